@@ -1,0 +1,42 @@
+"""The exception hierarchy of draaw-mi: everything it raises on bad input is a DraawError."""
+from __future__ import annotations
+
+import difflib
+from typing import Iterable
+
+
+class DraawError(Exception):
+    """Base class of every error draaw-mi raises for bad input or a bad environment.
+
+    The message is one line that names the file or function, the field, the bad value and
+    what was expected, so the CLI can print it as is.
+    """
+
+
+class SceneError(DraawError, ValueError):
+    """A scene description (TOML, JSON, dict, XML or mesh) is malformed or inconsistent."""
+
+
+class ParameterError(DraawError, ValueError):
+    """A parameter value is out of its range or of the wrong type."""
+
+
+class RenderError(DraawError, RuntimeError):
+    """A render request cannot be carried out (bad version, spp, resolution, ...)."""
+
+
+class IOFailure(DraawError, OSError):
+    """An image or scene file cannot be read or written."""
+
+
+def suggest(name: str, valid: Iterable[str]) -> str:
+    """A ``"; did you mean 'x'?"`` suffix for an unknown ``name``, or a list of valid names.
+
+    >>> suggest('roughnes', ['roughness', 'metallic'])
+    "; did you mean 'roughness'?"
+    """
+    valid = sorted(set(valid))
+    close = difflib.get_close_matches(name, valid, n=1, cutoff=0.6)
+    if close:
+        return f"; did you mean {close[0]!r}?"
+    return "; valid: " + ", ".join(valid)

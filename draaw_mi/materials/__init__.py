@@ -1,0 +1,14 @@
+"""Materials: the ``draaw`` BSDF plugin (metallic/roughness model + GO-Draaw's legacy knobs)."""
+from __future__ import annotations
+
+_REGISTERED = False
+
+
+def register() -> None:
+    """Register the ``draaw`` BSDF with Mitsuba (idempotent)."""
+    global _REGISTERED
+    if _REGISTERED:
+        return
+    from .draaw_bsdf import register_draaw_bsdf
+    register_draaw_bsdf()
+    _REGISTERED = True

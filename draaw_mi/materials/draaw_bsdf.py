@@ -1,0 +1,2 @@
+def register_draaw_bsdf():
+    pass
