@@ -1,1 +1,201 @@
-def main(argv=None): raise SystemExit(0)
+"""The ``draaw-mi`` command line: render, info, post.
+
+Bad input exits with status 2 and one line on stderr (``draaw-mi: error: ...``), no traceback.
+
+Examples::
+
+    draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --spp 256
+    draaw-mi info scenes/material_spheres.toml
+    draaw-mi post out/cornell.exr -o out/graded.exr --chain chain.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+EXIT_BAD_INPUT = 2
+
+
+class CliError(Exception):
+    """Bad command-line input: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, status 2, no usage dump
+        raise CliError(f"{self.prog}: {message} (see --help)")
+
+
+def _writable(path: str, suffixes: tuple[str, ...], what: str) -> str:
+    if not path.lower().endswith(suffixes):
+        raise CliError(f"{what} {path!r} must end with {' or '.join(suffixes)}")
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    probe = folder
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if os.path.isdir(path):
+        raise CliError(f"{what} {path!r} is a folder")
+    if not os.path.isdir(probe) or not os.access(probe, os.W_OK | os.X_OK):
+        raise CliError(f"{what} {path!r} is not writable (folder {probe!r})")
+    return path
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="draaw-mi", description="Differentiable GO-Draaw-style renderer on Mitsuba 3.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("render", help="render a scene to EXR (and PNG)")
+    r.add_argument("scene", help="scene file: .toml, .json, .xml or a mesh (.obj, .ply, .glb, ...)")
+    r.add_argument("-o", "--output", required=True, help="output EXR file (float32, AOVs as named channels)")
+    r.add_argument("--png", help="also write an sRGB PNG")
+    r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), path, prb")
+    r.add_argument("--spp", type=int, help="samples per pixel")
+    r.add_argument("--resolution", help="WxH, e.g. 640x480")
+    r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
+    r.add_argument("--max-depth", type=int, help="maximum path depth (-1: unbounded)")
+    r.add_argument("--time-budget", type=float, help="stop after this many seconds (at least one pass)")
+    r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
+    r.add_argument("--threads", type=int, help="Dr.Jit worker threads (default: all cores)")
+    r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+    i = sub.add_parser("info", help="show the set-up, or what a scene contains and calls for")
+    i.add_argument("scene", nargs="?", help="scene file")
+    i.add_argument("--json", action="store_true", help="print JSON")
+
+    q = sub.add_parser("post", help="apply a post-processing chain to an EXR")
+    q.add_argument("input", help="input EXR")
+    q.add_argument("-o", "--output", required=True, help="output EXR (or .png)")
+    q.add_argument("--chain", required=True, help="chain JSON file: a list of filter dicts")
+    return p
+
+
+def _cmd_render(args) -> int:
+    import drjit as dr
+    import numpy as np
+
+    import draaw_mi
+
+    _writable(args.output, (".exr",), "output")
+    if args.png:
+        _writable(args.png, (".png",), "--png")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise CliError(f"--threads {args.threads}: expected an integer >= 1")
+        dr.set_thread_count(args.threads)
+    overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth}
+    scene = draaw_mi.load_scene(args.scene, **{k: v for k, v in overrides.items() if v is not None})
+    post = None
+    if args.post:
+        post = _load_chain(args.post)
+    image, info = draaw_mi.render(scene, version=args.version, time_budget=args.time_budget, post=post,
+                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True)
+    arr = np.array(image)
+    draaw_mi.write_exr(args.output, arr, channels=info["channels"])
+    if args.png:
+        draaw_mi.write_png(args.png, arr[..., :3])
+    finite = bool(np.isfinite(arr).all())
+    print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
+          f"{info['spp']} spp, {info['integrator']}, {info['seconds']:.2f} s"
+          + ("" if finite else ", WARNING: non-finite pixels") + ")")
+    return 0
+
+
+def _load_chain(path: str):
+    from draaw_mi import post
+    return post.load_chain(path)
+
+
+def _cmd_info(args) -> int:
+    import drjit as dr
+    import mitsuba as mi
+
+    import draaw_mi
+    from draaw_mi import integrators, materials
+
+    out = {
+        "draaw_mi": draaw_mi.__version__,
+        "variant": mi.variant(),
+        "mitsuba": mi.__version__,
+        "drjit": dr.__version__,
+        "llvm": ".".join(map(str, dr.detail.llvm_version())) if mi.variant().startswith("llvm") else None,
+        "threads": dr.thread_count(),
+        "plugins": {"bsdf": list(getattr(materials, "PLUGINS", ["draaw"])),
+                    "integrators": sorted(set(getattr(integrators, "PLUGINS", [])))},
+        "versions": dict(integrators.VERSION_ALIASES),
+    }
+    if args.scene:
+        out["scene"] = draaw_mi.load_scene(args.scene).summary()
+    if args.json:
+        print(json.dumps(out, indent=2, default=str))
+        return 0
+    for key, value in out.items():
+        if key == "scene":
+            continue
+        print(f"{key:>10}: {value}")
+    if args.scene:
+        s = out["scene"]
+        print(f"\nscene {s['source']}: {s['resolution'][0]}x{s['resolution'][1]}")
+        print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
+        print(f"    lights: {', '.join(s['lights']) or 'none'}")
+        print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
+        print(f"  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
+        if s["post"]:
+            print(f"      post: {' -> '.join(map(str, s['post']))}")
+        on = [k for k, v in s["features"].items() if v]
+        off = [k for k, v in s["features"].items() if not v]
+        print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
+    return 0
+
+
+def _cmd_post(args) -> int:
+    import numpy as np
+
+    import draaw_mi
+    from draaw_mi import post
+
+    _writable(args.output, (".exr", ".png"), "output")
+    chain = _load_chain(args.chain)
+    arr, names = draaw_mi.read_exr(args.input, with_names=True)
+    n_color = 4 if names[:4] == ["R", "G", "B", "A"] else 3 if names[:3] == ["R", "G", "B"] else 0
+    if n_color == 0:
+        raise CliError(f"{args.input}: no R, G, B channels to post-process (channels: {', '.join(names)})")
+    color = np.array(post.apply(arr[..., :n_color], chain))
+    result = np.concatenate([color, arr[..., n_color:]], axis=2)
+    if args.output.lower().endswith(".png"):
+        draaw_mi.write_png(args.output, result[..., :3])
+    else:
+        draaw_mi.write_exr(args.output, result, channels=names)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        args = _parser().parse_args(argv)
+        import draaw_mi  # noqa: F401  (environment check happens here)
+        from draaw_mi.errors import DraawError
+        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post}[args.command]
+        try:
+            return handler(args)
+        except DraawError as e:
+            raise CliError(str(e)) from None
+    except CliError as e:
+        print(f"draaw-mi: error: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except ImportError as e:
+        print(f"draaw-mi: error: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except Exception as e:  # noqa: BLE001 - environment problems (DraawError at import) are one line too
+        if any(c.__name__ == "DraawError" for c in type(e).__mro__):
+            print(f"draaw-mi: error: {e}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        raise
+    except KeyboardInterrupt:
+        print("draaw-mi: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,1 +1,192 @@
-def render(*a, **k): raise NotImplementedError
+"""``draaw_mi.render``: render a scene with a chosen version, in passes, with progress and budget.
+
+Large sample counts are split into passes of at most ``pass_spp`` samples with independent
+seeds; the image is the spp-weighted mean of the passes (GO-Draaw's "frame averaging", done as
+a true mean rather than its exponential moving average). Same arguments and seed, same image.
+
+>>> import draaw_mi
+>>> scene = draaw_mi.load_scene({"render": {"resolution": [16, 16]},
+...     "shapes": [{"type": "sphere"}], "lights": [{"type": "constant"}],
+...     "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+>>> img = draaw_mi.render(scene, version="path", spp=4, seed=1)
+>>> img.shape
+(16, 16, 3)
+"""
+from __future__ import annotations
+
+import threading
+import time
+import weakref
+
+import drjit as dr
+import mitsuba as mi
+
+from .errors import RenderError, suggest
+from .integrators import VERSION_ALIASES
+
+_INTEGRATOR_CACHE: dict = {}
+_SCENE_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_LOCKS_GUARD = threading.Lock()
+MAX_PASS_SPP = 256
+
+
+def resolve_version(version: str) -> str:
+    """Mitsuba integrator plugin name for a user-facing version name (``v4``, ``V2M``, ``path``)."""
+    from . import integrators
+    if hasattr(integrators, "resolve_version"):
+        return integrators.resolve_version(version)
+    if not isinstance(version, str):
+        raise RenderError(f"render: version={version!r}; expected a name such as 'v4' or 'path'")
+    key = version.strip().lower()
+    if key in VERSION_ALIASES:
+        return VERSION_ALIASES[key]
+    if key in ("v1", "v2", "v2m", "v3", "v4", "draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4"):
+        return "path"    # the draaw_v* integrators are not registered yet: fall back to path
+    raise RenderError(f"render: unknown version {version!r}{suggest(key, VERSION_ALIASES)}")
+
+
+def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
+    """Instantiate (and cache) the integrator plugin for ``version`` with these options."""
+    plugin = resolve_version(version)
+    props = {"type": plugin, "max_depth": int(max_depth)}
+    if hide_emitters:
+        props["hide_emitters"] = True
+    if aovs:
+        props["aovs"] = ",".join(aovs)
+    props.update(options)
+    key = tuple(sorted((k, str(v)) for k, v in props.items()))
+    if key not in _INTEGRATOR_CACHE:
+        try:
+            _INTEGRATOR_CACHE[key] = mi.load_dict(props)
+        except Exception as e:  # noqa: BLE001
+            from .scene import mitsuba_error_message
+            raise RenderError(f"render: cannot create integrator {plugin!r}: {mitsuba_error_message(e)}") from None
+    return _INTEGRATOR_CACHE[key]
+
+
+def detect_features(scene) -> dict:
+    """Effects a Mitsuba scene calls for; the integrators' detector when available."""
+    try:
+        from .integrators.features import detect_features as detect
+        return detect(scene)
+    except ImportError:
+        pass
+    kinds = [str(e).split("[", 1)[0] for e in scene.emitters()]
+    return {
+        "area_lights": any(k == "AreaLight" for k in kinds),
+        "point_lights": any(k in ("PointLight", "SpotLight") for k in kinds),
+        "environment": scene.environment() is not None,
+    }
+
+
+def _scene_lock(scene) -> threading.Lock:
+    with _LOCKS_GUARD:
+        lock = _SCENE_LOCKS.get(scene)
+        if lock is None:
+            lock = _SCENE_LOCKS[scene] = threading.Lock()
+        return lock
+
+
+def pass_seeds(seed: int, n: int) -> list[int]:
+    """Independent per-pass seeds; the first pass uses ``seed`` itself.
+
+    >>> pass_seeds(7, 3)[0]
+    7
+    """
+    return [seed] + [(seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF for i in range(1, n)]
+
+
+def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
+           max_depth: int | None = None, resolution=None, *, params=None, progress: bool = False,
+           time_budget: float | None = None, pass_spp: int | None = None, post=None,
+           hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
+           integrator_options: dict | None = None):
+    """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = 3 + AOV channels).
+
+    Parameters
+    ----------
+    scene: a :class:`DraawScene`, file name, description dict or ``mi.Scene``.
+    version: ``"v1"`` .. ``"v4"`` (GO-Draaw names accepted), ``"path"`` or ``"prb"``;
+        default the scene's ``render.version``.
+    spp, seed, max_depth, resolution ((W, H)): override the scene's render settings.
+    params: ``mi.traverse`` parameters, for differentiable renders (``dr.backward`` works).
+    progress: show a tqdm progress bar over passes.
+    time_budget: seconds; stop after the pass that reaches it (at least one pass runs); the
+        image is the mean of the passes done (``return_info`` tells how many samples).
+    pass_spp: samples per pass (default: all at once up to 256, 16 with a progress bar/budget).
+    post: a post-processing chain (list of dicts) to apply; default the scene's ``post``;
+        ``[]`` disables it.
+    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``.
+    """
+    from .scene import DraawScene, load_scene
+
+    if not isinstance(scene, DraawScene):
+        scene = load_scene(scene)
+    s = scene.settings
+    if resolution is not None:
+        from .scene.schema import Where, resolution as parse_res
+        scene = scene.with_resolution(*parse_res(resolution, Where("render") / "resolution"))
+    version = s["version"] if version is None else version
+    spp = s["spp"] if spp is None else spp
+    seed = s["seed"] if seed is None else seed
+    max_depth = s["max_depth"] if max_depth is None else max_depth
+    _check_int("spp", spp, 1)
+    _check_int("seed", seed, 0)
+    _check_int("max_depth", max_depth, -1)
+    if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
+        raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
+    if pass_spp is None:
+        pass_spp = min(spp, 16 if (progress or time_budget) else MAX_PASS_SPP)
+    _check_int("pass_spp", pass_spp, 1)
+    hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
+    aovs = s.get("aovs", []) if aovs is None else aovs
+    integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
+
+    n_passes = -(-spp // pass_spp)
+    counts = [pass_spp] * (n_passes - 1) + [spp - pass_spp * (n_passes - 1)]
+    seeds = pass_seeds(int(seed), n_passes)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=spp, unit="spp", desc=f"render {version}", leave=False)
+    acc, done, t0 = None, 0, time.perf_counter()
+    with _scene_lock(scene):
+        for count, pseed in zip(counts, seeds):
+            img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
+            acc = img * count if acc is None else acc + img * count
+            done += count
+            if n_passes > 1:
+                dr.eval(acc)
+                dr.sync_thread()
+            if bar is not None:
+                bar.update(count)
+                bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
+            if time_budget is not None and time.perf_counter() - t0 >= time_budget:
+                break
+    image = acc / done
+    dr.eval(image)
+    dr.sync_thread()
+    if bar is not None:
+        bar.close()
+    names = ["R", "G", "B"] + list(integrator.aov_names())
+    chain = s.get("post", []) if post is None else post
+    if chain:
+        image = _apply_post(image, chain)
+    if return_info:
+        return image, {"spp": done, "passes": -(-done // pass_spp), "seconds": time.perf_counter() - t0,
+                       "channels": names, "version": version, "integrator": resolve_version(version)}
+    return image
+
+
+def _check_int(name, value, lo):
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise RenderError(f"render: {name}={value!r}; expected an integer >= {lo}")
+
+
+def _apply_post(image, chain):
+    from . import post
+    c = image.shape[2]
+    if c <= 4:
+        return post.apply(image, chain)
+    color = post.apply(image[:, :, :3], chain)
+    return dr.concat([color, image[:, :, 3:]], axis=2)

@@ -1,2 +1,284 @@
-def register_draaw_bsdf():
-    pass
+"""The ``draaw`` BSDF: GO-Draaw's metallic/roughness material as a differentiable Mitsuba plugin.
+
+Model (design.md §3)::
+
+    f(wi, wo) = (1 - metallic) * base_color / pi * (1 - F)        Lambert, energy taken by F
+              + F * D(h) * G(wi, wo) / (4 cos_i cos_o)           Cook-Torrance, GGX
+    F   = F0 + (F90 - F0) * (1 - <wi, h>)^5                      Fresnel-Schlick, per channel
+    F0  = lerp(0.08 * specular, base_color, metallic)            (specular 0.5 -> F0 = 0.04)
+    F90 = min(1, 50 * F0)                                        so F0 = 0 gives F = 0
+    alpha = sqrt(roughness^4 + alpha_min^2)                      smooth clamp, alpha >= alpha_min
+    G   = G1(wi) G1(wo)                                          separable Smith, as Mitsuba
+
+``specular = metallic = 0`` is exactly Lambertian (Mitsuba ``diffuse``); ``metallic = 1``,
+``base_color = 1`` is exactly ``roughconductor`` (GGX, ``material = "none"``) up to the smooth
+alpha clamp (relative change < 1e-4 for roughness >= 0.2).
+
+Sampling mixes cosine-weighted hemisphere sampling with GGX visible-normal sampling; the
+probability of the glossy lobe is the luminance of the Fresnel term at normal-ish incidence
+over the sum of both lobes' estimated albedos (it depends only on ``wi`` so the mixture pdf is
+exact), and the returned weight is always ``eval / pdf`` of the same mixture.
+
+Plugin parameters
+
+.. list-table::
+   * - base_color       - texture/RGB >= 0, default 0.5      - albedo / metal tint
+   * - roughness        - texture/float in [0, 1], 0.5       - GGX alpha = roughness^2 (clamped)
+   * - metallic         - texture/float in [0, 1], 0.0       - metallic-workflow mix
+   * - specular         - texture/float in [0, 1], 0.5       - dielectric F0 = 0.08 * specular
+   * - reflection       - texture/float in [0, 1], 0.0       - legacy mirror weight (V1/V2 only)
+   * - direct_to_scatter- texture/float in [0, 1], 1.0       - legacy direct/scatter split (V1/V2)
+   * - normalmap        - texture (RGB), optional             - tangent-space normal map
+   * - normalmap_encoding - "unsigned" (0..1, default) or "signed" (-1..1)
+   * - two_sided        - bool, default False                 - shade back faces like front faces
+   * - alpha_min        - float in (0, 0.1], default 1e-3     - smallest GGX alpha
+
+Values set at load time outside their range raise :class:`ParameterError`; values set by an
+optimiser through ``mi.traverse`` are clamped into range when evaluated (their gradient is then
+zero outside the range, which keeps Adam from drifting further out).
+
+Example::
+
+    >>> import draaw_mi, mitsuba as mi
+    >>> bsdf = mi.load_dict({'type': 'draaw', 'roughness': 0.3, 'metallic': 1.0})
+    >>> 'roughness.value' in mi.traverse(bsdf).keys()
+    True
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..errors import ParameterError
+from . import textures
+
+INV_PI = 1.0 / 3.141592653589793
+# Luminance weights (Rec. 709) used to pick the sampled lobe.
+_LUM = (0.2126, 0.7152, 0.0722)
+
+SCALAR_PARAMS = {
+    # name: (default, low, high)
+    "roughness": (0.5, 0.0, 1.0),
+    "metallic": (0.0, 0.0, 1.0),
+    "specular": (0.5, 0.0, 1.0),
+    "reflection": (0.0, 0.0, 1.0),
+    "direct_to_scatter": (1.0, 0.0, 1.0),
+}
+COLOR_PARAMS = {"base_color": (0.5, 0.0, None)}
+ALL_PARAMS = tuple(COLOR_PARAMS) + tuple(SCALAR_PARAMS)
+OPTIONS = ("normalmap", "normalmap_encoding", "two_sided", "alpha_min")
+NORMALMAP_ENCODINGS = ("unsigned", "signed")
+
+
+def _lum(c):
+    return _LUM[0] * c.x + _LUM[1] * c.y + _LUM[2] * c.z
+
+
+def _schlick(f0, f90, cos_theta):
+    m = dr.clip(1.0 - cos_theta, 0.0, 1.0)
+    m2 = dr.square(m)
+    return f0 + (f90 - f0) * (m2 * m2 * m)
+
+
+class DraawBSDF(mi.BSDF):
+    """Metallic/roughness GGX + Lambert BSDF with GO-Draaw's legacy knobs (see module doc)."""
+
+    def __init__(self, props: mi.Properties):
+        mi.BSDF.__init__(self, props)
+        for name, (default, lo, hi) in COLOR_PARAMS.items():
+            setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=True))
+        for name, (default, lo, hi) in SCALAR_PARAMS.items():
+            setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=False))
+        self.normalmap = None
+        if props.has_property("normalmap"):
+            self.normalmap = textures.texture_property(props, "normalmap", None, None, None, color=True)
+        enc = props.get("normalmap_encoding", "unsigned")
+        if enc not in NORMALMAP_ENCODINGS:
+            raise ParameterError(f"draaw BSDF: normalmap_encoding={enc!r}; expected one of "
+                                 f"{', '.join(NORMALMAP_ENCODINGS)}")
+        self.normalmap_signed = enc == "signed"
+        self.two_sided = bool(props.get("two_sided", False))
+        self.alpha_min = float(props.get("alpha_min", 1e-3))
+        if not (0.0 < self.alpha_min <= 0.1):
+            raise ParameterError(f"draaw BSDF: alpha_min={self.alpha_min}; expected a value in (0, 0.1]")
+
+        side = mi.BSDFFlags.FrontSide | (mi.BSDFFlags.BackSide if self.two_sided else mi.BSDFFlags(0))
+        diff = mi.BSDFFlags.DiffuseReflection | side
+        glossy = mi.BSDFFlags.GlossyReflection | side
+        if any(textures.is_spatially_varying(getattr(self, n)) for n in ALL_PARAMS) or self.normalmap:
+            diff |= mi.BSDFFlags.SpatiallyVarying
+            glossy |= mi.BSDFFlags.SpatiallyVarying
+        self.m_components = [diff, glossy]
+        self.m_flags = diff | glossy
+
+    # ------------------------------------------------------------------ parameters
+    def _params(self, si, active):
+        base = dr.maximum(self.base_color.eval(si, active), 0.0)
+        rough = dr.clip(self.roughness.eval_1(si, active), 0.0, 1.0)
+        metallic = dr.clip(self.metallic.eval_1(si, active), 0.0, 1.0)
+        specular = dr.clip(self.specular.eval_1(si, active), 0.0, 1.0)
+        alpha = dr.sqrt(dr.square(dr.square(rough)) + self.alpha_min ** 2)
+        f0 = dr.lerp(mi.Color3f(0.08 * specular), base, metallic)
+        f90 = dr.minimum(1.0, 50.0 * f0)
+        kd = base * (1.0 - metallic)
+        return kd, f0, f90, alpha
+
+    def _spec_probability(self, kd, f0, f90, cos_i):
+        """Probability of sampling the glossy lobe; depends on wi only (exact mixture pdf)."""
+        w_spec = _lum(_schlick(f0, f90, cos_i))
+        w_diff = _lum(kd) * (1.0 - w_spec)
+        total = w_spec + w_diff
+        return dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5)
+
+    # ------------------------------------------------------------------ shading frame
+    def _local_frame(self, si, active):
+        """Return (wi, to_shading) where to_shading maps local directions to the (normal-mapped,
+        two-sided-flipped) shading frame; identity when neither feature is on."""
+        wi = si.wi
+        flip = None
+        if self.two_sided:
+            flip = mi.Frame3f.cos_theta(wi) < 0
+            wi = mi.Vector3f(wi.x, wi.y, dr.select(flip, -wi.z, wi.z))
+        frame = None
+        if self.normalmap is not None:
+            v = self.normalmap.eval(si, active)
+            n = mi.Vector3f(v.x, v.y, v.z) if self.normalmap_signed else mi.Vector3f(2 * v.x - 1, 2 * v.y - 1, 2 * v.z - 1)
+            n_len = dr.norm(n)
+            ok = (n_len > 1e-6) & (n.z > 1e-4)
+            n = dr.select(ok, n / dr.select(ok, n_len, 1.0), mi.Vector3f(0, 0, 1))
+            # Tangent: the local x axis made orthogonal to n (as Mitsuba's normalmap does with dp_du).
+            t = mi.Vector3f(1, 0, 0) - n * n.x
+            t_len = dr.norm(t)
+            t = dr.select(t_len > 1e-6, t / dr.select(t_len > 1e-6, t_len, 1.0), mi.Vector3f(1, 0, 0))
+            frame = mi.Frame3f(t, dr.cross(n, t), n)
+        return wi, flip, frame
+
+    @staticmethod
+    def _flip(v, flip):
+        return v if flip is None else mi.Vector3f(v.x, v.y, dr.select(flip, -v.z, v.z))
+
+    # ------------------------------------------------------------------ core model
+    def _eval_pdf_local(self, ctx, kd, f0, f90, alpha, wi, wo, active):
+        """BSDF value (times cos_o) and mixture pdf for local directions wi, wo."""
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 0)
+        has_spec = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 1)
+        cos_i = mi.Frame3f.cos_theta(wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        ok = active & (cos_i > 0) & (cos_o > 0)
+        h = wi + wo
+        h_len = dr.norm(h)
+        h = dr.select(h_len > 1e-12, h / dr.select(h_len > 1e-12, h_len, 1.0), mi.Vector3f(0, 0, 1))
+        F = _schlick(f0, f90, dr.dot(wi, h))
+        value = mi.Color3f(0.0)
+        pdf = mi.Float(0.0)
+        p_spec = self._spec_probability(kd, f0, f90, cos_i) if (has_diff and has_spec) else (
+            mi.Float(1.0 if has_spec else 0.0))
+        if has_diff:
+            value += kd * (1.0 - F) * (INV_PI * cos_o)
+            pdf += (1.0 - p_spec) * mi.warp.square_to_cosine_hemisphere_pdf(wo)
+        if has_spec:
+            distr = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True)
+            D = distr.eval(h)
+            G = distr.G(wi, wo, h)
+            value += F * (D * G / (4.0 * dr.select(ok, cos_i, 1.0)))
+            dot_oh = dr.abs(dr.dot(wo, h))
+            pdf += p_spec * distr.pdf(wi, h) / (4.0 * dr.select(dot_oh > 0, dot_oh, 1.0))
+        ok &= dr.isfinite(pdf)
+        return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
+
+    def _eval_pdf(self, ctx, si, wo, active):
+        kd, f0, f90, alpha = self._params(si, active)
+        wi, flip, frame = self._local_frame(si, active)
+        wo_l = self._flip(wo, flip)
+        active = active & (mi.Frame3f.cos_theta(wo_l) > 0) & (mi.Frame3f.cos_theta(wi) > 0)
+        if frame is not None:
+            wi, wo_l = frame.to_local(wi), frame.to_local(wo_l)
+        return self._eval_pdf_local(ctx, kd, f0, f90, alpha, wi, wo_l, active)
+
+    # ------------------------------------------------------------------ mi.BSDF interface
+    def eval(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        kd, f0, f90, alpha = self._params(si, active)
+        wi_g, flip, frame = self._local_frame(si, active)
+        wi = frame.to_local(wi_g) if frame is not None else wi_g
+        cos_i = mi.Frame3f.cos_theta(wi)
+        active = active & (cos_i > 0) & (mi.Frame3f.cos_theta(wi_g) > 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 0)
+        has_spec = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 1)
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not (has_diff or has_spec):
+            return bs, mi.Color3f(0.0)
+        if has_diff and has_spec:
+            p_spec = self._spec_probability(kd, f0, f90, cos_i)
+        else:
+            p_spec = mi.Float(1.0 if has_spec else 0.0)
+        choose_spec = sample1 < p_spec
+        wo = mi.warp.square_to_cosine_hemisphere(sample2)
+        if has_spec:
+            distr = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True)
+            m, _ = distr.sample(dr.select(active, wi, mi.Vector3f(0, 0, 1)), sample2)
+            wo = dr.select(choose_spec, mi.reflect(wi, m), wo)
+        value, pdf = self._eval_pdf_local(ctx, kd, f0, f90, alpha, wi, wo, active)
+        if frame is not None:
+            wo = frame.to_world(wo)
+        wo = self._flip(wo, flip)
+        ok = active & (pdf > 0) & (mi.Frame3f.cos_theta(self._flip(wo, flip)) > 0)
+        bs.wo = wo
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_component = dr.select(choose_spec, mi.UInt32(1), mi.UInt32(0))
+        bs.sampled_type = dr.select(choose_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+        weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+        return bs, weight
+
+    # ------------------------------------------------------------------ attributes
+    def eval_diffuse_reflectance(self, si, active=True):
+        return self._params(si, active)[0]
+
+    def has_attribute(self, name, active=True):
+        return name in ALL_PARAMS or name == "albedo"
+
+    def eval_attribute(self, name, si, active=True):
+        if name in ("base_color", "albedo"):
+            return self.base_color.eval(si, active)
+        if name in SCALAR_PARAMS:
+            return mi.Color3f(getattr(self, name).eval_1(si, active))
+        return mi.Color3f(0.0)
+
+    def eval_attribute_1(self, name, si, active=True):
+        if name in SCALAR_PARAMS:
+            return getattr(self, name).eval_1(si, active)
+        if name in ("base_color", "albedo"):
+            return _lum(self.base_color.eval(si, active))
+        return mi.Float(0.0)
+
+    def eval_attribute_3(self, name, si, active=True):
+        return self.eval_attribute(name, si, active)
+
+    def traverse(self, cb):
+        for name in ALL_PARAMS:
+            cb.put(name, getattr(self, name), mi.ParamFlags.Differentiable)
+        if self.normalmap is not None:
+            cb.put("normalmap", self.normalmap, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        fields = ", ".join(f"{n}={textures.describe(getattr(self, n))}" for n in ALL_PARAMS)
+        nm = f", normalmap={textures.describe(self.normalmap)} ({'signed' if self.normalmap_signed else 'unsigned'})" \
+            if self.normalmap is not None else ""
+        return f"DraawBSDF[{fields}{nm}, two_sided={self.two_sided}]"
+
+
+def register_draaw_bsdf() -> None:
+    mi.register_bsdf("draaw", lambda props: DraawBSDF(props))

@@ -1,0 +1,125 @@
+"""Turn a plugin property (float, RGB, file name, array or nested texture) into an mi.Texture.
+
+Scalar material parameters are stored as textures too, so that every parameter is
+differentiable through ``mi.traverse`` under one naming scheme (``<bsdf>.<name>.value`` for
+constants, ``<bsdf>.<name>.data`` for bitmaps).
+"""
+from __future__ import annotations
+
+import os
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import ParameterError
+
+# Parameters whose bitmaps hold data, not colours: read them without the sRGB decoding.
+RAW_BY_DEFAULT = {"roughness", "metallic", "specular", "reflection", "direct_to_scatter", "normalmap"}
+
+
+def _check_range(name, lo, hi, values, what):
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.size == 0:
+        raise ParameterError(f"draaw BSDF: {name} {what} is empty")
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"draaw BSDF: {name} {what} contains NaN or Inf; expected finite values")
+    if lo is not None and arr.min() < lo:
+        raise ParameterError(f"draaw BSDF: {name}={_fmt(arr.min())} ({what}) is below {lo}; "
+                             f"expected {_range(lo, hi)}")
+    if hi is not None and arr.max() > hi:
+        raise ParameterError(f"draaw BSDF: {name}={_fmt(arr.max())} ({what}) is above {hi}; "
+                             f"expected {_range(lo, hi)}")
+
+
+def _fmt(x):
+    return f"{float(x):g}"
+
+
+def _range(lo, hi):
+    if hi is None:
+        return f">= {lo}"
+    return f"a value in [{lo}, {hi}]"
+
+
+def constant_texture(value, color: bool) -> mi.Texture:
+    if color:
+        return mi.load_dict({"type": "rgb", "value": [float(v) for v in value]})
+    return mi.load_dict({"type": "uniform", "value": float(value)})
+
+
+def bitmap_texture(source, raw: bool) -> mi.Texture:
+    """A bitmap texture from a file name or an (H, W[, C]) array (values as given, linear)."""
+    if isinstance(source, str):
+        if not os.path.isfile(source):
+            raise ParameterError(f"draaw BSDF: texture file {source!r} does not exist")
+        return mi.load_dict({"type": "bitmap", "filename": source, "raw": raw})
+    arr = np.asarray(source, dtype=np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
+        raise ParameterError(f"draaw BSDF: texture array of shape {arr.shape}; expected (H, W), "
+                             "(H, W, 1) or (H, W, 3)")
+    return mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True})
+
+
+def texture_values(tex: mi.Texture):
+    """The numeric values a constant or bitmap texture holds (for validation), or None."""
+    params = mi.traverse(tex)
+    for key in ("value", "data"):
+        if key in params.keys():
+            return np.array(params[key]).ravel()
+    return None
+
+
+def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bool) -> mi.Texture:
+    """Read property ``name`` as a texture, validating constants and bitmap contents."""
+    if not props.has_property(name):
+        if default is None:
+            raise ParameterError(f"draaw BSDF: parameter {name!r} is required")
+        return constant_texture([default] * 3 if color else default, color)
+    value = props[name]
+    if isinstance(value, mi.Texture):
+        tex = value
+        vals = texture_values(tex)
+        if vals is not None and (lo is not None or hi is not None):
+            _check_range(name, lo, hi, vals, "texture values")
+        return tex
+    if isinstance(value, bool):
+        raise ParameterError(f"draaw BSDF: {name}={value!r}; expected a number or a texture")
+    if isinstance(value, (int, float)):
+        _check_range(name, lo, hi, [value], "value")
+        return constant_texture([value] * 3 if color else value, color)
+    if isinstance(value, str):
+        return bitmap_texture(value, raw=(name in RAW_BY_DEFAULT))
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except Exception:  # noqa: BLE001 - anything not numeric is a user error
+        raise ParameterError(f"draaw BSDF: {name}={value!r}; expected a number, RGB triple, "
+                             "file name, array or texture") from None
+    if arr.ndim == 1 and arr.size == 3 and color:
+        _check_range(name, lo, hi, arr, "value")
+        return constant_texture(arr, color=True)
+    if arr.ndim >= 2:
+        _check_range(name, lo, hi, arr, "array values")
+        return bitmap_texture(arr, raw=True)
+    raise ParameterError(f"draaw BSDF: {name}={value!r}; expected "
+                         + ("an RGB triple, a number" if color else "a number") + ", file name, array or texture")
+
+
+def is_spatially_varying(tex) -> bool:
+    return tex is not None and bool(tex.is_spatially_varying())
+
+
+def describe(tex) -> str:
+    """Short human-readable form of a texture parameter for ``to_string``."""
+    if tex is None:
+        return "none"
+    params = mi.traverse(tex)
+    if "value" in params.keys():
+        v = np.array(params["value"]).ravel()
+        return f"{v[0]:g}" if v.size == 1 else "(" + ", ".join(f"{x:g}" for x in v) + ")"
+    if "data" in params.keys():
+        shape = params["data"].shape
+        return f"bitmap({shape[1]}x{shape[0]}x{shape[2]})"
+    return type(tex).__name__

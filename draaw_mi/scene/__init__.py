@@ -1,0 +1,247 @@
+"""Scenes: load TOML / JSON / dict descriptions, Mitsuba XML and bare mesh files.
+
+>>> import draaw_mi
+>>> scene = draaw_mi.load_scene({
+...     "render": {"resolution": [32, 24], "spp": 4},
+...     "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+...     "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.3}},
+...     "shapes": [{"type": "sphere", "material": "gold"}],
+...     "lights": [{"type": "point", "position": [2, 3, 4], "intensity": 30}],
+... })
+>>> scene.resolution
+(32, 24)
+>>> "gold.roughness.value" in scene.params
+True
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import DraawError, SceneError, suggest
+from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
+from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
+from .schema import Where
+
+SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
+
+
+def mitsuba_error_message(err: Exception) -> str:
+    """The useful line of a Mitsuba loader error (our own DraawError text when it is inside)."""
+    text = str(err)
+    for cls in ("ParameterError", "SceneError", "DraawError"):
+        m = re.search(rf"{cls}: (.+)", text)
+        if m:
+            return m.group(1).strip()
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    msg = lines[-1] if lines else type(err).__name__
+    return re.sub(r"^\[[^\]]*\]\s*", "", msg)
+
+
+@dataclass(eq=False)
+class DraawScene:
+    """A loaded scene: the Mitsuba scene plus draaw-mi's render settings and names.
+
+    Attributes: ``mi_scene`` (mi.Scene), ``settings`` (resolution, spp, max_depth, version, seed,
+    filter, hide_emitters, aovs, post), ``source`` (file name or ``<dict>``), ``info`` (material,
+    shape and light names, camera).
+    """
+
+    mi_scene: Any
+    settings: dict
+    source: str
+    info: dict = field(default_factory=dict)
+    mi_dict: dict | None = None
+    _tmp: Any = None
+    _params: Any = None
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) of the film."""
+        size = self.mi_scene.sensors()[0].film().size()
+        return int(size[0]), int(size[1])
+
+    @property
+    def params(self):
+        """``mi.traverse`` of the scene (cached; call ``.update()`` after changing values)."""
+        if self._params is None:
+            import mitsuba as mi
+            self._params = mi.traverse(self.mi_scene)
+        return self._params
+
+    def key(self, name: str) -> str:
+        """Resolve ``material.parameter`` (or a full traverse key) to an ``mi.traverse`` key.
+
+        >>> # scene.key("gold.roughness") -> "gold.roughness.value"
+        """
+        keys = list(self.params.keys())
+        for cand in (name, f"{name}.value", f"{name}.data"):
+            if cand in keys:
+                return cand
+        raise SceneError(f"{self.source}: no parameter {name!r}{suggest(name, keys)}")
+
+    def with_resolution(self, width: int, height: int) -> "DraawScene":
+        """The same scene with another film size (reloads the Mitsuba scene)."""
+        if (width, height) == self.resolution:
+            return self
+        if self.mi_dict is None:
+            raise SceneError(f"{self.source}: cannot change the resolution of a scene loaded from "
+                             "XML or given as mi.Scene; edit its film instead")
+        import mitsuba as mi
+        d = dict(self.mi_dict)
+        sensor = dict(d["sensor"])
+        sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
+        d["sensor"] = sensor
+        settings = dict(self.settings, resolution=(int(width), int(height)))
+        return DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp)
+
+    def features(self) -> dict:
+        """Which effects the scene calls for (emitter kinds, textures, ...)."""
+        from ..render import detect_features
+        return detect_features(self.mi_scene)
+
+    def summary(self) -> dict:
+        """Everything ``draaw-mi info SCENE`` prints."""
+        s = self.mi_scene
+        return {
+            "source": self.source,
+            "resolution": list(self.resolution),
+            "shapes": [sh.id() for sh in s.shapes()],
+            "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
+            "materials": self.info.get("materials", []),
+            "settings": {k: v for k, v in self.settings.items() if k != "post"},
+            "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
+            "features": self.features(),
+        }
+
+
+def _load_dict(mi, d: dict, source: str):
+    try:
+        return mi.load_dict(d)
+    except DraawError:
+        raise
+    except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
+        raise SceneError(f"{source}: {mitsuba_error_message(e)}") from None
+
+
+def _read_text_description(path: str) -> dict:
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read scene file ({e.strerror})") from None
+    try:
+        if path.lower().endswith(".toml"):
+            return tomllib.loads(raw.decode("utf-8"))
+        return json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise SceneError(f"{path}: not a UTF-8 text file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: malformed TOML: {e}") from None
+    except json.JSONDecodeError as e:
+        raise SceneError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+
+
+def _bare_mesh_description(path: str) -> dict:
+    """A description for a mesh file alone: camera and lights placed from its bounds."""
+    from .camera import auto_camera
+
+    parts = load_mesh_parts(path, Where(path))
+    lo, hi = bounds(parts)
+    camera = auto_camera(lo, hi)
+    return {"shapes": [{"type": "mesh", "file": os.path.abspath(path)}], "camera": camera,
+            "lights": auto_light(lo, hi, camera["origin"])}
+
+
+def load_scene(source, **overrides) -> DraawScene:
+    """Load a scene from a TOML/JSON/XML/mesh file, a description dict, a Mitsuba scene dict
+    (``{"type": "scene", ...}``) or an ``mi.Scene``.
+
+    ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
+    ``version``, ``seed``, ``filter``. Errors are :class:`SceneError` naming the file and field.
+    """
+    import mitsuba as mi
+
+    bad = set(overrides) - set(DEFAULT_SETTINGS)
+    if bad:
+        name = sorted(bad)[0]
+        raise SceneError(f"load_scene: unknown setting {name!r}{suggest(name, DEFAULT_SETTINGS)}")
+    if isinstance(source, DraawScene):
+        return source
+    if isinstance(source, mi.Scene):
+        return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
+    if isinstance(source, dict):
+        if source.get("type") == "scene":
+            return _from_mitsuba_scene(_load_dict(mi, source, "<dict>"), "<dict>", overrides, source)
+        return _from_description(source, "<dict>", os.getcwd(), overrides)
+    if not isinstance(source, (str, os.PathLike)):
+        raise SceneError(f"load_scene: expected a file name, dict or mi.Scene, got {type(source).__name__}")
+    path = os.fspath(source)
+    if not os.path.exists(path):
+        raise SceneError(f"{path}: scene file does not exist")
+    if os.path.isdir(path):
+        raise SceneError(f"{path}: is a folder, not a scene file")
+    lower = path.lower()
+    if not lower.endswith(SCENE_SUFFIXES):
+        raise SceneError(f"{path}: unknown scene format; expected one of {', '.join(SCENE_SUFFIXES)}")
+    if lower.endswith(".xml"):
+        try:
+            scene = mi.load_file(path)
+        except Exception as e:  # noqa: BLE001
+            raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
+        return _from_mitsuba_scene(scene, path, overrides)
+    if lower.endswith((".toml", ".json")):
+        desc = _read_text_description(path)
+    else:
+        desc = _bare_mesh_description(path)
+    return _from_description(desc, path, os.path.dirname(os.path.abspath(path)), overrides)
+
+
+def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -> DraawScene:
+    import mitsuba as mi
+
+    tmp = tempfile.TemporaryDirectory(prefix="draaw-mi-")
+    mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
+    scene = _load_dict(mi, mi_dict, source)
+    return DraawScene(scene, settings, source, info, mi_dict, tmp)
+
+
+def _checked(overrides: dict, source: str) -> dict:
+    from .schema import number, resolution
+    where = Where(source) / "override"
+    out = dict(overrides)
+    if out.get("resolution") is not None:
+        out["resolution"] = resolution(out["resolution"], where / "resolution")
+    for key, lo in (("spp", 1), ("max_depth", -1), ("seed", 0)):
+        if out.get(key) is not None:
+            out[key] = number(out[key], where / key, lo=lo, integer=True)
+    return out
+
+
+def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None) -> DraawScene:
+    sensors = scene.sensors()
+    if not sensors:
+        raise SceneError(f"{source}: the scene has no sensor (camera)")
+    settings = dict(DEFAULT_SETTINGS)
+    size = sensors[0].film().size()
+    settings["resolution"] = (int(size[0]), int(size[1]))
+    settings["spp"] = int(sensors[0].sampler().sample_count())
+    integ = scene.integrator()
+    if integ is not None and hasattr(integ, "max_depth"):
+        settings["max_depth"] = int(integ.max_depth)
+    settings["post"] = []
+    settings.update({k: v for k, v in _checked(overrides, source).items() if v is not None})
+    d = DraawScene(scene, settings, source, {"materials": []}, mi_dict)
+    if overrides.get("resolution") and tuple(overrides["resolution"]) != d.resolution:
+        d = d.with_resolution(*overrides["resolution"])
+    return d
+
+
+__all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES", "np"]

@@ -1,0 +1,109 @@
+"""Cameras: look-at, or GO-Draaw's position + two spherical angles, as Mitsuba sensors.
+
+GO-Draaw (go-draaw-spec.md §2.8) spans the image as a bilinear patch between three points on
+the unit sphere, ``S(θ, φ) = (sin φ cos θ, sin φ sin θ, cos φ)``: top-left ``S(θ, φ)``,
+top-right ``S(θ + F, φ)``, bottom-left ``S(θ, φ + F)``. draaw-mi replaces that patch with a
+proper pinhole camera looking through the patch's centre ``(TR + BL) / 2``, with image-up
+along ``TL − BL`` and the horizontal field of view F: the same view, without the patch's
+non-uniform distortion (documented deviation).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .schema import Where, check_keys, number, string, vector
+
+CAMERA_KEYS = ("origin", "target", "up", "position", "angles", "fov", "fov_axis", "near_clip",
+               "far_clip")
+
+
+def spherical(theta: float, phi: float) -> np.ndarray:
+    """GO-Draaw's unit-sphere point ``S(θ, φ)``.
+
+    >>> np.round(spherical(0.0, math.pi / 2), 6).tolist()
+    [1.0, 0.0, 0.0]
+    """
+    return np.array([math.sin(phi) * math.cos(theta), math.sin(phi) * math.sin(theta), math.cos(phi)])
+
+
+def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
+    """Convert GO-Draaw's (position, θ, φ, FOV) into (origin, target, up) for a pinhole camera."""
+    f = math.radians(fov_deg)
+    tl, tr, bl = spherical(theta, phi), spherical(theta + f, phi), spherical(theta, phi + f)
+    centre = 0.5 * (tr + bl)
+    up = tl - bl
+    n_c, n_u = np.linalg.norm(centre), np.linalg.norm(up)
+    if n_c < 1e-9 or n_u < 1e-9:
+        raise ValueError("degenerate GO-Draaw camera angles")
+    d = centre / n_c
+    up = up / n_u
+    up = up - d * float(np.dot(up, d))           # orthogonalise
+    if np.linalg.norm(up) < 1e-9:
+        raise ValueError("degenerate GO-Draaw camera angles")
+    origin = np.asarray(position, dtype=float)
+    return origin, origin + d, up / np.linalg.norm(up)
+
+
+def camera_to_look_at(cam: dict, where: Where):
+    """Validate a ``[camera]`` table; return (origin, target, up, fov_deg, fov_axis, near, far)."""
+    check_keys(cam, CAMERA_KEYS, where)
+    fov = number(cam.get("fov", 40.0), where / "fov", lo=0.1, hi=179.0)
+    fov_axis = string(cam.get("fov_axis", "x"), where / "fov_axis", ["x", "y", "smaller", "larger", "diagonal"])
+    near = number(cam.get("near_clip", 1e-2), where / "near_clip", lo=0.0, lo_open=True)
+    far = number(cam.get("far_clip", 1e4), where / "far_clip", lo=near, lo_open=True)
+    if "angles" in cam or "position" in cam:
+        for k in ("origin", "target", "up"):
+            if k in cam:
+                raise (where / k).error("cannot be combined with GO-Draaw's 'position' + 'angles'")
+        if "position" not in cam or "angles" not in cam:
+            raise where.error("a GO-Draaw camera needs both 'position' and 'angles' = [theta, phi]")
+        pos = vector(cam["position"], where / "position")
+        theta, phi = vector(cam["angles"], where / "angles", n=2)
+        try:
+            origin, target, up = go_draaw_look_at(pos, theta, phi, fov)
+        except ValueError:
+            raise (where / "angles").error(f"{[theta, phi]} gives a degenerate view "
+                                           "(phi = 0 or pi makes every column identical)") from None
+    else:
+        origin = np.array(vector(cam.get("origin", [0.0, 0.0, 5.0]), where / "origin"))
+        target = np.array(vector(cam.get("target", [0.0, 0.0, 0.0]), where / "target"))
+        up = np.array(vector(cam.get("up", [0.0, 1.0, 0.0]), where / "up"))
+        d = target - origin
+        if np.linalg.norm(d) < 1e-9:
+            raise (where / "target").error("equals 'origin'; the camera needs a view direction")
+        if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
+            raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
+    return origin, target, up, fov, fov_axis, near, far
+
+
+def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str) -> dict:
+    import mitsuba as mi
+
+    origin, target, up, fov, fov_axis, near, far = look_at
+    return {
+        "type": "perspective",
+        "fov": fov,
+        "fov_axis": fov_axis,
+        "near_clip": near,
+        "far_clip": far,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
+                                                   target=[float(v) for v in target],
+                                                   up=[float(v) for v in up]),
+        "sampler": {"type": "independent", "sample_count": spp},
+        "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
+                 "rfilter": {"type": rfilter}},
+    }
+
+
+def auto_camera(bbox_min, bbox_max, fov: float = 40.0):
+    """A camera framing a bounding box from the front-top-right, for bare mesh files."""
+    lo, hi = np.asarray(bbox_min, float), np.asarray(bbox_max, float)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    dist = radius / math.sin(math.radians(fov) / 2) * 1.05
+    direction = np.array([0.45, 0.35, 1.0])
+    direction /= np.linalg.norm(direction)
+    origin = centre + direction * dist
+    return {"origin": origin.tolist(), "target": centre.tolist(), "up": [0.0, 1.0, 0.0], "fov": fov}

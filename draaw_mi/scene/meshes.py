@@ -1,0 +1,137 @@
+"""Mesh files (OBJ/PLY/GLB/STL/OFF via trimesh) split into per-material parts, and PLY export.
+
+Each part carries its MTL/PBR colour and colour texture, mapped to ``draaw`` parameters:
+``Kd`` (or a glTF base colour) -> ``base_color``, ``map_Kd`` -> a ``base_color`` bitmap (sRGB
+decoded), glTF metallic/roughness factors -> ``metallic``/``roughness``. Faces without a
+material get GO-Draaw's grey (178/255). Parts are handed to Mitsuba as temporary binary PLY
+files so that materials can be referenced by name (keys ``<material>.<param>`` in
+``mi.traverse``).
+"""
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import SceneError
+
+GO_DRAAW_GREY = 178.0 / 255.0
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
+
+
+@dataclass
+class MeshPart:
+    name: str
+    vertices: np.ndarray            # (N, 3) float32
+    faces: np.ndarray               # (M, 3) uint32
+    uv: np.ndarray | None = None    # (N, 2) float32, OpenGL convention (v up)
+    material_name: str | None = None
+    material: dict = field(default_factory=dict)   # draaw parameters read from the file
+
+
+def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def _material_of(geom) -> tuple[str | None, dict]:
+    visual = getattr(geom, "visual", None)
+    mat = getattr(visual, "material", None)
+    if mat is None:
+        colors = getattr(visual, "face_colors", None) if visual is not None and visual.kind == "face" else None
+        if colors is not None and len(colors):
+            rgb = np.asarray(colors, float)[:, :3].mean(axis=0) / 255.0
+            return None, {"base_color": _srgb_to_linear(rgb).tolist()}
+        return None, {}
+    out: dict = {}
+    name = getattr(mat, "name", None)
+    if hasattr(mat, "baseColorFactor"):        # glTF PBR material
+        if mat.baseColorFactor is not None:
+            out["base_color"] = (np.asarray(mat.baseColorFactor, float)[:3] / (255.0 if np.asarray(mat.baseColorFactor).dtype == np.uint8 else 1.0)).tolist()
+        if getattr(mat, "metallicFactor", None) is not None:
+            out["metallic"] = float(np.clip(mat.metallicFactor, 0, 1))
+        if getattr(mat, "roughnessFactor", None) is not None:
+            out["roughness"] = float(np.clip(mat.roughnessFactor, 0, 1))
+        image = getattr(mat, "baseColorTexture", None)
+    else:                                      # OBJ/MTL SimpleMaterial: Kd in [0, 255]
+        diffuse = getattr(mat, "diffuse", None)
+        if diffuse is not None:
+            out["base_color"] = (np.asarray(diffuse, float)[:3] / 255.0).tolist()
+        image = getattr(mat, "image", None)
+    if image is not None:
+        arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
+        out["base_color"] = _srgb_to_linear(arr).astype(np.float32)
+    return name, out
+
+
+def load_mesh_parts(path: str, where) -> list[MeshPart]:
+    """Load a mesh file into per-material parts; raise SceneError on unreadable files."""
+    import trimesh
+
+    if not os.path.isfile(path):
+        raise where.error(f"mesh file {path!r} does not exist")
+    if not path.lower().endswith(MESH_SUFFIXES):
+        raise where.error(f"{path!r} is not a supported mesh file; expected one of {', '.join(MESH_SUFFIXES)}")
+    logging.getLogger("trimesh").setLevel(logging.ERROR)
+    try:
+        loaded = trimesh.load(path, force="scene", process=False)
+    except Exception as e:  # noqa: BLE001 - trimesh raises many kinds of errors on bad files
+        raise where.error(f"cannot read mesh {path!r}: {type(e).__name__}: {e}") from None
+    parts = []
+    try:
+        items = loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded]
+    except Exception as e:  # noqa: BLE001
+        raise where.error(f"cannot read mesh {path!r}: {e}") from None
+    for i, geom in enumerate(items):
+        if not hasattr(geom, "faces") or len(geom.faces) == 0:
+            continue
+        verts = np.asarray(geom.vertices, dtype=np.float32)
+        faces = np.asarray(geom.faces, dtype=np.int64)
+        if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(verts):
+            raise where.error(f"mesh {path!r} has invalid face indices")
+        if not np.all(np.isfinite(verts)):
+            raise where.error(f"mesh {path!r} has non-finite vertex coordinates")
+        uv = getattr(getattr(geom, "visual", None), "uv", None)
+        uv = np.asarray(uv, dtype=np.float32) if uv is not None and len(uv) == len(verts) else None
+        mat_name, mat = _material_of(geom)
+        if "base_color" not in mat:
+            mat["base_color"] = [GO_DRAAW_GREY] * 3
+        if not isinstance(mat.get("base_color"), list):
+            if uv is None:       # a texture without coordinates cannot be mapped
+                mat["base_color"] = mat["base_color"].reshape(-1, 3).mean(axis=0).tolist()
+        parts.append(MeshPart(name=f"part{i}", vertices=verts, faces=faces.astype(np.uint32), uv=uv,
+                              material_name=mat_name, material=mat))
+    if not parts:
+        raise where.error(f"mesh {path!r} contains no triangles")
+    return parts
+
+
+def write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
+    """Binary little-endian PLY with positions, optional (u, 1 - v) texture coordinates."""
+    n, m = len(vertices), len(faces)
+    vfields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if uv is not None:
+        vfields += [("u", "<f4"), ("v", "<f4")]
+    vdata = np.empty(n, dtype=vfields)
+    vdata["x"], vdata["y"], vdata["z"] = vertices[:, 0], vertices[:, 1], vertices[:, 2]
+    if uv is not None:
+        vdata["u"], vdata["v"] = uv[:, 0], 1.0 - uv[:, 1]     # OpenGL -> Mitsuba (v down)
+    fdata = np.empty(m, dtype=[("n", "u1"), ("i", "<u4", 3)])
+    fdata["n"], fdata["i"] = 3, faces
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
+    header += [f"property float {name}" for name, _ in vfields]
+    header += [f"element face {m}", "property list uchar uint vertex_indices", "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(vdata.tobytes())
+        f.write(fdata.tobytes())
+
+
+def bounds(parts: list[MeshPart], transform=None) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.concatenate([p.vertices for p in parts]).astype(np.float64)
+    if transform is not None:
+        pts = pts @ transform[:3, :3].T + transform[:3, 3]
+    return pts.min(axis=0), pts.max(axis=0)
+
+

@@ -1,0 +1,108 @@
+"""Validation helpers for scene descriptions: typed fields, ranges, unknown-key suggestions.
+
+Every error is a :class:`SceneError` whose message starts with the location
+(``file: section.key``), then the bad value and what was expected.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+from ..errors import SceneError, suggest
+
+
+class Where:
+    """A location in a scene description, used to prefix error messages."""
+
+    def __init__(self, source: str, path: str = ""):
+        self.source, self.path = source, path
+
+    def __truediv__(self, key) -> "Where":
+        key = f"[{key}]" if isinstance(key, int) else str(key)
+        sep = "" if (not self.path or key.startswith("[")) else "."
+        return Where(self.source, f"{self.path}{sep}{key}")
+
+    def __str__(self) -> str:
+        return f"{self.source}: {self.path}" if self.path else self.source
+
+    def error(self, msg: str) -> SceneError:
+        return SceneError(f"{self}: {msg}")
+
+
+def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iterable[str] = ()) -> None:
+    """Reject keys not in ``allowed`` (suggesting the closest) and missing ``required`` keys."""
+    if not isinstance(table, dict):
+        raise where.error(f"expected a table, got {type(table).__name__} {table!r}")
+    allowed = list(allowed)
+    for key in table:
+        if key not in allowed:
+            raise (where / key).error(f"unknown key {key!r}{suggest(str(key), allowed)}")
+    for key in required:
+        if key not in table:
+            raise where.error(f"missing required key {key!r}")
+
+
+def number(value: Any, where: Where, lo: float | None = None, hi: float | None = None,
+           integer: bool = False, lo_open: bool = False) -> float:
+    """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise where.error(f"{value!r} is not a number")
+    if not math.isfinite(value):
+        raise where.error(f"{value!r} is not finite")
+    if integer and int(value) != value:
+        raise where.error(f"{value!r} is not an integer")
+    if lo is not None and (value < lo or (lo_open and value == lo)):
+        raise where.error(f"{value!r} is out of range; expected {_range_text(lo, hi, lo_open)}")
+    if hi is not None and value > hi:
+        raise where.error(f"{value!r} is out of range; expected {_range_text(lo, hi, lo_open)}")
+    return int(value) if integer else float(value)
+
+
+def _range_text(lo, hi, lo_open=False):
+    if hi is None:
+        return f"{'>' if lo_open else '>='} {lo}"
+    if lo is None:
+        return f"<= {hi}"
+    return f"a value in {'(' if lo_open else '['}{lo}, {hi}]"
+
+
+def vector(value: Any, where: Where, n: int = 3, lo: float | None = None) -> list[float]:
+    """A list of ``n`` finite numbers (a single number is broadcast for colours)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value] * n
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise where.error(f"{value!r} is not a list of {n} numbers")
+    return [number(v, where / i, lo=lo) for i, v in enumerate(value)]
+
+
+def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> str:
+    if not isinstance(value, str):
+        raise where.error(f"{value!r} is not a string")
+    if choices is not None:
+        choices = list(choices)
+        if value not in choices:
+            raise where.error(f"{value!r} is not one of {', '.join(choices)}{suggest(value, choices)}")
+    return value
+
+
+def boolean(value: Any, where: Where) -> bool:
+    if not isinstance(value, bool):
+        raise where.error(f"{value!r} is not true or false")
+    return value
+
+
+def resolution(value: Any, where: Where) -> tuple[int, int]:
+    """``[W, H]``, ``"WxH"`` or a single int (square), each side in 1..16384."""
+    if isinstance(value, str):
+        parts = value.lower().split("x")
+        try:
+            value = [int(p) for p in parts]
+        except ValueError:
+            raise where.error(f"{value!r} is not a resolution; expected 'WxH' such as '256x256'") from None
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = [value, value]
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise where.error(f"{value!r} is not a resolution; expected [width, height] or 'WxH'")
+    w = number(value[0], where / "width", lo=1, hi=16384, integer=True)
+    h = number(value[1], where / "height", lo=1, hi=16384, integer=True)
+    return int(w), int(h)
