@@ -22,7 +22,10 @@ _SEARCH_DIRS = [
     "/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib",
     "/usr/local/lib", "/opt/homebrew/opt/llvm/lib", "/usr/local/opt/llvm/lib",
 ]
-_NAME_RE = re.compile(r"libLLVM[-.]?(\d+)(?:[.\d]*)?(?:git)?\.(?:so|dylib)")
+# libLLVM-19.so[.1] (Debian), libLLVM.so.18.1 (Fedora, Arch), libLLVM.19.dylib / libLLVM-19.dylib
+_NAME_RES = (re.compile(r"^libLLVM-(\d+)(?:\.\d+)*(?:git)?\.(?:so|dylib)"),
+             re.compile(r"^libLLVM\.so\.(\d+)\.\d+"),
+             re.compile(r"^libLLVM\.(\d+)\.dylib"))
 
 
 def llvm_major_from_name(path: str) -> int | None:
@@ -33,8 +36,12 @@ def llvm_major_from_name(path: str) -> int | None:
     >>> llvm_major_from_name('libLLVM.so') is None
     True
     """
-    m = _NAME_RE.search(os.path.basename(path))
-    return int(m.group(1)) if m else None
+    name = os.path.basename(path)
+    for pattern in _NAME_RES:
+        m = pattern.search(name)
+        if m:
+            return int(m.group(1))
+    return None
 
 
 def find_libllvm() -> list[tuple[int, str]]:

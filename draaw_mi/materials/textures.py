@@ -44,21 +44,23 @@ def _range(lo, hi):
 
 def constant_texture(value, color: bool) -> mi.Texture:
     if color:
-        return mi.load_dict({"type": "rgb", "value": [float(v) for v in value]})
+        # 'srgb' + unbounded: the plain 'rgb' plugin rejects values outside [0, 1] (base_color > 1,
+        # signed normal maps), which the draaw parameters allow.
+        return mi.load_dict({"type": "srgb", "color": [float(v) for v in value], "unbounded": True})
     return mi.load_dict({"type": "uniform", "value": float(value)})
 
 
-def bitmap_texture(source, raw: bool) -> mi.Texture:
+def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     """A bitmap texture from a file name or an (H, W[, C]) array (values as given, linear)."""
     if isinstance(source, str):
         if not os.path.isfile(source):
-            raise ParameterError(f"draaw BSDF: texture file {source!r} does not exist")
+            raise ParameterError(f"draaw BSDF: {name}={source!r}: texture file does not exist")
         return mi.load_dict({"type": "bitmap", "filename": source, "raw": raw})
     arr = np.asarray(source, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
-        raise ParameterError(f"draaw BSDF: texture array of shape {arr.shape}; expected (H, W), "
+        raise ParameterError(f"draaw BSDF: {name} texture array of shape {arr.shape}; expected (H, W), "
                              "(H, W, 1) or (H, W, 3)")
     return mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True})
 
@@ -74,7 +76,7 @@ def texture_values(tex: mi.Texture):
 
 def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bool) -> mi.Texture:
     """Read property ``name`` as a texture, validating constants and bitmap contents."""
-    if not props.has_property(name):
+    if not (name in props):
         if default is None:
             raise ParameterError(f"draaw BSDF: parameter {name!r} is required")
         return constant_texture([default] * 3 if color else default, color)
@@ -91,7 +93,7 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
         _check_range(name, lo, hi, [value], "value")
         return constant_texture([value] * 3 if color else value, color)
     if isinstance(value, str):
-        return bitmap_texture(value, raw=(name in RAW_BY_DEFAULT))
+        return bitmap_texture(value, raw=(name in RAW_BY_DEFAULT), name=name)
     try:
         arr = np.array(value, dtype=np.float64)
     except Exception:  # noqa: BLE001 - anything not numeric is a user error
@@ -102,7 +104,7 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
         return constant_texture(arr, color=True)
     if arr.ndim >= 2:
         _check_range(name, lo, hi, arr, "array values")
-        return bitmap_texture(arr, raw=True)
+        return bitmap_texture(arr, raw=True, name=name)
     raise ParameterError(f"draaw BSDF: {name}={value!r}; expected "
                          + ("an RGB triple, a number" if color else "a number") + ", file name, array or texture")
 

@@ -234,8 +234,10 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     settings["resolution"] = (int(size[0]), int(size[1]))
     settings["spp"] = int(sensors[0].sampler().sample_count())
     integ = scene.integrator()
-    if integ is not None and hasattr(integ, "max_depth"):
-        settings["max_depth"] = int(integ.max_depth)
+    if integ is not None:      # C++ integrators expose max_depth only through to_string()
+        m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
+        if m:
+            settings["max_depth"] = int(m.group(1))
     settings["post"] = []
     settings.update({k: v for k, v in _checked(overrides, source).items() if v is not None})
     d = DraawScene(scene, settings, source, {"materials": []}, mi_dict)

@@ -14,8 +14,8 @@ parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on.
 """
 from __future__ import annotations
 
-import math
 import os
+import re
 
 import numpy as np
 
@@ -66,6 +66,15 @@ class BuildContext:
     def unique(self, stem: str) -> str:
         self.counter += 1
         return f"{stem}_{self.counter}"
+
+
+def safe_id(name: str) -> str:
+    """A Mitsuba object id from a free-form name ('.' is reserved in parameter paths).
+
+    >>> safe_id("Blue_Light.001")
+    'Blue_Light_001'
+    """
+    return re.sub(r"[^A-Za-z0-9_-]", "_", name)
 
 
 # --------------------------------------------------------------------------- settings
@@ -216,6 +225,8 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
     kind = string(shape.get("type", "mesh" if "file" in shape else ""), where / "type", SHAPE_KEYS)
     check_keys(shape, COMMON_SHAPE_KEYS + SHAPE_KEYS[kind], where)
     name = string(shape.get("name", f"{kind}{index}"), where / "name")
+    if safe_id(name) != name or not name:
+        raise (where / "name").error(f"{name!r} may only contain letters, digits, '_' and '-'")
     mat_ref = shape.get("material")
     if isinstance(mat_ref, dict):
         mat_id = f"{name}_material"
@@ -247,13 +258,13 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         for part in parts:
             own = None
             if mat_id is None:      # take the file's material (MTL Kd / texture / glTF PBR)
-                own = f"{name}_{part.material_name or part.name}"
+                own = safe_id(f"{name}_{part.material_name or part.name}")
                 if own not in materials:
                     materials[own] = material_dict(own, {"type": "draaw", **part.material}, ctx, where / "file")
             ply = os.path.join(ctx.tmp_dir, ctx.unique("mesh") + ".ply")
             write_ply(ply, part.vertices, part.faces, part.uv)
             d = {"type": "ply", "filename": ply, "to_world": transform, "face_normals": not smooth}
-            out[f"{name}_{part.name}" if len(parts) > 1 else name] = finish(d, own)
+            out[safe_id(f"{name}_{part.name}") if len(parts) > 1 else name] = finish(d, own)
         return out
     if kind == "sphere":
         d = {"type": "sphere", "center": vector(shape.get("center", [0, 0, 0]), where / "center"),
@@ -281,6 +292,8 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     kind = string(light.get("type", ""), where / "type", LIGHT_KEYS)
     check_keys(light, COMMON_LIGHT_KEYS + LIGHT_KEYS[kind], where)
     name = string(light.get("name", f"{kind}_light{index}"), where / "name")
+    if safe_id(name) != name or not name:
+        raise (where / "name").error(f"{name!r} may only contain letters, digits, '_' and '-'")
     intensity = number(light.get("intensity", 1.0), where / "intensity", lo=0.0)
     color = vector(light.get("color", [1.0, 1.0, 1.0]), where / "color", lo=0.0)
     rgb = {"type": "rgb", "value": [intensity * c for c in color]}
@@ -371,6 +384,9 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if not isinstance(mats, dict):
         raise (where / "materials").error("expected a table of named materials")
     for mname, table in mats.items():
+        if safe_id(mname) != mname:
+            raise (where / "materials" / mname).error(f"material name {mname!r} may only contain letters, "
+                                                      "digits, '_' and '-'")
         materials[mname] = material_dict(mname, table, ctx, where / "materials" / mname)
 
     shape_entries: dict = {}
@@ -432,6 +448,6 @@ def _scene_bounds(shape_entries: dict):
 def auto_light(bbox_min, bbox_max, origin) -> list[dict]:
     """Lights for a bare mesh file: a point light at the camera and a dim sky."""
     diag = float(np.linalg.norm(np.subtract(bbox_max, bbox_min)))
-    return [{"type": "point", "position": [float(v) for v in origin], "intensity": max(diag, 1e-3) ** 2 * 1.5},
+    return [{"type": "point", "position": [float(v) for v in origin], "intensity": max(diag, 1e-3) ** 2 * 3.0},
             {"type": "constant", "intensity": 0.15}]
 

@@ -1,0 +1,52 @@
+"""Shared fixtures: tiny scenes (<= 64x64, box filter, fixed seeds) and paths."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+import draaw_mi  # noqa: F401  (sets the variant, registers plugins)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENES = os.path.join(ROOT, "scenes")
+GO_DRAAW = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
+
+
+def tiny_description(**render):
+    """A sphere on a floor under a point light and a dim sky, 32x24 by default."""
+    r = {"resolution": [32, 24], "spp": 4, "max_depth": 4, "filter": "box"}
+    r.update(render)
+    return {
+        "render": r,
+        "camera": {"origin": [0.0, 1.0, 5.0], "target": [0.0, 0.5, 0.0], "fov": 40},
+        "materials": {
+            "ball": {"base_color": [0.8, 0.3, 0.2], "roughness": 0.4, "metallic": 0.2},
+            "ground": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.9, "specular": 0.2},
+        },
+        "shapes": [
+            {"type": "sphere", "name": "ball_shape", "material": "ball", "center": [0, 0.8, 0], "radius": 0.8},
+            {"type": "rectangle", "name": "floor", "material": "ground", "scale": 4.0,
+             "rotate": {"axis": [1, 0, 0], "angle": -90}},
+        ],
+        "lights": [
+            {"type": "point", "position": [2.0, 4.0, 3.0], "intensity": 40.0},
+            {"type": "constant", "intensity": 0.2},
+        ],
+    }
+
+
+@pytest.fixture
+def tiny_desc():
+    return tiny_description()
+
+
+@pytest.fixture
+def tiny_scene():
+    return draaw_mi.load_scene(tiny_description())
+
+
+@pytest.fixture
+def go_draaw_dir():
+    if not os.path.isdir(GO_DRAAW):
+        pytest.skip(f"GO-Draaw data folder {GO_DRAAW} is absent (it lives in ../shared beside the project)")
+    return GO_DRAAW

@@ -1,0 +1,82 @@
+"""EXR/PNG I/O: bit-exact float32 round trips, AOV channel names, atomic writes, sRGB."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.errors import IOFailure
+from draaw_mi.io import channel_names, srgb_encode
+
+
+def test_exr_round_trip_is_bit_exact(tmp_path):
+    rng = np.random.default_rng(0)
+    img = (rng.standard_normal((7, 5, 3)) * 1e3).astype(np.float32)
+    path = tmp_path / "a.exr"
+    draaw_mi.write_exr(str(path), img)
+    back = draaw_mi.read_exr(str(path))
+    assert back.dtype == np.float32 and np.array_equal(back, img)
+
+
+def test_exr_aov_channel_names(tmp_path):
+    img = np.arange(4 * 3 * 6, dtype=np.float32).reshape(4, 3, 6)
+    names = channel_names(6, ["depth.Z", "albedo.R", "albedo.G"])
+    assert names == ["R", "G", "B", "depth.Z", "albedo.R", "albedo.G"]
+    path = str(tmp_path / "aov.exr")
+    draaw_mi.write_exr(path, img, channels=names)
+    back, got = draaw_mi.read_exr(path, with_names=True)
+    assert got[:3] == ["R", "G", "B"]
+    for i, n in enumerate(names):
+        assert np.array_equal(back[..., got.index(n)], img[..., i])
+
+
+def test_exr_float32_overflow_is_inf_not_garbage(tmp_path):
+    img = np.array([[[1e39, -1e39, 1.0]]], dtype=np.float64)
+    path = str(tmp_path / "o.exr")
+    with np.errstate(over="ignore"):
+        draaw_mi.write_exr(path, img)
+    back = draaw_mi.read_exr(path)
+    assert np.isposinf(back[0, 0, 0]) and np.isneginf(back[0, 0, 1]) and back[0, 0, 2] == 1.0
+
+
+def test_failed_write_keeps_the_old_file(tmp_path):
+    path = tmp_path / "keep.exr"
+    good = np.ones((2, 2, 3), np.float32)
+    draaw_mi.write_exr(str(path), good)
+    with pytest.raises(IOFailure):
+        draaw_mi.write_exr(str(path), np.ones((2, 2, 3), np.float32), channels=["R", "G"])  # bad names
+    assert np.array_equal(draaw_mi.read_exr(str(path)), good)
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.exr"]        # no temp files left
+
+
+def test_unwritable_and_bad_paths(tmp_path):
+    with pytest.raises(IOFailure, match="cannot"):
+        draaw_mi.write_exr("/proc/forbidden/x.exr", np.ones((2, 2, 3), np.float32))
+    with pytest.raises(IOFailure, match="does not exist"):
+        draaw_mi.read_exr(str(tmp_path / "none.exr"))
+    junk = tmp_path / "junk.exr"
+    junk.write_bytes(b"not an exr")
+    with pytest.raises(IOFailure, match="not a readable EXR"):
+        draaw_mi.read_exr(str(junk))
+    with pytest.raises(IOFailure, match="expected"):
+        draaw_mi.write_exr(str(tmp_path / "x.exr"), np.ones((0, 2, 3), np.float32))
+
+
+def test_srgb_matches_the_standard():
+    x = np.array([0.0, 0.0031308, 0.18, 0.5, 1.0, 2.0, np.nan])
+    ref = np.array([0.0, 12.92 * 0.0031308, 1.055 * 0.18 ** (1 / 2.4) - 0.055,
+                    1.055 * 0.5 ** (1 / 2.4) - 0.055, 1.0, 1.0, 0.0])
+    assert np.allclose(srgb_encode(x), ref, atol=1e-12)
+
+
+def test_png_is_srgb_encoded(tmp_path):
+    import matplotlib.image
+    img = np.full((2, 3, 3), 0.18, np.float32)
+    path = str(tmp_path / "p.png")
+    draaw_mi.write_png(path, img)
+    back = matplotlib.image.imread(path)
+    assert back.shape[:2] == (2, 3)
+    assert abs(back[0, 0, 0] * 255 - round((1.055 * 0.18 ** (1 / 2.4) - 0.055) * 255)) < 0.51
+    assert os.listdir(tmp_path) == ["p.png"]

@@ -1,0 +1,233 @@
+"""Scene loading: TOML/JSON/dict/XML/mesh, names, cameras, and clear errors for bad input."""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi import SceneError
+from draaw_mi.scene.camera import go_draaw_look_at, spherical
+
+from conftest import SCENES, tiny_description
+
+
+@pytest.mark.parametrize("name", ["cornell", "material_spheres", "thesis"])
+def test_sample_scenes_load_and_render(name):
+    scene = draaw_mi.load_scene(os.path.join(SCENES, f"{name}.toml"), resolution=(32, 32), spp=4)
+    img = np.array(draaw_mi.render(scene, version="path"))
+    assert img.shape == (32, 32, 3)
+    assert np.isfinite(img).all() and img.mean() > 0.01
+
+
+def test_material_keys_are_named_after_materials(tiny_scene):
+    keys = tiny_scene.params.keys()
+    for k in ("ball.roughness.value", "ball.metallic.value", "ball.base_color.value", "ground.specular.value"):
+        assert k in keys
+    assert tiny_scene.key("ball.roughness") == "ball.roughness.value"
+    with pytest.raises(SceneError, match="did you mean 'ball.roughness(.value)?'"):
+        tiny_scene.key("ball.rougness")
+
+
+def test_toml_json_and_dict_give_the_same_image(tmp_path, tiny_desc):
+    import tomllib  # noqa: F401  (stdlib on 3.11)
+    js = tmp_path / "s.json"
+    js.write_text(json.dumps(tiny_desc))
+    toml_text = _to_toml(tiny_desc)
+    tm = tmp_path / "s.toml"
+    tm.write_text(toml_text)
+    imgs = [np.array(draaw_mi.render(draaw_mi.load_scene(src), version="path", seed=3))
+            for src in (tiny_desc, str(js), str(tm))]
+    assert np.array_equal(imgs[0], imgs[1]) and np.array_equal(imgs[0], imgs[2])
+
+
+def _to_toml(desc):
+    """Minimal TOML writer for the fixture's structure (tables, arrays of tables, inline values)."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return repr(v)
+    lines = []
+    for k, v in desc["render"].items():
+        pass
+    lines.append("[render]")
+    lines += [f"{k} = {val(v)}" for k, v in desc["render"].items()]
+    lines.append("[camera]")
+    lines += [f"{k} = {val(v)}" for k, v in desc["camera"].items()]
+    for name, mat in desc["materials"].items():
+        lines.append(f"[materials.{name}]")
+        lines += [f"{k} = {val(v)}" for k, v in mat.items()]
+    for sec in ("shapes", "lights"):
+        for item in desc[sec]:
+            lines.append(f"[[{sec}]]")
+            lines += [f"{k} = {val(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_go_draaw_camera_looks_through_the_patch_centre():
+    theta, phi, fov = 0.335, -1.715, 45.0
+    origin, target, up = go_draaw_look_at([1.0, 2.0, 3.0], theta, phi, fov)
+    f = math.radians(fov)
+    centre = 0.5 * (spherical(theta + f, phi) + spherical(theta, phi + f))
+    d = (target - origin)
+    assert np.allclose(d / np.linalg.norm(d), centre / np.linalg.norm(centre))
+    assert abs(np.dot(up, d)) < 1e-9                    # orthonormal
+    tl_minus_bl = spherical(theta, phi) - spherical(theta, phi + f)
+    assert np.dot(up, tl_minus_bl) > 0                  # image-up is decreasing phi
+
+
+def test_snap_light_to_camera(tiny_desc):
+    tiny_desc["lights"] = [{"type": "point", "snap_to_camera": True, "intensity": 10.0}]
+    scene = draaw_mi.load_scene(tiny_desc)
+    pos = np.array(scene.params["point_light0.position"]).ravel()
+    assert np.allclose(pos, tiny_desc["camera"]["origin"])
+
+
+def test_mitsuba_dict_and_xml_pass_through(tmp_path):
+    d = mi.cornell_box()
+    d["sensor"]["film"]["width"] = d["sensor"]["film"]["height"] = 16
+    scene = draaw_mi.load_scene(d)
+    assert scene.resolution == (16, 16)
+    xml = tmp_path / "s.xml"
+    xml.write_text("""<scene version="3.0.0"><integrator type="path"><integer name="max_depth" value="3"/></integrator>
+      <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="20"/>
+      <integer name="height" value="10"/></film><sampler type="independent"><integer name="sample_count" value="8"/></sampler></sensor>
+      <shape type="sphere"><bsdf type="draaw"><float name="roughness" value="0.3"/></bsdf></shape>
+      <emitter type="constant"/></scene>""")
+    s = draaw_mi.load_scene(str(xml))
+    assert s.resolution == (20, 10) and s.settings["spp"] == 8 and s.settings["max_depth"] == 3
+    img = np.array(draaw_mi.render(s, version="path"))
+    assert img.shape == (10, 20, 3) and np.isfinite(img).all()
+
+
+def test_with_resolution_rebuilds_film(tiny_scene):
+    s2 = tiny_scene.with_resolution(16, 8)
+    assert s2.resolution == (16, 8)
+    assert np.array(draaw_mi.render(s2, version="path")).shape == (8, 16, 3)
+
+
+def test_mesh_with_mtl_materials(tmp_path):
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl blue\nKd 0.1 0.1 0.8\n")
+    (tmp_path / "m.obj").write_text(
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\n"
+        "usemtl red\nf 1 2 3 4\nusemtl blue\nf 2 5 6 3\n")
+    scene = draaw_mi.load_scene(str(tmp_path / "m.obj"), resolution=(16, 16), spp=4)
+    mats = scene.info["materials"]
+    assert len(mats) == 2
+    colors = sorted(tuple(np.round(np.array(scene.params[f"{m}.base_color.value"]).ravel(), 2)) for m in mats)
+    assert colors == [(0.1, 0.1, 0.8), (0.8, 0.1, 0.1)]
+    assert np.isfinite(np.array(draaw_mi.render(scene, version="path"))).all()
+
+
+def test_go_draaw_scenes_load_and_render(go_draaw_dir):
+    for name in ("monkey.obj", "cubes.obj", "Room.obj", "t90.obj"):
+        scene = draaw_mi.load_scene(os.path.join(go_draaw_dir, name), resolution=(24, 16), spp=2)
+        img = np.array(draaw_mi.render(scene, version="path"))
+        assert img.shape == (16, 24, 3) and np.isfinite(img).all() and img.mean() > 0, name
+    room = draaw_mi.load_scene(os.path.join(go_draaw_dir, "Room.obj"), resolution=(8, 8))
+    assert len(room.info["materials"]) >= 15      # Room.mtl's materials become draaw materials
+
+
+def test_go_draaw_camera_positions(go_draaw_dir):
+    cams = json.load(open(os.path.join(go_draaw_dir, "camera_positions.json")))
+    for c in cams:
+        desc = {"render": {"resolution": [20, 15], "spp": 2},
+                "camera": {"position": [c["x"], c["y"], c["z"]], "angles": [c["cameraX"], c["cameraY"]], "fov": 45},
+                "shapes": [{"type": "mesh", "file": os.path.join(go_draaw_dir, "monkey.obj"), "scale": 75}],
+                "lights": [{"type": "point", "snap_to_camera": True, "intensity": 2e6}]}
+        img = np.array(draaw_mi.render(draaw_mi.load_scene(desc), version="path"))
+        assert np.isfinite(img).all() and img.mean() > 0   # the monkey scene is in view
+
+
+# ----------------------------------------------------------------------------- bad input
+def _mut(path, value):
+    d = tiny_description()
+    target = d
+    for p in path[:-1]:
+        target = target[p]
+    if value is KeyError:
+        del target[path[-1]]
+    else:
+        target[path[-1]] = value
+    return d
+
+
+BAD = [
+    (("render", "resolution"), [-5, 3], r"render.resolution.width: -5 is out of range"),
+    (("render", "resolution"), "axb", r"not a resolution"),
+    (("render", "spp"), 0, r"render.spp: 0 is out of range"),
+    (("render", "sppp"), 4, r"unknown key 'sppp'; did you mean 'spp'\?"),
+    (("render", "filter"), "gauss", r"did you mean 'gaussian'"),
+    (("materials", "ball", "roughness"), 1.5, r"materials.ball.roughness: 1.5 is out of range; expected a value in \[0.0, 1.0\]"),
+    (("materials", "ball", "metalic"), 0.5, r"unknown key 'metalic'; did you mean 'metallic'\?"),
+    (("materials", "ball", "base_color"), [1, -1, 0], r"base_color\[1\]: -1 is out of range"),
+    (("materials", "ball", "base_color"), "missing.png", r"texture file 'missing.png' does not exist"),
+    (("shapes", 0, "material"), "bal", r"unknown material 'bal'; did you mean 'ball'\?"),
+    (("shapes", 0, "type"), "spehre", r"did you mean 'sphere'"),
+    (("shapes", 0, "radius"), -1, r"radius: -1 is out of range"),
+    (("shapes", 0, "name"), "floor", r"duplicate name 'floor'"),
+    (("shapes",), [], r"no shapes"),
+    (("camera", "target"), [0.0, 1.0, 5.0], r"camera.target: equals 'origin'"),
+    (("camera", "fov"), 180, r"camera.fov: 180 is out of range"),
+    (("camera", "angles"), [0.1, 0.2], r"cannot be combined"),
+    (("lights", 0, "intensity"), -2, r"lights\[0\].intensity: -2 is out of range"),
+    (("lights", 0, "type"), "sun", r"lights\[0\].type: 'sun' is not one of"),
+    (("lights", 0, "position"), KeyError, r"needs 'position'"),
+    (("colour",), {}, r"unknown key 'colour'"),
+]
+
+
+@pytest.mark.parametrize("path,value,message", BAD, ids=[".".join(map(str, b[0])) + "=" + str(b[1]) for b in BAD])
+def test_bad_descriptions_raise_one_clear_line(path, value, message):
+    with pytest.raises(SceneError, match=message) as info:
+        draaw_mi.load_scene(_mut(path, value))
+    assert "\n" not in str(info.value)
+    assert str(info.value).startswith("<dict>")
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(SceneError, match="does not exist"):
+        draaw_mi.load_scene(str(tmp_path / "nope.toml"))
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[render\nspp = 3")
+    with pytest.raises(SceneError, match="bad.toml: malformed TOML"):
+        draaw_mi.load_scene(str(bad))
+    badj = tmp_path / "bad.json"
+    badj.write_text("{\"render\": {\"spp\": 3,}}")
+    with pytest.raises(SceneError, match="bad.json: malformed JSON at line 1"):
+        draaw_mi.load_scene(str(badj))
+    obj = tmp_path / "bad.obj"
+    obj.write_text("this is not an obj file\nf 1 2 3\n")
+    with pytest.raises(SceneError, match="bad.obj"):
+        draaw_mi.load_scene(str(obj))
+    empty = tmp_path / "empty.obj"
+    empty.write_text("")
+    with pytest.raises(SceneError, match="no triangles|cannot read"):
+        draaw_mi.load_scene(str(empty))
+    other = tmp_path / "scene.blend"
+    other.write_text("x")
+    with pytest.raises(SceneError, match="unknown scene format"):
+        draaw_mi.load_scene(str(other))
+    xml = tmp_path / "bad.xml"
+    xml.write_text("<scene version='3.0.0'><shape type='nosuchshape'/></scene>")
+    with pytest.raises(SceneError, match="bad.xml"):
+        draaw_mi.load_scene(str(xml))
+    with pytest.raises(SceneError, match="unknown setting 'sp'"):
+        draaw_mi.load_scene(tiny_description(), sp=3)
+
+
+def test_loading_does_not_mutate_the_description(tiny_desc):
+    before = copy.deepcopy(tiny_desc)
+    draaw_mi.load_scene(tiny_desc)
+    assert tiny_desc == before

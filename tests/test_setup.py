@@ -1,0 +1,51 @@
+"""Import-time checks: libLLVM detection and variant selection fail with one clear line."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from draaw_mi._llvm import check_llvm, llvm_major_from_name
+
+
+def test_llvm_name_parsing():
+    assert llvm_major_from_name("/usr/lib/x86_64-linux-gnu/libLLVM-19.so.1") == 19
+    assert llvm_major_from_name("libLLVM.so.18.1") == 18
+    assert llvm_major_from_name("libLLVM-15.so") == 15
+    assert llvm_major_from_name("libfoo.so") is None
+    assert llvm_major_from_name("/usr/lib/llvm-19/lib/libLLVM.so.1") is None     # soname only: unknown
+
+
+def test_this_machine_has_a_usable_llvm():
+    assert check_llvm() is None
+
+
+def _import_in_subprocess(env_extra):
+    env = dict(os.environ, **env_extra)
+    return subprocess.run([sys.executable, "-c", "import draaw_mi"], capture_output=True, text=True, env=env)
+
+
+def test_too_old_llvm_override_raises_before_drjit_aborts(tmp_path):
+    fake = tmp_path / "libLLVM-15.so.1"
+    fake.write_bytes(b"")
+    r = _import_in_subprocess({"DRJIT_LIBLLVM_PATH": str(fake)})
+    assert r.returncode == 1
+    last = r.stderr.strip().splitlines()[-1]
+    assert "DraawError" in last and "libllvm19" in last and "LLVM 15" in last
+
+
+def test_missing_llvm_override_and_bad_variant():
+    r = _import_in_subprocess({"DRJIT_LIBLLVM_PATH": "/nonexistent/libLLVM-19.so"})
+    assert r.returncode == 1 and "does not exist" in r.stderr.strip().splitlines()[-1]
+    r = _import_in_subprocess({"DRAAW_MI_VARIANT": "scalar_rgb"})
+    assert r.returncode == 1 and "not supported" in r.stderr.strip().splitlines()[-1]
+    r = _import_in_subprocess({"DRAAW_MI_VARIANT": "llvm_ad_rgbx"})
+    assert r.returncode == 1 and "is not a Mitsuba variant" in r.stderr.strip().splitlines()[-1]
+
+
+def test_cli_reports_environment_problems_in_one_line():
+    env = dict(os.environ, DRAAW_MI_VARIANT="scalar_rgb")
+    exe = os.path.join(os.path.dirname(sys.executable), "draaw-mi")
+    cmd = [exe, "info"] if os.path.exists(exe) else [sys.executable, "-m", "draaw_mi_cli", "info"]
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    assert r.returncode == 2 and r.stderr.startswith("draaw-mi: error:") and r.stderr.count("\n") == 1
