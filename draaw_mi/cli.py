@@ -7,6 +7,8 @@ Examples::
     draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --spp 256
     draaw-mi info scenes/material_spheres.toml
     draaw-mi post out/cornell.exr -o out/graded.exr --chain chain.json
+    draaw-mi fit scenes/fit_sphere.toml --reference ref.exr --param target.roughness \
+             --param target.metallic -o fitted.toml --plot fit.png
 """
 from __future__ import annotations
 
@@ -62,6 +64,26 @@ def _parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="show the set-up, or what a scene contains and calls for")
     i.add_argument("scene", nargs="?", help="scene file")
     i.add_argument("--json", action="store_true", help="print JSON")
+
+    f = sub.add_parser("fit", help="fit material parameters to reference images")
+    f.add_argument("scene", help="scene file (.toml, .json, .xml)")
+    f.add_argument("--reference", action="append", required=True,
+                   help="reference image (.exr linear, or .png sRGB); repeat once per view")
+    f.add_argument("--param", action="append", required=True,
+                   help="parameter to fit, as material.parameter (e.g. gold.roughness); repeatable")
+    f.add_argument("-o", "--output", help="write the fitted scene (.toml/.json) or the values (.json)")
+    f.add_argument("--plot", help="write a PNG plot of loss and parameters over iterations")
+    f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference")
+    f.add_argument("--version", default="v4", help="differentiable integrator (default v4)")
+    f.add_argument("--spp", type=int, default=16, help="samples per pixel per iteration (default 16)")
+    f.add_argument("--iterations", type=int, default=100, help="Adam iterations (default 100)")
+    f.add_argument("--lr", type=float, default=0.03, help="learning rate (default 0.03)")
+    f.add_argument("--loss", default="l2", choices=["l2", "l1", "relative_l2"])
+    f.add_argument("--exposure", default="fixed", choices=["fixed", "fit"],
+                   help="'fit' makes the loss insensitive to a global exposure difference")
+    f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss")
+    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--no-progress", action="store_true")
 
     q = sub.add_parser("post", help="apply a post-processing chain to an EXR")
     q.add_argument("input", help="input EXR")
@@ -148,6 +170,48 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _cmd_fit(args) -> int:
+    import draaw_mi
+    import tomli_w
+
+    if args.output:
+        _writable(args.output, (".toml", ".json"), "output")
+    if args.plot:
+        _writable(args.plot, (".png",), "--plot")
+    views = None
+    if args.views:
+        try:
+            with open(args.views) as fh:
+                views = json.load(fh)
+        except (OSError, json.JSONDecodeError) as e:
+            raise CliError(f"--views {args.views!r}: {e}") from None
+    scene = draaw_mi.load_scene(args.scene)
+    post = _load_chain(args.post) if args.post else None
+    res = draaw_mi.fit(scene, list(args.reference), params=list(args.param), version=args.version,
+                       spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
+                       post=post, exposure=args.exposure, seed=args.seed,
+                       progress=(not args.no_progress) and sys.stderr.isatty())
+    for name, value in res.values.items():
+        print(f"{name} = {value if isinstance(value, list) else round(value, 5)}")
+    print(f"loss {res.losses[0]:.4g} -> {res.losses[-1]:.4g} in {res.iterations} iterations, "
+          f"{res.seconds:.1f} s, {'converged' if res.converged else 'not converged'}")
+    if args.output:
+        from draaw_mi.io import atomic_path
+        if scene.description is not None:
+            doc = scene.updated_description(res.values)
+        else:
+            doc = {"fitted": res.values}
+        text = tomli_w.dumps(doc) if args.output.lower().endswith(".toml") else json.dumps(doc, indent=2)
+        with atomic_path(args.output, ".tmp") as tmp:
+            with open(tmp, "w") as fh:
+                fh.write(text)
+        print(f"wrote {args.output}")
+    if args.plot:
+        res.plot(args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
 def _cmd_post(args) -> int:
     import numpy as np
 
@@ -176,7 +240,7 @@ def main(argv=None) -> int:
         args = _parser().parse_args(argv)
         import draaw_mi  # noqa: F401  (environment check happens here)
         from draaw_mi.errors import DraawError
-        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post}[args.command]
+        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit}[args.command]
         try:
             return handler(args)
         except DraawError as e:

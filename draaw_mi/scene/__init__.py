@@ -60,6 +60,7 @@ class DraawScene:
     info: dict = field(default_factory=dict)
     mi_dict: dict | None = None
     _tmp: Any = None
+    description: dict | None = None
     _params: Any = None
 
     @property
@@ -100,7 +101,24 @@ class DraawScene:
         sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
         d["sensor"] = sensor
         settings = dict(self.settings, resolution=(int(width), int(height)))
-        return DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp)
+        return DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp,
+                          self.description)
+
+    def updated_description(self, values: dict) -> dict:
+        """The scene description with ``{"material.parameter": value}`` written into its
+        ``[materials]`` tables (for saving fitted scenes)."""
+        import copy
+        if self.description is None:
+            raise SceneError(f"{self.source}: only TOML/JSON/dict scenes can be written back")
+        desc = copy.deepcopy(self.description)
+        mats = desc.setdefault("materials", {})
+        for name, value in values.items():
+            mat, _, param = name.partition(".")
+            param = param.removesuffix(".value")
+            if mat not in mats or not param or "." in param:
+                raise SceneError(f"{self.source}: cannot write {name!r} back: no material {mat!r} in the file")
+            mats[mat][param] = value
+        return desc
 
     def features(self) -> dict:
         """Which effects the scene calls for (emitter kinds, textures, ...)."""
@@ -210,7 +228,8 @@ def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -
     tmp = tempfile.TemporaryDirectory(prefix="draaw-mi-")
     mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
     scene = _load_dict(mi, mi_dict, source)
-    return DraawScene(scene, settings, source, info, mi_dict, tmp)
+    import copy
+    return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
 
 
 def _checked(overrides: dict, source: str) -> dict:
