@@ -100,7 +100,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
-           integrator_options: dict | None = None):
+           integrator_options: dict | None = None, adaptive: int | None = None):
     """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = 3 + AOV channels).
 
     Parameters
@@ -117,6 +117,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     post: a post-processing chain (list of dicts) to apply; default the scene's ``post``;
         ``[]`` disables it.
     return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``.
+    adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
+        interpolation (see :mod:`draaw_mi.adaptive`; biased, not differentiable, no AOVs).
     """
     from .scene import DraawScene, load_scene
 
@@ -140,6 +142,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     aovs = s.get("aovs", []) if aovs is None else aovs
+    if adaptive is not None:
+        return _render_adaptive(scene, adaptive, version, spp, seed, max_depth, params, aovs, post,
+                                return_info)
     integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
 
     n_passes = -(-spp // pass_spp)
@@ -175,6 +180,26 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if return_info:
         return image, {"spp": done, "passes": -(-done // pass_spp), "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version)}
+    return image
+
+
+def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, post, return_info):
+    from .adaptive import render_adaptive
+    if params is not None:
+        raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
+    if aovs:
+        raise RenderError("render: adaptive subsampling renders colour only; drop aovs or adaptive=")
+    t0 = time.perf_counter()
+    with _scene_lock(scene):
+        image, stats = render_adaptive(scene, block=block, spp=spp, seed=seed, version=version,
+                                       max_depth=max_depth)
+    chain = scene.settings.get("post", []) if post is None else post
+    if chain:
+        image = _apply_post(image, chain)
+    if return_info:
+        return image, {"spp": spp, "passes": 1, "seconds": time.perf_counter() - t0,
+                       "channels": ["R", "G", "B"], "version": version,
+                       "integrator": resolve_version(version), "adaptive": stats}
     return image
 
 
