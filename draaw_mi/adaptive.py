@@ -35,6 +35,18 @@ import numpy as np
 from .errors import RenderError
 
 
+def _jit(array_type, values: np.ndarray):
+    """A Dr.Jit array made from ``values`` via a 64-byte aligned buffer. Dr.Jit maps numpy
+    memory; its alignment varies between allocations and is baked into the kernel (``align 1``
+    vs ``align 64`` loads), so unaligned inputs would cost a recompile on many calls."""
+    values = np.ascontiguousarray(values)
+    buf = np.empty(values.nbytes + 64, np.uint8)
+    offset = (-buf.ctypes.data) % 64
+    aligned = buf[offset:offset + values.nbytes].view(values.dtype)
+    aligned[...] = values.ravel()
+    return array_type(aligned)
+
+
 def _sample_points(scene, integrator, xs: np.ndarray, ys: np.ndarray, spp: int, seed: int) -> mi.Float:
     """Radiance at pixels (xs, ys), ``spp`` jittered samples each, one launch: a flat
     (w * h * 3) Dr.Jit array with the traced pixels filled in (zeros elsewhere)."""
@@ -42,11 +54,11 @@ def _sample_points(scene, integrator, xs: np.ndarray, ys: np.ndarray, spp: int, 
     sensor = mis.sensors()[0]
     w, h = scene.resolution
     n = len(xs)
-    idx = mi.UInt32(np.arange(n, dtype=np.uint32))
+    idx = dr.arange(mi.UInt32, n)
     if spp > 1:
         idx = dr.repeat(idx, spp)
-    px = dr.gather(mi.Float, mi.Float(xs.astype(np.float32)), idx)
-    py = dr.gather(mi.Float, mi.Float(ys.astype(np.float32)), idx)
+    px = dr.gather(mi.Float, _jit(mi.Float, xs.astype(np.float32)), idx)
+    py = dr.gather(mi.Float, _jit(mi.Float, ys.astype(np.float32)), idx)
     sampler = sensor.sampler().clone()
     sampler.seed(dr.opaque(mi.UInt32, seed), n * spp)
     with dr.suspend_grad():
@@ -60,8 +72,9 @@ def _sample_points(scene, integrator, xs: np.ndarray, ys: np.ndarray, spp: int, 
         L = mi.Color3f(L * weight)
         if spp > 1:
             L = dr.block_sum(L, spp) / spp
-        pix = mi.UInt32((ys * w + xs).astype(np.uint32))
+        pix = _jit(mi.UInt32, (ys * w + xs).astype(np.uint32))
         image = dr.zeros(mi.Float, w * h * 3)
+        dr.eval(L)                           # once, not once per scattered channel
         for c in range(3):
             dr.scatter(image, L[c], pix * 3 + c)
         dr.eval(image)
@@ -75,7 +88,8 @@ def _signatures(scene, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     sensor = mis.sensors()[0]
     w, h = scene.resolution
     with dr.suspend_grad():
-        pos = mi.Point2f((mi.Float(xs.astype(np.float32)) + 0.5) / w, (mi.Float(ys.astype(np.float32)) + 0.5) / h)
+        pos = mi.Point2f((_jit(mi.Float, xs.astype(np.float32)) + 0.5) / w,
+                         (_jit(mi.Float, ys.astype(np.float32)) + 0.5) / h)
         ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
         si = mis.ray_intersect(ray)
         hit = si.is_valid()
@@ -169,12 +183,12 @@ def _fill(vals: mi.Float, traced: np.ndarray, agree_maps, w: int, h: int) -> mi.
     x, y = idx % w, idx // w
     out = mi.Color3f(dr.gather(mi.Float, vals, idx * 3 + 0), dr.gather(mi.Float, vals, idx * 3 + 1),
                      dr.gather(mi.Float, vals, idx * 3 + 2))
-    done = mi.Bool(traced.ravel())
+    done = _jit(mi.Bool, traced.ravel())
     for step, agree in agree_maps:
         nyc, nxc = agree.shape
         i = dr.minimum(x // step, nxc - 1)
         j = dr.minimum(y // step, nyc - 1)
-        ok = ~done & dr.gather(mi.Bool, mi.Bool(agree.ravel()), j * nxc + i)
+        ok = ~done & dr.gather(mi.Bool, _jit(mi.Bool, agree.ravel()), j * nxc + i)
         x0, y0 = i * step, j * step
         x1, y1 = dr.minimum(x0 + step, w - 1), dr.minimum(y0 + step, h - 1)
         fx = mi.Float(x - x0) / mi.Float(dr.maximum(x1 - x0, 1))

@@ -85,6 +85,22 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--no-progress", action="store_true")
 
+    b = sub.add_parser("bench", help="measure what accuracy costs in time (error vs time study)")
+    b.add_argument("scenes", nargs="*", help="scene files (default: the sample scenes)")
+    b.add_argument("--quick", action="store_true", help="small grid, finishes in about two minutes")
+    b.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
+    b.add_argument("--versions", help="comma-separated, default v1,v2,v3,v4,path")
+    b.add_argument("--spp", help="comma-separated spp list, default 1,2,4,...,1024")
+    b.add_argument("--max-depth", help="comma-separated max_depth list (default: the scene's)")
+    b.add_argument("--adaptive", type=int, default=8, help="adaptive block size to include (0: none)")
+    b.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
+    b.add_argument("--resolution", help="WxH for every scene (default: the scene's)")
+    b.add_argument("--gt-spp", type=int, default=4096, help="ground-truth spp (Mitsuba path)")
+    b.add_argument("--camera-path", help="JSON keyframes (GO-Draaw camera_positions.json form): "
+                   "also measure frame-time statistics along this path")
+    b.add_argument("--frames", type=int, default=60, help="frames along --camera-path")
+    b.add_argument("--no-progress", action="store_true")
+
     q = sub.add_parser("post", help="apply a post-processing chain to an EXR")
     q.add_argument("input", help="input EXR")
     q.add_argument("-o", "--output", required=True, help="output EXR (or .png)")
@@ -212,6 +228,63 @@ def _cmd_fit(args) -> int:
     return 0
 
 
+def _int_list(text, name):
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise CliError(f"{name} {text!r}: expected comma-separated integers") from None
+    if not values:
+        raise CliError(f"{name} is empty")
+    return values
+
+
+def _cmd_bench(args) -> int:
+    import draaw_mi
+    from draaw_mi import bench
+    from draaw_mi.scene.schema import Where, resolution as parse_res
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(draaw_mi.__file__)))
+    scenes = args.scenes or [os.path.join(root, "scenes", f) for f in ("cornell.toml", "material_spheres.toml")]
+    versions = args.versions.split(",") if args.versions else list(bench.DEFAULT_VERSIONS)
+    for v in versions:
+        draaw_mi.render.__globals__["resolve_version"](v)
+    if args.repeats < 1:
+        raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
+    res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None
+    if args.quick:
+        spps = _int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
+        res = res or (64, 64)
+        gt_spp = min(args.gt_spp, 1024)
+        repeats = min(args.repeats, 2)
+    else:
+        spps = _int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
+        gt_spp, repeats = args.gt_spp, args.repeats
+    depths = _int_list(args.max_depth, "--max-depth") if args.max_depth else None
+    progress = (not args.no_progress) and sys.stderr.isatty()
+    result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
+                             adaptive=(None, args.adaptive) if args.adaptive else (None,),
+                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress)
+    print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
+    if args.camera_path:
+        try:
+            with open(args.camera_path) as fh:
+                keys = json.load(fh)
+        except (OSError, json.JSONDecodeError) as e:
+            raise CliError(f"--camera-path {args.camera_path!r}: {e}") from None
+        scene = draaw_mi.load_scene(scenes[0], **({"resolution": res} if res else {}))
+        rows = bench.frame_times(scene, keys, versions=versions, frames=args.frames, progress=progress)
+        from draaw_mi.io import atomic_path
+        path = os.path.join(args.out, "frame_times.json")
+        with atomic_path(path, ".tmp") as tmp:
+            with open(tmp, "w") as fh:
+                json.dump(rows, fh, indent=1)
+        for r in rows:
+            print(f"{r['version']:>6}: mean {r['mean_s'] * 1e3:.1f} ms, median {r['median_s'] * 1e3:.1f} ms, "
+                  f"p90 {r['p90_s'] * 1e3:.1f} ms")
+        print(f"wrote {path}")
+    return 0
+
+
 def _cmd_post(args) -> int:
     import numpy as np
 
@@ -240,7 +313,8 @@ def main(argv=None) -> int:
         args = _parser().parse_args(argv)
         import draaw_mi  # noqa: F401  (environment check happens here)
         from draaw_mi.errors import DraawError
-        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit}[args.command]
+        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit,
+                   "bench": _cmd_bench}[args.command]
         try:
             return handler(args)
         except DraawError as e:

@@ -1,0 +1,311 @@
+"""What accuracy costs in time: the benchmark study behind ``draaw-mi bench``.
+
+For each scene it renders a ground truth (Mitsuba's ``path`` with the scene's materials at high
+spp, cached as EXR), then for every setting of a grid — version (V1..V4 and ``path`` as the
+peer), spp (powers of two), ``max_depth``, adaptive subsampling on/off — it measures:
+
+* **time**: median of ``repeats`` timed renders after a warm-up render; the warm-up's extra
+  time is reported separately as ``compile_s`` (JIT compilation, or a disk-cache hit);
+* **error** against the ground truth, averaged over the repeats (independent seeds): RMSE,
+  relative MSE (``(x - gt)^2 / (gt^2 + 0.01)``) and mean CIEDE2000 of the sRGB-encoded images
+  (colour-science);
+* **bias**: the error that does not fall with spp: ``sqrt(MSE - variance)`` with the variance
+  of one render estimated from the independent repeats (see :func:`estimate_bias`).
+
+Results are written as JSON, CSV, a Markdown summary and plots (see :mod:`draaw_mi.bench_report`).
+GO-Draaw's frame-time statistics along a camera path are in :func:`frame_times`.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+
+import drjit as dr
+import numpy as np
+
+from .errors import DraawError
+from .io import read_exr, srgb_encode, write_exr
+
+DEFAULT_VERSIONS = ("v1", "v2", "v3", "v4", "path")
+
+
+@dataclass(frozen=True)
+class Setting:
+    version: str
+    spp: int
+    max_depth: int
+    adaptive: int | None = None
+
+    @property
+    def label(self) -> str:
+        return f"{self.version}{'+adaptive' + str(self.adaptive) if self.adaptive else ''}"
+
+
+# --------------------------------------------------------------------------- error metrics
+def rmse(img: np.ndarray, gt: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((img - gt) ** 2)))
+
+
+def relmse(img: np.ndarray, gt: np.ndarray) -> float:
+    return float(np.mean((img - gt) ** 2 / (gt ** 2 + 1e-2)))
+
+
+def ciede2000(img: np.ndarray, gt: np.ndarray) -> float:
+    """Mean CIEDE2000 between the sRGB-encoded (display-referred, clipped) images."""
+    import colour
+
+    def lab(x):
+        enc = srgb_encode(x[..., :3])
+        xyz = colour.sRGB_to_XYZ(enc)                 # decodes the sRGB transfer function
+        return colour.XYZ_to_Lab(xyz)
+    return float(np.mean(colour.delta_E(lab(img), lab(gt), method="CIE 2000")))
+
+
+def errors(img: np.ndarray, gt: np.ndarray) -> dict:
+    img = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
+    return {"rmse": rmse(img, gt), "relmse": relmse(img, gt), "ciede2000": ciede2000(img, gt)}
+
+
+# --------------------------------------------------------------------------- ground truth
+def _scene_key(scene, spp: int, max_depth: int) -> str:
+    h = hashlib.sha256()
+    src = scene.source
+    if src and os.path.isfile(src):
+        with open(src, "rb") as f:
+            h.update(f.read())
+    elif scene.description is not None:
+        h.update(json.dumps(scene.description, sort_keys=True, default=str).encode())
+    h.update(repr((scene.resolution, spp, max_depth)).encode())
+    return h.hexdigest()[:16]
+
+
+def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir: str | None = None,
+                 progress: bool = False) -> np.ndarray:
+    """Mitsuba ``path`` at high spp, cached as ``<cache_dir>/gt-<hash>.exr`` (atomic write)."""
+    from .render import render
+
+    max_depth = scene.settings["max_depth"] if max_depth is None else max_depth
+    path = None
+    if cache_dir:
+        name = os.path.splitext(os.path.basename(scene.source or "scene"))[0]
+        path = os.path.join(cache_dir, f"gt-{name}-{_scene_key(scene, spp, max_depth)}.exr")
+        if os.path.isfile(path):
+            return read_exr(path)[..., :3]
+    img = np.array(render(scene, version="path", spp=spp, seed=2 ** 31 - 1, max_depth=max_depth,
+                          progress=progress, post=[]))[..., :3]
+    if path:
+        write_exr(path, img)
+    return img
+
+
+# --------------------------------------------------------------------------- measurement
+def _timed_render(scene, s: Setting, seed: int) -> tuple[np.ndarray, float]:
+    from .render import render
+    t0 = time.perf_counter()
+    img = render(scene, version=s.version, spp=s.spp, seed=seed, max_depth=s.max_depth,
+                 adaptive=s.adaptive, post=[])
+    dr.eval(img)
+    dr.sync_thread()
+    arr = np.array(img)
+    return arr, time.perf_counter() - t0
+
+
+def measure(scene, s: Setting, gt: np.ndarray, repeats: int = 3, seed: int = 1) -> tuple[dict, np.ndarray]:
+    """Time and error of one setting (see the module docstring): (row, last image)."""
+    _, first = _timed_render(scene, s, seed + 1000)
+    times, errs, imgs = [], [], []
+    for r in range(repeats):
+        img, t = _timed_render(scene, s, seed + r)
+        times.append(t)
+        errs.append(errors(img, gt))
+        imgs.append(np.nan_to_num(img[..., :3]))
+    last = imgs[-1]
+    median = float(np.median(times))
+    stack = np.stack(imgs)
+    # MSE of one render = bias^2 + variance; the variance is estimated from the repeats
+    mse = float(np.mean((stack - gt) ** 2))
+    var = float(np.mean(stack.var(axis=0, ddof=1))) if repeats > 1 else float("nan")
+    row = asdict(s)
+    row.update({"label": s.label, "time_s": median, "time_min_s": float(np.min(times)),
+                "compile_s": max(0.0, first - median), "repeats": repeats,
+                "finite": bool(np.isfinite(last).all()), "mse": mse, "variance": var})
+    for k in errs[0]:
+        row[k] = float(np.mean([e[k] for e in errs]))
+    return row, last
+
+
+def estimate_bias(rows: list[dict]) -> dict:
+    """``{(scene, label, max_depth): bias}``: the RMSE that does not fall with spp.
+
+    Per setting, ``bias^2 = MSE - variance`` (the variance of one render estimated from the
+    independent repeats); per method the estimate at its highest spp is kept, where the
+    variance term is smallest. The ground truth's own noise (``gt_spp`` samples) is a floor
+    that shows up as a small bias of every method, ``path`` included.
+    """
+    out = {}
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["label"], r["max_depth"]), []).append(r)
+    for key, rs in groups.items():
+        best = max(rs, key=lambda r: r["spp"])
+        if not np.isfinite(best.get("variance", np.nan)):
+            continue
+        out[key] = float(np.sqrt(max(best["mse"] - best["variance"], 0.0)))
+    return out
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of (time, error) points not dominated by another (lower time and error).
+
+    >>> pareto_front([(1, 5), (2, 3), (3, 4), (4, 1)])
+    [0, 1, 3]
+    """
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    front, best = [], np.inf
+    for i in order:
+        if points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return sorted(front)
+
+
+def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024),
+              max_depths=None, adaptive=(None, 8), adaptive_spp=(1,), repeats: int = 3,
+              resolution=None, gt_spp: int = 4096, out_dir: str = "out/bench", cache_dir: str | None = None,
+              progress: bool = True, seed: int = 1) -> dict:
+    """Run the grid on every scene; write results into ``out_dir`` and return them."""
+    from . import load_scene
+    from .bench_report import write_report
+
+    os.makedirs(out_dir, exist_ok=True)
+    cache_dir = cache_dir or os.path.join(out_dir, "cache")
+    loaded = []
+    for sc in scenes:
+        s = load_scene(sc, **({"resolution": tuple(resolution)} if resolution else {}))
+        loaded.append(s)
+    plan = []
+    for s in loaded:
+        depths = max_depths or [s.settings["max_depth"]]
+        for d in depths:
+            for v in versions:
+                for spp in spps:
+                    plan.append((s, Setting(v, spp, d, None)))
+                if adaptive and any(a for a in adaptive):
+                    for a in adaptive:
+                        if a:
+                            for spp in adaptive_spp:
+                                plan.append((s, Setting(v, spp, d, a)))
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=len(plan) + len(loaded), desc="bench", unit="setting")
+    rows, images, gts = [], {}, {}
+    for s in loaded:
+        name = os.path.splitext(os.path.basename(s.source))[0]
+        if bar is not None:
+            bar.set_postfix_str(f"{name}: ground truth ({gt_spp} spp)")
+        gts[name] = ground_truth(s, gt_spp, cache_dir=cache_dir)
+        if bar is not None:
+            bar.update(1)
+    for s, setting in plan:
+        name = os.path.splitext(os.path.basename(s.source))[0]
+        if bar is not None:
+            bar.set_postfix_str(f"{name}: {setting.label} {setting.spp} spp depth {setting.max_depth}")
+        row, img = measure(s, setting, gts[name], repeats=repeats, seed=seed)
+        row["scene"] = name
+        row["resolution"] = list(s.resolution)
+        rows.append(row)
+        images[(name, setting)] = img
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    bias = estimate_bias(rows)
+    for r in rows:
+        r["bias_rmse"] = bias.get((r["scene"], r["label"], r["max_depth"]))
+    result = {"rows": rows, "ground_truth_spp": gt_spp, "repeats": repeats,
+              "machine": _machine()}
+    write_report(result, images, gts, out_dir)
+    return result
+
+
+def _machine() -> dict:
+    import platform
+
+    import mitsuba as mi
+    return {"cpu_count": os.cpu_count(), "threads": dr.thread_count(), "platform": platform.platform(),
+            "variant": mi.variant(), "mitsuba": mi.__version__, "drjit": dr.__version__}
+
+
+# --------------------------------------------------------------------------- frame times
+def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, spp: int = 1,
+                fov: float | None = None, faithful: bool = False, error_frames: int = 3,
+                gt_spp: int = 256, progress: bool = True) -> list[dict]:
+    """GO-Draaw's frame-time statistics along a camera path, per version.
+
+    The camera follows GO-Draaw's keyframes (position + angles) interpolated to ``frames``
+    frames. Per version: mean, std, min, p10, median, p90, max frame time (seconds; each frame
+    is a full render call, evaluated and synchronised) and the mean RMSE / CIEDE2000 against a
+    ``path`` ground truth on ``error_frames`` evenly spaced frames.
+    """
+    import mitsuba as mi
+
+    from .camera_path import interpolate
+    from .render import render
+    from .scene.camera import go_draaw_look_at
+
+    path = interpolate(keyframes, duration=frames / 60.0, faithful=faithful)
+    fov = fov if fov is not None else float(scene.info.get("camera", {}).get("fov", 45.0))
+    params = scene.params
+    key = next((k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
+    if key is None:
+        raise DraawError("frame_times: the scene's sensor has no to_world parameter")
+    x_fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
+    if x_fov_key:
+        params[x_fov_key] = fov
+
+    def set_camera(p):
+        o, t, u = go_draaw_look_at(p[:3], p[3], p[4], fov)
+        params[key] = mi.ScalarTransform4f().look_at(origin=o.tolist(), target=t.tolist(), up=u.tolist())
+        params.update()
+
+    check = set(np.linspace(0, len(path) - 1, error_frames).astype(int).tolist()) if error_frames else set()
+    gts = {}
+    for i in sorted(check):
+        set_camera(path[i])
+        gts[i] = np.array(render(scene, version="path", spp=gt_spp, seed=777, post=[]))[..., :3]
+    out = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=len(versions) * len(path), desc="frame times", unit="frame")
+    for v in versions:
+        set_camera(path[0])
+        render(scene, version=v, spp=spp, post=[])          # warm-up (compilation)
+        times, errs = [], []
+        for i, p in enumerate(path):
+            set_camera(p)
+            t0 = time.perf_counter()
+            img = render(scene, version=v, spp=spp, seed=i, post=[])
+            dr.eval(img)
+            dr.sync_thread()
+            times.append(time.perf_counter() - t0)
+            if i in gts:
+                errs.append(errors(np.array(img), gts[i]))
+            if bar is not None:
+                bar.update(1)
+        t = np.array(times)
+        row = {"version": v, "frames": len(t), "spp": spp, "mean_s": float(t.mean()),
+               "std_s": float(t.std(ddof=1)) if len(t) > 1 else 0.0, "min_s": float(t.min()),
+               "p10_s": float(np.quantile(t, 0.1)), "median_s": float(np.median(t)),
+               "p90_s": float(np.quantile(t, 0.9)), "max_s": float(t.max())}
+        if errs:
+            row["rmse"] = float(np.mean([e["rmse"] for e in errs]))
+            row["ciede2000"] = float(np.mean([e["ciede2000"] for e in errs]))
+        out.append(row)
+    if bar is not None:
+        bar.close()
+    return out
