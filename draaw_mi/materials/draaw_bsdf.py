@@ -2,9 +2,11 @@
 
 Model (design.md §3)::
 
-    f(wi, wo) = (1 - metallic) * base_color / pi * (1 - F)        Lambert, energy taken by F
+    f(wi, wo) = (1 - metallic) * base_color / pi                 Lambert, energy taken by F:
+                * (1 - F(cos_i)) (1 - F(cos_o)) / (1 - F_avg)    reciprocal, albedo (1 - F(cos_i))
               + F * D(h) * G(wi, wo) / (4 cos_i cos_o)           Cook-Torrance, GGX
     F   = F0 + (F90 - F0) * (1 - <wi, h>)^5                      Fresnel-Schlick, per channel
+    F_avg = F0 + (F90 - F0) / 21                                 cosine-weighted mean of F(cos)
     F0  = lerp(0.08 * specular, base_color, metallic)            (specular 0.5 -> F0 = 0.04)
     F90 = min(1, 50 * F0)                                        so F0 = 0 gives F = 0
     alpha = sqrt(roughness^4 + alpha_min^2)                      smooth clamp, alpha >= alpha_min
@@ -34,8 +36,9 @@ Plugin parameters
    * - alpha_min        - float in (0, 0.1], default 1e-3     - smallest GGX alpha
 
 Values set at load time outside their range raise :class:`ParameterError`; values set by an
-optimiser through ``mi.traverse`` are clamped into range when evaluated (their gradient is then
-zero outside the range, which keeps Adam from drifting further out).
+optimiser through ``mi.traverse`` are clamped into range when evaluated, with a straight-through
+gradient (the derivative of the unclamped value), so an optimiser sitting exactly on a bound —
+metallic = 0, roughness = 1 — is not stuck there with a zero gradient.
 
 Example::
 
@@ -74,6 +77,12 @@ def _lum(c):
     return _LUM[0] * c.x + _LUM[1] * c.y + _LUM[2] * c.z
 
 
+def _clamp_st(x, lo, hi):
+    """Clamp the value into [lo, hi] but pass the gradient straight through (documented)."""
+    clamped = dr.maximum(x, lo) if hi is None else dr.clip(x, lo, hi)
+    return dr.replace_grad(clamped, x)
+
+
 def _schlick(f0, f90, cos_theta):
     m = dr.clip(1.0 - cos_theta, 0.0, 1.0)
     m2 = dr.square(m)
@@ -90,15 +99,21 @@ class DraawBSDF(mi.BSDF):
         for name, (default, lo, hi) in SCALAR_PARAMS.items():
             setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=False))
         self.normalmap = None
-        if props.has_property("normalmap"):
+        if "normalmap" in props:
             self.normalmap = textures.texture_property(props, "normalmap", None, None, None, color=True)
         enc = props.get("normalmap_encoding", "unsigned")
         if enc not in NORMALMAP_ENCODINGS:
             raise ParameterError(f"draaw BSDF: normalmap_encoding={enc!r}; expected one of "
                                  f"{', '.join(NORMALMAP_ENCODINGS)}")
         self.normalmap_signed = enc == "signed"
-        self.two_sided = bool(props.get("two_sided", False))
-        self.alpha_min = float(props.get("alpha_min", 1e-3))
+        two_sided = props.get("two_sided", False)
+        if not isinstance(two_sided, bool):
+            raise ParameterError(f"draaw BSDF: two_sided={two_sided!r}; expected true or false")
+        self.two_sided = two_sided
+        alpha_min = props.get("alpha_min", 1e-3)
+        if isinstance(alpha_min, bool) or not isinstance(alpha_min, (int, float)):
+            raise ParameterError(f"draaw BSDF: alpha_min={alpha_min!r}; expected a number in (0, 0.1]")
+        self.alpha_min = float(alpha_min)
         if not (0.0 < self.alpha_min <= 0.1):
             raise ParameterError(f"draaw BSDF: alpha_min={self.alpha_min}; expected a value in (0, 0.1]")
 
@@ -113,10 +128,12 @@ class DraawBSDF(mi.BSDF):
 
     # ------------------------------------------------------------------ parameters
     def _params(self, si, active):
-        base = dr.maximum(self.base_color.eval(si, active), 0.0)
-        rough = dr.clip(self.roughness.eval_1(si, active), 0.0, 1.0)
-        metallic = dr.clip(self.metallic.eval_1(si, active), 0.0, 1.0)
-        specular = dr.clip(self.specular.eval_1(si, active), 0.0, 1.0)
+        # Clamp into range with a straight-through gradient: an optimiser that sits exactly on
+        # a bound (metallic = 0, roughness = 1) still sees which way the loss wants to go.
+        base = _clamp_st(self.base_color.eval(si, active), 0.0, None)
+        rough = _clamp_st(self.roughness.eval_1(si, active), 0.0, 1.0)
+        metallic = _clamp_st(self.metallic.eval_1(si, active), 0.0, 1.0)
+        specular = _clamp_st(self.specular.eval_1(si, active), 0.0, 1.0)
         alpha = dr.sqrt(dr.square(dr.square(rough)) + self.alpha_min ** 2)
         f0 = dr.lerp(mi.Color3f(0.08 * specular), base, metallic)
         f90 = dr.minimum(1.0, 50.0 * f0)
@@ -174,7 +191,12 @@ class DraawBSDF(mi.BSDF):
         p_spec = self._spec_probability(kd, f0, f90, cos_i) if (has_diff and has_spec) else (
             mi.Float(1.0 if has_spec else 0.0))
         if has_diff:
-            value += kd * (1.0 - F) * (INV_PI * cos_o)
+            # (1 - F(wi.h)) here would not conserve energy at grazing wi (albedo up to 1.9):
+            # couple to F at both cosines instead (white furnace <= 1, still reciprocal).
+            f_avg = f0 + (f90 - f0) * (1.0 / 21.0)
+            t_i = dr.maximum(1.0 - _schlick(f0, f90, cos_i), 0.0)
+            t_o = dr.maximum(1.0 - _schlick(f0, f90, cos_o), 0.0)
+            value += kd * (t_i * t_o / dr.maximum(1.0 - f_avg, 1e-6)) * (INV_PI * cos_o)
             pdf += (1.0 - p_spec) * mi.warp.square_to_cosine_hemisphere_pdf(wo)
         if has_spec:
             distr = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True)

@@ -23,7 +23,8 @@ def _check_range(name, lo, hi, values, what):
     if arr.size == 0:
         raise ParameterError(f"draaw BSDF: {name} {what} is empty")
     if not np.all(np.isfinite(arr)):
-        raise ParameterError(f"draaw BSDF: {name} {what} contains NaN or Inf; expected finite values")
+        bad = arr[~np.isfinite(arr)].flat[0]
+        raise ParameterError(f"draaw BSDF: {name}={_fmt(bad)} ({what}) is not finite; expected finite values")
     if lo is not None and arr.min() < lo:
         raise ParameterError(f"draaw BSDF: {name}={_fmt(arr.min())} ({what}) is below {lo}; "
                              f"expected {_range(lo, hi)}")
