@@ -60,8 +60,9 @@ from .io import read_exr, write_exr, write_png  # noqa: E402
 from .render import render  # noqa: E402
 from .scene import load_scene  # noqa: E402
 from .fit import FitResult, fit  # noqa: E402
+from . import post  # noqa: E402
 
 __all__ = [
     "DraawError", "SceneError", "ParameterError", "RenderError", "IOFailure", "VARIANT",
-    "register_plugins", "load_scene", "render", "write_exr", "read_exr", "write_png", "fit", "FitResult",
+    "register_plugins", "load_scene", "render", "write_exr", "read_exr", "write_png", "fit", "FitResult", "post",
 ]

@@ -420,6 +420,13 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     post = desc.get("post")
     if post is not None and not isinstance(post, list):
         raise (where / "post").error("expected a list of filter tables ([[post]])")
+    if post:
+        from ..errors import DraawError
+        from ..post import load_chain
+        try:
+            load_chain(post)                       # validate names, parameters and ranges now
+        except DraawError as e:
+            raise (where / "post").error(str(e)) from None
     settings["post"] = post or []
     info = {"materials": list(materials), "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),

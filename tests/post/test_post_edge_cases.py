@@ -1,0 +1,95 @@
+"""Hard inputs stay finite: black, constant, HDR up to 1e6, 1×1 and 2×2 images, multipass 10,
+chromatic-aberration shifts larger than the image; gradients stay finite too."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi.post as post
+from post_helpers import FILTER_NAMES, hdr_image
+
+BOUNDARY_FILTERS = ["bloom", "bloom_v2", "sharpen", "chromatic_aberration", "edge_detection",
+                    "crt"]
+
+
+def _images():
+    rng = np.random.default_rng(30)
+    return {
+        "black": np.zeros((8, 9, 3), np.float32),
+        "constant": np.full((8, 9, 3), 0.37, np.float32),
+        "hdr1e6": (rng.random((8, 9, 3)) ** 4 * 1e6).astype(np.float32),
+        "1x1": np.full((1, 1, 3), 0.8, np.float32),
+        "2x2": hdr_image(seed=31, shape=(2, 2)),
+        "1x5rgba": hdr_image(seed=32, shape=(1, 5), channels=4),
+    }
+
+
+IMAGES = _images()
+
+
+def _finite(t):
+    a = t.numpy()
+    assert np.all(np.isfinite(a)), f"{np.sum(~np.isfinite(a))} non-finite values"
+    return a
+
+
+@pytest.mark.parametrize("name", FILTER_NAMES)
+@pytest.mark.parametrize("image", list(IMAGES))
+@pytest.mark.parametrize("multipass", [1, 10])
+def test_finite_outputs(name, image, multipass):
+    img = IMAGES[image]
+    out = _finite(getattr(post, name)(img, multipass=multipass))
+    assert out.shape == img.shape
+
+
+@pytest.mark.parametrize("name", BOUNDARY_FILTERS)
+@pytest.mark.parametrize("boundary", post.BOUNDARIES)
+def test_tiny_images_every_boundary(name, boundary):
+    for shape in [(1, 1), (2, 2), (1, 3)]:
+        _finite(getattr(post, name)(hdr_image(seed=33, shape=shape), boundary=boundary))
+
+
+@pytest.mark.parametrize("boundary", post.BOUNDARIES)
+@pytest.mark.parametrize("shift", [9.0, 100.5, 12345.25])
+def test_aberration_shift_larger_than_image(boundary, shift):
+    img = hdr_image(seed=34, shape=(3, 4))
+    out = _finite(post.chromatic_aberration(img, shift, boundary=boundary))
+    np.testing.assert_array_equal(out[..., 1], img[..., 1])          # green never moves
+    if boundary == "zero":
+        assert np.all(out[..., 0] == 0) and np.all(out[..., 2] == 0)
+    if boundary == "nearest":
+        np.testing.assert_array_equal(out[..., 0], np.repeat(img[:, :1, 0], 4, axis=1))
+        np.testing.assert_array_equal(out[..., 2], np.repeat(img[:, -1:, 2], 4, axis=1))
+    if boundary == "wrap" and shift == 9.0:                          # 9 = 2·4 + 1
+        np.testing.assert_array_equal(out[..., 0], np.roll(img[..., 0], 1, axis=1))
+
+
+@pytest.mark.parametrize("name", ["sharpen", "edge_detection", "chromatic_aberration"])
+def test_constant_image_is_a_fixed_point(name):
+    img = IMAGES["constant"]
+    np.testing.assert_allclose(getattr(post, name)(img).numpy(), img, rtol=0, atol=1e-6)
+
+
+def test_hdr_values_survive_without_clamps():
+    img = IMAGES["hdr1e6"]
+    out = _finite(post.apply(img, [
+        {"type": "bloom", "clamp": False, "multipass": 10}, {"type": "sharpen"},
+        {"type": "edgeDetection"}, {"type": "crt", "clamp": False},
+        {"type": "log", "clamp": False}, {"type": "srgb"}]))
+    assert out.max() > 1.0
+    out = _finite(post.apply(img, [{"type": "sharpen", "multipass": 10},
+                                   {"type": "edgeDetection", "multipass": 10}]))
+    assert out.max() > 1e6
+
+
+@pytest.mark.parametrize("name", FILTER_NAMES)
+@pytest.mark.parametrize("image", ["black", "hdr1e6", "1x1"])
+def test_finite_gradients(name, image):
+    x = mi.TensorXf(IMAGES[image])
+    dr.enable_grad(x)
+    y = getattr(post, name)(x, multipass=2)
+    dr.backward(dr.sum(y.array) * 1e-6)
+    g = dr.grad(x).numpy()
+    assert np.all(np.isfinite(g)), f"{name} on {image}: non-finite gradient"
