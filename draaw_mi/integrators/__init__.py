@@ -1,14 +1,45 @@
-"""Render versions as Mitsuba integrator plugins: ``draaw_v1`` .. ``draaw_v4`` (see design.md §4).
+"""Render versions as Mitsuba integrator plugins: ``draaw_v1`` .. ``draaw_v4`` (design.md §4).
 
-``register()`` registers every integrator module present; ``VERSION_ALIASES`` maps the names
-users type (``v4``, ``V2M``, ``path``, ...) to Mitsuba integrator plugin names.
+=============  =================================================================================
+``draaw_v1``   classic: Whitted mirror recursion + Lambert/Phong direct light from every
+               emitter + ``scatter`` one-bounce diffuse gather rays (biased by design)
+``draaw_v2``   energy-conserving Phong-family path tracer with next-event estimation
+``draaw_v3``   the ``draaw`` PBR model, next-event estimation, plain NDF sampling, no MIS
+               (``distribution = "ggx" | "beckmann"``); the accuracy reference of the ladder
+``draaw_v4``   the same model and expectation as V3 with VNDF sampling, MIS, Russian roulette
+               and a kernel specialised to the scene
+=============  =================================================================================
+
+``register()`` registers them (idempotent); ``VERSION_ALIASES`` maps the names users type
+(GO-Draaw's ``V1``, ``V2``, ``V2M``, ``V4``, ..., ``v1`` .. ``v4``, ``path``, ``prb``) to
+Mitsuba integrator plugin names, and ``resolve_version(name)`` looks one up.
 """
 from __future__ import annotations
 
-import mitsuba as mi
+from ..errors import RenderError, suggest
+from .features import FEATURE_NAMES, detect_features
+
+PLUGINS: tuple[str, ...] = ("draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4")
 
 # name typed by a user (lower-cased) -> Mitsuba integrator plugin name
 VERSION_ALIASES: dict[str, str] = {
+    # plugin names and short forms
+    **{p: p for p in PLUGINS},
+    "v1": "draaw_v1", "v2": "draaw_v2", "v3": "draaw_v3", "v4": "draaw_v4",
+    "1": "draaw_v1", "2": "draaw_v2", "3": "draaw_v3", "4": "draaw_v4",
+    # GO-Draaw's UI names (go-draaw-spec.md §3): V2M and its graded variants are the
+    # physically based rung (V3 here); the Lin/Log grades are tone curves in the post chain.
+    "v2m": "draaw_v3",
+    "v2-linear": "draaw_v3", "v2-log": "draaw_v3",
+    "v2-linear-texture": "draaw_v3", "v2-log-texture": "draaw_v3",
+    "v4-linear": "draaw_v4", "v4-log": "draaw_v4",
+    "v4-linear-optim": "draaw_v4", "v4-log-optim": "draaw_v4",
+    "v4-linear-optim-v2": "draaw_v4", "v4-log-optim-v2": "draaw_v4",
+    "v4-optim-v2": "draaw_v4", "v4o2": "draaw_v4", "v4o3": "draaw_v4",
+    # descriptive names
+    "classic": "draaw_v1", "phong": "draaw_v2", "pbr": "draaw_v3", "optimised": "draaw_v4",
+    "optimized": "draaw_v4",
+    # Mitsuba's own
     "path": "path",
     "prb": "prb",
 }
@@ -16,9 +47,39 @@ VERSION_ALIASES: dict[str, str] = {
 _REGISTERED = False
 
 
+def resolve_version(name: str) -> str:
+    """Mitsuba integrator plugin name for a render version name (case-insensitive).
+
+    >>> resolve_version('V2M')
+    'draaw_v3'
+
+    Raises :class:`~draaw_mi.errors.RenderError` naming the bad value and the valid names.
+    """
+    if not isinstance(name, str):
+        raise RenderError(f"render version {name!r} must be a string; valid: "
+                          + ", ".join(sorted(VERSION_ALIASES)))
+    key = name.strip().lower()
+    # plugin names use '_' (draaw_v4), GO-Draaw's names '-' (V4-Log-Optim): accept either
+    key = key.replace("-", "_") if key.startswith("draaw") else key.replace("_", "-")
+    if key in VERSION_ALIASES:
+        return VERSION_ALIASES[key]
+    hint = suggest(key, VERSION_ALIASES)
+    valid = ", ".join(sorted(VERSION_ALIASES))
+    if hint.startswith("; did you mean"):
+        hint += f" (valid: {valid})"
+    raise RenderError(f"render version {name!r} is unknown{hint}")
+
+
 def register() -> None:
     """Register the draaw_v* integrators with Mitsuba (idempotent)."""
     global _REGISTERED
     if _REGISTERED:
         return
+    from . import v1, v2, v3, v4
+    for module in (v1, v2, v3, v4):
+        module.register()
     _REGISTERED = True
+
+
+__all__ = ["FEATURE_NAMES", "PLUGINS", "VERSION_ALIASES", "detect_features", "register",
+           "resolve_version"]

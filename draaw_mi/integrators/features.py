@@ -1,0 +1,131 @@
+"""Which effects a scene calls for: ``detect_features(scene) -> dict[str, bool]``.
+
+The draaw integrators look at a scene once per render (when ``sample()`` is traced) and use
+these flags as *Python-level* branches, so code for an absent feature never enters the JIT
+kernel (design.md §5, guide §7). ``draaw-mi info`` shows the same dictionary.
+
+Keys (always present, in this order):
+
+======================  =====================================================================
+``area_lights``         an ``area`` emitter on some shape
+``point_lights``        a ``point`` emitter
+``spot_lights``         a ``spot`` emitter
+``directional_lights``  a ``directional`` (or other delta-direction) emitter
+``envmap``              an ``envmap`` emitter
+``constant_env``        a ``constant`` emitter
+``environment``         the scene has an environment emitter (``scene.environment()``)
+``delta_lights``        some emitter is a delta light (point, spot, directional, ...)
+``hittable_lights``     some emitter can be hit by a BSDF-sampled ray (area or environment)
+``textures``            some BSDF or area emitter reads a bitmap or procedural texture (uv)
+``normal_maps``         some BSDF applies a normal or bump map
+``draaw_materials``     some shape uses the ``draaw`` BSDF
+``other_materials``     some shape uses another BSDF
+``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...)
+``media``               a shape or sensor references a participating medium
+``aovs``                the scene's integrator outputs AOVs
+======================  =====================================================================
+
+Example::
+
+    >>> import draaw_mi, mitsuba as mi
+    >>> from draaw_mi.integrators.features import detect_features
+    >>> f = detect_features(mi.load_dict(mi.cornell_box()))
+    >>> f['area_lights'], f['environment'], f['draaw_materials']
+    (True, False, False)
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+
+FEATURE_NAMES: tuple[str, ...] = (
+    "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
+    "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
+    "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "media", "aovs",
+)
+
+_EMITTER_CLASSES = {
+    "AreaLight": "area_lights",
+    "PointLight": "point_lights",
+    "SpotLight": "spot_lights",
+    "DirectionalEmitter": "directional_lights",
+    "EnvironmentMapEmitter": "envmap",
+    "ConstantBackgroundEmitter": "constant_env",
+}
+_NORMALMAP_CLASSES = ("NormalMap", "BumpMap")
+_NORMALMAP_KEYS = ("normalmap", "bumpmap")
+
+
+def _is_draaw(bsdf) -> bool:
+    from ..materials.draaw_bsdf import DraawBSDF
+    return isinstance(bsdf, DraawBSDF)
+
+
+def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
+    flags = bsdf.flags()
+    if mi.has_flag(flags, mi.BSDFFlags.Delta):
+        f["delta_bsdfs"] = True
+    if _is_draaw(bsdf):
+        f["draaw_materials"] = True
+        if bsdf.normalmap is not None:
+            f["normal_maps"] = True
+        if mi.has_flag(flags, mi.BSDFFlags.SpatiallyVarying):
+            f["textures"] = True
+        return
+    f["other_materials"] = True
+    if bsdf.class_name() in _NORMALMAP_CLASSES:
+        f["normal_maps"] = True
+    for key in mi.traverse(bsdf).keys():
+        parts = key.split(".")
+        if any(p in _NORMALMAP_KEYS for p in parts):
+            f["normal_maps"] = True
+        elif parts[-1] in ("data", "to_uv"):
+            f["textures"] = True
+
+
+def detect_features(scene: mi.Scene) -> dict[str, bool]:
+    """Return the feature flags of ``scene`` (see the module docstring for the keys).
+
+    Cheap (a walk over the scene's emitters and distinct BSDFs, no kernel launch); the
+    integrators call it each time they trace a render.
+    """
+    f = dict.fromkeys(FEATURE_NAMES, False)
+    for em in scene.emitters():
+        name = _EMITTER_CLASSES.get(em.class_name())
+        flags = em.flags()
+        if name is not None:
+            f[name] = True
+        elif mi.has_flag(flags, mi.EmitterFlags.DeltaDirection):
+            f["directional_lights"] = True
+        elif mi.has_flag(flags, mi.EmitterFlags.Surface):
+            f["area_lights"] = True
+        if mi.has_flag(flags, mi.EmitterFlags.Surface) and \
+                mi.has_flag(flags, mi.EmitterFlags.SpatiallyVarying):
+            f["textures"] = True                       # textured area light: needs uv
+        if mi.has_flag(flags, mi.EmitterFlags.Delta):
+            f["delta_lights"] = True
+        else:
+            f["hittable_lights"] = True
+    f["environment"] = scene.environment() is not None
+
+    seen: set[int] = set()
+    for shape in scene.shapes():
+        if shape.interior_medium() is not None or shape.exterior_medium() is not None:
+            f["media"] = True
+        bsdf = shape.bsdf()
+        if bsdf is None or id(bsdf) in seen:
+            continue
+        seen.add(id(bsdf))
+        _bsdf_features(bsdf, f)
+    for sensor in scene.sensors():
+        if sensor.get_medium() is not None:
+            f["media"] = True
+    integrator = scene.integrator()
+    if integrator is not None:
+        f["aovs"] = len(integrator.aov_names()) > 0
+    return f
+
+
+def describe(features: dict[str, bool]) -> str:
+    """One line listing the features that are on, e.g. ``'area_lights, draaw_materials'``."""
+    on = [k for k in FEATURE_NAMES if features.get(k)]
+    return ", ".join(on) if on else "(none)"

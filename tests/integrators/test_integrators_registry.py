@@ -1,0 +1,129 @@
+"""Registration, version names, parameter validation, feature detection and AOV names."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import draaw_mi
+import mitsuba as mi
+from draaw_mi.errors import ParameterError, RenderError
+from draaw_mi.integrators import (FEATURE_NAMES, PLUGINS, VERSION_ALIASES, detect_features,
+                                  register, resolve_version)
+from draaw_mi.integrators import reference_scenes as rs
+
+
+@pytest.mark.parametrize("plugin", PLUGINS)
+def test_plugin_loads_and_prints(plugin):
+    integ = mi.load_dict({"type": plugin, "max_depth": 5})
+    assert plugin.replace("draaw_v", "DraawV") in type(integ).__name__
+    assert "max_depth=5" in str(integ)
+    assert integ.aov_names() == []
+
+
+def test_register_is_idempotent():
+    register()
+    register()
+    draaw_mi.register_plugins()
+    assert mi.load_dict({"type": "draaw_v4"}) is not None
+
+
+@pytest.mark.parametrize("name,plugin", [
+    ("V1", "draaw_v1"), ("V2", "draaw_v2"), ("V2M", "draaw_v3"), ("V4", "draaw_v4"),
+    ("v3", "draaw_v3"), ("draaw_v2", "draaw_v2"), ("DRAAW-V4", "draaw_v4"),
+    ("V4-Log-Optim", "draaw_v4"), ("V2-Linear", "draaw_v3"), (" path ", "path"), ("prb", "prb"),
+])
+def test_resolve_version(name, plugin):
+    assert resolve_version(name) == plugin
+
+
+def test_every_alias_resolves_to_a_plugin():
+    for alias, plugin in VERSION_ALIASES.items():
+        assert resolve_version(alias) == plugin
+        assert plugin in PLUGINS + ("path", "prb")
+
+
+@pytest.mark.parametrize("bad", ["v5", "pth", "", "V3X"])
+def test_resolve_version_error_names_value_and_valid_names(bad):
+    with pytest.raises(RenderError) as e:
+        resolve_version(bad)
+    msg = str(e.value)
+    assert repr(bad) in msg and "draaw_v4" in msg and "path" in msg
+
+
+def test_resolve_version_suggests():
+    with pytest.raises(RenderError, match="did you mean 'path'"):
+        resolve_version("pth")
+
+
+@pytest.mark.parametrize("plugin,props,match", [
+    ("draaw_v4", {"max_depth": -2}, "max_depth=-2"),
+    ("draaw_v4", {"rr_depth": 0}, "rr_depth=0"),
+    ("draaw_v4", {"rr_min": 0.0}, "rr_min"),
+    ("draaw_v3", {"distribution": "ggxx"}, "did you mean 'ggx'"),
+    ("draaw_v3", {"glossy_alpha": 2.0}, "glossy_alpha"),
+    ("draaw_v2", {"scatter": -1}, "scatter=-1"),
+    ("draaw_v1", {"scatter": -3}, "scatter=-3"),
+    ("draaw_v1", {"aovs": "deph"}, "did you mean 'depth'"),
+    ("draaw_v2", {"aovs": "depth, normals"}, "normals"),
+])
+def test_bad_parameters_raise(plugin, props, match):
+    with pytest.raises((ParameterError, RuntimeError), match=match):
+        mi.load_dict({"type": plugin, **props})
+
+
+def test_aov_names():
+    integ = mi.load_dict({"type": "draaw_v4", "aovs": "albedo, depth"})
+    assert integ.aov_names() == ["depth.Z", "albedo.R", "albedo.G", "albedo.B"]
+    integ = mi.load_dict({"type": "draaw_v1", "aovs": "all"})
+    assert integ.aov_names() == ["depth.Z", "depth_log.Z", "N.X", "N.Y", "N.Z",
+                                 "albedo.R", "albedo.G", "albedo.B"]
+
+
+def _scene(**extra):
+    d = rs.cornell_draaw(res=8, spp=1)
+    d.update(extra)
+    return mi.load_dict(d)
+
+
+def test_detect_features_cornell():
+    f = detect_features(_scene())
+    assert tuple(f) == FEATURE_NAMES
+    assert all(isinstance(v, bool) for v in f.values())
+    assert f["area_lights"] and f["hittable_lights"] and f["draaw_materials"]
+    for k in ("point_lights", "spot_lights", "envmap", "constant_env", "environment",
+              "delta_lights", "textures", "normal_maps", "delta_bsdfs", "media", "aovs"):
+        assert not f[k], k
+
+
+def test_detect_features_emitters_and_materials():
+    T = mi.ScalarTransform4f
+    env = mi.Bitmap(np.full((8, 16, 3), 0.5, np.float32))
+
+    def tex():
+        return mi.TensorXf(np.full((4, 4, 3), 0.5, np.float32))
+    f = detect_features(_scene(
+        pt={"type": "point", "position": [0, 0.5, 0]},
+        spot={"type": "spot", "to_world": T().look_at([0, 0.9, 0], [0, 0, 0], [0, 0, 1])},
+        sun={"type": "directional", "direction": [0, -1, 0]},
+        sky={"type": "envmap", "bitmap": env},
+        glass={"type": "sphere", "radius": 0.1, "bsdf": {"type": "dielectric"}},
+        tex={"type": "sphere", "radius": 0.1, "center": [0.5, 0, 0],
+             "bsdf": {"type": "diffuse", "reflectance": {"type": "bitmap", "data": tex()}}},
+        nm={"type": "sphere", "radius": 0.1, "center": [-0.5, 0, 0],
+            "bsdf": {"type": "draaw", "normalmap": {"type": "bitmap", "data": tex(), "raw": True}}},
+        fog={"type": "sphere", "radius": 0.1, "center": [0, 0.5, 0], "bsdf": {"type": "null"},
+             "interior": {"type": "homogeneous", "sigma_t": 1.0}},
+        integrator={"type": "draaw_v4", "aovs": "depth"},
+    ))
+    for k in FEATURE_NAMES:
+        if k != "constant_env":
+            assert f[k], k
+    assert not f["constant_env"]
+
+
+def test_detect_features_constant_env_only():
+    d = {"type": "scene", "sky": {"type": "constant"},
+         "ball": {"type": "sphere", "bsdf": {"type": "diffuse"}}}
+    f = detect_features(mi.load_dict(d))
+    assert f["constant_env"] and f["environment"] and f["hittable_lights"]
+    assert f["other_materials"] and not f["draaw_materials"] and not f["area_lights"]
