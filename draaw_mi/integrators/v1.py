@@ -34,7 +34,8 @@ class DraawV1Integrator(DraawIntegrator):
 
      * - hide_emitters
        - |bool|
-       - Do not show directly visible emitters. (Default: |false|)
+       - Do not show directly visible emitters (area emitters are skipped, the environment
+         is transparent), as Mitsuba's ``path``. (Default: |false|)
 
      * - aovs
        - |string|
@@ -57,7 +58,8 @@ class DraawV1Integrator(DraawIntegrator):
 
     Biased by design: transport is truncated after one diffuse bounce (no light from emitters
     seen by gather rays, no glossy indirect light, no caustics), so V1 is darker than V2-V4.
-    Other BSDFs act as Lambertian with their diffuse reflectance clipped to [0, 1].
+    Other BSDFs act as Lambertian with their diffuse reflectance clipped to [0, 1] (see
+    ``draaw_v2``: glass renders black, ``roughconductor`` white).
 
     Differentiable by path replay (primal, forward and backward modes) with respect to the
     ``draaw`` knobs, other BSDFs' diffuse reflectance and emitter parameters.

@@ -31,9 +31,10 @@ class DraawV2Integrator(DraawIntegrator):
 
      * - hide_emitters
        - |bool|
-       - Do not show directly visible emitters. (Default: |false|)
+       - Do not show directly visible emitters (area emitters are skipped, the environment
+         is transparent), as Mitsuba's ``path``. (Default: |false|)
 
-    * - aovs
+     * - aovs
        - |string|
        - Comma-separated AOVs: ``depth``, ``depth_log``, ``normal``, ``albedo`` or ``all``
          (see ``draaw_mi.integrators.common``). (Default: none)
@@ -54,9 +55,10 @@ class DraawV2Integrator(DraawIntegrator):
     by cosine sampling, lobes in proportion to their albedo. Indirect light reaching a surface
     through its diffuse lobe is scaled by ``direct_to_scatter`` (GO-Draaw's "directToScatter":
     1 = physical, smaller = less bounce light); direct light is not. Other BSDFs act as
-    Lambertian with their diffuse reflectance clipped to [0, 1] (``dielectric`` or mirror
-    ``conductor`` therefore render black). Biased against the ``draaw`` PBR model (V3/V4) by
-    design: no Fresnel, Phong instead of GGX.
+    Lambertian with their diffuse reflectance (``eval_diffuse_reflectance``) clipped to
+    [0, 1]: ``dielectric`` and smooth ``conductor`` render black, and BSDFs without a
+    diffuse lobe whose default estimate exceeds 1 (``roughconductor``) render white. Biased
+    against the ``draaw`` PBR model (V3/V4) by design: no Fresnel, Phong instead of GGX.
 
     Differentiable by path replay (primal, forward and backward modes) with respect to the
     ``draaw`` knobs (base_color, roughness, metallic, specular, reflection,

@@ -34,8 +34,8 @@ class DraawV4Integrator(DraawIntegrator):
 
      * - hide_emitters
        - |bool|
-       - Do not show directly visible emitters (the environment is transparent).
-         (Default: |false|)
+       - Do not show directly visible emitters (area emitters are skipped, the environment
+         is transparent), as Mitsuba's ``path``. (Default: |false|)
 
      * - aovs
        - |string|
