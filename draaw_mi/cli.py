@@ -168,9 +168,16 @@ def _cmd_info(args) -> int:
         print(json.dumps(out, indent=2, default=str))
         return 0
     for key, value in out.items():
-        if key == "scene":
+        if key in ("scene", "versions", "plugins"):
             continue
         print(f"{key:>10}: {value}")
+    print(f"{'bsdfs':>10}: {', '.join(out['plugins']['bsdf'])}")
+    by_plugin: dict = {}
+    for alias, plugin in out["versions"].items():
+        if alias != plugin:
+            by_plugin.setdefault(plugin, []).append(alias)
+    for plugin in sorted(set(out["versions"].values())):
+        print(f"{'version':>10}: {plugin} ({', '.join(by_plugin.get(plugin, [])) or plugin})")
     if args.scene:
         s = out["scene"]
         print(f"\nscene {s['source']}: {s['resolution'][0]}x{s['resolution'][1]}")
