@@ -77,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--version", default="v4", help="differentiable integrator (default v4)")
     f.add_argument("--spp", type=int, default=16, help="samples per pixel per iteration (default 16)")
     f.add_argument("--iterations", type=int, default=100, help="Adam iterations (default 100)")
-    f.add_argument("--lr", type=float, default=0.03, help="learning rate (default 0.03)")
+    f.add_argument("--lr", type=float, default=0.05, help="learning rate (default 0.05)")
     f.add_argument("--loss", default="l2", choices=["l2", "l1", "relative_l2"])
     f.add_argument("--exposure", default="fixed", choices=["fixed", "fit"],
                    help="'fit' makes the loss insensitive to a global exposure difference")
@@ -216,6 +216,8 @@ def _cmd_fit(args) -> int:
                        progress=(not args.no_progress) and sys.stderr.isatty())
     for name, value in res.values.items():
         print(f"{name} = {value if isinstance(value, list) else round(value, 5)}")
+    if args.exposure == "fit":
+        print(f"exposure = {res.exposure_stops:+.4f} stops (render x {2 ** res.exposure_stops:.4f} matches the reference)")
     print(f"loss {res.losses[0]:.4g} -> {res.losses[-1]:.4g} in {res.iterations} iterations, "
           f"{res.seconds:.1f} s, {'converged' if res.converged else 'not converged'}")
     if args.output:

@@ -1,18 +1,30 @@
-"""fit(): recovery of known parameters, hard targets, robustness, kernel reuse, CLI."""
+"""fit(): recovery of known parameters, hard targets, robustness, kernel reuse, CLI.
+
+Default tests run at 32x32 (a few seconds each). References are rendered with Mitsuba's own
+``path`` integrator, so every recovery test also checks that the fitting integrator and
+``path`` agree in expectation. Tolerances are about four standard deviations of the fitted
+value over fit seeds, measured at these settings (noted per test); the 128x128 accuracy checks
+of issue 6 (0.02) are ``slow`` and recorded by benchmarks/fit_accuracy.py.
+"""
 from __future__ import annotations
 
 import os
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 
 import draaw_mi
 from draaw_mi.cli import main
 from draaw_mi.errors import DraawError
+from draaw_mi.fit import _loss, _Param
 
 from conftest import SCENES
 
 RES = 32
+P = ["target.roughness", "target.metallic"]
+START = {"target.roughness": 0.5, "target.metallic": 0.5}
 
 
 def _version():
@@ -25,54 +37,194 @@ def fit_scene():
     return draaw_mi.load_scene(os.path.join(SCENES, "fit_sphere.toml"), resolution=(RES, RES))
 
 
-def _reference(scene, rough, metal, spp=256, seed=1234):
+def _set(scene, values):
     p = scene.params
-    p["target.roughness.value"], p["target.metallic.value"] = rough, metal
+    for name, value in values.items():
+        p[scene.key(name)] = value
     p.update()
+
+
+def _reference(scene, rough, metal, spp=1024, seed=1234):
+    _set(scene, {"target.roughness": rough, "target.metallic": metal})
     ref = np.array(draaw_mi.render(scene, version="path", spp=spp, seed=seed))
-    p["target.roughness.value"], p["target.metallic.value"] = 0.5, 0.5
-    p.update()
+    _set(scene, START)
     return ref
 
 
+def _fit(scene, ref, **kw):
+    kw.setdefault("version", _version())
+    kw.setdefault("spp", 16)
+    kw.setdefault("iterations", 100)
+    return draaw_mi.fit(scene, ref, kw.pop("params", P), init=kw.pop("init", START), progress=False, **kw)
+
+
+def _all_finite(res):
+    return (np.isfinite(res.losses).all() and np.isfinite(res.image).all()
+            and all(np.isfinite(np.ravel(list(h["values"].values()))).all() for h in res.history))
+
+
+# ---------------------------------------------------------------------------------- recovery
 def test_recovers_roughness_and_metallic(fit_scene):
+    # 10 seeds at these settings: roughness 0.2516 +- 0.003, metallic 0.799 +- 0.0125 (80 it.)
     ref = _reference(fit_scene, 0.25, 0.8)
-    res = draaw_mi.fit(fit_scene, ref, ["target.roughness", "target.metallic"], version=_version(), spp=8,
-                       iterations=80, lr=0.05, progress=False)
-    assert abs(res.values["target.roughness"] - 0.25) < 0.06
-    assert abs(res.values["target.metallic"] - 0.8) < 0.06
-    assert res.losses[-1] < 0.5 * res.losses[0]
+    res = _fit(fit_scene, ref)
+    assert abs(res.values["target.roughness"] - 0.25) < 0.015
+    assert abs(res.values["target.metallic"] - 0.8) < 0.04
     assert res.kernel_compiles == 0          # kernels compiled in the first iteration only
+    # The loss is dominated by 16-spp noise at the end; it still falls clearly.
+    assert np.mean(res.losses[-10:]) < 0.5 * np.mean(res.losses[:3])
 
 
-@pytest.mark.parametrize("rough,metal", [(0.02, 1.0), (0.5, 0.0), (0.9, 1.0)])
+def test_small_roughness_is_not_trapped_below_the_alpha_clamp(fit_scene):
+    """Regression: with linear roughness, Adam overshot 0.05 into the flat region below the
+    alpha clamp (gradient ~ roughness^3) and stayed at 0. Log space + a floor fix it."""
+    ref = _reference(fit_scene, 0.06, 0.9)
+    res = _fit(fit_scene, ref, iterations=120)
+    assert 0.04 < res.values["target.roughness"] < 0.08
+    assert min(h["values"]["target.roughness"] for h in res.history) >= 0.019 - 1e-6
+    assert abs(res.values["target.metallic"] - 0.9) < 0.04
+
+
+@pytest.mark.parametrize("rough,metal", [(0.02, 1.0), (0.5, 0.0), (1.0, 1.0), (0.02, 0.0)])
 def test_hard_targets_stay_finite_and_in_range(fit_scene, rough, metal):
-    ref = _reference(fit_scene, rough, metal, spp=64)
-    res = draaw_mi.fit(fit_scene, ref, ["target.roughness", "target.metallic"], version=_version(), spp=4,
-                       iterations=12, lr=0.1, progress=False)
+    ref = _reference(fit_scene, rough, metal, spp=256)
+    res = _fit(fit_scene, ref, spp=8, iterations=80, lr=0.08)
+    assert _all_finite(res)
     for h in res.history:
-        assert np.isfinite(h["loss"])
         for v in h["values"].values():
             assert 0.0 <= v <= 1.0
-    assert np.isfinite(res.image).all()
+    assert abs(res.values["target.metallic"] - metal) < 0.03
+    if rough == 0.02:
+        # At 32x32 a pixel spans ~0.016 rad of reflected direction, more than the GGX lobe of any
+        # roughness below ~0.1: those renders are alike here (fits end at 0.05-0.07). 128x128
+        # resolves them (benchmarks/fit_cases.md).
+        assert res.values["target.roughness"] < 0.1
+    else:
+        assert abs(res.values["target.roughness"] - rough) < 0.03
+
+
+@pytest.mark.parametrize("fast_math", [True, False])
+def test_near_mirror_fit_is_finite_with_and_without_fast_math(fit_scene, fast_math):
+    ref = _reference(fit_scene, 0.0, 1.0, spp=64)            # roughness exactly 0
+    with dr.scoped_set_flag(dr.JitFlag.FastMath, fast_math):
+        res = _fit(fit_scene, ref, spp=4, iterations=15, lr=0.2)
+    assert _all_finite(res)
+    assert all(0.0 <= h["values"]["target.roughness"] <= 1.0 for h in res.history)
 
 
 def test_exposure_fit_is_insensitive_to_a_global_scale(fit_scene):
     ref = _reference(fit_scene, 0.3, 0.6) * 1.5
-    res = draaw_mi.fit(fit_scene, ref, ["target.metallic"], version=_version(), spp=8, iterations=40,
-                       lr=0.05, exposure="fit", progress=False, init={"target.metallic": 0.3})
-    assert abs(res.exposure_stops - np.log2(1.5)) < 0.1
-    assert abs(res.values["target.metallic"] - 0.6) < 0.1
+    res = _fit(fit_scene, ref, exposure="fit")
+    assert abs(res.exposure_stops - np.log2(1.5)) < 0.02
+    assert abs(res.values["target.metallic"] - 0.6) < 0.04
+    assert abs(res.values["target.roughness"] - 0.3) < 0.02
+    assert "exposure_stops" in res.history[-1]
+
+
+def test_exposure_scale_estimate_is_unbiased_under_noise():
+    """<ref, ref> / <img, ref> is unbiased for a noisy render; <img, ref> / <img, img> (the
+    least-squares scale, used before) is biased low by the pixel variance."""
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(0.1, 1.0, (64, 64, 3)).astype(np.float32)
+    ref = mi.TensorXf(truth * 2.0)
+    scales = []
+    for _ in range(8):
+        noisy = truth + rng.normal(0, 0.3, truth.shape).astype(np.float32)
+        _, s = _loss(mi.TensorXf(noisy), ref, "l2", "fit")
+        scales.append(float(s[0]))
+        lsq = float(np.sum(noisy * truth * 2) / np.sum(noisy * noisy))
+        assert lsq < 1.85                     # what the old estimate gave
+    assert abs(np.mean(scales) - 2.0) < 0.01
 
 
 def test_noisy_reference_and_colour(fit_scene):
     rng = np.random.default_rng(0)
     ref = _reference(fit_scene, 0.4, 0.3, spp=16)             # a noisy (16 spp) reference
     ref = ref + rng.normal(0, 0.02, ref.shape).astype(np.float32)
-    res = draaw_mi.fit(fit_scene, ref, ["target.roughness", "target.base_color"], version=_version(), spp=4,
-                       iterations=10, progress=False)
+    res = _fit(fit_scene, ref, params=["target.roughness", "target.base_color"], spp=4, iterations=10,
+               init={"target.roughness": 0.5})
     assert np.isfinite(res.losses).all()
     assert len(res.values["target.base_color"]) == 3 and all(0 <= c <= 1 for c in res.values["target.base_color"])
+
+
+def test_noisy_reference_is_recovered(fit_scene):
+    # A 32x32, 32-spp reference holds little information: over 8 reference realisations the
+    # fits scatter with sd 0.016 (roughness) and 0.033 (metallic) around means 0.406 / 0.296.
+    rng = np.random.default_rng(1)
+    ref = _reference(fit_scene, 0.4, 0.3, spp=32) + rng.normal(0, 0.02, (RES, RES, 3)).astype(np.float32)
+    res = _fit(fit_scene, ref)
+    assert _all_finite(res)
+    assert abs(res.values["target.roughness"] - 0.4) < 0.05
+    assert abs(res.values["target.metallic"] - 0.3) < 0.1
+
+
+def test_l1_loss_recovers_with_render_averaging(fit_scene):
+    """The l1 loss is non-linear in the render (it targets the median of the noisy pixel, not
+    the mean), so fit() averages renders for it by default (``smooth``)."""
+    ref = _reference(fit_scene, 0.3, 0.6)
+    res = _fit(fit_scene, ref, loss="l1")
+    assert _all_finite(res)
+    assert abs(res.values["target.roughness"] - 0.3) < 0.03
+    assert abs(res.values["target.metallic"] - 0.6) < 0.05
+
+
+# ---------------------------------------------------------------------- composite fits
+def test_two_materials_jointly():
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "fit_two_spheres.toml"), resolution=(RES, RES))
+    truth = {"left.roughness": 0.2, "left.metallic": 0.9, "right.roughness": 0.6, "right.metallic": 0.1}
+    _set(scene, truth)
+    ref = np.array(draaw_mi.render(scene, version="path", spp=1024, seed=5))
+    res = _fit(scene, ref, params=list(truth), init={k: 0.5 for k in truth}, iterations=120)
+    for k, v in truth.items():
+        assert abs(res.values[k] - v) < 0.05, (k, res.values[k], v)
+
+
+def test_two_views(fit_scene):
+    views = [{"origin": [0.0, 0.7, 3.2], "target": [0.0, 0.5, 0.0], "fov": 30.0},
+             {"origin": [2.4, 1.9, 1.8], "target": [0.0, 0.3, 0.0], "fov": 34.0}]
+    from draaw_mi.fit import _views
+    from draaw_mi.render import make_integrator
+    _set(fit_scene, {"target.roughness": 0.7, "target.metallic": 0.3})
+    integ = make_integrator("path", fit_scene.settings["max_depth"])
+    refs = [np.array(mi.render(fit_scene.mi_scene, sensor=s, integrator=integ, spp=1024, seed=9 + i))
+            for i, s in enumerate(_views(fit_scene, views))]
+    res = _fit(fit_scene, refs, views=views, iterations=80)
+    assert res.image.shape == (RES, RES, 3)
+    assert abs(res.values["target.roughness"] - 0.7) < 0.04
+    assert abs(res.values["target.metallic"] - 0.3) < 0.04
+
+
+def test_post_chain_inside_the_loss(fit_scene):
+    chain = [{"type": "bloom", "threshold": 0.3, "intensity": 1.1, "amount": 0.5},
+             {"type": "contrast", "contrast": 1.3}]
+    ref = np.array(draaw_mi.post.apply(_reference(fit_scene, 0.3, 0.6), chain))
+    res = _fit(fit_scene, ref, post=chain)
+    assert _all_finite(res)
+    assert res.kernel_compiles == 0
+    assert abs(res.values["target.roughness"] - 0.3) < 0.03
+    assert abs(res.values["target.metallic"] - 0.6) < 0.05
+    # the final image is a post-processed render: close to the post-processed reference
+    assert np.median(np.abs(res.image - ref)) < 0.05
+
+
+# ------------------------------------------------------------------- parameters, errors
+def test_log_space_roughness_parameter(fit_scene):
+    prm = _Param("target.roughness.value", "target.roughness", mi.Float(0.5), fit_scene)
+    assert prm.space == "log" and abs(prm.lo - 0.6 * np.sqrt(1e-3)) < 1e-9 and prm.hi == 1.0
+    u = prm.to_latent(0.0)                   # clamped up to the floor
+    assert abs(float(dr.exp(u)[0]) - prm.lo) < 1e-6
+    assert abs(float(prm.from_latent(prm.to_latent(0.37))[0]) - 0.37) < 1e-6
+    metal = _Param("target.metallic.value", "target.metallic", mi.Float(0.5), fit_scene)
+    assert metal.space == "linear" and (metal.lo, metal.hi) == (0.0, 1.0)
+
+
+def test_fit_leaves_the_fitted_values_in_the_scene(fit_scene):
+    ref = _reference(fit_scene, 0.35, 0.5, spp=64)
+    res = _fit(fit_scene, ref, spp=4, iterations=5)
+    p = fit_scene.params
+    assert abs(float(p["target.roughness.value"][0]) - res.values["target.roughness"]) < 1e-6
+    assert not dr.grad_enabled(p["target.roughness.value"])
+    _set(fit_scene, START)
 
 
 def test_bad_arguments(fit_scene):
@@ -89,6 +241,13 @@ def test_bad_arguments(fit_scene):
         draaw_mi.fit(fit_scene, ref * np.nan, ["target.roughness"], iterations=1, progress=False)
     with pytest.raises(DraawError, match="iterations=0"):
         draaw_mi.fit(fit_scene, ref, ["target.roughness"], iterations=0, progress=False)
+    with pytest.raises(DraawError, match="twice"):
+        draaw_mi.fit(fit_scene, ref, ["target.roughness", "target.roughness.value"], iterations=1, progress=False)
+    with pytest.raises(DraawError, match="init names"):
+        draaw_mi.fit(fit_scene, ref, ["target.roughness"], init={"target.metallic": 0.1}, iterations=1,
+                     progress=False)
+    with pytest.raises(DraawError, match="average_last"):
+        draaw_mi.fit(fit_scene, ref, ["target.roughness"], average_last=0, iterations=1, progress=False)
 
 
 def test_cli_fit_writes_scene_and_plot(tmp_path, fit_scene, capsys):
@@ -104,5 +263,22 @@ def test_cli_fit_writes_scene_and_plot(tmp_path, fit_scene, capsys):
     r = float(np.array(fitted.params["target.roughness.value"]).ravel()[0])
     assert 0.0 <= r <= 1.0 and r != 0.5
     assert plot.stat().st_size > 1000
+    capsys.readouterr()
+    assert main(["fit", os.path.join(SCENES, "fit_sphere.toml"), "--reference", ref_path, "--param",
+                 "target.metallic", "--iterations", "4", "--spp", "4", "--exposure", "fit"]) == 0
+    assert "exposure = " in capsys.readouterr().out
     assert main(["fit", os.path.join(SCENES, "fit_sphere.toml"), "--reference", ref_path,
                  "--param", "nomat.roughness", "--iterations", "2"]) == 2
+
+
+# ----------------------------------------------------------------------------- slow
+@pytest.mark.slow
+@pytest.mark.parametrize("rough,metal", [(0.05, 0.05), (0.05, 0.95), (0.95, 0.05), (0.95, 0.95), (0.25, 0.8)])
+def test_accuracy_128(rough, metal):
+    """Issue 6 acceptance at full size: within 0.02 from (0.5, 0.5); benchmarks/fit_accuracy.py
+    records the timed table."""
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "fit_sphere.toml"), resolution=(128, 128))
+    ref = _reference(scene, rough, metal, spp=2048, seed=77)
+    res = _fit(scene, ref, iterations=150)
+    assert abs(res.values["target.roughness"] - rough) < 0.02
+    assert abs(res.values["target.metallic"] - metal) < 0.02
