@@ -58,10 +58,7 @@ def _to_toml(desc):
         if isinstance(v, list):
             return "[" + ", ".join(val(x) for x in v) + "]"
         return repr(v)
-    lines = []
-    for k, v in desc["render"].items():
-        pass
-    lines.append("[render]")
+    lines = ["[render]"]
     lines += [f"{k} = {val(v)}" for k, v in desc["render"].items()]
     lines.append("[camera]")
     lines += [f"{k} = {val(v)}" for k, v in desc["camera"].items()]
