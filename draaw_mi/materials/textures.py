@@ -44,11 +44,16 @@ def _range(lo, hi):
 
 
 def constant_texture(value, color: bool) -> mi.Texture:
+    """A constant texture, built through ``mi.Properties`` rather than a nested
+    ``mi.load_dict``: plugin constructors run on Mitsuba's parallel scene-loading threads, and a
+    parser re-entered from there raced with other plugins being loaded (seen as random
+    ``std::bad_alloc`` / ``basic_string`` errors while a ``roughconductor`` read its data)."""
+    props = mi.Properties("constant")
     if color:
-        # 'srgb' + unbounded: the plain 'rgb' plugin rejects values outside [0, 1] (base_color > 1,
-        # signed normal maps), which the draaw parameters allow.
-        return mi.load_dict({"type": "srgb", "color": [float(v) for v in value], "unbounded": True})
-    return mi.load_dict({"type": "uniform", "value": float(value)})
+        props["value"] = mi.ScalarColor3f(*[float(v) for v in value])
+        return props.get_unbounded_texture("value")
+    props["value"] = float(value)
+    return props.get_texture("value")
 
 
 def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
@@ -56,14 +61,15 @@ def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     if isinstance(source, str):
         if not os.path.isfile(source):
             raise ParameterError(f"draaw BSDF: {name}={source!r}: texture file does not exist")
-        return mi.load_dict({"type": "bitmap", "filename": source, "raw": raw})
+        return mi.load_dict({"type": "bitmap", "filename": source, "raw": raw}, parallel=False)
     arr = np.asarray(source, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
         raise ParameterError(f"draaw BSDF: {name} texture array of shape {arr.shape}; expected (H, W), "
                              "(H, W, 1) or (H, W, 3)")
-    return mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True})
+    return mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True},
+                        parallel=False)
 
 
 def texture_values(tex: mi.Texture):
