@@ -184,7 +184,7 @@ def _cmd_info(args) -> int:
         print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
         print(f"    lights: {', '.join(s['lights']) or 'none'}")
         print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
-        print(f"  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
+        print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
         if s["post"]:
             print(f"      post: {' -> '.join(map(str, s['post']))}")
         on = [k for k, v in s["features"].items() if v]
@@ -255,8 +255,9 @@ def _cmd_bench(args) -> int:
     root = os.path.dirname(os.path.dirname(os.path.abspath(draaw_mi.__file__)))
     scenes = args.scenes or [os.path.join(root, "scenes", f) for f in ("cornell.toml", "material_spheres.toml")]
     versions = args.versions.split(",") if args.versions else list(bench.DEFAULT_VERSIONS)
+    from draaw_mi.integrators import resolve_version
     for v in versions:
-        draaw_mi.render.__globals__["resolve_version"](v)
+        resolve_version(v)
     if args.repeats < 1:
         raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
     res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None

@@ -21,28 +21,13 @@ import weakref
 import drjit as dr
 import mitsuba as mi
 
-from .errors import RenderError, suggest
-from .integrators import VERSION_ALIASES
+from .errors import RenderError
+from .integrators import resolve_version
 
 _INTEGRATOR_CACHE: dict = {}
 _SCENE_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _LOCKS_GUARD = threading.Lock()
 MAX_PASS_SPP = 256
-
-
-def resolve_version(version: str) -> str:
-    """Mitsuba integrator plugin name for a user-facing version name (``v4``, ``V2M``, ``path``)."""
-    from . import integrators
-    if hasattr(integrators, "resolve_version"):
-        return integrators.resolve_version(version)
-    if not isinstance(version, str):
-        raise RenderError(f"render: version={version!r}; expected a name such as 'v4' or 'path'")
-    key = version.strip().lower()
-    if key in VERSION_ALIASES:
-        return VERSION_ALIASES[key]
-    if key in ("v1", "v2", "v2m", "v3", "v4", "draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4"):
-        return "path"    # the draaw_v* integrators are not registered yet: fall back to path
-    raise RenderError(f"render: unknown version {version!r}{suggest(key, VERSION_ALIASES)}")
 
 
 def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
@@ -62,21 +47,6 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
             from .scene import mitsuba_error_message
             raise RenderError(f"render: cannot create integrator {plugin!r}: {mitsuba_error_message(e)}") from None
     return _INTEGRATOR_CACHE[key]
-
-
-def detect_features(scene) -> dict:
-    """Effects a Mitsuba scene calls for; the integrators' detector when available."""
-    try:
-        from .integrators.features import detect_features as detect
-        return detect(scene)
-    except ImportError:
-        pass
-    kinds = [str(e).split("[", 1)[0] for e in scene.emitters()]
-    return {
-        "area_lights": any(k == "AreaLight" for k in kinds),
-        "point_lights": any(k in ("PointLight", "SpotLight") for k in kinds),
-        "environment": scene.environment() is not None,
-    }
 
 
 def _scene_lock(scene) -> threading.Lock:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 

@@ -23,7 +23,6 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 
 from ..errors import DraawError, SceneError, suggest
 from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
@@ -122,7 +121,7 @@ class DraawScene:
 
     def features(self) -> dict:
         """Which effects the scene calls for (emitter kinds, textures, ...)."""
-        from ..render import detect_features
+        from ..integrators.features import detect_features
         return detect_features(self.mi_scene)
 
     def summary(self) -> dict:
@@ -265,4 +264,4 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     return d
 
 
-__all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES", "np"]
+__all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES"]
