@@ -1,0 +1,230 @@
+"""Batch rendering to multi-layer EXR that never loses a frame, in-process or on Dask.
+
+``draaw_mi.batch.run(manifest)`` validates a manifest (see :mod:`draaw_mi.batch.manifest`),
+plans every frame (:mod:`~draaw_mi.batch.plan`), skips the frames already finished (file
+present and its header's job hash equal to the plan's), renders the rest with an executor
+(:mod:`~draaw_mi.batch.executors`) and logs every frame to a JSONL file beside the outputs.
+
+=================  ================================================================
+Parameter          Meaning
+=================  ================================================================
+``manifest``       TOML/JSON file name or dict
+``out``            put every output under this folder (relative patterns resolve there)
+``executor``       ``"inprocess"`` (default) or ``"dask"``
+``workers``        Dask LocalCluster worker processes (default: 2 or the core count)
+``scheduler``      ``tcp://host:port`` of an existing Dask scheduler (instead of a LocalCluster)
+``dry_run``        plan and report, render nothing
+``progress``       tqdm bar with frames done / failed and ETA
+``on_result``      callback called with every frame's result record (tests, UIs)
+=================  ================================================================
+
+Phases: validate (bad manifest → :class:`~draaw_mi.errors.SceneError`, nothing rendered) →
+plan → remove temp files of killed runs → render → log → contact sheets.
+
+>>> import draaw_mi.batch as batch                             # doctest: +SKIP
+>>> res = batch.run("scenes/batch_example.toml", out="out")    # doctest: +SKIP
+>>> res.complete, res.summary()                                # doctest: +SKIP
+(True, 'batch: 48 frames: 48 rendered, 0 already done, 0 failed; all 48 frames present ...')
+"""
+from __future__ import annotations
+
+import glob
+import json
+import os
+import time
+from dataclasses import dataclass, field
+
+from .exr import frame_status, read_header
+from .manifest import Manifest, parse_manifest
+from .plan import plan
+
+__all__ = ["run", "status", "load", "BatchResult", "parse_manifest", "plan", "frame_status", "read_header"]
+
+TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png")
+
+
+@dataclass
+class BatchResult:
+    """What a batch run did. ``complete``: every planned frame is finished on disk."""
+
+    total: int
+    skipped: int = 0
+    rendered: int = 0
+    failed: list = field(default_factory=list)        # result records with "error"
+    seconds: float = 0.0
+    log: str = ""
+    new_kernels: dict = field(default_factory=dict)   # job -> kernels first seen after its first frame
+    results: list = field(default_factory=list)
+    missing: int = 0
+
+    @property
+    def complete(self) -> bool:
+        return self.missing == 0
+
+    def summary(self) -> str:
+        rate = f", {self.seconds / self.rendered:.2f} s/frame" if self.rendered else ""
+        state = (f"all {self.total} frames present" if self.complete
+                 else f"{self.missing} of {self.total} frames missing")
+        recompiles = sum(self.new_kernels.values())
+        extra = f"; WARNING: {recompiles} kernel(s) compiled after a job's first frame" if recompiles else ""
+        return (f"batch: {self.total} frames: {self.rendered} rendered, {self.skipped} already done, "
+                f"{len(self.failed)} failed; {state} ({self.seconds:.1f} s{rate}); log {self.log}{extra}")
+
+
+def load(manifest, out: str | None = None, cache=None):
+    """Validate and plan: ``(Manifest, frame specs, scene cache)``. Raises on a bad manifest."""
+    from .frame import SceneCache
+    m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out)
+    cache = cache if cache is not None else SceneCache()
+    return m, plan(m, cache), cache
+
+
+def log_path(m: Manifest, specs) -> str:
+    if m.log:
+        return m.log
+    root = os.path.commonpath([os.path.dirname(s["output"]) for s in specs])
+    stem = os.path.splitext(os.path.basename(m.path))[0] if not m.path.startswith("<") else "batch"
+    return os.path.join(root, f"{stem}.batch.jsonl")
+
+
+class _Log:
+    """Append-only JSONL log; every line is flushed and fsynced, so a kill loses at most the
+    line being written (readers skip a torn last line)."""
+
+    def __init__(self, path: str):
+        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+        self.path = path
+        self.fh = open(path, "a", encoding="utf-8")
+
+    def write(self, **record):
+        record = {"time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **record}
+        self.fh.write(json.dumps(record, default=str) + "\n")
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+
+    def close(self):
+        self.fh.close()
+
+
+def read_log(path: str) -> list[dict]:
+    """The records of a batch log (a torn last line from a killed run is skipped)."""
+    out = []
+    if not os.path.isfile(path):
+        return out
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return out
+
+
+def remove_temp_files(specs) -> list[str]:
+    """Delete the temporary files that a killed run left in the output folders."""
+    removed = []
+    for folder in sorted({os.path.dirname(s["output"]) for s in specs}):
+        for pattern in TEMP_PATTERNS:
+            for path in glob.glob(os.path.join(glob.escape(folder), pattern)):
+                try:
+                    os.unlink(path)
+                    removed.append(path)
+                except OSError:
+                    pass
+    return removed
+
+
+def status(manifest, out: str | None = None) -> dict:
+    """Per frame ``done`` / ``missing`` / ``stale`` (present, other job), plus the last error
+    the log recorded for frames not done. Returns ``{"frames": [...], "counts": {...}}``."""
+    m, specs, _ = load(manifest, out)
+    errors = {}
+    for rec in read_log(log_path(m, specs)):
+        if rec.get("event") == "frame":
+            errors[(rec.get("job"), rec.get("frame"))] = rec.get("error")
+    frames, counts = [], {"done": 0, "missing": 0, "stale": 0, "failed": 0}
+    for s in specs:
+        st = frame_status(s)
+        err = errors.get((s["job"], s["frame"])) if st != "done" else None
+        if err:
+            st = "failed"
+        counts[st] += 1
+        frames.append({"job": s["job"], "frame": s["frame"], "output": s["output"], "status": st, "error": err})
+    return {"frames": frames, "counts": counts, "log": log_path(m, specs)}
+
+
+def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
+        scheduler: str | None = None, progress: bool = True, on_result=None, dry_run: bool = False,
+        client=None) -> BatchResult:
+    """Render every unfinished frame of ``manifest``; see the module docstring."""
+    from .executors import EXECUTORS
+    from ..errors import ParameterError, suggest
+
+    if executor not in EXECUTORS:
+        raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
+    if executor == "dask" and client is None:
+        from .executors import dask_client  # noqa: F401  (fails early, in one line, without Dask)
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            from ..errors import DraawError
+            raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'") from None
+    t0 = time.perf_counter()
+    m, specs, cache = load(manifest, out)
+    states = [frame_status(s) for s in specs]
+    todo = [s for s, st in zip(specs, states) if st != "done"]
+    res = BatchResult(total=len(specs), skipped=len(specs) - len(todo), log=log_path(m, specs))
+    if dry_run:
+        res.missing = len(todo)
+        return res
+    remove_temp_files(specs)
+    log = _Log(res.log)
+    log.write(event="start", manifest=m.path, frames=len(specs), todo=len(todo), executor=executor,
+              pid=os.getpid())
+    bar = None
+    if progress and todo:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=len(todo), unit="frame", desc="batch", dynamic_ncols=True)
+    first_kernels: dict = {}
+
+    def handle(r):
+        res.results.append(r)
+        if "error" in r:
+            res.failed.append(r)
+        else:
+            res.rendered += 1
+            ks = set(r.get("kernels") or ())
+            if r["job"] not in first_kernels:
+                first_kernels[r["job"]] = ks
+                res.new_kernels.setdefault(r["job"], 0)
+            else:
+                new = ks - first_kernels[r["job"]]
+                r["new_kernels"] = len(new)
+                res.new_kernels[r["job"]] += len(new)
+                first_kernels[r["job"]] |= new
+        log.write(event="frame", **{k: v for k, v in r.items() if k != "kernels"})
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(done=res.rendered, failed=len(res.failed))
+        if on_result is not None:
+            on_result(r)
+
+    try:
+        if executor == "inprocess":
+            from .executors import run_inprocess
+            run_inprocess(todo, cache, handle)
+        else:
+            from .executors import run_dask
+            run_dask(todo, handle, workers=workers, scheduler=scheduler, client=client)
+    finally:
+        if bar is not None:
+            bar.close()
+        res.seconds = time.perf_counter() - t0
+        res.missing = sum(frame_status(s) != "done" for s in specs)
+        log.write(event="end", rendered=res.rendered, failed=len(res.failed), missing=res.missing,
+                  seconds=round(res.seconds, 3))
+        log.close()
+    if m.contact_sheet:
+        from .sheet import contact_sheets
+        contact_sheets(specs)
+    return res

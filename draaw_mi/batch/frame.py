@@ -1,0 +1,148 @@
+"""Rendering one frame spec: a per-process scene cache, parameter updates, the NaN guard.
+
+:func:`render_frame` is a pure function of its spec: every parameter a previous frame changed
+is put back to the scene's loaded value unless this frame sets it, and the seed is part of the
+spec, so a frame renders to the same bits in any process, after any other frame (box filter).
+Both executors call it; the Dask executor keeps one :class:`SceneCache` per worker process.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import numpy as np
+
+from ..errors import DraawError, RenderError
+from .exr import metadata, write_frame
+
+
+class CachedScene:
+    """A loaded scene, its file hash and the original values of everything frames override."""
+
+    def __init__(self, scene, digest: str):
+        self.scene, self.hash = scene, digest
+        params = scene.params
+        self.camera_key = "sensor.to_world" if "sensor.to_world" in params.keys() else next(
+            (k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
+        self.fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
+        self.fov = float(scene.info.get("camera", {}).get("fov", 0.0)) or (
+            float(params[self.fov_key][0]) if self.fov_key else 45.0)
+        self.originals: dict = {}
+        if self.camera_key:
+            self.originals[self.camera_key] = params[self.camera_key]
+        if self.fov_key:
+            self.originals[self.fov_key] = params[self.fov_key]
+        self.lock = threading.Lock()
+
+    def apply(self, spec: dict) -> None:
+        """Set this frame's camera and overrides; restore everything else a frame changed."""
+        import mitsuba as mi
+
+        params = self.scene.params
+        wanted = {}
+        for key, value in spec["params"].items():
+            if key not in self.originals:
+                self.originals[key] = params[key]
+            wanted[key] = _convert(self.originals[key], value, key)
+        cam = spec.get("camera")
+        if cam is not None:
+            wanted[self.camera_key] = mi.ScalarTransform4f().look_at(
+                origin=cam["origin"], target=cam["target"], up=cam["up"])
+            if self.fov_key:
+                wanted[self.fov_key] = type(self.originals[self.fov_key])(cam["fov"])
+        for key, original in self.originals.items():
+            params[key] = wanted.get(key, original)
+        params.update()
+
+
+def _convert(original, value, key):
+    try:
+        return type(original)(*value) if isinstance(value, list) and len(value) == len(original) \
+            and not _is_flat(original) else type(original)(value)
+    except Exception as e:  # noqa: BLE001
+        raise RenderError(f"params[{key!r}] = {value!r}: cannot convert to {type(original).__name__} ({e})") \
+            from None
+
+
+def _is_flat(x) -> bool:
+    import drjit as dr
+    return dr.depth_v(x) <= 1
+
+
+class SceneCache:
+    """Scenes loaded once per process, keyed by (file, resolution); reloaded if the file changes."""
+
+    def __init__(self):
+        self._scenes: dict = {}
+        self._guard = threading.Lock()
+
+    def get(self, path: str, resolution=None, digest: str | None = None) -> CachedScene:
+        from .. import load_scene
+        from .plan import file_hash
+
+        key = (os.path.abspath(path), tuple(resolution) if resolution else None)
+        with self._guard:
+            entry = self._scenes.get(key)
+            if entry is not None and (digest is None or entry.hash == digest):
+                return entry
+            current = file_hash(path)
+            if digest is not None and current != digest:
+                raise RenderError(f"{path}: scene file changed since the batch was planned (sha256 "
+                                  f"{current[:12]}, planned {digest[:12]}); re-run the batch")
+            if entry is not None:          # free the old scene first: a live twin changes kernels
+                del self._scenes[key]
+                entry = None
+            scene = load_scene(path, **({"resolution": tuple(resolution)} if resolution else {}))
+            entry = self._scenes[key] = CachedScene(scene, current)
+            return entry
+
+
+def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:
+    """Render one frame spec to its EXR (and PNG preview); return a result record.
+
+    Raises :class:`~draaw_mi.errors.DraawError` (bad override value, non-finite pixels, I/O)
+    for a frame that cannot be finished; the file is then not written.
+    """
+    import drjit as dr
+
+    from ..render import render
+
+    t0 = time.perf_counter()
+    entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"])
+    with entry.lock:
+        entry.apply(spec)
+        if track_kernels:
+            dr.kernel_history()                     # clears the history
+        image, info = render(entry.scene, version=spec["version"], spp=spec["spp"], seed=spec["seed"],
+                             max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
+                             return_info=True)
+        arr = np.array(image, dtype=np.float32)
+        kernels = []
+        if track_kernels:
+            kernels = sorted({str(k["hash"]) for k in dr.kernel_history()
+                              if k["type"] == dr.KernelType.JIT})
+    bad = int(np.count_nonzero(~np.isfinite(arr)))
+    if bad:
+        raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
+                          "(NaN guard); frame not written")
+    seconds = time.perf_counter() - t0
+    write_frame(spec["output"], arr, info["channels"], metadata(spec, seconds), half=spec["half"])
+    if spec.get("preview"):
+        from ..io import write_png
+        write_png(os.path.splitext(spec["output"])[0] + ".png", arr[..., :3])
+    return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
+            "channels": info["channels"], "kernels": kernels, "pid": os.getpid()}
+
+
+def safe_render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:
+    """:func:`render_frame` that reports a failure as ``{"error": ...}`` instead of raising
+    (any exception: a failing frame must not stop the batch)."""
+    try:
+        return render_frame(spec, cache, track_kernels)
+    except DraawError as e:
+        msg = str(e)
+    except Exception as e:  # noqa: BLE001 - Mitsuba/Dr.Jit errors are RuntimeErrors
+        msg = f"{type(e).__name__}: {str(e).strip().splitlines()[-1] if str(e).strip() else ''}"
+    return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "error": msg,
+            "pid": os.getpid()}

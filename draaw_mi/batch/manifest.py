@@ -1,0 +1,357 @@
+"""Batch manifests: read a TOML/JSON manifest and validate it into :class:`Job` objects.
+
+A manifest lists jobs; a job is a scene rendered along a camera path with parameter overrides
+at some version / spp / AOVs / post chain. ``version``, ``spp`` and ``scene`` may be lists:
+the job then expands into one job per combination (named ``job-v4-16`` and so on)::
+
+    output = "out/{job}/{frame:04d}.exr"     # pattern; fields: job scene version spp frame
+    half = false                             # float16 EXR channels instead of float32
+    previews = false                         # also an sRGB PNG beside every EXR
+    contact_sheet = false                    # one PNG with every frame of a job, per job
+
+    [defaults]                               # any job key, applied where a job does not set it
+    spp = 16
+
+    [[jobs]]
+    name = "turntable"
+    scene = "material_spheres.toml"          # relative to the manifest's folder
+    frames = 24
+    version = "v4"                           # or ["v1", "v4"]
+    resolution = [256, 256]
+    aovs = ["depth", "sh_normal"]
+    camera = { orbit = { target = [0, 0.1, 0], radius = 9.3, height = 2.2, degrees = 360 } }
+    params = { "r0m0.roughness" = { from = 0.05, to = 0.95 } }
+
+Camera tables (one of): ``orbit``; ``keyframes`` (GO-Draaw ``[x, y, z, theta, phi]`` rows,
+interpolated as in :mod:`draaw_mi.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
+``file`` (a GO-Draaw ``camera_positions.json``); ``look_at`` (a list of
+``{origin, target, up}`` keyframes, eased like the GO-Draaw path). ``fov`` sets the field of
+view. Parameter values: a number or list (every frame), ``{from, to}`` (linear over the
+frames) or ``{values = [...]}`` (one per frame).
+
+Every error is one line naming the manifest, the field, the bad value and what was expected.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import string as _string
+import tomllib
+from dataclasses import dataclass, field
+
+from ..errors import SceneError
+from ..scene.schema import Where, boolean, check_keys, number, resolution, string, vector
+
+TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
+JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
+            "post", "camera", "params", "output", "half", "previews")
+CAMERA_KEYS = ("orbit", "keyframes", "file", "look_at", "faithful", "fov")
+ORBIT_KEYS = ("target", "radius", "height", "degrees", "start", "up")
+LOOK_AT_KEYS = ("origin", "target", "up")
+PATTERN_FIELDS = ("job", "scene", "version", "spp", "frame")
+DEFAULT_OUTPUT = "{job}/{frame:04d}.exr"
+EXPANDING = ("scene", "version", "spp")
+
+
+@dataclass
+class Job:
+    """One validated job: a scene rendered over ``frames`` frames with fixed settings."""
+
+    name: str
+    scene: str                    # absolute path
+    frames: int
+    output: str                   # absolute pattern
+    version: str | None = None
+    spp: int | None = None
+    seed: int = 0
+    max_depth: int | None = None
+    resolution: tuple | None = None
+    aovs: list | None = None
+    post: list | None = None
+    camera: dict | None = None    # validated camera table (see module docstring)
+    params: dict = field(default_factory=dict)   # name -> ("const"|"linear"|"values", data)
+    half: bool = False
+    previews: bool = False
+
+
+@dataclass
+class Manifest:
+    """A validated manifest: its jobs plus batch-wide options."""
+
+    path: str
+    jobs: list
+    contact_sheet: bool = False
+    log: str | None = None
+
+
+def read_manifest_file(path: str) -> dict:
+    """Parse a TOML or JSON manifest into a dict (errors name the file and line)."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"{path}: manifest does not exist")
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read().decode("utf-8")
+        if path.lower().endswith(".json"):
+            return json.loads(raw)
+        if path.lower().endswith(".toml"):
+            return tomllib.loads(raw)
+    except UnicodeDecodeError:
+        raise SceneError(f"{path}: not a UTF-8 text file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: malformed TOML: {e}") from None
+    except json.JSONDecodeError as e:
+        raise SceneError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    raise SceneError(f"{path}: unknown manifest format; expected .toml or .json")
+
+
+def parse_manifest(source, out_dir: str | None = None) -> Manifest:
+    """Validate a manifest (file name or dict) into a :class:`Manifest`.
+
+    Relative scene and camera files resolve against the manifest's folder; relative output
+    patterns against ``out_dir`` when given, else against the manifest's folder.
+    """
+    if isinstance(source, dict):
+        doc, name, base = source, "<manifest>", os.getcwd()
+    else:
+        name = os.fspath(source)
+        doc, base = read_manifest_file(name), os.path.dirname(os.path.abspath(name))
+    where = Where(name)
+    check_keys(doc, TOP_KEYS, where, required=("jobs",))
+    out_base = os.path.abspath(out_dir) if out_dir else base
+    pattern = doc.get("output", DEFAULT_OUTPUT)
+    half = boolean(doc.get("half", False), where / "half")
+    previews = boolean(doc.get("previews", False), where / "previews")
+    sheet = boolean(doc.get("contact_sheet", False), where / "contact_sheet")
+    log = doc.get("log")
+    if log is not None:
+        log = os.path.join(out_base, string(log, where / "log"))
+    defaults = doc.get("defaults", {})
+    check_keys(defaults, [k for k in JOB_KEYS if k != "name"], where / "defaults")
+    jobs_doc = doc["jobs"]
+    if not isinstance(jobs_doc, list) or not jobs_doc:
+        raise (where / "jobs").error("expected a non-empty list of job tables ([[jobs]])")
+    jobs, names = [], set()
+    for i, jd in enumerate(jobs_doc):
+        wj = where / "jobs" / i
+        check_keys(jd, JOB_KEYS, wj)
+        merged = {**{"output": pattern, "half": half, "previews": previews}, **defaults, **jd}
+        for job in _expand(merged, wj, base, out_base, i):
+            if job.name in names:
+                raise (wj / "name").error(f"{job.name!r} is used by two jobs; job names must be unique")
+            names.add(job.name)
+            jobs.append(job)
+    return Manifest(name, jobs, sheet, log)
+
+
+def _expand(jd: dict, where: Where, base: str, out_base: str, index: int):
+    name = jd.get("name", f"job{index}")
+    name = string(name, where / "name")
+    if not name or any(c in name for c in "/\\") or name.startswith("."):
+        raise (where / "name").error(f"{name!r} is not a usable job name (no slashes, not empty)")
+    if "scene" not in jd:
+        raise where.error("missing required key 'scene'")
+    axes = {k: (jd[k] if isinstance(jd.get(k), list) else [jd.get(k)]) for k in EXPANDING}
+    for k in EXPANDING:
+        if isinstance(jd.get(k), list) and not jd[k]:
+            raise (where / k).error("is an empty list")
+    combos = list(itertools.product(*(axes[k] for k in EXPANDING)))
+    for combo in combos:
+        vals = dict(zip(EXPANDING, combo))
+        suffix = "".join(f"-{_tag(k, vals[k])}" for k in EXPANDING if isinstance(jd.get(k), list))
+        yield _job(dict(jd, **vals), where, base, out_base, name + suffix)
+
+
+def _tag(key, value):
+    if key == "scene":
+        return os.path.splitext(os.path.basename(str(value)))[0]
+    return str(value)
+
+
+def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
+    scene = string(jd["scene"], where / "scene")
+    scene = scene if os.path.isabs(scene) else os.path.normpath(os.path.join(base, scene))
+    if not os.path.isfile(scene):
+        raise (where / "scene").error(f"scene file {scene!r} does not exist")
+    job = Job(name=name, scene=scene, frames=1, output="")
+    if jd.get("version") is not None:
+        from ..integrators import resolve_version
+        job.version = string(jd["version"], where / "version")
+        try:
+            resolve_version(job.version)
+        except Exception as e:  # noqa: BLE001 - resolve_version raises a DraawError with the list
+            raise (where / "version").error(str(e)) from None
+    if jd.get("spp") is not None:
+        job.spp = int(number(jd["spp"], where / "spp", lo=1, hi=2 ** 24, integer=True))
+    if "seed" in jd:
+        job.seed = int(number(jd["seed"], where / "seed", lo=0, hi=2 ** 32 - 1, integer=True))
+    if "max_depth" in jd:
+        job.max_depth = int(number(jd["max_depth"], where / "max_depth", lo=-1, hi=1024, integer=True))
+    if "resolution" in jd:
+        job.resolution = resolution(jd["resolution"], where / "resolution")
+    if "aovs" in jd:
+        aovs = jd["aovs"]
+        if not isinstance(aovs, list) or not all(isinstance(a, str) and a for a in aovs):
+            raise (where / "aovs").error(f"{aovs!r} is not a list of AOV names")
+        job.aovs = list(aovs)
+    if "post" in jd:
+        job.post = _check_post(jd["post"], where / "post")
+    job.half = boolean(jd.get("half", False), where / "half")
+    job.previews = boolean(jd.get("previews", False), where / "previews")
+    if "camera" in jd:
+        job.camera = _camera(jd["camera"], where / "camera", base)
+    job.params = _params(jd.get("params", {}), where / "params")
+    job.frames = _frames(jd, job, where)
+    job.output = _pattern(jd.get("output", DEFAULT_OUTPUT), where / "output", out_base, job)
+    return job
+
+
+def _check_post(chain, where: Where) -> list:
+    """Validate a post chain as ``draaw-mi render --post`` does; keep its canonical list form."""
+    from ..post import load_chain
+    if not isinstance(chain, list):
+        raise where.error(f"{chain!r} is not a list of filter tables")
+    try:
+        return load_chain(chain).to_list()
+    except Exception as e:  # noqa: BLE001 - ParameterError naming the entry
+        raise where.error(str(e)) from None
+
+
+def _camera(cam, where: Where, base: str) -> dict:
+    check_keys(cam, CAMERA_KEYS, where)
+    kinds = [k for k in ("orbit", "keyframes", "file", "look_at") if k in cam]
+    if len(kinds) != 1:
+        raise where.error("needs exactly one of orbit, keyframes, file, look_at"
+                          + (f" (got {', '.join(kinds)})" if kinds else ""))
+    kind = kinds[0]
+    out = {"kind": kind, "faithful": boolean(cam.get("faithful", False), where / "faithful")}
+    if "fov" in cam:
+        out["fov"] = number(cam["fov"], where / "fov", lo=0.1, hi=179.0)
+    if kind == "orbit":
+        o = cam["orbit"]
+        wo = where / "orbit"
+        check_keys(o, ORBIT_KEYS, wo, required=("radius",))
+        out["orbit"] = {"target": vector(o.get("target", [0, 0, 0]), wo / "target"),
+                        "radius": number(o["radius"], wo / "radius", lo=0.0, lo_open=True),
+                        "height": number(o.get("height", 0.0), wo / "height"),
+                        "degrees": number(o.get("degrees", 360.0), wo / "degrees"),
+                        "start": number(o.get("start", 0.0), wo / "start"),
+                        "up": vector(o.get("up", [0, 1, 0]), wo / "up")}
+    elif kind == "look_at":
+        keys = cam["look_at"]
+        if not isinstance(keys, list) or not keys:
+            raise (where / "look_at").error("expected a non-empty list of {origin, target, up} tables")
+        rows = []
+        for i, k in enumerate(keys):
+            wk = where / "look_at" / i
+            check_keys(k, LOOK_AT_KEYS, wk, required=("origin", "target"))
+            rows.append(vector(k["origin"], wk / "origin") + vector(k["target"], wk / "target")
+                        + vector(k.get("up", [0, 1, 0]), wk / "up"))
+        out["look_at"] = rows
+    else:
+        if kind == "file":
+            path = string(cam["file"], where / "file")
+            path = path if os.path.isabs(path) else os.path.join(base, path)
+            try:
+                with open(path) as fh:
+                    keys = json.load(fh)
+            except OSError as e:
+                raise (where / "file").error(f"cannot read {path!r} ({e.strerror})") from None
+            except json.JSONDecodeError as e:
+                raise (where / "file").error(f"{path!r} is not JSON ({e.msg} at line {e.lineno})") from None
+        else:
+            keys = cam["keyframes"]
+        from ..camera_path import as_keyframes
+        try:
+            out["keyframes"] = as_keyframes(keys if isinstance(keys, list) else [keys]).tolist()
+        except Exception as e:  # noqa: BLE001 - ParameterError with the keyframe index
+            raise (where / kind).error(str(e)) from None
+    return out
+
+
+def _params(params, where: Where) -> dict:
+    if not isinstance(params, dict):
+        raise where.error(f"expected a table of parameter overrides, got {params!r}")
+    out = {}
+    for name, spec in params.items():
+        wp = where / name
+        if isinstance(spec, dict):
+            if "values" in spec:
+                check_keys(spec, ("values",), wp)
+                vals = spec["values"]
+                if not isinstance(vals, list) or not vals:
+                    raise (wp / "values").error("expected a non-empty list, one value per frame")
+                out[name] = ("values", [_value(v, wp / "values" / i) for i, v in enumerate(vals)])
+            else:
+                check_keys(spec, ("from", "to"), wp, required=("from", "to"))
+                a, b = _value(spec["from"], wp / "from"), _value(spec["to"], wp / "to")
+                if (isinstance(a, list) != isinstance(b, list)) or (isinstance(a, list) and len(a) != len(b)):
+                    raise wp.error("'from' and 'to' must have the same shape")
+                out[name] = ("linear", (a, b))
+        else:
+            out[name] = ("const", _value(spec, wp))
+    return out
+
+
+def _value(v, where: Where):
+    if isinstance(v, list):
+        if not v:
+            raise where.error("is an empty list")
+        return [number(x, where / i) for i, x in enumerate(v)]
+    return number(v, where)
+
+
+def _frames(jd: dict, job: Job, where: Where) -> int:
+    n_values = {name: len(d) for name, (kind, d) in job.params.items() if kind == "values"}
+    if "frames" in jd:
+        frames = int(number(jd["frames"], where / "frames", lo=1, hi=10 ** 6, integer=True))
+    elif n_values:
+        frames = next(iter(n_values.values()))
+    elif job.camera and job.camera["kind"] in ("keyframes", "file", "look_at"):
+        frames = len(job.camera.get("keyframes") or job.camera.get("look_at"))
+    else:
+        frames = 1
+    for name, n in n_values.items():
+        if n != frames:
+            raise (where / "params" / name / "values").error(f"has {n} values for {frames} frames")
+    cam = job.camera
+    if cam and cam["kind"] in ("keyframes", "file") and cam["faithful"] and frames < 2:
+        raise (where / "frames").error("GO-Draaw's faithful interpolation needs at least 2 frames")
+    return frames
+
+
+def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
+    pattern = string(pattern, where)
+    if not pattern.lower().endswith(".exr"):
+        raise where.error(f"{pattern!r} must end with .exr")
+    try:
+        fields = [f for _, f, _, _ in _string.Formatter().parse(pattern) if f is not None]
+    except ValueError as e:
+        raise where.error(f"{pattern!r} is not a valid pattern ({e})") from None
+    for f in fields:
+        base_name = f.split(".")[0].split("[")[0]
+        if base_name not in PATTERN_FIELDS:
+            from ..errors import suggest
+            raise where.error(f"{pattern!r} uses unknown field {{{f}}}{suggest(base_name, PATTERN_FIELDS)}")
+    if job.frames > 1 and "frame" not in [f.split(".")[0].split("[")[0] for f in fields]:
+        raise where.error(f"{pattern!r} has no {{frame}} field, so {job.frames} frames would overwrite "
+                          "one file")
+    try:
+        format_output(pattern, job, 0)
+    except (ValueError, KeyError, IndexError, TypeError) as e:
+        raise where.error(f"{pattern!r} cannot be formatted ({e})") from None
+    return pattern if os.path.isabs(pattern) else os.path.join(out_base, pattern)
+
+
+def format_output(pattern: str, job: Job, frame: int) -> str:
+    """The output file of ``frame`` of ``job`` (pattern fields: job scene version spp frame)."""
+    return os.path.normpath(pattern.format(
+        job=job.name, scene=os.path.splitext(os.path.basename(job.scene))[0],
+        version=job.version or "default", spp=job.spp if job.spp is not None else "default", frame=frame))
+
+
+def is_finite_list(v) -> bool:
+    vals = v if isinstance(v, list) else [v]
+    return all(math.isfinite(x) for x in vals)

@@ -1,0 +1,226 @@
+"""Frame planning: expand validated jobs into self-contained, hashed frame specs.
+
+A frame spec is a plain dict (picklable, JSON-able) that holds everything a worker needs to
+render one frame: scene file and its hash, effective render settings, the camera and the
+parameter values of that frame, a deterministic seed and the output path. Its ``hash`` is the
+job identity written into the EXR; a frame whose file carries the same hash is finished.
+
+Planning loads every scene once (through a :class:`~draaw_mi.batch.frame.SceneCache`) to resolve
+the scene's default settings and to check that every overridden parameter exists, so a bad
+manifest fails before anything renders.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+
+import numpy as np
+
+from ..errors import DraawError, SceneError
+from .manifest import Manifest, format_output
+
+
+def file_hash(path: str) -> str:
+    """SHA-256 of a file's bytes (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def frame_seed(job_seed: int, frame: int) -> int:
+    """A deterministic per-frame seed in [0, 2**31): the same frame always gets the same seed,
+    and neighbouring frames get unrelated ones (no shared sample streams).
+
+    >>> frame_seed(0, 3) == frame_seed(0, 3), frame_seed(0, 3) != frame_seed(0, 4)
+    (True, True)
+    """
+    digest = hashlib.sha256(f"draaw-batch:{job_seed}:{frame}".encode()).digest()
+    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
+
+
+def versions() -> dict:
+    import drjit as dr
+    import mitsuba as mi
+
+    from .. import __version__
+    return {"draaw_mi": __version__, "mitsuba": mi.__version__, "drjit": dr.__version__, "variant": mi.variant()}
+
+
+def frame_hash(spec: dict) -> str:
+    """Hash of everything that determines a frame's pixels (not its output path or time)."""
+    keys = ("scene_hash", "resolution", "version", "spp", "seed", "max_depth", "aovs", "post", "camera",
+            "params", "half", "versions")
+    text = json.dumps({k: spec[k] for k in keys}, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+# --------------------------------------------------------------------------- cameras
+def _ease(rows: np.ndarray, frames: int) -> np.ndarray:
+    """Smoothstep-eased piecewise-linear path through ``rows`` with ``frames`` samples (the
+    non-faithful GO-Draaw interpolation of :func:`draaw_mi.camera_path.interpolate`)."""
+    n = len(rows)
+    if n == 1 or frames == 1:
+        return np.repeat(rows[:1], frames, axis=0)
+    u = np.linspace(0.0, n - 1, frames)
+    seg = np.minimum(u.astype(int), n - 2)
+    t = u - seg
+    s = t * t * (3 - 2 * t)
+    return rows[seg] + (rows[seg + 1] - rows[seg]) * s[:, None]
+
+
+def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
+    """One ``{origin, target, up, fov}`` per frame for a validated camera table."""
+    from ..camera_path import interpolate
+    from ..scene.camera import go_draaw_look_at
+
+    fov = float(cam.get("fov", scene_fov))
+    out = []
+    if cam["kind"] == "orbit":
+        o = cam["orbit"]
+        up = np.asarray(o["up"], float)
+        up /= max(np.linalg.norm(up), 1e-12)
+        e1 = np.cross([1.0, 0.0, 0.0], up)
+        if np.linalg.norm(e1) < 1e-6:
+            e1 = np.cross([0.0, 0.0, 1.0], up)
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(up, e1)
+        full = math.isclose(o["degrees"] % 360.0, 0.0, abs_tol=1e-9)
+        steps = frames if full else max(frames - 1, 1)      # a full turn must not repeat frame 0
+        target = np.asarray(o["target"], float)
+        for i in range(frames):
+            a = math.radians(o["start"] + o["degrees"] * i / steps)
+            origin = target + up * o["height"] + o["radius"] * (math.cos(a) * e1 + math.sin(a) * e2)
+            out.append((origin, target, up))
+    elif cam["kind"] == "look_at":
+        rows = _ease(np.asarray(cam["look_at"], float), frames)
+        out = [(r[0:3], r[3:6], r[6:9]) for r in rows]
+    else:
+        keys = cam["keyframes"]
+        if len(keys) == 1 or frames == 1:
+            path = np.repeat(np.asarray(keys[:1], float), frames, axis=0)
+        else:
+            path = interpolate(keys, duration=1.0, fps=frames, faithful=cam["faithful"])
+        for p in path:
+            try:
+                out.append(go_draaw_look_at(p[:3], p[3], p[4], fov))
+            except ValueError:
+                raise SceneError(f"camera keyframe {p.tolist()} gives a degenerate view") from None
+    return [{"origin": [float(v) for v in o], "target": [float(v) for v in t], "up": [float(v) for v in u],
+             "fov": fov} for o, t, u in out]
+
+
+def param_value(kind: str, data, frame: int, frames: int):
+    """The value of an override at ``frame``: constant, linear from/to, or per-frame list."""
+    if kind == "const":
+        return data
+    if kind == "values":
+        return data[frame]
+    a, b = data
+    t = frame / (frames - 1) if frames > 1 else 0.0
+    if isinstance(a, list):
+        return [x + (y - x) * t for x, y in zip(a, b)]
+    return a + (b - a) * t
+
+
+# --------------------------------------------------------------------------- plan
+def plan(manifest: Manifest, cache=None) -> list[dict]:
+    """Every frame of every job as a spec dict, validated against the loaded scenes."""
+    from ..render import make_integrator
+    from .frame import SceneCache
+
+    cache = cache if cache is not None else SceneCache()
+    vers = versions()
+    specs, seen = [], {}
+    where = manifest.path
+    for ji, job in enumerate(manifest.jobs):
+        loc = f"{where}: job {job.name!r}"
+        try:
+            entry = cache.get(job.scene, job.resolution)
+        except DraawError as e:
+            raise SceneError(f"{loc}: {e}") from None
+        scene = entry.scene
+        s = scene.settings
+        version = job.version or s["version"]
+        spp = job.spp or s["spp"]
+        max_depth = s["max_depth"] if job.max_depth is None else job.max_depth
+        aovs = list(s.get("aovs", [])) if job.aovs is None else job.aovs
+        try:
+            make_integrator(version, max_depth, s.get("hide_emitters", False), aovs)
+        except DraawError as e:
+            raise SceneError(f"{loc}: {e}") from None
+        keys = {}
+        for name in job.params:
+            try:
+                keys[name] = scene.key(name)
+            except DraawError as e:
+                raise SceneError(f"{loc}: params: {e}") from None
+            _check_shape(loc, name, job.params[name], scene.params[keys[name]])
+        cams = None
+        if job.camera is not None:
+            if entry.camera_key is None:
+                raise SceneError(f"{loc}: camera: the scene's sensor has no to_world parameter")
+            try:
+                cams = camera_frames(job.camera, job.frames, entry.fov)
+            except DraawError as e:
+                raise SceneError(f"{loc}: camera: {e}") from None
+        for f in range(job.frames):
+            out = format_output(job.output, job, f)
+            if out in seen:
+                raise SceneError(f"{where}: output pattern gives the same file {out!r} for "
+                                 f"{seen[out]} and job {job.name!r} frame {f}")
+            seen[out] = f"job {job.name!r} frame {f}"
+            spec = {
+                "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
+                "scene": job.scene, "scene_hash": entry.hash, "resolution": list(scene.resolution),
+                "version": version, "spp": int(spp), "seed": frame_seed(job.seed, f),
+                "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
+                "camera": cams[f] if cams else None,
+                "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},
+                "half": job.half, "preview": job.previews, "output": out, "versions": vers,
+            }
+            spec["hash"] = frame_hash(spec)
+            specs.append(spec)
+    check_writable(sorted({os.path.dirname(s["output"]) for s in specs}), where)
+    return specs
+
+
+def components(value) -> int:
+    """Number of values a parameter holds: 3 for a Color3f, the width of a Float array."""
+    import drjit as dr
+    if dr.is_array_v(value):
+        return len(value) if dr.depth_v(value) > 1 else dr.width(value)
+    return 1
+
+
+def _check_shape(loc, name, spec, current):
+    if "Transform" in type(current).__name__:
+        raise SceneError(f"{loc}: params.{name}: transforms cannot be overridden; use [camera] for the "
+                         "sensor")
+    kind, data = spec
+    samples = data if kind in ("values", "linear") else [data]
+    want = components(current)
+    for v in samples:
+        size = len(v) if isinstance(v, list) else 1
+        if size != want and size != 1:
+            raise SceneError(f"{loc}: params.{name}: value {v!r} has {size} components; the parameter "
+                             f"has {want}")
+
+
+def check_writable(folders, where: str) -> None:
+    """Every output folder exists and is writable, or can be created (checked before rendering)."""
+    for folder in folders:
+        probe = folder
+        while not os.path.exists(probe):
+            parent = os.path.dirname(probe)
+            if parent == probe:
+                break
+            probe = parent
+        if not os.path.isdir(probe):
+            raise SceneError(f"{where}: output folder {folder!r} cannot be created ({probe!r} is a file)")
+        if not os.access(probe, os.W_OK | os.X_OK):
+            raise SceneError(f"{where}: output folder {folder!r} is not writable (no write permission "
+                             f"on {probe!r})")

@@ -1,0 +1,41 @@
+"""Contact sheets: one sRGB PNG per job with a thumbnail of every finished frame."""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from ..io import read_exr, write_png
+
+
+def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
+    """Write ``<first frame's folder>/<job>_contact.png`` for each job; return the paths."""
+    from .exr import frame_status
+
+    jobs: dict = {}
+    for s in specs:
+        jobs.setdefault(s["job"], []).append(s)
+    written = []
+    for job, frames in jobs.items():
+        tiles = []
+        for s in frames:
+            if frame_status(s) != "done":
+                continue
+            img = read_exr(s["output"])[..., :3]
+            step = max(1, math.ceil(max(img.shape[:2]) / thumb))
+            tiles.append(img[::step, ::step])
+        if not tiles:
+            continue
+        h = max(t.shape[0] for t in tiles)
+        w = max(t.shape[1] for t in tiles)
+        cols = min(columns, len(tiles))
+        rows = -(-len(tiles) // cols)
+        sheet = np.zeros((rows * h, cols * w, 3), np.float32)
+        for i, t in enumerate(tiles):
+            r, c = divmod(i, cols)
+            sheet[r * h:r * h + t.shape[0], c * w:c * w + t.shape[1]] = t
+        path = os.path.join(os.path.dirname(frames[0]["output"]), f"{job}_contact.png")
+        write_png(path, sheet)
+        written.append(path)
+    return written
