@@ -7,6 +7,7 @@ Examples::
     draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --spp 256
     draaw-mi info scenes/material_spheres.toml
     draaw-mi post out/cornell.exr -o out/graded.exr --chain chain.json
+    draaw-mi batch scenes/batch_example.toml --out out/batch [--executor dask --workers 2]
     draaw-mi fit scenes/fit_sphere.toml --reference ref.exr --param target.roughness \
              --param target.metallic -o fitted.toml --plot fit.png
 """
@@ -105,7 +106,20 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument("input", help="input EXR")
     q.add_argument("-o", "--output", required=True, help="output EXR (or .png)")
     q.add_argument("--chain", required=True, help="chain JSON file: a list of filter dicts")
+    _batch_parser(sub)
     return p
+
+
+def _batch_parser(sub) -> None:
+    a = sub.add_parser("batch", help="render the frames of a batch manifest to multi-layer EXR (resumable)")
+    a.add_argument("manifest", help="batch manifest (.toml or .json)")
+    a.add_argument("--out", help="put every output under this folder (relative patterns resolve there)")
+    a.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
+    a.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
+    a.add_argument("--executor", default="inprocess", choices=["inprocess", "dask"])
+    a.add_argument("--workers", type=int, help="Dask LocalCluster worker processes (default: min(cores, 2))")
+    a.add_argument("--scheduler", help="address of an existing Dask scheduler, tcp://HOST:PORT")
+    a.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def _cmd_render(args) -> int:
@@ -317,6 +331,34 @@ def _cmd_post(args) -> int:
     return 0
 
 
+def _cmd_batch(args) -> int:
+    """Exit 0 when every frame of the manifest exists (done), 1 when some are missing."""
+    from draaw_mi import batch
+
+    if args.workers is not None and args.workers < 1:
+        raise CliError(f"--workers {args.workers}: expected an integer >= 1")
+    if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
+        raise CliError(f"--scheduler {args.scheduler!r}: expected an address such as tcp://HOST:8786")
+    if (args.workers or args.scheduler) and args.executor != "dask":
+        raise CliError("--workers and --scheduler need --executor dask")
+    if args.status or args.dry_run:
+        st = batch.status(args.manifest, out=args.out)
+        for f in st["frames"]:
+            if args.dry_run or f["status"] != "done":
+                print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<8} {f['output']}"
+                      + (f"  ({f['error']})" if f["error"] else ""))
+        c = st["counts"]
+        print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
+              f"(other job settings), {c['failed']} failed; log {st['log']}")
+        return 0 if c["done"] == len(st["frames"]) else 1
+    res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
+                    scheduler=args.scheduler, progress=(not args.no_progress) and sys.stderr.isatty())
+    for r in res.failed:
+        print(f"failed: {r['job']} frame {r['frame']}: {r['error']}", file=sys.stderr)
+    print(res.summary())
+    return 0 if res.complete else 1
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -324,7 +366,7 @@ def main(argv=None) -> int:
         import draaw_mi  # noqa: F401  (environment check happens here)
         from draaw_mi.errors import DraawError
         handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit,
-                   "bench": _cmd_bench}[args.command]
+                   "bench": _cmd_bench, "batch": _cmd_batch}[args.command]
         try:
             return handler(args)
         except DraawError as e:

@@ -4,7 +4,8 @@ A manifest lists jobs; a job is a scene rendered along a camera path with parame
 at some version / spp / AOVs / post chain. ``version``, ``spp`` and ``scene`` may be lists:
 the job then expands into one job per combination (named ``job-v4-16`` and so on)::
 
-    output = "out/{job}/{frame:04d}.exr"     # pattern; fields: job scene version spp frame
+    output = "out/{job}/{frame:04d}.exr"     # pattern (relative: to --out DIR or the current
+                                             # folder); fields: job scene version spp frame
     half = false                             # float16 EXR channels instead of float32
     previews = false                         # also an sRGB PNG beside every EXR
     contact_sheet = false                    # one PNG with every frame of a job, per job
@@ -111,7 +112,7 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
     """Validate a manifest (file name or dict) into a :class:`Manifest`.
 
     Relative scene and camera files resolve against the manifest's folder; relative output
-    patterns against ``out_dir`` when given, else against the manifest's folder.
+    patterns against ``out_dir`` when given, else against the current folder.
     """
     if isinstance(source, dict):
         doc, name, base = source, "<manifest>", os.getcwd()
@@ -120,7 +121,7 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
         doc, base = read_manifest_file(name), os.path.dirname(os.path.abspath(name))
     where = Where(name)
     check_keys(doc, TOP_KEYS, where, required=("jobs",))
-    out_base = os.path.abspath(out_dir) if out_dir else base
+    out_base = os.path.abspath(out_dir) if out_dir else os.getcwd()
     pattern = doc.get("output", DEFAULT_OUTPUT)
     half = boolean(doc.get("half", False), where / "half")
     previews = boolean(doc.get("previews", False), where / "previews")
