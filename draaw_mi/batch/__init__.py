@@ -83,8 +83,9 @@ def log_path(m: Manifest, specs) -> str:
     if m.log:
         return m.log
     root = os.path.commonpath([os.path.dirname(s["output"]) for s in specs])
-    stem = os.path.splitext(os.path.basename(m.path))[0] if not m.path.startswith("<") else "batch"
-    return os.path.join(root, f"{stem}.batch.jsonl")
+    if m.path.startswith("<"):
+        return os.path.join(root, "batch.jsonl")
+    return os.path.join(root, os.path.splitext(os.path.basename(m.path))[0] + ".batch.jsonl")
 
 
 class _Log:

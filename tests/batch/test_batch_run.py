@@ -1,0 +1,205 @@
+"""In-process batch runs: frames equal independent renders, resume, stale frames, failures,
+EXR layers and metadata, and no kernel compiles after a job's first frame."""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+
+import numpy as np
+import OpenEXR
+from batch_helpers import assert_bit_identical, frames_of, manifest, write_manifest, write_scene
+from conftest import tiny_description
+
+import draaw_mi
+from draaw_mi import batch
+from draaw_mi.batch.plan import frame_seed, param_value
+
+
+def test_frame_equals_an_independent_render(tmp_path):
+    """Frame 2 of an orbit + roughness ramp equals a fresh scene built with that camera and that
+    roughness in its description, rendered with the frame's seed (box filter: bit-identical)."""
+    doc = manifest(tmp_path, frames=4)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 4 and not res.failed
+    m, specs, _ = batch.load(doc)
+    s = specs[2]
+    desc = tiny_description()
+    desc["camera"] = {"origin": s["camera"]["origin"], "target": s["camera"]["target"],
+                      "up": s["camera"]["up"], "fov": 40}
+    desc["materials"]["ball"]["roughness"] = param_value("linear", (0.1, 0.9), 2, 4)
+    ref = np.array(draaw_mi.render(draaw_mi.load_scene(desc), seed=frame_seed(0, 2), spp=4))
+    got = draaw_mi.read_exr(s["output"])
+    assert np.array_equal(got, ref)
+    # the override and the camera matter: neighbouring frames differ from this reference
+    assert not np.array_equal(draaw_mi.read_exr(specs[1]["output"]), ref)
+
+
+def test_plan_cameras_params_and_seeds(tmp_path):
+    doc = manifest(tmp_path, frames=8)
+    _, specs, _ = batch.load(doc)
+    target = np.array([0.0, 0.5, 0.0])
+    angles = []
+    for s in specs:
+        o = np.array(s["camera"]["origin"])
+        assert math.isclose(o[1] - target[1], 0.8, abs_tol=1e-12)
+        assert math.isclose(np.hypot(o[0], o[2]), 5.0, rel_tol=1e-12)
+        angles.append(math.atan2(o[0], o[2]))
+    steps = np.diff(np.unwrap(angles))
+    assert np.allclose(steps, 2 * math.pi / 8)             # a full turn, frame 0 not repeated
+    r = [s["params"]["ball.roughness.value"] for s in specs]
+    assert np.allclose(r, np.linspace(0.1, 0.9, 8))
+    seeds = [s["seed"] for s in specs]
+    assert len(set(seeds)) == 8 and seeds == [frame_seed(0, i) for i in range(8)]
+    assert len({s["hash"] for s in specs}) == 8
+
+
+def test_go_draaw_keyframes_follow_camera_path(tmp_path, go_draaw_dir):
+    from draaw_mi.camera_path import interpolate
+    from draaw_mi.scene.camera import go_draaw_look_at
+
+    doc = manifest(tmp_path, frames=6, camera={"file": os.path.join(go_draaw_dir, "camera_positions.json"),
+                                               "fov": 50})
+    del doc["jobs"][0]["params"]
+    _, specs, _ = batch.load(doc)
+    with open(os.path.join(go_draaw_dir, "camera_positions.json")) as fh:
+        keys = json.load(fh)
+    path = interpolate(keys, duration=1.0, fps=6)
+    for s, p in zip(specs, path):
+        o, t, u = go_draaw_look_at(p[:3], p[3], p[4], 50.0)
+        assert np.allclose(s["camera"]["origin"], o) and np.allclose(s["camera"]["target"], t)
+
+
+def test_resume_renders_only_missing_corrupt_and_stale_frames(tmp_path):
+    doc = manifest(tmp_path, frames=5)
+    batch.run(doc, progress=False)
+    _, specs, _ = batch.load(doc)
+    before = frames_of(tmp_path / "out")
+    mtimes = {s["frame"]: os.stat(s["output"]).st_mtime_ns for s in specs}
+    os.unlink(specs[1]["output"])
+    with open(specs[3]["output"], "r+b") as fh:           # a truncated (corrupt) file
+        fh.truncate(100)
+    res = batch.run(doc, progress=False)
+    assert sorted(r["frame"] for r in res.results) == [1, 3] and res.skipped == 3 and res.complete
+    for f in (0, 2, 4):
+        assert os.stat(specs[f]["output"]).st_mtime_ns == mtimes[f]
+    assert_bit_identical(before, frames_of(tmp_path / "out"))
+    # other settings for the same files: every frame is stale and re-rendered
+    doc2 = copy.deepcopy(doc)
+    doc2["jobs"][0]["spp"] = 8
+    assert batch.status(doc2)["counts"]["stale"] == 5
+    res = batch.run(doc2, progress=False)
+    assert res.rendered == 5
+
+
+def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
+    doc = manifest(tmp_path, frames=3)
+    # 1e39 overflows float32: frame 1 renders inf pixels, which the NaN guard refuses
+    doc["jobs"][0]["params"] = {"point_light0.intensity": {"values": [40.0, 1e39, 40.0]}}
+    _, specs, _ = batch.load(doc)
+    assert "intensity" in next(iter(specs[1]["params"]))
+    res = batch.run(doc, progress=False)
+    assert [r["frame"] for r in res.failed] == [1] and "non-finite" in res.failed[0]["error"]
+    assert res.rendered == 2 and not res.complete and res.missing == 1
+    assert not os.path.exists(specs[1]["output"])
+    log = batch.read_log(res.log)
+    assert [r["event"] for r in log] == ["start", "frame", "frame", "frame", "end"]
+    assert sum("error" in r for r in log) == 1
+    st = batch.status(doc)
+    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "failed": 1}
+    from draaw_mi.cli import main
+    path = write_manifest(tmp_path, doc)
+    assert main(["batch", path, "--no-progress"]) == 1        # exit status: not all frames exist
+    assert "failed: orbit frame 1" in capsys.readouterr().err
+
+
+def test_exr_layers_metadata_and_half(tmp_path):
+    doc = manifest(tmp_path, frames=2, aovs=["depth", "normal"], half=True)
+    batch.run(doc, progress=False)
+    _, specs, _ = batch.load(doc)
+    with OpenEXR.File(specs[1]["output"], separate_channels=True) as f:
+        h = dict(f.header())
+        chans = {n: c.pixels for n, c in f.channels().items()}
+    assert set(chans) == {"R", "G", "B", "depth.Z", "N.X", "N.Y", "N.Z"}
+    assert all(c.dtype == np.float16 and c.shape == (24, 32) for c in chans.values())
+    assert h["draaw:frame_hash"] == specs[1]["hash"] and h["draaw:spp"] == 4
+    assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4"
+    assert h["draaw:mitsuba"] == "3.9.1" and h["draaw:draaw_mi"] == draaw_mi.__version__
+    assert h["draaw:scene_sha256"] == batch.plan.__globals__["file_hash"](specs[1]["scene"])
+    # depth is the distance to the first hit: about |camera - sphere| - radius at the centre
+    o = np.array(specs[1]["camera"]["origin"])
+    centre_depth = float(chans["depth.Z"][12, 16])
+    assert abs(centre_depth - (np.linalg.norm(o - [0, 0.8, 0]) - 0.8)) < 0.1
+
+
+def test_no_kernel_compiles_after_the_first_frame(tmp_path):
+    res = batch.run(manifest(tmp_path, frames=4), progress=False)
+    assert all(r["kernels"] for r in res.results)          # kernels were recorded
+    assert [r.get("new_kernels") for r in res.results] == [None, 0, 0, 0]
+    assert res.new_kernels == {"orbit": 0}
+
+
+def test_kernel_check_sees_a_recompile(tmp_path):
+    """The detector is not blind: a frame with another max_depth (a literal in the kernel)
+    shows up as new kernels."""
+    from draaw_mi.batch.executors import run_inprocess
+    from draaw_mi.batch.plan import frame_hash
+
+    m, specs, cache = batch.load(manifest(tmp_path, frames=3))
+    specs[2]["max_depth"] = 2
+    specs[2]["hash"] = frame_hash(specs[2])
+    got = []
+    run_inprocess(specs, cache, got.append)
+    first = set(got[0]["kernels"])
+    assert set(got[1]["kernels"]) <= first
+    assert set(got[2]["kernels"]) - first
+
+
+def test_previews_and_contact_sheet(tmp_path):
+    doc = manifest(tmp_path, frames=3, previews=True)
+    doc["contact_sheet"] = True
+    batch.run(doc, progress=False)
+    out = tmp_path / "out" / "orbit"
+    assert sorted(p.name for p in out.iterdir()) == ["0000.exr", "0000.png", "0001.exr", "0001.png",
+                                                    "0002.exr", "0002.png", "batch.jsonl",
+                                                    "orbit_contact.png"]
+
+
+def test_dry_run_and_status_render_nothing(tmp_path, capsys):
+    from draaw_mi.cli import main
+    path = write_manifest(tmp_path, manifest(tmp_path, frames=3))
+    assert main(["batch", path, "--dry-run"]) == 1
+    out = capsys.readouterr().out
+    assert out.count("missing") >= 3 and "3 frames: 0 done, 3 missing" in out
+    assert not (tmp_path / "out").exists()
+    assert main(["batch", path, "--no-progress"]) == 0
+    assert "3 rendered" in capsys.readouterr().out
+    assert main(["batch", path, "--status"]) == 0
+    assert "3 frames: 3 done" in capsys.readouterr().out
+
+
+def test_out_dir_and_expansion(tmp_path):
+    doc = manifest(tmp_path, frames=2, version=["v1", "v4"])
+    doc["output"] = "{job}/{version}_{frame:02d}.exr"
+    res = batch.run(doc, out=str(tmp_path / "elsewhere"), progress=False)
+    assert res.complete
+    names = sorted(frames_of(tmp_path / "elsewhere"))
+    assert names == ["orbit-v1/v1_00.exr", "orbit-v1/v1_01.exr", "orbit-v4/v4_00.exr", "orbit-v4/v4_01.exr"]
+
+
+def test_example_manifest_plans(tmp_path):
+    from conftest import SCENES
+    m, specs, _ = batch.load(os.path.join(SCENES, "batch_example.toml"), out=str(tmp_path))
+    assert [j.name for j in m.jobs] == ["turntable", "roughness_sweep"]
+    assert len(specs) == 36 and specs[0]["resolution"] == [256, 256]
+    assert all(s["output"].startswith(str(tmp_path)) for s in specs)
+
+
+def test_scene_changed_after_planning_fails_the_frame(tmp_path):
+    doc = manifest(tmp_path, frames=2)
+    m, specs, cache = batch.load(doc)
+    write_scene(tmp_path, spp=8)                           # same file, other content
+    from draaw_mi.batch.frame import SceneCache, safe_render_frame
+    r = safe_render_frame(specs[0], SceneCache())
+    assert "changed since the batch was planned" in r["error"]
