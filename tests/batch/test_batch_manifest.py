@@ -1,0 +1,124 @@
+"""Bad manifests: one line on stderr, exit 2, and nothing rendered or written."""
+from __future__ import annotations
+
+import os
+
+import pytest
+from batch_helpers import manifest, write_manifest
+
+from draaw_mi import batch
+from draaw_mi.cli import main
+from draaw_mi.errors import SceneError
+
+
+def _bad(tmp_path, capsys, mutate, expect):
+    doc = manifest(tmp_path, frames=3)
+    mutate(doc, tmp_path)
+    path = write_manifest(tmp_path, doc)
+    assert main(["batch", path, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("draaw-mi: error: "), err
+    for e in expect:
+        assert e in lines[0], lines[0]
+    assert not (tmp_path / "out").exists()                # nothing rendered, no log
+    return lines[0]
+
+
+def test_unknown_job_key_suggests(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(fames=3),
+         ["jobs[0].fames", "unknown key 'fames'", "did you mean 'frames'?"])
+
+
+def test_unknown_top_key_suggests(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, _: d.update(ouptut="x/{frame}.exr"), ["did you mean 'output'?"])
+
+
+def test_missing_scene(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, t: d["jobs"][0].update(scene=str(t / "nope.toml")),
+         ["jobs[0].scene", "nope.toml", "does not exist"])
+
+
+@pytest.mark.parametrize("pattern, expect", [
+    ("out/{job}/{frme:04d}.exr", ["unknown field {frme}", "did you mean 'frame'?"]),
+    ("out/{job}/still.exr", ["no {frame} field", "3 frames would overwrite"]),
+    ("out/{job}/{frame:04d}.png", ["must end with .exr"]),
+    ("out/{job}/{frame:04d.exr", ["not a valid pattern"]),
+    ("out/{job}/{frame:04q}.exr", ["cannot be formatted"]),
+])
+def test_bad_pattern(tmp_path, capsys, pattern, expect):
+    _bad(tmp_path, capsys, lambda d, t: d.update(output=str(t / pattern)), expect)
+
+
+def test_override_of_a_parameter_that_does_not_exist(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(params={"ball.roughnes": 0.3}),
+         ["job 'orbit'", "no parameter 'ball.roughnes'", "did you mean 'ball.roughness.value'?"])
+
+
+def test_override_with_the_wrong_shape(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(params={"ball.roughness": [0.1, 0.2]}),
+         ["ball.roughness", "2 components", "the parameter has 1"])
+
+
+def test_per_frame_values_must_match_frames(tmp_path, capsys):
+    _bad(tmp_path, capsys,
+         lambda d, _: d["jobs"][0].update(params={"ball.roughness": {"values": [0.1, 0.2]}}),
+         ["has 2 values for 3 frames"])
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root can write anywhere")
+def test_unwritable_output_folder_permissions(tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        _bad(tmp_path, capsys, lambda d, t: d.update(output=str(ro / "{job}" / "{frame}.exr")),
+             ["is not writable"])
+    finally:
+        ro.chmod(0o700)
+
+
+def test_unwritable_output_folder_is_a_file(tmp_path, capsys):
+    (tmp_path / "blocker").write_text("a file where a folder should be")
+    _bad(tmp_path, capsys, lambda d, t: d.update(output=str(t / "blocker" / "{job}" / "{frame}.exr")),
+         ["cannot be created", "blocker"])
+
+
+def test_bad_version_aov_and_camera(tmp_path, capsys):
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(version="v9"), ["jobs[0].version", "v9"])
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(aovs=["dpeth"]), ["dpeth", "did you mean 'depth'?"])
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"orbit": {"radius": 2}, "look_at": []}),
+         ["exactly one of"])
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"keyframes": [[0, 0, 0, 1]]}),
+         ["keyframe 0", "5 finite numbers"])
+
+
+def test_same_file_for_two_frames(tmp_path, capsys):
+    def two_jobs(d, t):
+        d["jobs"].append(dict(d["jobs"][0], name="other"))
+        d["output"] = str(t / "out" / "{frame:04d}.exr")
+    _bad(tmp_path, capsys, two_jobs, ["same file", "frame 0"])
+
+
+def test_malformed_toml_and_missing_manifest(tmp_path, capsys):
+    p = tmp_path / "broken.toml"
+    p.write_text("jobs = [\n")
+    assert main(["batch", str(p)]) == 2
+    assert "malformed TOML" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path / "none.toml")]) == 2
+    assert "manifest does not exist" in capsys.readouterr().err
+
+
+def test_cli_flag_combinations(tmp_path, capsys):
+    path = write_manifest(tmp_path, manifest(tmp_path))
+    assert main(["batch", path, "--workers", "2"]) == 2
+    assert "need --executor dask" in capsys.readouterr().err
+    assert main(["batch", path, "--executor", "dask", "--scheduler", "localhost:1"]) == 2
+    assert "tcp://" in capsys.readouterr().err
+
+
+def test_api_raises_scene_error(tmp_path):
+    doc = manifest(tmp_path)
+    doc["jobs"][0]["params"] = {"nosuch.thing": 1.0}
+    with pytest.raises(SceneError, match="no parameter 'nosuch.thing'"):
+        batch.run(doc, progress=False)
