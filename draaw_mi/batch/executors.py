@@ -59,7 +59,9 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     threads = max(1, cores // n)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
-    return Client(cluster), cluster, threads
+    client = Client(cluster)
+    client.draaw_drjit_threads = threads      # run_dask passes it to each worker's first task
+    return client, cluster, threads
 
 
 def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None = None,
@@ -70,7 +72,7 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
     from .worker import dask_render_frame
 
     own = client is None
-    cluster, threads = None, None
+    cluster, threads = None, getattr(client, "draaw_drjit_threads", None)
     if own:
         client, cluster, threads = dask_client(workers, scheduler)
     try:

@@ -132,7 +132,7 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         from ..io import write_png
         write_png(os.path.splitext(spec["output"])[0] + ".png", arr[..., :3])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
-            "channels": info["channels"], "kernels": kernels, "pid": os.getpid()}
+            "channels": info["channels"], "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 
 
 def safe_render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:
