@@ -57,7 +57,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     cores = os.cpu_count() or 1
     n = workers or min(cores, 2)
     threads = max(1, cores // n)
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     client = Client(cluster)
     client.draaw_drjit_threads = threads      # run_dask passes it to each worker's first task
