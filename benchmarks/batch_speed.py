@@ -110,7 +110,7 @@ def scene_xml(mi_dict: dict, spp: int, max_depth: int, camera=None) -> str:
     if camera is not None:
         sensor["to_world"] = mi.ScalarTransform4f().look_at(origin=camera["origin"], target=camera["target"],
                                                              up=camera["up"])
-    lines = ['<scene version="3.0.0">', f'    <integrator type="path" id="integrator">',
+    lines = ['<scene version="3.0.0">',     '    <integrator type="path" id="integrator">',
              f'        <integer name="max_depth" value="{max_depth}"/>', "    </integrator>"]
     for k, v in d.items():
         if k == "type" or k == "integrator":

@@ -164,12 +164,10 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     if executor == "dask" and client is None:
-        from .executors import dask_client  # noqa: F401  (fails early, in one line, without Dask)
-        try:
-            import distributed  # noqa: F401
-        except ImportError:
+        import importlib.util
+        if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line
             from ..errors import DraawError
-            raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'") from None
+            raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'")
     t0 = time.perf_counter()
     m, specs, cache = load(manifest, out)
     states = [frame_status(s) for s in specs]

@@ -34,6 +34,42 @@ class CachedScene:
         if self.fov_key:
             self.originals[self.fov_key] = params[self.fov_key]
         self.lock = threading.Lock()
+        self.frozen: dict = {}
+
+    def render(self, spec: dict):
+        """Render the frame: with a frozen function (``dr.freeze``) when the samples fit in one
+        pass, so frames after the first replay the recorded kernels instead of re-tracing the
+        integrator (the trace costs more than the kernel at low spp); otherwise through
+        :func:`draaw_mi.render`. Same bits either way: the frozen call reproduces render()'s
+        arithmetic (``img * spp / spp``) and seed. Returns ``(image, channel names)``."""
+        import drjit as dr
+        import mitsuba as mi
+
+        from ..render import MAX_PASS_SPP, _apply_post, make_integrator, render
+
+        s = self.scene.settings
+        spp = spec["spp"]
+        if not spec.get("freeze", True) or spp > MAX_PASS_SPP:
+            image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
+                                 max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
+                                 return_info=True)
+            return image, info["channels"]
+        integrator = make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
+                                     spec["aovs"])
+        key = (id(integrator), spp)
+        fn = self.frozen.get(key)
+        if fn is None:
+            def fn(scene, seed, integrator=integrator, spp=spp):
+                img = mi.render(scene, integrator=integrator, seed=seed, spp=spp)
+                return (img * spp) / spp                  # what render() computes for one pass
+            fn = self.frozen[key] = dr.freeze(fn)
+        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]))
+        dr.eval(image)
+        dr.sync_thread()
+        chain = s.get("post", []) if spec["post"] is None else spec["post"]
+        if chain:
+            image = _apply_post(image, chain)
+        return image, ["R", "G", "B"] + list(integrator.aov_names())
 
     def apply(self, spec: dict) -> None:
         """Set this frame's camera and overrides; restore everything else a frame changed."""
@@ -106,17 +142,13 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     """
     import drjit as dr
 
-    from ..render import render
-
     t0 = time.perf_counter()
     entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"])
     with entry.lock:
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history
-        image, info = render(entry.scene, version=spec["version"], spp=spec["spp"], seed=spec["seed"],
-                             max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
-                             return_info=True)
+        image, channels = entry.render(spec)
         arr = np.array(image, dtype=np.float32)
         kernels = []
         if track_kernels:
@@ -127,12 +159,12 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")
     seconds = time.perf_counter() - t0
-    write_frame(spec["output"], arr, info["channels"], metadata(spec, seconds), half=spec["half"])
+    write_frame(spec["output"], arr, channels, metadata(spec, seconds), half=spec["half"])
     if spec.get("preview"):
         from ..io import write_png
         write_png(os.path.splitext(spec["output"])[0] + ".png", arr[..., :3])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
-            "channels": info["channels"], "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
+            "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 
 
 def safe_render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import math
 import os
 import string as _string
 import tomllib
@@ -351,8 +350,3 @@ def format_output(pattern: str, job: Job, frame: int) -> str:
     return os.path.normpath(pattern.format(
         job=job.name, scene=os.path.splitext(os.path.basename(job.scene))[0],
         version=job.version or "default", spp=job.spp if job.spp is not None else "default", frame=frame))
-
-
-def is_finite_list(v) -> bool:
-    vals = v if isinstance(v, list) else [v]
-    return all(math.isfinite(x) for x in vals)

@@ -73,3 +73,10 @@ def test_cli_dask_executor_with_its_own_cluster(tmp_path, capsys):
     assert main(["batch", path, "--executor", "dask", "--workers", "1", "--no-progress"]) == 0
     assert "2 rendered" in capsys.readouterr().out
     assert len(frames_of(tmp_path / "out")) == 2
+
+
+def test_existing_scheduler_address(tmp_path, client):
+    doc = manifest(tmp_path, frames=2)
+    res = batch.run(doc, executor="dask", scheduler=client.scheduler.address, progress=False)
+    assert res.complete and res.rendered == 2
+    assert all(r["pid"] != os.getpid() for r in res.results)
