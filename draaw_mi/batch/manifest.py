@@ -9,6 +9,7 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     half = false                             # float16 EXR channels instead of float32
     previews = false                         # also an sRGB PNG beside every EXR
     contact_sheet = false                    # one PNG with every frame of a job, per job
+    # a job's freeze = false re-traces every frame instead of replaying a dr.freeze recording
 
     [defaults]                               # any job key, applied where a job does not set it
     spp = 16
@@ -46,7 +47,7 @@ from ..scene.schema import Where, boolean, check_keys, number, resolution, strin
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
 JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
-            "post", "camera", "params", "output", "half", "previews")
+            "post", "camera", "params", "output", "half", "previews", "freeze")
 CAMERA_KEYS = ("orbit", "keyframes", "file", "look_at", "faithful", "fov")
 ORBIT_KEYS = ("target", "radius", "height", "degrees", "start", "up")
 LOOK_AT_KEYS = ("origin", "target", "up")
@@ -74,6 +75,7 @@ class Job:
     params: dict = field(default_factory=dict)   # name -> ("const"|"linear"|"values", data)
     half: bool = False
     previews: bool = False
+    freeze: bool = True           # replay a frozen render after the first frame (dr.freeze)
 
 
 @dataclass
@@ -200,6 +202,7 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
         job.post = _check_post(jd["post"], where / "post")
     job.half = boolean(jd.get("half", False), where / "half")
     job.previews = boolean(jd.get("previews", False), where / "previews")
+    job.freeze = boolean(jd.get("freeze", True), where / "freeze")
     if "camera" in jd:
         job.camera = _camera(jd["camera"], where / "camera", base)
     job.params = _params(jd.get("params", {}), where / "params")

@@ -181,6 +181,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "camera": cams[f] if cams else None,
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},
                 "half": job.half, "preview": job.previews, "output": out, "versions": vers,
+                "freeze": job.freeze,
             }
             spec["hash"] = frame_hash(spec)
             specs.append(spec)
