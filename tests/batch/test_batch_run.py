@@ -218,3 +218,18 @@ def test_frozen_frames_equal_retraced_frames(tmp_path):
     a, b = frames_of(tmp_path / "frozen"), frames_of(tmp_path / "traced")
     assert_bit_identical(a, b)
     assert len({float(v[..., 0].mean()) for v in a.values()}) == 4        # the frames do differ
+
+
+def test_post_chain_applies_to_colour_only(tmp_path):
+    """A job's post chain equals draaw_mi.post.apply on the plain frame's colour; AOVs untouched."""
+    chain = [{"type": "tint", "color": [1.0, 0.5, 0.25], "strength": 0.6}]
+    doc = manifest(tmp_path, frames=2, aovs=["depth"])
+    doc["output"] = "{job}/{frame:04d}.exr"
+    batch.run(doc, out=str(tmp_path / "plain"), progress=False)
+    doc["jobs"][0]["post"] = chain
+    batch.run(doc, out=str(tmp_path / "post"), progress=False)
+    plain, post = frames_of(tmp_path / "plain"), frames_of(tmp_path / "post")
+    for k in plain:
+        ref = np.array(draaw_mi.post.apply(plain[k][..., :3], chain))
+        assert np.allclose(post[k][..., :3], ref, atol=1e-6) and not np.allclose(ref, plain[k][..., :3])
+        assert np.array_equal(post[k][..., 3], plain[k][..., 3])
