@@ -8,7 +8,7 @@ the EXR files themselves (a shared file system is assumed for remote clusters).
   the kernels of a job compile at its first frame and are reused after (recorded per frame).
 * ``dask``: a ``LocalCluster`` of spawned worker processes, one task at a time each, with Dr.Jit
   threads per worker set so that workers × threads = cores — or an existing scheduler
-  (``tcp://host:port``). Each worker loads a scene once and keeps it; a frame is a task with
+  (``tcp://host:port``), whose workers keep their own Dr.Jit thread setting. Each worker loads a scene once and keeps it; a frame is a task with
   retries, so a lost worker costs only the frame it was rendering.
 """
 from __future__ import annotations

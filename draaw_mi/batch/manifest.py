@@ -9,6 +9,7 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     half = false                             # float16 EXR channels instead of float32
     previews = false                         # also an sRGB PNG beside every EXR
     contact_sheet = false                    # one PNG with every frame of a job, per job
+    log = "render-log.jsonl"                 # like output; default <outputs>/<manifest>.batch.jsonl
     # a job's freeze = false re-traces every frame instead of replaying a dr.freeze recording
 
     [defaults]                               # any job key, applied where a job does not set it
@@ -20,7 +21,7 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     frames = 24
     version = "v4"                           # or ["v1", "v4"]
     resolution = [256, 256]
-    aovs = ["depth", "sh_normal"]
+    aovs = ["depth", "normal"]
     camera = { orbit = { target = [0, 0.1, 0], radius = 9.3, height = 2.2, degrees = 360 } }
     params = { "r0m0.roughness" = { from = 0.05, to = 0.95 } }
 
