@@ -233,3 +233,11 @@ def test_post_chain_applies_to_colour_only(tmp_path):
         ref = np.array(draaw_mi.post.apply(plain[k][..., :3], chain))
         assert np.allclose(post[k][..., :3], ref, atol=1e-6) and not np.allclose(ref, plain[k][..., :3])
         assert np.array_equal(post[k][..., 3], plain[k][..., 3])
+
+
+def test_doctests():
+    import doctest
+
+    import draaw_mi.batch.plan as plan_mod
+    result = doctest.testmod(plan_mod)
+    assert result.attempted >= 1 and result.failed == 0
