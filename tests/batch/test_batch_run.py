@@ -126,7 +126,8 @@ def test_exr_layers_metadata_and_half(tmp_path):
     assert h["draaw:frame_hash"] == specs[1]["hash"] and h["draaw:spp"] == 4
     assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4"
     assert h["draaw:mitsuba"] == "3.9.1" and h["draaw:draaw_mi"] == draaw_mi.__version__
-    assert h["draaw:scene_sha256"] == batch.plan.__globals__["file_hash"](specs[1]["scene"])
+    from draaw_mi.batch.plan import file_hash
+    assert h["draaw:scene_sha256"] == file_hash(specs[1]["scene"])
     # depth is the distance to the first hit: about |camera - sphere| - radius at the centre
     o = np.array(specs[1]["camera"]["origin"])
     centre_depth = float(chans["depth.Z"][12, 16])
@@ -238,6 +239,7 @@ def test_post_chain_applies_to_colour_only(tmp_path):
 def test_doctests():
     import doctest
 
-    import draaw_mi.batch.plan as plan_mod
+    import sys
+    plan_mod = sys.modules["draaw_mi.batch.plan"]        # draaw_mi.batch.plan is also the function
     result = doctest.testmod(plan_mod)
     assert result.attempted >= 1 and result.failed == 0
