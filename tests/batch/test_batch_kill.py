@@ -18,7 +18,7 @@ from draaw_mi import batch
 from draaw_mi.io import read_exr
 
 CLI = "import sys; from draaw_mi.cli import main; sys.exit(main())"
-FRAMES = 60
+FRAMES = 80
 KILLS = 5
 
 
@@ -49,7 +49,7 @@ def test_sigkill_at_random_moments_then_resume(tmp_path):
         deadline = time.monotonic() + 120
         while len(_finished(run_dir)) <= before and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.005)                                          # wait until it renders
-        time.sleep(rng.uniform(0.0, 0.5))                              # then a random moment
+        time.sleep(rng.uniform(0.0, 0.3))                              # then a random moment
         if proc.poll() is not None:                                    # it finished first
             assert proc.returncode == 0, proc.stderr.read().decode()
             break
@@ -93,10 +93,12 @@ def test_sigkill_during_exr_writes_never_leaves_a_partial_frame(tmp_path):
     rng = random.Random(7)
     temps: set = set()
     for _ in range(KILLS):
+        ino = target.stat().st_ino if target.exists() else None
         proc = subprocess.Popen([sys.executable, "-c", WRITER, str(target)], stderr=subprocess.PIPE)
-        deadline = time.monotonic() + 60
-        while not target.exists() and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.005)
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline and (
+                not target.exists() or target.stat().st_ino == ino):
+            time.sleep(0.005)                                 # until this process has written once
         time.sleep(rng.uniform(0.0, 0.3))
         assert proc.poll() is None, proc.stderr.read().decode()
         proc.send_signal(signal.SIGKILL)
