@@ -176,6 +176,8 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     if dry_run:
         res.missing = len(todo)
         return res
+    from .plan import prepare_outputs
+    prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {os.path.dirname(res.log)}), m.path)
     remove_temp_files(specs)
     log = _Log(res.log)
     log.write(event="start", manifest=m.path, frames=len(specs), todo=len(todo), executor=executor,

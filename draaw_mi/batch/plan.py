@@ -225,3 +225,19 @@ def check_writable(folders, where: str) -> None:
         if not os.access(probe, os.W_OK | os.X_OK):
             raise SceneError(f"{where}: output folder {folder!r} is not writable (no write permission "
                              f"on {probe!r})")
+
+
+def prepare_outputs(folders, where: str) -> None:
+    """Create the output folders and write and delete a probe file in each: the real test of
+    "writable" (permission bits do not tell for root, read-only mounts or /proc). Called by
+    ``run`` before anything renders; raises a one-line SceneError."""
+    import tempfile
+    for folder in folders:
+        try:
+            os.makedirs(folder, exist_ok=True)
+            fd, probe = tempfile.mkstemp(prefix=".draaw-probe-", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as e:
+            raise SceneError(f"{where}: output folder {folder!r} cannot be written "
+                             f"({e.strerror or e})") from None

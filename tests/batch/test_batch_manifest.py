@@ -78,6 +78,14 @@ def test_unwritable_output_folder_permissions(tmp_path, capsys):
         ro.chmod(0o700)
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc")
+def test_unwritable_output_folder_even_for_root(tmp_path, capsys):
+    """/proc passes a permission-bit check for root but cannot hold files: the probe write
+    catches it before rendering."""
+    _bad(tmp_path, capsys, lambda d, t: d.update(output="/proc/draaw-batch-test/{job}/{frame}.exr"),
+         ["cannot be written", "/proc/draaw-batch-test"])
+
+
 def test_unwritable_output_folder_is_a_file(tmp_path, capsys):
     (tmp_path / "blocker").write_text("a file where a folder should be")
     _bad(tmp_path, capsys, lambda d, t: d.update(output=str(t / "blocker" / "{job}" / "{frame}.exr")),
