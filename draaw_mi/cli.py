@@ -187,6 +187,10 @@ def _cmd_info(args) -> int:
         print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
         if s["post"]:
             print(f"      post: {' -> '.join(map(str, s['post']))}")
+        if s.get("sdf"):
+            print(f"       sdf: {len(s['sdf'])} nodes")
+            for line in s["sdf"]:
+                print(f"            {line}")
         on = [k for k, v in s["features"].items() if v]
         off = [k for k, v in s["features"].items() if not v]
         print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")

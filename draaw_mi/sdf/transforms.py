@@ -69,10 +69,11 @@ class Transform(SDFNode):
     def to_local(self, p):
         q = mi.Vector3f(p - self.translate)
         if not self._identity_rot:
-            R = self.rotation              # q_local = R^T q
-            q = mi.Vector3f(R[0, 0] * q.x + R[1, 0] * q.y + R[2, 0] * q.z,
-                            R[0, 1] * q.x + R[1, 1] * q.y + R[2, 1] * q.z,
-                            R[0, 2] * q.x + R[1, 2] * q.y + R[2, 2] * q.z)
+            R = self.rotation.tolist()     # q_local = R^T q (Python floats: numpy scalars
+            R = [[float(v) for v in row] for row in R]   # would try to read the JIT arrays)
+            q = mi.Vector3f(R[0][0] * q.x + R[1][0] * q.y + R[2][0] * q.z,
+                            R[0][1] * q.x + R[1][1] * q.y + R[2][1] * q.z,
+                            R[0][2] * q.x + R[1][2] * q.y + R[2][2] * q.z)
         return mi.Point3f(q / self.scale)
 
     def distance(self, p):
