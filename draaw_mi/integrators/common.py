@@ -224,7 +224,8 @@ def sample_emitter(scene: mi.Scene, si: mi.SurfaceInteraction3f, sample: mi.Poin
         active &= ~blocked
         em_weight = dr.select(blocked, 0.0, em_weight)
     if not primal:
-        em_val = scene.eval_emitter_direction(si, ds, active)
+        # (with SDFs the point's motion enters through sdf.emitter_geometry instead)
+        em_val = scene.eval_emitter_direction(si if sdf is None else dr.detach(si), ds, active)
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
         if sdf is not None:
             ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
@@ -242,7 +243,7 @@ def emitter_sample_one(emitter: mi.Emitter, scene: mi.Scene, si: mi.SurfaceInter
             occluded |= sdf.occluded(si, ds, active & ~occluded)
         active &= ~occluded
     if not primal:
-        em_val = emitter.eval_direction(si, ds, active)
+        em_val = emitter.eval_direction(si if sdf is None else dr.detach(si), ds, active)
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
         if sdf is not None:
             ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)

@@ -119,7 +119,7 @@ class DraawV2Integrator(DraawIntegrator):
                     nee = sample_emitter(scene, si, sampler.next_2d(), active_next, primal, sdf)
                 else:
                     ds, em_w, act = nee
-                    em_val = scene.eval_emitter_direction(si, ds, act)
+                    em_val = scene.eval_emitter_direction(si if sdf is None else dr.detach(si), ds, act)
                     em_w = dr.replace_grad(em_w, safe_div(em_val, ds.pdf, act))
                     if sdf is not None and attach:
                         ds, em_w = sdf.emitter_geometry(si, ds, em_w, act)

@@ -19,6 +19,7 @@ from .node import SDFNode
 from .operators import (OPERATORS, addition, intersection, lse_intersection, smooth_addition,
                         smooth_intersection, smooth_lse_intersection, smooth_subtraction,
                         smooth_union, subtraction, union)
+from .params import SDFParameters, parameters
 from .primitives import PRIMITIVES, Box, Capsule, Cone, Cylinder, Plane, RoundBox, Sphere, Torus
 from .transforms import Transform, rotate, scale, translate
 
@@ -27,5 +28,5 @@ __all__ = [
     "Transform", "translate", "rotate", "scale",
     "union", "intersection", "subtraction", "smooth_union", "smooth_intersection",
     "smooth_subtraction", "lse_intersection", "smooth_lse_intersection", "addition",
-    "smooth_addition", "PRIMITIVES", "OPERATORS",
+    "smooth_addition", "PRIMITIVES", "OPERATORS", "parameters", "SDFParameters",
 ]

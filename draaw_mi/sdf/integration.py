@@ -131,7 +131,9 @@ class SDFHook:
     def emitter_geometry(si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f, em_weight, active):
         """Re-attach ``ds.d`` and the ``1 / dist^2`` (and, for area lights, the emitter-side
         cosine) factor of ``em_weight`` to the (attached) point ``si.p``; values unchanged.
-        Directional and environment samples (infinite ``dist``) depend on the direction only."""
+        Directional and environment samples (infinite ``dist``) depend on the direction only.
+        ``common.sample_emitter`` evaluates the emitter at the detached point in SDF scenes, so
+        that a point light's own ``1 / dist^2`` is not counted twice."""
         finite = active & dr.isfinite(ds.dist) & (ds.dist > 0)
         v = mi.Vector3f(dr.detach(ds.p)) - si.p
         dist2 = dr.squared_norm(v)
@@ -144,7 +146,6 @@ class SDFHook:
         geo = dr.select(area, geo * cos_l, geo)
         geo_d = dr.detach(geo)
         rel = dr.select(geo_d > 0, geo / dr.select(geo_d > 0, geo_d, 1.0), 1.0)
-        ds = mi.DirectionSample3f(ds)
         ds.d = dr.replace_grad(dr.detach(ds.d), d_att)
         return ds, em_weight * dr.replace_grad(mi.Float(1.0), rel)
 
