@@ -4,11 +4,10 @@ implicit re-attachment of the hit to the SDF parameters.
 ==================  =====================================================================
 option              meaning (integrator property ``sdf_*``; defaults)
 ==================  =====================================================================
-``hit_epsilon``     relative hit tolerance: a point ``p`` is on the surface when
-                    ``|f(p)| < hit_epsilon * (1 + max|p|)`` (scales with the float
-                    spacing of ``p``). Must stay below Mitsuba's ray offset ``~9e-5``
-                    so that rays leaving an SDF surface do not hit it again.
-                    (``sdf_epsilon``, 1e-5)
+``hit_epsilon``     relative hit tolerance: ``p = o + t d`` is on the surface when
+                    ``|f(p)| < hit_epsilon * (1 + t) + 1e-6 max|p|`` (grows with the
+                    distance travelled; the second term, ~16 float spacings of ``p``,
+                    keeps far-away objects convergent). (``sdf_epsilon``, 1e-5)
 ``max_steps``       iteration cap; a ray that has not converged then is a **miss**
                     (``sdf_max_steps``, 256)
 ``relaxation``      over-relaxation factor ``omega`` in [1, 2): steps of ``omega |f|``
@@ -24,7 +23,7 @@ exceeded the band once, and steps at least ``epsilon / 2`` meanwhile, so it neit
 own surface nor stalls. Rays are clipped to the union of the roots' bounding boxes first:
 rays that miss every box do not march, the others start at the first box entry.
 
-Normals are central differences on a tetrahedron (4 evaluations, ``h = 1e-4 (1 + max|p|)``;
+Normals are central differences on a tetrahedron (4 evaluations, ``h = 1e-4 + 4e-6 max|p|``;
 Quilez' tetrahedral stencil), which are differentiable with respect to the SDF parameters
 and the point, so the same code gives the primal normal and the normal's derivative in the
 adjoint phase. A zero gradient (e.g. the centre of a sphere) falls back to ``-ray.d``.
@@ -137,7 +136,7 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
         def body(t, hit, armed, steps, omega, r_prev, step_prev):
             p = dr.fma(d, t, o)
             f = dr.abs(sdf.distance(mi.Point3f(p)))
-            eps = eps_rel * (1.0 + _max_abs(p))
+            eps = eps_rel * (1.0 + t) + 1e-6 * _max_abs(p)
             if relax:
                 fail = (omega > 1.0) & (f + r_prev < step_prev)
                 # the spheres of the last two points do not overlap: a surface may lie in
@@ -165,7 +164,7 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
 
 def gradient(sdf, p: mi.Point3f) -> mi.Vector3f:
     """Tetrahedral central-difference gradient of ``sdf`` at ``p`` (differentiable)."""
-    h = 1e-4 * (1.0 + dr.detach(_max_abs(p)))
+    h = 1e-4 + 4e-6 * dr.detach(_max_abs(p))
     g = mi.Vector3f(0.0)
     for k in _TETRA:
         kv = mi.Vector3f(*k)

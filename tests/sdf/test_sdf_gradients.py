@@ -123,6 +123,7 @@ def test_box_size_gradient_matches_fd():
     check(*ad_fd(_scene(BOX, light=(1.0, 1.5, 2.0)), "sdf.blk.size", 2, 0.02, "v4", range(4)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", ["v1", "v2"])
 def test_radius_gradient_legacy_versions(version):
     check(*ad_fd(_scene(SPHERE), "sdf.ball.radius", 0, 0.01, version, range(4)))

@@ -113,7 +113,7 @@ def test_cylinder_exact_vs_sampled_surface():
 def test_cone_exact_vs_sampled_surface():
     c, ang, h = np.array([0.0, -0.5, 0.1]), 30.0, 1.2
     R = h * math.tan(math.radians(ang))
-    u, v = grid2(600)
+    u, v = grid2(400)
     s, phi = u.ravel(), 2 * np.pi * v.ravel()
     lateral = np.stack([s * R * np.cos(phi), h * (1 - s), s * R * np.sin(phi)], 1)
     rr = R * np.sqrt(u.ravel())

@@ -47,9 +47,9 @@ def test_ray_sphere_hits(relaxation):
     assert np.array_equal(hit[clear], (disc > 0)[clear])
     both = hit & (disc > 0) & clear
     assert both.sum() > 500
-    # stops short of the surface, within the hit tolerance |f| < 1e-5 (1 + max|p|)
+    # stops short of the surface, within the hit tolerance |f| < 1e-5 (1 + t) + 1e-6 max|p|
     p = o[both] + t[both, None] * d[both]
-    tol = 1e-5 * (1 + np.abs(p).max(1)) + 2e-6
+    tol = 1e-5 * (1 + t[both]) + 1e-6 * np.abs(p).max(1) + 2e-6
     assert np.all(t[both] <= t_ref[both] + 2e-6)
     assert np.all(np.abs(np.linalg.norm(p - c, axis=1) - r) <= tol)
     np.testing.assert_allclose(t[both], t_ref[both], atol=2e-3)
@@ -70,8 +70,12 @@ def test_ray_box_hits():
     both = hit & ref_hit & clear
     assert both.sum() > 500
     assert np.all(t[both] <= tn[both] + 2e-6)
-    np.testing.assert_allclose(t[both], tn[both], atol=2e-3)
-    np.testing.assert_allclose(np.median(np.abs(t[both] - tn[both])), 0, atol=2e-5)
+    p = o[both] + t[both, None] * d[both]              # on the surface within the tolerance
+    q = np.abs(p - c) - size / 2
+    dist = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+    assert np.all(np.abs(dist) <= 1e-5 * (1 + t[both]) + 1e-6 * np.abs(p).max(1) + 2e-6)
+    np.testing.assert_allclose(t[both], tn[both], atol=5e-3)     # grazing: error = eps / cos
+    np.testing.assert_allclose(np.median(np.abs(t[both] - tn[both])), 0, atol=1e-4)
 
 
 def test_over_relaxation_same_hits_fewer_steps_at_shallow_angles():
@@ -123,7 +127,7 @@ def test_same_image_under_area_light_v4():
     check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
 
 
-@pytest.mark.parametrize("version", ["v1", "v2"])
+@pytest.mark.parametrize("version", [pytest.param("v1", marks=pytest.mark.slow), "v2"])
 def test_legacy_versions_match_mitsuba_shape(version):
     """V1/V2 shade SDF points through the same hooks (same seeds: nearly the same image)."""
     ref, sdf = twin_scenes("sphere")
