@@ -12,7 +12,8 @@ option              meaning (integrator property ``sdf_*``; defaults)
                     (``sdf_max_steps``, 256)
 ``relaxation``      over-relaxation factor ``omega`` in [1, 2): steps of ``omega |f|``
                     with Keinert et al.'s check (if the unbounding spheres of two steps
-                    do not overlap, step back and continue with omega = 1)
+                    do not overlap, step back and continue with omega = 1; a relaxed
+                    step that would leave the ray's interval is replaced by a plain one)
                     (``sdf_relaxation``, 1.0 = plain sphere tracing)
 ==================  =====================================================================
 
@@ -145,7 +146,13 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
                 omega = dr.select(fail, 1.0, omega)
                 hit = ~fail & armed & (f < eps)
                 armed |= ~fail & (f >= eps)
-                step = omega * dr.maximum(f, 0.5 * eps)
+                plain = dr.maximum(f, 0.5 * eps)
+                step = omega * plain
+                # a relaxed step must not leave the interval unchecked (the surface may lie
+                # before t1, e.g. in front of a mesh): take the plain step there instead
+                out = ~fail & ~hit & (omega > 1.0) & (t + step >= t1)
+                omega = dr.select(out, 1.0, omega)
+                step = dr.select(out, plain, step)
                 t_new = dr.select(fail, t_back, dr.select(hit, t, t + step))
                 r_prev = dr.select(fail, r_prev, f)
                 step_prev = dr.select(fail, r_prev, step)

@@ -167,3 +167,19 @@ def test_tracer_options_validated():
 
 
 _ = dr
+
+
+def test_relaxed_step_does_not_skip_a_surface_just_before_tmax():
+    """A mesh just behind the SDF surface (tmax slightly beyond the hit): the relaxed march
+    must not overshoot tmax and report a miss (regression: 0.3 % false misses in sdf_csg)."""
+    o, d = _rays(2000)
+    c, r = np.zeros(3), 1.0
+    b = np.sum((o - c) * d, 1)
+    disc = b * b - (np.sum((o - c) ** 2, 1) - r * r)
+    t_ref = np.where(disc > 1e-3, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
+    sdf = SDFScene([Sphere(c, r)], ["m"])
+    P = mi.Point3f(*(o[:, i].astype(np.float32) for i in range(3)))
+    D = mi.Vector3f(*(d[:, i].astype(np.float32) for i in range(3)))
+    tmax = mi.Float((t_ref + 0.05).astype(np.float32))
+    _, hit, _ = march(sdf, P, D, tmax, mi.Bool(True), TracerOptions(relaxation=1.9))
+    assert np.array(hit)[np.isfinite(t_ref)].all()
