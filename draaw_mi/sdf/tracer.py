@@ -18,8 +18,8 @@ option              meaning (integrator property ``sdf_*``; defaults)
 ==================  =====================================================================
 
 The march uses ``|f|``, i.e. SDF surfaces behave like Mitsuba's surfaces: a camera inside an
-SDF sees the inside of its surface, rays may leave a surface to either side. A ray that
-starts within the hit band (a ray spawned on a surface) is *disarmed* until ``|f|`` has
+SDF sees the inside of its surface, rays may leave a surface to either side. A ray whose
+*origin* lies within the hit band (a ray spawned on a surface) is *disarmed* until ``|f|`` has
 exceeded the band once, and steps at least ``epsilon / 2`` meanwhile, so it neither hits its
 own surface nor stalls. Rays are clipped to the union of the roots' bounding boxes first:
 rays that miss every box do not march, the others start at the first box entry.
@@ -125,7 +125,10 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
         relax = omega0 > 1.0
         t = mi.Float(dr.select(act, t0, 0.0))
         hit = mi.Bool(False)
-        armed = mi.Bool(False)
+        # rays that start in the hit band of a surface (spawned on it) are disarmed; the
+        # test is at the origin, not at the box entry (tight boxes touch the surface)
+        f_o = dr.abs(sdf.distance(mi.Point3f(o)))
+        armed = mi.Bool(f_o >= eps_rel + 1e-6 * _max_abs(o))
         steps = mi.UInt32(0)
         omega = mi.Float(omega0)
         r_prev = mi.Float(0.0)

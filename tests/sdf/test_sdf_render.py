@@ -183,3 +183,14 @@ def test_relaxed_step_does_not_skip_a_surface_just_before_tmax():
     tmax = mi.Float((t_ref + 0.05).astype(np.float32))
     _, hit, _ = march(sdf, P, D, tmax, mi.Bool(True), TracerOptions(relaxation=1.9))
     assert np.array(hit)[np.isfinite(t_ref)].all()
+
+
+def test_far_ray_entering_a_tight_box_hits_the_front_face():
+    """The box's bounding box touches its faces; with a coarse epsilon the entry point is in
+    the hit band. Only rays *starting* in the band are disarmed (regression: such camera
+    rays went through the front face and hit the back face)."""
+    o = np.tile([0.05, 0.1, 8.0], (64, 1)) + RNG.uniform(-0.2, 0.2, (64, 3)) * [1, 1, 0]
+    d = np.tile([0.0, 0.0, -1.0], (64, 1))
+    t, hit, _ = _march_np(Box((0, 0, 0), (1, 1, 1)), o, d, hit_epsilon=5e-5)
+    assert hit.all()
+    np.testing.assert_allclose(t, o[:, 2] - 0.5, atol=1e-3)
