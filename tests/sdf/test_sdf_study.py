@@ -24,3 +24,26 @@ def test_sdf_study_reports_false_misses_and_error(tmp_path):
         assert os.path.isfile(tmp_path / f"sdf_study_sdf_csg{ext}")
     assert os.path.isfile(tmp_path / "sdf_error_vs_time_sdf_csg.png")
     assert json.loads((tmp_path / "sdf_study_sdf_csg.json").read_text())["sdf_rays"] > 50
+
+
+def test_cli_bench_sends_sdf_scenes_to_the_tracer_study(monkeypatch, tmp_path, capsys):
+    """`draaw-mi bench` runs the tracer study on [[sdf]] scenes (Mitsuba's path, the main
+    study's ground truth, cannot see SDFs) and the main study on the others."""
+    import draaw_mi.bench as bench
+    import draaw_mi.sdf.study as study
+    from draaw_mi.cli import main
+    calls = {"sdf": [], "main": []}
+
+    def fake_sdf(scene, out, **kw):
+        calls["sdf"].append(os.path.basename(scene.source))
+        return {"scene": "sdf_csg", "rows": [1, 2]}
+
+    def fake_main(scenes, **kw):
+        calls["main"].append([os.path.basename(s) for s in scenes])
+        return {"rows": []}
+    monkeypatch.setattr(study, "run_sdf_study", fake_sdf)
+    monkeypatch.setattr(bench, "run_study", fake_main)
+    scenes = [os.path.join(ROOT, "scenes", f) for f in ("sdf_csg.toml", "fit_sphere.toml")]
+    assert main(["bench", *scenes, "--quick", "--out", str(tmp_path), "--no-progress"]) == 0
+    assert calls == {"sdf": ["sdf_csg.toml"], "main": [["fit_sphere.toml"]]}
+    assert "sdf_study_sdf_csg" in capsys.readouterr().out
