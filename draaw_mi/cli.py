@@ -201,10 +201,33 @@ def _cmd_info(args) -> int:
         print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
         if s["post"]:
             print(f"      post: {' -> '.join(map(str, s['post']))}")
+        if s.get("sdf"):
+            print(f"       sdf: {len(s['sdf'])} nodes")
+            for line in s["sdf"]:
+                print(f"            {line}")
         on = [k for k, v in s["features"].items() if v]
         off = [k for k, v in s["features"].items() if not v]
         print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
     return 0
+
+
+def _bench_sdf_scenes(args, scenes, res, progress):
+    """Run the SDF tracer-knob study (draaw_mi.sdf.study) on the scenes with [[sdf]] entries
+    (Mitsuba's path, the main study's ground truth, cannot see SDFs); return the others."""
+    import draaw_mi
+    from draaw_mi.sdf.study import has_sdf, run_sdf_study
+    rest = []
+    for sc in scenes:
+        if not has_sdf(sc):
+            rest.append(sc)
+            continue
+        scene = draaw_mi.load_scene(sc, **({"resolution": res} if res else {}))
+        r = run_sdf_study(scene, args.out, spp=4 if args.quick else 16,
+                          repeats=min(args.repeats, 2) if args.quick else args.repeats,
+                          progress=progress, quick=args.quick)
+        print(f"wrote {args.out}/sdf_study_{r['scene']}.json/.csv/.md and "
+              f"sdf_error_vs_time_{r['scene']}.png ({len(r['rows'])} tracer settings)")
+    return rest
 
 
 def _cmd_fit(args) -> int:
@@ -267,7 +290,8 @@ def _cmd_bench(args) -> int:
     from draaw_mi.scene.schema import Where, resolution as parse_res
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(draaw_mi.__file__)))
-    scenes = args.scenes or [os.path.join(root, "scenes", f) for f in ("cornell.toml", "material_spheres.toml")]
+    scenes = args.scenes or [os.path.join(root, "scenes", f) for f in ("cornell.toml", "material_spheres.toml",
+                                                                         "sdf_csg.toml")]
     versions = args.versions.split(",") if args.versions else list(bench.DEFAULT_VERSIONS)
     from draaw_mi.integrators import resolve_version
     for v in versions:
@@ -285,6 +309,9 @@ def _cmd_bench(args) -> int:
         gt_spp, repeats = args.gt_spp, args.repeats
     depths = _int_list(args.max_depth, "--max-depth") if args.max_depth else None
     progress = (not args.no_progress) and sys.stderr.isatty()
+    scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
+    if not scenes:
+        return 0
     result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
                              adaptive=(None, args.adaptive) if args.adaptive else (None,),
                              repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress)

@@ -113,6 +113,9 @@ class DraawIntegrator(RBIntegrator):
         parse_int(props, self.PLUGIN, "rr_depth", 5, 1)
         super().__init__(props)
         self.aovs = parse_aovs(self.PLUGIN, props.get("aovs", ""))
+        # SDF sphere-tracer knobs (sdf_epsilon, sdf_max_steps, sdf_relaxation; draaw_mi.sdf)
+        from ..sdf.tracer import TracerOptions
+        self.sdf_tracer = TracerOptions.from_props(props, self.PLUGIN)
 
     # ------------------------------------------------------------------ interface
     def aov_names(self) -> list[str]:
@@ -123,6 +126,14 @@ class DraawIntegrator(RBIntegrator):
         f = detect_features(scene)
         f["aovs"] = bool(self.aovs)
         return f
+
+    def sdf_hook(self, scene: mi.Scene, feats: dict[str, bool]):
+        """The scene's SDF hook (``draaw_mi.sdf.integration.SDFHook``) or ``None`` when it has
+        no SDF objects (then no SDF code is traced into the kernel)."""
+        if not feats.get("sdf"):
+            return None
+        from ..sdf.integration import hook
+        return hook(self, scene, feats)
 
     def to_string(self) -> str:
         depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
@@ -196,33 +207,46 @@ class DraawIntegrator(RBIntegrator):
 # ---------------------------------------------------------------------------------------
 
 def sample_emitter(scene: mi.Scene, si: mi.SurfaceInteraction3f, sample: mi.Point2f,
-                   active: mi.Bool, primal: bool):
+                   active: mi.Bool, primal: bool, sdf=None):
     """Sample one emitter direction with a shadow ray (detached); in the differential phases
     re-evaluate the emitted radiance with AD (call under ``dr.resume_grad(when=not primal)``).
 
     Returns ``(ds, weight, active)``: ``weight`` = radiance / pdf (0 if occluded);
-    ``active`` is cleared where the sample is invalid or occluded.
+    ``active`` is cleared where the sample is invalid or occluded. ``sdf``: the scene's SDF
+    hook (SDF objects occlude the shadow ray; in the differential phases the sample's
+    direction and distance factor follow an SDF point's re-attached position).
     """
     with dr.suspend_grad():
         ds, em_weight = scene.sample_emitter_direction(si, sample, True, active)
     active = active & (ds.pdf != 0.0)
+    if sdf is not None:
+        blocked = sdf.occluded(si, ds, active)
+        active &= ~blocked
+        em_weight = dr.select(blocked, 0.0, em_weight)
     if not primal:
-        em_val = scene.eval_emitter_direction(si, ds, active)
+        # (with SDFs the point's motion enters through sdf.emitter_geometry instead)
+        em_val = scene.eval_emitter_direction(si if sdf is None else dr.detach(si), ds, active)
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
+        if sdf is not None:
+            ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
     return ds, em_weight, active
 
 
 def emitter_sample_one(emitter: mi.Emitter, scene: mi.Scene, si: mi.SurfaceInteraction3f,
-                       sample: mi.Point2f, active: mi.Bool, primal: bool):
+                       sample: mi.Point2f, active: mi.Bool, primal: bool, sdf=None):
     """Like :func:`sample_emitter` for one given emitter (used to light from every emitter)."""
     with dr.suspend_grad():
         ds, em_weight = emitter.sample_direction(si, sample, active)
         active = active & (ds.pdf != 0.0)
         occluded = scene.ray_test(si.spawn_ray_to(ds.p), active)
+        if sdf is not None:
+            occluded |= sdf.occluded(si, ds, active & ~occluded)
         active &= ~occluded
     if not primal:
-        em_val = emitter.eval_direction(si, ds, active)
+        em_val = emitter.eval_direction(si if sdf is None else dr.detach(si), ds, active)
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
+        if sdf is not None:
+            ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
     return ds, dr.select(active, em_weight, 0.0), active
 
 

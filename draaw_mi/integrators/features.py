@@ -23,6 +23,7 @@ Keys (always present, in this order):
 ``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...)
 ``media``               a shape or sensor references a participating medium
 ``aovs``                the scene's integrator outputs AOVs
+``sdf``                 the scene has SDF objects (``[[sdf]]``; ``draaw_mi.sdf``)
 ======================  =====================================================================
 
 Example::
@@ -41,6 +42,7 @@ FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
     "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "media", "aovs",
+    "sdf",
 )
 
 _EMITTER_CLASSES = {
@@ -122,6 +124,9 @@ def detect_features(scene: mi.Scene) -> dict[str, bool]:
     integrator = scene.integrator()
     if integrator is not None:
         f["aovs"] = len(integrator.aov_names()) > 0
+    # SDF objects: hidden proxy shapes registered by draaw_mi.sdf.scene
+    from ..sdf.scene import find as _find_sdf
+    f["sdf"] = _find_sdf(scene) is not None
     return f
 
 

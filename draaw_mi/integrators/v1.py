@@ -92,7 +92,7 @@ class DraawV1Integrator(DraawIntegrator):
         return f", scatter={self.scatter}"
 
     # ------------------------------------------------------------------ direct light
-    def _direct(self, scene, sampler, si, mat, wi, sign, active, primal, every_emitter):
+    def _direct(self, scene, sampler, si, mat, wi, sign, active, primal, every_emitter, sdf=None):
         """Reflected direct light at ``si`` (call under resume_grad in the adjoint)."""
         emitters = scene.emitters()
         L = mi.Spectrum(0.0)
@@ -100,16 +100,17 @@ class DraawV1Integrator(DraawIntegrator):
             return L
         if every_emitter and len(emitters) <= MAX_UNROLLED_EMITTERS:
             for em in emitters:
-                ds, em_w, act = emitter_sample_one(em, scene, si, sampler.next_2d(), active, primal)
+                ds, em_w, act = emitter_sample_one(em, scene, si, sampler.next_2d(), active, primal,
+                                                   sdf)
                 fd, fg = phong_eval(mat, wi, flip_z(si.to_local(ds.d), sign), act)
                 L += (fd + fg) * em_w
         else:
-            ds, em_w, act = sample_emitter(scene, si, sampler.next_2d(), active, primal)
+            ds, em_w, act = sample_emitter(scene, si, sampler.next_2d(), active, primal, sdf)
             fd, fg = phong_eval(mat, wi, flip_z(si.to_local(ds.d), sign), act)
             L += (fd + fg) * em_w
         return L
 
-    def _gather(self, scene, sampler, si, mat, sign, active, primal, feats, flags):
+    def _gather(self, scene, sampler, si, mat, sign, active, primal, feats, flags, sdf=None):
         """``scatter`` cosine-weighted rays collecting direct light one bounce away."""
         L = mi.Spectrum(0.0)
         for _ in range(self.scatter):
@@ -117,12 +118,14 @@ class DraawV1Integrator(DraawIntegrator):
             ray_g = si.spawn_ray(si.to_world(wo))
             with dr.suspend_grad():
                 si_g = scene.ray_intersect(ray_g, ray_flags=flags, coherent=False, active=active)
+                if sdf is not None:
+                    si_g = sdf.intersect(ray_g, si_g, sampler, active)
             act_g = active & si_g.is_valid()
             bsdf_g = si_g.bsdf(ray_g)
             sign_g = side_sign(bsdf_g, si_g, act_g)
             mat_g = phong_material(bsdf_g, si_g, act_g, feats)
             L += self._direct(scene, sampler, si_g, mat_g, flip_z(si_g.wi, sign_g), sign_g,
-                              act_g, primal, every_emitter=False)
+                              act_g, primal, every_emitter=False, sdf=sdf)
         # cosine sampling: f cos / pdf = kd (1 - mirror) per ray
         return L * mat.kd * ((1.0 - mat.mirror) * mat.scatter / self.scatter)
 
@@ -146,6 +149,10 @@ class DraawV1Integrator(DraawIntegrator):
         active = mi.Bool(active)
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+        if dr.hint(sdf is not None, mode="scalar"):
+            si = sdf.intersect(ray, si, sampler, active)
+            valid |= active & si.is_valid()
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
@@ -168,13 +175,17 @@ class DraawV1Integrator(DraawIntegrator):
                     Le = β * si.emitter(scene).eval(si, em_active)
 
                 # ------------------ Direct light and gather ------------------
+                si_d, wi_d = si, wi
+                if dr.hint(sdf is not None and not primal, mode="scalar"):
+                    si_d = sdf.reattach(ray, si, active_next)     # SDF shape derivatives
+                    wi_d = flip_z(si_d.wi, sign)
                 mat = phong_material(bsdf, si, active_next, feats)
-                Lr = β * self._direct(scene, sampler, si, mat, wi, sign, active_next, primal,
-                                      every_emitter=True)
+                Lr = β * self._direct(scene, sampler, si_d, mat, wi_d, sign, active_next, primal,
+                                      every_emitter=True, sdf=sdf)
                 if dr.hint(gather, mode="scalar"):
                     act_g = active_next & (depth + 2 < self.max_depth)
                     Lr += β * self._gather(scene, sampler, si, mat, sign, act_g, primal,
-                                           feats, flags)
+                                           feats, flags, sdf)
                 f_mirror = mat.mirror * mat.tint
 
             # ------------------ Mirror recursion ------------------
@@ -184,6 +195,8 @@ class DraawV1Integrator(DraawIntegrator):
             active_next &= dr.max(β) != 0
             si_next = scene.ray_intersect(ray_next, ray_flags=flags, coherent=False,
                                           active=active_next)
+            if dr.hint(sdf is not None, mode="scalar"):
+                si_next = sdf.intersect(ray_next, si_next, sampler, active_next)
 
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():

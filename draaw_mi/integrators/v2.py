@@ -100,7 +100,7 @@ class DraawV2Integrator(DraawIntegrator):
         return mat, sign, flip_z(si.wi, sign)
 
     def _light(self, attach, scene, sampler, si, mat, wi, sign, β, prev_delta, depth, active,
-               active_next, feats, nee=None):
+               active_next, feats, nee=None, sdf=None):
         """Emission (camera / mirror-reached vertices only) and NEE at ``si``; with ``attach``
         the radiance is re-evaluated with AD. ``nee``: reuse an earlier emitter sample.
         Returns ``(Le, Lr_dir, nee)``."""
@@ -116,11 +116,14 @@ class DraawV2Integrator(DraawIntegrator):
         if len(scene.emitters()) > 0:
             with dr.resume_grad(when=not primal):
                 if nee is None:
-                    nee = sample_emitter(scene, si, sampler.next_2d(), active_next, primal)
+                    nee = sample_emitter(scene, si, sampler.next_2d(), active_next, primal, sdf)
                 else:
                     ds, em_w, act = nee
-                    em_val = scene.eval_emitter_direction(si, ds, act)
-                    nee = ds, dr.replace_grad(em_w, safe_div(em_val, ds.pdf, act)), act
+                    em_val = scene.eval_emitter_direction(si if sdf is None else dr.detach(si), ds, act)
+                    em_w = dr.replace_grad(em_w, safe_div(em_val, ds.pdf, act))
+                    if sdf is not None and attach:
+                        ds, em_w = sdf.emitter_geometry(si, ds, em_w, act)
+                    nee = ds, em_w, act
                 ds, em_w, act = nee
                 fd, fg = phong_eval(mat, wi, flip_z(si.to_local(ds.d), sign), act)
                 Lr_dir = β * (fd + fg) * em_w
@@ -147,7 +150,8 @@ class DraawV2Integrator(DraawIntegrator):
 
     # ------------------------------------------------------------------ bounce loop
     @dr.syntax
-    def _trace(self, mode, scene, sampler, ray, β, prev_delta, L, δL, active, feats, flags):
+    def _trace(self, mode, scene, sampler, ray, β, prev_delta, L, δL, active, feats, flags,
+               sdf=None):
         """Path from the first bounce on (vertex depth >= 1); PRB adjoint as in ``prb``."""
         primal = mode == dr.ADMode.Primal
         ray = mi.Ray3f(ray)
@@ -160,10 +164,17 @@ class DraawV2Integrator(DraawIntegrator):
         while dr.hint(active, max_iterations=self.max_depth,
                       label=f"draaw_v2 ({mode.name})"):
             si = scene.ray_intersect(ray, ray_flags=flags, coherent=False, active=active)
+            if dr.hint(sdf is not None, mode="scalar"):
+                si = sdf.intersect(ray, si, sampler, active)
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
             mat, sign, wi = self._material(not primal, si, si.bsdf(ray), active_next, feats)
-            Le, Lr_dir, _ = self._light(not primal, scene, sampler, si, mat, wi, sign, β,
-                                        prev_delta, depth, active, active_next, feats)
+            si_d, wi_d = si, wi
+            if dr.hint(sdf is not None and not primal, mode="scalar"):
+                with dr.resume_grad():
+                    si_d = sdf.reattach(ray, si, active_next)     # SDF shape derivatives
+                    wi_d = flip_z(si_d.wi, sign)
+            Le, Lr_dir, _ = self._light(not primal, scene, sampler, si_d, mat, wi_d, sign, β,
+                                        prev_delta, depth, active, active_next, feats, sdf=sdf)
             ray_next, w, is_mirror, f, _ = self._scatter(not primal, sampler, si, mat, wi,
                                                          sign, active_next)
             L = (L + Le + Lr_dir) if primal else (L - Le - Lr_dir)
@@ -196,6 +207,10 @@ class DraawV2Integrator(DraawIntegrator):
         # ---------------- first hit: emission, direct light, AOVs ----------------
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+        if sdf is not None:
+            si = sdf.intersect(ray, si, sampler, active)
+            valid |= active & si.is_valid()
         aovs = self.eval_aovs(si, si.bsdf(ray), active, feats) if primal else self.zero_aovs()
         zero = mi.UInt32(0)
         one = mi.Spectrum(1.0)
@@ -205,7 +220,7 @@ class DraawV2Integrator(DraawIntegrator):
         bsdf = si.bsdf(ray)
         mat, sign, wi = self._material(False, si, bsdf, active_next, feats)
         Le, Lr_dir, nee = self._light(False, scene, sampler, si, mat, wi, sign, one,
-                                      mi.Bool(True), zero, active, active_next, feats)
+                                      mi.Bool(True), zero, active, active_next, feats, sdf=sdf)
         branches = []
         state = [] if primal else list(state_in)
         for k in range(self.scatter):
@@ -214,7 +229,7 @@ class DraawV2Integrator(DraawIntegrator):
             w = w / self.scatter
             L_k, δL_k = self._trace(mode, scene, sampler, ray_next, w, is_mirror,
                                     mi.Spectrum(0.0) if primal else state[1 + k], δL,
-                                    active_next & (dr.max(w) != 0), feats, flags)
+                                    active_next & (dr.max(w) != 0), feats, flags, sdf)
             branches.append((L_k if primal else state[1 + k], δL_k, wo, is_mirror))
 
         if primal:
@@ -225,8 +240,13 @@ class DraawV2Integrator(DraawIntegrator):
         δL_out = sum((b[1] for b in branches), mi.Spectrum(0.0))
         with dr.resume_grad():
             mat, _, _ = self._material(True, si, bsdf, active_next, feats)
-            Le, Lr_dir, _ = self._light(True, scene, sampler, si, mat, wi, sign, one,
-                                        mi.Bool(True), zero, active, active_next, feats, nee)
+            si_d, wi_d = si, wi
+            if sdf is not None:
+                si_d = sdf.reattach(ray, si, active_next)       # SDF shape derivatives
+                wi_d = flip_z(si_d.wi, sign)
+            Le, Lr_dir, _ = self._light(True, scene, sampler, si_d, mat, wi_d, sign, one,
+                                        mi.Bool(True), zero, active, active_next, feats, nee,
+                                        sdf=sdf)
             Lo = Le + Lr_dir
             for L_k, _, wo, is_mirror in branches:
                 Lo = Lo + L_k * relative(self._value(mat, wi, wo, is_mirror, active_next))

@@ -162,6 +162,10 @@ class DraawV3Integrator(DraawIntegrator):
         active = mi.Bool(active)                      # Active SIMD lanes
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+        if dr.hint(sdf is not None, mode="scalar"):
+            si = sdf.intersect(ray, si, sampler, active)
+            valid |= active & si.is_valid()
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
@@ -203,9 +207,12 @@ class DraawV3Integrator(DraawIntegrator):
                 if dr.hint(delta_bsdf, mode="scalar"):
                     active_em &= mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
                 with dr.resume_grad(when=not primal):
-                    ds, em_w, active_em = sample_emitter(scene, si, sampler.next_2d(),
-                                                          active_em, primal)
-                    f_em, f_em_glossy = self._eval(bsdf, si, si.to_local(ds.d), active_em,
+                    si_em = si
+                    if dr.hint(sdf is not None and not primal, mode="scalar"):
+                        si_em = sdf.reattach(ray, si, active_em)   # SDF shape derivatives
+                    ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
+                                                          active_em, primal, sdf)
+                    f_em, f_em_glossy = self._eval(bsdf, si_em, si_em.to_local(ds.d), active_em,
                                                    is_draaw, params, sign, feats, split)
                     Lr_dir = β * dr.select(glossy_split & ~ds.delta, f_em - f_em_glossy, f_em) * em_w
 
@@ -243,6 +250,8 @@ class DraawV3Integrator(DraawIntegrator):
             active_next = active & (dr.max(weight) != 0)
             si_next = scene.ray_intersect(ray_next, ray_flags=flags, coherent=False,
                                           active=active_next)
+            if dr.hint(sdf is not None, mode="scalar"):
+                si_next = sdf.intersect(ray_next, si_next, sampler, active_next)
 
             # ---- Emitters found by BSDF sampling: after delta lobes, and by the
             # ---- glossy lobe of near-specular draaw vertices (not sampled by NEE)

@@ -123,9 +123,13 @@ class DraawV4Integrator(DraawIntegrator):
         prev_pdf = mi.Float(1.0)
         prev_delta = mi.Bool(True)
 
+        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
             si0 = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+            if dr.hint(sdf is not None, mode="scalar"):
+                si0 = sdf.intersect(ray, si0, None, active)
             aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats)
             del si0
 
@@ -133,6 +137,9 @@ class DraawV4Integrator(DraawIntegrator):
                       label=f"draaw_v4 ({mode.name})"):
             active_next = mi.Bool(active)
             si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+            if dr.hint(sdf is not None, mode="scalar"):
+                si = sdf.intersect(ray, si, sampler, active)
+                valid |= active & (depth == 0) & si.is_valid()
             bsdf = si.bsdf(ray)
 
             # ---------------------- Direct emission ----------------------
@@ -156,17 +163,20 @@ class DraawV4Integrator(DraawIntegrator):
                 if dr.hint(delta_bsdf, mode="scalar"):
                     active_em &= mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
                 with dr.resume_grad(when=not primal):
-                    ds, em_w, active_em = sample_emitter(scene, si, sampler.next_2d(),
-                                                          active_em, primal)
-                    wo = si.to_local(ds.d)
+                    si_em = si
+                    if dr.hint(sdf is not None and not primal, mode="scalar"):
+                        si_em = sdf.reattach(ray, si, active_em)   # SDF shape derivatives
+                    ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
+                                                          active_em, primal, sdf)
+                    wo = si_em.to_local(ds.d)
                     if dr.hint(mis_em, mode="scalar"):
-                        f_em, pdf_em = bsdf.eval_pdf(ctx, si, wo, active_em)
+                        f_em, pdf_em = bsdf.eval_pdf(ctx, si_em, wo, active_em)
                         w_em = mis_weight(ds.pdf, pdf_em)
                         if dr.hint(delta_em, mode="scalar"):
                             w_em = dr.select(ds.delta, 1.0, w_em)
                         Lr_dir = β * w_em * f_em * em_w
                     else:
-                        Lr_dir = β * bsdf.eval(ctx, si, wo, active_em) * em_w
+                        Lr_dir = β * bsdf.eval(ctx, si_em, wo, active_em) * em_w
 
             # ------------------ Detached BSDF sampling -------------------
             bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)

@@ -119,6 +119,11 @@ class DraawScene:
             mats[mat][param] = value
         return desc
 
+    @property
+    def sdf(self):
+        """The scene's :class:`draaw_mi.sdf.scene.SDFScene` (``[[sdf]]`` entries), or ``None``."""
+        return self.info.get("sdf")
+
     def features(self) -> dict:
         """Which effects the scene calls for (emitter kinds, textures, ...)."""
         from ..integrators.features import detect_features
@@ -130,12 +135,13 @@ class DraawScene:
         return {
             "source": self.source,
             "resolution": list(self.resolution),
-            "shapes": [sh.id() for sh in s.shapes()],
+            "shapes": [sh.id() for sh in s.shapes() if not sh.id().startswith("__sdf_")],
             "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
             "materials": self.info.get("materials", []),
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
             "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
             "features": self.features(),
+            **({"sdf": self.sdf.describe()} if self.sdf is not None else {}),
         }
 
 

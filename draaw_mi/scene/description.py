@@ -25,7 +25,7 @@ from . import camera as cam
 from .meshes import load_mesh_parts, write_ply
 from .schema import Where, boolean, check_keys, number, resolution, string, vector
 
-TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post")
+TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "hide_emitters", "aovs")
 FILTERS = ("box", "gaussian", "tent", "lanczos", "mitchell", "catmullrom")
 TRANSFORM_KEYS = ("translate", "rotate", "scale", "matrix")
@@ -376,7 +376,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     shapes = desc.get("shapes", [])
     if not isinstance(shapes, list):
         raise (where / "shapes").error("expected a list of shape tables ([[shapes]])")
-    if not shapes:
+    if not shapes and not desc.get("sdf"):
         raise where.error("the scene has no shapes; add at least one [[shapes]] entry")
 
     materials: dict = {}
@@ -396,6 +396,14 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
                 used = "a material" if key in materials else "another shape"
                 raise (where / "shapes" / i / "name").error(f"duplicate name {key!r} (already used by {used})")
             shape_entries[key] = d
+
+    # --- SDF objects ([[sdf]], see draaw_mi.sdf.scene): hidden proxy shapes carry their BSDFs
+    sdf_scene = None
+    if desc.get("sdf") is not None:
+        from ..sdf.scene import sdf_dicts
+        proxies, sdf_scene = sdf_dicts(desc["sdf"], materials, ctx, where / "sdf")
+        shape_entries.update(proxies)
+    # --- end SDF
 
     if camera_table is None:
         camera_table = cam.auto_camera(*_scene_bounds(shape_entries))
@@ -431,6 +439,9 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     info = {"materials": list(materials), "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),
                        "up": list(map(float, look_at[2])), "fov": look_at[3]}}
+    if sdf_scene is not None:
+        info["sdf"] = sdf_scene
+        info["shapes"] = [k for k in info["shapes"] if k not in sdf_scene.proxy_ids]
     return scene, settings, info
 
 

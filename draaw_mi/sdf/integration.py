@@ -1,0 +1,153 @@
+"""The draaw integrators' SDF hooks (feature ``sdf``; absent SDFs compile none of this).
+
+An integrator asks :func:`hook` once per traced render; with SDF objects in the scene it gets
+an :class:`SDFHook` and calls
+
+* :meth:`SDFHook.intersect` after each ``scene.ray_intersect`` (camera, bounce and gather
+  rays): the SDF is sphere-traced up to the mesh hit (the depth test) and, where it is
+  closer, the mesh interaction is replaced by a synthesised ``SurfaceInteraction3f`` on the
+  material slot's hidden proxy shape, so ``si.bsdf()``, ``si.to_local``, ``si.spawn_ray`` and
+  emitter sampling work unchanged. Where a smooth operator blends two materials, the slot is
+  picked at random with the blend weights (a stochastic mixture: its expectation is the
+  weight-blended BSDF).
+* :meth:`SDFHook.occluded` for shadow rays (through ``common.sample_emitter``): SDFs cast
+  shadows on meshes and on themselves.
+* :meth:`SDFHook.reattach` in the differential phases: the hit point, normal, frame and
+  ``wi`` of SDF hits are recomputed so that they carry derivatives with respect to the SDF
+  parameters (implicit re-attachment of ``t``, see :func:`draaw_mi.sdf.tracer.reattach_t`),
+  and :meth:`SDFHook.emitter_geometry` re-attaches the emitter sample's direction and its
+  ``cos / dist^2`` factor to the moving point.
+
+**Differentiated:** material and emitter parameters (path replay, as for meshes); SDF shape
+parameters (radius, centre, size, translation, scale, smooth ``k``) through the position,
+normal and direct lighting of SDF points seen by the camera or by a path vertex.
+**Not differentiated:** silhouettes and shadow boundaries (visibility discontinuities; no
+boundary term), the mixture weights of blended materials, indirect light leaving an SDF
+point (its outgoing direction is kept fixed in the local frame).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .scene import find
+from .tracer import TracerOptions, march, normal, reattach_t
+
+
+def hook(integrator, scene: mi.Scene, feats: dict) -> "SDFHook | None":
+    """The SDF hook for ``scene`` or ``None`` (no SDF objects: no SDF code in the kernel)."""
+    if not feats.get("sdf"):
+        return None
+    sdf = find(scene)
+    if sdf is None:
+        return None
+    opts = getattr(integrator, "sdf_tracer", None) or TracerOptions()
+    return SDFHook(sdf, scene, opts)
+
+
+class SDFHook:
+    def __init__(self, sdf, scene: mi.Scene, opts: TracerOptions):
+        self.sdf = sdf
+        self.opts = opts
+        by_id = {sh.id(): sh for sh in scene.shapes()}
+        self.proxies = [by_id[pid] for pid in sdf.proxy_ids]
+        self.proxy_ptrs = mi.ShapePtr(self.proxies)
+
+    # ------------------------------------------------------------------ primal
+    def intersect(self, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, sampler, active):
+        """``si`` (mesh hit of ``ray``) with closer SDF hits substituted (detached)."""
+        with dr.suspend_grad():
+            d = dr.detach(ray.d)
+            tmax = dr.select(si.is_valid(), si.t, dr.inf)
+            t, hit, _ = march(self.sdf, ray.o, d, tmax, mi.Bool(active), self.opts)
+            p = dr.fma(d, t, ray.o)
+            n = normal(self.sdf, mi.Point3f(p), -d)
+            shape = mi.ShapePtr(self.proxies[0]) if len(self.proxies) == 1 else None
+            if shape is None and sampler is None:     # no random numbers (AOVs): largest weight
+                _, w = self.sdf.eval(mi.Point3f(p))
+                idx, best = mi.UInt32(0), w[0]
+                for i, wi in enumerate(w[1:]):
+                    idx = dr.select(wi > best, mi.UInt32(i + 1), idx)
+                    best = dr.maximum(best, wi)
+                shape = dr.gather(mi.ShapePtr, self.proxy_ptrs, idx, hit)
+            elif shape is None:
+                _, w = self.sdf.eval(mi.Point3f(p))
+                u = sampler.next_1d(hit)
+                idx = mi.UInt32(0)
+                acc = mi.Float(0.0)
+                total = mi.Float(0.0)
+                for wi in w:
+                    total += dr.maximum(wi, 0.0)
+                for i, wi in enumerate(w[:-1]):
+                    acc += dr.maximum(wi, 0.0)
+                    idx = dr.select(u * total >= acc, mi.UInt32(i + 1), idx)
+                shape = dr.gather(mi.ShapePtr, self.proxy_ptrs, idx, hit)
+            s = self._interaction(ray, t, p, n, shape)
+            return dr.select(hit, s, si)
+
+    @staticmethod
+    def _interaction(ray, t, p, n, shape):
+        s = dr.zeros(mi.SurfaceInteraction3f)
+        s.t = mi.Float(t)
+        s.time = ray.time
+        s.wavelengths = ray.wavelengths
+        s.p = mi.Point3f(p)
+        s.n = mi.Normal3f(n)
+        s.sh_frame = mi.Frame3f(mi.Vector3f(n))
+        s.dp_du = s.sh_frame.s
+        s.dp_dv = s.sh_frame.t
+        s.wi = s.sh_frame.to_local(-ray.d)
+        s.shape = shape
+        return s
+
+    def occluded(self, si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f, active) -> mi.Bool:
+        """Whether an SDF blocks the shadow ray from ``si`` to the emitter sample ``ds``."""
+        with dr.suspend_grad():
+            ray = si.spawn_ray(dr.detach(ds.d))
+            tmax = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - 1e-4), dr.inf)
+            _, hit, _ = march(self.sdf, ray.o, ray.d, tmax, mi.Bool(active), self.opts)
+        return hit
+
+    def is_sdf(self, si: mi.SurfaceInteraction3f, active) -> mi.Bool:
+        m = mi.Bool(False)
+        for sh in self.proxies:
+            m |= si.shape == mi.ShapePtr(sh)
+        return active & si.is_valid() & m
+
+    # ------------------------------------------------------------------ differential
+    def reattach(self, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, active):
+        """``si`` whose SDF hits carry derivatives w.r.t. the SDF parameters (call under
+        ``dr.resume_grad()``; mesh hits are returned unchanged)."""
+        on = self.is_sdf(si, active)
+        o, d = dr.detach(ray.o), dr.detach(ray.d)
+        t = reattach_t(self.sdf, o, d, dr.detach(si.t), on)
+        p = mi.Point3f(dr.fma(d, t, o))
+        n = normal(self.sdf, p, -d)
+        s = self._interaction(ray, t, p, n, si.shape)
+        s.t = dr.detach(si.t)
+        return dr.select(on, s, si)
+
+    @staticmethod
+    def emitter_geometry(si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f, em_weight, active):
+        """Re-attach ``ds.d`` and the ``1 / dist^2`` (and, for area lights, the emitter-side
+        cosine) factor of ``em_weight`` to the (attached) point ``si.p``; values unchanged.
+        Directional and environment samples (infinite ``dist``) depend on the direction only.
+        ``common.sample_emitter`` evaluates the emitter at the detached point in SDF scenes, so
+        that a point light's own ``1 / dist^2`` is not counted twice."""
+        finite = active & dr.isfinite(ds.dist) & (ds.dist > 0)
+        v = mi.Vector3f(dr.detach(ds.p)) - si.p
+        dist2 = dr.squared_norm(v)
+        ok = finite & (dist2 > 0)
+        inv = dr.rsqrt(dr.select(ok, dist2, 1.0))
+        d_att = dr.select(ok, v * inv, dr.detach(ds.d))
+        geo = dr.select(ok, 1.0 / dr.select(ok, dist2, 1.0), 1.0)
+        area = ok & ~ds.delta
+        cos_l = dr.abs(dr.dot(dr.detach(ds.n), d_att))
+        geo = dr.select(area, geo * cos_l, geo)
+        geo_d = dr.detach(geo)
+        rel = dr.select(geo_d > 0, geo / dr.select(geo_d > 0, geo_d, 1.0), 1.0)
+        ds.d = dr.replace_grad(dr.detach(ds.d), d_att)
+        return ds, em_weight * dr.replace_grad(mi.Float(1.0), rel)
+
+
+__all__ = ["hook", "SDFHook", "TracerOptions"]

@@ -1,0 +1,191 @@
+"""The SDF node base class: distance, material weights, bounding box, parameters.
+
+Every node of an SDF tree (primitive, transform or operator) evaluates
+
+* ``node.distance(p: mi.Point3f) -> mi.Float`` -- a signed distance (negative inside) that is
+  *exact* or a documented *bound* (``|f(p)| <= distance to the surface``, i.e. 1-Lipschitz),
+  so that sphere tracing never steps through a surface;
+* ``node.eval(p, n_slots) -> (mi.Float, list[mi.Float])`` -- the distance and the blend
+  weights of the ``n_slots`` material slots at ``p`` (they sum to 1; smooth operators blend
+  the weights of their operands with the same weight that blends the distances);
+* ``node.bbox() -> mi.ScalarBoundingBox3f`` -- a world box that contains the surface
+  (infinite for a plane);
+* ``node.params()`` -- ``{"NAME.PARAM": Dr.Jit array}`` of the differentiable parameters of
+  the subtree (radius, centre, size, smooth ``k``, translation, scale), to be used with
+  ``dr.enable_grad`` and ``node.set(...)`` / :meth:`SDFNode.set_param`.
+
+Parameters are stored as *opaque* Dr.Jit arrays (``dr.opaque``), so a new value does not
+recompile the render kernel.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from ..errors import ParameterError
+
+INF = float("inf")
+
+
+def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(x) for x in value)
+    except TypeError:
+        raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers") from None
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise ParameterError(f"{where}: {name}={value!r}; expected 3 finite numbers")
+    return v
+
+
+def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        try:
+            value = float(value[0]) if len(value) == 1 else value   # 1-element Dr.Jit array
+        except TypeError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParameterError(f"{where}: {name}={value!r}; expected a finite number")
+    if lo is not None and (value < lo or (lo_open and value == lo)):
+        op = ">" if lo_open else ">="
+        raise ParameterError(f"{where}: {name}={value!r}; expected a number {op} {lo}")
+    return float(value)
+
+
+def safe_norm(v) -> mi.Float:
+    """``|v|`` with a finite derivative at 0 (``sqrt(max(|v|^2, 1e-30))``)."""
+    return dr.sqrt(dr.maximum(dr.squared_norm(v), 1e-30))
+
+
+def scalar_of(x) -> float:
+    """The Python value of a 1-element Dr.Jit Float (detached)."""
+    return float(dr.detach(x)[0]) if dr.is_array_v(x) else float(x)
+
+
+def vec_of(x) -> tuple[float, float, float]:
+    return tuple(scalar_of(c) for c in (x.x, x.y, x.z))
+
+
+def box(lo, hi) -> mi.ScalarBoundingBox3f:
+    return mi.ScalarBoundingBox3f(mi.ScalarPoint3f(*lo), mi.ScalarPoint3f(*hi))
+
+
+def infinite_box() -> mi.ScalarBoundingBox3f:
+    return box((-INF,) * 3, (INF,) * 3)
+
+
+def is_infinite(bb: mi.ScalarBoundingBox3f) -> bool:
+    return not all(math.isfinite(float(c)) for c in list(bb.min) + list(bb.max))
+
+
+def pad(bb: mi.ScalarBoundingBox3f, amount: float) -> mi.ScalarBoundingBox3f:
+    if is_infinite(bb):
+        return bb
+    return box([float(c) - amount for c in bb.min], [float(c) + amount for c in bb.max])
+
+
+class SDFNode:
+    """Base class of SDF tree nodes (see the module docstring).
+
+    ``name`` names the node in parameter keys and errors; ``material`` (a material name of
+    the scene, or ``None`` to inherit) is resolved to a slot by :mod:`draaw_mi.sdf.scene`.
+    """
+
+    kind = "node"
+    exact = True            # distance is exact (False: a documented lower bound)
+
+    def __init__(self, name: str | None = None, material: str | None = None):
+        self.name = name or self.kind
+        self.material = material
+        self.slot = 0                      # material slot; set when a scene resolves materials
+        self._params: dict[str, object] = {}
+
+    # ------------------------------------------------------------------ parameters
+    def _scalar_param(self, key: str, value, lo: float | None = None, lo_open: bool = False):
+        v = _scalar(value, f"sdf.{self.kind} {self.name!r}", key, lo, lo_open)
+        arr = dr.opaque(mi.Float, v)
+        self._params[key] = arr
+        return arr
+
+    def _vec_param(self, key: str, value):
+        v = _vec3(value, f"sdf.{self.kind} {self.name!r}", key)
+        arr = dr.opaque(mi.Point3f, v)
+        self._params[key] = arr
+        return arr
+
+    def set_param(self, key: str, value) -> None:
+        """Set parameter ``key`` (e.g. ``"radius"``) of this node to a number, a 3-vector or
+        a Dr.Jit array (which may carry gradients); checks the same ranges as the constructor.
+
+        >>> from draaw_mi.sdf import Sphere
+        >>> s = Sphere(radius=1.0); s.set_param("radius", 2.0); s.bbox().max.x
+        2.0
+        """
+        if key not in self._params:
+            from ..errors import suggest
+            raise ParameterError(f"sdf.{self.kind} {self.name!r}: no parameter {key!r}"
+                                 f"{suggest(key, self._params)}")
+        old = self._params[key]
+        if dr.is_array_v(value) and type(value) is type(old):
+            new = value
+        elif isinstance(old, mi.Point3f):
+            new = dr.opaque(mi.Point3f, _vec3(value, f"sdf.{self.kind} {self.name!r}", key))
+        else:
+            lo = getattr(self, "_lower_bounds", {}).get(key)
+            new = dr.opaque(mi.Float, _scalar(value, f"sdf.{self.kind} {self.name!r}", key,
+                                              lo, lo_open=lo is not None))
+        self._params[key] = new
+        setattr(self, key, new)
+        self._check()
+
+    def _check(self) -> None:
+        """Cross-parameter checks (overridden where needed)."""
+
+    def own_params(self) -> dict:
+        return dict(self._params)
+
+    def params(self) -> dict:
+        """``{"NAME.PARAM": array}`` for this node and its subtree."""
+        out = {f"{self.name}.{k}": v for k, v in self._params.items()}
+        for c in self.children():
+            for k, v in c.params().items():
+                out.setdefault(k, v)
+        return out
+
+    # ------------------------------------------------------------------ tree
+    def children(self) -> tuple["SDFNode", ...]:
+        return ()
+
+    def nodes(self):
+        """This node and its subtree, depth first."""
+        yield self
+        for c in self.children():
+            yield from c.nodes()
+
+    # ------------------------------------------------------------------ evaluation
+    def distance(self, p: mi.Point3f) -> mi.Float:
+        raise NotImplementedError
+
+    def eval(self, p: mi.Point3f, n_slots: int):
+        """``(distance, weights)``; a leaf puts all weight on its material slot."""
+        d = self.distance(p)
+        w = [mi.Float(1.0 if i == self.slot else 0.0) for i in range(n_slots)]
+        return d, w
+
+    def bbox(self) -> mi.ScalarBoundingBox3f:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        """One line for ``draaw-mi info``."""
+        vals = []
+        for k, v in self._params.items():
+            if isinstance(v, mi.Point3f):
+                vals.append(f"{k}=({', '.join(f'{c:g}' for c in vec_of(v))})")
+            else:
+                vals.append(f"{k}={scalar_of(v):g}")
+        mat = f" material={self.material}" if self.material else ""
+        return f"{self.name}: {self.kind}({', '.join(vals)}){mat}"
+
+    def __repr__(self) -> str:
+        return f"SDF[{self.describe()}]"

@@ -1,0 +1,73 @@
+"""``draaw_mi.sdf.parameters(scene)``: the scene's ``mi.traverse`` parameters plus its SDF
+shape parameters (``"sdf.NODE.PARAM"``), for differentiable renders.
+
+>>> # params = draaw_mi.sdf.parameters(scene)
+>>> # dr.enable_grad(params["sdf.ball.radius"]); params.update()
+>>> # img = draaw_mi.render(scene, params=params, spp=64); dr.backward(loss(img))
+>>> # dr.grad(params["sdf.ball.radius"])
+
+The SDF values are the nodes' own Dr.Jit arrays, so ``dr.enable_grad`` on them reaches the
+tracer; assigning ``params["sdf.ball.radius"] = 0.7`` (then ``params.update()``) sets the
+node's parameter with the constructor's range checks. The object is a
+``mi.SceneParameters`` (``mi.render`` requires one) that delegates every other key to
+``mi.traverse(scene)``; optimisers such as ``mi.ad.Adam`` work on it as on Mitsuba's.
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+
+PREFIX = "sdf."
+
+
+class SDFParameters(mi.SceneParameters):
+    def __init__(self, scene):
+        super().__init__({}, {})
+        self._base = mi.traverse(scene.mi_scene)
+        self._sdf = scene.sdf
+
+    def _sdf_keys(self):
+        return [PREFIX + k for k in self._sdf.params()] if self._sdf is not None else []
+
+    def keys(self):
+        return list(self._base.keys()) + self._sdf_keys()
+
+    def __iter__(self):
+        return iter([(k, self[k]) for k in self.keys()])
+
+    def items(self):
+        return self.__iter__()
+
+    def __len__(self):
+        return len(self.keys())
+
+    def __contains__(self, key):
+        return key in self._base or key in self._sdf_keys()
+
+    def __getitem__(self, key):
+        if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
+            return self._sdf.params()[key[len(PREFIX):]]
+        return self._base[key]
+
+    def __setitem__(self, key, value):
+        if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
+            self._sdf.set(key[len(PREFIX):], value)
+        else:
+            self._base[key] = value
+
+    def update(self, values=None):
+        if values is not None:
+            for k, v in values.items():
+                if k in self:
+                    self[k] = v
+        return self._base.update()
+
+    def __repr__(self):
+        return f"SDFParameters[{len(self)} keys, {len(self._sdf_keys())} SDF]"
+
+
+def parameters(scene) -> SDFParameters:
+    """``mi.traverse`` of a loaded draaw scene plus its ``"sdf.NODE.PARAM"`` keys."""
+    from ..scene import DraawScene, load_scene
+    if not isinstance(scene, DraawScene):
+        scene = load_scene(scene)
+    return SDFParameters(scene)

@@ -1,0 +1,453 @@
+"""SDFs in scenes: ``[[sdf]]`` tables, GO-Draaw sphere lists, and how the tree reaches the
+integrators.
+
+``[[sdf]]`` entries use the keys of ``[[shapes]]`` where they overlap, so a sphere moves from
+``[[shapes]]`` to ``[[sdf]]`` by renaming the table::
+
+    [[sdf]]                                   # a primitive
+    name = "ball"
+    type = "sphere"                           # sphere box round_box torus cylinder capsule cone plane
+    center = [0, 0.5, 0]
+    radius = 0.5
+    material = "red"                          # a [materials] name or an inline table
+    translate = [1, 0, 0]                     # optional; also rotate = {axis, angle}, scale = s
+
+    [[sdf]]                                   # an operator over named entries
+    name = "blob"
+    type = "smooth_union"                     # union intersection subtraction smooth_* lse_* ...
+    children = ["ball", "block"]              # two or more (folded left); order matters for subtraction
+    k = 0.2
+
+    [[sdf]]                                   # GO-Draaw's sphere list (go-draaw-spec.md §5)
+    type = "go_draaw_spheres"
+    spheres = [{centerX = 0, centerY = 0, centerZ = 0, radius = 16, colorR = 200, ...,
+                indexOfOtherSphere = 1, sdfType = 2, amount = 4}]    # or file = "spheres.json"
+
+Entries that no operator names as a child are the *roots*; the scene's SDF is their union.
+Materials are placed in *slots*; each slot gets a hidden proxy shape (one degenerate triangle,
+never hit by a ray) that carries the slot's BSDF, so SDF hits are shaded through the ordinary
+``si.bsdf()`` path, the BSDF parameters appear in ``mi.traverse`` as for meshes, and the
+integrators find the SDF tree from the proxies' ids (``__sdf_<token>_<slot>``) in
+:data:`REGISTRY`. :func:`find` returns the :class:`SDFScene` of an ``mi.Scene`` or ``None``.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import os
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import suggest
+from .node import SDFNode, box, is_infinite, vec_of
+from .operators import OPERATORS
+from .primitives import PRIMITIVES
+from .transforms import Transform, rotation_matrix
+
+PROXY_PREFIX = "__sdf_"
+REGISTRY: dict[str, "SDFScene"] = {}
+_TOKENS = itertools.count()
+
+PRIMITIVE_KEYS = {
+    "sphere": ("center", "radius"),
+    "box": ("center", "size"),
+    "round_box": ("center", "size", "radius"),
+    "torus": ("center", "major", "minor"),
+    "cylinder": ("center", "radius", "height"),
+    "capsule": ("a", "b", "radius"),
+    "cone": ("center", "angle", "height"),
+    "plane": ("normal", "offset"),
+}
+COMMON_KEYS = ("type", "name", "material", "translate", "rotate", "scale")
+OPERATOR_KEYS = ("children", "k")
+GO_DRAAW_TYPES = {0: "distance", 1: "union", 2: "smoothUnion", 3: "intersection",
+                  4: "smoothIntersection", 5: "subtraction", 6: "smoothSubtraction", 7: "addition",
+                  8: "smoothAddition", 9: "smoothUnionNoColorMix"}
+
+
+class SDFScene:
+    """The SDF part of a scene: root nodes (implicitly unioned) and material slots.
+
+    ``slots``: material ids (one per slot; the proxy shape ``proxy_ids[i]`` carries slot
+    ``i``'s BSDF). ``distance(p)`` / ``eval(p)`` evaluate the union of the roots.
+    """
+
+    def __init__(self, roots: list[SDFNode], slots: list[str], nodes: dict | None = None):
+        self.roots = list(roots)
+        self.slots = list(slots)
+        self.nodes = dict(nodes or {n.name: n for r in roots for n in r.nodes()})
+        self.token = f"{next(_TOKENS)}x{id(self) & 0xFFFF:x}"
+        self.proxy_ids = [f"{PROXY_PREFIX}{self.token}_{i}" for i in range(len(self.slots))]
+        REGISTRY[self.token] = self
+
+    def distance(self, p: mi.Point3f) -> mi.Float:
+        d = self.roots[0].distance(p)
+        for r in self.roots[1:]:
+            d = dr.minimum(d, r.distance(p))
+        return d
+
+    def eval(self, p: mi.Point3f):
+        n = len(self.slots)
+        d, w = self.roots[0].eval(p, n)
+        for r in self.roots[1:]:
+            d2, w2 = r.eval(p, n)
+            closer = d2 < d
+            d = dr.select(closer, d2, d)
+            w = [dr.select(closer, b, a) for a, b in zip(w, w2)]
+        return d, w
+
+    def bboxes(self) -> list[mi.ScalarBoundingBox3f]:
+        return [r.bbox() for r in self.roots]
+
+    def params(self) -> dict:
+        """``{"NODE.PARAM": Dr.Jit array}`` of every node (see :meth:`SDFNode.params`)."""
+        out: dict = {}
+        for r in self.roots:
+            out.update(r.params())
+        return out
+
+    def set(self, key: str, value) -> None:
+        """Set ``"NODE.PARAM"`` (e.g. ``"ball.radius"``) to a number, vector or Dr.Jit array."""
+        node, _, param = key.partition(".")
+        if node not in self.nodes:
+            from ..errors import ParameterError
+            raise ParameterError(f"sdf: no node {node!r}{suggest(node, self.nodes)}")
+        self.nodes[node].set_param(param, value)
+
+    def describe(self) -> list[str]:
+        """One line per node (roots first, children indented), for ``draaw-mi info``."""
+        lines: list[str] = []
+
+        def walk(n, depth):
+            lines.append("  " * depth + n.describe())
+            for c in n.children():
+                walk(c, depth + 1)
+        for r in self.roots:
+            walk(r, 0)
+        return lines
+
+
+def find(scene: mi.Scene) -> SDFScene | None:
+    """The :class:`SDFScene` placed in ``scene`` (via its proxy shapes), or ``None``."""
+    for sh in scene.shapes():
+        sid = sh.id()
+        if sid.startswith(PROXY_PREFIX):
+            token = sid[len(PROXY_PREFIX):].rsplit("_", 1)[0]
+            return REGISTRY.get(token)
+    return None
+
+
+# --------------------------------------------------------------------------- parsing
+def _transform_of(entry: dict, where, node: SDFNode) -> SDFNode:
+    from ..scene.schema import check_keys, number, vector
+    if not any(k in entry for k in ("translate", "rotate", "scale")):
+        return node
+    t = vector(entry.get("translate", [0, 0, 0]), where / "translate")
+    R = np.eye(3)
+    if "rotate" in entry:
+        rot = entry["rotate"]
+        rots = rot if isinstance(rot, list) else [rot]
+        for i, r in enumerate(rots):
+            wr = where / "rotate" / i if isinstance(rot, list) else where / "rotate"
+            check_keys(r, ("axis", "angle"), wr, required=("axis", "angle"))
+            axis = vector(r["axis"], wr / "axis")
+            if np.linalg.norm(axis) == 0:
+                raise (wr / "axis").error("is the zero vector")
+            R = rotation_matrix(axis, number(r["angle"], wr / "angle")) @ R
+    s = entry.get("scale", 1.0)
+    if isinstance(s, list):
+        v = vector(s, where / "scale", lo=0.0)
+        if max(v) - min(v) > 1e-9 * max(v):
+            raise (where / "scale").error(f"{s!r} is not uniform; an SDF keeps exact distances only "
+                                          "under uniform scale (give one number)")
+        s = v[0]
+    s = number(s, where / "scale", lo=0.0, lo_open=True)
+    return Transform(node, translate=t, rotation=R, scale=s, name=f"{node.name}_xf")
+
+
+def _primitive(entry: dict, kind: str, name: str, where) -> SDFNode:
+    from ..errors import DraawError
+    from ..scene.schema import check_keys, number, vector
+    check_keys(entry, COMMON_KEYS + PRIMITIVE_KEYS[kind], where)
+    kw = {}
+    for key in PRIMITIVE_KEYS[kind]:
+        if key not in entry:
+            continue
+        v = entry[key]
+        if key in ("center", "size", "a", "b", "normal"):
+            kw[key] = vector(v, where / key)
+        else:
+            lo = None if key == "offset" else 0.0
+            kw[key] = number(v, where / key, lo=lo, lo_open=key not in ("offset",))
+    if "size" in kw and any(x <= 0 for x in kw["size"]):
+        raise (where / "size").error(f"{entry['size']!r} has a side <= 0; expected positive edge lengths")
+    try:
+        return PRIMITIVES[kind](name=name, **kw)
+    except DraawError as e:
+        raise where.error(str(e)) from None
+
+
+def build_nodes(entries: list, material_slot, where) -> tuple[list[SDFNode], dict]:
+    """Parse ``[[sdf]]`` entries into root nodes. ``material_slot(value, where) -> (id, slot)``
+    resolves a ``material`` value (name or inline table) to a material slot."""
+    from ..scene.schema import check_keys, number, string
+    if not isinstance(entries, list):
+        raise where.error("expected a list of SDF tables ([[sdf]])")
+    kinds = list(PRIMITIVES) + list(OPERATORS) + ["go_draaw_spheres"]
+    tables: dict[str, tuple[dict, object]] = {}
+    order: list[str] = []
+    extra_roots: list[SDFNode] = []
+    for i, entry in enumerate(entries):
+        w = where / i
+        if not isinstance(entry, dict):
+            raise w.error(f"expected an SDF table, got {entry!r}")
+        kind = entry.get("type")
+        if not isinstance(kind, str):
+            raise (w / "type").error(f"{kind!r} is not a string; expected one of {', '.join(kinds)}")
+        if kind not in kinds:
+            raise (w / "type").error(f"unknown SDF type {kind!r}{suggest(kind, kinds)}")
+        if kind == "go_draaw_spheres":
+            check_keys(entry, ("type", "spheres", "file", "scale"), w)
+            extra_roots.append(_go_draaw_entry(entry, material_slot, w))
+            continue
+        name = string(entry.get("name", f"sdf{i}"), w / "name")
+        if name in tables:
+            raise (w / "name").error(f"duplicate SDF name {name!r}")
+        tables[name] = (entry, w)
+        order.append(name)
+
+    built: dict[str, SDFNode] = {}
+    referenced: set[str] = set()
+    visiting: list[str] = []
+
+    def build(name: str) -> SDFNode:
+        if name in built:
+            return built[name]
+        entry, w = tables[name]
+        if name in visiting:
+            cycle = " -> ".join(visiting[visiting.index(name):] + [name])
+            raise (w / "children").error(f"SDF children form a cycle: {cycle}")
+        visiting.append(name)
+        kind = entry["type"]
+        if kind in PRIMITIVES:
+            node = _primitive(entry, kind, name, w)
+        else:
+            check_keys(entry, COMMON_KEYS + OPERATOR_KEYS, w, required=("children",))
+            kids = entry["children"]
+            if not isinstance(kids, list) or len(kids) < 2 or not all(isinstance(k, str) for k in kids):
+                raise (w / "children").error(f"{kids!r}; expected a list of two or more SDF names")
+            for k in kids:
+                if k not in tables:
+                    raise (w / "children").error(f"no SDF named {k!r}{suggest(k, tables)}")
+                referenced.add(k)
+            cls = OPERATORS[kind]
+            k = number(entry.get("k", 0.1), w / "k", lo=0.0) if cls.smooth else None
+            if not cls.smooth and "k" in entry:
+                raise (w / "k").error(f"{kind!r} is not a smooth operator and takes no 'k'")
+            node = build(kids[0])
+            for j, kid in enumerate(kids[1:]):
+                nm = name if j == len(kids) - 2 else f"{name}_{j}"
+                node = cls(node, build(kid), k, name=nm) if cls.smooth else cls(node, build(kid), name=nm)
+        if "material" in entry:
+            node.material, node.slot = material_slot(entry["material"], w / "material")
+            _assign(node, node.slot)
+        node = _transform_of(entry, w, node)
+        visiting.pop()
+        built[name] = node
+        return node
+
+    for name in order:
+        build(name)
+    roots = [built[n] for n in order if n not in referenced] + extra_roots
+    nodes = {n.name: n for r in roots for n in r.nodes()}
+    return roots, nodes
+
+
+def _assign(node: SDFNode, slot: int) -> None:
+    """Give ``slot`` to every node below ``node`` that has no material of its own."""
+    for c in node.children():
+        if c.material is None:
+            c.slot = slot
+            _assign(c, slot)
+
+
+def _go_draaw_entry(entry: dict, material_slot, where) -> SDFNode:
+    from ..scene.schema import number, string
+    if ("spheres" in entry) == ("file" in entry):
+        raise where.error("a go_draaw_spheres entry needs exactly one of 'spheres' or 'file'")
+    spheres = entry.get("spheres")
+    if "file" in entry:
+        path = string(entry["file"], where / "file")
+        try:
+            with open(path, encoding="utf-8") as f:
+                spheres = json.load(f)
+        except OSError as e:
+            raise (where / "file").error(f"cannot read {path!r} ({e.strerror})") from None
+        except json.JSONDecodeError as e:
+            raise (where / "file").error(f"malformed JSON at line {e.lineno}: {e.msg}") from None
+    s = number(entry.get("scale", 1.0), where / "scale", lo=0.0, lo_open=True)
+    return go_draaw_spheres(spheres, lambda i, col: material_slot(
+        {"base_color": col}, where / "spheres" / i), scale=s, where=where / "spheres")
+
+
+def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, where=None) -> SDFNode:
+    """A GO-Draaw sphere list (``/getSpheres`` records) as one SDF tree.
+
+    Each sphere ``i`` contributes ``op_i(sphere_i, sphere_j)`` with ``j =
+    indexOfOtherSphere`` and ``op`` from ``sdfType`` (0 distance, 1 union, 2 smoothUnion,
+    3 intersection, 4 smoothIntersection, 5 subtraction, 6 smoothSubtraction, 7 addition,
+    8 smoothAddition, 9 smoothUnionNoColorMix; names accepted too), ``k = amount * scale``; the
+    result is the union of the contributions, as GO-Draaw's march takes their minimum.
+    GO-Draaw's bugs are fixed (go-draaw-spec.md §5.2): smoothUnion blends the two colours
+    (type 9 keeps sphere i's), smoothIntersection uses ``k - |a - b|``, both subtractions
+    remove sphere ``i`` from sphere ``j`` (GO-Draaw's ``subtraction`` order), addition /
+    smoothAddition are the log-sum-exp soft intersections. As in GO-Draaw, a sphere whose
+    operator needs another sphere but whose index is out of range is skipped.
+    ``material_slot(i, rgb) -> (id, slot)`` assigns materials (colour = colorR..B / 255).
+    """
+    from ..errors import SceneError
+    from ..scene.schema import Where, number
+    from .operators import (intersection, lse_intersection, smooth_intersection,
+                            smooth_lse_intersection, smooth_subtraction, smooth_union,
+                            subtraction, union)
+    from .primitives import Sphere
+    where = where or Where("go_draaw_spheres")
+    if not isinstance(spheres, list) or not spheres:
+        raise where.error("expected a non-empty list of GO-Draaw sphere records")
+    names = {v: k for k, v in GO_DRAAW_TYPES.items()}
+    prims, types, others, ks = [], [], [], []
+    for i, rec in enumerate(spheres):
+        w = where / i
+        if not isinstance(rec, dict):
+            raise w.error(f"expected a sphere record, got {rec!r}")
+        c = [number(rec.get(f"center{a}", 0.0), w / f"center{a}") * scale for a in "XYZ"]
+        r = number(rec.get("radius", 16.0), w / "radius", lo=0.0, lo_open=True) * scale
+        col = [number(rec.get(f"color{a}", 255), w / f"color{a}", lo=0, hi=255) / 255.0 for a in "RGB"]
+        t = rec.get("sdfType", 0)
+        if isinstance(t, str):
+            t = names.get(t if t != "smothUnionNoColorMix" else "smoothUnionNoColorMix")
+            if t is None:
+                raise (w / "sdfType").error(f"unknown GO-Draaw operator {rec['sdfType']!r}"
+                                            f"{suggest(str(rec['sdfType']), names)}")
+        elif isinstance(t, bool) or not isinstance(t, int) or t not in GO_DRAAW_TYPES:
+            raise (w / "sdfType").error(f"{t!r} is not a GO-Draaw operator; expected 0..9 or a name")
+        sp = Sphere(c, r, name=f"go_sphere{i}")
+        if material_slot is not None:
+            sp.material, sp.slot = material_slot(i, col)
+        prims.append(sp)
+        types.append(t)
+        others.append(rec.get("indexOfOtherSphere", -1))
+        ks.append(number(rec.get("amount", 0.0), w / "amount", lo=0.0) * scale)
+    parts = []
+    for i, (sp, t, j, k) in enumerate(zip(prims, types, others, ks)):
+        if t == 0:
+            parts.append(sp)
+            continue
+        if isinstance(j, bool) or not isinstance(j, int) or not (0 <= j < len(prims)):
+            continue                                   # GO-Draaw skips these
+        o = prims[j]
+        nm = f"go_op{i}"
+        node = {1: lambda: union(sp, o, name=nm), 2: lambda: smooth_union(sp, o, k, name=nm),
+                9: lambda: smooth_union(sp, o, k, name=nm, material=sp.material),
+                3: lambda: intersection(sp, o, name=nm),
+                4: lambda: smooth_intersection(sp, o, k, name=nm),
+                5: lambda: subtraction(o, sp, name=nm),
+                6: lambda: smooth_subtraction(o, sp, k, name=nm),
+                7: lambda: lse_intersection(sp, o, name=nm),
+                8: lambda: smooth_lse_intersection(sp, o, k, name=nm)}[t]()
+        if t == 9:
+            node.slot = sp.slot
+        parts.append(node)
+    if not parts:
+        raise SceneError(f"{where}: no sphere survives (every operator names a missing other sphere)")
+    root = parts[0]
+    for n, p in enumerate(parts[1:]):
+        root = union(root, p, name=f"go_union{n}")
+    return root
+
+
+# --------------------------------------------------------------------------- scene building
+def proxy_ply(path: str, bb: mi.ScalarBoundingBox3f) -> str:
+    """Write the proxy mesh: one zero-area triangle (a point) at the box centre."""
+    from ..scene.meshes import write_ply
+    c = [0.0, 0.0, 0.0] if is_infinite(bb) else [0.5 * (float(a) + float(b)) for a, b in zip(bb.min, bb.max)]
+    write_ply(path, np.array([c, c, c], dtype=np.float32), np.array([[0, 1, 2]], dtype=np.uint32))
+    return path
+
+
+def sdf_dicts(entries, materials: dict, ctx, where):
+    """``[[sdf]]`` entries -> ``(proxy shape dicts, SDFScene)``; ``materials`` (the scene's
+    material dicts, by id) gains inline and GO-Draaw materials and a default one if needed."""
+    from ..scene.description import material_dict
+    slots: list[str] = []
+
+    def material_slot(value, w):
+        if isinstance(value, dict):
+            mid = ctx.unique("sdf_material")
+            materials[mid] = material_dict(mid, value, ctx, w)
+        else:
+            if not isinstance(value, str):
+                raise w.error(f"{value!r} is not a material name or table")
+            if value not in materials:
+                raise w.error(f"unknown material {value!r}{suggest(value, materials)}")
+            mid = value
+        if mid not in slots:
+            slots.append(mid)
+        return mid, slots.index(mid)
+
+    roots, nodes = build_nodes(entries, material_slot, where)
+    if not roots:
+        raise where.error("no SDF roots: every entry is a child of another")
+    # nodes without any material (no own, no inherited) use a default slot
+    default_needed = any(n.material is None and not _has_material_above(r, n)
+                         for r in roots for n in r.nodes() if not n.children())
+    if default_needed:
+        mid = "__sdf_default_material"
+        materials[mid] = {"type": "draaw", "two_sided": True}
+        slots.append(mid)
+        dslot = len(slots) - 1
+        for r in roots:
+            _default_slots(r, dslot, inherited=False)
+    sdf = SDFScene(roots, slots, nodes)
+    bb = _union_bbox(sdf.bboxes())
+    shapes = {}
+    for pid, mid in zip(sdf.proxy_ids, slots):
+        path = proxy_ply(os.path.join(ctx.tmp_dir, ctx.unique("sdf_proxy") + ".ply"), bb)
+        shapes[pid] = {"type": "ply", "filename": path, "bsdf": {"type": "ref", "id": mid}}
+    return shapes, sdf
+
+
+def _has_material_above(root: SDFNode, target: SDFNode) -> bool:
+    def walk(n, inherited):
+        has = inherited or n.material is not None
+        if n is target:
+            return has
+        for c in n.children():
+            r = walk(c, has)
+            if r is not None:
+                return r
+        return None
+    return bool(walk(root, False))
+
+
+def _default_slots(node: SDFNode, slot: int, inherited: bool) -> None:
+    has = inherited or node.material is not None
+    if not has:
+        node.slot = slot
+    for c in node.children():
+        _default_slots(c, slot, has)
+
+
+def _union_bbox(boxes):
+    if any(is_infinite(b) for b in boxes):
+        from .node import infinite_box
+        return infinite_box()
+    lo = np.min([list(b.min) for b in boxes], axis=0)
+    hi = np.max([list(b.max) for b in boxes], axis=0)
+    return box(lo, hi)
+
+
+__all__ = ["SDFScene", "find", "build_nodes", "go_draaw_spheres", "sdf_dicts", "REGISTRY"]
+_ = vec_of

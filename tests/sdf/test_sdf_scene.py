@@ -1,0 +1,137 @@
+"""[[sdf]] scene entries, GO-Draaw sphere lists, bad input and `draaw-mi info`."""
+from __future__ import annotations
+
+import copy
+import json
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.cli import main
+from draaw_mi.errors import SceneError
+from draaw_mi.sdf.scene import go_draaw_spheres
+
+from sdf_helpers import base_description
+
+
+def _desc(sdf):
+    d = base_description()
+    d["sdf"] = sdf
+    return d
+
+
+CSG = [
+    {"type": "sphere", "name": "ball", "center": [0, 0.6, 0], "radius": 0.6, "material": "ball"},
+    {"type": "box", "name": "block", "center": [0.5, 0.4, 0], "size": [0.6, 0.8, 0.6],
+     "material": {"base_color": [0.1, 0.8, 0.1]}},
+    {"type": "smooth_union", "name": "blob", "children": ["ball", "block"], "k": 0.25},
+    {"type": "torus", "name": "ring", "center": [0, 0, 0], "major": 0.4, "minor": 0.1,
+     "translate": [-1.2, 0.1, 0], "rotate": {"axis": [1, 0, 0], "angle": 90}, "scale": 1.5},
+]
+
+
+def test_load_scene_dict_with_sdf_tree():
+    s = draaw_mi.load_scene(_desc(CSG))
+    assert s.sdf is not None and s.features()["sdf"]
+    assert [r.name for r in s.sdf.roots] == ["blob", "ring_xf"]
+    assert len(s.sdf.slots) == 3                     # ball, inline block material, default
+    keys = s.sdf.params()
+    assert {"ball.radius", "block.size", "blob.k", "ring_xf.translate"} <= set(keys)
+    # the proxies carry the materials; their parameters are in mi.traverse as usual
+    assert "ball.base_color.value" in s.params
+    assert not any(k.startswith("__sdf_") for k in s.summary()["shapes"])
+    # distance of the scene = union of the roots
+    p = mi.Point3f(-0.6, 0.1, 0.0)       # on the centre line of the scaled torus, turned into xy
+    assert abs(float(s.sdf.distance(p)[0]) - (0.0 - 0.15)) < 1e-5
+
+
+def test_sphere_moves_from_shapes_to_sdf_by_renaming():
+    entry = {"type": "sphere", "name": "b", "material": "ball", "center": [0, 0.5, 0], "radius": 0.5,
+             "translate": [0.2, 0, 0]}
+    d = base_description()
+    d["shapes"].append(copy.deepcopy(entry))
+    draaw_mi.load_scene(d)
+    s = draaw_mi.load_scene(_desc([entry]))
+    assert abs(float(s.sdf.distance(mi.Point3f(0.2, 0.5, 0))[0]) + 0.5) < 1e-6
+
+
+@pytest.mark.parametrize("sdf,match", [
+    ([{"type": "sphere", "radius": -1}], r"sdf\[0\]\.radius: -1 is out of range"),
+    ([{"type": "box", "size": [1, 0, 1]}], r"size"),
+    ([{"type": "spher", "radius": 1}], r"did you mean 'sphere'"),
+    ([{"type": "smooth_unoin", "children": ["a", "b"]}], r"did you mean 'smooth_union'"),
+    ([{"type": "sphere", "name": "a"}, {"type": "union", "children": ["a", "bb"]}],
+     r"no SDF named 'bb'"),
+    ([{"type": "union", "name": "u", "children": ["v", "s"]}, {"type": "union", "name": "v",
+      "children": ["u", "s"]}, {"type": "sphere", "name": "s"}], r"cycle: u -> v -> u"),
+    ([{"type": "sphere", "material": "nope"}], r"unknown material 'nope'"),
+    ([{"type": "sphere", "radus": 1}], r"did you mean 'radius'"),
+    ([{"type": "union", "children": ["x"]}], r"two or more"),
+    ([{"type": "sphere", "scale": [1, 2, 1]}], r"uniform"),
+])
+def test_bad_input_one_line(sdf, match):
+    with pytest.raises(SceneError, match=match) as e:
+        draaw_mi.load_scene(_desc(sdf))
+    assert "\n" not in str(e.value)
+
+
+def test_cli_bad_sdf_exits_2(tmp_path, capsys):
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(_desc([{"type": "sphere", "radius": -2}])))
+    assert main(["info", str(p)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("draaw-mi: error:") and "radius" in err[0]
+
+
+def test_cli_info_lists_sdf_nodes(tmp_path, capsys):
+    p = tmp_path / "ok.json"
+    p.write_text(json.dumps(_desc(CSG)))
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "sdf: 5 nodes" in out and "blob: smooth_union(k=0.25)" in out and "ball: sphere" in out
+
+
+GO_SPHERES = [
+    {"centerX": 0, "centerY": 0, "centerZ": 0, "radius": 16, "colorR": 255, "colorG": 0, "colorB": 0,
+     "colorA": 255, "indexOfOtherSphere": 1, "sdfType": 2, "amount": 8},
+    {"centerX": 20, "centerY": 0, "centerZ": 0, "radius": 16, "colorR": 0, "colorG": 0, "colorB": 255,
+     "colorA": 255, "indexOfOtherSphere": 0, "sdfType": 0, "amount": 0},
+    {"centerX": 0, "centerY": 40, "centerZ": 0, "radius": 10, "colorR": 0, "colorG": 255, "colorB": 0,
+     "colorA": 255, "indexOfOtherSphere": 3, "sdfType": 5, "amount": 0},
+    {"centerX": 5, "centerY": 40, "centerZ": 0, "radius": 8, "colorR": 9, "colorG": 9, "colorB": 9,
+     "colorA": 255, "indexOfOtherSphere": 7, "sdfType": 1, "amount": 0},      # index out of range
+]
+
+
+def _d(node, p):
+    return float(node.distance(mi.Point3f(*p))[0])
+
+
+def test_go_draaw_sphere_list_semantics():
+    root = go_draaw_spheres(GO_SPHERES)
+    d = lambda c, r, p: float(np.linalg.norm(np.subtract(p, c)) - r)   # noqa: E731
+    k = 8.0
+    for p in ([10, 0, 0], [0, 17, 0], [30, 5, 0], [0, 40, 0], [3, 40, 0], [-9, 40, 0]):
+        d0, d1 = d([0, 0, 0], 16, p), d([20, 0, 0], 16, p)
+        h = np.clip(0.5 + 0.5 * (d1 - d0) / k, 0, 1)
+        su = d1 + (d0 - d1) * h - k * h * (1 - h)           # sphere 0 smooth-unioned with 1
+        sub = max(d([5, 40, 0], 8, p), -d([0, 40, 0], 10, p))   # type 5: other (3) minus this (2)
+        ref = min(su, d1, sub)                              # sphere 3's union: skipped (bad index)
+        assert _d(root, p) == pytest.approx(ref, abs=1e-4)
+
+
+def test_go_draaw_entry_in_scene_blends_colours():
+    s = draaw_mi.load_scene(_desc([{"type": "go_draaw_spheres", "spheres": GO_SPHERES[:2], "scale": 0.02}]))
+    assert len(s.sdf.slots) == 2
+    # in the smooth-union neck both materials carry weight
+    _, w = s.sdf.eval(mi.Point3f(0.2, 0.0, 0.0))
+    w = [float(x[0]) for x in w]
+    assert 0.05 < w[0] < 0.95 and abs(sum(w) - 1) < 1e-6
+
+
+def test_go_draaw_bad_operator():
+    bad = [dict(GO_SPHERES[0], sdfType="smoothUnoin")]
+    with pytest.raises(SceneError, match="did you mean 'smoothUnion'"):
+        go_draaw_spheres(bad)
