@@ -60,6 +60,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads (default: all cores)")
     r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    r.add_argument("--denoise", action="store_true",
+                   help="denoise with Intel OIDN guided by albedo/normal AOVs (biased; needs pyoidn)")
 
     i = sub.add_parser("info", help="show the set-up, or what a scene contains and calls for")
     i.add_argument("scene", nargs="?", help="scene file")
@@ -127,14 +129,16 @@ def _cmd_render(args) -> int:
     if args.post:
         post = _load_chain(args.post)
     image, info = draaw_mi.render(scene, version=args.version, time_budget=args.time_budget, post=post,
-                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True)
+                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True,
+                                  denoise=args.denoise)
     arr = np.array(image)
     draaw_mi.write_exr(args.output, arr, channels=info["channels"])
     if args.png:
         draaw_mi.write_png(args.png, arr[..., :3])
     finite = bool(np.isfinite(arr).all())
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
-          f"{info['spp']} spp, {info['integrator']}, {info['seconds']:.2f} s"
+          f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
+          f"{info['seconds']:.2f} s"
           + ("" if finite else ", WARNING: non-finite pixels") + ")")
     return 0
 
