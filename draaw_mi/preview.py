@@ -31,7 +31,10 @@ Example::
     >>> pv = Preview(scene, version="v4", max_depth=3, freeze=False)
     >>> pv.step().spp
     1
-    >>> pv.update({"m.roughness": 0.2}); pv.step().spp      # reset by the change
+    >>> pv.step().spp
+    2
+    >>> generation = pv.update({"m.roughness": 0.2})
+    >>> pv.step().spp                                       # the mean restarted
     1
 """
 from __future__ import annotations
