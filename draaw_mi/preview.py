@@ -15,7 +15,9 @@ its own (a script, a custom UI, the latency benchmark). Its phases, per frame:
    in step) and shown upscaled; it is never mixed into the mean.
 3. **Accumulate** full-resolution frames into a running mean (colour and the guide AOVs).
 4. **Publish** a :class:`PreviewFrame`: optionally denoised with Intel OIDN guided by the mean
-   albedo and normal (biased; :func:`draaw_mi.denoise`), then the post chain.
+   albedo and normal (biased; :func:`draaw_mi.denoise`; OIDN costs about as much as a
+   1-spp frame, so denoised refinement frames are published at most every
+   ``denoise_interval`` = 0.25 s), then the post chain.
 
 A worker thread (:meth:`Preview.start`) repeats this until ``max_spp`` and sleeps until the
 next change; a frame whose parameters went stale while it rendered is dropped (cancellation
@@ -148,6 +150,8 @@ class Preview:
         self._spp = 0
         self._frame_index = 0
         self._frozen: dict = {}
+        self._last_publish = 0.0
+        self.denoise_interval = 0.25         # seconds between denoised refinement frames
         self._lo = None
         self._thread = None
         self._stop = threading.Event()
@@ -250,7 +254,9 @@ class Preview:
 
     def step(self) -> PreviewFrame | None:
         """Render one frame now (in the calling thread) and publish it; ``None`` when the
-        parameters changed while it rendered (the stale frame is dropped)."""
+        parameters changed while it rendered (the stale frame is dropped), or when a denoised
+        preview accumulated it without publishing (at most one denoised refinement frame per
+        ``denoise_interval`` seconds; the first frame after a change is always published)."""
         with self._lock:
             generation = self._generation
             interactive = self._spp == 0 and self.interactive_scale < 1.0 and generation != self._shown_generation
@@ -269,16 +275,20 @@ class Preview:
             if generation != self._generation:
                 return None
             if interactive:
-                mean, spp = self._upscale(arr), 0
+                mean, spp = arr, 0           # denoised (cheaply) at its own size, then upscaled
             else:
                 self._acc = arr.astype(np.float64) if self._acc is None else self._acc + arr
                 self._spp += 1
                 mean, spp = (self._acc / self._spp).astype(np.float32), self._spp
+        if self.denoise and not interactive and spp > 1 and spp < self.max_spp and \
+                time.perf_counter() - self._last_publish < self.denoise_interval:
+            return None          # OIDN costs about a frame: refine several frames per denoise
         frame = self._finish(mean, spp, generation, interactive, render_s)
         with self._lock:
             if generation != self._generation:
                 return None
             self.frame = frame
+            self._last_publish = frame.t_ready
             self._shown_generation = generation
             self._wake.notify_all()
             callbacks = list(self._callbacks)
@@ -298,8 +308,11 @@ class Preview:
         if self.denoise and mean.shape[2] >= 9:
             from .denoise import denoise
             # channel order of the guides: N.X..N.Z then albedo.R..B (AOV_CHANNELS order)
-            image = denoise(np.ascontiguousarray(color), mean[..., 6:9], mean[..., 3:6])
+            image = denoise(np.ascontiguousarray(color), mean[..., 6:9], mean[..., 3:6],
+                            quality="fast" if interactive else "high")
             denoised = True
+        if interactive:
+            image, color = self._upscale(image), self._upscale(color)
         if self.post:
             from . import post as _post
             image = np.array(_post.apply(mi.TensorXf(np.ascontiguousarray(image)), self.post), dtype=np.float32)
