@@ -102,6 +102,8 @@ def _parser() -> argparse.ArgumentParser:
                    "also measure frame-time statistics along this path")
     b.add_argument("--frames", type=int, default=60, help="frames along --camera-path")
     b.add_argument("--no-progress", action="store_true")
+    b.add_argument("--denoise", help="comma-separated spp list: also measure OIDN-denoised renders "
+                   "at these spp (biased points; needs pyoidn)")
 
     q = sub.add_parser("post", help="apply a post-processing chain to an EXR")
     q.add_argument("input", help="input EXR")
@@ -277,7 +279,8 @@ def _cmd_bench(args) -> int:
     progress = (not args.no_progress) and sys.stderr.isatty()
     result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
                              adaptive=(None, args.adaptive) if args.adaptive else (None,),
-                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress)
+                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress,
+                             **_bench_denoise(args))
     print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
     if args.camera_path:
         try:
@@ -297,6 +300,14 @@ def _cmd_bench(args) -> int:
                   f"p90 {r['p90_s'] * 1e3:.1f} ms")
         print(f"wrote {path}")
     return 0
+
+
+def _bench_denoise(args) -> dict:
+    if not args.denoise:
+        return {}
+    from draaw_mi.denoise import _pyoidn
+    _pyoidn()                                     # the install hint before the study starts
+    return {"denoise_spp": _int_list(args.denoise, "--denoise")}
 
 
 def _cmd_post(args) -> int:
