@@ -29,3 +29,9 @@ test-all: setup
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
+
+# JupyterLab on notebooks/ with the widgets and the denoiser installed (material_tuning.ipynb).
+.PHONY: notebook
+notebook: setup
+	$(BIN)/python -m pip install -q -e ".[notebooks]"
+	cd notebooks && ../$(BIN)/jupyter lab

@@ -116,7 +116,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     aovs = s.get("aovs", []) if aovs is None else aovs
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image
-        aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs)
+        aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs, version)
     if adaptive is not None:
         return _render_adaptive(scene, adaptive, version, spp, seed, max_depth, params, aovs, post,
                                 return_info)
@@ -181,8 +181,9 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
     return image
 
 
-def _denoise_aovs(params, adaptive, aovs):
-    """(AOVs to render, the ones added only to guide the denoiser) for ``denoise=True``."""
+def _denoise_aovs(params, adaptive, aovs, version):
+    """(AOVs to render, the ones added only to guide the denoiser) for ``denoise=True``.
+    Mitsuba's own integrators (``path``, ``prb``) have no AOV outputs: colour-only denoising."""
     from .denoise import AUX_AOVS, _pyoidn
     if params is not None:
         raise RenderError("render: denoise=True is not differentiable; drop params= or denoise=")
@@ -190,6 +191,8 @@ def _denoise_aovs(params, adaptive, aovs):
         raise RenderError("render: denoise=True cannot be combined with adaptive= (no AOVs there)")
     _pyoidn()                            # the one-line install hint before any rendering
     aovs = [aovs] if isinstance(aovs, str) else list(aovs)
+    if not resolve_version(version).startswith("draaw"):
+        return aovs, []
     asked = {a.strip() for item in aovs for a in str(item).split(",")}
     if "all" in asked:
         return aovs, []

@@ -101,6 +101,10 @@ def test_render_denoise_channels_and_errors(cornell):
     assert info["channels"] == ["R", "G", "B", "depth.Z"] and img.shape == (64, 64, 4)
     raw = np.array(draaw_mi.render(cornell, spp=2, seed=1, aovs=["depth"]))
     np.testing.assert_array_equal(np.array(img)[..., 3], raw[..., 3])     # AOVs not denoised
+    img, info = draaw_mi.render(cornell, version="path", spp=2, seed=1, denoise=True, return_info=True)
+    assert info["channels"] == ["R", "G", "B"] and info["denoised"]       # colour-only guides
+    raw = np.array(draaw_mi.render(cornell, version="path", spp=2, seed=1))
+    np.testing.assert_allclose(np.array(img), draaw_mi.denoise(raw), rtol=1e-5, atol=1e-6)
     with pytest.raises(RenderError, match="not differentiable"):
         draaw_mi.render(cornell, spp=1, denoise=True, params=cornell.params)
     with pytest.raises(RenderError, match="adaptive"):
