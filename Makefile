@@ -25,6 +25,7 @@ test: setup
 	$(BIN)/python -m pytest -m "not slow" -q
 
 test-all: setup
+	$(BIN)/python -m pip install -q -e ".[notebooks,browser]"
 	$(BIN)/python -m pytest -q
 
 clean:
