@@ -63,6 +63,7 @@ def measure(args) -> str:
 
     if args.threads:
         dr.set_thread_count(args.threads)
+    load0 = os.getloadavg()
     scene = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "cornell.toml"), resolution=(args.size, args.size))
     rng = random.Random(0)
     previews = [(name, Preview(scene, **opts)) for name, opts in CONFIGS]
@@ -140,7 +141,9 @@ def measure(args) -> str:
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Dr.Jit threads {dr.thread_count()}, "
         f"Python {platform.python_version()}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. "
         "**The machine was shared with other jobs during the run**: absolute times are noisy; the "
-        "configurations were interleaved so that load hit them alike.", "",
+        "configurations were interleaved so that load hit them alike. Load average (1 min) at the "
+        f"start {load0[0]:.1f}, at the end {os.getloadavg()[0]:.1f} (2 cores: above 2 means other jobs waited "
+        "for the CPU too).", "",
         f"Scene `scenes/cornell.toml` at {args.size}x{args.size}, version {scene.settings['version']}, "
         f"max_depth {scene.settings['max_depth']}, 1 spp per frame.", "",
         "## Change -> new frame available", "",

@@ -321,8 +321,57 @@ class MaterialTuner:
         get = W.Button(description="get camera")
         self.camera_text = W.Textarea(layout=W.Layout(width="380px", height="90px"))
         get.on_click(self._guard(lambda _b: self._get_camera()))
+        # a camera path (GO-Draaw camera_positions.json keyframes), stepped or played
+        self.path_file = W.Text(placeholder="camera_positions.json", description="camera path")
+        load = W.Button(description="load path")
+        load.on_click(self._guard(lambda _b: self.load_camera_path(self.path_file.value.strip())))
+        self.path_frame = W.IntSlider(value=0, min=0, max=0, description="path frame", disabled=True)
+        self.path_play = W.Play(value=0, min=0, max=0, interval=100, disabled=True)
+        W.jslink((self.path_play, "value"), (self.path_frame, "value"))
+        self.path_frame.observe(self._guard(lambda ch: self._path_step(int(ch["new"]))), "value")
+        self._path = None
         rows = [self.fov] + ([self.yaw, self.pitch, self.distance, get, self.camera_text] if self.camera else [])
+        rows += [W.HBox([self.path_file, load]), W.HBox([self.path_play, self.path_frame])]
         return W.VBox(rows)
+
+    def load_camera_path(self, keys, frames: int = 120):
+        """Load keyframes (a GO-Draaw ``camera_positions.json`` file name or a list of
+        ``(x, y, z, theta, phi)`` / dicts) and interpolate ``frames`` frames along them; the
+        *path frame* slider and its play button then move the camera."""
+        from .camera_path import interpolate
+        if isinstance(keys, str):
+            if not keys:
+                raise DraawError("camera path: no file name given")
+            try:
+                with open(keys) as fh:
+                    keys = json.load(fh)
+            except (OSError, json.JSONDecodeError) as e:
+                raise DraawError(f"camera path {keys!r}: {e}") from None
+        path = interpolate(keys, duration=frames / 60.0, fps=60)
+        self._path = path
+        for w in (self.path_frame, self.path_play):
+            w.max = len(path) - 1
+            w.disabled = False
+        self._path_step(int(self.path_frame.value))
+        return path
+
+    def _path_step(self, i):
+        if self._path is None:
+            return
+        from .scene.camera import go_draaw_look_at
+        x, y, z, theta, phi = self._path[min(i, len(self._path) - 1)]
+        try:
+            o, t, up = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
+        except ValueError as e:
+            raise DraawError(f"camera path frame {i}: {e}") from None
+        self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
+                       "up": list(map(float, up)), "fov": float(self.fov.value)}
+        self._syncing = True                 # the orbit is relative to the path's camera
+        try:
+            self.yaw.value, self.pitch.value, self.distance.value = 0.0, 0.0, 1.0
+        finally:
+            self._syncing = False
+        self._set_camera()
 
     def _camera_now(self):
         return tuning.orbit(self.camera, self.yaw.value, self.pitch.value, self.distance.value)

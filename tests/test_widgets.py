@@ -203,3 +203,15 @@ def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
     finally:
         t.close()
     assert not t.preview.running
+
+
+def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
+    keys = [(0.0, 1.0, 6.0, -1.5708, 1.5708), (2.0, 1.5, 5.0, -1.2, 1.5)]
+    path = tuner.load_camera_path(keys, frames=10)
+    assert len(path) == 10 and tuner.path_frame.max == 9 and not tuner.path_play.disabled
+    tuner.path_frame.value = 9
+    tuner.refresh()
+    m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
+    np.testing.assert_allclose(m[:3, 3], keys[-1][:3], atol=1e-5)      # camera at the last keyframe
+    tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
+    assert "camera path" in tuner.message.value
