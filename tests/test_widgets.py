@@ -215,3 +215,41 @@ def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
     np.testing.assert_allclose(m[:3, 3], keys[-1][:3], atol=1e-5)      # camera at the last keyframe
     tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
     assert "camera path" in tuner.message.value
+
+
+def test_texture_file_and_resolution_scale_reload_the_scene(tuner, tmp_path):
+    import matplotlib.image
+    tex = tmp_path / "checker.png"
+    checker = (np.indices((8, 8)).sum(axis=0) % 2).astype(np.float32)
+    matplotlib.image.imsave(str(tex), np.dstack([checker, 0.2 + 0 * checker, 1 - checker]))
+    tuner.controls["ball"]["roughness"].value = 0.2                 # survives the reload
+    tuner.controls["ball"]["texture"].value = str(tex)
+    tuner._guard(lambda: tuner._apply_textures("ball"))()
+    assert tuner.message.value == ""
+    assert "ball.base_color.data" in tuner.scene.params            # now a bitmap texture
+    assert tuner.controls["ball"]["base_color"].disabled
+    assert float(np.array(tuner.scene.params["ball.roughness.value"]).ravel()[0]) == pytest.approx(0.2)
+    tuner.controls_render["scale"].value = 0.5
+    f = tuner.refresh()
+    assert f.image.shape == (12, 16, 3) and tuner.scene.resolution == (16, 12)
+    out = str(tmp_path / "t.toml")
+    tuner.save(out)
+    again = draaw_mi.load_scene(out)
+    assert again.resolution == (32, 24) and "ball.base_color.data" in again.params
+
+
+def test_snap_light_to_camera_moves_point_lights(tuner):
+    tuner.snap_light.value = True
+    tuner.yaw.value = 40.0
+    tuner.refresh()
+    origin = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)[:3, 3]
+    np.testing.assert_allclose(np.array(tuner.scene.params["point_light0.position"]).ravel(), origin, atol=1e-5)
+
+
+def test_missing_ipywidgets_is_one_clear_error(monkeypatch):
+    import importlib
+    import sys
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)
+    monkeypatch.delitem(sys.modules, "draaw_mi.widgets")
+    with pytest.raises(draaw_mi.DraawError, match=r"pip install 'draaw-mi\[notebooks\]'"):
+        importlib.import_module("draaw_mi.widgets")
