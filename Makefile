@@ -25,7 +25,14 @@ test: setup
 	$(BIN)/python -m pytest -m "not slow" -q
 
 test-all: setup
+	$(BIN)/python -m pip install -q -e ".[notebooks,browser]"
 	$(BIN)/python -m pytest -q
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
+
+# JupyterLab on notebooks/ with the widgets and the denoiser installed (material_tuning.ipynb).
+.PHONY: notebook
+notebook: setup
+	$(BIN)/python -m pip install -q -e ".[notebooks]"
+	cd notebooks && ../$(BIN)/jupyter lab

@@ -61,8 +61,10 @@ from .render import render  # noqa: E402
 from .scene import load_scene  # noqa: E402
 from .fit import FitResult, fit  # noqa: E402
 from . import post  # noqa: E402
+from .denoise import denoise  # noqa: E402  (pyoidn is imported only when called)
 
 __all__ = [
     "DraawError", "SceneError", "ParameterError", "RenderError", "IOFailure", "VARIANT",
     "register_plugins", "load_scene", "render", "write_exr", "read_exr", "write_png", "fit", "FitResult", "post",
+    "denoise",
 ]

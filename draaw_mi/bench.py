@@ -38,10 +38,12 @@ class Setting:
     spp: int
     max_depth: int
     adaptive: int | None = None
+    denoise: bool = False          # OIDN on the colour (albedo/normal guides): biased
 
     @property
     def label(self) -> str:
-        return f"{self.version}{'+adaptive' + str(self.adaptive) if self.adaptive else ''}"
+        return (f"{self.version}{'+adaptive' + str(self.adaptive) if self.adaptive else ''}"
+                f"{'+oidn (biased)' if self.denoise else ''}")
 
 
 # --------------------------------------------------------------------------- error metrics
@@ -106,7 +108,7 @@ def _timed_render(scene, s: Setting, seed: int) -> tuple[np.ndarray, float]:
     from .render import render
     t0 = time.perf_counter()
     img = render(scene, version=s.version, spp=s.spp, seed=seed, max_depth=s.max_depth,
-                 adaptive=s.adaptive, post=[])
+                 adaptive=s.adaptive, post=[], **({"denoise": True} if s.denoise else {}))
     dr.eval(img)
     dr.sync_thread()
     arr = np.array(img)
@@ -175,8 +177,12 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
 def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024),
               max_depths=None, adaptive=(None, 8), adaptive_spp=(1,), repeats: int = 3,
               resolution=None, gt_spp: int = 4096, out_dir: str = "out/bench", cache_dir: str | None = None,
-              progress: bool = True, seed: int = 1) -> dict:
-    """Run the grid on every scene; write results into ``out_dir`` and return them."""
+              progress: bool = True, seed: int = 1, denoise_spp=()) -> dict:
+    """Run the grid on every scene; write results into ``out_dir`` and return them.
+
+    ``denoise_spp``: also measure every version at these spp with OIDN denoising
+    (``render(..., denoise=True)``; labelled ``+oidn (biased)``; needs ``pyoidn``).
+    """
     from . import load_scene
     from .bench_report import write_report
 
@@ -193,6 +199,8 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
             for v in versions:
                 for spp in spps:
                     plan.append((s, Setting(v, spp, d, None)))
+                for spp in denoise_spp:
+                    plan.append((s, Setting(v, spp, d, None, True)))
                 if adaptive and any(a for a in adaptive):
                     for a in adaptive:
                         if a:

@@ -11,7 +11,7 @@ import numpy as np
 from .io import atomic_path
 
 COLUMNS = ["scene", "label", "version", "adaptive", "max_depth", "spp", "time_s", "time_min_s", "compile_s",
-           "rmse", "relmse", "ciede2000", "bias_rmse", "finite", "resolution"]
+           "rmse", "relmse", "ciede2000", "bias_rmse", "finite", "resolution", "denoise"]
 
 
 def _write_text(path: str, text: str) -> None:
@@ -51,7 +51,7 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
     """At every RMSE level reached by ``rivals``, is ``subject`` the fastest to reach it?"""
     by_label: dict = {}
     for r in rows:
-        if r["scene"] == scene and r["max_depth"] == depth and not r["adaptive"]:
+        if r["scene"] == scene and r["max_depth"] == depth and not r["adaptive"] and not r.get("denoise"):
             by_label.setdefault(r["label"], []).append((r["time_s"], r["rmse"]))
     if subject not in by_label:
         return {}
@@ -82,7 +82,7 @@ def _plot_error_vs_time(rows, scene, depth, path):
     for lab in labels:
         pts = sorted((r["time_s"], r["rmse"], r["spp"]) for r in sel if r["label"] == lab)
         t, e, s = zip(*pts)
-        style = "o--" if "adaptive" in lab else "o-"
+        style = "o--" if "adaptive" in lab else "s:" if "oidn" in lab else "o-"
         ax.plot(t, e, style, label=lab, ms=4)
         for ti, ei, si in pts[:: max(1, len(pts) // 4)]:
             ax.annotate(str(si), (ti, ei), fontsize=6, alpha=0.6)

@@ -61,6 +61,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads (default: all cores)")
     r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    r.add_argument("--denoise", action="store_true",
+                   help="denoise with Intel OIDN guided by albedo/normal AOVs (biased; needs pyoidn)")
 
     i = sub.add_parser("info", help="show the set-up, or what a scene contains and calls for")
     i.add_argument("scene", nargs="?", help="scene file")
@@ -101,6 +103,8 @@ def _parser() -> argparse.ArgumentParser:
                    "also measure frame-time statistics along this path")
     b.add_argument("--frames", type=int, default=60, help="frames along --camera-path")
     b.add_argument("--no-progress", action="store_true")
+    b.add_argument("--denoise", help="comma-separated spp list: also measure OIDN-denoised renders "
+                   "at these spp (biased points; needs pyoidn)")
 
     q = sub.add_parser("post", help="apply a post-processing chain to an EXR")
     q.add_argument("input", help="input EXR")
@@ -141,14 +145,16 @@ def _cmd_render(args) -> int:
     if args.post:
         post = _load_chain(args.post)
     image, info = draaw_mi.render(scene, version=args.version, time_budget=args.time_budget, post=post,
-                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True)
+                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True,
+                                  denoise=args.denoise)
     arr = np.array(image)
     draaw_mi.write_exr(args.output, arr, channels=info["channels"])
     if args.png:
         draaw_mi.write_png(args.png, arr[..., :3])
     finite = bool(np.isfinite(arr).all())
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
-          f"{info['spp']} spp, {info['integrator']}, {info['seconds']:.2f} s"
+          f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
+          f"{info['seconds']:.2f} s"
           + ("" if finite else ", WARNING: non-finite pixels") + ")")
     return 0
 
@@ -314,7 +320,8 @@ def _cmd_bench(args) -> int:
         return 0
     result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
                              adaptive=(None, args.adaptive) if args.adaptive else (None,),
-                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress)
+                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress,
+                             **_bench_denoise(args))
     print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
     if args.camera_path:
         try:
@@ -334,6 +341,14 @@ def _cmd_bench(args) -> int:
                   f"p90 {r['p90_s'] * 1e3:.1f} ms")
         print(f"wrote {path}")
     return 0
+
+
+def _bench_denoise(args) -> dict:
+    if not args.denoise:
+        return {}
+    from draaw_mi.denoise import _pyoidn
+    _pyoidn()                                     # the install hint before the study starts
+    return {"denoise_spp": _int_list(args.denoise, "--denoise")}
 
 
 def _cmd_post(args) -> int:

@@ -70,7 +70,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
-           integrator_options: dict | None = None, adaptive: int | None = None):
+           integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
     """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = 3 + AOV channels).
 
     Parameters
@@ -89,6 +89,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``.
     adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
         interpolation (see :mod:`draaw_mi.adaptive`; biased, not differentiable, no AOVs).
+    denoise: denoise the colour with Intel OIDN (:func:`draaw_mi.denoise`, needs ``pyoidn``),
+        guided by albedo and normal AOVs rendered for it (returned only if asked for in
+        ``aovs``); applied before the post chain. Biased, not differentiable.
     """
     from .scene import DraawScene, load_scene
 
@@ -112,6 +115,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     aovs = s.get("aovs", []) if aovs is None else aovs
+    if denoise:     # ---- denoising: check early, render the guide AOVs with the image
+        aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs, version)
     if adaptive is not None:
         return _render_adaptive(scene, adaptive, version, spp, seed, max_depth, params, aovs, post,
                                 return_info)
@@ -144,12 +149,15 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if bar is not None:
         bar.close()
     names = ["R", "G", "B"] + list(integrator.aov_names())
+    if denoise:
+        image, names = _denoised(image, names, extra_aovs)
     chain = s.get("post", []) if post is None else post
     if chain:
         image = _apply_post(image, chain)
     if return_info:
         return image, {"spp": done, "passes": -(-done // pass_spp), "seconds": time.perf_counter() - t0,
-                       "channels": names, "version": version, "integrator": resolve_version(version)}
+                       "channels": names, "version": version, "integrator": resolve_version(version),
+                       "denoised": bool(denoise)}
     return image
 
 
@@ -171,6 +179,38 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
                        "channels": ["R", "G", "B"], "version": version,
                        "integrator": resolve_version(version), "adaptive": stats}
     return image
+
+
+def _denoise_aovs(params, adaptive, aovs, version):
+    """(AOVs to render, the ones added only to guide the denoiser) for ``denoise=True``.
+    Mitsuba's own integrators (``path``, ``prb``) have no AOV outputs: colour-only denoising."""
+    from .denoise import AUX_AOVS, _pyoidn
+    if params is not None:
+        raise RenderError("render: denoise=True is not differentiable; drop params= or denoise=")
+    if adaptive is not None:
+        raise RenderError("render: denoise=True cannot be combined with adaptive= (no AOVs there)")
+    _pyoidn()                            # the one-line install hint before any rendering
+    aovs = [aovs] if isinstance(aovs, str) else list(aovs)
+    if not resolve_version(version).startswith("draaw"):
+        return aovs, []
+    asked = {a.strip() for item in aovs for a in str(item).split(",")}
+    if "all" in asked:
+        return aovs, []
+    extra = [a for a in AUX_AOVS if a not in asked]
+    return aovs + extra, extra
+
+
+def _denoised(image, names, extra_aovs):
+    from .denoise import denoise_aovs
+    from .integrators.common import AOV_CHANNELS
+    out = denoise_aovs(image, names)
+    drop = {c for a in extra_aovs for c in AOV_CHANNELS[a]}
+    keep = [i for i, n in enumerate(names) if n not in drop]
+    if len(keep) < len(names):
+        import numpy as np
+        out = mi.TensorXf(np.ascontiguousarray(np.asarray(out)[..., keep]))
+        names = [names[i] for i in keep]
+    return out, names
 
 
 def _check_int(name, value, lo):

@@ -1,0 +1,391 @@
+"""Progressive previews: 1-spp frames, a running mean while idle, reset on every change.
+
+:class:`Preview` is the render engine behind :class:`draaw_mi.widgets.MaterialTuner`, usable on
+its own (a script, a custom UI, the latency benchmark). Its phases, per frame:
+
+1. **Apply changes.** Pending parameter values (``{"material.parameter": value}``, camera,
+   lights) are written with ``params.update()`` under the scene's render lock. Values live in
+   Dr.Jit arrays, so a slider move never recompiles a kernel; the seed is an opaque
+   ``mi.UInt32`` for the same reason.
+2. **Render one sample per pixel**, through a ``dr.freeze``-recorded function (replays the
+   recorded kernels without re-tracing the Python integrator: measured 0.19 -> 0.13 s per
+   256² V4 frame on a shared 2-core machine, see ``benchmarks/results/preview_latency.md``;
+   ``freeze=False`` turns it off). The first frame after a change can be rendered at a
+   reduced ``interactive_scale`` (a second, private copy of the scene; its parameters are kept
+   in step) and shown upscaled; it is never mixed into the mean.
+3. **Accumulate** full-resolution frames into a running mean (colour and the guide AOVs).
+4. **Publish** a :class:`PreviewFrame`: optionally denoised with Intel OIDN guided by the mean
+   albedo and normal (biased; :func:`draaw_mi.denoise`; OIDN costs about as much as a
+   1-spp frame, so denoised refinement frames are published at most every
+   ``denoise_interval`` = 0.25 s), then the post chain.
+
+A worker thread (:meth:`Preview.start`) repeats this until ``max_spp`` and sleeps until the
+next change; a frame whose parameters went stale while it rendered is dropped (cancellation
+at frame granularity: a running kernel cannot be interrupted). :meth:`Preview.stop` ends it.
+
+Example::
+
+    >>> import draaw_mi
+    >>> from draaw_mi.preview import Preview
+    >>> scene = draaw_mi.load_scene({"render": {"resolution": [16, 16], "filter": "box"},
+    ...     "materials": {"m": {"roughness": 0.5}}, "shapes": [{"type": "sphere", "material": "m"}],
+    ...     "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+    >>> pv = Preview(scene, version="v4", max_depth=3, freeze=False)
+    >>> pv.step().spp
+    1
+    >>> pv.step().spp
+    2
+    >>> generation = pv.update({"m.roughness": 0.2})
+    >>> pv.step().spp                                       # the mean restarted
+    1
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .errors import ParameterError, suggest
+from .render import _scene_lock, make_integrator, pass_seeds
+
+GUIDES = ("albedo", "normal")
+
+
+@dataclass
+class PreviewFrame:
+    """One published preview image and what it holds."""
+
+    image: np.ndarray          # (H, W, 3) float32, linear, denoised / post-processed as asked
+    raw: np.ndarray            # (H, W, 3) the running mean itself (no denoise, no post)
+    spp: int                   # samples per pixel in the mean (0 for an interactive frame)
+    generation: int            # parameter generation the frame shows
+    interactive: bool          # a reduced-resolution first frame after a change
+    denoised: bool
+    render_s: float            # seconds spent rendering this frame
+    t_ready: float             # time.perf_counter() when it became available
+
+
+def _value(v):
+    """A Python value -> what ``params[key] = ...`` accepts."""
+    if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
+        return mi.Color3f(*[float(x) for x in v])
+    return v
+
+
+def _check_value(name, key, v):
+    """Finite numbers, and the draaw BSDF's ranges for its parameters (ParameterError)."""
+    from .materials.draaw_bsdf import SCALAR_PARAMS
+    nums = None
+    if isinstance(v, bool):
+        raise ParameterError(f"Preview.update: {name}={v!r}; expected a number")
+    if isinstance(v, (int, float)):
+        nums = [float(v)]
+    elif isinstance(v, (list, tuple, np.ndarray)):
+        try:
+            nums = [float(x) for x in v]
+        except (TypeError, ValueError):
+            raise ParameterError(f"Preview.update: {name}={v!r}; expected numbers") from None
+        if len(nums) != 3:
+            raise ParameterError(f"Preview.update: {name}={v!r}; expected 3 numbers (an RGB colour)")
+    if nums is None:
+        return                                   # a Mitsuba value (transform, colour): as is
+    if not all(math.isfinite(x) for x in nums):
+        raise ParameterError(f"Preview.update: {name}={v!r}; expected finite numbers")
+    parts = key.split(".")
+    param = parts[-2] if len(parts) >= 3 and parts[-1] == "value" else None
+    if param in SCALAR_PARAMS:
+        lo, hi = SCALAR_PARAMS[param][1:]
+        if not all(lo <= x <= hi for x in nums):
+            raise ParameterError(f"Preview.update: {name}={v!r}; expected a number in [{lo}, {hi}]")
+    elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
+        raise ParameterError(f"Preview.update: {name}={v!r}; expected values >= 0")
+
+
+class Preview:
+    """Progressive running-mean renderer of one scene (see the module docstring).
+
+    ==================  ========================================================================
+    Parameter           Meaning
+    ==================  ========================================================================
+    ``scene``           a :class:`~draaw_mi.scene.DraawScene` (or anything ``load_scene`` takes)
+    ``version``         integrator version (default: the scene's)
+    ``max_depth``       path depth (default: the scene's)
+    ``max_spp``         stop refining at this many samples per pixel (default 1024)
+    ``denoise``         denoise published frames with OIDN (needs ``pyoidn``; biased)
+    ``post``            post chain for published frames (default: the scene's; ``[]``: none)
+    ``interactive_scale``  resolution factor of the first frame after a change (1: full)
+    ``freeze``          record the 1-spp render with ``dr.freeze`` and replay it
+    ``seed``            base seed; frame ``i`` uses an independent seed derived from it
+    ==================  ========================================================================
+    """
+
+    def __init__(self, scene, version: str | None = None, max_depth: int | None = None,
+                 max_spp: int = 1024, denoise: bool = False, post=None, interactive_scale: float = 1.0,
+                 freeze: bool = True, seed: int = 0):
+        from .scene import DraawScene, load_scene
+        self.scene = scene if isinstance(scene, DraawScene) else load_scene(scene)
+        s = self.scene.settings
+        self.version = s["version"] if version is None else version
+        self.max_depth = s["max_depth"] if max_depth is None else max_depth
+        self.post = s.get("post", []) if post is None else post
+        if not (0.0 < float(interactive_scale) <= 1.0):
+            raise ParameterError(f"Preview: interactive_scale={interactive_scale!r}; expected a number in (0, 1]")
+        self.interactive_scale = float(interactive_scale)
+        self.max_spp, self.freeze, self.seed = int(max_spp), bool(freeze), int(seed)
+        self.denoise = bool(denoise)
+        if self.denoise:
+            from .denoise import _pyoidn
+            _pyoidn()
+        self._lock = threading.RLock()            # guards the fields below (not the render)
+        self._wake = threading.Condition(self._lock)
+        self._pending: dict = {}
+        self._generation = 0
+        self._shown_generation = -1
+        self._acc = None
+        self._spp = 0
+        self._frame_index = 0
+        self._frozen: dict = {}
+        self._last_publish = 0.0
+        self.denoise_interval = 0.25         # seconds between denoised refinement frames
+        self._lo = None
+        self._thread = None
+        self._stop = threading.Event()
+        self._callbacks = []
+        self.frame: PreviewFrame | None = None
+        self.error: Exception | None = None
+        self._integrator = self._make_integrator()
+
+    # ------------------------------------------------------------------ configuration
+    def _make_integrator(self):
+        return make_integrator(self.version, self.max_depth, False, GUIDES if self.denoise else ())
+
+    def configure(self, **options):
+        """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or
+        ``interactive_scale`` and restart the accumulation (a new version or depth compiles
+        its kernel once)."""
+        allowed = ("version", "max_depth", "denoise", "post", "max_spp", "interactive_scale")
+        for k in options:
+            if k not in allowed:
+                raise ParameterError(f"Preview.configure: unknown option {k!r}{suggest(k, allowed)}")
+        with self._lock:
+            for k, v in options.items():
+                setattr(self, k, v)
+            if options.get("denoise"):
+                from .denoise import _pyoidn
+                _pyoidn()
+            self._integrator = self._make_integrator()
+            self._bump()
+
+    def key(self, name: str) -> str:
+        """``material.parameter`` or a full ``mi.traverse`` key -> the traverse key."""
+        return self.scene.key(name)
+
+    def update(self, values: dict) -> int:
+        """Queue parameter changes (``{"gold.roughness": 0.3, "sensor.x_fov": 40}``); the next
+        frame shows them and the mean restarts. Returns the new generation number."""
+        checked = {}
+        for name, v in values.items():
+            key = self.key(name)
+            _check_value(name, key, v)
+            checked[key] = v
+        with self._lock:
+            self._pending.update(checked)
+            return self._bump()
+
+    def _bump(self) -> int:
+        self._generation += 1
+        self._acc, self._spp = None, 0
+        self.error = None
+        self._wake.notify_all()
+        return self._generation
+
+    def reset(self) -> int:
+        """Restart the accumulation (e.g. after changing the scene from outside)."""
+        with self._lock:
+            return self._bump()
+
+    # ------------------------------------------------------------------ one frame
+    def _apply_pending(self):
+        with self._lock:
+            pending, self._pending = self._pending, {}
+        if not pending:
+            return
+        scenes = [self.scene] + ([self._lo] if self._lo is not None else [])
+        with _scene_lock(self.scene):
+            for sc in scenes:
+                p = sc.params
+                for key, v in pending.items():
+                    p[key] = _value(v)
+                p.update()
+
+    def _lo_scene(self):
+        if self._lo is None:
+            w, h = self.scene.resolution
+            s = self.interactive_scale
+            self._lo = self.scene.with_resolution(max(1, round(w * s)), max(1, round(h * s)))
+            p = self._lo.params                  # copy every current value over
+            src = self.scene.params
+            for key in p.keys():
+                if key.endswith((".faces", ".vertex_positions", ".vertex_normals", ".vertex_texcoords")):
+                    continue
+                if key.startswith("sensor.film"):
+                    continue
+                try:
+                    p[key] = src[key]
+                except Exception:  # noqa: BLE001 - a non-writable entry: keep the loaded value
+                    pass
+            p.update()
+        return self._lo
+
+    def _render_fn(self):
+        integrator = self._integrator
+        key = id(integrator)
+        fn = self._frozen.get(key)
+        if fn is None:
+            def render_1spp(scene, seed):
+                return mi.render(scene, integrator=integrator, seed=seed, spp=1)
+            fn = self._frozen[key] = dr.freeze(render_1spp) if self.freeze else render_1spp
+        return fn
+
+    def step(self) -> PreviewFrame | None:
+        """Render one frame now (in the calling thread) and publish it; ``None`` when the
+        parameters changed while it rendered (the stale frame is dropped), or when a denoised
+        preview accumulated it without publishing (at most one denoised refinement frame per
+        ``denoise_interval`` seconds; the first frame after a change is always published)."""
+        with self._lock:
+            generation = self._generation
+            interactive = self._spp == 0 and self.interactive_scale < 1.0 and generation != self._shown_generation
+            index = self._frame_index
+            self._frame_index += 1
+        self._apply_pending()
+        target = self._lo_scene() if interactive else self.scene
+        seed = dr.opaque(mi.UInt32, pass_seeds(self.seed, index + 2)[-1])
+        fn = self._render_fn()
+        t0 = time.perf_counter()
+        with _scene_lock(self.scene):
+            img = fn(target.mi_scene, seed)
+            arr = np.array(img, dtype=np.float32)       # evaluates and waits
+        render_s = time.perf_counter() - t0
+        with self._lock:
+            if generation != self._generation:
+                return None
+            if interactive:
+                mean, spp = arr, 0           # denoised (cheaply) at its own size, then upscaled
+            else:
+                self._acc = arr.astype(np.float64) if self._acc is None else self._acc + arr
+                self._spp += 1
+                mean, spp = (self._acc / self._spp).astype(np.float32), self._spp
+        if self.denoise and not interactive and spp > 1 and spp < self.max_spp and \
+                time.perf_counter() - self._last_publish < self.denoise_interval:
+            return None          # OIDN costs about a frame: refine several frames per denoise
+        frame = self._finish(mean, spp, generation, interactive, render_s)
+        with self._lock:
+            if generation != self._generation:
+                return None
+            self.frame = frame
+            self._last_publish = frame.t_ready
+            self._shown_generation = generation
+            self._wake.notify_all()
+            callbacks = list(self._callbacks)
+        for cb in callbacks:
+            cb(frame)
+        return frame
+
+    def _upscale(self, arr):
+        h, w = self.scene.resolution[1], self.scene.resolution[0]
+        rows = np.minimum((np.arange(h) * arr.shape[0]) // h, arr.shape[0] - 1)
+        cols = np.minimum((np.arange(w) * arr.shape[1]) // w, arr.shape[1] - 1)
+        return arr[rows][:, cols]
+
+    def _finish(self, mean, spp, generation, interactive, render_s) -> PreviewFrame:
+        color = mean[..., :3]
+        image, denoised = color, False
+        if self.denoise and mean.shape[2] >= 9:
+            from .denoise import denoise
+            # channel order of the guides: N.X..N.Z then albedo.R..B (AOV_CHANNELS order)
+            image = denoise(np.ascontiguousarray(color), mean[..., 6:9], mean[..., 3:6],
+                            quality="fast" if interactive else "high")
+            denoised = True
+        if interactive:
+            image, color = self._upscale(image), self._upscale(color)
+        if self.post:
+            from . import post as _post
+            image = np.array(_post.apply(mi.TensorXf(np.ascontiguousarray(image)), self.post), dtype=np.float32)
+        return PreviewFrame(image=image, raw=color, spp=spp, generation=generation, interactive=interactive,
+                            denoised=denoised, render_s=render_s, t_ready=time.perf_counter())
+
+    # ------------------------------------------------------------------ worker thread
+    def on_frame(self, callback):
+        """Call ``callback(frame)`` (from the worker thread) for every published frame."""
+        with self._lock:
+            self._callbacks.append(callback)
+
+    def start(self):
+        """Start the worker thread (idempotent)."""
+        if self._thread is not None and self._thread.is_alive():
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="draaw-mi-preview", daemon=True)
+        self._thread.start()
+
+    def _idle(self) -> bool:
+        return self._spp >= self.max_spp and not self._pending and self._shown_generation == self._generation
+
+    def _run(self):
+        while not self._stop.is_set():
+            with self._lock:
+                while self._idle() and not self._stop.is_set():
+                    self._wake.wait(0.5)
+            if self._stop.is_set():
+                break
+            try:
+                self.step()
+            except Exception as e:  # noqa: BLE001 - shown by the UI; the thread waits for a change
+                with self._lock:
+                    self.error = e
+                    self._spp = self.max_spp
+                    self._shown_generation = self._generation
+                    self._wake.notify_all()
+
+    def stop(self, timeout: float = 10.0):
+        """Ask the worker to stop after its current frame and wait for it."""
+        self._stop.set()
+        with self._lock:
+            self._wake.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def wait(self, generation: int | None = None, spp: int = 0, timeout: float = 30.0) -> PreviewFrame | None:
+        """Block until a frame of ``generation`` (default: the latest) with at least ``spp``
+        samples (0: any frame, interactive included) is published; ``None`` on timeout."""
+        deadline = time.perf_counter() + timeout
+        with self._lock:
+            g = self._generation if generation is None else generation
+            while True:
+                f = self.frame
+                if f is not None and f.generation >= g and f.spp >= spp:
+                    return f
+                if self.error is not None and self._shown_generation >= g:
+                    return None
+                left = deadline - time.perf_counter()
+                if left <= 0:
+                    return None
+                self._wake.wait(min(left, 0.5))
+
+    @property
+    def generation(self) -> int:
+        return self._generation
+
+    @property
+    def spp(self) -> int:
+        return self._spp

@@ -1,0 +1,235 @@
+"""Helpers of the material tuner that need no widgets: material values, lights, the orbit
+camera, frame encoding, errors against a reference, saving and the Python snippet.
+
+Kept apart from :mod:`draaw_mi.widgets` so that scripts and tests can use them without
+ipywidgets.
+
+>>> orbit({"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0]}, yaw=90)[0].round(6).tolist()
+[4.0, 0.0, 0.0]
+"""
+from __future__ import annotations
+
+import copy
+import io
+import math
+
+import numpy as np
+
+from .errors import ParameterError
+from .materials.draaw_bsdf import ALL_PARAMS, COLOR_PARAMS, SCALAR_PARAMS
+
+LIGHT_SUFFIXES = (".emitter.radiance.value", ".radiance.value", ".intensity.value", ".irradiance.value")
+
+
+# --------------------------------------------------------------------------- materials
+def material_values(scene) -> dict:
+    """``{material: {parameter: value}}`` for every draaw parameter held as a constant
+    (textured parameters are left out: they have no single value to put on a slider)."""
+    params = scene.params
+    out: dict = {}
+    for name in scene.info.get("materials", []):
+        vals = {}
+        for p in ALL_PARAMS:
+            key = f"{name}.{p}.value"
+            if key not in params:
+                continue
+            arr = np.array(params[key], dtype=np.float64).ravel()
+            if p in COLOR_PARAMS:
+                vals[p] = [float(x) for x in (arr if arr.size == 3 else np.repeat(arr[:1], 3))]
+            else:
+                vals[p] = float(arr[0])
+        if vals:
+            out[name] = vals
+    return out
+
+
+def parse_rgb(text: str, where: str) -> list[float]:
+    """``"0.8, 0.3, 0.2"`` (or one number for grey) -> three floats >= 0 (ParameterError).
+
+    >>> parse_rgb("0.5", "x")
+    [0.5, 0.5, 0.5]
+    """
+    parts = [p for p in str(text).replace(";", ",").replace(" ", ",").split(",") if p.strip()]
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        raise ParameterError(f"{where}: {text!r} is not a colour; expected three numbers such as "
+                             "'0.8, 0.3, 0.2'") from None
+    if len(nums) == 1:
+        nums = nums * 3
+    if len(nums) != 3 or not all(math.isfinite(x) and x >= 0 for x in nums):
+        raise ParameterError(f"{where}: {text!r}; expected three finite numbers >= 0 (linear RGB)")
+    return nums
+
+
+def hex_to_linear(value: str) -> list[float]:
+    """A colour picker's sRGB ``#rrggbb`` -> linear RGB in [0, 1]."""
+    v = value.lstrip("#")
+    if len(v) == 3:
+        v = "".join(c * 2 for c in v)
+    try:
+        c = [int(v[i:i + 2], 16) / 255.0 for i in (0, 2, 4)]
+    except ValueError:
+        raise ParameterError(f"colour {value!r}; expected #rrggbb") from None
+    return [x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4 for x in c]
+
+
+def linear_to_hex(rgb) -> str:
+    """Linear RGB -> sRGB ``#rrggbb`` (clipped to [0, 1]) for a colour picker.
+
+    >>> linear_to_hex([1.0, 0.0, 0.2140])
+    '#ff007f'
+    """
+    out = []
+    for x in rgb:
+        x = min(max(float(x), 0.0), 1.0)
+        s = 12.92 * x if x <= 0.0031308 else 1.055 * x ** (1 / 2.4) - 0.055
+        out.append(int(round(s * 255)))
+    return "#" + "".join(f"{v:02x}" for v in out)
+
+
+# --------------------------------------------------------------------------- lights
+def light_values(scene) -> dict:
+    """``{traverse key: base RGB value}`` of every emitter's radiance / intensity."""
+    params = scene.params
+    out = {}
+    for key in params.keys():
+        if key.endswith(LIGHT_SUFFIXES) and not key.endswith(".bsdf.reflectance.value"):
+            out[key] = np.array(params[key], dtype=np.float64).ravel()
+    return out
+
+
+# --------------------------------------------------------------------------- camera
+def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 1.0):
+    """Rotate the camera ``origin`` about ``target``: ``yaw`` degrees about ``up``, ``pitch``
+    degrees towards it (clamped short of the pole), distance scaled by ``distance``.
+    Returns (origin, target, up) as numpy arrays."""
+    o = np.asarray(camera["origin"], float)
+    t = np.asarray(camera["target"], float)
+    up = np.asarray(camera.get("up", [0, 1, 0]), float)
+    up = up / max(np.linalg.norm(up), 1e-12)
+    d = o - t
+    r = np.linalg.norm(d)
+    if r < 1e-12 or not (distance > 0):
+        raise ParameterError(f"orbit: camera origin equals target or distance={distance!r}; expected > 0")
+    # frame: up, and two axes spanning the plane orthogonal to it
+    h = d - np.dot(d, up) * up
+    if np.linalg.norm(h) < 1e-9 * r:
+        h = np.cross(up, [1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.cross(up, [0.0, 0.0, 1.0])
+    e1 = h / np.linalg.norm(h)
+    e2 = np.cross(up, e1)
+    el0 = math.asin(max(-1.0, min(1.0, float(np.dot(d, up)) / r)))
+    el = max(-math.radians(89), min(math.radians(89), el0 + math.radians(pitch)))
+    az = math.radians(yaw)
+    direction = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up
+    return t + direction * r * distance, t, up
+
+
+def look_at(origin, target, up):
+    import mitsuba as mi
+    return mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin], target=[float(v) for v in target],
+                                          up=[float(v) for v in up])
+
+
+# --------------------------------------------------------------------------- frames and errors
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """Linear HDR -> sRGB-encoded, clipped, uint8 (H, W, 3)."""
+    from .io import srgb_encode
+    x = np.nan_to_num(np.asarray(image, dtype=np.float32)[..., :3], nan=0.0, posinf=1.0, neginf=0.0)
+    return (np.clip(srgb_encode(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def encode(image: np.ndarray, fmt: str = "jpeg", quality: int = 80) -> bytes:
+    """An image as JPEG (``quality``) or PNG bytes, for ``ipywidgets.Image``."""
+    from PIL import Image
+    buf = io.BytesIO()
+    im = Image.fromarray(image if image.dtype == np.uint8 else to_uint8(image))
+    if fmt == "jpeg":
+        im.save(buf, format="JPEG", quality=int(quality))
+    elif fmt == "png":
+        im.save(buf, format="PNG", compress_level=1)
+    else:
+        raise ParameterError(f"encode: fmt={fmt!r}; expected 'jpeg' or 'png'")
+    return buf.getvalue()
+
+
+def errors(image: np.ndarray, reference: np.ndarray) -> dict:
+    """Linear RMSE and the RMSE of the sRGB-encoded display images."""
+    from .io import srgb_encode
+    a = np.nan_to_num(np.asarray(image, np.float32)[..., :3])
+    b = np.asarray(reference, np.float32)[..., :3]
+    if a.shape != b.shape:
+        raise ParameterError(f"reference image of shape {b.shape}; expected the preview's {a.shape}")
+    return {"rmse": float(np.sqrt(np.mean((a - b) ** 2))),
+            "display_rmse": float(np.sqrt(np.mean((srgb_encode(a) - srgb_encode(b)) ** 2)))}
+
+
+def error_image(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """|display difference| in false colour (magma, 0 .. 0.25) as uint8 RGB."""
+    from matplotlib import colormaps
+    from .io import srgb_encode
+    d = np.abs(srgb_encode(np.nan_to_num(image[..., :3])) - srgb_encode(reference[..., :3])).mean(axis=2)
+    return (colormaps["magma"](np.clip(d / 0.25, 0, 1))[..., :3] * 255).astype(np.uint8)
+
+
+# --------------------------------------------------------------------------- saving
+def document(scene, materials: dict, *, camera: dict | None = None, render: dict | None = None,
+             post=None, light_scale: float = 1.0, light_color=(1.0, 1.0, 1.0)) -> dict:
+    """The scene description with the tuned values written in (for ``tomli_w``)."""
+    flat = {f"{m}.{p}": v for m, vals in materials.items() for p, v in vals.items()}
+    desc = scene.updated_description(flat)
+    if camera is not None:
+        cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles")}
+        cam.update({k: [float(x) for x in camera[k]] for k in ("origin", "target", "up")})
+        if "fov" in camera:
+            cam["fov"] = float(camera["fov"])
+        desc["camera"] = cam
+    if render:
+        desc["render"] = dict(desc.get("render", {}), **render)
+    if post is not None:
+        desc["post"] = copy.deepcopy(list(post))
+    col = [float(c) for c in light_color]
+    if light_scale != 1.0 or col != [1.0, 1.0, 1.0]:
+        for light in desc.get("lights", []):
+            if "intensity" in light:
+                light["intensity"] = float(light["intensity"]) * float(light_scale)
+            elif light.get("type") in ("point", "spot", "area", "constant", "directional", "sun"):
+                light["intensity"] = float(light_scale)
+            if col != [1.0, 1.0, 1.0]:
+                base = light.get("color", [1.0, 1.0, 1.0])
+                base = base if isinstance(base, list) else [float(base)] * 3
+                light["color"] = [float(b) * c for b, c in zip(base, col)]
+    return desc
+
+
+def save_toml(path: str, doc: dict) -> None:
+    """Write ``doc`` as TOML atomically (``draaw_mi.io.atomic_path``)."""
+    import tomli_w
+    from .io import atomic_path
+    if not str(path).lower().endswith(".toml"):
+        raise ParameterError(f"save: {path!r}; expected a .toml file name")
+    text = tomli_w.dumps(doc)
+    with atomic_path(path, ".tmp") as tmp:
+        with open(tmp, "w") as fh:
+            fh.write(text)
+
+
+def snippet(source: str, materials: dict, settings: dict | None = None) -> str:
+    """Python code that loads the scene and sets the tuned values."""
+    lines = ["import draaw_mi", "", f"scene = draaw_mi.load_scene({source!r})", "params = scene.params"]
+    for m, vals in materials.items():
+        for p, v in vals.items():
+            if isinstance(v, list):
+                lines.append(f"params[{f'{m}.{p}.value'!r}] = mi.Color3f({', '.join(f'{x:.4g}' for x in v)})")
+            else:
+                lines.append(f"params[{f'{m}.{p}.value'!r}] = {v:.4g}")
+    lines.insert(1, "import mitsuba as mi")
+    lines.append("params.update()")
+    args = ", ".join(f"{k}={v!r}" for k, v in (settings or {}).items())
+    lines.append(f"image = draaw_mi.render(scene{', ' + args if args else ''})")
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["material_values", "parse_rgb", "hex_to_linear", "linear_to_hex", "light_values", "orbit",
+           "look_at", "to_uint8", "encode", "errors", "error_image", "document", "save_toml", "snippet",
+           "SCALAR_PARAMS"]

@@ -1,0 +1,498 @@
+"""``draaw_mi.widgets.MaterialTuner``: tune materials, lights, camera and post chain in Jupyter.
+
+GO-Draaw's web front end as ipywidgets (``pip install 'draaw-mi[notebooks]'``) over
+:class:`draaw_mi.preview.Preview`: every control writes Dr.Jit parameter values (no kernel is
+recompiled by a slider), a worker thread renders 1-spp frames and refines them by a running
+mean while idle, and frames reach the browser through an ``ipywidgets.Image`` as JPEG while
+you interact and as PNG once the image has been at rest for ``rest_after`` seconds.
+
+Panels: **Materials** (per material: base colour picker and exact linear RGB text field,
+sliders for every draaw parameter, base-colour texture and normal-map files), **Render**
+(version, max depth, spp budget, resolution scale, OIDN denoise), **Light** (intensity scale,
+colour, snap point lights to the camera), **Camera** (FOV, orbit yaw / pitch / distance, get),
+**Post** (add, remove, reorder filters, amounts, or the chain as JSON), **Save** (scene TOML,
+Python snippet). With ``reference=`` an error line and a false-colour error image follow the
+preview. Bad input is shown in red in the panel; no traceback reaches the notebook.
+
+Example (in a notebook)::
+
+    from draaw_mi.widgets import MaterialTuner
+    tuner = MaterialTuner("scenes/cornell.toml", reference="ref.exr")
+    tuner                                  # shows the panel; tuner.close() stops the worker
+"""
+from __future__ import annotations
+
+import collections
+import json
+import os
+import time
+
+import numpy as np
+
+from . import tuning
+from .errors import DraawError
+from .preview import Preview
+
+try:
+    import ipywidgets as W
+except ImportError as _e:  # pragma: no cover - exercised by a test with the module hidden
+    raise DraawError("draaw_mi.widgets needs ipywidgets; install it with: pip install "
+                     f"'draaw-mi[notebooks]' ({_e})") from None
+
+VERSIONS = ("v1", "v2", "v3", "v4", "path")
+
+
+def _slider(desc, value, lo, hi, step=0.01):
+    return W.FloatSlider(value=value, min=lo, max=hi, step=step, description=desc, continuous_update=True,
+                         readout_format=".3f", style={"description_width": "120px"},
+                         layout=W.Layout(width="380px"))
+
+
+class MaterialTuner:
+    """An interactive panel for one scene (see the module docstring).
+
+    ==================  =======================================================================
+    Parameter           Meaning
+    ==================  =======================================================================
+    ``scene``           a DraawScene, a scene file (.toml / .json) or a description dict
+    ``reference``       optional reference image (.exr linear, .png sRGB, or an array) of the
+                        preview's size: shows RMSE and an error image
+    ``version``         integrator version (default: the scene's)
+    ``max_spp``         refinement budget (samples per pixel)
+    ``denoise``         start with OIDN denoising on (needs ``pyoidn``)
+    ``interactive_scale``  resolution of the first frame after a change (default 0.5)
+    ``autostart``       start the worker thread now (False: call :meth:`refresh` yourself)
+    ``rest_after``      seconds without a change after which frames are sent as PNG
+    ==================  =======================================================================
+    """
+
+    def __init__(self, scene, reference=None, *, version: str | None = None, max_spp: int = 256,
+                 denoise: bool = False, interactive_scale: float = 0.5, autostart: bool = True,
+                 freeze: bool = True, rest_after: float = 0.5, save_path: str | None = None):
+        from .scene import DraawScene, load_scene
+        self.base_scene = scene if isinstance(scene, DraawScene) else load_scene(scene)
+        self.scene = self.base_scene
+        self.materials = tuning.material_values(self.scene)
+        self._light_base = tuning.light_values(self.scene)
+        cam = self.scene.info.get("camera")
+        self.camera = {k: list(map(float, cam[k])) for k in ("origin", "target", "up")} if cam else None
+        if cam:
+            self.camera["fov"] = float(cam.get("fov", 40.0))
+        self.post = list(self.scene.settings.get("post", []))
+        self.reference = None if reference is None else self._load_reference(reference)
+        self.rest_after = float(rest_after)
+        self._options = dict(version=version or self.scene.settings["version"], max_spp=int(max_spp),
+                             denoise=bool(denoise), interactive_scale=float(interactive_scale), freeze=freeze)
+        self._last_change = time.perf_counter()
+        self._syncing = False
+        self._textures: dict = {}
+        self.frames_shown = 0
+        self.last_format = None
+        self.sent = collections.deque(maxlen=256)    # (generation, spp, format) of pushed frames
+        self._autostart = autostart
+        self.preview = self._new_preview(self.scene)
+        self._build(save_path)
+        if autostart:
+            self.preview.start()
+
+    # ------------------------------------------------------------------ plumbing
+    def _new_preview(self, scene) -> Preview:
+        o = self._options
+        pv = Preview(scene, version=o["version"], max_spp=o["max_spp"], denoise=o["denoise"], post=self.post,
+                     interactive_scale=o["interactive_scale"], freeze=o["freeze"])
+        pv.on_frame(self._show)
+        return pv
+
+    def _guard(self, fn):
+        """Run a control's action; a DraawError / bad value becomes a red message, not a traceback."""
+        def run(*args):
+            if self._syncing:
+                return
+            self.message.value = ""
+            try:
+                fn(*args)
+            except (DraawError, ValueError, OSError, KeyError, TypeError) as e:
+                self.message.value = f"<span style='color:#b00020'>error: {_html(str(e))}</span>"
+        return run
+
+    def _changed(self, values: dict):
+        self._last_change = time.perf_counter()
+        self.preview.update(values)
+
+    def _show(self, frame):
+        """Worker-thread callback: encode and push the frame (JPEG while interacting)."""
+        at_rest = (time.perf_counter() - self._last_change) > self.rest_after or frame.spp >= self.preview.max_spp
+        fmt = "png" if at_rest and not frame.interactive else "jpeg"
+        data = tuning.encode(frame.image, fmt)
+        self.image.format = fmt
+        self.image.value = data
+        self.frames_shown += 1
+        self.last_format = fmt
+        self.last_frame = frame
+        self.sent.append((frame.generation, frame.spp, fmt))
+        text = (f"{frame.spp} spp · {frame.render_s * 1e3:.0f} ms/frame · {self.preview.version}"
+                f"{' · denoised (biased)' if frame.denoised else ''}{' · preview' if frame.interactive else ''} · {fmt}")
+        if self.reference is not None and frame.image.shape == self.reference.shape:
+            e = tuning.errors(frame.image, self.reference)
+            self.error_label.value = f"vs reference: RMSE {e['rmse']:.4f} · display RMSE {e['display_rmse']:.4f}"
+            self.error_image.value = tuning.encode(tuning.error_image(frame.image, self.reference), "png")
+        self.status.value = text
+
+    def refresh(self, frames: int = 1):
+        """Render ``frames`` frames now in this thread (for scripts/tests without the worker)."""
+        out = None
+        for _ in range(frames):
+            out = self.preview.step() or out
+        return out
+
+    def close(self):
+        """Stop the worker thread and close the widgets."""
+        self.preview.stop()
+        self.widget.close()
+
+    def _ipython_display_(self):
+        from IPython.display import display
+        display(self.widget)
+
+    @staticmethod
+    def _load_reference(ref):
+        from .fit import load_reference
+        return np.asarray(load_reference(ref), np.float32)[..., :3]
+
+    # ------------------------------------------------------------------ panels
+    def _build(self, save_path):
+        self.image = W.Image(format="jpeg", layout=W.Layout(border="1px solid #ccc"))
+        self.status = W.HTML("")
+        self.message = W.HTML("")
+        self.error_label = W.HTML("")
+        self.error_image = W.Image(format="png")
+        tabs = [("Materials", self._materials_panel()), ("Render", self._render_panel()),
+                ("Light", self._light_panel()), ("Camera", self._camera_panel()),
+                ("Post", self._post_panel()), ("Save", self._save_panel(save_path))]
+        self.tabs = W.Tab(children=[t[1] for t in tabs])
+        for i, (name, _) in enumerate(tabs):
+            self.tabs.set_title(i, name)
+        left = W.VBox([self.image, self.status, self.message] +
+                      ([self.error_label, self.error_image] if self.reference is not None else []))
+        self.widget = W.HBox([left, self.tabs])
+
+    def _materials_panel(self):
+        self.controls: dict = {}
+        boxes, titles = [], []
+        for m, vals in self.materials.items():
+            rows, ctl = [], {}
+            if "base_color" in vals:
+                ctl["base_color"] = picker = W.ColorPicker(value=tuning.linear_to_hex(vals["base_color"]),
+                                                            description="base colour", concise=False)
+                ctl["base_color_text"] = text = W.Text(value=", ".join(f"{x:.4g}" for x in vals["base_color"]),
+                                                       description="linear RGB", continuous_update=False)
+                picker.observe(self._guard(lambda ch, m=m: self._set_color(m, tuning.hex_to_linear(ch["new"]))), "value")
+                text.observe(self._guard(lambda ch, m=m: self._set_color(
+                    m, tuning.parse_rgb(ch["new"], f"{m}.base_color"))), "value")
+                rows += [picker, text]
+            for p, (_, lo, hi) in tuning.SCALAR_PARAMS.items():
+                if p in vals:
+                    ctl[p] = s = _slider(p.replace("_", " "), vals[p], lo, hi)
+                    s.observe(self._guard(lambda ch, m=m, p=p: self._set(m, p, float(ch["new"]))), "value")
+                    rows.append(s)
+            ctl["texture"] = W.Text(placeholder="image file for base_color", description="texture")
+            ctl["normalmap"] = W.Text(placeholder="normal-map image file", description="normal map")
+            apply = W.Button(description="load files", tooltip="reloads the scene with these textures")
+            apply.on_click(self._guard(lambda _b, m=m: self._apply_textures(m)))
+            rows += [ctl["texture"], ctl["normalmap"], apply]
+            self.controls[m] = ctl
+            boxes.append(W.VBox(rows))
+            titles.append(m)
+        acc = W.Accordion(children=boxes)
+        for i, t in enumerate(titles):
+            acc.set_title(i, t)
+        if boxes:
+            acc.selected_index = 0
+        return acc
+
+    def _set(self, m, p, value):
+        self._changed({f"{m}.{p}": value})
+        self.materials[m][p] = value
+
+    def _set_color(self, m, rgb):
+        self._changed({f"{m}.base_color": rgb})
+        self.materials[m]["base_color"] = [float(x) for x in rgb]
+        self._syncing = True                   # keep the picker and the text field in step
+        try:
+            self.controls[m]["base_color"].value = tuning.linear_to_hex(rgb)
+            self.controls[m]["base_color_text"].value = ", ".join(f"{x:.4g}" for x in rgb)
+        finally:
+            self._syncing = False
+
+    def _apply_textures(self, m):
+        base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
+        files = {}
+        for field, param in (("texture", "base_color"), ("normalmap", "normalmap")):
+            text = self.controls[m][field].value.strip()
+            if not text:
+                continue
+            path = text if os.path.isabs(text) else os.path.join(base, text)
+            if not os.path.isfile(path):
+                raise DraawError(f"{m}.{param}: file {text!r} does not exist (looked for {path!r})")
+            files[param] = os.path.abspath(path)
+        if not files:
+            raise DraawError(f"{m}: no texture or normal-map file given")
+        self._textures.setdefault(m, {}).update(files)
+        self._reload()
+        if "base_color" in files:               # now a texture: no single colour to pick
+            self.controls[m]["base_color"].disabled = True
+            self.controls[m]["base_color_text"].disabled = True
+
+    def _reload(self, scale: float | None = None):
+        """Rebuild the scene (textures, resolution): the only changes that recompile."""
+        from .scene import _from_description
+        doc = self.document()
+        for m, files in self._textures.items():
+            doc["materials"][m].update(files)
+            if "base_color" in files:
+                self.materials[m].pop("base_color", None)
+        base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
+        scale = self.controls_render["scale"].value if scale is None else scale
+        w, h = self.base_scene.resolution
+        doc["render"]["resolution"] = [max(8, round(w * scale)), max(8, round(h * scale))]
+        scene = _from_description(doc, self.scene.source, base, {})
+        running = self.preview.running
+        self.preview.stop()
+        self.scene = scene
+        self._light_base = {k: v for k, v in tuning.light_values(scene).items()}
+        self.preview = self._new_preview(scene)
+        if running:
+            self.preview.start()
+
+    def _render_panel(self):
+        o = self._options
+        c = self.controls_render = {
+            "version": W.Dropdown(options=VERSIONS, value=o["version"] if o["version"] in VERSIONS else "v4",
+                                  description="version"),
+            "max_depth": W.IntSlider(value=self.preview.max_depth, min=1, max=16, description="max depth"),
+            "max_spp": W.BoundedIntText(value=o["max_spp"], min=1, max=1 << 16, description="spp budget"),
+            "scale": W.FloatSlider(value=1.0, min=0.25, max=1.0, step=0.25, description="resolution",
+                                   continuous_update=False),
+            "denoise": W.Checkbox(value=o["denoise"], description="OIDN denoise (biased)"),
+        }
+        c["version"].observe(self._guard(lambda ch: self._configure(version=ch["new"])), "value")
+        c["max_depth"].observe(self._guard(lambda ch: self._configure(max_depth=int(ch["new"]))), "value")
+        c["max_spp"].observe(self._guard(lambda ch: self._configure(max_spp=int(ch["new"]))), "value")
+        c["denoise"].observe(self._guard(lambda ch: self._configure(denoise=bool(ch["new"]))), "value")
+        c["scale"].observe(self._guard(lambda ch: self._reload(ch["new"])), "value")
+        return W.VBox(list(c.values()))
+
+    def _configure(self, **kw):
+        self._last_change = time.perf_counter()
+        self.preview.configure(**kw)
+        self._options.update({k: v for k, v in kw.items() if k in self._options})
+
+    def _light_panel(self):
+        self.light_scale = W.FloatLogSlider(value=1.0, base=2, min=-4, max=4, description="intensity ×")
+        self.light_color = W.ColorPicker(value="#ffffff", description="colour")
+        self.snap_light = W.Checkbox(value=False, description="snap point lights to the camera")
+        for w in (self.light_scale, self.light_color, self.snap_light):
+            w.observe(self._guard(lambda ch: self._set_lights()), "value")
+        return W.VBox([self.light_scale, self.light_color, self.snap_light])
+
+    def _set_lights(self):
+        col = np.array(tuning.hex_to_linear(self.light_color.value))
+        s = float(self.light_scale.value)
+        vals = {}
+        for k, base in self._light_base.items():
+            v = base * s * (col if base.size == 3 else col.mean())
+            vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
+        if self.snap_light.value and self.camera is not None:
+            for k in self.scene.params.keys():
+                if k.endswith(".position") and k.split(".")[0] in self.scene.info.get("lights", []):
+                    vals[k] = self._camera_now()[0].tolist()
+        self._changed(vals)
+
+    def _camera_panel(self):
+        fov = float(np.array(self.scene.params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self.scene.params \
+            else 40.0
+        self.fov = _slider("FOV (x)", fov, 5.0, 120.0, 0.5)
+        self.yaw = _slider("orbit yaw °", 0.0, -180.0, 180.0, 1.0)
+        self.pitch = _slider("orbit pitch °", 0.0, -85.0, 85.0, 1.0)
+        self.distance = _slider("distance ×", 1.0, 0.2, 3.0, 0.01)
+        self.fov.observe(self._guard(lambda ch: self._changed({"sensor.x_fov": float(ch["new"])})), "value")
+        for w in (self.yaw, self.pitch, self.distance):
+            w.observe(self._guard(lambda ch: self._set_camera()), "value")
+        get = W.Button(description="get camera")
+        self.camera_text = W.Textarea(layout=W.Layout(width="380px", height="90px"))
+        get.on_click(self._guard(lambda _b: self._get_camera()))
+        # a camera path (GO-Draaw camera_positions.json keyframes), stepped or played
+        self.path_file = W.Text(placeholder="camera_positions.json", description="camera path")
+        load = W.Button(description="load path")
+        load.on_click(self._guard(lambda _b: self.load_camera_path(self.path_file.value.strip())))
+        self.path_frame = W.IntSlider(value=0, min=0, max=0, description="path frame", disabled=True)
+        self.path_play = W.Play(value=0, min=0, max=0, interval=100, disabled=True)
+        W.jslink((self.path_play, "value"), (self.path_frame, "value"))
+        self.path_frame.observe(self._guard(lambda ch: self._path_step(int(ch["new"]))), "value")
+        self._path = None
+        rows = [self.fov] + ([self.yaw, self.pitch, self.distance, get, self.camera_text] if self.camera else [])
+        rows += [W.HBox([self.path_file, load]), W.HBox([self.path_play, self.path_frame])]
+        return W.VBox(rows)
+
+    def load_camera_path(self, keys, frames: int = 120):
+        """Load keyframes (a GO-Draaw ``camera_positions.json`` file name or a list of
+        ``(x, y, z, theta, phi)`` / dicts) and interpolate ``frames`` frames along them; the
+        *path frame* slider and its play button then move the camera."""
+        from .camera_path import interpolate
+        if isinstance(keys, str):
+            if not keys:
+                raise DraawError("camera path: no file name given")
+            try:
+                with open(keys) as fh:
+                    keys = json.load(fh)
+            except (OSError, json.JSONDecodeError) as e:
+                raise DraawError(f"camera path {keys!r}: {e}") from None
+        path = interpolate(keys, duration=frames / 60.0, fps=60)
+        self._path = path
+        for w in (self.path_frame, self.path_play):
+            w.max = len(path) - 1
+            w.disabled = False
+        self._path_step(int(self.path_frame.value))
+        return path
+
+    def _path_step(self, i):
+        if self._path is None:
+            return
+        from .scene.camera import go_draaw_look_at
+        x, y, z, theta, phi = self._path[min(i, len(self._path) - 1)]
+        try:
+            o, t, up = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
+        except ValueError as e:
+            raise DraawError(f"camera path frame {i}: {e}") from None
+        self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
+                       "up": list(map(float, up)), "fov": float(self.fov.value)}
+        self._syncing = True                 # the orbit is relative to the path's camera
+        try:
+            self.yaw.value, self.pitch.value, self.distance.value = 0.0, 0.0, 1.0
+        finally:
+            self._syncing = False
+        self._set_camera()
+
+    def _camera_now(self):
+        return tuning.orbit(self.camera, self.yaw.value, self.pitch.value, self.distance.value)
+
+    def _set_camera(self):
+        if self.camera is None:
+            raise DraawError("this scene has no [camera] table to orbit")
+        o, t, up = self._camera_now()
+        values = {"sensor.to_world": tuning.look_at(o, t, up)}
+        if self.snap_light.value:
+            self._set_lights()
+        self._changed(values)
+
+    def _get_camera(self):
+        o, t, up = self._camera_now()
+        cam = {"origin": o.round(5).tolist(), "target": t.round(5).tolist(), "up": up.round(5).tolist(),
+               "fov": round(float(self.fov.value), 4)}
+        self.camera_text.value = json.dumps(cam)
+        return cam
+
+    def _post_panel(self):
+        from . import post
+        self.post_rows = W.VBox([])
+        self.post_add = W.Dropdown(options=list(post.FILTERS), description="filter")
+        add = W.Button(description="add")
+        add.on_click(self._guard(lambda _b: self._post_edit(add=self.post_add.value)))
+        self.post_json = W.Textarea(value=json.dumps(self.post), layout=W.Layout(width="380px", height="80px"))
+        apply = W.Button(description="apply JSON")
+        apply.on_click(self._guard(lambda _b: self._post_from_json(self.post_json.value)))
+        self._post_rows_refresh()
+        return W.VBox([self.post_rows, W.HBox([self.post_add, add]), self.post_json, apply])
+
+    def _post_from_json(self, text):
+        try:
+            chain = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise DraawError(f"post chain JSON: {e}") from None
+        if not isinstance(chain, list):
+            raise DraawError(f"post chain JSON: expected a list of filter tables, got {type(chain).__name__}")
+        self._set_post(chain)
+
+    def _set_post(self, chain):
+        from . import post
+        post.Chain(chain)                      # validates names and values (ParameterError)
+        self.post = [dict(e) for e in chain]
+        self._configure(post=self.post)
+        self._post_rows_refresh()
+
+    def _post_edit(self, add=None, remove=None, up=None, amount=None):
+        chain = [dict(e) for e in self.post]
+        if add is not None:
+            chain.append({"type": add, "amount": 0.5})
+        if remove is not None:
+            chain.pop(remove)
+        if up is not None and up > 0:
+            chain[up - 1], chain[up] = chain[up], chain[up - 1]
+        if amount is not None:
+            chain[amount[0]]["amount"] = float(amount[1])
+        self._set_post(chain)
+
+    def _post_rows_refresh(self):
+        rows = []
+        for i, e in enumerate(self.post):
+            amt = _slider(str(e.get("type")), float(e.get("amount", 1.0)), 0.0, 1.0)
+            amt.continuous_update = False
+            amt.observe(self._guard(lambda ch, i=i: self._post_edit(amount=(i, ch["new"]))), "value")
+            upb = W.Button(description="↑", layout=W.Layout(width="36px"))
+            upb.on_click(self._guard(lambda _b, i=i: self._post_edit(up=i)))
+            rm = W.Button(description="✕", layout=W.Layout(width="36px"))
+            rm.on_click(self._guard(lambda _b, i=i: self._post_edit(remove=i)))
+            rows.append(W.HBox([amt, upb, rm]))
+        if hasattr(self, "post_rows"):
+            self.post_rows.children = rows
+            self._syncing = True
+            try:
+                self.post_json.value = json.dumps(self.post)
+            finally:
+                self._syncing = False
+
+    def _save_panel(self, save_path):
+        default = save_path or (os.path.splitext(self.scene.source)[0] + "_tuned.toml"
+                                if self.scene.source.endswith((".toml", ".json")) else "tuned.toml")
+        self.save_path = W.Text(value=default, description="save to")
+        save = W.Button(description="save TOML")
+        save.on_click(self._guard(lambda _b: self.save(self.save_path.value)))
+        show = W.Button(description="Python snippet")
+        self.snippet_text = W.Textarea(layout=W.Layout(width="420px", height="160px"))
+        show.on_click(self._guard(lambda _b: setattr(self.snippet_text, "value", self.snippet())))
+        return W.VBox([W.HBox([self.save_path, save]), show, self.snippet_text])
+
+    # ------------------------------------------------------------------ results
+    def document(self) -> dict:
+        """The tuned scene as a description dict (what :meth:`save` writes)."""
+        cam = None
+        if self.camera is not None:
+            o, t, up = self._camera_now()
+            cam = {"origin": o, "target": t, "up": up, "fov": float(self.fov.value)}
+        render = {"version": self.preview.version, "max_depth": int(self.preview.max_depth)}
+        doc = tuning.document(self.scene, self.materials, camera=cam, render=render, post=self.post,
+                              light_scale=float(self.light_scale.value),
+                              light_color=tuning.hex_to_linear(self.light_color.value))
+        for m, files in self._textures.items():
+            doc["materials"][m].update(files)
+        w, h = self.base_scene.resolution
+        doc["render"]["resolution"] = [w, h]
+        return doc
+
+    def save(self, path: str) -> str:
+        """Write the tuned scene to a TOML file (atomically) and return its path."""
+        tuning.save_toml(path, self.document())
+        self.message.value = f"saved {_html(path)}"
+        return path
+
+    def snippet(self) -> str:
+        """Python code reproducing the tuned materials."""
+        return tuning.snippet(self.scene.source, self.materials,
+                              {"version": self.preview.version, "max_depth": int(self.preview.max_depth)})
+
+
+def _html(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+__all__ = ["MaterialTuner"]

@@ -1,0 +1,59 @@
+"""Execute the Jupyter-tuning notebooks in their small CI configuration (DRAAW_MI_NOTEBOOK_SMALL=1).
+
+Same protocol as tests/test_notebooks.py: generated from ``notebooks/make_<name>.py``,
+committed without outputs, run top to bottom in a fresh ``python3`` kernel.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import pytest
+
+nbformat = pytest.importorskip("nbformat")
+nbclient = pytest.importorskip("nbclient")
+pytest.importorskip("ipywidgets")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+NOTEBOOKS = os.path.join(ROOT, "notebooks")
+CASES = {  # name -> (generator, text that shows the small configuration ran, min. images)
+    "material_tuning": ("make_material_tuning.py", "48x48 preview", 1),
+    "accuracy_vs_time": ("make_accuracy_vs_time.py", "small study: 32x32", 1),
+}
+
+
+def _generator(script):
+    spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_notebook_is_generated_and_has_no_outputs(name):
+    nb = nbformat.read(os.path.join(NOTEBOOKS, f"{name}.ipynb"), as_version=4)
+    nbformat.validate(nb)
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            assert cell.outputs == [] and cell.execution_count is None, "commit notebooks without outputs"
+    fresh = _generator(CASES[name][0]).build()
+    assert [(c.cell_type, c.source) for c in nb.cells] == [(c.cell_type, c.source) for c in fresh.cells], \
+        f"{name}.ipynb is out of date: run python notebooks/{CASES[name][0]}"
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_notebook_executes_small(name, monkeypatch, tmp_path):
+    monkeypatch.setenv("DRAAW_MI_NOTEBOOK_SMALL", "1")
+    nb = nbformat.read(os.path.join(NOTEBOOKS, f"{name}.ipynb"), as_version=4)
+    client = nbclient.NotebookClient(nb, kernel_name="python3", timeout=180,
+                                     resources={"metadata": {"path": NOTEBOOKS}})
+    client.execute()                   # raises CellExecutionError with the cell and traceback
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert CASES[name][1] in text
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= CASES[name][2]
+    if name == "material_tuning":
+        views = [o for o in outputs if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+        assert views, "the tuner panel was displayed as a widget"
+        assert "change -> new frame: median" in text and "saved" in text

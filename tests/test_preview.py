@@ -1,0 +1,155 @@
+"""Progressive preview: running mean, reset on change, no recompilation, worker thread, lock."""
+from __future__ import annotations
+
+import os
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.errors import DraawError, ParameterError
+from draaw_mi.preview import Preview
+from draaw_mi.render import _scene_lock, make_integrator, pass_seeds
+
+from conftest import SCENES, tiny_description
+
+
+def _direct(scene, seeds, version="v4", depth=4):
+    """Independent mean of 1-spp renders with Mitsuba's own mi.render (no preview code)."""
+    integ = make_integrator(version, depth)
+    return np.mean([np.array(mi.render(scene.mi_scene, integrator=integ, seed=s, spp=1)) for s in seeds], axis=0)
+
+
+def test_running_mean_equals_mean_of_independent_frames():
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=4, freeze=False, seed=3)
+    frames = [pv.step() for _ in range(4)]
+    assert [f.spp for f in frames] == [1, 2, 3, 4] and len({f.generation for f in frames}) == 1
+    seeds = [pass_seeds(3, i + 2)[-1] for i in range(4)]
+    assert len(set(seeds)) == 4
+    np.testing.assert_allclose(frames[-1].raw, _direct(scene, seeds)[..., :3], rtol=1e-5, atol=1e-6)
+    assert not np.allclose(frames[0].raw, frames[-1].raw)        # frames really differ
+
+
+@pytest.mark.parametrize("freeze", [False, True])
+def test_change_resets_the_mean_and_shows_the_new_value_without_recompiling(freeze):
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=4, freeze=freeze, seed=1)
+    for _ in range(3):
+        pv.step()
+    before = pv.frame.raw.copy()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        g = pv.update({"ball.base_color": [0.1, 0.2, 0.9], "ball.roughness": 0.1})
+        f = pv.step()
+        f2 = pv.step()
+        misses = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT and not k["cache_hit"]]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert misses == []
+    assert f.generation == g and f.spp == 1 and f2.spp == 2
+    # the new frame is the new parameter's image: compare with an independent render
+    k = scene.key("ball.base_color")
+    assert np.allclose(np.array(scene.params[k]).ravel(), [0.1, 0.2, 0.9])
+    seed = pass_seeds(1, pv._frame_index + 1)[-1]
+    np.testing.assert_allclose(f2.raw * 2 - f.raw, _direct(scene, [seed])[..., :3], rtol=1e-4, atol=1e-5)
+    assert np.abs(f2.raw - before).max() > 0.05
+
+
+def test_frozen_and_plain_frames_are_identical_after_camera_changes():
+    a = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=True, seed=2)
+    b = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False, seed=2)
+    T = mi.ScalarTransform4f().look_at(origin=[1.5, 1.2, 4.5], target=[0, 0.5, 0], up=[0, 1, 0])
+    for pv in (a, b):
+        pv.step()
+        pv.update({"sensor.to_world": T, "sensor.x_fov": 55.0})
+        pv.step()
+    np.testing.assert_array_equal(a.frame.raw, b.frame.raw)
+
+
+def test_interactive_first_frame_is_low_resolution_and_not_accumulated():
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=4, freeze=False, interactive_scale=0.5)
+    f0 = pv.step()
+    assert f0.interactive and f0.spp == 0 and f0.image.shape == (24, 32, 3)
+    assert np.array_equal(f0.image[0::2, 0::2], f0.image[1::2, 1::2])   # 2x2 blocks
+    f1 = pv.step()
+    assert not f1.interactive and f1.spp == 1
+    pv.update({"ball.metallic": 0.9})
+    assert pv.step().interactive
+
+
+@pytest.mark.parametrize("values, match", [
+    ({"ball.roughness": 1.5}, r"ball.roughness=1.5; expected a number in \[0.0, 1.0\]"),
+    ({"ball.roughness": float("nan")}, "finite"),
+    ({"ball.base_color": [0.1, 0.2]}, "3 numbers"),
+    ({"ball.base_color": [0.1, -0.2, 0.3]}, ">= 0"),
+    ({"ball.roughnes": 0.3}, "did you mean"),
+])
+def test_bad_values_are_rejected_before_rendering(values, match):
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False)
+    g = pv.generation
+    with pytest.raises(DraawError, match=match):
+        pv.update(values)
+    assert pv.generation == g and pv._pending == {}
+
+
+def test_worker_thread_refines_resets_and_stops():
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=4, max_spp=6, freeze=True)
+    got = []
+    pv.on_frame(lambda f: got.append((f.generation, f.spp)))
+    pv.start()
+    try:
+        f = pv.wait(spp=6, timeout=60)
+        assert f is not None and f.spp == 6
+        time.sleep(0.3)
+        assert pv.spp == 6 and pv.running                     # idle at max_spp, not spinning
+        g = pv.update({"ball.roughness": 0.9})
+        f = pv.wait(g, spp=2, timeout=60)
+        assert f is not None and f.generation == g
+        assert all(spp >= 1 for gen, spp in got)
+        spps = [spp for gen, spp in got if gen == g]
+        assert spps[:2] == [1, 2]                             # the mean restarted
+    finally:
+        pv.stop()
+    assert not pv.running
+
+
+def test_worker_respects_the_scene_render_lock():
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=4, max_spp=1000, freeze=False)
+    pv.start()
+    try:
+        assert pv.wait(spp=2, timeout=60) is not None
+        with _scene_lock(scene):
+            time.sleep(0.2)                  # a frame in flight may finish; then it must wait
+            n = pv.spp
+            time.sleep(0.5)
+            assert pv.spp == n
+        assert pv.wait(spp=n + 2, timeout=60) is not None
+    finally:
+        pv.stop()
+
+
+def test_denoised_preview_uses_the_guides():
+    pytest.importorskip("pyoidn")
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=(48, 48))
+    pv = Preview(scene, denoise=True, freeze=False, max_depth=4)
+    f = pv.step()
+    assert f.denoised and f.image.shape == (48, 48, 3) and np.isfinite(f.image).all()
+    assert not np.array_equal(f.image, f.raw)
+    ref = draaw_mi.denoise(f.raw, pv._acc[..., 6:9].astype(np.float32), pv._acc[..., 3:6].astype(np.float32))
+    np.testing.assert_allclose(f.image, ref, rtol=1e-5, atol=1e-6)
+
+
+def test_configure_rejects_unknown_options():
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False)
+    with pytest.raises(ParameterError, match="max_dept"):
+        pv.configure(max_dept=3)
+    with pytest.raises(ParameterError, match="interactive_scale"):
+        Preview(pv.scene, interactive_scale=0)

@@ -1,0 +1,255 @@
+"""MaterialTuner headless: controls -> scene parameters and image; save -> reload; bad input.
+
+No browser: ipywidgets run without a front end (their comms are inert); frames are rendered
+synchronously with ``refresh()`` (``autostart=False``), except in the worker-thread test.
+"""
+from __future__ import annotations
+
+import io
+import json
+import os
+
+import numpy as np
+import pytest
+
+import draaw_mi
+
+W = pytest.importorskip("ipywidgets")
+from draaw_mi.widgets import MaterialTuner  # noqa: E402
+
+from conftest import tiny_description  # noqa: E402
+
+
+def _decode(data: bytes) -> np.ndarray:
+    from PIL import Image
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), dtype=np.float32)
+
+
+@pytest.fixture
+def tuner(tmp_path):
+    desc = tiny_description()
+    path = tmp_path / "tiny.toml"
+    import tomli_w
+    path.write_text(tomli_w.dumps(desc))
+    t = MaterialTuner(str(path), autostart=False, freeze=False, interactive_scale=1.0, max_spp=64)
+    yield t
+    t.close()
+
+
+def test_panel_has_every_draaw_parameter_for_every_material(tuner):
+    for m in ("ball", "ground"):
+        ctl = tuner.controls[m]
+        for p in ("base_color", "roughness", "metallic", "specular", "reflection", "direct_to_scatter"):
+            assert p in ctl, (m, p)
+        assert ctl["roughness"].min == 0.0 and ctl["roughness"].max == 1.0
+    assert [tuner.tabs.get_title(i) for i in range(6)] == ["Materials", "Render", "Light", "Camera", "Post", "Save"]
+
+
+def test_slider_changes_scene_parameter_and_image(tuner):
+    tuner.refresh(2)
+    before = _decode(tuner.image.value)
+    k = tuner.scene.key("ball.roughness")
+    tuner.controls["ball"]["roughness"].value = 0.05
+    tuner.controls["ball"]["metallic"].value = 1.0
+    tuner.refresh(2)
+    assert tuner.message.value == ""
+    assert float(np.array(tuner.scene.params[k]).ravel()[0]) == pytest.approx(0.05)
+    assert tuner.materials["ball"]["metallic"] == 1.0
+    after = _decode(tuner.image.value)
+    assert np.abs(after - before).max() > 20          # 8-bit levels: the sphere visibly changed
+    assert tuner.last_frame.spp == 2                  # the mean restarted at the change
+
+
+def test_colour_picker_and_text_field_agree(tuner):
+    tuner.controls["ball"]["base_color"].value = "#ff0000"
+    k = tuner.scene.key("ball.base_color")
+    np.testing.assert_allclose(np.array(tuner.preview._pending[k]), [1.0, 0.0, 0.0])
+    assert tuner.controls["ball"]["base_color_text"].value == "1, 0, 0"
+    tuner.controls["ball"]["base_color_text"].value = "0.2, 0.4, 0.6"
+    tuner.refresh()
+    np.testing.assert_allclose(np.array(tuner.scene.params[k]).ravel(), [0.2, 0.4, 0.6], rtol=1e-6)
+    assert tuner.controls["ball"]["base_color"].value == draaw_mi.tuning.linear_to_hex([0.2, 0.4, 0.6])
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("base_color_text", "1, x, 2", "is not a colour"),
+    ("base_color_text", "1, 2", "three finite numbers"),
+    ("base_color_text", "-1, 0, 0", "three finite numbers"),
+])
+def test_bad_text_value_shows_an_error_not_a_traceback(tuner, field, value, match):
+    k = tuner.scene.key("ball.base_color")
+    old = np.array(tuner.scene.params[k]).ravel().copy()
+    tuner.controls["ball"][field].value = value           # must not raise
+    assert "error" in tuner.message.value and match in tuner.message.value
+    tuner.refresh()
+    np.testing.assert_array_equal(np.array(tuner.scene.params[k]).ravel(), old)
+    tuner.controls["ball"]["roughness"].value = 0.3       # the next good change clears it
+    assert tuner.message.value == ""
+
+
+def test_bad_files_and_post_json_show_errors(tuner):
+    tuner.controls["ball"]["texture"].value = "no/such/file.png"
+    tuner._guard(lambda: tuner._apply_textures("ball"))()
+    assert "does not exist" in tuner.message.value
+    tuner.post_json.value = "[{'type': 'bloom'}"
+    tuner._guard(lambda: tuner._post_from_json(tuner.post_json.value))()
+    assert "post chain JSON" in tuner.message.value
+    tuner._guard(lambda: tuner._post_from_json('[{"type": "blom"}]'))()
+    assert "blom" in tuner.message.value and tuner.post == []
+
+
+def test_post_chain_editor_add_reorder_amount_remove(tuner):
+    tuner._post_edit(add="contrast")
+    tuner._post_edit(add="tint")
+    assert [e["type"] for e in tuner.post] == ["contrast", "tint"]
+    tuner._post_edit(up=1)
+    assert [e["type"] for e in tuner.post] == ["tint", "contrast"]
+    tuner.post_rows.children[1].children[0].value = 0.9       # the amount slider of "contrast"
+    assert tuner.post[1]["amount"] == 0.9 and tuner.preview.post == tuner.post
+    assert json.loads(tuner.post_json.value) == tuner.post
+    tuner._post_edit(remove=0)
+    assert [e["type"] for e in tuner.post] == ["contrast"]
+    f = tuner.refresh()
+    import mitsuba as mi
+    expected = np.array(draaw_mi.post.apply(mi.TensorXf(f.raw), tuner.post))
+    np.testing.assert_allclose(f.image, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_camera_light_and_render_options(tuner):
+    tuner.refresh()
+    T0 = np.array(tuner.scene.params["sensor.to_world"].matrix)
+    tuner.yaw.value = 30.0
+    tuner.fov.value = 60.0
+    tuner.refresh()
+    assert np.abs(np.array(tuner.scene.params["sensor.to_world"].matrix) - T0).max() > 0.1
+    assert float(np.array(tuner.scene.params["sensor.x_fov"]).ravel()[0]) == pytest.approx(60.0)
+    cam = tuner._get_camera()
+    r0 = np.linalg.norm(np.subtract([0.0, 1.0, 5.0], [0.0, 0.5, 0.0]))
+    assert np.linalg.norm(np.subtract(cam["origin"], cam["target"])) == pytest.approx(r0, rel=1e-4)
+    k = "point_light0.intensity.value"
+    base = np.array(tuner.scene.params[k]).ravel().copy()
+    tuner.light_scale.value = 2.0
+    tuner.refresh()
+    np.testing.assert_allclose(np.array(tuner.scene.params[k]).ravel(), base * 2, rtol=1e-6)
+    tuner.controls_render["max_depth"].value = 2
+    tuner.controls_render["version"].value = "v3"
+    assert tuner.preview.max_depth == 2 and tuner.preview.version == "v3"
+    assert tuner.refresh().spp == 1
+
+
+def test_save_then_reload_gives_the_same_scene(tuner, tmp_path):
+    tuner.controls["ball"]["roughness"].value = 0.12
+    tuner.controls["ground"]["base_color_text"].value = "0.1, 0.6, 0.2"
+    tuner.yaw.value = -25.0
+    tuner.light_scale.value = 0.5
+    tuner._post_edit(add="contrast")
+    tuner.refresh()
+    out = str(tmp_path / "tuned.toml")
+    tuner.save_path.value = out
+    tuner._guard(lambda: tuner.save(out))()
+    assert "saved" in tuner.message.value
+    again = draaw_mi.load_scene(out)
+    assert again.settings["post"] == tuner.post
+    for m, vals in tuner.materials.items():
+        for p, v in vals.items():
+            got = np.array(again.params[again.key(f"{m}.{p}")]).ravel()
+            np.testing.assert_allclose(got, np.broadcast_to(v, got.shape), rtol=1e-6)
+    for key in ("sensor.to_world", "point_light0.intensity.value", "constant_light1.radiance.value"):
+        a, b = tuner.scene.params[key], again.params[key]
+        a, b = (np.array(a.matrix), np.array(b.matrix)) if key.endswith("to_world") else (np.array(a), np.array(b))
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    # and the same image, rendered from both with one seed (box filter: bit-comparable)
+    img_a = np.array(draaw_mi.render(tuner.scene, spp=4, seed=9, post=[]))
+    img_b = np.array(draaw_mi.render(again, spp=4, seed=9, post=[]))
+    np.testing.assert_allclose(img_a, img_b, rtol=1e-4, atol=1e-5)
+
+
+def test_reference_error_line_matches_numpy(tuner):
+    tuner.refresh(3)
+    ref = tuner.last_frame.image * 0.5
+    t2 = MaterialTuner(tuner.scene, reference=ref, autostart=False, freeze=False, interactive_scale=1.0)
+    try:
+        f = t2.refresh()
+        rmse = float(np.sqrt(np.mean((f.image - ref) ** 2)))
+        assert f"RMSE {rmse:.4f}" in t2.error_label.value
+        assert len(t2.error_image.value) > 100
+    finally:
+        t2.close()
+
+
+def test_snippet_runs_and_reproduces_values(tuner):
+    tuner.controls["ball"]["roughness"].value = 0.22
+    code = tuner.snippet()
+    ns: dict = {}
+    exec(compile(code.replace("image = draaw_mi.render(", "image = (lambda *a, **k: None)("), "snippet", "exec"), ns)
+    k = ns["scene"].key("ball.roughness")
+    assert float(np.array(ns["scene"].params[k]).ravel()[0]) == pytest.approx(0.22)
+
+
+def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), max_spp=4, rest_after=30.0, freeze=True)
+    try:
+        assert t.preview.wait(spp=4, timeout=60) is not None
+        t.controls["ball"]["metallic"].value = 0.5
+        g = t.preview.generation
+        assert t.preview.wait(g, spp=4, timeout=60) is not None
+        import time
+        time.sleep(0.2)                   # the callback of the last frame has finished
+        mine = [(spp, fmt) for gen, spp, fmt in t.sent if gen == g]
+        assert mine[0] == (0, "jpeg")                     # the half-resolution first frame
+        assert mine[-1] == (4, "png")                     # budget reached: lossless
+        assert all(fmt == "jpeg" for spp, fmt in mine[:-1])
+        assert t.image.format == "png" and t.image.value[:4] == b"\x89PNG"
+    finally:
+        t.close()
+    assert not t.preview.running
+
+
+def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
+    keys = [(0.0, 1.0, 6.0, -1.5708, 1.5708), (2.0, 1.5, 5.0, -1.2, 1.5)]
+    path = tuner.load_camera_path(keys, frames=10)
+    assert len(path) == 10 and tuner.path_frame.max == 9 and not tuner.path_play.disabled
+    tuner.path_frame.value = 9
+    tuner.refresh()
+    m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
+    np.testing.assert_allclose(m[:3, 3], keys[-1][:3], atol=1e-5)      # camera at the last keyframe
+    tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
+    assert "camera path" in tuner.message.value
+
+
+def test_texture_file_and_resolution_scale_reload_the_scene(tuner, tmp_path):
+    import matplotlib.image
+    tex = tmp_path / "checker.png"
+    checker = (np.indices((8, 8)).sum(axis=0) % 2).astype(np.float32)
+    matplotlib.image.imsave(str(tex), np.dstack([checker, 0.2 + 0 * checker, 1 - checker]))
+    tuner.controls["ball"]["roughness"].value = 0.2                 # survives the reload
+    tuner.controls["ball"]["texture"].value = str(tex)
+    tuner._guard(lambda: tuner._apply_textures("ball"))()
+    assert tuner.message.value == ""
+    assert "ball.base_color.data" in tuner.scene.params            # now a bitmap texture
+    assert tuner.controls["ball"]["base_color"].disabled
+    assert float(np.array(tuner.scene.params["ball.roughness.value"]).ravel()[0]) == pytest.approx(0.2)
+    tuner.controls_render["scale"].value = 0.5
+    f = tuner.refresh()
+    assert f.image.shape == (12, 16, 3) and tuner.scene.resolution == (16, 12)
+    out = str(tmp_path / "t.toml")
+    tuner.save(out)
+    again = draaw_mi.load_scene(out)
+    assert again.resolution == (32, 24) and "ball.base_color.data" in again.params
+
+
+def test_snap_light_to_camera_moves_point_lights(tuner):
+    tuner.snap_light.value = True
+    tuner.yaw.value = 40.0
+    tuner.refresh()
+    origin = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)[:3, 3]
+    np.testing.assert_allclose(np.array(tuner.scene.params["point_light0.position"]).ravel(), origin, atol=1e-5)
+
+
+def test_missing_ipywidgets_is_one_clear_error(monkeypatch):
+    import importlib
+    import sys
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)
+    monkeypatch.delitem(sys.modules, "draaw_mi.widgets")
+    with pytest.raises(draaw_mi.DraawError, match=r"pip install 'draaw-mi\[notebooks\]'"):
+        importlib.import_module("draaw_mi.widgets")
