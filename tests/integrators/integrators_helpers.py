@@ -58,7 +58,9 @@ def highlight_weight(scene, spp: int = 256) -> "mi.TensorXf":
     highlights, so that the loss sees light moving within the image (a normalised lobe's
     roughness hardly changes the image mean)."""
     img = render_np(scene, integrator("path", max_depth=4), spp, seed=4242)
-    w = (img.mean(axis=2, keepdims=True) / img.mean(axis=2).max()) ** 2
+    lum = img.mean(axis=2, keepdims=True)
+    cap = np.percentile(lum, 90)              # visible emitters saturate instead of dominating
+    w = (np.minimum(lum, cap) / cap) ** 2
     return mi.TensorXf(np.repeat(w, img.shape[2], axis=2).astype(np.float32))
 
 
