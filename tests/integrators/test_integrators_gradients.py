@@ -119,8 +119,10 @@ def test_gradients_do_not_accumulate_when_cleared(grad_scene, kind):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("key,h", [("tall_box.bsdf.roughness.value", 0.03),
-                                   ("white.base_color.value", 0.02)])
+# The tall box's roughness was dropped from this test: at 24x24 its gradient is within FD noise
+# even for a highlight-weighted loss (FD 2.8e-4 +- 2.0e-4, 8 seeds x 2048 spp), so the comparison
+# passed as 0 = 0. Roughness gradients are compared on the gradient plane above.
+@pytest.mark.parametrize("key,h", [("white.base_color.value", 0.02)])
 def test_gradients_on_official_cornell(key, h):
     from integrators_helpers import official_scene
     scene = official_scene("cornell", 24)
