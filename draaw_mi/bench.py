@@ -55,15 +55,27 @@ def relmse(img: np.ndarray, gt: np.ndarray) -> float:
     return float(np.mean((img - gt) ** 2 / (gt ** 2 + 1e-2)))
 
 
+def delta_e2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
+    """Per-element CIEDE2000 colour difference of CIELAB arrays (..., 3) (colour-science).
+
+    >>> round(float(delta_e2000(np.array([50.0, 2.6772, -79.7751]), np.array([50.0, 0.0, -82.7485]))), 4)
+    2.0425
+    """
+    import colour
+    return colour.delta_E(lab1, lab2, method="CIE 2000")
+
+
+def srgb_to_lab(img: np.ndarray) -> np.ndarray:
+    """CIELAB (D65) of a linear-sRGB image after display encoding (clipped to [0, 1])."""
+    import colour
+    enc = srgb_encode(img[..., :3])
+    xyz = colour.sRGB_to_XYZ(enc)                     # decodes the sRGB transfer function
+    return colour.XYZ_to_Lab(xyz)
+
+
 def ciede2000(img: np.ndarray, gt: np.ndarray) -> float:
     """Mean CIEDE2000 between the sRGB-encoded (display-referred, clipped) images."""
-    import colour
-
-    def lab(x):
-        enc = srgb_encode(x[..., :3])
-        xyz = colour.sRGB_to_XYZ(enc)                 # decodes the sRGB transfer function
-        return colour.XYZ_to_Lab(xyz)
-    return float(np.mean(colour.delta_E(lab(img), lab(gt), method="CIE 2000")))
+    return float(np.mean(delta_e2000(srgb_to_lab(img), srgb_to_lab(gt))))
 
 
 def errors(img: np.ndarray, gt: np.ndarray) -> dict:

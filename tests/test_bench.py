@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -15,7 +16,60 @@ from draaw_mi.camera_path import GO_DRAAW_BENCHMARK_PATH, interpolate
 from conftest import tiny_description
 
 
-def test_error_metrics_against_independent_formulas():
+# Sharma, Wu & Dalal (2005), "The CIEDE2000 color-difference formula: implementation notes,
+# supplementary test data, and mathematical observations", Color Res. Appl. 30(1), Table 1:
+# (L1, a1, b1, L2, a2, b2, dE00) for all 34 pairs (published data, typed in).
+SHARMA_2005 = np.array([
+    [50.0000, 2.6772, -79.7751, 50.0000, 0.0000, -82.7485, 2.0425],
+    [50.0000, 3.1571, -77.2803, 50.0000, 0.0000, -82.7485, 2.8615],
+    [50.0000, 2.8361, -74.0200, 50.0000, 0.0000, -82.7485, 3.4412],
+    [50.0000, -1.3802, -84.2814, 50.0000, 0.0000, -82.7485, 1.0000],
+    [50.0000, -1.1848, -84.8006, 50.0000, 0.0000, -82.7485, 1.0000],
+    [50.0000, -0.9009, -85.5211, 50.0000, 0.0000, -82.7485, 1.0000],
+    [50.0000, 0.0000, 0.0000, 50.0000, -1.0000, 2.0000, 2.3669],
+    [50.0000, -1.0000, 2.0000, 50.0000, 0.0000, 0.0000, 2.3669],
+    [50.0000, 2.4900, -0.0010, 50.0000, -2.4900, 0.0009, 7.1792],
+    [50.0000, 2.4900, -0.0010, 50.0000, -2.4900, 0.0010, 7.1792],
+    [50.0000, 2.4900, -0.0010, 50.0000, -2.4900, 0.0011, 7.2195],
+    [50.0000, 2.4900, -0.0010, 50.0000, -2.4900, 0.0012, 7.2195],
+    [50.0000, -0.0010, 2.4900, 50.0000, 0.0009, -2.4900, 4.8045],
+    [50.0000, -0.0010, 2.4900, 50.0000, 0.0010, -2.4900, 4.8045],
+    [50.0000, -0.0010, 2.4900, 50.0000, 0.0011, -2.4900, 4.7461],
+    [50.0000, 2.5000, 0.0000, 50.0000, 0.0000, -2.5000, 4.3065],
+    [50.0000, 2.5000, 0.0000, 73.0000, 25.0000, -18.0000, 27.1492],
+    [50.0000, 2.5000, 0.0000, 61.0000, -5.0000, 29.0000, 22.8977],
+    [50.0000, 2.5000, 0.0000, 56.0000, -27.0000, -3.0000, 31.9030],
+    [50.0000, 2.5000, 0.0000, 58.0000, 24.0000, 15.0000, 19.4535],
+    [50.0000, 2.5000, 0.0000, 50.0000, 3.1736, 0.5854, 1.0000],
+    [50.0000, 2.5000, 0.0000, 50.0000, 3.2972, 0.0000, 1.0000],
+    [50.0000, 2.5000, 0.0000, 50.0000, 1.8634, 0.5757, 1.0000],
+    [50.0000, 2.5000, 0.0000, 50.0000, 3.2592, 0.3350, 1.0000],
+    [60.2574, -34.0099, 36.2677, 60.4626, -34.1751, 39.4387, 1.2644],
+    [63.0109, -31.0961, -5.8663, 62.8187, -29.7946, -4.0864, 1.2630],
+    [61.2901, 3.7196, -5.3901, 61.4292, 2.2480, -4.9620, 1.8731],
+    [35.0831, -44.1164, 3.7933, 35.0232, -40.0716, 1.5901, 1.8645],
+    [22.7233, 20.0904, -46.6940, 23.0331, 14.9730, -42.5619, 2.0373],
+    [36.4612, 47.8580, 18.3852, 36.2715, 50.5065, 21.2231, 1.4146],
+    [90.8027, -2.0831, 1.4410, 91.1528, -1.6435, 0.0447, 1.4441],
+    [90.9257, -0.5406, -0.9208, 88.6381, -0.8985, -0.7239, 1.5381],
+    [6.7747, -0.2908, -2.4247, 5.8714, -0.0985, -2.2286, 0.6377],
+    [2.0776, 0.0795, -1.1350, 0.9033, -0.0636, -0.5514, 0.9082],
+])
+
+
+def _lab_to_linear_srgb(lab):
+    """CIELAB (D65, xy = 0.3127, 0.3290) -> linear sRGB with the CIE formulas and the
+    XYZ -> RGB matrix published in IEC 61966-2-1 (independent of colour-science)."""
+    white = np.array([0.3127 / 0.3290, 1.0, (1 - 0.3127 - 0.3290) / 0.3290])
+    m = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
+    fy = (lab[..., 0] + 16) / 116
+    f = np.stack([fy + lab[..., 1] / 500, fy, fy - lab[..., 2] / 200], -1)
+    d = 6 / 29
+    xyz = np.where(f > d, f ** 3, 3 * d * d * (f - 4 / 29)) * white
+    return xyz @ m.T
+
+
+def test_rmse_and_relmse_against_formulas():
     rng = np.random.default_rng(1)
     gt = rng.random((8, 9, 3)).astype(np.float32)
     img = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
@@ -23,12 +77,34 @@ def test_error_metrics_against_independent_formulas():
     assert e["rmse"] == pytest.approx(np.sqrt(((img - gt) ** 2).mean()), rel=1e-6)
     assert e["relmse"] == pytest.approx(((img - gt) ** 2 / (gt ** 2 + 0.01)).mean(), rel=1e-6)
     assert bench.errors(gt, gt)["ciede2000"] == pytest.approx(0.0, abs=1e-9)
-    # CIEDE2000 of a pure sRGB red vs a slightly darker red, from the published Lab values
-    import colour
-    a, b = np.full((1, 1, 3), [1.0, 0, 0], np.float32), np.full((1, 1, 3), [0.8, 0, 0], np.float32)
-    lab = lambda x: colour.XYZ_to_Lab(colour.sRGB_to_XYZ(draaw_mi.io.srgb_encode(x)))
-    assert bench.ciede2000(a, b) == pytest.approx(float(colour.delta_E(lab(a), lab(b), method="CIE 2000")[0, 0]))
-    assert lab(a)[0, 0, 0] == pytest.approx(53.24, abs=0.05)      # L* of sRGB red
+
+
+def test_ciede2000_matches_sharma_2005_table():
+    """All 34 published pairs, both orders (the formula is symmetric), to the table's 4 decimals."""
+    lab1, lab2, de = SHARMA_2005[:, :3], SHARMA_2005[:, 3:6], SHARMA_2005[:, 6]
+    got = np.asarray(bench.delta_e2000(lab1, lab2))
+    assert got.shape == (34,)
+    assert np.abs(got - de).max() < 6e-5, np.round(got - de, 5)
+    assert np.abs(np.asarray(bench.delta_e2000(lab2, lab1)) - de).max() < 6e-5
+
+
+def test_ciede2000_of_images_is_the_mean_over_pixels_of_published_pairs():
+    """Pairs inside the sRGB gamut, turned into linear-sRGB pixels by an independent numpy
+    conversion: the image metric is the mean of their published differences. (Pairs 9-15 sit
+    on the formula's hue discontinuity, where rounding picks the side; they are left out.)"""
+    rgb1, rgb2 = _lab_to_linear_srgb(SHARMA_2005[:, :3]), _lab_to_linear_srgb(SHARMA_2005[:, 3:6])
+    keep = ((rgb1 >= 0) & (rgb1 <= 1) & (rgb2 >= 0) & (rgb2 <= 1)).all(1)
+    keep[8:15] = False
+    assert keep.sum() >= 15
+    img, gt = rgb1[keep][:, None, :], rgb2[keep][:, None, :]            # an (N, 1, 3) image
+    assert bench.ciede2000(img, gt) == pytest.approx(SHARMA_2005[keep, 6].mean(), abs=2e-4)
+    # the sRGB primaries and white (IEC 61966-2-1 / CIE published Lab)
+    prim = np.array([[[1.0, 0, 0]], [[0, 1.0, 0]], [[0, 0, 1.0]], [[1.0, 1.0, 1.0]]])
+    ref = np.array([[53.24, 80.09, 67.20], [87.73, -86.18, 83.18], [32.30, 79.19, -107.86], [100, 0, 0]])
+    assert np.abs(bench.srgb_to_lab(prim)[:, 0] - ref).max() < 0.03      # rounding of matrix and table
+    # a linear grey g: L* = 116 g^(1/3) - 16 (CIE), i.e. the display encoding is undone exactly
+    g = np.array([[[0.05] * 3], [[0.2] * 3], [[0.6] * 3]])
+    assert np.allclose(bench.srgb_to_lab(g)[:, 0, 0], 116 * np.cbrt(g[:, 0, 0]) - 16, atol=1e-3)
 
 
 def test_bias_separates_noise_from_bias():
@@ -58,22 +134,50 @@ def test_pareto_and_time_to_error():
 
 
 def test_study_writes_table_summary_and_plots(tmp_path):
+    import csv
+
+    import matplotlib.image
+    import mitsuba as mi
     scene_file = tmp_path / "tiny.json"
     scene_file.write_text(json.dumps(tiny_description(resolution=[16, 12])))
     res = bench.run_study([str(scene_file)], versions=("v4", "path"), spps=(1, 4), adaptive=(None, 4),
                           repeats=2, gt_spp=64, out_dir=str(tmp_path / "out"), progress=False)
     out = tmp_path / "out"
-    for name in ("results.json", "results.csv", "summary.md", "error_vs_time_tiny_d4.png", "error_images_tiny.png"):
-        assert (out / name).stat().st_size > 0, name
     rows = res["rows"]
     assert {r["label"] for r in rows} == {"v4", "path", "v4+adaptive4", "path+adaptive4"}
     for r in rows:
         assert r["time_s"] > 0 and np.isfinite(r["rmse"]) and r["finite"]
+    # ground truth: cached, and equal to Mitsuba's path at 64 spp with the study's seed
+    cached = list((out / "cache").iterdir())
+    assert len(cached) == 1 and cached[0].suffix == ".exr"
+    scene = draaw_mi.load_scene(str(scene_file))
+    integ = mi.load_dict({"type": "path", "max_depth": 4})
+    gt = np.array(mi.render(scene.mi_scene, integrator=integ, spp=64, seed=2 ** 31 - 1))
+    assert np.allclose(draaw_mi.read_exr(str(cached[0])), gt, rtol=1e-6, atol=1e-6)
+    # the path rows' errors, recomputed from independent Mitsuba renders (seeds 1, 2; mean of repeats)
+    for spp in (1, 4):
+        imgs = [np.array(mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=1 + r)) for r in range(2)]
+        row = next(r for r in rows if r["label"] == "path" and r["spp"] == spp)
+        assert row["rmse"] == pytest.approx(np.mean([np.sqrt(((i - gt) ** 2).mean()) for i in imgs]), rel=1e-5)
+        assert row["mse"] == pytest.approx(np.mean((np.stack(imgs) - gt) ** 2), rel=1e-5)
+        assert row["variance"] == pytest.approx(np.stack(imgs).var(axis=0, ddof=1).mean(), rel=1e-5)
     four = {r["label"]: r["rmse"] for r in rows if r["spp"] == 4}
     one = {r["label"]: r["rmse"] for r in rows if r["spp"] == 1 and "adaptive" not in r["label"]}
     assert four["path"] < one["path"]                     # error falls with spp
-    cached = list((out / "cache").iterdir())
-    assert len(cached) == 1 and cached[0].suffix == ".exr"     # ground truth cached
+    # the files hold the rows: JSON round trip, one CSV line per row, a table line per row
+    assert json.loads((out / "results.json").read_text())["rows"] == json.loads(json.dumps(rows, default=str))
+    with open(out / "results.csv") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == len(rows)
+    for t, r in zip(table, rows):
+        assert t["label"] == r["label"] and int(t["spp"]) == r["spp"]
+        assert float(t["rmse"]) == pytest.approx(r["rmse"], rel=1e-9)
+    md = (out / "summary.md").read_text()
+    for r in rows:
+        assert f"| {r['label']} | {r['spp']} | {r['time_s']:.4f} |" in md and f"{r['rmse']:.4f}" in md
+    for name in ("error_vs_time_tiny_d4.png", "error_images_tiny.png"):
+        png = matplotlib.image.imread(str(out / name))
+        assert png.ndim == 3 and min(png.shape[:2]) > 200 and png[..., :3].std() > 0.05, name
 
 
 def test_go_draaw_interpolation_quirks_reproduced():
@@ -88,16 +192,35 @@ def test_go_draaw_interpolation_quirks_reproduced():
     assert np.all(np.diff(g[:, 0]) >= 0) and g[0][0] == 0 and g[-1][0] == 9
 
 
-def test_frame_times_along_a_path(go_draaw_dir):
+def test_frame_times_along_a_path(go_draaw_dir, monkeypatch):
     desc = {"render": {"resolution": [20, 15], "spp": 1, "max_depth": 3},
             "camera": {"position": list(GO_DRAAW_BENCHMARK_PATH[0][:3]), "angles": list(GO_DRAAW_BENCHMARK_PATH[0][3:]),
                        "fov": 45},
             "shapes": [{"type": "mesh", "file": os.path.join(go_draaw_dir, "monkey.obj"), "scale": 75}],
             "lights": [{"type": "point", "position": [0, 1500, 1000], "intensity": 4e6}]}
     scene = draaw_mi.load_scene(desc)
+    # spy on every render call: which camera position the sensor has at that moment
+    render_mod = sys.modules["draaw_mi.render"]
+    real_render = render_mod.render
+    key = next(k for k in scene.params.keys() if k.endswith("to_world") and "sensor" in k)
+    seen = []
+
+    def spy(sc, *a, **kw):
+        m = np.array(sc.params[key].matrix).reshape(4, 4)
+        seen.append((kw.get("version"), kw.get("seed"), m[:3, 3].copy()))
+        return real_render(sc, *a, **kw)
+    monkeypatch.setattr(render_mod, "render", spy)
     rows = bench.frame_times(scene, GO_DRAAW_BENCHMARK_PATH, versions=("v1", "v4"), frames=4, error_frames=2,
                              gt_spp=16, progress=False)
     assert [r["version"] for r in rows] == ["v1", "v4"]
+    # each timed frame i is rendered from the i-th position of the interpolated path
+    path = interpolate(GO_DRAAW_BENCHMARK_PATH, duration=4 / 60)
+    assert np.ptp(path[:, :3], axis=0).max() > 1.0                   # the path does move
+    for v in ("v1", "v4"):
+        timed = [(seed, pos) for ver, seed, pos in seen if ver == v and seed is not None]
+        assert [sd for sd, _ in timed] == [0, 1, 2, 3]
+        for i, pos in timed:
+            assert np.allclose(pos, path[i, :3], rtol=1e-5, atol=1e-3), (v, i, pos, path[i, :3])
     for r in rows:
         assert r["frames"] == 4 and 0 < r["min_s"] <= r["p10_s"] <= r["median_s"] <= r["p90_s"] <= r["max_s"]
         assert np.isfinite(r["rmse"]) and np.isfinite(r["ciede2000"])

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 
 import drjit as dr
+import matplotlib.image
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -85,7 +86,14 @@ def test_small_roughness_is_not_trapped_below_the_alpha_clamp(fit_scene):
     assert abs(res.values["target.metallic"] - 0.9) < 0.04
 
 
-@pytest.mark.parametrize("rough,metal", [(0.02, 1.0), (0.5, 0.0), (1.0, 1.0), (0.02, 0.0)])
+_NEAR_MIRROR_METAL = pytest.mark.xfail(strict=True, reason=(
+    "measured: the 32x32 fit of roughness 0.02 / metallic 1 ends at roughness 0.052, whose image "
+    "differs from the truth's beyond Monte Carlo noise (9.5 % of pixel channels at |z| > 3, max "
+    "|z| 21): not 'alike at this resolution'; a fitter limitation, not fixed in issue 9"))
+
+
+@pytest.mark.parametrize("rough,metal", [pytest.param(0.02, 1.0, marks=_NEAR_MIRROR_METAL), (0.5, 0.0),
+                                         (1.0, 1.0), (0.02, 0.0)])
 def test_hard_targets_stay_finite_and_in_range(fit_scene, rough, metal):
     ref = _reference(fit_scene, rough, metal, spp=256)
     res = _fit(fit_scene, ref, spp=8, iterations=80, lr=0.08)
@@ -96,11 +104,24 @@ def test_hard_targets_stay_finite_and_in_range(fit_scene, rough, metal):
     assert abs(res.values["target.metallic"] - metal) < 0.03
     if rough == 0.02:
         # At 32x32 a pixel spans ~0.016 rad of reflected direction, more than the GGX lobe of any
-        # roughness below ~0.1: those renders are alike here (fits end at 0.05-0.07). 128x128
-        # resolves them (benchmarks/fit_cases.md).
+        # roughness below ~0.1 (fits end at 0.05-0.07; 128x128 resolves them, see
+        # benchmarks/fit_cases.md). So instead of a tolerance on the value, check the claim:
+        # the fitted material renders the true image within Monte Carlo noise (per-pixel z).
+        fitted = _images(fit_scene, res.values["target.roughness"], res.values["target.metallic"])
+        truth = _images(fit_scene, rough, metal)
+        se = np.sqrt(fitted.var(0, ddof=1) / len(fitted) + truth.var(0, ddof=1) / len(truth))
+        z = (fitted.mean(0) - truth.mean(0))[se > 1e-6] / se[se > 1e-6]
+        assert np.mean(np.abs(z) > 3) < 0.02 and abs(z.mean()) < 0.3, (res.values, np.abs(z).max())
         assert res.values["target.roughness"] < 0.1
     else:
         assert abs(res.values["target.roughness"] - rough) < 0.03
+
+
+def _images(scene, rough, metal, k=6, spp=256):
+    _set(scene, {"target.roughness": rough, "target.metallic": metal})
+    out = np.stack([np.array(draaw_mi.render(scene, version="path", spp=spp, seed=900 + i)) for i in range(k)])
+    _set(scene, START)
+    return out.astype(np.float64)
 
 
 @pytest.mark.parametrize("fast_math", [True, False])
@@ -122,19 +143,24 @@ def test_exposure_fit_is_insensitive_to_a_global_scale(fit_scene):
 
 
 def test_exposure_scale_estimate_is_unbiased_under_noise():
-    """<ref, ref> / <img, ref> is unbiased for a noisy render; <img, ref> / <img, img> (the
-    least-squares scale, used before) is biased low by the pixel variance."""
+    """<ref, ref> / <img, ref> is unbiased for a noisy render (the least-squares <img, ref> /
+    <img, img> used before is biased low by the pixel variance: 2 / (1 + 0.09 / E[t^2]) ~ 1.8
+    here); the loss is that of the scaled render."""
     rng = np.random.default_rng(0)
     truth = rng.uniform(0.1, 1.0, (64, 64, 3)).astype(np.float32)
     ref = mi.TensorXf(truth * 2.0)
     scales = []
     for _ in range(8):
         noisy = truth + rng.normal(0, 0.3, truth.shape).astype(np.float32)
-        _, s = _loss(mi.TensorXf(noisy), ref, "l2", "fit")
+        lv, s = _loss(mi.TensorXf(noisy), ref, "l2", "fit")
         scales.append(float(s[0]))
-        lsq = float(np.sum(noisy * truth * 2) / np.sum(noisy * noisy))
-        assert lsq < 1.85                     # what the old estimate gave
-    assert abs(np.mean(scales) - 2.0) < 0.01
+        expected = np.mean((noisy.astype(np.float64) * scales[-1] - truth * 2.0) ** 2)
+        assert float(lv[0]) == pytest.approx(expected, rel=1e-4)
+        lv1, _ = _loss(mi.TensorXf(noisy), ref, "l1", "fit")
+        assert float(lv1[0]) == pytest.approx(np.mean(np.abs(noisy * scales[-1] - truth * 2.0)), rel=1e-4)
+    se = np.std(scales, ddof=1) / np.sqrt(len(scales))
+    assert abs(np.mean(scales) - 2.0) < 4 * se + 1e-4, (np.mean(scales), se)
+    assert se < 0.01                                        # and the check has power against -0.2
 
 
 def test_noisy_reference_and_colour(fit_scene):
@@ -257,12 +283,20 @@ def test_cli_fit_writes_scene_and_plot(tmp_path, fit_scene, capsys):
     out, plot = tmp_path / "fitted.toml", tmp_path / "fit.png"
     rc = main(["fit", os.path.join(SCENES, "fit_sphere.toml"), "--reference", ref_path, "--param",
                "target.roughness", "--iterations", "8", "--spp", "4", "--version", _version(),
-               "-o", str(out), "--plot", str(plot)])
+               "--lr", "0.1", "--seed", "3", "-o", str(out), "--plot", str(plot)])
     assert rc == 0, capsys.readouterr().err
+    printed = capsys.readouterr().out
     fitted = draaw_mi.load_scene(str(out))
     r = float(np.array(fitted.params["target.roughness.value"]).ravel()[0])
-    assert 0.0 <= r <= 1.0 and r != 0.5
-    assert plot.stat().st_size > 1000
+    # the written value is the library's fit with the same arguments (deterministic), moved from
+    # the start (0.5) towards the truth (0.35)
+    # the written value is the one printed, and the 8 steps of lr 0.1 (log space) moved it from
+    # the start (0.5) to the truth (0.35); library fits with these arguments end at 0.340 +- 0.003
+    # (Adam's first steps are sign-like, so runs are not bit-identical)
+    assert f"target.roughness = {round(r, 5)}" in printed
+    assert abs(r - 0.35) < 0.04, r
+    png = matplotlib.image.imread(str(plot))
+    assert png.shape[0] > 200 and png[..., :3].std() > 0.05
     capsys.readouterr()
     assert main(["fit", os.path.join(SCENES, "fit_sphere.toml"), "--reference", ref_path, "--param",
                  "target.metallic", "--iterations", "4", "--spp", "4", "--exposure", "fit"]) == 0

@@ -56,6 +56,25 @@ def test_notebook_executes_small(name, monkeypatch):
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs
                    if o.output_type == "stream")
     assert "32x32" in text and "fit" in text                   # the small configuration ran
+    if name == "inverse_fitting":
+        _check_fitted_values(text)
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
     assert len(images) >= 2                                     # side by side + convergence
+
+
+# The notebook's ground truth (scenes/fit_two_spheres.toml), typed here independently of it.
+TRUTH = {"left.roughness": 0.2, "left.metallic": 0.9, "right.roughness": 0.6, "right.metallic": 0.1}
+
+
+def _check_fitted_values(text):
+    """The fit cell prints ``name truth T fit F error E`` per parameter: the fit recovers the
+    truth as tests/test_fit.py::test_two_materials_jointly requires of the same scene (0.05)."""
+    import re
+    found = {m[0]: (float(m[1]), float(m[2]), float(m[3])) for m in
+             re.findall(r"^(\S+)\s+truth ([-\d.]+)\s+fit ([-\d.]+)\s+error ([-+\d.]+)$", text, re.M)}
+    assert set(found) == set(TRUTH), f"fitted values not printed: {found}"
+    for name, (truth, fit, err) in found.items():
+        assert truth == pytest.approx(TRUTH[name], abs=5e-4), name
+        assert err == pytest.approx(fit - truth, abs=2e-4), name
+        assert abs(fit - TRUTH[name]) < 0.05, (name, fit, TRUTH[name])

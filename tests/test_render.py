@@ -35,8 +35,18 @@ def test_passes_are_a_true_mean_of_independent_passes(tiny_scene):
 
 
 def test_uneven_passes_are_weighted_by_spp(tiny_scene):
-    img, info = draaw_mi.render(tiny_scene, version="path", spp=10, pass_spp=4, return_info=True)
-    assert info["spp"] == 10 and np.isfinite(np.array(img)).all()
+    """10 spp in passes of 4, 4, 2: the image is (4 a + 4 b + 2 c) / 10 of the three passes
+    rendered by Mitsuba with the per-pass seeds (an unweighted mean would give c weight 1/3)."""
+    img, info = draaw_mi.render(tiny_scene, version="path", spp=10, pass_spp=4, seed=3, return_info=True)
+    assert info["spp"] == 10 and info["passes"] == 3
+    integ = mi.load_dict({"type": "path", "max_depth": 4})
+    seeds = draaw_mi.render.__globals__["pass_seeds"](3, 3)
+    passes = [np.array(mi.render(tiny_scene.mi_scene, integrator=integ, spp=n, seed=s))
+              for n, s in zip((4, 4, 2), seeds)]
+    manual = (4 * passes[0] + 4 * passes[1] + 2 * passes[2]) / 10
+    unweighted = sum(passes) / 3
+    assert np.abs(manual - unweighted).max() > 1e-3       # the test can tell the two apart
+    assert np.allclose(np.array(img), manual, rtol=1e-6, atol=1e-7)
 
 
 def test_time_budget_stops_early_but_renders_one_pass(tiny_scene):

@@ -76,7 +76,11 @@ def texture_values(tex: mi.Texture):
     params = mi.traverse(tex)
     for key in ("value", "data"):
         if key in params.keys():
-            return np.array(params[key]).ravel()
+            arr = np.array(params[key]).ravel()
+            if np.issubdtype(arr.dtype, np.integer):
+                # 8/16-bit image files keep their integer data; eval() maps it onto [0, 1]
+                arr = arr.astype(np.float64) / np.iinfo(arr.dtype).max
+            return arr
     return None
 
 

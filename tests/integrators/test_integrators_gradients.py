@@ -14,7 +14,8 @@ import sys
 import numpy as np
 import pytest
 
-from integrators_helpers import (VERSIONS, ad_gradient, dr, fd_gradient, integrator, mi, rs)
+from integrators_helpers import (VERSIONS, ad_gradient, dr, fd_gradient, highlight_weight, integrator, mi,
+                                 rs)
 
 KEYS = [
     ("plane.bsdf.base_color.value", 0.02),
@@ -33,10 +34,23 @@ def grad_scene():
 
 def compare(scene, kind, key, h, n=6, spp_ad=256, spp_fd=1024, **props):
     integ = integrator(kind, max_depth=4, **props)
-    ad = np.array([ad_gradient(scene, integ, key, spp_ad, s) for s in range(n)])
-    fd = np.array([fd_gradient(scene, integ, key, h, spp_fd, 10 + s) for s in range(n)])
+    # roughness moves light within the image more than it changes its mean: weight highlights
+    w = highlight_weight(scene) if "roughness" in key else None
+    ad = np.array([ad_gradient(scene, integ, key, spp_ad, s, w) for s in range(n)])
+    fd = np.array([fd_gradient(scene, integ, key, h, spp_fd, 10 + s, w) for s in range(n)])
     se = np.sqrt(ad.var(ddof=1) / n + fd.var(ddof=1) / n)
+    assert_connected(ad, fd, key)
     return ad.mean(), fd.mean(), se
+
+
+def assert_connected(ad, fd, key):
+    """Both estimates are non-zero and stand well above their own noise: a parameter that
+    does not reach the image (0 = 0) or an FD step drowned in noise cannot pass."""
+    n = len(ad)
+    se_ad, se_fd = ad.std(ddof=1) / np.sqrt(n), fd.std(ddof=1) / np.sqrt(n)
+    assert np.isfinite(ad).all() and np.isfinite(fd).all(), (key, ad, fd)
+    assert abs(fd.mean()) > 4 * se_fd and abs(fd.mean()) > 1e-6, ("FD gradient not above its noise", key, fd)
+    assert abs(ad.mean()) > 4 * se_ad and abs(ad.mean()) > 1e-6, ("AD gradient not above its noise", key, ad)
 
 
 @pytest.mark.parametrize("kind", VERSIONS)
@@ -51,7 +65,16 @@ def test_gradient_matches_finite_differences(grad_scene, kind, key, h):
 @pytest.mark.parametrize("kind", ["draaw_v1", "draaw_v2"])
 @pytest.mark.parametrize("key,h", LEGACY_KEYS, ids=["reflection", "direct_to_scatter"])
 def test_legacy_knob_gradients(grad_scene, kind, key, h):
-    ad, fd, se = compare(grad_scene, kind, key, h, n=8)
+    scene = grad_scene
+    if "direct_to_scatter" in key:
+        # the gradient plane has almost no indirect diffuse light for this knob to scale
+        # (FD 0.0009 +- 0.0003): use the Cornell box's white walls instead
+        # (FD 0.0009 +- 0.0003): use the Cornell box's white walls instead, at 0.7 so that both
+        # FD steps stay inside [0, 1] (at the default 1.0 the +h step is clipped: FD = AD / 2)
+        d = rs.cornell_draaw(res=12, spp=16)
+        d["white"]["direct_to_scatter"] = 0.7
+        scene, key = mi.load_dict(d), "white.direct_to_scatter.value"
+    ad, fd, se = compare(scene, kind, key, h, n=8)
     assert abs(ad - fd) <= 3 * se + 1e-7, (kind, key, ad, fd, se)
 
 
@@ -96,8 +119,10 @@ def test_gradients_do_not_accumulate_when_cleared(grad_scene, kind):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("key,h", [("tall_box.bsdf.roughness.value", 0.03),
-                                   ("white.base_color.value", 0.02)])
+# The tall box's roughness was dropped from this test: at 24x24 its gradient is within FD noise
+# even for a highlight-weighted loss (FD 2.8e-4 +- 2.0e-4, 8 seeds x 2048 spp), so the comparison
+# passed as 0 = 0. Roughness gradients are compared on the gradient plane above.
+@pytest.mark.parametrize("key,h", [("white.base_color.value", 0.02)])
 def test_gradients_on_official_cornell(key, h):
     from integrators_helpers import official_scene
     scene = official_scene("cornell", 24)
@@ -117,19 +142,32 @@ integ = integrator({kind!r}, max_depth=4)
 ad_gradient(scene, integ, "plane.bsdf.roughness.value", 16, 0)
 ad_gradient(scene, integ, "plane.bsdf.roughness.value", 16, 1)
 r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-ad_gradient(scene, integ, "plane.bsdf.roughness.value", 1024, 2)
+ad_gradient(scene, integ, "plane.bsdf.roughness.value", {spp}, 2)
 r1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print((r1 - r0) / 1024.0)
+print((r1 - r0) * 1024.0)
 """
+
+
+def _growth_per_sample(kind, spp):
+    """Peak-RSS growth of a backward pass at ``spp`` over one at 16 spp (64x64), in units of
+    one 32-bit float per sample of the large pass."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    out = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT.format(here=here, kind=kind, spp=spp)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    growth_bytes = float(out.stdout.strip().splitlines()[-1])
+    return growth_bytes / (64 * 64 * spp * 4)
 
 
 @pytest.mark.parametrize("kind", ["draaw_v2", "draaw_v4"])
 def test_gradient_memory_does_not_grow_with_spp(kind):
-    """Peak RSS of a backward pass at 1024 spp is no larger than at 16 spp (64x64: 4.2 M
-    samples; any per-sample state would need >= 50 MB)."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    out = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT.format(here=here, kind=kind)],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
-    growth_mb = float(out.stdout.strip().splitlines()[-1])
-    assert growth_mb < 20.0, growth_mb
+    """Path replay keeps no per-sample state: the peak RSS of a backward pass at 1024 spp
+    (4.2 M samples) exceeds the one at 16 spp by less than a quarter of a float per sample.
+    Control: Mitsuba's ``path`` differentiated by plain AD (the whole graph kept) grows by
+    more than one float per sample in the same measurement, so the measurement can see it."""
+    per_sample = _growth_per_sample(kind, 1024)
+    assert per_sample < 0.25, f"{kind}: {per_sample:.3f} floats per sample"
+
+
+def test_memory_measurement_sees_per_sample_state():
+    assert _growth_per_sample("path", 256) > 1.0

@@ -1,0 +1,174 @@
+"""The CLI sub-commands users script: ``post``, ``render --post``, ``info --json``, ``bench``
+(with ``--camera-path``) and ``fit`` (``--views``, ``--post``, ``--loss``, PNG references).
+
+Outputs are checked against independent computations: the numpy post-filter reference of
+tests/post, the library called directly, Mitsuba renders and the sRGB formulas.
+"""
+from __future__ import annotations
+
+import json
+import os
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.cli import main
+
+from conftest import SCENES, tiny_description
+
+CHAIN = [{"type": "contrast", "contrast": 1.3, "pivot": 0.4}]
+
+
+def _contrast(c):                                 # the chain above, in numpy
+    return (c - 0.4) * 1.3 + 0.4
+
+
+@pytest.fixture
+def tiny_file(tmp_path):
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps(tiny_description(resolution=[12, 10])))
+    return str(path)
+
+
+@pytest.fixture
+def chain_file(tmp_path):
+    path = tmp_path / "chain.json"
+    path.write_text(json.dumps(CHAIN))
+    return str(path)
+
+
+def test_post_applies_the_chain_to_colour_and_keeps_other_channels(tmp_path, chain_file, capsys):
+    rng = np.random.default_rng(2)
+    img = rng.random((7, 9, 5)).astype(np.float32)
+    src = str(tmp_path / "in.exr")
+    draaw_mi.write_exr(src, img, channels=["R", "G", "B", "depth", "normal.X"])
+    assert main(["post", src, "-o", str(tmp_path / "out.exr"), "--chain", chain_file]) == 0
+    out, names = draaw_mi.read_exr(str(tmp_path / "out.exr"), with_names=True)
+    assert names == ["R", "G", "B", "depth", "normal.X"]
+    assert np.allclose(out[..., :3], _contrast(img[..., :3]), atol=1e-6)
+    assert np.array_equal(out[..., 3:], img[..., 3:])                # AOVs untouched
+    # PNG output: the sRGB encoding of the same result, 8 bits
+    assert main(["post", src, "-o", str(tmp_path / "out.png"), "--chain", chain_file]) == 0
+    png = matplotlib.image.imread(str(tmp_path / "out.png"))[..., :3]
+    c = np.clip(_contrast(img[..., :3]), 0, 1)
+    enc = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    assert np.abs(png - enc).max() <= 0.5 / 255 + 1e-6
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_render_post_is_the_chain_applied_to_the_plain_render(tmp_path, tiny_file, chain_file):
+    base = ["render", tiny_file, "--spp", "4", "--seed", "7", "--version", "path"]
+    assert main(base + ["-o", str(tmp_path / "plain.exr")]) == 0
+    assert main(base + ["-o", str(tmp_path / "post.exr"), "--post", chain_file]) == 0
+    plain, post = draaw_mi.read_exr(str(tmp_path / "plain.exr")), draaw_mi.read_exr(str(tmp_path / "post.exr"))
+    assert np.abs(post - plain).max() > 0.01
+    assert np.allclose(post, _contrast(plain), atol=1e-5)
+
+
+def test_info_json_describes_the_setup_and_the_scene(tiny_file, capsys):
+    assert main(["info", "--json", tiny_file]) == 0
+    out = json.loads(capsys.readouterr().out)
+    import mitsuba as mi
+    assert out["variant"] == mi.variant() and out["mitsuba"] == mi.__version__
+    assert "draaw" in out["plugins"]["bsdf"]
+    assert {"draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4"} <= set(out["plugins"]["integrators"])
+    assert out["versions"]["v4"] == "draaw_v4"
+    s = out["scene"]
+    assert list(s["resolution"]) == [12, 10]
+    assert set(s["shapes"]) >= {"ball_shape", "floor"} and set(s["materials"]) == {"ball", "ground"}
+    assert isinstance(s["features"], dict) and s["features"]
+
+
+def test_bench_quick_with_a_camera_path(tmp_path, tiny_file, capsys):
+    keys = [[0.0, 1.0, 5.0, 0.0, 0.0], [1.0, 1.2, 4.0, 0.2, 0.1]]
+    (tmp_path / "keys.json").write_text(json.dumps(keys))
+    out = tmp_path / "bench"
+    rc = main(["bench", tiny_file, "--quick", "--versions", "v4,path", "--spp", "1,2", "--adaptive", "0",
+               "--repeats", "2", "--resolution", "8x6", "--gt-spp", "16", "--out", str(out),
+               "--camera-path", str(tmp_path / "keys.json"), "--frames", "3", "--no-progress"])
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    rows = res["rows"]
+    assert sorted((r["label"], r["spp"]) for r in rows) == [("path", 1), ("path", 2), ("v4", 1), ("v4", 2)]
+    assert all(r["resolution"] == [8, 6] and r["repeats"] == 2 for r in rows)
+    assert res["ground_truth_spp"] == 16
+    frames = json.loads((out / "frame_times.json").read_text())
+    assert [f["version"] for f in frames] == ["v4", "path"]
+    assert all(f["frames"] == 3 and f["min_s"] <= f["median_s"] <= f["max_s"] for f in frames)
+    printed = capsys.readouterr().out
+    assert "frame_times.json" in printed and "4 settings" in printed
+
+
+def test_fit_passes_views_post_and_loss_through(tmp_path, chain_file, monkeypatch, capsys):
+    """--views (one camera table per --reference), --post and --loss reach fit() unchanged,
+    and the run completes with a scene written."""
+    views = [{"origin": [0.0, 0.7, 3.2], "target": [0.0, 0.5, 0.0], "fov": 30.0},
+             {"origin": [2.4, 1.9, 1.8], "target": [0.0, 0.3, 0.0], "fov": 34.0}]
+    (tmp_path / "views.json").write_text(json.dumps(views))
+    scene_file = _small_fit_scene(tmp_path)
+    refs = []
+    for i in range(2):
+        refs.append(str(tmp_path / f"ref{i}.exr"))
+        draaw_mi.write_exr(refs[-1], np.full((16, 16, 3), 0.2 + 0.1 * i, np.float32))
+    seen = {}
+    real_fit = draaw_mi.fit
+
+    def spy(scene, references, **kw):
+        seen.update(kw, references=references)
+        seen["result"] = real_fit(scene, references, **kw)
+        return seen["result"]
+    monkeypatch.setattr(draaw_mi, "fit", spy)
+    rc = main(["fit", scene_file, "--reference", refs[0], "--reference", refs[1], "--param", "target.roughness",
+               "--views", str(tmp_path / "views.json"), "--post", chain_file, "--loss", "l1",
+               "--iterations", "2", "--spp", "2", "-o", str(tmp_path / "out.json"), "--no-progress"])
+    assert rc == 0, capsys.readouterr().err
+    assert seen["references"] == refs and seen["views"] == views and seen["loss"] == "l1"
+    x = np.random.default_rng(0).random((4, 5, 3)).astype(np.float32)
+    assert np.allclose(np.array(draaw_mi.post.apply(x, seen["post"])), _contrast(x), atol=1e-6)
+    assert seen["params"] == ["target.roughness"]
+    written = draaw_mi.load_scene(str(tmp_path / "out.json")).params["target.roughness.value"]
+    assert float(np.array(written).ravel()[0]) == pytest.approx(seen["result"].values["target.roughness"], abs=1e-6)
+
+
+def _small_fit_scene(tmp_path):
+    import tomllib
+    import tomli_w
+    with open(os.path.join(SCENES, "fit_sphere.toml"), "rb") as f:
+        desc = tomllib.load(f)
+    desc["render"]["resolution"] = [16, 16]
+    path = tmp_path / "fit_small.toml"
+    path.write_text(tomli_w.dumps(desc))
+    return str(path)
+
+
+def test_png_reference_is_srgb_decoded(tmp_path):
+    """A PNG reference is display-encoded sRGB: fit() works on its linear values."""
+    from draaw_mi.fit import load_reference
+    rng = np.random.default_rng(4)
+    linear = rng.random((6, 8, 3)).astype(np.float32) ** 2
+    draaw_mi.write_png(str(tmp_path / "r.png"), linear)
+    back = load_reference(str(tmp_path / "r.png"))
+    enc = lambda c: np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.clip(c, 0, 1) ** (1 / 2.4) - 0.055)  # noqa: E731
+    assert back.shape == (6, 8, 3) and np.abs(enc(back) - enc(linear)).max() <= 0.5 / 255 + 1e-5
+    grey = np.full((2, 2, 3), 128, np.uint8)                     # sRGB 128/255 -> 0.2158605 linear
+    matplotlib.image.imsave(str(tmp_path / "g.png"), grey)
+    assert np.allclose(load_reference(str(tmp_path / "g.png")), ((128 / 255 + 0.055) / 1.055) ** 2.4, atol=1e-5)
+
+
+def test_cli_fit_accepts_a_png_reference(tmp_path, monkeypatch):
+    scene_file = _small_fit_scene(tmp_path)
+    draaw_mi.write_png(str(tmp_path / "ref.png"), np.full((16, 16, 3), 0.2158605, np.float32))
+    seen = {}
+    import sys
+    fit_mod = sys.modules["draaw_mi.fit"]
+    real = fit_mod.load_reference
+
+    def spy(ref):
+        seen.setdefault("arrays", []).append(real(ref))
+        return seen["arrays"][-1]
+    monkeypatch.setattr(fit_mod, "load_reference", spy)
+    assert main(["fit", scene_file, "--reference", str(tmp_path / "ref.png"), "--param", "target.metallic",
+                 "--iterations", "1", "--spp", "1", "--no-progress"]) == 0
+    assert len(seen["arrays"]) == 1 and np.allclose(seen["arrays"][0], 0.2158605, atol=2e-3)
