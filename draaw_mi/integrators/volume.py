@@ -1,0 +1,584 @@
+"""Volumetric path tracing for ``draaw_v3`` / ``draaw_v4`` (scenes whose ``media`` flag is on).
+
+Estimator (the same expectation as Mitsuba's ``volpath``, tested per pixel):
+
+* **Free flights** by delta tracking against a **local majorant grid** (pbrt-v4's design,
+  :mod:`draaw_mi.media.majorant`): a DDA walks the coarse cells the ray crosses inside
+  ``dr.while_loop``; in each cell tentative collisions are drawn against that cell's bound,
+  accepted as real with probability ``sigma_t / sigma_maj``. Empty cells cost one DDA step.
+  Homogeneous media are sampled in closed form (no grid code is compiled for them).
+* **Next-event estimation** at every surface and medium vertex: one emitter sample whose
+  transmittance is estimated by **ratio tracking** over the same majorant grid, through
+  ``null`` (index-matched) boundaries and medium changes; opaque surfaces block. Emitters
+  hit by BSDF / phase-sampled rays count only on camera rays and after delta bounces (no MIS:
+  every light path is counted by exactly one strategy).
+* Surfaces: any Mitsuba BSDF through ``sample`` / ``eval``; ``null`` BSDFs are crossed
+  without counting a bounce (as ``volpath``); ``interior`` / ``exterior`` media switch at
+  medium transitions; a camera inside a medium starts in the sensor's medium.
+* ``max_depth`` counts real scattering events as ``volpath`` does; ``draaw_v4`` adds Russian
+  roulette (``rr_depth``), ``draaw_v3`` has none.
+
+Differentiable by path replay w.r.t. medium density, albedo and the HG ``g`` (and BSDF /
+emitter parameters), as ``prbvolpath``: majorants are detached; each null collision
+contributes ``d log sigma_n``, each real collision ``d log sigma_s``, closed-form
+homogeneous segments ``d log T``; shadow-ray transmittance is replayed with a cloned sampler.
+
+Assumptions (checked when a render is prepared, a :class:`ParameterError` otherwise): grey
+extinction (a one-channel ``sigma_t``; the albedo may be RGB).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import ParameterError
+from ..media.majorant import build_majorant
+
+MAX_TRACKING_STEPS = 4096     # per flight; exhausted flights count as absorbed (documented)
+RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
+
+
+# ---------------------------------------------------------------------------------------
+#  Scene preparation: one table of media and their majorant grids
+# ---------------------------------------------------------------------------------------
+
+class MediaTable:
+    """Every medium of a scene with its majorant, as Dr.Jit arrays indexed per lane."""
+
+    def __init__(self, scene: mi.Scene):
+        media, inside = [], []
+        for shape in scene.shapes():
+            for m in (shape.interior_medium(), shape.exterior_medium()):
+                if m is not None and all(m is not x for x in media):
+                    media.append(m)
+                    bb = shape.bbox()
+                    inside.append(0.5 * (np.array(bb.min) + np.array(bb.max)))
+        self.sensor_media = {}
+        for k, sensor in enumerate(scene.sensors()):
+            m = sensor.get_medium()
+            if m is not None:
+                if all(m is not x for x in media):
+                    media.append(m)
+                    inside.append(np.array(sensor.world_transform().translation()))
+                self.sensor_media[k] = m
+        self.media = media
+        self.majorants = [build_majorant(m, inside=p) for m, p in zip(media, inside)]
+        for m in media:
+            self._check_grey(m)
+        kinds = [mj.kind for mj in self.majorants]
+        self.has_homogeneous = "homogeneous" in kinds
+        self.has_tracked = any(k != "homogeneous" for k in kinds)
+        # flat arrays for the tracked media
+        offs, vals = [], []
+        total = 0
+        for mj in self.majorants:
+            offs.append(total)
+            vals.append(mj.values.ravel(order="F"))          # x fastest
+            total += mj.values.size
+        self.values = mi.Float(np.concatenate(vals).astype(np.float32)) if vals else mi.Float(0)
+        self.offset = mi.UInt32(np.array(offs or [0], np.uint32))
+        res = np.array([mj.values.shape for mj in self.majorants] or [(1, 1, 1)], np.int32)
+        lo = np.array([mj.bbox_min for mj in self.majorants] or [np.zeros(3)], np.float64)
+        hi = np.array([mj.bbox_max for mj in self.majorants] or [np.ones(3)], np.float64)
+        self.res = [mi.Int32(res[:, a]) for a in range(3)]
+        self.lo = [mi.Float(lo[:, a].astype(np.float32)) for a in range(3)]
+        self.size = [mi.Float(((hi[:, a] - lo[:, a]) / res[:, a]).astype(np.float32)) for a in range(3)]
+        self.is_homog = mi.Bool(np.array([mj.kind == "homogeneous" for mj in self.majorants] or [False]))
+
+    @staticmethod
+    def _check_grey(medium) -> None:
+        params = mi.traverse(medium)
+        for key in params.keys():
+            if key.startswith("sigma_t."):
+                v = np.array(params[key])
+                if key.endswith(".data") and v.ndim == 4 and v.shape[3] != 1:
+                    raise ParameterError(f"draaw_v3/draaw_v4: medium {medium.id() or medium} has a "
+                                         f"{v.shape[3]}-channel sigma_t grid; expected grey extinction "
+                                         "(one channel); render it with 'volpath'")
+                if key.endswith("value") and v.size == 3 and not np.allclose(v, v.ravel()[0]):
+                    raise ParameterError(f"draaw_v3/draaw_v4: medium {medium.id() or medium} has RGB "
+                                         f"sigma_t {v.ravel().tolist()}; expected grey extinction")
+
+    def index(self, medium: mi.MediumPtr) -> mi.UInt32:
+        idx = mi.UInt32(0)
+        for k, m in enumerate(self.media):
+            idx = dr.select(medium == mi.MediumPtr(m), k, idx)
+        return idx
+
+    def describe(self) -> list[str]:
+        return [f"{m.id() or type(m).__name__}: {mj.kind} {mj.values.shape}{' (' + mj.note + ')' if mj.note else ''}"
+                for m, mj in zip(self.media, self.majorants)]
+
+
+_TABLES: dict[int, tuple] = {}
+
+
+def media_table(scene: mi.Scene) -> MediaTable:
+    """The scene's :class:`MediaTable`, rebuilt when medium parameters changed."""
+    key = id(scene)
+    stamp = []
+    for shape in scene.shapes():
+        for m in (shape.interior_medium(), shape.exterior_medium()):
+            if m is not None:
+                p = mi.traverse(m)
+                for k in p.keys():
+                    if k.endswith("sigma_t.data") or k == "scale" or k.startswith("sigma_t."):
+                        v = p[k]
+                        # a JIT variable's index changes whenever the parameter is replaced
+                        arr = getattr(v, "array", v)
+                        stamp.append((k, getattr(arr, "index", None), v if isinstance(v, float) else None))
+    hit = _TABLES.get(key)
+    if hit is not None and hit[0] == stamp and hit[1] is scene:
+        return hit[2]
+    table = MediaTable(scene)
+    _TABLES[key] = (stamp, scene, table)
+    return table
+
+
+# ---------------------------------------------------------------------------------------
+#  Interactions
+# ---------------------------------------------------------------------------------------
+
+def medium_interaction(ray: mi.Ray3f, t: mi.Float, medium: mi.MediumPtr) -> mi.MediumInteraction3f:
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.t = t
+    mei.p = ray(t)
+    mei.wi = -ray.d
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    mei.time = ray.time
+    mei.wavelengths = ray.wavelengths
+    mei.medium = medium
+    return mei
+
+
+def coefficients(medium, mei, active):
+    """(sigma_s, sigma_t) with sigma_t grey (channel 0)."""
+    sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return sigma_s, sigma_t.x
+
+
+# ---------------------------------------------------------------------------------------
+#  Tracking over the majorant grid
+# ---------------------------------------------------------------------------------------
+
+class Flight:
+    """Result of a free flight: ``t`` of the real collision (inf if none), ``weight`` (primal
+    throughput factor: albedo on a real collision, 1 on escape)."""
+
+    def __init__(self, t, collided, weight):
+        self.t, self.collided, self.weight = t, collided, weight
+
+
+def _segment(table: MediaTable, medium, ray, tmax, active):
+    """[t0, t1] of the ray inside the medium's box and below tmax."""
+    ok, mint, maxt = medium.intersect_aabb(ray)
+    t0 = dr.maximum(mint, 0.0)
+    t1 = dr.minimum(maxt, tmax)
+    ok = active & ok & (t1 > t0)
+    return ok, dr.select(ok, t0, 0.0), dr.select(ok, t1, 0.0)
+
+
+def _dda_setup(table: MediaTable, idx, ray, t0):
+    lo = [dr.gather(mi.Float, table.lo[a], idx) for a in range(3)]
+    size = [dr.gather(mi.Float, table.size[a], idx) for a in range(3)]
+    res = [dr.gather(mi.Int32, table.res[a], idx) for a in range(3)]
+    off = dr.gather(mi.UInt32, table.offset, idx)
+    p = ray(t0)
+    d = [ray.d.x, ray.d.y, ray.d.z]
+    pc = [p.x, p.y, p.z]
+    cell, t_next, dt, step = [], [], [], []
+    for a in range(3):
+        u = (pc[a] - lo[a]) / size[a]
+        c = dr.clip(mi.Int32(dr.floor(u)), 0, res[a] - 1)
+        pos = d[a] > 0
+        nz = d[a] != 0
+        inv = dr.select(nz, dr.rcp(dr.select(nz, d[a], 1.0)), 0.0)
+        bound = lo[a] + mi.Float(c + dr.select(pos, 1, 0)) * size[a]
+        t_next.append(dr.select(nz, t0 + (bound - pc[a]) * inv, dr.inf))
+        dt.append(dr.select(nz, size[a] * dr.abs(inv), dr.inf))
+        cell.append(c)
+        step.append(dr.select(pos, mi.Int32(1), mi.Int32(-1)))
+    return cell, t_next, dt, step, res, off
+
+
+@dr.syntax
+def free_flight(table: MediaTable, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.Sampler,
+                active: mi.Bool, adjoint=None) -> Flight:
+    """Delta tracking from ``ray.o`` up to ``tmax`` in ``medium`` (grid / global kinds).
+
+    ``adjoint``: ``(δL, L_rem)`` in the backward phase -- every null collision then
+    back-propagates ``δL * L_rem * d log sigma_n``; None in the primal phase."""
+    ok, t0, t1 = _segment(table, medium, ray, tmax, active)
+    cell, t_next, dt, step, res, off = _dda_setup(table, idx, ray, t0)
+    cx, cy, cz = cell
+    tnx, tny, tnz = t_next
+    t = mi.Float(t0)
+    t_hit = mi.Float(dr.inf)
+    collided = mi.Bool(False)
+    weight = mi.Spectrum(1.0)
+    it = mi.UInt32(0)
+    live = mi.Bool(ok)
+    while live:
+        flat = off + mi.UInt32(cx + res[0] * (cy + res[1] * cz))
+        sig_maj = dr.gather(mi.Float, table.values, flat, live)
+        t_exit = dr.minimum(dr.minimum(tnx, dr.minimum(tny, tnz)), t1)
+        u = sampler.next_1d(live)
+        tau = -dr.log(1.0 - u)
+        has = live & (sig_maj > 0)
+        t_c = dr.select(has, t + tau / dr.select(has, sig_maj, 1.0), dr.inf)
+        tentative = live & (t_c < t_exit)
+        mei = medium_interaction(ray, t_c, medium)
+        sigma_s, sigma_t = coefficients(medium, mei, tentative)
+        u2 = sampler.next_1d(tentative)
+        real = tentative & (u2 * sig_maj < sigma_t)
+        null = tentative & ~real
+        if dr.hint(adjoint is not None, mode="scalar"):
+            with dr.resume_grad():
+                s_s, s_t = coefficients(medium, mei, null | real)
+                s_n = sig_maj - s_t
+                ok_n = null & (dr.detach(s_n) > 1e-12 * sig_maj)
+                r = dr.select(ok_n, s_n / dr.detach(dr.select(ok_n, s_n, 1.0)), 0.0)
+                ok_s = real & (dr.detach(s_t) > 0)
+                w = dr.select(ok_s, s_s / dr.detach(dr.select(ok_s, s_t, 1.0)), 0.0)
+                w_d = dr.detach(w)
+                dr.backward(adjoint[0] * adjoint[1] * (mi.Spectrum(r) + dr.select(w_d != 0, w / dr.select(w_d != 0, w_d, 1.0), 0.0)))
+        ok_t = real & (sigma_t > 0)
+        weight[real] = dr.select(ok_t, sigma_s / dr.select(ok_t, sigma_t, 1.0), 0.0)
+        t_hit[real] = t_c
+        collided |= real
+        t[null] = t_c
+        # advance the DDA where no tentative collision happened in this cell
+        adv = live & ~tentative
+        done = adv & (t_exit >= t1)
+        step_on = adv & ~done
+        ax = dr.select(tnx <= dr.minimum(tny, tnz), 0, dr.select(tny <= tnz, 1, 2))
+        t[step_on] = t_exit
+        mx = step_on & (ax == 0)
+        my = step_on & (ax == 1)
+        mz = step_on & (ax == 2)
+        cx[mx] = cx + step[0]
+        tnx[mx] = tnx + dt[0]
+        cy[my] = cy + step[1]
+        tny[my] = tny + dt[1]
+        cz[mz] = cz + step[2]
+        tnz[mz] = tnz + dt[2]
+        out = (cx < 0) | (cy < 0) | (cz < 0) | (cx >= res[0]) | (cy >= res[1]) | (cz >= res[2])
+        it += 1
+        exhausted = it >= MAX_TRACKING_STEPS
+        weight[live & exhausted & ~real] = 0.0          # exhausted: absorbed (never NaN)
+        live &= ~real & ~done & ~out & ~exhausted
+    return Flight(t_hit, collided, weight)
+
+
+@dr.syntax
+def ratio_track(table: MediaTable, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.Sampler,
+                active: mi.Bool, adjoint=None) -> mi.Float:
+    """Ratio-tracking transmittance along ``ray`` up to ``tmax`` (grid / global kinds).
+
+    Russian roulette on T below ``RATIO_RR`` keeps dense media cheap (unbiased).
+    ``adjoint``: ``(δL, contribution)`` replays with gradients of each factor."""
+    ok, t0, t1 = _segment(table, medium, ray, tmax, active)
+    cell, t_next, dt, step, res, off = _dda_setup(table, idx, ray, t0)
+    cx, cy, cz = cell
+    tnx, tny, tnz = t_next
+    t = mi.Float(t0)
+    T = mi.Float(1.0)
+    it = mi.UInt32(0)
+    live = mi.Bool(ok)
+    while live:
+        flat = off + mi.UInt32(cx + res[0] * (cy + res[1] * cz))
+        sig_maj = dr.gather(mi.Float, table.values, flat, live)
+        t_exit = dr.minimum(dr.minimum(tnx, dr.minimum(tny, tnz)), t1)
+        u = sampler.next_1d(live)
+        has = live & (sig_maj > 0)
+        t_c = dr.select(has, t - dr.log(1.0 - u) / dr.select(has, sig_maj, 1.0), dr.inf)
+        tentative = live & (t_c < t_exit)
+        mei = medium_interaction(ray, t_c, medium)
+        _, sigma_t = coefficients(medium, mei, tentative)
+        factor = dr.clip(1.0 - sigma_t / dr.select(has, sig_maj, 1.0), 0.0, 1.0)
+        if dr.hint(adjoint is not None, mode="scalar"):
+            with dr.resume_grad():
+                _, s_t = coefficients(medium, mei, tentative)
+                f = 1.0 - s_t / dr.select(has, sig_maj, 1.0)
+                ok_f = tentative & (dr.detach(f) > 0)
+                r = dr.select(ok_f, f / dr.detach(dr.select(ok_f, f, 1.0)), 0.0)
+                dr.backward(adjoint[0] * adjoint[1] * mi.Spectrum(r))
+        T[tentative] = T * factor
+        t[tentative] = t_c
+        # Russian roulette on small T
+        u_rr = sampler.next_1d(tentative & (T < RATIO_RR))
+        rr = tentative & (T < RATIO_RR)
+        T[rr] = dr.select(u_rr * RATIO_RR < T, RATIO_RR, 0.0)
+        adv = live & ~tentative
+        done = adv & (t_exit >= t1)
+        step_on = adv & ~done
+        ax = dr.select(tnx <= dr.minimum(tny, tnz), 0, dr.select(tny <= tnz, 1, 2))
+        t[step_on] = t_exit
+        mx = step_on & (ax == 0)
+        my = step_on & (ax == 1)
+        mz = step_on & (ax == 2)
+        cx[mx] = cx + step[0]
+        tnx[mx] = tnx + dt[0]
+        cy[my] = cy + step[1]
+        tny[my] = tny + dt[1]
+        cz[mz] = cz + step[2]
+        tnz[mz] = tnz + dt[2]
+        out = (cx < 0) | (cy < 0) | (cz < 0) | (cx >= res[0]) | (cy >= res[1]) | (cz >= res[2])
+        it += 1
+        exhausted = it >= MAX_TRACKING_STEPS
+        T[live & exhausted] = 0.0
+        live &= ~done & ~out & ~exhausted & (T > 0)
+    return T
+
+
+# ---------------------------------------------------------------------------------------
+#  Transmittance between two points (shadow rays): media, null boundaries, blockers
+# ---------------------------------------------------------------------------------------
+
+@dr.syntax
+def transmittance(table: MediaTable, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Float, medium: mi.MediumPtr,
+                  sampler: mi.Sampler, active: mi.Bool, adjoint=None) -> mi.Float:
+    """Transmittance along ``ray`` over ``dist`` (inf: to infinity), starting in ``medium``:
+    ratio tracking in media, crossing ``null`` surfaces (switching media), 0 at other
+    surfaces. ``adjoint``: ``(δL, contribution)`` for the replay with gradients."""
+    T = mi.Float(1.0)
+    remaining = mi.Float(dist)
+    med = dr.select(active, medium, dr.zeros(mi.MediumPtr))
+    r = mi.Ray3f(ray)
+    live = mi.Bool(active)
+    n = mi.UInt32(0)
+    while live:
+        r.maxt = remaining
+        si = scene.ray_intersect(r, mi.RayFlags.Minimal, False, live)
+        seg = dr.minimum(si.t, remaining)
+        in_med = live & (med != None)  # noqa: E711
+        if dr.hint(table.has_tracked, mode="scalar"):
+            idx = table.index(med)
+            tracked = in_med & ~dr.gather(mi.Bool, table.is_homog, idx, in_med)
+            Tm = ratio_track(table, med, idx, r, seg, sampler, tracked, adjoint)
+            T[tracked] = T * Tm
+        if dr.hint(table.has_homogeneous, mode="scalar"):
+            homog = in_med
+            if dr.hint(table.has_tracked, mode="scalar"):
+                homog &= dr.gather(mi.Bool, table.is_homog, table.index(med), in_med)
+            mei = medium_interaction(r, seg, med)
+            with dr.resume_grad(when=adjoint is not None):
+                _, s_t = coefficients(med, mei, homog)
+                ok, mint, maxt = med.intersect_aabb(r)
+                length = dr.maximum(dr.minimum(maxt, seg) - dr.maximum(mint, 0.0), 0.0)
+                Th = dr.exp(-s_t * length)
+                if dr.hint(adjoint is not None, mode="scalar"):
+                    Thd = dr.detach(Th)
+                    okh = homog & (Thd > 0)
+                    dr.backward(adjoint[0] * adjoint[1] * mi.Spectrum(dr.select(okh, Th / dr.select(okh, Thd, 1.0), 0.0)))
+            T[homog] = T * dr.detach(Th)
+        hit = live & si.is_valid() & (si.t < remaining)
+        bsdf = si.bsdf()
+        null = hit & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
+        T[hit & ~null] = 0.0
+        med[null & si.is_medium_transition()] = si.target_medium(r.d)
+        remaining[null] = remaining - si.t
+        r[null] = si.spawn_ray(r.d)
+        n += 1
+        live &= null & (T > 0) & (n < 64)
+    return T
+
+
+# ---------------------------------------------------------------------------------------
+#  Next-event estimation from a surface or medium vertex
+# ---------------------------------------------------------------------------------------
+
+def _nee(table, scene, sampler, ref: mi.Interaction3f, medium, active, adjoint_scale=None):
+    """Sample an emitter from ``ref``; returns ``(ds, Le / pdf * T)`` (detached) and
+    replays the transmittance with gradients when ``adjoint_scale = (δL, contribution)``."""
+    with dr.suspend_grad():
+        ds, em_w = scene.sample_emitter_direction(ref, sampler.next_2d(active), False, active)
+    active = active & (ds.pdf != 0)
+    ray = ref.spawn_ray(ds.d)
+    dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
+    return ds, em_w, active, ray, dist
+
+
+def sample(integ, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, δL, state_in,
+           active: mi.Bool, russian_roulette: bool):
+    """The body of ``draaw_v3`` / ``draaw_v4``'s ``sample()`` for scenes with media."""
+    if mode == dr.ADMode.Forward:
+        raise ParameterError(f"{integ.PLUGIN}: forward-mode differentiation is not supported in scenes "
+                             "with participating media (use reverse mode, as prbvolpath)")
+    table = media_table(scene)
+    return _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table)
+
+
+@dr.syntax
+def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table):
+    primal = mode == dr.ADMode.Primal
+    has_tracked = table.has_tracked
+    has_homog = table.has_homogeneous
+    ctx = mi.BSDFContext()
+    max_depth = integ.max_depth
+    rr_depth = integ.rr_depth
+    rr_min = getattr(integ, "rr_min", 0.05)
+
+    ray = mi.Ray3f(dr.detach(ray))
+    ray.d = dr.normalize(ray.d)
+    depth = mi.UInt32(0)
+    L = mi.Spectrum(0 if primal else state_in)
+    δL = mi.Spectrum(δL if δL is not None else 0)
+    β = mi.Spectrum(1)
+    η = mi.Float(1)
+    active = mi.Bool(active)
+    valid = mi.Bool(False)
+    count_emission = mi.Bool(True)            # camera ray or after a delta bounce
+    medium = dr.zeros(mi.MediumPtr)
+    if dr.hint(0 in table.sensor_media, mode="scalar"):
+        medium = dr.select(active, mi.MediumPtr(table.sensor_media[0]), medium)
+    first = mi.Bool(True)
+
+    while dr.hint(active, label=f"{integ.PLUGIN} media ({mode.name})"):
+        si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+        valid |= active & first & si.is_valid()
+        first = mi.Bool(False)
+        in_med = active & (medium != None)  # noqa: E711
+        scattered = mi.Bool(False)
+        t_scatter = mi.Float(dr.inf)
+        adj = None if primal else (δL, L)
+
+        # ------------------------- free flight -------------------------
+        if dr.hint(has_tracked, mode="scalar"):
+            idx = table.index(medium)
+            tracked = in_med & ~dr.gather(mi.Bool, table.is_homog, idx, in_med)
+            fl = free_flight(table, medium, idx, ray, si.t, sampler, tracked, adj)
+            scattered |= tracked & fl.collided
+            t_scatter[tracked & fl.collided] = fl.t
+            β[tracked] *= fl.weight
+        if dr.hint(has_homog, mode="scalar"):
+            homog = mi.Bool(in_med)
+            if dr.hint(has_tracked, mode="scalar"):
+                homog &= dr.gather(mi.Bool, table.is_homog, table.index(medium), in_med)
+            mei0 = medium_interaction(ray, mi.Float(0.0), medium)
+            s_s0, s_t0 = coefficients(medium, mei0, homog)
+            u = sampler.next_1d(homog)
+            t_h = dr.select(s_t0 > 0, -dr.log(1.0 - u) / dr.select(s_t0 > 0, s_t0, 1.0), dr.inf)
+            ok, mint, maxt = medium.intersect_aabb(ray)
+            t_end = dr.minimum(si.t, maxt)
+            hit_h = homog & (t_h < t_end)
+            scattered |= hit_h
+            t_scatter[hit_h] = t_h
+            wh = dr.select(s_t0 > 0, s_s0 / dr.select(s_t0 > 0, s_t0, 1.0), 0.0)
+            β[hit_h] *= wh
+            if dr.hint(not primal, mode="scalar"):
+                with dr.resume_grad():
+                    s_s, s_t = coefficients(medium, mei0, homog)
+                    tt = dr.select(hit_h, t_h, t_end)
+                    f = dr.select(hit_h, s_s, mi.Spectrum(1.0)) * dr.exp(-s_t * tt)
+                    fd = dr.detach(f)
+                    okf = homog & (fd > 0)
+                    dr.backward(δL * L * dr.select(okf, f / dr.select(okf, fd, 1.0), 0.0))
+
+        # ------------------------ medium vertex ------------------------
+        scattered &= active
+        depth[scattered] += 1
+        med_active = scattered & (depth < max_depth)
+        active &= ~scattered | med_active
+        mei = medium_interaction(ray, t_scatter, medium)
+        phase = mei.medium.phase_function()
+        phase[~med_active] = dr.zeros(mi.PhaseFunctionPtr)
+        phase_ctx = mi.PhaseFunctionContext(sampler)
+        if dr.hint(not primal, mode="scalar"):
+            nee_sampler = sampler.clone()
+        ds, em_w, act_e, sray, sdist = _nee(table, scene, sampler, mei, medium, med_active)
+        Tm = transmittance(table, scene, sray, sdist, medium, sampler, act_e)
+        with dr.resume_grad(when=not primal):
+            ph_val = phase.eval_pdf(phase_ctx, mei, ds.d, act_e)[0]
+            contrib = β * ph_val * em_w * Tm
+            if dr.hint(not primal, mode="scalar"):
+                em_val = scene.eval_emitter_direction(mei, ds, act_e)
+                contrib = β * ph_val * dr.select(act_e, em_val / dr.detach(dr.select(act_e, ds.pdf, 1.0)), 0.0) * Tm
+        contrib = dr.select(act_e & (Tm > 0), contrib, 0.0)
+        L = (L + dr.detach(contrib)) if primal else (L - dr.detach(contrib))
+        if dr.hint(not primal, mode="scalar"):
+            _nee(table, scene, nee_sampler, mei, medium, med_active)
+            transmittance(table, scene, sray, sdist, medium, nee_sampler, act_e, (δL, dr.detach(contrib)))
+            dr.backward(δL * contrib)
+        with dr.suspend_grad():
+            wo, ph_w, ph_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(med_active),
+                                            sampler.next_2d(med_active), med_active)
+        med_active &= ph_pdf > 0
+        if dr.hint(not primal, mode="scalar"):
+            with dr.resume_grad():
+                ph_eval = phase.eval_pdf(phase_ctx, mei, wo, med_active)[0]
+                ph_d = dr.detach(ph_eval)
+                okp = med_active & (ph_d > 0)
+                dr.backward(δL * L * mi.Spectrum(dr.select(okp, ph_eval / dr.select(okp, ph_d, 1.0), 0.0)))
+        β[med_active] *= ph_w
+        ray[med_active] = mei.spawn_ray(wo)
+        count_emission &= ~med_active
+
+        # ------------------------ surface vertex -----------------------
+        at_surf = active & ~scattered
+        bsdf = si.bsdf(ray)
+        null = at_surf & si.is_valid() & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
+        real = at_surf & ~null
+        # emission (camera rays, after delta bounces); escaped rays see the environment
+        with dr.resume_grad(when=not primal):
+            em_hit = real & count_emission
+            if dr.hint(integ.hide_emitters, mode="scalar"):
+                em_hit &= depth > 0
+            Le = β * si.emitter(scene).eval(si, em_hit)
+            Le = dr.select(em_hit, Le, 0.0)
+        L = (L + dr.detach(Le)) if primal else (L - dr.detach(Le))
+        if dr.hint(not primal, mode="scalar"):
+            dr.backward(δL * Le)
+        real &= si.is_valid()
+        surf = real & (depth + 1 < max_depth)
+        # NEE from the surface
+        if dr.hint(not primal, mode="scalar"):
+            nee_sampler2 = sampler.clone()
+        act_s = surf & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        ds2, em_w2, act_s, sray2, sdist2 = _nee(table, scene, sampler, si, medium, act_s)
+        med2 = dr.select(si.is_medium_transition(), si.target_medium(ds2.d), medium)
+        T2 = transmittance(table, scene, sray2, sdist2, med2, sampler, act_s)
+        with dr.resume_grad(when=not primal):
+            f_em = bsdf.eval(ctx, si, si.to_local(ds2.d), act_s)
+            if dr.hint(not primal, mode="scalar"):
+                em_val2 = scene.eval_emitter_direction(si, ds2, act_s)
+                em_w2 = dr.select(act_s, em_val2 / dr.detach(dr.select(act_s, ds2.pdf, 1.0)), 0.0)
+            contrib2 = dr.select(act_s & (T2 > 0), β * f_em * em_w2 * T2, 0.0)
+        L = (L + dr.detach(contrib2)) if primal else (L - dr.detach(contrib2))
+        if dr.hint(not primal, mode="scalar"):
+            _nee(table, scene, nee_sampler2, si, medium, surf & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
+            transmittance(table, scene, sray2, sdist2, med2, nee_sampler2, act_s, (δL, dr.detach(contrib2)))
+            dr.backward(δL * contrib2)
+        # BSDF sampling (null surfaces: pass straight through, no bounce counted)
+        with dr.suspend_grad():
+            bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(surf), sampler.next_2d(surf), surf)
+        surf &= bs.pdf > 0
+        if dr.hint(not primal, mode="scalar"):
+            with dr.resume_grad():
+                f = bsdf.eval(ctx, si, bs.wo, surf)
+                fd = dr.detach(f)
+                okb = surf & (dr.max(fd) > 0)
+                dr.backward(δL * L * dr.select(okb, f / dr.select(fd != 0, fd, 1.0), 0.0))
+        β[surf] *= bsdf_w
+        η[surf] *= bs.eta
+        wo_world = si.to_world(bs.wo)
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        count_emission = dr.select(surf, delta, count_emission)
+        ray[surf] = si.spawn_ray(wo_world)
+        ray[null] = si.spawn_ray(ray.d)
+        trans = (surf | null) & si.is_medium_transition()
+        medium[trans] = si.target_medium(dr.select(null, ray.d, wo_world))
+        depth[surf] += 1
+        active &= med_active | surf | null
+
+        # ------------------------ Russian roulette ---------------------
+        if dr.hint(russian_roulette, mode="scalar"):
+            β_max = dr.max(β)
+            rr_on = active & (depth >= rr_depth)
+            q = dr.clip(β_max * dr.square(η), rr_min, 0.95)
+            β[rr_on] *= dr.rcp(q)
+            active &= ~rr_on | (sampler.next_1d(rr_on) < q)
+        active &= dr.max(β) > 0
+        active &= depth < max_depth
+    return (L if primal else δL), valid | mi.Bool(scene.environment() is not None), integ.zero_aovs(), L
