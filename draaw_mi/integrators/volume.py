@@ -35,8 +35,19 @@ import numpy as np
 from ..errors import ParameterError
 from ..media.majorant import build_majorant
 
+# While a medium parameter is differentiated, majorants are scaled by this factor: path replay
+# differentiates transmittance only through null collisions (d log sigma_n), and where the
+# majorant equals sigma_t (a uniform region) there are none, so the density gradient would
+# silently miss the d/dsigma of the transmittance (prbvolpath has this bias on uniform grids).
+DIFF_MAJORANT_FACTOR = 2.0
 MAX_TRACKING_STEPS = 4096     # per flight; exhausted flights count as absorbed (documented)
 RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
+
+
+def _bw(x) -> None:
+    """Back-propagate ``x`` when it depends on a differentiated parameter (else nothing)."""
+    if dr.grad_enabled(x):
+        dr.backward(x, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
 
 
 # ---------------------------------------------------------------------------------------
@@ -46,7 +57,7 @@ RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
 class MediaTable:
     """Every medium of a scene with its majorant, as Dr.Jit arrays indexed per lane."""
 
-    def __init__(self, scene: mi.Scene):
+    def __init__(self, scene: mi.Scene, factor: float = 1.0):
         media, inside = [], []
         for shape in scene.shapes():
             for m in (shape.interior_medium(), shape.exterior_medium()):
@@ -74,7 +85,7 @@ class MediaTable:
         total = 0
         for mj in self.majorants:
             offs.append(total)
-            vals.append(mj.values.ravel(order="F"))          # x fastest
+            vals.append(mj.values.ravel(order="F") * factor)  # x fastest
             total += mj.values.size
         self.values = mi.Float(np.concatenate(vals).astype(np.float32)) if vals else mi.Float(0)
         self.offset = mi.UInt32(np.array(offs or [0], np.uint32))
@@ -118,6 +129,7 @@ def media_table(scene: mi.Scene) -> MediaTable:
     """The scene's :class:`MediaTable`, rebuilt when medium parameters changed."""
     key = id(scene)
     stamp = []
+    diff = False
     for shape in scene.shapes():
         for m in (shape.interior_medium(), shape.exterior_medium()):
             if m is not None:
@@ -128,10 +140,14 @@ def media_table(scene: mi.Scene) -> MediaTable:
                         # a JIT variable's index changes whenever the parameter is replaced
                         arr = getattr(v, "array", v)
                         stamp.append((k, getattr(arr, "index", None), v if isinstance(v, float) else None))
+                with dr.resume_grad():            # sample() runs with AD suspended
+                    for k in p.keys():
+                        diff |= not isinstance(p[k], (float, int)) and dr.grad_enabled(p[k])
+    stamp.append(("differentiated", diff))
     hit = _TABLES.get(key)
     if hit is not None and hit[0] == stamp and hit[1] is scene:
         return hit[2]
-    table = MediaTable(scene)
+    table = MediaTable(scene, DIFF_MAJORANT_FACTOR if diff else 1.0)
     _TABLES[key] = (stamp, scene, table)
     return table
 
@@ -242,7 +258,7 @@ def free_flight(table: MediaTable, medium, idx, ray: mi.Ray3f, tmax: mi.Float, s
                 ok_s = real & (dr.detach(s_t) > 0)
                 w = dr.select(ok_s, s_s / dr.detach(dr.select(ok_s, s_t, 1.0)), 0.0)
                 w_d = dr.detach(w)
-                dr.backward(adjoint[0] * adjoint[1] * (mi.Spectrum(r) + dr.select(w_d != 0, w / dr.select(w_d != 0, w_d, 1.0), 0.0)))
+                _bw(adjoint[0] * adjoint[1] * (mi.Spectrum(r) + dr.select(w_d != 0, w / dr.select(w_d != 0, w_d, 1.0), 0.0)))
         ok_t = real & (sigma_t > 0)
         weight[real] = dr.select(ok_t, sigma_s / dr.select(ok_t, sigma_t, 1.0), 0.0)
         t_hit[real] = t_c
@@ -303,7 +319,7 @@ def ratio_track(table: MediaTable, medium, idx, ray: mi.Ray3f, tmax: mi.Float, s
                 f = 1.0 - s_t / dr.select(has, sig_maj, 1.0)
                 ok_f = tentative & (dr.detach(f) > 0)
                 r = dr.select(ok_f, f / dr.detach(dr.select(ok_f, f, 1.0)), 0.0)
-                dr.backward(adjoint[0] * adjoint[1] * mi.Spectrum(r))
+                _bw(adjoint[0] * adjoint[1] * mi.Spectrum(r))
         T[tentative] = T * factor
         t[tentative] = t_c
         # Russian roulette on small T
@@ -371,7 +387,7 @@ def transmittance(table: MediaTable, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Fl
                 if dr.hint(adjoint is not None, mode="scalar"):
                     Thd = dr.detach(Th)
                     okh = homog & (Thd > 0)
-                    dr.backward(adjoint[0] * adjoint[1] * mi.Spectrum(dr.select(okh, Th / dr.select(okh, Thd, 1.0), 0.0)))
+                    _bw(adjoint[0] * adjoint[1] * mi.Spectrum(dr.select(okh, Th / dr.select(okh, Thd, 1.0), 0.0)))
             T[homog] = T * dr.detach(Th)
         hit = live & si.is_valid() & (si.t < remaining)
         bsdf = si.bsdf()
@@ -474,7 +490,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                     f = dr.select(hit_h, s_s, mi.Spectrum(1.0)) * dr.exp(-s_t * tt)
                     fd = dr.detach(f)
                     okf = homog & (fd > 0)
-                    dr.backward(δL * L * dr.select(okf, f / dr.select(okf, fd, 1.0), 0.0))
+                    _bw(δL * L * dr.select(okf, f / dr.select(okf, fd, 1.0), 0.0))
 
         # ------------------------ medium vertex ------------------------
         scattered &= active
@@ -495,12 +511,13 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
             if dr.hint(not primal, mode="scalar"):
                 em_val = scene.eval_emitter_direction(mei, ds, act_e)
                 contrib = β * ph_val * dr.select(act_e, em_val / dr.detach(dr.select(act_e, ds.pdf, 1.0)), 0.0) * Tm
-        contrib = dr.select(act_e & (Tm > 0), contrib, 0.0)
+            contrib = dr.select(act_e & (Tm > 0), contrib, 0.0)
+            if dr.hint(not primal, mode="scalar"):
+                _bw(δL * contrib)
         L = (L + dr.detach(contrib)) if primal else (L - dr.detach(contrib))
         if dr.hint(not primal, mode="scalar"):
             _nee(table, scene, nee_sampler, mei, medium, med_active)
             transmittance(table, scene, sray, sdist, medium, nee_sampler, act_e, (δL, dr.detach(contrib)))
-            dr.backward(δL * contrib)
         with dr.suspend_grad():
             wo, ph_w, ph_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(med_active),
                                             sampler.next_2d(med_active), med_active)
@@ -510,7 +527,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                 ph_eval = phase.eval_pdf(phase_ctx, mei, wo, med_active)[0]
                 ph_d = dr.detach(ph_eval)
                 okp = med_active & (ph_d > 0)
-                dr.backward(δL * L * mi.Spectrum(dr.select(okp, ph_eval / dr.select(okp, ph_d, 1.0), 0.0)))
+                _bw(δL * L * mi.Spectrum(dr.select(okp, ph_eval / dr.select(okp, ph_d, 1.0), 0.0)))
         β[med_active] *= ph_w
         ray[med_active] = mei.spawn_ray(wo)
         count_emission &= ~med_active
@@ -527,9 +544,9 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                 em_hit &= depth > 0
             Le = β * si.emitter(scene).eval(si, em_hit)
             Le = dr.select(em_hit, Le, 0.0)
+            if dr.hint(not primal, mode="scalar"):
+                _bw(δL * Le)
         L = (L + dr.detach(Le)) if primal else (L - dr.detach(Le))
-        if dr.hint(not primal, mode="scalar"):
-            dr.backward(δL * Le)
         real &= si.is_valid()
         surf = real & (depth + 1 < max_depth)
         # NEE from the surface
@@ -545,11 +562,12 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                 em_val2 = scene.eval_emitter_direction(si, ds2, act_s)
                 em_w2 = dr.select(act_s, em_val2 / dr.detach(dr.select(act_s, ds2.pdf, 1.0)), 0.0)
             contrib2 = dr.select(act_s & (T2 > 0), β * f_em * em_w2 * T2, 0.0)
+            if dr.hint(not primal, mode="scalar"):
+                _bw(δL * contrib2)
         L = (L + dr.detach(contrib2)) if primal else (L - dr.detach(contrib2))
         if dr.hint(not primal, mode="scalar"):
             _nee(table, scene, nee_sampler2, si, medium, surf & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth))
             transmittance(table, scene, sray2, sdist2, med2, nee_sampler2, act_s, (δL, dr.detach(contrib2)))
-            dr.backward(δL * contrib2)
         # BSDF sampling (null surfaces: pass straight through, no bounce counted)
         with dr.suspend_grad():
             bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(surf), sampler.next_2d(surf), surf)
@@ -559,7 +577,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                 f = bsdf.eval(ctx, si, bs.wo, surf)
                 fd = dr.detach(f)
                 okb = surf & (dr.max(fd) > 0)
-                dr.backward(δL * L * dr.select(okb, f / dr.select(fd != 0, fd, 1.0), 0.0))
+                _bw(δL * L * dr.select(okb, f / dr.select(fd != 0, fd, 1.0), 0.0))
         β[surf] *= bsdf_w
         η[surf] *= bs.eta
         wo_world = si.to_world(bs.wo)
