@@ -10,8 +10,8 @@ Estimator (the same expectation as Mitsuba's ``volpath``, tested per pixel):
 * **Next-event estimation** at every surface and medium vertex: one emitter sample whose
   transmittance is estimated by **ratio tracking** over the same majorant grid, through
   ``null`` (index-matched) boundaries and medium changes; opaque surfaces block. Emitters
-  hit by BSDF / phase-sampled rays count only on camera rays and after delta bounces (no MIS:
-  every light path is counted by exactly one strategy).
+  hit by BSDF / phase-sampled rays are combined with it by multiple importance sampling
+  (power heuristic, as ``volpath``; weight 1 on camera rays and after delta bounces).
 * Surfaces: any Mitsuba BSDF through ``sample`` / ``eval``; ``null`` BSDFs are crossed
   without counting a bounce (as ``volpath``); ``interior`` / ``exterior`` media switch at
   medium transitions; a camera inside a medium starts in the sensor's medium.
@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..media.majorant import build_majorant
+from .common import mis_weight
 
 # While a medium parameter is differentiated, majorants are scaled by this factor: path replay
 # differentiates transmittance only through null collisions (d log sigma_n), and where the
@@ -445,7 +446,9 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     η = mi.Float(1)
     active = mi.Bool(active)
     valid = mi.Bool(False)
-    count_emission = mi.Bool(True)            # camera ray or after a delta bounce
+    count_emission = mi.Bool(True)            # camera ray or after a delta bounce: weight 1
+    prev_it = dr.zeros(mi.Interaction3f)      # last real scattering vertex (for MIS)
+    prev_pdf = mi.Float(1.0)                  # its BSDF / phase pdf of the sampled direction
     medium = dr.zeros(mi.MediumPtr)
     if dr.hint(0 in table.sensor_media, mode="scalar"):
         medium = dr.select(active, mi.MediumPtr(table.sensor_media[0]), medium)
@@ -506,7 +509,9 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         ds, em_w, act_e, sray, sdist = _nee(table, scene, sampler, mei, medium, med_active)
         Tm = transmittance(table, scene, sray, sdist, medium, sampler, act_e)
         with dr.resume_grad(when=not primal):
-            ph_val = phase.eval_pdf(phase_ctx, mei, ds.d, act_e)[0]
+            ph_val, ph_pdf_e = phase.eval_pdf(phase_ctx, mei, ds.d, act_e)
+            w_e = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, dr.detach(ph_pdf_e)))
+            ph_val = ph_val * w_e
             contrib = β * ph_val * em_w * Tm
             if dr.hint(not primal, mode="scalar"):
                 em_val = scene.eval_emitter_direction(mei, ds, act_e)
@@ -531,6 +536,8 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         β[med_active] *= ph_w
         ray[med_active] = mei.spawn_ray(wo)
         count_emission &= ~med_active
+        prev_it[med_active] = dr.detach(mei)
+        prev_pdf[med_active] = ph_pdf
 
         # ------------------------ surface vertex -----------------------
         at_surf = active & ~scattered
@@ -539,10 +546,14 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         real = at_surf & ~null
         # emission (camera rays, after delta bounces); escaped rays see the environment
         with dr.resume_grad(when=not primal):
-            em_hit = real & count_emission
+            emitter = si.emitter(scene)
+            em_hit = real & (emitter != None)  # noqa: E711
             if dr.hint(integ.hide_emitters, mode="scalar"):
                 em_hit &= depth > 0
-            Le = β * si.emitter(scene).eval(si, em_hit)
+            ds_hit = mi.DirectionSample3f(scene, si, prev_it)
+            pdf_hit = scene.pdf_emitter_direction(prev_it, ds_hit, em_hit & ~count_emission)
+            w_hit = dr.select(count_emission, 1.0, mis_weight(prev_pdf, pdf_hit))
+            Le = β * w_hit * emitter.eval(si, em_hit)
             Le = dr.select(em_hit, Le, 0.0)
             if dr.hint(not primal, mode="scalar"):
                 _bw(δL * Le)
@@ -557,7 +568,8 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         med2 = dr.select(si.is_medium_transition(), si.target_medium(ds2.d), medium)
         T2 = transmittance(table, scene, sray2, sdist2, med2, sampler, act_s)
         with dr.resume_grad(when=not primal):
-            f_em = bsdf.eval(ctx, si, si.to_local(ds2.d), act_s)
+            f_em, pdf_b = bsdf.eval_pdf(ctx, si, si.to_local(ds2.d), act_s)
+            f_em = f_em * dr.select(ds2.delta, 1.0, mis_weight(ds2.pdf, dr.detach(pdf_b)))
             if dr.hint(not primal, mode="scalar"):
                 em_val2 = scene.eval_emitter_direction(si, ds2, act_s)
                 em_w2 = dr.select(act_s, em_val2 / dr.detach(dr.select(act_s, ds2.pdf, 1.0)), 0.0)
@@ -583,6 +595,8 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         wo_world = si.to_world(bs.wo)
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         count_emission = dr.select(surf, delta, count_emission)
+        prev_it[surf] = dr.detach(si)
+        prev_pdf[surf] = bs.pdf
         ray[surf] = si.spawn_ray(wo_world)
         ray[null] = si.spawn_ray(ray.d)
         trans = (surf | null) & si.is_medium_transition()
