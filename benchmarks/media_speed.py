@@ -1,7 +1,7 @@
 """Participating media: what the local majorant grid buys (draaw_v4) against Mitsuba's
 ``volpath`` (one global majorant, plain delta tracking).
 
-Cases (all 64x64 images unless ``--res``, a point light + constant sky + diffuse floor, the
+Cases (48x48 images unless ``--res``, a point light + constant sky + diffuse floor, the
 smoke in a null-BSDF cube, HG g = 0.3, albedo 0.8):
 
 1. **one dense voxel**: a 64^3 grid, empty except one voxel of density 1e4, against the
@@ -121,10 +121,10 @@ def equal_error(make, res, spp, repeats, ref_spp, integrators=("volpath", "draaw
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--res", type=int, default=64)
+    ap.add_argument("--res", type=int, default=48)
     ap.add_argument("--spp", type=int, default=32)
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--ref-spp", type=int, default=4096)
+    ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=os.path.join(HERE, "results", "media_speed.md"))
     a = ap.parse_args(argv)

@@ -133,6 +133,12 @@ class DraawV1Integrator(DraawIntegrator):
         if dr.hint(self.max_depth == 0, mode="scalar"):
             return mi.Spectrum(0.0), mi.Bool(False), self.zero_aovs(), mi.Spectrum(0.0)
         feats = self.features(scene)
+        # ---- participating media: not rendered by this version (draaw_v3 / draaw_v4 do)
+        if dr.hint(feats["media"], mode="scalar"):
+            from ..errors import RenderError
+            raise RenderError("draaw_v1: the scene has participating media, which draaw_v1 does not "
+                              "render yet; use draaw_v3, draaw_v4 or volpath")
+        # ---- end media
         flags = self.ray_flags(feats)
         hit_em = feats["hittable_lights"]
         gather = self.scatter > 0

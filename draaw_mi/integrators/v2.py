@@ -186,6 +186,12 @@ class DraawV2Integrator(DraawIntegrator):
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
         primal = mode == dr.ADMode.Primal
         feats = self.features(scene)
+        # ---- participating media: not rendered by this version (draaw_v3 / draaw_v4 do)
+        if dr.hint(feats["media"], mode="scalar"):
+            from ..errors import RenderError
+            raise RenderError("draaw_v2: the scene has participating media, which draaw_v2 does not "
+                              "render yet; use draaw_v3, draaw_v4 or volpath")
+        # ---- end media
         flags = self.ray_flags(feats)
         ray = mi.Ray3f(dr.detach(ray))
         active = mi.Bool(active)

@@ -41,7 +41,8 @@ from .common import mis_weight
 # majorant equals sigma_t (a uniform region) there are none, so the density gradient would
 # silently miss the d/dsigma of the transmittance (prbvolpath has this bias on uniform grids).
 DIFF_MAJORANT_FACTOR = 2.0
-MAX_TRACKING_STEPS = 4096     # per flight; exhausted flights count as absorbed (documented)
+MAX_TRACKING_STEPS = 4096
+MEDIA_RR_DEPTH = 5            # first depth at which Russian roulette may stop a path (v4)     # per flight; exhausted flights count as absorbed (documented)
 RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
 
 
@@ -434,7 +435,10 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     has_homog = table.has_homogeneous
     ctx = mi.BSDFContext()
     max_depth = integ.max_depth
-    rr_depth = integ.rr_depth
+    # Russian roulette in media: from depth 5 with survival up to 0.99, as volpath. The
+    # surface-tuned draaw_v4 default (depth 2) doubled the variance in dense media, where
+    # every path scatters many times with a throughput of albedo^k.
+    rr_depth = max(integ.rr_depth, MEDIA_RR_DEPTH)
     rr_min = getattr(integ, "rr_min", 0.05)
 
     ray = mi.Ray3f(dr.detach(ray))
@@ -608,7 +612,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         if dr.hint(russian_roulette, mode="scalar"):
             β_max = dr.max(β)
             rr_on = active & (depth >= rr_depth)
-            q = dr.clip(β_max * dr.square(η), rr_min, 0.95)
+            q = dr.clip(β_max * dr.square(η), rr_min, 0.99)
             β[rr_on] *= dr.rcp(q)
             active &= ~rr_on | (sampler.next_1d(rr_on) < q)
         active &= dr.max(β) > 0

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 GLOBAL_BOX = 1e6        # half-size of the box of a global (1x1x1) majorant
+UNIFORM_GAIN = 1.3      # local grid kept only if max > 1.3 x mean of the local bounds
 
 
 @dataclass
@@ -124,4 +125,9 @@ def build_majorant(medium, resolution: int = 16, inside=None) -> Majorant:
         fallback.note = "grid placement not axis-aligned (rotated or mirrored to_world)"
         return fallback
     res = tuple(int(min(resolution, s)) for s in n)
-    return Majorant("grid", _pool(data, res), lo, hi)
+    local = _pool(data, res)
+    # A nearly uniform grid gains nothing from local bounds but pays a DDA step per coarse
+    # cell crossed: bound it with a single cell over its box instead.
+    if float(local.max()) <= UNIFORM_GAIN * float(local.mean()):
+        return Majorant("grid", np.full((1, 1, 1), float(local.max())), lo, hi, "nearly uniform: one cell")
+    return Majorant("grid", local, lo, hi)
