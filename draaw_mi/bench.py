@@ -175,13 +175,13 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
 
 def _media_versions(versions) -> list[str]:
     """Versions for a scene with participating media: ``path``/``prb`` ignore media, so
-    Mitsuba's ``volpath`` stands in for them; V1/V2 do not render media (skipped)."""
+    Mitsuba's ``volpath`` stands in for them (V1/V2 render GO-Draaw's single-scattering march,
+    V3/V4 full volumetric transport)."""
     out = []
     for v in versions:
         v2 = {"path": "volpath", "prb": "volpath"}.get(v, v)
-        if v2 in ("v1", "v2", "draaw_v1", "draaw_v2") or v2 in out:
-            continue
-        out.append(v2)
+        if v2 not in out:
+            out.append(v2)
     return out
 
 
