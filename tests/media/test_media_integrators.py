@@ -19,6 +19,7 @@ import media_scenes as ms  # noqa: E402
 from integrators_helpers import seed_stack, z_summary, zscores  # noqa: E402
 
 import draaw_mi.integrators.volume as volume  # noqa: E402
+import draaw_mi.integrators.volume_tracking as tracking  # noqa: E402
 
 
 def same_expectation(kind, integ, seeds=5, spp=32, res=10, **kw):
@@ -181,7 +182,7 @@ def test_stability_camera_inside_medium_gradient():
 
 
 def test_exhausted_tracking_is_a_miss_not_nan(monkeypatch):
-    monkeypatch.setattr(volume, "MAX_TRACKING_STEPS", 2)
+    monkeypatch.setattr(tracking, "MAX_TRACKING_STEPS", 2)
     volume._TABLES.clear()
     sc = ms.scene("gradient", "draaw_v4", res=8)
     img = np.array(mi.render(sc, spp=4, seed=0))
@@ -231,8 +232,8 @@ def test_homogeneous_only_compiles_no_grid_tracking(monkeypatch):
 
     def boom(*a, **k):
         raise AssertionError("grid tracking traced")
-    monkeypatch.setattr(volume, "free_flight", boom)
-    monkeypatch.setattr(volume, "ratio_track", boom)
+    monkeypatch.setattr(tracking, "free_flight", boom)
+    monkeypatch.setattr(tracking, "ratio_track", boom)
     homog = _op_count(ms.scene("homogeneous", "draaw_v4", res=8, max_depth=4))
     assert none < homog < grid, (none, homog, grid)
     assert grid - homog > 500, (none, homog, grid)
