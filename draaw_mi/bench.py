@@ -108,7 +108,8 @@ def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir
         path = os.path.join(cache_dir, f"gt-{name}-{_scene_key(scene, spp, max_depth)}.exr")
         if os.path.isfile(path):
             return read_exr(path)[..., :3]
-    img = np.array(render(scene, version="path", spp=spp, seed=2 ** 31 - 1, max_depth=max_depth,
+    version = "volpath" if scene.features().get("media") else "path"     # media need volpath
+    img = np.array(render(scene, version=version, spp=spp, seed=2 ** 31 - 1, max_depth=max_depth,
                           progress=progress, post=[]))[..., :3]
     if path:
         write_exr(path, img)
@@ -186,6 +187,18 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
     return sorted(front)
 
 
+def _media_versions(versions) -> list[str]:
+    """Versions for a scene with participating media: ``path``/``prb`` ignore media, so
+    Mitsuba's ``volpath`` stands in for them (V1/V2 render GO-Draaw's single-scattering march,
+    V3/V4 full volumetric transport)."""
+    out = []
+    for v in versions:
+        v2 = {"path": "volpath", "prb": "volpath"}.get(v, v)
+        if v2 not in out:
+            out.append(v2)
+    return out
+
+
 def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024),
               max_depths=None, adaptive=(None, 8), adaptive_spp=(1,), repeats: int = 3,
               resolution=None, gt_spp: int = 4096, out_dir: str = "out/bench", cache_dir: str | None = None,
@@ -207,13 +220,14 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
     plan = []
     for s in loaded:
         depths = max_depths or [s.settings["max_depth"]]
+        media = bool(s.features().get("media"))
         for d in depths:
-            for v in versions:
+            for v in (_media_versions(versions) if media else versions):
                 for spp in spps:
                     plan.append((s, Setting(v, spp, d, None)))
                 for spp in denoise_spp:
                     plan.append((s, Setting(v, spp, d, None, True)))
-                if adaptive and any(a for a in adaptive):
+                if adaptive and any(a for a in adaptive) and not media:
                     for a in adaptive:
                         if a:
                             for spp in adaptive_spp:

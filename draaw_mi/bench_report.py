@@ -137,7 +137,8 @@ def _plot_error_images(images, gts, scene, spp, path):
 def summary_markdown(result: dict) -> str:
     rows = result["rows"]
     lines = ["# draaw-mi benchmark: what accuracy costs in time", "",
-             f"Ground truth: Mitsuba `path`, {result['ground_truth_spp']} spp, same materials. "
+             f"Ground truth: Mitsuba `{'volpath' if any(r.get('label') == 'volpath' for r in rows) else 'path'}` "
+             f"(`volpath` for scenes with media), {result['ground_truth_spp']} spp, same materials. "
              f"Times: median of {result['repeats']} renders after a warm-up (compile time separate). "
              f"Machine: {result['machine']}.", ""]
     scenes = sorted({r["scene"] for r in rows})

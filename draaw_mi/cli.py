@@ -204,6 +204,8 @@ def _cmd_info(args) -> int:
         print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
         print(f"    lights: {', '.join(s['lights']) or 'none'}")
         print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
+        for v in s.get("volumes", []):
+            print("    volume: " + _volume_line(v))
         print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
         if s["post"]:
             print(f"      post: {' -> '.join(map(str, s['post']))}")
@@ -234,6 +236,17 @@ def _bench_sdf_scenes(args, scenes, res, progress):
         print(f"wrote {args.out}/sdf_study_{r['scene']}.json/.csv/.md and "
               f"sdf_error_vs_time_{r['scene']}.png ({len(r['rows'])} tracer settings)")
     return rest
+
+
+def _volume_line(v: dict) -> str:
+    """One line of ``draaw-mi info`` for a [[volumes]] entry."""
+    shape = "x".join(map(str, v["shape"]))
+    lo, hi = v["bounds"]
+    box = f"box {[round(x, 3) for x in lo]}..{[round(x, 3) for x in hi]}"
+    if v["mode"] == "smoke":
+        return (f"{v['name']}: smoke {shape}, {v['cells']} cells with density, max sigma_t "
+                f"{v['max_sigma_t']:g}, g={v['g']:g}, {box}")
+    return f"{v['name']}: solid {shape}, {v['voxels']} voxels, {v['faces']} exterior faces, {box}"
 
 
 def _cmd_fit(args) -> int:

@@ -42,6 +42,9 @@ VERSION_ALIASES: dict[str, str] = {
     # Mitsuba's own
     "path": "path",
     "prb": "prb",
+    # Mitsuba's volumetric path tracers (scenes with media)
+    "volpath": "volpath",
+    "prbvolpath": "prbvolpath",
 }
 
 _REGISTERED = False

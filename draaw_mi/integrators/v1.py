@@ -86,6 +86,8 @@ class DraawV1Integrator(DraawIntegrator):
 
     def __init__(self, props: mi.Properties):
         self.scatter = parse_int(props, self.PLUGIN, "scatter", 4, 0)
+        # media scenes: march steps per medium segment (draaw_mi.integrators.volume_march)
+        self.medium_steps = parse_int(props, self.PLUGIN, "medium_steps", 12, 1)
         super().__init__(props)
 
     def _extra_repr(self) -> str:
@@ -136,6 +138,11 @@ class DraawV1Integrator(DraawIntegrator):
         if dr.hint(self.max_depth == 0, mode="scalar"):
             return mi.Spectrum(0.0), mi.Bool(False), self.zero_aovs(), mi.Spectrum(0.0)
         feats = self.features(scene)
+        # ---- participating media: GO-Draaw's single-scattering march, fixed (volume_march)
+        if dr.hint(feats["media"], mode="scalar"):
+            from . import volume_march
+            return volume_march.sample(self, mode, scene, sampler, ray, active)
+        # ---- end media
         flags = self.ray_flags(feats)
         hit_em = feats["hittable_lights"]
         gather = self.scatter > 0

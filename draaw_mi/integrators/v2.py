@@ -85,6 +85,8 @@ class DraawV2Integrator(DraawIntegrator):
 
     def __init__(self, props: mi.Properties):
         self.scatter = parse_int(props, self.PLUGIN, "scatter", 1, 0)
+        # media scenes: march steps per medium segment (draaw_mi.integrators.volume_march)
+        self.medium_steps = parse_int(props, self.PLUGIN, "medium_steps", 12, 1)
         super().__init__(props)
 
     def _extra_repr(self) -> str:
@@ -197,6 +199,11 @@ class DraawV2Integrator(DraawIntegrator):
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
         primal = mode == dr.ADMode.Primal
         feats = self.features(scene)
+        # ---- participating media: GO-Draaw's single-scattering march, fixed (volume_march)
+        if dr.hint(feats["media"], mode="scalar"):
+            from . import volume_march
+            return volume_march.sample(self, mode, scene, sampler, ray, active)
+        # ---- end media
         flags = self.ray_flags(feats)
         ray = mi.Ray3f(dr.detach(ray))
         active = mi.Bool(active)

@@ -100,6 +100,12 @@ class DraawV4Integrator(DraawIntegrator):
         if dr.hint(self.max_depth == 0, mode="scalar"):
             return mi.Spectrum(0.0), mi.Bool(False), self.zero_aovs(), mi.Spectrum(0.0)
         feats = self.features(scene)
+        # ---- participating media (draaw_mi.integrators.volume), only when the scene has them
+        if dr.hint(feats["media"], mode="scalar"):
+            from . import volume
+            return volume.sample(self, mode, scene, sampler, ray, δL, state_in, active,
+                                 russian_roulette=True)
+        # ---- end media
         flags = self.ray_flags(feats)
         has_nee = len(scene.emitters()) > 0           # any emitter to sample
         hit_em = feats["hittable_lights"]             # area or environment emitters

@@ -141,6 +141,7 @@ class DraawScene:
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
             "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
             "features": self.features(),
+            "volumes": self.info.get("volumes", []),
             **({"sdf": self.sdf.describe()} if self.sdf is not None else {}),
         }
 

@@ -8,6 +8,7 @@ The description has these top-level tables (all optional but ``shapes``)::
     [[shapes]]   type = mesh | sphere | rectangle | disk | cube | cylinder, material, emission, ...
     [[lights]]   type = point | spot | area | constant | envmap | directional, intensity, color
     [[post]]     post-processing chain (see draaw_mi.post)
+    [[volumes]]  voxel grids as solid voxels or smoke (see draaw_mi.media.scene_volumes)
 
 Materials are declared once at the top of the Mitsuba dict under their own names, so their
 parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on.
@@ -25,7 +26,7 @@ from . import camera as cam
 from .meshes import load_mesh_parts, write_ply
 from .schema import Where, boolean, check_keys, number, resolution, string, vector
 
-TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf")
+TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "hide_emitters", "aovs")
 FILTERS = ("box", "gaussian", "tent", "lanczos", "mitchell", "catmullrom")
 TRANSFORM_KEYS = ("translate", "rotate", "scale", "matrix")
@@ -376,7 +377,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     shapes = desc.get("shapes", [])
     if not isinstance(shapes, list):
         raise (where / "shapes").error("expected a list of shape tables ([[shapes]])")
-    if not shapes and not desc.get("sdf"):
+    if not shapes and not desc.get("sdf") and not desc.get("volumes"):
         raise where.error("the scene has no shapes; add at least one [[shapes]] entry")
 
     materials: dict = {}
@@ -404,6 +405,21 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         proxies, sdf_scene = sdf_dicts(desc["sdf"], materials, ctx, where / "sdf")
         shape_entries.update(proxies)
     # --- end SDF
+    # ---- [[volumes]]: voxel grids (draaw_mi.media) -------------------------------------
+    volume_info = []
+    volumes = desc.get("volumes", [])
+    if not isinstance(volumes, list):
+        raise (where / "volumes").error("expected a list of volume tables ([[volumes]])")
+    if volumes:
+        from ..media.scene_volumes import volume_dicts
+        for i, vol in enumerate(volumes):
+            entries, vinfo = volume_dicts(vol, i, mats, ctx, where / "volumes" / i)
+            for key, d in entries.items():
+                if key in shape_entries or key in materials:
+                    raise (where / "volumes" / i / "name").error(f"duplicate name {key!r}")
+                shape_entries[key] = d
+            volume_info.append(vinfo)
+    # ---- end [[volumes]] ------------------------------------------------------------------
 
     if camera_table is None:
         camera_table = cam.auto_camera(*_scene_bounds(shape_entries))
@@ -442,6 +458,8 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if sdf_scene is not None:
         info["sdf"] = sdf_scene
         info["shapes"] = [k for k in info["shapes"] if k not in sdf_scene.proxy_ids]
+    if volume_info:
+        info["volumes"] = volume_info
     return scene, settings, info
 
 
@@ -452,7 +470,8 @@ def _scene_bounds(shape_entries: dict):
     los, his = [], []
     for d in shape_entries.values():
         try:
-            shape = mi.load_dict({k: v for k, v in d.items() if k not in ("bsdf", "emitter")})
+            shape = d if not isinstance(d, dict) else \
+                mi.load_dict({k: v for k, v in d.items() if k not in ("bsdf", "emitter", "interior")})
         except Exception:  # noqa: BLE001 - bounds are best effort
             continue
         bb = shape.bbox()

@@ -1,0 +1,151 @@
+"""``draaw_v1`` / ``draaw_v2`` in scenes with media: GO-Draaw's single-scattering ray march,
+fixed (``go-draaw-spec.md`` §4.3).
+
+GO-Draaw marched 12 equal steps with one *global* density, used a transmittance that started
+at a user "transmittance" value (a brightness gain), estimated the light's transmittance from
+the whole box chord regardless of where the light was, and ignored surfaces. Here:
+
+* the camera ray is marched through every medium segment it crosses (``null`` boundaries
+  switch media) in ``medium_steps`` equal steps per segment with a random offset (stochastic
+  midpoint rule), reading the medium's own ``sigma_t`` / ``sigma_s`` at each sample (per-cell
+  density and albedo), with transmittance ``T = exp(-sum sigma_t dt)`` starting at 1;
+* single scattering: at each sample, one emitter sample, HG phase, and the light's *real*
+  transmittance, marched the same way along the shadow ray up to the light (opaque surfaces
+  block);
+* the first opaque surface adds its emission and direct light (the BSDF's ``eval``, one
+  emitter sample, marched transmittance), attenuated by ``T``. No multiple scattering and no
+  indirect light: biased by design (the cheap rung), ``medium_steps`` is the knob.
+
+Primal only: in media scenes V1/V2 are not differentiable (use ``draaw_v3`` / ``draaw_v4``).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..errors import RenderError
+
+MAX_SEGMENTS = 16
+
+
+def _coeffs(medium, ray, t, active):
+    mei = dr.zeros(mi.MediumInteraction3f)
+    mei.t = t
+    mei.p = ray(t)
+    mei.wi = -ray.d
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    mei.time = ray.time
+    mei.wavelengths = ray.wavelengths
+    mei.medium = medium
+    sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, active)
+    return mei, sigma_s, sigma_t.x
+
+
+@dr.syntax
+def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.Float, active):
+    """``exp(-integral sigma_t)`` along ``ray`` up to ``dist`` by ``steps`` samples per medium
+    segment (offset ``u``), through null surfaces; 0 if an opaque surface blocks."""
+    T = mi.Float(1.0)
+    r = mi.Ray3f(ray)
+    rem = mi.Float(dist)
+    med = dr.select(active, medium, dr.zeros(mi.MediumPtr))
+    live = mi.Bool(active)
+    n = mi.UInt32(0)
+    while live:
+        r.maxt = rem
+        si = scene.ray_intersect(r, mi.RayFlags.Minimal, False, live)
+        seg = dr.minimum(si.t, rem)
+        in_med = live & (med != None)  # noqa: E711
+        ok, mint, maxt = med.intersect_aabb(r)
+        t0 = dr.maximum(mint, 0.0)
+        t1 = dr.minimum(maxt, seg)
+        march = in_med & ok & (t1 > t0)
+        dt = dr.select(march, (t1 - t0) / steps, 0.0)
+        tau = mi.Float(0.0)
+        k = mi.UInt32(0)
+        while march & (k < steps):
+            _, _, s_t = _coeffs(med, r, t0 + (mi.Float(k) + u) * dt, march)
+            tau += s_t * dt
+            k += 1
+        T[march] = T * dr.exp(-tau)
+        hit = live & si.is_valid() & (si.t < rem)
+        null = hit & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
+        T[hit & ~null] = 0.0
+        med[null & si.is_medium_transition()] = si.target_medium(r.d)
+        rem[null] = rem - si.t
+        r[null] = si.spawn_ray(r.d)
+        n += 1
+        live &= null & (T > 0) & (n < MAX_SEGMENTS)
+    return T
+
+
+def _light(scene, sampler, it, medium, steps, active):
+    """One emitter sample from ``it``: ``(ds, Le / pdf * T_light)``."""
+    ds, em_w = scene.sample_emitter_direction(it, sampler.next_2d(active), False, active)
+    active = active & (ds.pdf != 0)
+    r = it.spawn_ray(ds.d)
+    dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
+    T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active)
+    return ds, dr.select(active, em_w * T, 0.0)
+
+
+@dr.syntax
+def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool):
+    """The body of ``draaw_v1`` / ``draaw_v2``'s ``sample()`` for scenes with media."""
+    if mode != dr.ADMode.Primal:
+        raise RenderError(f"{integ.PLUGIN}: scenes with participating media are rendered primal-only "
+                          "by V1/V2 (single-scattering march); differentiate with draaw_v3 / draaw_v4")
+    steps = int(getattr(integ, "medium_steps", 12))
+    ctx = mi.BSDFContext()
+    ray = mi.Ray3f(ray)
+    ray.d = dr.normalize(ray.d)
+    L = mi.Spectrum(0.0)
+    T = mi.Spectrum(1.0)
+    medium = dr.zeros(mi.MediumPtr)
+    sensor_media = [s.get_medium() for s in scene.sensors()]
+    if dr.hint(len(sensor_media) > 0 and sensor_media[0] is not None, mode="scalar"):
+        medium = dr.select(active, mi.MediumPtr(sensor_media[0]), medium)
+    live = mi.Bool(active)
+    valid = mi.Bool(False)
+    n = mi.UInt32(0)
+    while live:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, False, live)
+        in_med = live & (medium != None)  # noqa: E711
+        ok, mint, maxt = medium.intersect_aabb(ray)
+        t0 = dr.maximum(mint, 0.0)
+        t1 = dr.minimum(maxt, si.t)
+        march = in_med & ok & (t1 > t0)
+        dt = dr.select(march, (t1 - t0) / steps, 0.0)
+        u = sampler.next_1d(march)
+        k = mi.UInt32(0)
+        while march & (k < steps):
+            mei, s_s, s_t = _coeffs(medium, ray, t0 + (mi.Float(k) + u) * dt, march)
+            ds, Lw = _light(scene, sampler, mei, medium, steps, march)
+            phase = medium.phase_function()
+            ph, _ = phase.eval_pdf(mi.PhaseFunctionContext(sampler), mei, ds.d, march)
+            # this step's own attenuation up to the sample, then through it
+            T_half = T * dr.exp(-s_t * (u * dt))
+            L[march] = L + T_half * s_s * ph * Lw * dt
+            T[march] = T * dr.exp(-s_t * dt)
+            k += 1
+        valid |= live & si.is_valid()
+        bsdf = si.bsdf(ray)
+        hit = live & si.is_valid()
+        null = hit & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
+        opaque = hit & ~null
+        # emission of what the ray finally sees (surface or environment)
+        seen = (live & ~si.is_valid()) | opaque
+        Le = si.emitter(scene).eval(si, seen)
+        if dr.hint(integ.hide_emitters, mode="scalar"):
+            Le = dr.select(n == 0, 0.0, Le)
+        L[seen] = L + T * Le
+        # direct light at the surface
+        m2 = dr.select(si.is_medium_transition(), si.target_medium(si.to_world(si.wi)), medium)
+        ds, Lw = _light(scene, sampler, si, m2, steps, opaque)
+        f = bsdf.eval(ctx, si, si.to_local(ds.d), opaque)
+        L[opaque] = L + T * f * Lw
+        medium[null & si.is_medium_transition()] = si.target_medium(ray.d)
+        ray[null] = si.spawn_ray(ray.d)
+        n += 1
+        live &= null & (n < MAX_SEGMENTS)
+    return L, valid | mi.Bool(scene.environment() is not None), integ.zero_aovs(), L

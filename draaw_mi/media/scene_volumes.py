@@ -1,0 +1,159 @@
+"""``[[volumes]]`` entries of draaw-mi scene files -> Mitsuba shapes and media.
+
+One entry is one voxel grid, rendered as solid voxels or as smoke::
+
+    [[volumes]]
+    name = "plume"
+    mode = "smoke"                       # "solid" (default) | "smoke"
+    procedural = { type = "plume", seed = 3, resolution = [40, 56, 40] }
+    # or: file = "grid.npz" | "density.vol" | "mesh.obj" (voxelised);  or inline arrays:
+    # density = [[[...]]] / occupied = [[[...]]]   (nested lists, [ix][iy][iz])
+    bounds = [[-1, 0, -1], [1, 2, 1]]    # world box (default: from the file, else the unit cube)
+    resolution = 64                      # voxelising a mesh (int or [nx, ny, nz])
+    fill = "surface"                     # voxelising a mesh: "surface" | "solid"
+    # smoke keys
+    density_scale = 8.0                  # sigma_t = density_scale * density  (1/world units)
+    albedo = [0.9, 0.9, 0.9]             # constant smoke colour (default: the grid's)
+    g = 0.3                              # Henyey-Greenstein |g| < 1
+    filter = "trilinear"                 # "nearest" | "trilinear"
+    # solid keys
+    material = "clay"                    # a [materials] entry of type draaw (colours from voxels)
+    color = [0.8, 0.2, 0.1]              # one colour for every voxel (default: the grid's)
+
+Errors are :class:`SceneError` naming ``file: volumes[i].key``.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import DraawError, ParameterError
+from .faces import solid_meshes
+from .mitsuba_dicts import FILTERS, check_g, smoke_shape
+from .voxel_grid import VoxelGrid
+
+VOLUME_KEYS = ("name", "mode", "file", "procedural", "density", "occupied", "bounds", "resolution", "fill",
+               "density_scale", "albedo", "g", "filter", "material", "color", "seed")
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def _bounds(value, where):
+    from ..scene.schema import vector
+    if not isinstance(value, list) or len(value) != 2:
+        raise (where / "bounds").error(f"{value!r} is not [[xmin, ymin, zmin], [xmax, ymax, zmax]]")
+    lo = np.array(vector(value[0], where / "bounds" / 0))
+    hi = np.array(vector(value[1], where / "bounds" / 1))
+    if np.any(hi <= lo):
+        raise (where / "bounds").error(f"{value!r} is an empty box; expected min < max on every axis")
+    return lo, hi
+
+
+def _array(value, where, key):
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (ValueError, TypeError):
+        raise (where / key).error("is not a nested list of numbers [ix][iy][iz]") from None
+    if arr.ndim != 3 or min(arr.shape) < 1:
+        raise (where / key).error(f"has shape {arr.shape}; expected a non-empty [ix][iy][iz] nested list")
+    return arr
+
+
+def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
+    """Build the :class:`VoxelGrid` an entry describes (no Mitsuba objects yet)."""
+    from ..scene.schema import number, string
+    sources = [k for k in ("file", "procedural", "density", "occupied") if k in entry]
+    if not sources:
+        raise where.error("needs a grid: one of 'file', 'procedural', 'density' or 'occupied'")
+    if "file" in sources and len(sources) > 1:
+        raise where.error(f"give either 'file' or inline arrays / 'procedural', not {' and '.join(sources)}")
+    seed = int(number(entry.get("seed", 0), where / "seed", lo=0, integer=True))
+    bounds = _bounds(entry["bounds"], where) if "bounds" in entry else None
+    kw = {} if bounds is None else {"bbox_min": bounds[0], "bbox_max": bounds[1]}
+    try:
+        if "file" in entry:
+            path = ctx.path(string(entry["file"], where / "file"))
+            if not os.path.isfile(path):
+                raise (where / "file").error(f"{path!r} does not exist")
+            low = path.lower()
+            if low.endswith(".npz"):
+                g = VoxelGrid.load(path, seed=seed)
+            elif low.endswith(".vol"):
+                g = VoxelGrid.from_vol(path, seed=seed)
+            elif low.endswith(MESH_SUFFIXES):
+                res = entry.get("resolution", 64)
+                fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))
+                g = VoxelGrid.from_mesh(path, res, fill, seed=seed, **({} if bounds is None else
+                                                                      {"bbox_min": bounds[0], "bbox_max": bounds[1]}))
+                bounds = None
+            else:
+                raise (where / "file").error(f"{path!r}: unknown grid format; expected .npz, .vol or a mesh "
+                                             f"({', '.join(MESH_SUFFIXES)})")
+            if bounds is not None:
+                g.bbox_min, g.bbox_max = bounds
+        elif "procedural" in entry:
+            from .procedural import plume
+            p = entry["procedural"]
+            if not isinstance(p, dict) or p.get("type") != "plume":
+                raise (where / "procedural").error(f"{p!r}; expected a table with type = 'plume'")
+            extra = set(p) - {"type", "seed", "resolution"}
+            if extra:
+                raise (where / "procedural").error(f"unknown key {sorted(extra)[0]!r}; valid: type, seed, resolution")
+            dens = plume(p.get("resolution", (48, 64, 48)), seed=int(p.get("seed", 0)))
+            g = VoxelGrid.from_arrays(density=dens, seed=seed, **kw)
+        else:
+            dens = _array(entry["density"], where, "density") if "density" in entry else None
+            occ = _array(entry["occupied"], where, "occupied") != 0 if "occupied" in entry else None
+            g = VoxelGrid.from_arrays(occupied=occ, density=dens, seed=seed, **kw)
+    except ParameterError as e:
+        raise where.error(str(e)) from None
+    return g
+
+
+def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tuple[dict, dict]:
+    """``({id: mitsuba dict or object}, info)`` for one ``[[volumes]]`` entry."""
+    from ..scene.description import safe_id
+    from ..scene.schema import check_keys, number, string, vector
+    check_keys(entry, VOLUME_KEYS, where)
+    name = safe_id(string(entry.get("name", f"volume_{index}"), where / "name"))
+    mode = string(entry.get("mode", "solid"), where / "mode", ("solid", "smoke"))
+    solid_only, smoke_only = ("material", "color"), ("density_scale", "albedo", "g", "filter")
+    for k in (smoke_only if mode == "solid" else solid_only):
+        if k in entry:
+            raise (where / k).error(f"applies to mode = {'smoke' if mode == 'solid' else 'solid'} volumes only")
+    grid = load_volume_grid(entry, ctx, where)
+    info = {"name": name, "mode": mode, "shape": list(grid.shape),
+            "bounds": [grid.bbox_min.tolist(), grid.bbox_max.tolist()]}
+    try:
+        if mode == "smoke":
+            g_phase = check_g(number(entry.get("g", 0.0), where / "g"), f"{where}.g") if "g" in entry else 0.0
+            scale = number(entry.get("density_scale", 1.0), where / "density_scale", lo=0)
+            filt = string(entry.get("filter", "trilinear"), where / "filter", FILTERS)
+            albedo = vector(entry["albedo"], where / "albedo", lo=0) if "albedo" in entry else None
+            if albedo is not None and max(albedo) > 1:
+                raise (where / "albedo").error(f"{albedo!r} is above 1; expected values in [0, 1]")
+            if not np.any(grid.density > 0):
+                raise (where / "density").error("the grid has no density > 0 (nothing to render as smoke)")
+            info.update(cells=int((grid.density > 0).sum()), max_sigma_t=float(grid.density.max() * scale), g=g_phase)
+            return {name: smoke_shape(grid, g_phase=g_phase, scale=scale, filter_type=filt, albedo=albedo)}, info
+        mat_params: dict = {}
+        if "material" in entry:
+            mname = string(entry["material"], where / "material")
+            if mname not in raw_materials:
+                raise (where / "material").error(f"unknown material {mname!r}")
+            table = dict(raw_materials[mname])
+            if table.pop("type", "draaw") != "draaw":
+                raise (where / "material").error(f"{mname!r} is not a draaw material (needed for voxel colours)")
+            table.pop("base_color", None)
+            mat_params = table
+        if "color" in entry:
+            grid.color[:] = vector(entry["color"], where / "color", lo=0)
+        if not grid.occupied.any():
+            raise where.error("the grid has no solid voxels (mode = 'solid')")
+        meshes = solid_meshes(grid, mat_params, name=name)
+        info.update(voxels=int(grid.occupied.sum()), faces=int(sum(m.face_count() for m in meshes.values()) // 2))
+        return meshes, info
+    except ParameterError as e:
+        raise where.error(str(e)) from None
+    except DraawError:
+        raise

@@ -1,0 +1,239 @@
+"""draaw_v3 / draaw_v4 in scenes with participating media: the same expectation as Mitsuba's
+``volpath`` (per-pixel z-tests over independent seeds), gradients against central finite
+differences, stability, and proof that media code is compiled only when the scene needs it."""
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import draaw_mi  # noqa: F401
+import drjit as dr
+import mitsuba as mi
+
+sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "integrators"))
+import media_scenes as ms  # noqa: E402
+from integrators_helpers import seed_stack, z_summary, zscores  # noqa: E402
+
+import draaw_mi.integrators.volume as volume  # noqa: E402
+import draaw_mi.integrators.volume_tracking as tracking  # noqa: E402
+
+
+def same_expectation(kind, integ, seeds=5, spp=32, res=10, **kw):
+    ref = ms.scene(kind, "volpath", res=res, **kw)
+    ours = ms.scene(kind, integ, res=res, **kw)
+    a = seed_stack(ref, ref.integrator(), spp, range(seeds))
+    b = seed_stack(ours, ours.integrator(), spp, range(seeds, 2 * seeds))
+    s = z_summary(zscores(a, b))
+    assert np.all(np.isfinite(b))
+    assert s["n"] > 0.3 * a[0].size, s
+    # few seeds: the z-scores are t-distributed (heavy tails); the mean catches a bias
+    assert s["frac_gt3"] <= 0.05, s
+    assert abs(s["mean"]) <= 0.25, s
+    assert 0.7 <= s["std"] <= 1.4, s
+    assert b.mean() > 0.02
+    return s
+
+
+@pytest.mark.parametrize("kind", ["blobs", "mesh", "inside"])
+def test_v4_matches_volpath(kind):
+    same_expectation(kind, "draaw_v4")
+
+
+def test_v3_matches_volpath_coloured_albedo():
+    same_expectation("albedo", "draaw_v3")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["uniform", "gradient", "albedo", "homogeneous"])
+@pytest.mark.parametrize("integ", ["draaw_v3", "draaw_v4"])
+def test_matches_volpath_all_scenes(kind, integ):
+    same_expectation(kind, integ, seeds=8, spp=64)
+
+
+# --------------------------------------------------------------------------- gradients
+def _grads(key_suffix, direction_fn, h, n=4, kind="uniform", spp_ad=32, spp_fd=256, albedo=None):
+    sc = ms.scene(kind, "draaw_v4", res=8)
+    params = mi.traverse(sc)
+    if albedo is not None:
+        a = params["smoke.interior_medium.albedo.data"]
+        params["smoke.interior_medium.albedo.data"] = mi.TensorXf(np.full(a.shape, albedo, np.float32))
+        params.update()
+    key = "smoke.interior_medium." + key_suffix
+    v0 = type(params[key])(params[key])
+    direction = direction_fn(v0)
+    ad, fd = [], []
+    for s in range(n):
+        dr.enable_grad(params[key])
+        params.update()
+        img = mi.render(sc, params, spp=spp_ad, seed=10 + s, seed_grad=500 + s)
+        dr.backward(dr.mean(img, axis=None))
+        g = np.array(dr.grad(params[key]))
+        assert np.all(np.isfinite(g))
+        ad.append(float(np.sum(g * np.array(direction))))
+        dr.disable_grad(params[key])
+        params[key] = type(v0)(v0)
+        params.update()
+    for s in range(n):
+        vals = []
+        for sg in (1.0, -1.0):
+            params[key] = v0 + sg * h * direction
+            params.update()
+            vals.append(float(np.array(dr.mean(mi.render(sc, spp=spp_fd, seed=100 + s), axis=None)).ravel()[0]))
+        fd.append((vals[0] - vals[1]) / (2 * h))
+    params[key] = v0
+    params.update()
+    ad, fd = np.array(ad), np.array(fd)
+    se_ad, se_fd = ad.std(ddof=1) / np.sqrt(n), fd.std(ddof=1) / np.sqrt(n)
+    info = f"AD {ad.mean():.5f}±{se_ad:.5f} FD {fd.mean():.5f}±{se_fd:.5f}"
+    assert abs(fd.mean()) > 3 * se_fd and abs(ad.mean()) > 3 * se_ad, info      # signal above noise
+    assert abs(ad.mean() - fd.mean()) < 3.5 * np.hypot(se_ad, se_fd), info
+    return info
+
+
+def test_density_block_gradient_matches_fd():
+    def block(v0):
+        m = np.zeros(v0.shape, np.float32)
+        m[2:6, 2:6, 2:6] = 1.0
+        return mi.TensorXf(m * np.array(v0))           # relative scaling of a voxel block
+    # albedo 0.3: absorption dominates, so the gradient stands well above the FD noise
+    # (at albedo 0.8 in-scattering and extinction nearly cancel)
+    _grads("sigma_t.data", block, h=0.2, albedo=0.3)
+
+
+@pytest.mark.slow
+def test_albedo_gradient_matches_fd():
+    _grads("albedo.data", lambda v0: mi.TensorXf(np.ones(v0.shape, np.float32)), h=0.05)
+
+
+@pytest.mark.slow
+def test_g_gradient_matches_fd():
+    _grads("phase_function.g", lambda v0: mi.Float(1.0), h=0.1, n=8, spp_fd=512)
+
+
+# --------------------------------------------------------------------------- stability
+def test_stability_hard_media_in_one_scene():
+    """Density 0, density 1e6, g = +0.99 and -0.99, a 1x1x1 grid, side by side in one scene
+    (one compile): finite image and finite gradients for every medium parameter."""
+    from draaw_mi.media import VoxelGrid
+    from draaw_mi.media.mitsuba_dicts import smoke_shape
+    d = ms.base({"type": "draaw_v4", "max_depth": 6}, res=12, origin=(0.0, 0.5, 6.0))
+    cases = {"zero": (0.0, 0.3, 4), "dense": (1e6, 0.3, 4), "gplus": (2.0, 0.99, 4),
+             "gminus": (2.0, -0.99, 4), "one": (3.0, 0.3, 1)}
+    for i, (name, (dens, gp, n)) in enumerate(cases.items()):
+        x = -2.0 + i
+        g = VoxelGrid.from_arrays(density=np.full((n, n, n), dens), bbox_min=(x - 0.4, -0.4, -0.4),
+                                  bbox_max=(x + 0.4, 0.4, 0.4))
+        d[name] = smoke_shape(g, g_phase=gp)
+    sc = mi.load_dict(d)
+    img = np.array(mi.render(sc, spp=16, seed=0))
+    assert np.all(np.isfinite(img))
+    params = mi.traverse(sc)
+    keys = [k for k in params.keys() if ".interior_medium." in k
+            and k.endswith(("sigma_t.data", "albedo.data", "phase_function.g"))]
+    assert len(keys) >= 13                          # identical phase functions may be shared
+    for k in keys:
+        dr.enable_grad(params[k])
+    params.update()
+    out = mi.render(sc, params, spp=8, seed=1)
+    dr.backward(dr.mean(out, axis=None))
+    for k in keys:
+        g = np.array(dr.grad(params[k]))
+        assert np.all(np.isfinite(g)), k
+    assert np.abs(np.array(dr.grad(params["gplus.interior_medium.sigma_t.data"]))).sum() > 0
+
+
+def test_stability_grazing_rays_along_grid_planes():
+    """Orthographic rays exactly on the planes between voxels and majorant cells."""
+    from draaw_mi.media import VoxelGrid
+    from draaw_mi.media.mitsuba_dicts import smoke_shape
+    d = ms.base({"type": "draaw_v4", "max_depth": 4}, res=8)
+    d["sensor"] = {"type": "orthographic",
+                   "to_world": mi.ScalarTransform4f().look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}},
+                   "sampler": {"type": "stratified", "sample_count": 4, "jitter": False}}
+    g = VoxelGrid.from_arrays(density=np.zeros((32, 32, 32)), bbox_min=(-1, -1, -1), bbox_max=(1, 1, 1))
+    g.density[:16] = 5.0                                 # a wall ending on the plane x = 0
+    d["smoke"] = smoke_shape(g, g_phase=0.3, filter_type="nearest")
+    sc = mi.load_dict(d)
+    img = np.array(mi.render(sc, spp=4, seed=0))
+    assert np.all(np.isfinite(img))
+    ref = mi.load_dict(dict(d, integrator={"type": "volpath", "max_depth": 4}))
+    a = np.array(mi.render(ref, spp=128, seed=1))
+    b = np.array(mi.render(sc, spp=128, seed=2))
+    assert abs(a.mean() - b.mean()) < 0.05 * a.mean()
+
+
+@pytest.mark.slow
+def test_stability_camera_inside_medium_gradient():
+    d = ms.scene_dict("inside", {"type": "draaw_v4", "max_depth": 4}, res=8)
+    sc = mi.load_dict(d)
+    params = mi.traverse(sc)
+    key = [k for k in params.keys() if k.endswith("sigma_t.data")][0]
+    dr.enable_grad(params[key])
+    params.update()
+    img = mi.render(sc, params, spp=8, seed=0)
+    dr.backward(dr.mean(img, axis=None))
+    g = np.array(dr.grad(params[key]))
+    assert np.all(np.isfinite(np.array(img))) and np.all(np.isfinite(g)) and np.abs(g).sum() > 0
+
+
+def test_exhausted_tracking_is_a_miss_not_nan(monkeypatch):
+    monkeypatch.setattr(tracking, "MAX_TRACKING_STEPS", 2)
+    volume._TABLES.clear()
+    sc = ms.scene("gradient", "draaw_v4", res=8)
+    img = np.array(mi.render(sc, spp=4, seed=0))
+    assert np.all(np.isfinite(img))
+
+
+def test_rgb_extinction_is_one_clear_error():
+    d = ms.base({"type": "draaw_v4"}, res=4)
+    d["smoke"] = {"type": "cube", "bsdf": {"type": "null"},
+                  "interior": {"type": "homogeneous", "scale": 2.0,
+                               "sigma_t": {"type": "rgb", "value": [0.2, 0.5, 0.9]}}}
+    sc = mi.load_dict(d)
+    with pytest.raises(Exception) as e:
+        mi.render(sc, spp=1)
+    err = e.value if isinstance(e.value, draaw_mi.ParameterError) else e.value.__cause__
+    assert isinstance(err, draaw_mi.ParameterError) and "grey extinction" in str(err)
+
+
+# --------------------------------------------------------------------------- only what the scene needs
+def _op_count(sc) -> int:
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()                          # clear
+        img = mi.render(sc, spp=1, seed=0)
+        dr.eval(img)
+        dr.sync_thread()
+        hist = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return max(k["operation_count"] for k in hist if k.get("type") == dr.KernelType.JIT)
+
+
+def test_scene_without_media_traces_no_medium_code(monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("medium code traced")
+    monkeypatch.setattr(volume, "sample", boom)
+    for v in ("draaw_v3", "draaw_v4"):
+        sc = mi.load_dict(ms.base({"type": v, "max_depth": 4}, res=8))
+        img = np.array(mi.render(sc, spp=2))
+        assert img.mean() > 0
+
+
+def test_homogeneous_only_compiles_no_grid_tracking(monkeypatch):
+    none = _op_count(mi.load_dict(ms.base({"type": "draaw_v4", "max_depth": 4}, res=8)))
+    grid = _op_count(ms.scene("uniform", "draaw_v4", res=8, max_depth=4))
+    volume._TABLES.clear()
+
+    def boom(*a, **k):
+        raise AssertionError("grid tracking traced")
+    monkeypatch.setattr(tracking, "free_flight", boom)
+    monkeypatch.setattr(tracking, "ratio_track", boom)
+    homog = _op_count(ms.scene("homogeneous", "draaw_v4", res=8, max_depth=4))
+    assert none < homog < grid, (none, homog, grid)
+    assert grid - homog > 500, (none, homog, grid)

@@ -1,0 +1,137 @@
+"""``[[volumes]]`` in scene files, the smoke medium dict against closed-form transmittance,
+``draaw-mi info`` and bad inputs (one SceneError line, CLI exit 2)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import draaw_mi
+import mitsuba as mi
+
+from draaw_mi import SceneError
+from draaw_mi.media import VoxelGrid, write_vol
+from draaw_mi.media.mitsuba_dicts import smoke_shape
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+GO_DRAAW = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
+
+
+def ortho_scene(shape_dict, res=(6, 4)):
+    """Orthographic camera looking down -z over [-1, 1]^2, constant white environment."""
+    return mi.load_dict({
+        "type": "scene", "integrator": {"type": "volpath", "max_depth": 4},
+        "sensor": {"type": "orthographic",
+                   "to_world": mi.ScalarTransform4f().look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": res[0], "height": res[1], "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent"}},
+        "env": {"type": "constant", "radiance": 1.0},
+        "smoke": shape_dict})
+
+
+def test_smoke_medium_orientation_and_scale_match_closed_form_transmittance():
+    # density varies along x (image columns) and z (the viewing axis); nearest filtering
+    nx, ny, nz = 6, 4, 5
+    dx = np.linspace(0.2, 1.2, nx)[:, None, None]
+    dz = np.linspace(0.5, 1.5, nz)[None, None, :]
+    dens = np.broadcast_to(dx * dz, (nx, ny, nz)).astype(np.float32)
+    g = VoxelGrid.from_arrays(density=dens, bbox_min=(-1, -1, -0.5), bbox_max=(1, 1, 0.5))
+    scene = ortho_scene(smoke_shape(g, scale=2.0, filter_type="nearest", albedo=0.0))
+    img = np.array(mi.render(scene, spp=4096, seed=0))[..., 0]
+    tau = 2.0 * (dx[:, 0, 0] * dz.sum() * (1.0 / nz))              # per column, cell length 0.2
+    expected = np.exp(-tau)
+    got = img.mean(axis=0)                                        # average the 4 rows
+    # delta-tracking estimate of a Bernoulli(T): standard error sqrt(T(1-T)/(4096*4))
+    se = np.sqrt(expected * (1 - expected) / (4096 * 4))
+    assert np.all(np.abs(got - expected) < 5 * se + 1e-4), (got, expected)
+
+
+def test_smoke_scene_loads_reports_and_renders(tmp_path):
+    s = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "smoke.toml"), resolution=(16, 12), spp=4)
+    summ = s.summary()
+    vols = {v["name"]: v for v in summ["volumes"]}
+    assert vols["plume"]["mode"] == "smoke" and vols["plume"]["cells"] > 1000
+    assert vols["blocks"]["voxels"] == 20 and vols["blocks"]["faces"] == 72
+    assert summ["features"]["media"]
+    keys = mi.traverse(s.mi_scene).keys()
+    assert "plume.interior_medium.sigma_t.data" in keys and "blocks.face_color" in keys
+    img = np.array(draaw_mi.render(s, version="volpath", spp=4, seed=0))
+    assert np.all(np.isfinite(img)) and img.mean() > 0.01
+    out = subprocess.run([sys.executable, "-m", "draaw_mi_cli", "info", os.path.join(ROOT, "scenes", "smoke.toml")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert "volume: plume: smoke 32x48x32" in out.stdout and "volume: blocks: solid 3x3x3, 20 voxels" in out.stdout
+
+
+def base_desc(**vol):
+    v = {"name": "v", "mode": "smoke", "density": [[[1.0, 2.0]], [[0.5, 0.0]]], "bounds": [[-1, -1, -1], [1, 1, 1]]}
+    v.update(vol)
+    return {"render": {"resolution": [8, 8], "spp": 1},
+            "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+            "shapes": [{"type": "sphere", "radius": 0.1, "center": [0, 0, -3]}],
+            "lights": [{"type": "constant", "intensity": 1.0}],
+            "volumes": [v]}
+
+
+@pytest.mark.parametrize("vol, match", [
+    ({"g": 1.0}, r"volumes\[0\]\.g.*\|g\| < 1"),
+    ({"g": -1.5}, r"\|g\| < 1"),
+    ({"density": [[[1.0, -2.0]]]}, r"volumes\[0\].*density\[0, 0, 1\] = -2"),
+    ({"density": [[[1.0, float("nan")]]]}, r"density.*nan"),
+    ({"bounds": [[0, 0, 0], [1, 0, 1]]}, r"volumes\[0\]\.bounds.*empty"),
+    ({"density": [[[1.0, 2.0]]], "occupied": [[[1], [1]]]}, r"shape"),
+    ({"mode": "fog"}, r"mode.*solid, smoke"),
+    ({"material": "x"}, r"mode = solid volumes only"),
+    ({"densty": 1}, r"did you mean 'density'"),
+])
+def test_bad_volume_entries_are_one_scene_error(vol, match):
+    with pytest.raises(SceneError, match=match) as e:
+        draaw_mi.load_scene(base_desc(**vol))
+    assert "\n" not in str(e.value)
+
+
+def test_truncated_vol_file_is_a_scene_error_and_cli_exit_2(tmp_path):
+    p = tmp_path / "d.vol"
+    write_vol(p, np.ones((4, 4, 4, 1), np.float32), (0, 0, 0), (1, 1, 1))
+    p.write_bytes(p.read_bytes()[:-7])
+    desc = base_desc(file=str(p))
+    del desc["volumes"][0]["density"]
+    with pytest.raises(SceneError, match=r"volumes\[0\].*truncated"):
+        draaw_mi.load_scene(desc)
+    import json
+    scene_file = tmp_path / "bad.json"
+    scene_file.write_text(json.dumps(desc))
+    out = subprocess.run([sys.executable, "-m", "draaw_mi_cli", "info", str(scene_file)],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("draaw-mi: error:") and "truncated" in lines[0]
+
+
+def test_npz_and_vol_sources_give_the_same_medium(tmp_path):
+    rng = np.random.default_rng(0)
+    g = VoxelGrid.from_arrays(density=rng.random((4, 3, 5)), bbox_min=(-1, -1, -1), bbox_max=(1, 1, 1))
+    g.save(tmp_path / "g.npz")
+    g.save_vol(str(tmp_path / "g.vol"))
+    datas = []
+    for name in ("g.npz", "g.vol"):
+        desc = base_desc(file=name)
+        del desc["volumes"][0]["density"], desc["volumes"][0]["bounds"]
+        s = draaw_mi.load_scene(desc | {}) if False else None
+        from draaw_mi.scene import _from_description
+        s = _from_description(desc, "<t>", str(tmp_path), {})
+        datas.append(np.array(mi.traverse(s.mi_scene)["v.interior_medium.sigma_t.data"]))
+    assert np.array_equal(datas[0], datas[1])
+    assert np.allclose(datas[0][..., 0], g.density.transpose(2, 1, 0))
+
+
+@pytest.mark.skipif(not os.path.isdir(GO_DRAAW), reason=f"GO-Draaw data not found at {GO_DRAAW}")
+def test_mesh_source_voxelises_go_draaw_monkey(tmp_path):
+    desc = base_desc(mode="solid", file=os.path.join(GO_DRAAW, "monkey.obj"), resolution=24, color=[0.7, 0.5, 0.2])
+    del desc["volumes"][0]["density"], desc["volumes"][0]["bounds"]
+    s = draaw_mi.load_scene(desc)
+    v = s.summary()["volumes"][0]
+    assert v["mode"] == "solid" and v["voxels"] > 500 and v["faces"] > v["voxels"]
