@@ -1,0 +1,26 @@
+"""Every scene of the speed suite (``draaw_mi.speed_suite``): ``draaw_v4`` with its default
+variance reduction (roulette threshold, adaptive sampling at >= 32 spp) keeps ``path``'s
+expectation, per pixel (z-scores of the seed-stack means, as in
+test_integrators_expectation.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from integrators_helpers import check_same_expectation, integrator, mi, seed_stack
+
+from draaw_mi import speed_suite as ss
+
+
+@pytest.mark.parametrize("name", list(ss.SCENES))
+def test_v4_same_expectation_as_path(name):
+    d = ss.build(name, 10)
+    if d is None:
+        pytest.skip("GO-Draaw data absent (../shared/data/go-draaw)")
+    scene = mi.load_dict(d)
+    depth = ss.max_depth(name)
+    K, spp = 10, 256
+    ref = seed_stack(scene, integrator("path", max_depth=depth), spp, range(K))
+    st = seed_stack(scene, integrator("draaw_v4", max_depth=depth), spp, range(300, 300 + K))
+    assert np.isfinite(st).all()
+    check_same_expectation(ref, st)
