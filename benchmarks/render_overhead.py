@@ -2,10 +2,10 @@
 
 For each version, renders the Cornell box (``scenes/cornell.toml``) at ``--res``² and
 ``--spp`` spp ``--repeats`` times with new seeds (after warm-up calls), with
-``draaw_mi.render.FREEZE`` on and off, interleaved. Per call: wall time (``draaw_mi.render``
-returns an evaluated image) and the summed execution time of the kernels it launched
-(``dr.kernel_history``); the difference is time spent outside kernels (Python tracing, kernel
-look-up, launches, copies). Reports medians.
+`frozen (``draaw_mi.render``'s ``frozen_render``) and traced (``mi.render``) calls, interleaved.
+Per call: the time until the call returns (host: Python tracing or frozen replay), the wall
+time to the evaluated image, and the summed execution time of the kernels it launched
+(``dr.kernel_history``). Reports medians.
 
 Usage::
 
@@ -30,16 +30,23 @@ R = importlib.import_module("draaw_mi.render")    # the module (draaw_mi.render 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def one(scene, version, spp, seed):
+def one(scene, version, spp, seed, frozen):
+    """(wall, host, kernels) seconds of one render: ``host`` = until the call returns (Python
+    tracing or frozen replay; kernels run asynchronously), ``kernels`` = summed execution."""
+    integ = R.make_integrator(version, scene.settings["max_depth"])
     dr.kernel_history_clear()
     t = time.perf_counter()
-    img = draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[])
+    if frozen:
+        img = R.frozen_render(integ, spp)(scene.mi_scene, dr.opaque(mi.UInt32, seed))
+    else:
+        img = mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed)
+    host = time.perf_counter() - t
     dr.eval(img)
     dr.sync_thread()
     wall = time.perf_counter() - t
     kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
                if k["type"] == dr.KernelType.JIT) / 1000.0
-    return wall, kern
+    return wall, host, kern
 
 
 def main(argv=None) -> int:
@@ -57,32 +64,35 @@ def main(argv=None) -> int:
     data = {(v, f): [] for v in versions for f in (True, False)}
     for v in versions:
         for f in (True, False):
-            R.FREEZE = f
             for s in range(3):
-                one(scene, v, args.spp, 1000 + s)          # compile / record
+                one(scene, v, args.spp, 1000 + s, f)       # compile / record
     for i in range(args.repeats):
         for v in versions:
             for f in (True, False):
-                R.FREEZE = f
-                data[(v, f)].append(one(scene, v, args.spp, 7 + i))
-    R.FREEZE = True
+                data[(v, f)].append(one(scene, v, args.spp, 7 + i, f))
     out = ["# Time outside kernels, small repeated renders (benchmarks/render_overhead.py)", "",
            f"Command: `.venv/bin/python benchmarks/render_overhead.py {' '.join(sys.argv[1:])}`  ",
            f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other jobs), Dr.Jit "
            f"threads {dr.thread_count()}; {time.strftime('%Y-%m-%d %H:%M')}  ",
            f"`draaw_mi.render(scenes/cornell.toml, {args.res}x{args.res}, spp={args.spp}, new seed "
-           f"each call)`, medians of {args.repeats} interleaved calls after warm-up. *outside* = "
-           "wall - summed kernel execution time (`dr.kernel_history`).", "",
-           "| version | frozen: wall ms | kernels ms | outside | traced: wall ms | kernels ms | outside |",
-           "|---|---|---|---|---|---|---|"]
+           f"each call)`: the integrator render call as `draaw_mi.render` makes it for such small "
+           f"renders (frozen: `frozen_render`, seed `dr.opaque`; traced: `mi.render`), medians of "
+           f"{args.repeats} interleaved calls after warm-up. *host* = time until the call returns "
+           "(Python tracing, or the frozen replay's dispatch; kernels run asynchronously), "
+           "*outside* = wall - summed kernel execution time (`dr.kernel_history`; includes "
+           "thread wake-ups and, on a shared machine, waiting for a core).", "",
+           "| version | frozen: wall ms | host ms | host / wall | outside | traced: wall ms | host ms "
+           "| host / wall | outside |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for v in versions:
         cells = []
         for f in (True, False):
-            walls = [w for w, _ in data[(v, f)]]
-            kerns = [k for _, k in data[(v, f)]]
-            frac = statistics.median((w - k) / w for w, k in data[(v, f)])
-            cells.append(f"{1e3 * statistics.median(walls):.1f} | {1e3 * statistics.median(kerns):.1f} | "
-                         f"{100 * frac:.1f} %")
+            d = data[(v, f)]
+            wall = statistics.median(w for w, _, _ in d)
+            host = statistics.median(h for _, h, _ in d)
+            frac_h = statistics.median(h / w for w, h, _ in d)
+            frac_o = statistics.median((w - k) / w for w, _, k in d)
+            cells.append(f"{1e3 * wall:.1f} | {1e3 * host:.1f} | {100 * frac_h:.1f} % | {100 * frac_o:.1f} %")
         out.append(f"| {v} | " + " | ".join(cells) + " |")
     text = "\n".join(out) + "\n"
     print(text)

@@ -64,7 +64,11 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
     with dr.suspend_grad():
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, total)
-        pixel = mi.UInt32(np.repeat(np.arange(w * h, dtype=np.uint32), counts))
+        # pixel index of every sample, built on the device: mark where each pixel's run of
+        # samples starts, then an inclusive prefix sum
+        marks = dr.zeros(mi.UInt32, total)
+        dr.scatter(marks, mi.UInt32(1), mi.UInt32(np.cumsum(counts)[:-1].astype(np.uint32)))
+        pixel = dr.cumsum(marks)
         y = pixel // w
         x = pixel - y * w
         pos = mi.Vector2f(mi.Float(x), mi.Float(y)) + sampler.next_2d()
@@ -75,13 +79,20 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         ray, weight = sensor.sample_ray_differential(
             time=time, sample1=0.0, sample2=pos * mi.ScalarVector2f(1.0 / w, 1.0 / h),
             sample3=aperture)
-        L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
-                                           ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
-                                           state_in=None, active=mi.Bool(True))
+        reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
+        if reports_depth:
+            integrator.want_depth = True
+        try:
+            L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
+                                               ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
+                                               state_in=None, active=mi.Bool(True))
+            depth = integrator.last_depth if reports_depth else None   # segments per path
+        finally:
+            if reports_depth:
+                integrator.want_depth, integrator.last_depth = False, None
         value = L * weight
         chans = [value.x, value.y, value.z]
         if moments:
-            depth = getattr(integrator, "last_depth", None)     # segments per path (draaw_v4)
             chans += [dr.select(valid, 1.0, 0.0),
                       mi.Float(depth) if depth is not None else 1.0 + 0.0 * value.x]
         dr.eval(chans)

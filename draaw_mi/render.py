@@ -131,7 +131,10 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
             else:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
-            acc = img * count if acc is None else acc + img * count
+            if n_passes == 1:
+                acc = img            # one pass: no extra scaling kernels (small renders)
+            else:
+                acc = img * count if acc is None else acc + img * count
             done += count
             if n_passes > 1:
                 dr.eval(acc)
@@ -141,7 +144,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
-    image = acc / done
+    image = acc if n_passes == 1 else acc / done
     dr.eval(image)
     dr.sync_thread()
     if bar is not None:

@@ -134,6 +134,8 @@ class DraawV4Integrator(DraawIntegrator):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
                                  "'power' or 'uniform'")
         self._selection: dict = {}
+        self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
+        self.last_depth = None
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -284,7 +286,8 @@ class DraawV4Integrator(DraawIntegrator):
             pi = pi_next
             ray = ray_next
 
-        self.last_depth = depth if primal else None   # path lengths: adaptive sampling's cost
+        if dr.hint(primal and self.want_depth, mode="scalar"):
+            self.last_depth = depth        # path lengths, for adaptive sampling's cost model
         return (L if primal else δL), valid, aovs, L
 
 
