@@ -2,7 +2,7 @@
 
 * :func:`render_spp_map` renders one wavefront in which pixel ``i`` gets ``spp_map[i]``
   samples (any counts >= 1; the wavefront is ``sum(spp_map)`` samples long, each sample
-  knows its pixel) and returns the per-pixel mean and, optionally, the per-pixel sample
+  finds its pixel) and returns the per-pixel mean and, optionally, the per-pixel sample
   variance. It needs a box reconstruction filter (each sample belongs to exactly one pixel).
 * :func:`allocate` turns a per-pixel variance estimate into a map: ``m_i = m_min + extra_i``
   with ``extra_i`` proportional to the (3x3-smoothed) standard deviation, which minimises
@@ -15,8 +15,10 @@
   ``E[main | pilot] = E[pixel]`` and the image is unbiased (a count-weighted mean of both
   passes would not be: the counts would depend on the pilot's values).
 
-Same seed, same image: the pilot and main passes use seeds derived from ``seed``, and the
-rounding generator is seeded from it too.
+Same seed, same image (up to the order of atomic additions into the per-pixel sums): the
+pilot and main passes use seeds derived from ``seed``, and the rounding generator is seeded
+from it too. Memory does not grow with spp: each sample finds its pixel by a binary search
+over the per-pixel start indices inside the kernel and is summed into per-pixel totals.
 
 >>> import numpy as np
 >>> m = allocate(np.array([0.0, 1.0, 4.0, 0.0]).reshape(1, 4), budget=16, m_min=1, seed=0,
@@ -32,6 +34,7 @@ import numpy as np
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 4            # every pixel keeps at least (spp - pilot) / 4 main samples
+COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera ray, set-up, film)
 
 
 def supported(sensor: mi.Sensor) -> bool:
@@ -64,11 +67,12 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
     with dr.suspend_grad():
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, total)
-        # pixel index of every sample, built on the device: mark where each pixel's run of
-        # samples starts, then an inclusive prefix sum
-        marks = dr.zeros(mi.UInt32, total)
-        dr.scatter(marks, mi.UInt32(1), mi.UInt32(np.cumsum(counts)[:-1].astype(np.uint32)))
-        pixel = dr.cumsum(marks)
+        # pixel of every sample, inside the kernel (no per-sample array: memory does not grow
+        # with spp): the last pixel whose first sample index is <= the sample index
+        starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)   # P + 1 entries
+        first = mi.UInt32(starts)
+        idx = dr.arange(mi.UInt32, total)
+        pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, first, i) <= idx) - 1
         y = pixel // w
         x = pixel - y * w
         pos = mi.Vector2f(mi.Float(x), mi.Float(y)) + sampler.next_2d()
@@ -93,15 +97,15 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         value = L * weight
         chans = [value.x, value.y, value.z]
         if moments:
-            chans += [dr.select(valid, 1.0, 0.0),
-                      mi.Float(depth) if depth is not None else 1.0 + 0.0 * value.x]
-        dr.eval(chans)
-    # Samples of a pixel are contiguous: segmented sums in float64 (deterministic, no atomics).
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    per_sample = [np.broadcast_to(np.array(c, dtype=np.float64).ravel(), (total,)) for c in chans]
-    if moments:
-        per_sample += [v * v for v in per_sample[:3]]
-    arr = np.stack([np.add.reduceat(v, starts) for v in per_sample], -1) / counts[:, None]
+            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x,
+                      (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
+                      dr.square(value.x), dr.square(value.y), dr.square(value.z)]
+        # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
+        sums = [dr.zeros(mi.Float, w * h) for _ in chans]
+        for acc, v in zip(sums, chans):
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
+        dr.eval(sums)
+    arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
     mean = arr[:, :3].reshape(h, w, 3)
     if not moments:
         return mean
@@ -150,7 +154,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
     # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation ray
     # per segment (smoothed like the variance: both are estimated from few samples).
-    cost = _box3(1.0 + 2.0 * segments)
+    cost = _box3(COST_FIXED + 2.0 * segments)
     # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
     counts = allocate(var.sum(-1), rest * cost.sum(), max(1, rest // MIN_FRACTION), s2, cost=cost)
     main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995)

@@ -75,7 +75,8 @@ def test_v4_uses_adaptive_sampling_from_32_spp(monkeypatch):
     assert calls == [64]
     a = np.array(mi.render(scene, integrator=integ, spp=64, seed=4))
     b = np.array(mi.render(scene, integrator=integ, spp=64, seed=4))
-    assert np.array_equal(a, b)                            # same seed, same image
+    assert np.allclose(a, b, rtol=1e-5, atol=1e-7)         # same seed, same image (up to
+    #                                                        the order of atomic adds)
 
 
 def test_adaptive_lowers_the_error_where_noise_is_uneven():

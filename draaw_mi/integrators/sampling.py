@@ -51,6 +51,18 @@ def roulette(beta: mi.Spectrum, eta: mi.Float, depth: mi.UInt32, rr_depth: int,
     return beta, active & (~rr_active | (u < q))
 
 
+def only_constant_environment(scene: mi.Scene) -> bool:
+    """Whether every emitter of ``scene`` is a constant environment (``constant``).
+
+    There, next-event estimation only adds cost: its uniform sphere samples waste half their
+    shadow rays below the horizon, while the BSDF's own sampling (cosine, GGX) already follows
+    the integrand up to visibility; ``draaw_v4`` then samples the BSDF alone (MIS weight 1).
+    """
+    emitters = scene.emitters()
+    return len(emitters) > 0 and all(str(e).startswith("ConstantBackgroundEmitter")
+                                     for e in emitters)
+
+
 # ---------------------------------------------------------------------------------------
 #  Emitter selection by power (scenes with several emitters of different strength)
 # ---------------------------------------------------------------------------------------

@@ -6,7 +6,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from .common import DraawIntegrator, mis_weight, relative, sample_emitter
-from .sampling import PowerSelection, roulette
+from .sampling import PowerSelection, only_constant_environment, roulette
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
 ADAPTIVE_MIN_SPP = 32   # below, the pilot pass would be too small to estimate variances
@@ -46,6 +46,13 @@ class DraawV4Integrator(DraawIntegrator):
        - ``power``: next-event estimation picks an emitter in proportion to its estimated
          power where the scene's emitters differ in strength (uniform otherwise);
          ``uniform``: Mitsuba's uniform choice. (Default: ``power``)
+
+     * - constant_env_nee
+       - |bool|
+       - Sample a constant environment by next-event estimation when it is the only light;
+         by default such scenes use BSDF sampling alone (no shadow rays: cosine / GGX
+         sampling already matches a constant sky better than uniform sphere samples).
+         (Default: |false|)
 
      * - adaptive
        - |bool|
@@ -134,6 +141,7 @@ class DraawV4Integrator(DraawIntegrator):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
                                  "'power' or 'uniform'")
         self._selection: dict = {}
+        self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
 
@@ -174,6 +182,8 @@ class DraawV4Integrator(DraawIntegrator):
         feats = self.features(scene)
         flags = self.ray_flags(feats)
         has_nee = len(scene.emitters()) > 0           # any emitter to sample
+        if self.skip_constant_nee and only_constant_environment(scene):
+            has_nee = False          # BSDF sampling alone is better and cheaper (sampling.py)
         hit_em = feats["hittable_lights"]             # area or environment emitters
         mis_em = hit_em                               # NEE needs MIS only against those
         delta_em = feats["delta_lights"]
@@ -215,11 +225,14 @@ class DraawV4Integrator(DraawIntegrator):
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     em_active &= depth > 0
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-                if dr.hint(sel is not None, mode="scalar"):
+                if dr.hint(not has_nee, mode="scalar"):
+                    w_bsdf = mi.Float(1.0)                # BSDF sampling is the only strategy
+                elif dr.hint(sel is not None, mode="scalar"):
                     em_pdf = sel.pdf_direction(prev_si, ds, em_active & ~prev_delta)
+                    w_bsdf = mis_weight(prev_pdf, em_pdf)
                 else:
                     em_pdf = scene.pdf_emitter_direction(prev_si, ds, em_active & ~prev_delta)
-                w_bsdf = mis_weight(prev_pdf, em_pdf)
+                    w_bsdf = mis_weight(prev_pdf, em_pdf)
                 with dr.resume_grad(when=not primal):
                     Le = β * w_bsdf * ds.emitter.eval(si, em_active)
 
