@@ -59,8 +59,11 @@ def only_constant_environment(scene: mi.Scene) -> bool:
     the integrand up to visibility; ``draaw_v4`` then samples the BSDF alone (MIS weight 1).
     """
     emitters = scene.emitters()
-    return len(emitters) > 0 and all(str(e).startswith("ConstantBackgroundEmitter")
-                                     for e in emitters)
+    # infinite and not spatially varying: Mitsuba's ``constant`` (flags only: no JIT values
+    # are read, so this also works while dr.freeze records a render)
+    return len(emitters) > 0 and all(
+        mi.has_flag(e.flags(), mi.EmitterFlags.Infinite)
+        and not mi.has_flag(e.flags(), mi.EmitterFlags.SpatiallyVarying) for e in emitters)
 
 
 # ---------------------------------------------------------------------------------------

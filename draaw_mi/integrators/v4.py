@@ -152,6 +152,10 @@ class DraawV4Integrator(DraawIntegrator):
         """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform."""
         if self.light_selection != "power":
             return None
+        if dr.flag(dr.JitFlag.FreezingScope):
+            # recording dr.freeze (small renders): the power table would be state hidden from
+            # the recording, and emitter values cannot be read there; uniform is unbiased too
+            return None
         key = id(scene)
         if key not in self._selection:
             self._selection[key] = PowerSelection.of(scene)
