@@ -56,7 +56,7 @@ def test_spp_map_counts_set_the_variance():
     assert np.mean(np.abs(z) > 3) < 0.03 and abs(z.mean()) < 0.3
 
 
-def test_v4_uses_adaptive_sampling_from_32_spp(monkeypatch):
+def test_v4_uses_adaptive_sampling_from_64_spp(monkeypatch):
     calls = []
     real = ads.render_adaptive
 

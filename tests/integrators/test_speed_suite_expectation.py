@@ -1,5 +1,5 @@
 """Every scene of the speed suite (``draaw_mi.speed_suite``): ``draaw_v4`` with its default
-variance reduction (roulette threshold, adaptive sampling at >= 32 spp) keeps ``path``'s
+variance reduction (roulette threshold, adaptive sampling at >= 64 spp) keeps ``path``'s
 expectation, per pixel (z-scores of the seed-stack means, as in
 test_integrators_expectation.py; 10x10 pixels, 12 seeds x 512 spp per integrator)."""
 from __future__ import annotations
