@@ -143,7 +143,7 @@ class DraawV4Integrator(DraawIntegrator):
         if self.light_selection not in ("power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
                                  "'power' or 'uniform'")
-        self._selection: dict = {}
+        self._selection = None         # (scene, PowerSelection | None) of the last scene
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
@@ -159,10 +159,13 @@ class DraawV4Integrator(DraawIntegrator):
             # recording dr.freeze (small renders): the power table would be state hidden from
             # the recording, and emitter values cannot be read there; uniform is unbiased too
             return None
-        key = id(scene)
-        if key not in self._selection:
-            self._selection[key] = PowerSelection.of(scene)
-        return self._selection[key]
+        # Cache for the last scene only, holding it: an id() key could be reused by a new scene
+        # once the old one is freed (Mitsuba scenes take no weak references).
+        if self._selection is not None and self._selection[0] is scene:
+            return self._selection[1]
+        sel = PowerSelection.of(scene)
+        self._selection = (scene, sel)
+        return sel
 
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
