@@ -132,8 +132,14 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     acc, done, t0 = None, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
-            img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
-            acc = img * count if acc is None else acc + img * count
+            if params is None and freeze_eligible(scene.mi_scene, count):
+                img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
+            else:
+                img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
+            if n_passes == 1:
+                acc = img            # one pass: no extra scaling kernels (small renders)
+            else:
+                acc = img * count if acc is None else acc + img * count
             done += count
             if n_passes > 1:
                 dr.eval(acc)
@@ -143,7 +149,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
-    image = acc / done
+    image = acc if n_passes == 1 else acc / done
     dr.eval(image)
     dr.sync_thread()
     if bar is not None:
@@ -159,6 +165,37 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                        "channels": names, "version": version, "integrator": resolve_version(version),
                        "denoised": bool(denoise)}
     return image
+
+
+# ------------------------------------------------------------------ frozen small renders
+# Small renders (the Jupyter preview, the fit loop) would otherwise spend much of their time
+# re-tracing the Python integrator: ``dr.freeze`` records the kernels of the first call and
+# replays them; the seed is an opaque ``mi.UInt32`` so that a new seed is new data, not a new
+# kernel (benchmarks/render_overhead.py measures it).
+FREEZE_MAX_PIXELS = 128 * 128
+FREEZE_MAX_SPP = 16
+FREEZE = True                      # set False to trace every render (debugging)
+_FROZEN: dict = {}
+
+
+def freeze_eligible(mi_scene, spp: int) -> bool:
+    """Whether a primal render of ``spp`` samples of ``mi_scene`` goes through :func:`frozen_render`."""
+    if not FREEZE or spp > FREEZE_MAX_SPP:
+        return False
+    w, h = mi_scene.sensors()[0].film().size()
+    return int(w) * int(h) <= FREEZE_MAX_PIXELS
+
+
+def frozen_render(integrator, spp: int):
+    """``f(mi_scene, seed: mi.UInt32) -> image``: ``mi.render`` recorded with ``dr.freeze``
+    (one recording per integrator and spp; Dr.Jit re-records when the inputs' layout changes)."""
+    key = (id(integrator), int(spp))
+    fn = _FROZEN.get(key)
+    if fn is None:
+        def render_once(mi_scene, seed):
+            return mi.render(mi_scene, integrator=integrator, seed=seed, spp=spp)
+        fn = _FROZEN[key] = dr.freeze(render_once)
+    return fn
 
 
 def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, post, return_info):

@@ -6,6 +6,10 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from .common import DraawIntegrator, mis_weight, relative, sample_emitter
+from .sampling import PowerSelection, only_constant_environment, roulette
+
+RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
+ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
 
 
 class DraawV4Integrator(DraawIntegrator):
@@ -24,13 +28,38 @@ class DraawV4Integrator(DraawIntegrator):
 
      * - rr_depth
        - |int|
-       - Path depth (number of segments) from which *Russian roulette* may stop paths; lower
-         than ``prb``'s 5 because that is what gives the best time to a given error on the
-         reference scenes (``benchmarks/results/integrators_speed.md``). (Default: 2)
+       - Path depth (number of segments) from which *Russian roulette* may stop paths: never
+         on the first bounce. (Default: 2)
+
+     * - rr_threshold
+       - |float|
+       - Roulette only stops paths whose throughput ``max(beta) * eta^2`` is below this; they
+         survive with probability ``throughput / rr_threshold`` (see
+         :mod:`~draaw_mi.integrators.sampling`). (Default: 0.25)
 
      * - rr_min
        - |float|
        - Smallest survival probability of Russian roulette, in (0, 1]. (Default: 0.05)
+
+     * - light_selection
+       - |string|
+       - ``power``: next-event estimation picks an emitter in proportion to its estimated
+         power where the scene's emitters differ in strength (uniform otherwise);
+         ``uniform``: Mitsuba's uniform choice. (Default: ``power``)
+
+     * - constant_env_nee
+       - |bool|
+       - Sample a constant environment by next-event estimation when it is the only light;
+         by default such scenes use BSDF sampling alone (no shadow rays: cosine / GGX
+         sampling already matches a constant sky better than uniform sphere samples).
+         (Default: |false|)
+
+     * - adaptive
+       - |bool|
+       - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
+         AOVs, ``max_depth`` > 1): a pilot pass of spp/16 estimates each pixel's variance
+         and path length, the rest of the budget goes where it lowers the error most per unit
+         of cost (:mod:`draaw_mi.adaptive_sampling`). (Default: |true|)
 
      * - hide_emitters
        - |bool|
@@ -50,14 +79,30 @@ class DraawV4Integrator(DraawIntegrator):
 
     - emitter sampling and BSDF sampling combined by multiple importance sampling (power
       heuristic);
-    - Russian roulette from ``rr_depth`` on, with survival probability
-      ``clip(max(beta) * eta^2, rr_min, 0.95)``;
+    - Russian roulette from ``rr_depth`` on that stops only weak paths (throughput below
+      ``rr_threshold``), so bright paths in open scenes and metals are never cut;
+    - emitter selection by power in many-light scenes;
+    - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased);
     - a kernel specialised to the scene: each feature of
       :func:`~draaw_mi.integrators.features.detect_features` (area / delta / environment
       emitters, delta BSDFs, textures and normal maps, AOVs) is a Python-level branch, so an
       absent feature adds no code to the JIT kernel (for example, a scene lit only by point
       lights has no MIS and no emitter lookups at surface hits, a scene without textures
       computes no uv / dp/du).
+
+    What is on by default and why (``benchmarks/results/speed_suite.md``, ten scenes of
+    different kinds, time to reach ``path``'s 64-spp error): the roulette threshold because
+    ``path``-style roulette from depth 2 cost up to 1.7x the time in environment-lit scenes
+    (stopping bright paths adds variance) while never roulette costs speed in enclosed
+    scenes; power selection because it cut the error of the 24-light scene about 8x at the
+    same cost and is switched off (uniform, the same kernel as before) where the emitters
+    have similar powers; adaptive sampling because the error of most images is dominated by
+    few pixels (emitter edges, highlights, caustics), and it is off for small renders (< 64
+    spp: the preview and the fit loop, where a pilot pass would be too small) and for
+    differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
+    the *absolute* squared error; dark pixels get fewer samples, so a relative error measure
+    (relMSE) can rise (``adaptive=False`` turns it off). Known loss: the glass (thesis) scene
+    at 256², where V4 measured 1.5x (no adaptive) to 3.5x ``path``'s MSE.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with
     respect to BSDF and emitter parameters. Limitations: no geometry / visibility gradients
@@ -90,9 +135,54 @@ class DraawV4Integrator(DraawIntegrator):
         self.rr_min = float(props.get("rr_min", 0.05))
         if not (0.0 < self.rr_min <= 1.0):
             raise ParameterError(f"draaw_v4: rr_min={self.rr_min}; expected a value in (0, 1]")
+        self.rr_threshold = float(props.get("rr_threshold", RR_THRESHOLD))
+        if not (self.rr_threshold > 0.0):
+            raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
+        self.adaptive = bool(props.get("adaptive", True))
+        self.light_selection = str(props.get("light_selection", "power"))
+        if self.light_selection not in ("power", "uniform"):
+            raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
+                                 "'power' or 'uniform'")
+        self._selection = None         # (scene, PowerSelection | None) of the last scene
+        self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
+        self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
+        self.last_depth = None
 
     def _extra_repr(self) -> str:
-        return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}"
+        return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
+
+    def emitter_selection(self, scene):
+        """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform."""
+        if self.light_selection != "power":
+            return None
+        if dr.flag(dr.JitFlag.FreezingScope):
+            # recording dr.freeze (small renders): the power table would be state hidden from
+            # the recording, and emitter values cannot be read there; uniform is unbiased too
+            return None
+        # Cache for the last scene only, holding it: an id() key could be reused by a new scene
+        # once the old one is freed (Mitsuba scenes take no weak references).
+        if self._selection is not None and self._selection[0] is scene:
+            return self._selection[1]
+        sel = PowerSelection.of(scene)
+        self._selection = (scene, sel)
+        return sel
+
+    # ------------------------------------------------- adaptive sampling (primal renders)
+    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+        """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (box filter, no
+        AOVs, a plain seed) the unbiased two-pass adaptive render of
+        :mod:`draaw_mi.adaptive_sampling`, otherwise ``RBIntegrator.render``."""
+        from .. import adaptive_sampling as ads
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
+        if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
+                and self.max_depth > 1
+                and isinstance(seed, int) and ads.supported(sensor)):
+            alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
+            return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
+        return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     @dr.syntax
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
@@ -108,11 +198,14 @@ class DraawV4Integrator(DraawIntegrator):
         # ---- end media
         flags = self.ray_flags(feats)
         has_nee = len(scene.emitters()) > 0           # any emitter to sample
+        if self.skip_constant_nee and only_constant_environment(scene):
+            has_nee = False          # BSDF sampling alone is better and cheaper (sampling.py)
         hit_em = feats["hittable_lights"]             # area or environment emitters
         mis_em = hit_em                               # NEE needs MIS only against those
         delta_em = feats["delta_lights"]
         delta_bsdf = feats["delta_bsdfs"]
         ctx = mi.BSDFContext()
+        sel = self.emitter_selection(scene) if has_nee else None
 
         # --------------------- Configure loop state ----------------------
         ray = mi.Ray3f(dr.detach(ray))                # Current ray
@@ -125,7 +218,7 @@ class DraawV4Integrator(DraawIntegrator):
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
 
         # Previous vertex (for MIS of emitters hit by BSDF sampling)
-        prev_si = dr.zeros(mi.SurfaceInteraction3f)
+        prev_si = dr.zeros(mi.Interaction3f)          # p, n only: a smaller loop state
         prev_pdf = mi.Float(1.0)
         prev_delta = mi.Bool(True)
 
@@ -155,8 +248,14 @@ class DraawV4Integrator(DraawIntegrator):
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     em_active &= depth > 0
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-                em_pdf = scene.pdf_emitter_direction(prev_si, ds, em_active & ~prev_delta)
-                w_bsdf = mis_weight(prev_pdf, em_pdf)
+                if dr.hint(not has_nee, mode="scalar"):
+                    w_bsdf = mi.Float(1.0)                # BSDF sampling is the only strategy
+                elif dr.hint(sel is not None, mode="scalar"):
+                    em_pdf = sel.pdf_direction(prev_si, ds, em_active & ~prev_delta)
+                    w_bsdf = mis_weight(prev_pdf, em_pdf)
+                else:
+                    em_pdf = scene.pdf_emitter_direction(prev_si, ds, em_active & ~prev_delta)
+                    w_bsdf = mis_weight(prev_pdf, em_pdf)
                 with dr.resume_grad(when=not primal):
                     Le = β * w_bsdf * ds.emitter.eval(si, em_active)
 
@@ -172,8 +271,12 @@ class DraawV4Integrator(DraawIntegrator):
                     si_em = si
                     if dr.hint(sdf is not None and not primal, mode="scalar"):
                         si_em = sdf.reattach(ray, si, active_em)   # SDF shape derivatives
-                    ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
-                                                          active_em, primal, sdf)
+                    if dr.hint(sel is not None, mode="scalar"):
+                        ds, em_w, active_em = sel.sample(scene, si_em, sampler.next_2d(),
+                                                         active_em, primal, sdf)
+                    else:
+                        ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
+                                                              active_em, primal, sdf)
                     wo = si_em.to_local(ds.d)
                     if dr.hint(mis_em, mode="scalar"):
                         f_em, pdf_em = bsdf.eval_pdf(ctx, si_em, wo, active_em)
@@ -196,16 +299,12 @@ class DraawV4Integrator(DraawIntegrator):
             else:
                 prev_delta = mi.Bool(False)
             if dr.hint(hit_em, mode="scalar"):
-                prev_si = dr.detach(si, True)
+                prev_si = mi.Interaction3f(dr.detach(si, True))
                 prev_pdf = bs.pdf
 
             # -------------------- Stopping criterion ---------------------
-            β_max = dr.max(β)
-            active_next &= β_max != 0
-            rr_active = depth + 1 >= self.rr_depth       # the path has >= rr_depth segments
-            rr_prob = dr.clip(β_max * dr.square(η), self.rr_min, 0.95)
-            β[rr_active] *= dr.rcp(rr_prob)
-            active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
+            β, active_next = roulette(β, η, depth, self.rr_depth, self.rr_threshold, self.rr_min,
+                                      sampler.next_1d(), active_next)
 
             pi_next = scene.ray_intersect_preliminary(ray_next, coherent=False,
                                                       active=active_next)
@@ -226,6 +325,8 @@ class DraawV4Integrator(DraawIntegrator):
             pi = pi_next
             ray = ray_next
 
+        if dr.hint(primal and self.want_depth, mode="scalar"):
+            self.last_depth = depth        # path lengths, for adaptive sampling's cost model
         return (L if primal else δL), valid, aovs, L
 
 

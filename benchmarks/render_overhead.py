@@ -1,0 +1,107 @@
+"""Time outside kernels for small repeated renders (``draaw_mi.render``, frozen vs traced).
+
+For each version, renders the Cornell box (``scenes/cornell.toml``) at ``--res``² and
+``--spp`` spp ``--repeats`` times with new seeds (after warm-up calls), with
+`frozen (``draaw_mi.render``'s ``frozen_render``) and traced (``mi.render``) calls, interleaved.
+Per call: the time until the call returns (host: Python tracing or frozen replay), the wall
+time to the evaluated image, and the summed execution time of the kernels it launched
+(``dr.kernel_history``). Reports medians.
+
+Usage::
+
+    .venv/bin/python benchmarks/render_overhead.py            # 64x64, 4 spp, V1..V4 and path
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+
+import draaw_mi
+import drjit as dr
+import mitsuba as mi
+
+import importlib
+R = importlib.import_module("draaw_mi.render")    # the module (draaw_mi.render is the function)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def one(scene, version, spp, seed, frozen):
+    """(wall, host, kernels) seconds of one render: ``host`` = until the call returns (Python
+    tracing or frozen replay; kernels run asynchronously), ``kernels`` = summed execution."""
+    integ = R.make_integrator(version, scene.settings["max_depth"])
+    dr.kernel_history_clear()
+    t = time.perf_counter()
+    if frozen:
+        img = R.frozen_render(integ, spp)(scene.mi_scene, dr.opaque(mi.UInt32, seed))
+    else:
+        img = mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed)
+    host = time.perf_counter() - t
+    dr.eval(img)
+    dr.sync_thread()
+    wall = time.perf_counter() - t
+    kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
+               if k["type"] == dr.KernelType.JIT) / 1000.0
+    return wall, host, kern
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--res", type=int, default=64)
+    ap.add_argument("--spp", type=int, default=4)
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--versions", default="v1,v2,v3,v4,path")
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_overhead.md"))
+    args = ap.parse_args(argv)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    scene = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "cornell.toml"),
+                                resolution=(args.res, args.res))
+    versions = args.versions.split(",")
+    data = {(v, f): [] for v in versions for f in (True, False)}
+    for v in versions:
+        for f in (True, False):
+            for s in range(3):
+                one(scene, v, args.spp, 1000 + s, f)       # compile / record
+    for i in range(args.repeats):
+        for v in versions:
+            for f in (True, False):
+                data[(v, f)].append(one(scene, v, args.spp, 7 + i, f))
+    out = ["# Time outside kernels, small repeated renders (benchmarks/render_overhead.py)", "",
+           f"Command: `.venv/bin/python benchmarks/render_overhead.py {' '.join(sys.argv[1:])}`  ",
+           f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other jobs), Dr.Jit "
+           f"threads {dr.thread_count()}; {time.strftime('%Y-%m-%d %H:%M')}  ",
+           f"`draaw_mi.render(scenes/cornell.toml, {args.res}x{args.res}, spp={args.spp}, new seed "
+           f"each call)`: the integrator render call as `draaw_mi.render` makes it for such small "
+           f"renders (frozen: `frozen_render`, seed `dr.opaque`; traced: `mi.render`), medians of "
+           f"{args.repeats} interleaved calls after warm-up. *host* = time until the call returns "
+           "(Python tracing, or the frozen replay's dispatch; kernels run asynchronously), "
+           "*outside* = wall - summed kernel execution time (`dr.kernel_history`; includes "
+           "thread wake-ups and, on a shared machine, waiting for a core).", "",
+           "| version | frozen: wall ms | host ms | host / wall | outside | traced: wall ms | host ms "
+           "| host / wall | outside |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for v in versions:
+        cells = []
+        for f in (True, False):
+            d = data[(v, f)]
+            wall = statistics.median(w for w, _, _ in d)
+            host = statistics.median(h for _, h, _ in d)
+            frac_h = statistics.median(h / w for w, h, _ in d)
+            frac_o = statistics.median((w - k) / w for w, _, k in d)
+            cells.append(f"{1e3 * wall:.1f} | {1e3 * host:.1f} | {100 * frac_h:.1f} % | {100 * frac_o:.1f} %")
+        out.append(f"| {v} | " + " | ".join(cells) + " |")
+    text = "\n".join(out) + "\n"
+    print(text)
+    if args.out:
+        from draaw_mi.io import atomic_path
+        with atomic_path(args.out, ".md") as tmp, open(tmp, "w") as fh:
+            fh.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

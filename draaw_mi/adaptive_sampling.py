@@ -1,0 +1,165 @@
+"""Unbiased adaptive sampling: a per-pixel sample-count map, and a two-pass render that sets it.
+
+* :func:`render_spp_map` renders one wavefront in which pixel ``i`` gets ``spp_map[i]``
+  samples (any counts >= 1; the wavefront is ``sum(spp_map)`` samples long, each sample
+  finds its pixel) and returns the per-pixel mean and, optionally, the per-pixel sample
+  variance. It needs a box reconstruction filter (each sample belongs to exactly one pixel).
+* :func:`allocate` turns a per-pixel variance estimate into a map: ``m_i = m_min + extra_i``
+  with ``extra_i`` proportional to the (3x3-smoothed) standard deviation, which minimises
+  ``sum_i sigma_i^2 / m_i`` for a fixed total (as Cycles' adaptive sampling aims for); counts
+  are rounded stochastically with a seeded generator, so the total is the budget on average.
+* :func:`render_adaptive` (``draaw_v4``'s primal render for ``spp >= min_spp``): a *pilot*
+  pass of ``a = spp / 16`` samples per pixel estimates the variance, a *main* pass spends the
+  rest of the budget with the map, and the image is ``(a / spp) * pilot + (1 - a / spp) *
+  main``. The weights are constants and the main pass's counts depend only on the pilot, so
+  ``E[main | pilot] = E[pixel]`` and the image is unbiased (a count-weighted mean of both
+  passes would not be: the counts would depend on the pilot's values).
+
+Same seed, same image (up to the order of atomic additions into the per-pixel sums): the
+pilot and main passes use seeds derived from ``seed``, and the rounding generator is seeded
+from it too. Memory does not grow with spp: each sample finds its pixel by a binary search
+over the per-pixel start indices inside the kernel and is summed into per-pixel totals.
+
+>>> import numpy as np
+>>> m = allocate(np.array([0.0, 1.0, 4.0, 0.0]).reshape(1, 4), budget=16, m_min=1, seed=0,
+...              smooth=False)
+>>> int(m.min()) >= 1, abs(int(m.sum()) - 16) <= 2
+(True, True)
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
+MIN_FRACTION = 4            # every pixel keeps at least (spp - pilot) / 4 main samples
+COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera ray, set-up, film)
+
+
+def supported(sensor: mi.Sensor) -> bool:
+    """Whether :func:`render_spp_map` can render for this sensor: an ``hdrfilm``-like film
+    (not spectral-special), a box filter, no crop window and no border."""
+    film = sensor.film()
+    if mi.has_flag(film.flags(), mi.FilmFlags.Special):
+        return False
+    if not film.rfilter().is_box_filter() or film.sample_border():
+        return False
+    return tuple(film.crop_size()) == tuple(film.size()) and tuple(film.crop_offset()) == (0, 0)
+
+
+def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,
+                   seed: int, moments: bool = False):
+    """Mean (H, W, 3) and, with ``moments``, per-pixel sample variance (H, W, 3), alpha
+    (H, W) and mean path length in segments (H, W; 1 where the integrator does not report
+    ``last_depth``) of ``integrator.sample`` with ``spp_map[y, x]`` samples at pixel (x, y).
+
+    ``spp_map``: (H, W) integers >= 1. Primal only (no gradients).
+    """
+    film = sensor.film()
+    w, h = (int(v) for v in film.size())
+    counts = np.asarray(spp_map, dtype=np.int64).reshape(-1)
+    if counts.shape[0] != w * h or counts.min() < 1:
+        raise ValueError(f"render_spp_map: spp_map must be ({h}, {w}) counts >= 1")
+    total = int(counts.sum())
+    if total >= 2 ** 32:
+        raise ValueError(f"render_spp_map: {total} samples exceed 2^32; render in passes")
+    with dr.suspend_grad():
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, total)
+        # pixel of every sample, inside the kernel (no per-sample array: memory does not grow
+        # with spp): the last pixel whose first sample index is <= the sample index
+        starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)   # P + 1 entries
+        first = mi.UInt32(starts)
+        idx = dr.arange(mi.UInt32, total)
+        pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, first, i) <= idx) - 1
+        y = pixel // w
+        x = pixel - y * w
+        pos = mi.Vector2f(mi.Float(x), mi.Float(y)) + sampler.next_2d()
+        aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Vector2f(0.0)
+        time = sensor.shutter_open()
+        if sensor.shutter_open_time() > 0:
+            time += sampler.next_1d() * sensor.shutter_open_time()
+        ray, weight = sensor.sample_ray_differential(
+            time=time, sample1=0.0, sample2=pos * mi.ScalarVector2f(1.0 / w, 1.0 / h),
+            sample3=aperture)
+        reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
+        if reports_depth:
+            integrator.want_depth = True
+        try:
+            L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
+                                               ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
+                                               state_in=None, active=mi.Bool(True))
+            depth = integrator.last_depth if reports_depth else None   # segments per path
+        finally:
+            if reports_depth:
+                integrator.want_depth, integrator.last_depth = False, None
+        value = L * weight
+        chans = [value.x, value.y, value.z]
+        if moments:
+            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x,
+                      (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
+                      dr.square(value.x), dr.square(value.y), dr.square(value.z)]
+        # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
+        sums = [dr.zeros(mi.Float, w * h) for _ in chans]
+        for acc, v in zip(sums, chans):
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
+        dr.eval(sums)
+    arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
+    mean = arr[:, :3].reshape(h, w, 3)
+    if not moments:
+        return mean
+    n = counts[:, None].astype(np.float64)
+    var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
+    return mean, var.reshape(h, w, 3), arr[:, 3].reshape(h, w), arr[:, 4].reshape(h, w)
+
+
+def _box3(a: np.ndarray) -> np.ndarray:
+    p = np.pad(a, 1, mode="edge")
+    return sum(p[i:i + a.shape[0], j:j + a.shape[1]] for i in range(3) for j in range(3)) / 9.0
+
+
+def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
+             smooth: bool = True, cost: np.ndarray | None = None) -> np.ndarray:
+    """Per-pixel counts (H, W) >= ``m_min``.
+
+    Without ``cost``: about ``budget`` samples in all, the part above the minimum proportional
+    to the standard deviation (``variance``: (H, W), per pixel). With ``cost`` (relative cost
+    of one sample per pixel, (H, W) > 0): ``budget`` is a total *cost*, and the part above the
+    minimum is proportional to ``sd / sqrt(cost)`` -- the allocation that minimises
+    ``sum_i variance_i / m_i`` for that total cost.
+    """
+    v = _box3(variance) if smooth else variance
+    sd = np.sqrt(np.maximum(v, 0.0))
+    c = np.ones_like(sd) if cost is None else np.maximum(cost, 1e-6)
+    extra = max(budget - m_min * c.sum(), 0.0)
+    score = sd / np.sqrt(c)
+    total = float((score * c).sum())
+    want = m_min + (extra * score / total if total > 0 else extra / c.sum())
+    rng = np.random.default_rng(seed)
+    base = np.floor(want)
+    return (base + (rng.random(want.shape) < want - base)).astype(np.int64)
+
+
+def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
+                    alpha: bool):
+    """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor."""
+    film = sensor.film()
+    w, h = (int(v) for v in film.size())
+    seed = int(seed)
+    a = max(2, spp // PILOT_FRACTION)
+    rest = spp - a
+    pilot, var, valid, segments = render_spp_map(integrator, scene, sensor, np.full((h, w), a),
+                                                 seed, moments=True)
+    s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
+    # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation ray
+    # per segment (smoothed like the variance: both are estimated from few samples).
+    cost = _box3(COST_FIXED + 2.0 * segments)
+    # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
+    counts = allocate(var.sum(-1), rest * cost.sum(), max(1, rest // MIN_FRACTION), s2, cost=cost)
+    main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995)
+    wp = a / spp
+    img = wp * pilot + (1.0 - wp) * main
+    if alpha:
+        img = np.concatenate([img, valid[..., None]], -1)   # alpha from the pilot (exact 0/1)
+    return mi.TensorXf(img.astype(np.float32))

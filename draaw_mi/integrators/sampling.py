@@ -1,0 +1,159 @@
+"""Variance-reduction helpers of ``draaw_v4`` (sampling decisions, not light transport).
+
+* :func:`roulette` -- Russian roulette that only stops *weak* paths: a path whose throughput
+  (times ``eta^2``) is above ``threshold`` always continues, a weaker one survives with
+  probability ``throughput / threshold`` (at least ``rr_min``) and is re-weighted by its
+  inverse. Mitsuba's ``path`` / ``prb`` instead survive with ``min(throughput, 0.95)``: even a
+  bright path is stopped 5 % of the time at each bounce, which costs variance wherever the
+  remaining bounces carry most of the light (open scenes under a sky, metals).
+
+The survival probability only depends on the path's own sampled values, and survivors are
+divided by it, so the estimator keeps its expectation (the standard Russian-roulette
+argument; ``tests/integrators/test_integrators_expectation.py`` checks it per pixel).
+
+* :class:`PowerSelection` -- next-event estimation picks an emitter in proportion to a power
+  estimate instead of uniformly (Mitsuba's default), for scenes whose emitters differ in
+  strength; the hit-side MIS pdf uses the same probabilities.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+
+def survival_probability(beta_max: mi.Float, eta: mi.Float, threshold: float,
+                         rr_min: float) -> mi.Float:
+    """``clip(beta_max * eta^2 / threshold, rr_min, 1)`` (detached).
+
+    >>> import draaw_mi, mitsuba as mi
+    >>> survival_probability(mi.Float(0.05, 0.5), mi.Float(1.0), 0.25, 0.05)
+    [0.2, 1]
+    """
+    q = dr.detach(beta_max * dr.square(eta)) * (1.0 / threshold)
+    return dr.clip(q, rr_min, 1.0)
+
+
+def roulette(beta: mi.Spectrum, eta: mi.Float, depth: mi.UInt32, rr_depth: int,
+             threshold: float, rr_min: float, u: mi.Float, active: mi.Bool):
+    """Russian roulette after the path has ``rr_depth`` segments (``depth + 1 >= rr_depth``).
+
+    Returns ``(beta, active)``: survivors re-weighted by ``1 / q``, stopped paths inactive.
+    """
+    beta_max = dr.max(beta)
+    active = active & (beta_max != 0)
+    rr_active = depth + 1 >= rr_depth
+    q = survival_probability(beta_max, eta, threshold, rr_min)
+    rr_active &= q < 1.0
+    beta = dr.select(rr_active, beta * dr.rcp(q), beta)
+    return beta, active & (~rr_active | (u < q))
+
+
+def only_constant_environment(scene: mi.Scene) -> bool:
+    """Whether every emitter of ``scene`` is a constant environment (``constant``).
+
+    There, next-event estimation only adds cost: its uniform sphere samples waste half their
+    shadow rays below the horizon, while the BSDF's own sampling (cosine, GGX) already follows
+    the integrand up to visibility; ``draaw_v4`` then samples the BSDF alone (MIS weight 1).
+    """
+    emitters = scene.emitters()
+    # infinite and not spatially varying: Mitsuba's ``constant`` (flags only: no JIT values
+    # are read, so this also works while dr.freeze records a render)
+    return len(emitters) > 0 and all(
+        mi.has_flag(e.flags(), mi.EmitterFlags.Infinite)
+        and not mi.has_flag(e.flags(), mi.EmitterFlags.SpatiallyVarying) for e in emitters)
+
+
+# ---------------------------------------------------------------------------------------
+#  Emitter selection by power (scenes with several emitters of different strength)
+# ---------------------------------------------------------------------------------------
+
+POWER_SPREAD = 1.5      # select by power only when the strongest / weakest estimate exceeds this
+
+
+def _radiance_lum(emitter: mi.Emitter) -> float:
+    """Mean luminance of an emitter's constant radiance / intensity (1 when not constant)."""
+    p = mi.traverse(emitter)
+    for key in ("radiance.value", "intensity.value", "irradiance.value", "scale"):
+        if key in p:
+            v = np.array(p[key], dtype=np.float64).ravel()
+            if v.size == 3:
+                return float(0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2])
+            if v.size >= 1:
+                return float(v.mean())
+    return 1.0
+
+
+def _scalar(x) -> float:
+    return float(np.array(x, dtype=np.float64).ravel()[0])
+
+
+def emitter_power(emitter: mi.Emitter, scene: mi.Scene) -> float:
+    """Rough power estimate (only steers selection; any positive value keeps it unbiased)."""
+    lum = max(_radiance_lum(emitter), 0.0)
+    shape = emitter.get_shape()
+    if shape is not None:
+        return lum * _scalar(shape.surface_area()) * math.pi
+    r = _scalar(dr.norm(scene.bbox().extents())) * 0.5
+    if mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite):
+        return lum * math.pi * r * r * 4.0 * math.pi
+    return lum * 4.0 * math.pi                       # point / spot: intensity over the sphere
+
+
+class PowerSelection:
+    """Emitter selection proportional to :func:`emitter_power`; ``None`` from :meth:`of` when
+    uniform selection (Mitsuba's) is as good: a single emitter or similar powers."""
+
+    def __init__(self, scene: mi.Scene, power: np.ndarray):
+        power = np.maximum(power, 1e-6 * power.max())
+        self.pmf_np = power / power.sum()
+        self.distr = mi.DiscreteDistribution(mi.Float(self.pmf_np))
+        self.emitters = scene.emitters_dr()
+        ids = np.array(dr.reinterpret_array(mi.UInt32, self.emitters), dtype=np.int64)
+        table = np.zeros(ids.max() + 1)
+        table[ids] = self.pmf_np
+        self.pmf_by_id = mi.Float(table)              # registry id -> selection probability
+
+    @staticmethod
+    def of(scene: mi.Scene) -> "PowerSelection | None":
+        emitters = scene.emitters()
+        if len(emitters) < 2:
+            return None
+        power = np.array([emitter_power(e, scene) for e in emitters])
+        if not np.all(np.isfinite(power)) or power.max() <= 0:
+            return None
+        if power.max() < POWER_SPREAD * max(power.min(), 1e-30):
+            return None
+        return PowerSelection(scene, power)
+
+    def pmf(self, emitter: mi.EmitterPtr, active: mi.Bool) -> mi.Float:
+        idx = dr.reinterpret_array(mi.UInt32, emitter)
+        return dr.gather(mi.Float, self.pmf_by_id, idx, active & (emitter != None))  # noqa: E711
+
+    def pdf_direction(self, ref: mi.Interaction3f, ds: mi.DirectionSample3f, active: mi.Bool):
+        """Solid-angle pdf of NEE towards ``ds`` (replaces ``scene.pdf_emitter_direction``)."""
+        return ds.emitter.pdf_direction(ref, ds, active) * self.pmf(ds.emitter, active)
+
+    def sample(self, scene: mi.Scene, si: mi.SurfaceInteraction3f, sample: mi.Point2f,
+               active: mi.Bool, primal: bool, sdf=None):
+        """As :func:`~draaw_mi.integrators.common.sample_emitter`, the emitter chosen by power
+        (``sdf``: the scene's SDF hook, whose objects also occlude the shadow ray)."""
+        with dr.suspend_grad():
+            idx, u, pmf = self.distr.sample_reuse_pmf(sample.x, active)
+            emitter = dr.gather(mi.EmitterPtr, self.emitters, idx, active)
+            ds, w = emitter.sample_direction(si, mi.Point2f(u, sample.y), active)
+            active = active & (ds.pdf != 0.0) & (pmf > 0)
+            active &= ~scene.ray_test(si.spawn_ray_to(ds.p), active)
+            if sdf is not None:
+                active &= ~sdf.occluded(si, ds, active)
+            inv = dr.select(active, dr.rcp(pmf), 0.0)
+            ds.pdf *= pmf
+            em_weight = w * inv
+        if not primal:
+            em_val = emitter.eval_direction(si if sdf is None else dr.detach(si), ds, active)
+            em_weight = dr.replace_grad(em_weight, dr.select(active, em_val / dr.select(active, dr.detach(ds.pdf), 1.0), 0.0))
+            if sdf is not None:
+                ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
+        return ds, em_weight, active

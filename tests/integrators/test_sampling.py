@@ -1,0 +1,57 @@
+"""Russian roulette of draaw_v4 (draaw_mi/integrators/sampling.py)."""
+from __future__ import annotations
+
+import numpy as np
+
+import draaw_mi  # noqa: F401
+import drjit as dr
+import mitsuba as mi
+
+from draaw_mi.integrators.sampling import roulette, survival_probability
+
+
+def test_survival_probability():
+    q = survival_probability(mi.Float(0.0, 0.05, 0.2, 0.5, 3.0), mi.Float(1.0), 0.25, 0.05)
+    assert np.allclose(np.array(q), [0.05, 0.2, 0.8, 1.0, 1.0])
+    q = survival_probability(mi.Float(0.1), mi.Float(1.5), 0.25, 0.05)      # eta^2 counts
+    assert np.allclose(np.array(q), [0.9])
+
+
+def _run(b, depth, rr_depth, n=200_000, seed=3):
+    rng = mi.PCG32(size=n, initstate=seed)
+    beta = mi.Color3f(b, 0.5 * b, 0.1 * b)
+    beta2, active = roulette(beta, mi.Float(1.0), mi.UInt32(depth), rr_depth, 0.25, 0.05,
+                             rng.next_float32(), mi.Bool(True))
+    w = np.array(dr.select(active, beta2.x, 0.0))
+    return w, np.array(active)
+
+
+def test_roulette_keeps_expectation_and_spares_strong_paths():
+    w, act = _run(0.05, depth=3, rr_depth=2)           # weak path: q = 0.2
+    assert 0.17 < act.mean() < 0.23
+    se = w.std() / np.sqrt(w.size)
+    assert abs(w.mean() - 0.05) < 4 * se                # unbiased: E[beta'] = beta
+    assert np.allclose(w[act], 0.05 / 0.2, rtol=1e-5)
+    w, act = _run(0.6, depth=3, rr_depth=2)            # above the threshold: never stopped
+    assert act.all() and np.allclose(w, 0.6)
+    w, act = _run(0.05, depth=0, rr_depth=2)           # before rr_depth: never stopped
+    assert act.all() and np.allclose(w, 0.05)
+
+
+def test_power_selection_follows_the_emitters_power():
+    from draaw_mi import speed_suite as ss
+    from draaw_mi.integrators.sampling import PowerSelection
+    scene = ss.load("many_lights", 8)
+    sel = PowerSelection.of(scene)
+    assert sel is not None
+    pmf = sel.pmf_np
+    assert abs(pmf.sum() - 1.0) < 1e-9
+    strong = pmf > 2.0 * np.median(pmf)
+    assert strong.sum() == 4                                  # the four 40x lights
+    ratio = pmf[strong].mean() / pmf[~strong].mean()
+    assert 25.0 < ratio < 60.0                                # 40x the power, colours vary
+    # the pdf looked up from an emitter pointer is its own selection probability
+    ptrs = scene.emitters_dr()
+    got = np.array(sel.pmf(ptrs, mi.Bool(True)))
+    assert np.allclose(got, pmf, rtol=1e-6)
+    assert PowerSelection.of(ss.load("metal_018", 8)) is None  # one emitter: uniform is exact
