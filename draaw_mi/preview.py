@@ -249,7 +249,9 @@ class Preview:
         if fn is None:
             def render_1spp(scene, seed):
                 return mi.render(scene, integrator=integrator, seed=seed, spp=1)
-            fn = self._frozen[key] = dr.freeze(render_1spp) if self.freeze else render_1spp
+            from .render import freeze_supported     # no recording for SDF / media scenes
+            freeze = self.freeze and freeze_supported(self.scene.mi_scene)
+            fn = self._frozen[key] = dr.freeze(render_1spp) if freeze else render_1spp
         return fn
 
     def step(self) -> PreviewFrame | None:

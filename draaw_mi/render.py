@@ -178,9 +178,19 @@ FREEZE = True                      # set False to trace every render (debugging)
 _FROZEN: dict = {}
 
 
+def freeze_supported(mi_scene) -> bool:
+    """Whether renders of ``mi_scene`` may be recorded with ``dr.freeze``: not when the scene
+    has SDF objects (the tracer reads node parameters while it is traced) or participating
+    media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
+    aborts the process). The preview and the batch executor ask this too."""
+    from .integrators.features import detect_features
+    f = detect_features(mi_scene)
+    return not (f.get("sdf") or f.get("media"))
+
+
 def freeze_eligible(mi_scene, spp: int) -> bool:
     """Whether a primal render of ``spp`` samples of ``mi_scene`` goes through :func:`frozen_render`."""
-    if not FREEZE or spp > FREEZE_MAX_SPP:
+    if not FREEZE or spp > FREEZE_MAX_SPP or not freeze_supported(mi_scene):
         return False
     w, h = mi_scene.sensors()[0].film().size()
     return int(w) * int(h) <= FREEZE_MAX_PIXELS

@@ -63,7 +63,9 @@ def only_constant_environment(scene: mi.Scene) -> bool:
     # are read, so this also works while dr.freeze records a render)
     return len(emitters) > 0 and all(
         mi.has_flag(e.flags(), mi.EmitterFlags.Infinite)
-        and not mi.has_flag(e.flags(), mi.EmitterFlags.SpatiallyVarying) for e in emitters)
+        and not mi.has_flag(e.flags(), mi.EmitterFlags.SpatiallyVarying)
+        # a directional sun is Infinite too, but a delta light: BSDF sampling never hits it
+        and not mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in emitters)
 
 
 # ---------------------------------------------------------------------------------------
