@@ -20,6 +20,15 @@ from sdf_helpers import seed_stack, zscores
 RES = (12, 10)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _drop_media_tables():
+    """``volume.media_table`` caches each scene (and so keeps it alive); drop them after this
+    module, so later kernel op-count tests do not see these scenes' plugins in their vcalls."""
+    yield
+    from draaw_mi.integrators import volume
+    volume._TABLES.clear()
+
+
 def _description(spheres):
     """Graded smoke in [-1, 1]^3 on a floor, a point light and a sky; ``spheres``: list of
     (centre, radius) of draaw-material balls (added by :func:`_twins`)."""
@@ -89,8 +98,8 @@ def test_sdf_shadow_darkens_the_smoke():
     (guards against a reference that would also miss the shadow)."""
     _, sdf = _twins(SHADOW)
     bare = draaw_mi.load_scene(_description([]))
-    with_ball = seed_stack(sdf, "v4", 32, range(3)).mean()
-    without = seed_stack(bare, "v4", 32, range(3, 6)).mean()
+    with_ball = seed_stack(sdf, "v4", 32, range(2)).mean()
+    without = seed_stack(bare, "v4", 32, range(2, 4)).mean()
     assert with_ball < 0.97 * without, (with_ball, without)
 
 
@@ -106,7 +115,7 @@ def test_sdf_in_smoke_gradient_is_finite():
     for k in keys:
         dr.enable_grad(params[k])
     params.update()
-    img = mi.render(scene, params, integrator=integ, spp=8, seed=3)
+    img = mi.render(scene, params, integrator=integ, spp=4, seed=3)
     assert np.all(np.isfinite(np.array(img)))
     dr.backward(dr.mean(img, axis=None))
     gs = [np.array(dr.grad(params[k])) for k in keys]
