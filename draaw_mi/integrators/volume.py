@@ -15,6 +15,12 @@ Estimator (the same expectation as Mitsuba's ``volpath``, tested per pixel):
 * Surfaces: any Mitsuba BSDF through ``sample`` / ``eval``; ``null`` BSDFs are crossed
   without counting a bounce (as ``volpath``); ``interior`` / ``exterior`` media switch at
   medium transitions; a camera inside a medium starts in the sensor's medium.
+* SDF objects (feature ``sdf``, :mod:`draaw_mi.sdf.integration`): every segment ends at the
+  nearer of the mesh hit and the sphere-traced SDF hit (free flights stop there), SDF hits
+  scatter with their slot's BSDF without changing the current medium (SDFs are opaque
+  surfaces inside or outside media), and SDFs block shadow rays before ratio tracking runs.
+  SDF hits are detached here: no SDF *shape* gradients in media scenes (material, medium and
+  emitter gradients as usual).
 * ``max_depth`` counts real scattering events as ``volpath`` does; ``draaw_v4`` adds Russian
   roulette (``rr_depth``), ``draaw_v3`` has none.
 
@@ -152,12 +158,15 @@ def media_table(scene: mi.Scene) -> MediaTable:
 #  Next-event estimation from a surface or medium vertex
 # ---------------------------------------------------------------------------------------
 
-def _nee(table, scene, sampler, ref: mi.Interaction3f, medium, active, adjoint_scale=None):
-    """Sample an emitter from ``ref``; returns ``(ds, Le / pdf * T)`` (detached) and
-    replays the transmittance with gradients when ``adjoint_scale = (δL, contribution)``."""
+def _nee(table, scene, sampler, ref: mi.Interaction3f, medium, active, adjoint_scale=None, sdf=None):
+    """Sample an emitter from ``ref``; returns ``(ds, Le / pdf, active, shadow ray, dist)``
+    (detached). ``sdf``: the scene's SDF hook -- lanes whose shadow ray an SDF blocks are
+    deactivated here, so neither the primal nor the replayed ratio tracking runs for them."""
     with dr.suspend_grad():
         ds, em_w = scene.sample_emitter_direction(ref, sampler.next_2d(active), False, active)
     active = active & (ds.pdf != 0)
+    if sdf is not None:                       # SDF occluders (feature 'sdf'; draaw_mi.sdf)
+        active &= ~sdf.occluded(ref, ds, active)
     ray = ref.spawn_ray(ds.d)
     dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
     return ds, em_w, active, ray, dist
@@ -170,11 +179,15 @@ def sample(integ, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi
         raise ParameterError(f"{integ.PLUGIN}: forward-mode differentiation is not supported in scenes "
                              "with participating media (use reverse mode, as prbvolpath)")
     table = media_table(scene)
-    return _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table)
+    # SDF objects beside the media (feature 'sdf'): None when the scene has none, so no SDF
+    # code enters the kernel. Segments end at the nearer of the mesh and SDF hits.
+    sdf = integ.sdf_hook(scene, integ.features(scene))
+    return _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table,
+                   sdf)
 
 
 @dr.syntax
-def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table):
+def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table, sdf=None):
     primal = mode == dr.ADMode.Primal
     has_tracked = table.has_tracked
     has_homog = table.has_homogeneous
@@ -205,6 +218,8 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
 
     while dr.hint(active, label=f"{integ.PLUGIN} media ({mode.name})"):
         si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+        if dr.hint(sdf is not None, mode="scalar"):
+            si = sdf.intersect(ray, si, sampler, active)    # depth test: nearer hit wins
         valid |= active & first & si.is_valid()
         first = mi.Bool(False)
         in_med = active & (medium != None)  # noqa: E711
@@ -255,7 +270,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         phase_ctx = mi.PhaseFunctionContext(sampler)
         if dr.hint(not primal, mode="scalar"):
             nee_sampler = sampler.clone()
-        ds, em_w, act_e, sray, sdist = _nee(table, scene, sampler, mei, medium, med_active)
+        ds, em_w, act_e, sray, sdist = _nee(table, scene, sampler, mei, medium, med_active, sdf=sdf)
         Tm = vt.transmittance(table, scene, sray, sdist, medium, sampler, act_e)
         with dr.resume_grad(when=not primal):
             ph_val, ph_pdf_e = phase.eval_pdf(phase_ctx, mei, ds.d, act_e)
@@ -270,7 +285,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
                 _bw(δL * contrib)
         L = (L + dr.detach(contrib)) if primal else (L - dr.detach(contrib))
         if dr.hint(not primal, mode="scalar"):
-            _nee(table, scene, nee_sampler, mei, medium, med_active)
+            _nee(table, scene, nee_sampler, mei, medium, med_active)   # replays draws only
             vt.transmittance(table, scene, sray, sdist, medium, nee_sampler, act_e, (δL, dr.detach(contrib)))
         with dr.suspend_grad():
             wo, ph_w, ph_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(med_active),
@@ -313,7 +328,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         if dr.hint(not primal, mode="scalar"):
             nee_sampler2 = sampler.clone()
         act_s = surf & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-        ds2, em_w2, act_s, sray2, sdist2 = _nee(table, scene, sampler, si, medium, act_s)
+        ds2, em_w2, act_s, sray2, sdist2 = _nee(table, scene, sampler, si, medium, act_s, sdf=sdf)
         med2 = dr.select(si.is_medium_transition(), si.target_medium(ds2.d), medium)
         T2 = vt.transmittance(table, scene, sray2, sdist2, med2, sampler, act_s)
         with dr.resume_grad(when=not primal):

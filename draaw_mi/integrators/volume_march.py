@@ -15,6 +15,8 @@ the whole box chord regardless of where the light was, and ignored surfaces. Her
 * the first opaque surface adds its emission and direct light (the BSDF's ``eval``, one
   emitter sample, marched transmittance), attenuated by ``T``. No multiple scattering and no
   indirect light: biased by design (the cheap rung), ``medium_steps`` is the knob.
+* SDF objects (feature ``sdf``): the march of a segment stops at the nearer of the mesh and
+  SDF hits, SDF surfaces are lit like opaque surfaces, and SDFs block the shadow rays.
 
 Primal only: in media scenes V1/V2 are not differentiable (use ``draaw_v3`` / ``draaw_v4``).
 """
@@ -79,10 +81,13 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
     return T
 
 
-def _light(scene, sampler, it, medium, steps, active):
-    """One emitter sample from ``it``: ``(ds, Le / pdf * T_light)``."""
+def _light(scene, sampler, it, medium, steps, active, sdf=None):
+    """One emitter sample from ``it``: ``(ds, Le / pdf * T_light)``; ``sdf``: the scene's SDF
+    hook (SDF occluders block the sample before its transmittance is marched)."""
     ds, em_w = scene.sample_emitter_direction(it, sampler.next_2d(active), False, active)
     active = active & (ds.pdf != 0)
+    if sdf is not None:
+        active &= ~sdf.occluded(it, ds, active)
     r = it.spawn_ray(ds.d)
     dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
     T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active)
@@ -96,6 +101,8 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         raise RenderError(f"{integ.PLUGIN}: scenes with participating media are rendered primal-only "
                           "by V1/V2 (single-scattering march); differentiate with draaw_v3 / draaw_v4")
     steps = int(getattr(integ, "medium_steps", 12))
+    # SDF objects (feature 'sdf'): the march stops at the nearer of the mesh / SDF hit
+    sdf = integ.sdf_hook(scene, integ.features(scene))
     ctx = mi.BSDFContext()
     ray = mi.Ray3f(ray)
     ray.d = dr.normalize(ray.d)
@@ -110,6 +117,8 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
     n = mi.UInt32(0)
     while live:
         si = scene.ray_intersect(ray, mi.RayFlags.All, False, live)
+        if dr.hint(sdf is not None, mode="scalar"):
+            si = sdf.intersect(ray, si, sampler, live)
         in_med = live & (medium != None)  # noqa: E711
         ok, mint, maxt = medium.intersect_aabb(ray)
         t0 = dr.maximum(mint, 0.0)
@@ -120,7 +129,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         k = mi.UInt32(0)
         while march & (k < steps):
             mei, s_s, s_t = _coeffs(medium, ray, t0 + (mi.Float(k) + u) * dt, march)
-            ds, Lw = _light(scene, sampler, mei, medium, steps, march)
+            ds, Lw = _light(scene, sampler, mei, medium, steps, march, sdf)
             phase = medium.phase_function()
             ph, _ = phase.eval_pdf(mi.PhaseFunctionContext(sampler), mei, ds.d, march)
             # this step's own attenuation up to the sample, then through it
@@ -141,7 +150,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         L[seen] = L + T * Le
         # direct light at the surface
         m2 = dr.select(si.is_medium_transition(), si.target_medium(si.to_world(si.wi)), medium)
-        ds, Lw = _light(scene, sampler, si, m2, steps, opaque)
+        ds, Lw = _light(scene, sampler, si, m2, steps, opaque, sdf)
         f = bsdf.eval(ctx, si, si.to_local(ds.d), opaque)
         L[opaque] = L + T * f * Lw
         medium[null & si.is_medium_transition()] = si.target_medium(ray.d)

@@ -18,6 +18,12 @@ an :class:`SDFHook` and calls
   and :meth:`SDFHook.emitter_geometry` re-attaches the emitter sample's direction and its
   ``cos / dist^2`` factor to the moving point.
 
+In scenes with participating media (feature ``media``) the volumetric paths
+(:mod:`draaw_mi.integrators.volume` for V3/V4, :mod:`draaw_mi.integrators.volume_march` for
+V1/V2) use :meth:`SDFHook.intersect` (free flights and march segments end at the nearer hit)
+and :meth:`SDFHook.occluded` (before ratio tracking / marching the shadow ray), but not
+:meth:`SDFHook.reattach`: SDF shape parameters get no gradient in media scenes.
+
 **Differentiated:** material and emitter parameters (path replay, as for meshes); SDF shape
 parameters (radius, centre, size, translation, scale, smooth ``k``) through the position,
 normal and direct lighting of SDF points seen by the camera or by a path vertex.
