@@ -125,6 +125,7 @@ class MediaTable:
 
 
 _TABLES: dict[int, tuple] = {}
+_TABLES_MAX = 4          # a few scenes at most: entries hold their scene alive (mi.Scene has no weakref)
 
 
 def media_table(scene: mi.Scene) -> MediaTable:
@@ -150,11 +151,14 @@ def media_table(scene: mi.Scene) -> MediaTable:
     if hit is not None and hit[0] == stamp and hit[1] is scene:
         return hit[2]
     table = MediaTable(scene, DIFF_MAJORANT_FACTOR if diff else 1.0)
+    _TABLES.pop(key, None)
+    while len(_TABLES) >= _TABLES_MAX:                  # drop the oldest (insertion order)
+        _TABLES.pop(next(iter(_TABLES)))
     _TABLES[key] = (stamp, scene, table)
     return table
 
 
-# ---------------------------------------------------------------------------------------# ---------------------------------------------------------------------------------------
+# ---------------------------------------------------------------------------------------
 #  Next-event estimation from a surface or medium vertex
 # ---------------------------------------------------------------------------------------
 
