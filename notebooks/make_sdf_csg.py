@@ -70,6 +70,7 @@ for ax, (title, plane) in zip(axes, [("z = 0", "xy"), ("y = 0.75", "xz")]):
     im = ax.imshow(dist, origin="lower", extent=(xs[0], xs[-1], v[0, 0], v[-1, 0]), cmap="RdBu", vmin=-1, vmax=1)
     ax.contour(u, v, dist, levels=[0.0], colors="k")
     ax.set_title(f"signed distance, {title}")
+    ax.set_xlabel("x"); ax.set_ylabel(plane[1])
 fig.colorbar(im, ax=axes, shrink=0.8)"""),
     ("md", """## Render it
 

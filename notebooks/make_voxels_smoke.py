@@ -79,8 +79,8 @@ smoke.to_smoke(density=1.0)                          # voxels -> smoke cells (pe
 vox.save(os.path.join(TMP, "solid.npz"))
 smoke.save(os.path.join(TMP, "smoke.npz"))
 
-ext = vox.bbox_max - vox.bbox_min                    # keep the mesh's proportions, 1.5 high
-size = ext * 1.5 / ext[1]
+ext = vox.bbox_max - vox.bbox_min                    # keep the mesh's proportions, 1.3 high
+size = ext * 1.3 / ext[1]
 def bounds(x):
     return [[x - size[0] / 2, 0.0, -size[2] / 2], [x + size[0] / 2, size[1], size[2] / 2]]"""),
     ("md", """## Solid and smoke: `draaw_v4` vs Mitsuba's `volpath`
@@ -90,15 +90,15 @@ on the right. Both integrators have the same expectation, so the image means agr
 seed-to-seed noise."""),
     ("code", """desc = {
     "render": {"resolution": list(RES), "spp": SPP, "max_depth": 8, "filter": "box"},
-    "camera": {"origin": [0.0, 1.5, 5.5], "target": [0.0, 0.7, 0.0], "fov": 40},
+    "camera": {"origin": [0.0, 1.8, 6.5], "target": [0.0, 0.7, 0.0], "fov": 40},
     "materials": {"floor": {"base_color": [0.6, 0.6, 0.6], "roughness": 0.8},
                   "voxel": {"roughness": 0.55, "specular": 0.5}},
     "shapes": [{"type": "rectangle", "name": "ground", "material": "floor", "scale": 6.0,
                 "rotate": {"axis": [1, 0, 0], "angle": -90}}],
     "volumes": [{"name": "solid", "mode": "solid", "file": os.path.join(TMP, "solid.npz"),
-                 "bounds": bounds(-1.1), "material": "voxel"},
+                 "bounds": bounds(-1.0), "material": "voxel"},
                 {"name": "smoke", "mode": "smoke", "file": os.path.join(TMP, "smoke.npz"),
-                 "bounds": bounds(1.1), "density_scale": 20.0, "g": 0.3}],
+                 "bounds": bounds(1.0), "density_scale": 30.0, "g": 0.3}],
     "lights": [{"type": "area", "shape": "rectangle", "position": [1.5, 4.0, 2.5], "target": [0, 0.5, 0],
                 "size": 1.5, "intensity": 12.0, "color": [1.0, 0.85, 0.6]},
                {"type": "constant", "intensity": 0.25}],
