@@ -11,6 +11,7 @@ import importlib.util
 import os
 import time
 
+import numpy as np
 import pytest
 
 nbformat = pytest.importorskip("nbformat")
@@ -19,7 +20,13 @@ nbclient = pytest.importorskip("nbclient")
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NOTEBOOKS = os.path.join(ROOT, "notebooks")
 # name -> generator script
-CASES = {"inverse_fitting": "make_inverse_fitting.py"}
+CASES = {"inverse_fitting": "make_inverse_fitting.py",
+         "voxels_smoke": "make_voxels_smoke.py",
+         "sdf_csg": "make_sdf_csg.py"}
+# name -> (texts that show the small configuration ran, minimum number of images)
+SMALL_RUN = {"inverse_fitting": (("32x32", "fit"), 2),
+             "voxels_smoke": (("48x36", "spp per seed"), 1),
+             "sdf_csg": (("48x36",), 2)}
 
 
 def _generator(script):
@@ -55,12 +62,13 @@ def test_notebook_executes_small(name, monkeypatch):
     assert not errors
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs
                    if o.output_type == "stream")
-    assert "32x32" in text and "fit" in text                   # the small configuration ran
-    if name == "inverse_fitting":
-        _check_fitted_values(text)
+    markers, min_images = SMALL_RUN[name]
+    assert all(m in text for m in markers), markers            # the small configuration ran
+    {"inverse_fitting": _check_fitted_values, "voxels_smoke": _check_voxels_smoke,
+     "sdf_csg": _check_sdf_csg}[name](text)
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
-    assert len(images) >= 2                                     # side by side + convergence
+    assert len(images) >= min_images                           # e.g. side by side + convergence
 
 
 # The notebook's ground truth (scenes/fit_two_spheres.toml), typed here independently of it.
@@ -78,3 +86,63 @@ def _check_fitted_values(text):
         assert truth == pytest.approx(TRUTH[name], abs=5e-4), name
         assert err == pytest.approx(fit - truth, abs=2e-4), name
         assert abs(fit - TRUTH[name]) < 0.05, (name, fit, TRUTH[name])
+
+
+def _ad_fd(text, what):
+    """Parse ``AD a +- sa   FD f +- sf`` after ``what`` and check that the AD gradient agrees
+    with the central FD within their independent noise (4 combined standard errors), that
+    both have the same sign, and that FD stands out of its own noise (a zero or sign-flipped
+    gradient cannot pass)."""
+    import re
+    m = re.search(re.escape(what) + r".*?AD ([-+\d.]+) \+- ([\d.]+)\s+FD ([-+\d.]+) \+- ([\d.]+)", text)
+    assert m, f"{what!r} not printed"
+    ad, se_ad, fd, se_fd = map(float, m.groups())
+    assert se_ad > 0 and se_fd > 0
+    assert abs(fd) > 4 * se_fd, (fd, se_fd, "FD not above its noise")
+    assert np.sign(ad) == np.sign(fd), (ad, fd)
+    assert abs(ad - fd) <= 4 * np.hypot(se_ad, se_fd), (ad, se_ad, fd, se_fd)
+    return ad, fd
+
+
+def _check_voxels_smoke(text):
+    """Picking: the notebook adds a 3x3x3 block around (5, 4, 4) (x 4..6, y and z 3..5) and
+    draws (2, 4, 4); a ray along +x through row (:, 4, 4) first hits (2, 4, 4), then, once
+    that is erased, (4, 4, 4); 27 voxels remain; the camera on +z looking down -z through the
+    same row sees (4, 4, 5) first. draaw_v4 and volpath agree on the image mean within the
+    pooled per-pixel noise; the albedo gradient agrees with FD; one step lowers the loss."""
+    import re
+    assert "pick along +x: (2, 4, 4)" in text
+    assert "erased: (2, 4, 4) -> pick along +x: (4, 4, 4)" in text
+    assert "voxels: 27 - repainted: 27" in text
+    assert "pick under the centre pixel: (4, 4, 5)" in text
+    n = int(re.search(r": (\d+) surface voxels of", text).group(1))
+    assert n > 100
+    means = {v: (float(a), float(b)) for v, a, b in
+             re.findall(r"^(v4|volpath)\s+image mean ([\d.]+) \+- ([\d.]+)", text, re.M)}
+    assert set(means) == {"v4", "volpath"}
+    (m4, s4), (mv, sv) = means["v4"], means["volpath"]
+    assert 0.02 < mv < 2 and s4 > 0 and sv > 0
+    assert abs(m4 - mv) <= 4 * np.hypot(s4, sv), means
+    ad, fd = _ad_fd(text, "d mean(image) / d albedo (all cells):")
+    assert fd > 0                                    # brighter smoke, brighter image
+    before, after = map(float, re.search(r"one step: loss ([\d.]+) -> ([\d.]+)", text).groups())
+    assert after < before                            # same seeds for both evaluations
+
+
+def _check_sdf_csg(text):
+    """Distances typed from the tree's definition: -radius at the ball's centre (the block is
+    further than k away), 2 - 0.75 = 1.25 to the block's face at (2, 0.75, 0). The radius
+    gradient agrees with FD. Tracer: the default settings miss nothing the strict tracer hits,
+    an 8-step cap misses rays, and a looser epsilon takes fewer steps."""
+    import re
+    d0, d1 = map(float, re.search(r"distance at the ball's centre ([-+\d.]+), at \(2, 0.75, 0\) ([-+\d.]+)",
+                                  text).groups())
+    assert d0 == pytest.approx(-0.55, abs=2e-4) and d1 == pytest.approx(1.25, abs=2e-4)
+    ad, fd = _ad_fd(text, "d loss / d radius:")
+    assert fd > 0
+    rows = {(float(e), int(n), float(r)): (float(steps), float(miss)) for e, n, r, steps, miss in re.findall(
+        r"eps=([\d.e-]+) steps=(\d+) relax=([\d.]+): mean steps ([\d.]+), false misses ([\d.]+)", text)}
+    assert len(rows) == 4, rows
+    assert rows[(1e-5, 256, 1.0)][1] < 0.005
+    assert rows[(1e-5, 8, 1.0)][1] > 0.05
+    assert rows[(5e-5, 256, 1.0)][0] < rows[(1e-5, 256, 1.0)][0]

@@ -1,0 +1,188 @@
+"""Write notebooks/sdf_csg.ipynb (no outputs): python notebooks/make_sdf_csg.py
+
+CI executes it with DRAAW_MI_NOTEBOOK_SMALL=1 (48x36, few spp; tests/test_notebooks.py), and
+checks the distances, the AD-vs-FD radius gradient and the tracer figures it prints.
+"""
+from __future__ import annotations
+
+import os
+
+import nbformat
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+CELLS = [
+    ("md", """# Signed distance fields: a CSG tree in Python
+
+`draaw_mi.sdf` builds shapes from primitives and operators (GO-Draaw's ray-marched spheres, in
+3D, bugs fixed). The tree is ordinary Python; `to_entries` turns it into `[[sdf]]` tables, so
+the sphere tracer inside `draaw_v1`..`v4` renders it with meshes, shadows and the `draaw`
+material, and `draaw_mi.sdf.parameters` makes its radii, centres and blend radii
+differentiable.
+
+Set `DRAAW_MI_NOTEBOOK_SMALL=1` to run a tiny version (48x36) - CI does."""),
+    ("code", """import os
+import time
+
+import numpy as np
+import matplotlib.pyplot as plt
+import drjit as dr
+import mitsuba as mi
+
+import draaw_mi
+from draaw_mi.sdf import RoundBox, Sphere, smooth_subtraction, smooth_union
+from draaw_mi.sdf.export import to_entries
+from draaw_mi.sdf.study import camera_march
+
+SMALL = os.environ.get("DRAAW_MI_NOTEBOOK_SMALL") == "1"
+RES = (48, 36) if SMALL else (320, 240)
+SPP = 16 if SMALL else 64
+print(f"{RES[0]}x{RES[1]}, {SPP} spp")"""),
+    ("md", """## Build the tree
+
+A red ball smoothly merged (`k` = blend radius) into a blue rounded block, with a bite taken
+out by a smooth subtraction. Operators blend the materials with the same weight as the
+distances."""),
+    ("code", """ball = Sphere((-0.35, 0.75, 0.0), 0.55, name="ball", material="red")
+block = RoundBox((0.35, 0.45, 0.0), (0.8, 0.9, 0.8), 0.06, name="block", material="blue")
+blob = smooth_union(ball, block, k=0.3, name="blob")
+bite = Sphere((0.65, 0.95, 0.45), 0.35, name="bite", material="gold")
+tree = smooth_subtraction(blob, bite, k=0.05, name="carved")
+for node in tree.nodes():
+    print(node.describe())
+
+# exact where the operands are further apart than k: at the ball's centre d = -radius
+d = tree.distance(mi.Point3f([-0.35, 2.0], [0.75, 0.75], [0.0, 0.0]))
+print(f"distance at the ball's centre {d[0]:+.4f}, at (2, 0.75, 0) {d[1]:+.4f}")"""),
+    ("md", """## Distance slices
+
+`tree.distance` evaluates any batch of points (a `mi.Point3f`); here the plane z = 0 and the
+plane y = 0.75, with the zero level set (the surface) in black."""),
+    ("code", """n = 96 if SMALL else 256
+xs = np.linspace(-1.5, 1.5, n)
+fig, axes = plt.subplots(1, 2, figsize=(9, 4))
+for ax, (title, plane) in zip(axes, [("z = 0", "xy"), ("y = 0.75", "xz")]):
+    u, v = np.meshgrid(xs, xs + (0.5 if plane == "xy" else 0.0))
+    zero = np.zeros_like(u)
+    p = (u, v, zero) if plane == "xy" else (u, np.full_like(u, 0.75), v)
+    dist = np.array(tree.distance(mi.Point3f(*(c.ravel().astype(np.float32) for c in p)))).reshape(u.shape)
+    im = ax.imshow(dist, origin="lower", extent=(xs[0], xs[-1], v[0, 0], v[-1, 0]), cmap="RdBu", vmin=-1, vmax=1)
+    ax.contour(u, v, dist, levels=[0.0], colors="k")
+    ax.set_title(f"signed distance, {title}")
+    ax.set_xlabel("x"); ax.set_ylabel(plane[1])
+fig.colorbar(im, ax=axes, shrink=0.8)"""),
+    ("md", """## Render it
+
+The tree goes into a scene description next to a mesh floor; SDFs and meshes are depth-tested
+against each other and shadow each other."""),
+    ("code", """desc = {
+    "render": {"resolution": list(RES), "spp": SPP, "max_depth": 4, "filter": "box"},
+    "camera": {"origin": [0.0, 1.6, 4.2], "target": [0.0, 0.6, 0.0], "fov": 40},
+    "materials": {"red": {"base_color": [0.85, 0.12, 0.08], "roughness": 0.35},
+                  "blue": {"base_color": [0.1, 0.2, 0.85], "roughness": 0.5},
+                  "gold": {"base_color": [1.0, 0.78, 0.34], "roughness": 0.4, "metallic": 1.0},
+                  "ground": {"base_color": [0.6, 0.6, 0.6], "roughness": 0.8}},
+    "shapes": [{"type": "rectangle", "name": "floor", "material": "ground", "scale": 4.0,
+                "rotate": {"axis": [1, 0, 0], "angle": -90}}],
+    "lights": [{"type": "point", "position": [2.0, 4.0, 3.0], "intensity": 40.0},
+               {"type": "constant", "intensity": 0.3}],
+    "sdf": to_entries(tree),
+}
+scene = draaw_mi.load_scene(desc)
+t0 = time.perf_counter()
+img = np.array(draaw_mi.render(scene, version="v4", seed=1))
+print(f"draaw_v4, {SPP} spp: {time.perf_counter() - t0:.1f} s")
+plt.figure(figsize=(5, 4))
+plt.imshow(np.clip(img[..., :3], 0, 1) ** (1 / 2.2), interpolation="nearest")
+plt.axis("off")"""),
+    ("md", """## A radius gradient against finite differences
+
+`draaw_mi.sdf.parameters(scene)` is `mi.traverse` plus `sdf.NODE.PARAM` keys. The gradient
+comes from re-attaching the hit point to the SDF (implicit function theorem); silhouettes and
+shadow edges are **not** differentiated. So the loss is the mean of the pixels whose own and
+neighbouring pixel centres see pure ball (material weight > 0.99: no silhouette, no occlusion
+edge, no blend band inside), with direct light only and the light at the camera (shadows fall
+behind the objects). Central differences use the same seeds (common random numbers)."""),
+    ("code", """from draaw_mi.sdf.tracer import TracerOptions, march
+
+grad_desc = dict(desc, lights=[{"type": "point", "position": desc["camera"]["origin"], "intensity": 30.0}],
+                 render=dict(desc["render"], max_depth=2))
+gscene = draaw_mi.load_scene(grad_desc)
+W, H = RES
+ys, xs = np.mgrid[0:H, 0:W]
+ray, _ = gscene.mi_scene.sensors()[0].sample_ray(
+    0.0, 0.5, mi.Point2f(((xs + 0.5) / W).ravel(), ((ys + 0.5) / H).ravel()), mi.Point2f(0.5))
+t, hit, _ = march(gscene.sdf, ray.o, ray.d, mi.Float(dr.inf), mi.Bool(True), TracerOptions())
+weights = gscene.sdf.eval(ray(t))[1]
+red = np.array(hit & (weights[gscene.sdf.slots.index("red")] > 0.99)).reshape(H, W)
+mask = red.copy()                      # erode by one pixel
+mask[1:] &= red[:-1]; mask[:-1] &= red[1:]; mask[:, 1:] &= red[:, :-1]; mask[:, :-1] &= red[:, 1:]
+mask_t = mi.TensorXf(np.repeat(mask[..., None], 3, axis=2).astype(np.float32))
+
+def loss(image):
+    return dr.sum(image[..., :3] * mask_t, axis=None) / float(mask.sum())
+
+params = draaw_mi.sdf.parameters(gscene)
+key, h = "sdf.ball.radius", 0.01
+r0 = float(params[key][0])
+ad, fd = [], []
+for seed in range(4):
+    dr.enable_grad(params[key])
+    dr.backward(loss(draaw_mi.render(gscene, version="v4", spp=SPP, seed=seed, params=params, post=[])))
+    ad.append(float(dr.grad(params[key])[0]))
+    dr.disable_grad(params[key])
+    vals = []
+    for r in (r0 + h, r0 - h):
+        params[key] = r
+        vals.append(loss(draaw_mi.render(gscene, version="v4", spp=SPP, seed=seed, post=[])).item())
+    params[key] = r0
+    fd.append((vals[0] - vals[1]) / (2 * h))
+ad, fd = np.array(ad), np.array(fd)
+se = lambda a: a.std(ddof=1) / np.sqrt(len(a))
+print(f"{int(mask.sum())} pure-ball pixels")
+print(f"d loss / d radius: AD {ad.mean():+.5f} +- {se(ad):.5f}   FD {fd.mean():+.5f} +- {se(fd):.5f}   "
+      f"AD-FD {np.mean(ad - fd):+.5f} +- {se(ad - fd):.5f}")"""),
+    ("md", """## What the tracer's knobs cost
+
+`sdf_epsilon` (relative hit tolerance), `sdf_max_steps` (a ray that has not converged by then is
+a miss) and `sdf_relaxation` (over-relaxed sphere tracing with Keinert et al.'s fallback) are
+integrator options. For each setting: the march steps per camera ray, the share of rays that
+hit with a strict tracer but miss with this one, and the render time (after a warm-up render
+that compiles). `draaw-mi bench` runs the full study (`benchmarks/results/sdf_study_sdf_csg.md`)."""),
+    ("code", """strict = {"sdf_epsilon": 1e-6, "sdf_max_steps": 4096, "sdf_relaxation": 1.0}
+settings = [{"sdf_epsilon": 1e-5, "sdf_max_steps": 256, "sdf_relaxation": 1.0},
+            {"sdf_epsilon": 1e-5, "sdf_max_steps": 256, "sdf_relaxation": 1.6},
+            {"sdf_epsilon": 1e-5, "sdf_max_steps": 8, "sdf_relaxation": 1.0},
+            {"sdf_epsilon": 5e-5, "sdf_max_steps": 256, "sdf_relaxation": 1.0}]
+ref_hit = camera_march(scene, strict)[0]
+for s in settings:
+    hit, steps = camera_march(scene, s)
+    draaw_mi.render(scene, version="v4", spp=4, seed=0, integrator_options=s)          # compile
+    t0 = time.perf_counter()
+    dr.eval(draaw_mi.render(scene, version="v4", spp=4, seed=0, integrator_options=s)); dr.sync_thread()
+    ms = (time.perf_counter() - t0) * 1e3
+    print(f"eps={s['sdf_epsilon']:g} steps={s['sdf_max_steps']} relax={s['sdf_relaxation']:g}: "
+          f"mean steps {steps[ref_hit].mean():.1f}, false misses {np.sum(ref_hit & ~hit) / ref_hit.sum():.4f}, {ms:.0f} ms")"""),
+]
+
+
+def build() -> nbformat.NotebookNode:
+    nb = new_notebook()
+    nb.cells = [new_markdown_cell(src) if kind == "md" else new_code_cell(src) for kind, src in CELLS]
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.metadata["language_info"] = {"name": "python"}
+    return nb
+
+
+def main() -> None:
+    path = os.path.join(HERE, "sdf_csg.ipynb")
+    nb = build()
+    nbformat.validate(nb)
+    with open(path, "w") as fh:
+        nbformat.write(nb, fh)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
