@@ -132,9 +132,14 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     acc, done, t0 = None, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
+            img = None
             if params is None and freeze_eligible(scene.mi_scene, count):
-                img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
-            else:
+                try:
+                    img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
+                except RuntimeError:     # a scene the recorder cannot hold: trace it instead
+                    _FROZEN.pop((id(integrator), int(count)), None)
+                    img = None
+            if img is None:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
             if n_passes == 1:
                 acc = img            # one pass: no extra scaling kernels (small renders)
@@ -184,6 +189,9 @@ def freeze_supported(mi_scene) -> bool:
     media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
     aborts the process). The preview and the batch executor ask this too."""
     from .integrators.features import detect_features
+    from .sdf.scene import PROXY_PREFIX
+    if any(sh.id().startswith(PROXY_PREFIX) for sh in mi_scene.shapes()):
+        return False                                   # SDF proxies, registered or not
     f = detect_features(mi_scene)
     return not (f.get("sdf") or f.get("media"))
 
