@@ -188,12 +188,15 @@ def freeze_supported(mi_scene) -> bool:
     has SDF objects (the tracer reads node parameters while it is traced) or participating
     media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
     aborts the process). The preview and the batch executor ask this too."""
-    from .integrators.features import detect_features
+    # flags and ids only (no mi.traverse, no JIT reads): a check between replays must not
+    # disturb the recording's inputs
     from .sdf.scene import PROXY_PREFIX
-    if any(sh.id().startswith(PROXY_PREFIX) for sh in mi_scene.shapes()):
-        return False                                   # SDF proxies, registered or not
-    f = detect_features(mi_scene)
-    return not (f.get("sdf") or f.get("media"))
+    for sh in mi_scene.shapes():
+        if sh.id().startswith(PROXY_PREFIX):
+            return False                               # SDF proxies
+        if sh.interior_medium() is not None or sh.exterior_medium() is not None:
+            return False
+    return all(s.get_medium() is None for s in mi_scene.sensors())
 
 
 def freeze_eligible(mi_scene, spp: int) -> bool:
