@@ -249,9 +249,9 @@ class Preview:
         if fn is None:
             def render_1spp(scene, seed):
                 return mi.render(scene, integrator=integrator, seed=seed, spp=1)
-            from .render import freeze_supported     # no recording for SDF / media scenes
+            from .render import freeze_render, freeze_supported   # no recording for SDF / media
             freeze = self.freeze and freeze_supported(self.scene.mi_scene)
-            fn = self._frozen[key] = dr.freeze(render_1spp) if freeze else render_1spp
+            fn = self._frozen[key] = freeze_render(integrator, render_1spp) if freeze else render_1spp
         return fn
 
     def step(self) -> PreviewFrame | None:

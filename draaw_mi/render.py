@@ -207,6 +207,29 @@ def freeze_eligible(mi_scene, spp: int) -> bool:
     return int(w) * int(h) <= FREEZE_MAX_PIXELS
 
 
+def freeze_render(integrator, body):
+    """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
+    with the integrator's scene-dependent state (V4's light-selection table, from its
+    ``freeze_state``) passed to the recording as an input. Without it the recording would run
+    a different sampler than a traced render, or replay a stale table. The preview and the
+    batch executor record their renders through this too."""
+    state_of = getattr(integrator, "freeze_state", None)
+    use_state = getattr(integrator, "frozen_state", None)
+
+    def recorded(mi_scene, seed, state):
+        if use_state is None:
+            return body(mi_scene, seed)
+        with use_state(state):
+            return body(mi_scene, seed)
+
+    frozen = dr.freeze(recorded)
+
+    def call(mi_scene, seed):
+        return frozen(mi_scene, seed, None if state_of is None else state_of(mi_scene))
+    call.frozen = frozen
+    return call
+
+
 def frozen_render(integrator, spp: int):
     """``f(mi_scene, seed: mi.UInt32) -> image``: ``mi.render`` recorded with ``dr.freeze``
     (one recording per integrator and spp; Dr.Jit re-records when the inputs' layout changes)."""
@@ -215,7 +238,7 @@ def frozen_render(integrator, spp: int):
     if fn is None:
         def render_once(mi_scene, seed):
             return mi.render(mi_scene, integrator=integrator, seed=seed, spp=spp)
-        fn = _FROZEN[key] = dr.freeze(render_once)
+        fn = _FROZEN[key] = freeze_render(integrator, render_once)
     return fn
 
 

@@ -35,7 +35,6 @@ def test_running_mean_equals_mean_of_independent_frames():
 
 
 @pytest.mark.parametrize("freeze", [False, True])
-@pytest.mark.xfail(strict=False, reason="known after the issue 10/12 merge: V4 chooses lights uniformly while dr.freeze records, so frozen and traced frames differ; see the closing note")
 def test_change_resets_the_mean_and_shows_the_new_value_without_recompiling(freeze):
     scene = draaw_mi.load_scene(tiny_description())
     pv = Preview(scene, version="v4", max_depth=4, freeze=freeze, seed=1)
@@ -61,7 +60,6 @@ def test_change_resets_the_mean_and_shows_the_new_value_without_recompiling(free
     assert np.abs(f2.raw - before).max() > 0.05
 
 
-@pytest.mark.xfail(strict=False, reason="known after the issue 10/12 merge: V4 chooses lights uniformly while dr.freeze records, so frozen and traced frames differ; see the closing note")
 def test_frozen_and_plain_frames_are_identical_after_camera_changes():
     a = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=True, seed=2)
     b = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False, seed=2)
@@ -100,7 +98,6 @@ def test_bad_values_are_rejected_before_rendering(values, match):
     assert pv.generation == g and pv._pending == {}
 
 
-@pytest.mark.xfail(strict=False, reason="known after the issue 10/12 merge: V4 chooses lights uniformly while dr.freeze records, so frozen and traced frames differ; see the closing note")
 def test_worker_thread_refines_resets_and_stops():
     scene = draaw_mi.load_scene(tiny_description())
     pv = Preview(scene, version="v4", max_depth=4, max_spp=6, freeze=True)

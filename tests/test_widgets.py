@@ -186,7 +186,6 @@ def test_snippet_runs_and_reproduces_values(tuner):
     assert float(np.array(ns["scene"].params[k]).ravel()[0]) == pytest.approx(0.22)
 
 
-@pytest.mark.xfail(strict=False, reason="known after the issue 10/12 merge: V4 chooses lights uniformly while dr.freeze records, so frozen and traced frames differ; see the closing note")
 def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
     t = MaterialTuner(draaw_mi.load_scene(tiny_description()), max_spp=4, rest_after=30.0, freeze=True)
     try:

@@ -45,7 +45,7 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
-        from ..render import MAX_PASS_SPP, _apply_post, freeze_supported, make_integrator, render
+        from ..render import MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator, render
 
         s = self.scene.settings
         spp = spec["spp"]
@@ -62,7 +62,7 @@ class CachedScene:
             def fn(scene, seed, integrator=integrator, spp=spp):
                 img = mi.render(scene, integrator=integrator, seed=seed, spp=spp)
                 return (img * spp) / spp                  # what render() computes for one pass
-            fn = self.frozen[key] = dr.freeze(fn)
+            fn = self.frozen[key] = freeze_render(integrator, fn)
         image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]))
         dr.eval(image)
         dr.sync_thread()

@@ -106,17 +106,41 @@ def emitter_power(emitter: mi.Emitter, scene: mi.Scene) -> float:
 
 class PowerSelection:
     """Emitter selection proportional to :func:`emitter_power`; ``None`` from :meth:`of` when
-    uniform selection (Mitsuba's) is as good: a single emitter or similar powers."""
+    uniform selection (Mitsuba's) is as good: a single emitter or similar powers.
 
-    def __init__(self, scene: mi.Scene, power: np.ndarray):
-        power = np.maximum(power, 1e-6 * power.max())
-        self.pmf_np = power / power.sum()
-        self.distr = mi.DiscreteDistribution(mi.Float(self.pmf_np))
-        self.emitters = scene.emitters_dr()
-        ids = np.array(dr.reinterpret_array(mi.UInt32, self.emitters), dtype=np.int64)
+    The table is four plain Dr.Jit arrays (:meth:`arrays`), so a ``dr.freeze`` recording can
+    take it as an input (:func:`draaw_mi.render.frozen_render`): frozen and traced renders then
+    choose lights alike, and a replay reads the table it is given rather than a stale copy."""
+
+    def __init__(self, n: int, pmf: mi.Float, cdf: mi.Float, pmf_by_id: mi.Float,
+                 emitter_ids: mi.UInt32):
+        # the emitter count as a Python int: a recording keyed on it re-traces when it changes
+        self.n = int(n)
+        self.pmf_dr, self.cdf, self.pmf_by_id, self.emitter_ids = pmf, cdf, pmf_by_id, emitter_ids
+        self.emitters = dr.reinterpret_array(mi.EmitterPtr, emitter_ids)
+
+    @staticmethod
+    def from_power(scene: mi.Scene, power: np.ndarray) -> "PowerSelection":
+        power = np.maximum(np.asarray(power, np.float64), 1e-6 * np.max(power))
+        pmf = power / power.sum()
+        cdf = np.cumsum(pmf)
+        cdf[-1] = 1.0
+        ids = np.array(dr.reinterpret_array(mi.UInt32, scene.emitters_dr()), dtype=np.int64)
         table = np.zeros(ids.max() + 1)
-        table[ids] = self.pmf_np
-        self.pmf_by_id = mi.Float(table)              # registry id -> selection probability
+        table[ids] = pmf                              # registry id -> selection probability
+        return PowerSelection(len(pmf), mi.Float(pmf), mi.Float(cdf), mi.Float(table), mi.UInt32(ids))
+
+    def arrays(self) -> tuple:
+        """The table as inputs for a ``dr.freeze`` recording (see :meth:`from_arrays`)."""
+        return (self.n, self.pmf_dr, self.cdf, self.pmf_by_id, self.emitter_ids)
+
+    @staticmethod
+    def from_arrays(arrays: tuple) -> "PowerSelection":
+        return PowerSelection(*arrays)
+
+    @property
+    def pmf_np(self) -> np.ndarray:
+        return np.array(self.pmf_dr, dtype=np.float64)
 
     @staticmethod
     def of(scene: mi.Scene) -> "PowerSelection | None":
@@ -128,7 +152,19 @@ class PowerSelection:
             return None
         if power.max() < POWER_SPREAD * max(power.min(), 1e-30):
             return None
-        return PowerSelection(scene, power)
+        return PowerSelection.from_power(scene, power)
+
+    def sample_index(self, x: mi.Float, active: mi.Bool):
+        """``(index, reused sample, pmf)``: the emitter whose CDF interval holds ``x`` (as
+        ``DiscreteDistribution.sample_reuse_pmf``, on this object's own arrays)."""
+        n = self.n
+        idx = dr.binary_search(0, n - 1, lambda i: dr.gather(mi.Float, self.cdf, i) <= x)
+        idx = dr.minimum(idx, n - 1)
+        pmf = dr.gather(mi.Float, self.pmf_dr, idx, active)
+        lo = dr.gather(mi.Float, self.cdf, dr.maximum(idx, 1) - 1, active & (idx > 0))
+        u = dr.clip((x - dr.select(idx > 0, lo, 0.0)) * dr.rcp(dr.maximum(pmf, 1e-30)), 0.0,
+                    dr.one_minus_epsilon(mi.Float))
+        return idx, u, pmf
 
     def pmf(self, emitter: mi.EmitterPtr, active: mi.Bool) -> mi.Float:
         idx = dr.reinterpret_array(mi.UInt32, emitter)
@@ -143,7 +179,7 @@ class PowerSelection:
         """As :func:`~draaw_mi.integrators.common.sample_emitter`, the emitter chosen by power
         (``sdf``: the scene's SDF hook, whose objects also occlude the shadow ray)."""
         with dr.suspend_grad():
-            idx, u, pmf = self.distr.sample_reuse_pmf(sample.x, active)
+            idx, u, pmf = self.sample_index(sample.x, active)
             emitter = dr.gather(mi.EmitterPtr, self.emitters, idx, active)
             ds, w = emitter.sample_direction(si, mi.Point2f(u, sample.y), active)
             active = active & (ds.pdf != 0.0) & (pmf > 0)

@@ -1,6 +1,8 @@
 """``draaw_v4`` -- physically based path tracer, optimised (GO-Draaw "V4")."""
 from __future__ import annotations
 
+import contextlib
+
 import drjit as dr
 import mitsuba as mi
 
@@ -143,7 +145,8 @@ class DraawV4Integrator(DraawIntegrator):
         if self.light_selection not in ("power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
                                  "'power' or 'uniform'")
-        self._selection = None         # (scene, PowerSelection | None) of the last scene
+        self._selection = []           # [(scene, PowerSelection | None)], the last two scenes
+        self._frozen_selection = None  # (PowerSelection | None,) while a recording runs
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
@@ -155,17 +158,37 @@ class DraawV4Integrator(DraawIntegrator):
         """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform."""
         if self.light_selection != "power":
             return None
+        if self._frozen_selection is not None:
+            return self._frozen_selection[0]           # the table a recording takes as input
         if dr.flag(dr.JitFlag.FreezingScope):
-            # recording dr.freeze (small renders): the power table would be state hidden from
-            # the recording, and emitter values cannot be read there; uniform is unbiased too
+            # a recording made without :meth:`freeze_state` (emitter values cannot be read
+            # while recording): uniform selection, unbiased too
             return None
-        # Cache for the last scene only, holding it: an id() key could be reused by a new scene
-        # once the old one is freed (Mitsuba scenes take no weak references).
-        if self._selection is not None and self._selection[0] is scene:
-            return self._selection[1]
+        # Cache for the last two scenes (the preview alternates a low-resolution copy and the
+        # scene), holding them: an id() key could be reused by a new scene once the old one is
+        # freed (Mitsuba scenes take no weak references).
+        for held, sel in self._selection:
+            if held is scene:
+                return sel
         sel = PowerSelection.of(scene)
-        self._selection = (scene, sel)
+        self._selection = [(scene, sel)] + self._selection[:1]
         return sel
+
+    def freeze_state(self, scene):
+        """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
+        input (:func:`draaw_mi.render.frozen_render`): the power table's arrays, or ``None``.
+        Computed here, outside the recording, so frozen and traced renders choose alike."""
+        sel = self.emitter_selection(scene)
+        return None if sel is None else sel.arrays()
+
+    @contextlib.contextmanager
+    def frozen_state(self, state):
+        """Within this block (a recording's body) use ``state`` from :meth:`freeze_state`."""
+        self._frozen_selection = None if state is None else (PowerSelection.from_arrays(state),)
+        try:
+            yield
+        finally:
+            self._frozen_selection = None
 
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):

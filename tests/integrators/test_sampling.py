@@ -45,7 +45,7 @@ def test_power_selection_follows_the_emitters_power():
     sel = PowerSelection.of(scene)
     assert sel is not None
     pmf = sel.pmf_np
-    assert abs(pmf.sum() - 1.0) < 1e-9
+    assert abs(pmf.sum() - 1.0) < 1e-6                        # stored as float32
     strong = pmf > 2.0 * np.median(pmf)
     assert strong.sum() == 4                                  # the four 40x lights
     ratio = pmf[strong].mean() / pmf[~strong].mean()
@@ -55,3 +55,28 @@ def test_power_selection_follows_the_emitters_power():
     got = np.array(sel.pmf(ptrs, mi.Bool(True)))
     assert np.allclose(got, pmf, rtol=1e-6)
     assert PowerSelection.of(ss.load("metal_018", 8)) is None  # one emitter: uniform is exact
+
+
+def test_power_selection_samples_its_pmf_and_reuses_the_sample():
+    """sample_index (a CDF search on the table's own arrays, so a dr.freeze recording can take
+    them as inputs) against numpy's searchsorted: same index for every x, and the reused
+    sample is x's position inside the chosen interval."""
+    from draaw_mi.integrators.sampling import PowerSelection
+    scene = mi.load_dict({"type": "scene", "s": {"type": "sphere"},
+                          **{f"p{i}": {"type": "point", "position": [i, 3, 0],
+                                       "intensity": {"type": "rgb", "value": v}}
+                             for i, v in enumerate([1.0, 10.0, 0.5, 3.0, 0.0])}})
+    sel = PowerSelection.of(scene)
+    assert sel is not None
+    x = np.linspace(0, 1, 10001, endpoint=False).astype(np.float32)
+    idx, u, pmf = sel.sample_index(mi.Float(x), mi.Bool(True))
+    idx, u, pmf = np.array(idx), np.array(u), np.array(pmf)
+    cdf = np.array(sel.cdf)
+    want = np.minimum(np.searchsorted(cdf, x, side="right"), len(cdf) - 1)
+    assert np.array_equal(idx, want)
+    p = np.array(sel.pmf_dr)
+    assert p[4] > 0 and p[4] < 1e-5                    # a dark light keeps a tiny probability
+    assert np.allclose(pmf, p[idx])
+    lo = np.concatenate([[0.0], cdf[:-1]])[idx]
+    assert np.allclose(u, np.clip((x - lo) / p[idx], 0, 1), atol=1e-4)
+    assert (u >= 0).all() and (u < 1).all()
