@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import threading
 import time
+import warnings
 import weakref
 
 import drjit as dr
@@ -23,6 +24,7 @@ import mitsuba as mi
 
 from .errors import RenderError
 from .integrators import resolve_version
+from .materials.draaw_bsdf import LIVE_INSTANCES
 
 _INTEGRATOR_CACHE: dict = {}
 _SCENE_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -134,11 +136,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         for count, pseed in zip(counts, seeds):
             img = None
             if params is None and freeze_eligible(scene.mi_scene, count):
-                try:
-                    img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
-                except RuntimeError:     # a scene the recorder cannot hold: trace it instead
-                    _FROZEN.pop((id(integrator), int(count)), None)
-                    img = None
+                img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
             if img is None:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
             if n_passes == 1:
@@ -216,7 +214,7 @@ def freeze_render(integrator, body):
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
-    def recorded(mi_scene, seed, state):
+    def recorded(mi_scene, seed, state, live_bsdfs):
         if use_state is None:
             return body(mi_scene, seed)
         with use_state(state):
@@ -224,8 +222,22 @@ def freeze_render(integrator, body):
 
     frozen = dr.freeze(recorded)
 
+    failed = []                      # a recording that failed once: trace from then on
+
     def call(mi_scene, seed):
-        return frozen(mi_scene, seed, None if state_of is None else state_of(mi_scene))
+        if failed:
+            return body(mi_scene, seed)
+        # every live Python BSDF, also those of other scenes: without them the recording of a
+        # BSDF call fails (see materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
+        live = sorted(LIVE_INSTANCES, key=id)
+        try:
+            return frozen(mi_scene, seed, None if state_of is None else state_of(mi_scene), live)
+        except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
+            failed.append(str(e))
+            warnings.warn(f"freeze_render: dr.freeze could not record this render "
+                          f"({str(e).splitlines()[0][:200]}); it is traced from now on",
+                          RuntimeWarning, stacklevel=2)
+            return body(mi_scene, seed)
     call.frozen = frozen
     return call
 

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import os
 
-import nbformat
-from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _nbgen  # noqa: E402  (notebooks/_nbgen.py, beside this script)
+
 
 CELLS = [
     ("md", """# Signed distance fields: a CSG tree in Python
@@ -167,22 +168,9 @@ for s in settings:
 ]
 
 
-def build() -> nbformat.NotebookNode:
-    nb = new_notebook()
-    nb.cells = [new_markdown_cell(src) if kind == "md" else new_code_cell(src) for kind, src in CELLS]
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    nb.metadata["language_info"] = {"name": "python"}
-    return nb
-
-
-def main() -> None:
-    path = os.path.join(HERE, "sdf_csg.ipynb")
-    nb = build()
-    nbformat.validate(nb)
-    with open(path, "w") as fh:
-        nbformat.write(nb, fh)
-    print(f"wrote {path}")
+def build():
+    return _nbgen.build(CELLS)
 
 
 if __name__ == "__main__":
-    main()
+    _nbgen.write(CELLS, "sdf_csg")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 import time
 
 import numpy as np
@@ -30,6 +31,8 @@ SMALL_RUN = {"inverse_fitting": (("32x32", "fit"), 2),
 
 
 def _generator(script):
+    if NOTEBOOKS not in sys.path:              # the generators import notebooks/_nbgen.py
+        sys.path.insert(0, NOTEBOOKS)
     spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 
 import pytest
 
@@ -23,6 +24,8 @@ CASES = {  # name -> (generator, text that shows the small configuration ran, mi
 
 
 def _generator(script):
+    if NOTEBOOKS not in sys.path:              # the generators import notebooks/_nbgen.py
+        sys.path.insert(0, NOTEBOOKS)
     spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

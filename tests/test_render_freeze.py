@@ -98,9 +98,49 @@ def test_frozen_replay_reads_a_new_power_table(monkeypatch):
     a = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     n = len(scene.mi_scene.emitters())
     flat = PowerSelection.from_power(scene.mi_scene, np.ones(n))
-    monkeypatch.setattr(integ, "_selection", [(scene.mi_scene, flat)])
+    key = next(k for k in integ._selection if k[0] == id(scene.mi_scene))
+    monkeypatch.setitem(integ._selection, key, flat)
     b = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     monkeypatch.setattr(R, "FREEZE", False)
     c = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     assert not np.allclose(a, b)                       # the new table was used ...
     assert np.allclose(b, c, rtol=1e-5, atol=1e-6)     # ... as a traced render uses it
+
+
+def test_recording_holds_while_other_python_bsdfs_are_alive(scene, monkeypatch):
+    """Dr.Jit fails a recording whose BSDF call meets a live Python BSDF that is not among its
+    inputs (a draaw material of another scene, kept by a notebook or a cache); freeze_render
+    passes every live draaw BSDF along, so the render still records and replays."""
+    import warnings
+    others = [mi.load_dict({"type": "draaw", "roughness": 0.3 + 0.1 * i}) for i in range(2)]
+    calls = []
+    real = mi.render
+    monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    monkeypatch.setattr(R, "FREEZE", True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)      # no fallback to tracing
+        first = [np.array(draaw_mi.render(scene, version="v2", spp=2, seed=s, post=[])) for s in (1, 2)]
+        n = len(calls)
+        again = np.array(draaw_mi.render(scene, version="v2", spp=2, seed=1, post=[]))
+    assert len(calls) == n and np.array_equal(again, first[0])
+    assert len(others) == 2
+
+
+def test_a_failed_recording_falls_back_to_tracing(scene, monkeypatch):
+    """A scene the recorder cannot hold is traced instead, with a warning, and gives the traced
+    image (the fallback keeps renders working; the warning keeps it visible)."""
+    def refuse(fn):
+        def frozen(*a, **k):
+            raise RuntimeError("record(): stand-in failure")
+        return frozen
+    monkeypatch.setattr(R.dr, "freeze", refuse)
+    R._FROZEN.clear()
+    monkeypatch.setattr(R, "FREEZE", True)
+    try:
+        with pytest.warns(RuntimeWarning, match="traced from now on"):
+            img = np.array(draaw_mi.render(scene, version="v1", spp=2, seed=9, post=[]))
+        monkeypatch.setattr(R, "FREEZE", False)
+        traced = np.array(draaw_mi.render(scene, version="v1", spp=2, seed=9, post=[]))
+        assert np.allclose(img, traced, rtol=1e-5, atol=1e-6) and img.mean() > 0
+    finally:
+        R._FROZEN.clear()

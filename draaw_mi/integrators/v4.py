@@ -5,6 +5,7 @@ import contextlib
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from ..errors import ParameterError
 from .common import DraawIntegrator, mis_weight, relative, sample_emitter
@@ -145,7 +146,7 @@ class DraawV4Integrator(DraawIntegrator):
         if self.light_selection not in ("power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
                                  "'power' or 'uniform'")
-        self._selection = []           # [(scene, PowerSelection | None)], the last two scenes
+        self._selection = {}           # (id(scene), emitter ids) -> PowerSelection | None
         self._frozen_selection = None  # (PowerSelection | None,) while a recording runs
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
@@ -164,14 +165,18 @@ class DraawV4Integrator(DraawIntegrator):
             # a recording made without :meth:`freeze_state` (emitter values cannot be read
             # while recording): uniform selection, unbiased too
             return None
-        # Cache for the last two scenes (the preview alternates a low-resolution copy and the
-        # scene), holding them: an id() key could be reused by a new scene once the old one is
-        # freed (Mitsuba scenes take no weak references).
-        for held, sel in self._selection:
-            if held is scene:
-                return sel
+        # Cached per scene without holding it (a held scene keeps its Python BSDFs alive, and
+        # every live instance enlarges BSDF calls and must enter dr.freeze recordings). The key
+        # adds the emitters' registry ids to id(scene): a table found under a reused key then
+        # indexes the same emitter ids, and any positive table keeps the estimate unbiased.
+        ids = tuple(int(i) for i in np.array(dr.reinterpret_array(mi.UInt32, scene.emitters_dr())))
+        key = (id(scene), ids)
+        if key in self._selection:
+            return self._selection[key]
         sel = PowerSelection.of(scene)
-        self._selection = [(scene, sel)] + self._selection[:1]
+        if len(self._selection) >= 4:
+            self._selection.pop(next(iter(self._selection)))
+        self._selection[key] = sel
         return sel
 
     def freeze_state(self, scene):

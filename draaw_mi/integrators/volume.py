@@ -125,7 +125,7 @@ class MediaTable:
 
 
 _TABLES: dict[int, tuple] = {}
-_TABLES_MAX = 4          # a few scenes at most: entries hold their scene alive (mi.Scene has no weakref)
+_TABLES_MAX = 4          # a few scenes at most (each entry holds its media alive)
 
 
 def media_table(scene: mi.Scene) -> MediaTable:
@@ -135,6 +135,10 @@ def media_table(scene: mi.Scene) -> MediaTable:
     diff = False
     for shape in scene.shapes():
         for m in (shape.interior_medium(), shape.exterior_medium()):
+            # the media by identity: the table holds them alive, so a new scene at a reused
+            # address cannot match unless it has these very media (the scene itself is not
+            # held: a held scene keeps its Python BSDFs alive, which enlarge every BSDF call)
+            stamp.append(id(m))
             if m is not None:
                 p = mi.traverse(m)
                 for k in p.keys():
@@ -146,15 +150,16 @@ def media_table(scene: mi.Scene) -> MediaTable:
                 with dr.resume_grad():            # sample() runs with AD suspended
                     for k in p.keys():
                         diff |= not isinstance(p[k], (float, int)) and dr.grad_enabled(p[k])
+    stamp += [id(s.get_medium()) for s in scene.sensors()]
     stamp.append(("differentiated", diff))
     hit = _TABLES.get(key)
-    if hit is not None and hit[0] == stamp and hit[1] is scene:
-        return hit[2]
+    if hit is not None and hit[0] == stamp:
+        return hit[1]
     table = MediaTable(scene, DIFF_MAJORANT_FACTOR if diff else 1.0)
     _TABLES.pop(key, None)
     while len(_TABLES) >= _TABLES_MAX:                  # drop the oldest (insertion order)
         _TABLES.pop(next(iter(_TABLES)))
-    _TABLES[key] = (stamp, scene, table)
+    _TABLES[key] = (stamp, table)
     return table
 
 

@@ -92,6 +92,22 @@ def _dda_setup(table, idx, ray, t0):
     return cell, t_next, dt, step, res, off
 
 
+def _dda_advance(step_on, t, t_exit, cell, t_next, dt, step, res):
+    """One DDA step for the lanes ``step_on``: move ``t`` to the cell's exit and into the
+    neighbouring cell along the axis whose boundary comes first. Returns ``(t, cell, t_next,
+    out)``, ``out`` where the new cell lies outside the grid."""
+    cx, cy, cz = cell
+    tnx, tny, tnz = t_next
+    ax = dr.select(tnx <= dr.minimum(tny, tnz), 0, dr.select(tny <= tnz, 1, 2))
+    mx, my, mz = step_on & (ax == 0), step_on & (ax == 1), step_on & (ax == 2)
+    t = dr.select(step_on, t_exit, t)
+    cx, tnx = dr.select(mx, cx + step[0], cx), dr.select(mx, tnx + dt[0], tnx)
+    cy, tny = dr.select(my, cy + step[1], cy), dr.select(my, tny + dt[1], tny)
+    cz, tnz = dr.select(mz, cz + step[2], cz), dr.select(mz, tnz + dt[2], tnz)
+    out = (cx < 0) | (cy < 0) | (cz < 0) | (cx >= res[0]) | (cy >= res[1]) | (cz >= res[2])
+    return t, (cx, cy, cz), (tnx, tny, tnz), out
+
+
 @dr.syntax
 def free_flight(table, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.Sampler,
                 active: mi.Bool, adjoint=None) -> Flight:
@@ -142,18 +158,8 @@ def free_flight(table, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.S
         adv = live & ~tentative
         done = adv & (t_exit >= t1)
         step_on = adv & ~done
-        ax = dr.select(tnx <= dr.minimum(tny, tnz), 0, dr.select(tny <= tnz, 1, 2))
-        t[step_on] = t_exit
-        mx = step_on & (ax == 0)
-        my = step_on & (ax == 1)
-        mz = step_on & (ax == 2)
-        cx[mx] = cx + step[0]
-        tnx[mx] = tnx + dt[0]
-        cy[my] = cy + step[1]
-        tny[my] = tny + dt[1]
-        cz[mz] = cz + step[2]
-        tnz[mz] = tnz + dt[2]
-        out = (cx < 0) | (cy < 0) | (cz < 0) | (cx >= res[0]) | (cy >= res[1]) | (cz >= res[2])
+        t, (cx, cy, cz), (tnx, tny, tnz), out = _dda_advance(
+            step_on, t, t_exit, (cx, cy, cz), (tnx, tny, tnz), dt, step, res)
         it += 1
         exhausted = it >= MAX_TRACKING_STEPS
         weight[live & exhausted & ~real] = 0.0          # exhausted: absorbed (never NaN)
@@ -203,18 +209,8 @@ def ratio_track(table, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.S
         adv = live & ~tentative
         done = adv & (t_exit >= t1)
         step_on = adv & ~done
-        ax = dr.select(tnx <= dr.minimum(tny, tnz), 0, dr.select(tny <= tnz, 1, 2))
-        t[step_on] = t_exit
-        mx = step_on & (ax == 0)
-        my = step_on & (ax == 1)
-        mz = step_on & (ax == 2)
-        cx[mx] = cx + step[0]
-        tnx[mx] = tnx + dt[0]
-        cy[my] = cy + step[1]
-        tny[my] = tny + dt[1]
-        cz[mz] = cz + step[2]
-        tnz[mz] = tnz + dt[2]
-        out = (cx < 0) | (cy < 0) | (cz < 0) | (cx >= res[0]) | (cy >= res[1]) | (cz >= res[2])
+        t, (cx, cy, cz), (tnx, tny, tnz), out = _dda_advance(
+            step_on, t, t_exit, (cx, cy, cz), (tnx, tny, tnz), dt, step, res)
         it += 1
         exhausted = it >= MAX_TRACKING_STEPS
         T[live & exhausted] = 0.0

@@ -49,6 +49,8 @@ Example::
 """
 from __future__ import annotations
 
+import weakref
+
 import drjit as dr
 import mitsuba as mi
 
@@ -89,11 +91,18 @@ def _schlick(f0, f90, cos_theta):
     return f0 + (f90 - f0) * (m2 * m2 * m)
 
 
+# Every live DraawBSDF. A dr.freeze recording that makes a BSDF virtual call fails when a
+# Python BSDF instance is alive but not among its inputs (Dr.Jit 1.5 checks the whole registry
+# domain; C++ plugins are not affected): draaw_mi.render.freeze_render passes these along.
+LIVE_INSTANCES: "weakref.WeakSet" = weakref.WeakSet()
+
+
 class DraawBSDF(mi.BSDF):
     """Metallic/roughness GGX + Lambert BSDF with GO-Draaw's legacy knobs (see module doc)."""
 
     def __init__(self, props: mi.Properties):
         mi.BSDF.__init__(self, props)
+        LIVE_INSTANCES.add(self)
         for name, (default, lo, hi) in COLOR_PARAMS.items():
             setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=True))
         for name, (default, lo, hi) in SCALAR_PARAMS.items():
