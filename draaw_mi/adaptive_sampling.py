@@ -33,7 +33,13 @@ import mitsuba as mi
 import numpy as np
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
-MIN_FRACTION = 4            # every pixel keeps at least (spp - pilot) / 4 main samples
+MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
+# Floor and cap bound what a wrong pilot costs. A 4-sample pilot misses rare bright paths (the
+# point light's glints on the thesis scene's near-mirror floor, 95 % of its variance in ten
+# pixels): with a floor of 1/4 and no cap V4 measured 3.0x path's variance x time there at
+# 256x256, with 1/2 and a cap of 4x the mean score 1.3x; the Cornell box's gain shrank from
+# 0.26x to 0.43x, the spheres' from 0.61x to 0.70x (benchmarks/results/speed_suite.md).
+SCORE_CAP = 4.0             # cap of a pixel's allocation score, in multiples of the mean
 COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera ray, set-up, film)
 
 
@@ -120,7 +126,8 @@ def _box3(a: np.ndarray) -> np.ndarray:
 
 
 def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
-             smooth: bool = True, cost: np.ndarray | None = None) -> np.ndarray:
+             smooth: bool = True, cost: np.ndarray | None = None,
+             score_cap: float | None = None) -> np.ndarray:
     """Per-pixel counts (H, W) >= ``m_min``.
 
     Without ``cost``: about ``budget`` samples in all, the part above the minimum proportional
@@ -134,6 +141,13 @@ def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
     c = np.ones_like(sd) if cost is None else np.maximum(cost, 1e-6)
     extra = max(budget - m_min * c.sum(), 0.0)
     score = sd / np.sqrt(c)
+    if score_cap is not None and score.size:
+        # A pilot of a few samples sees a rare bright path (a glint, a caustic) in some pixels
+        # and misses it in their twins: uncapped, the few pixels that saw one take most of the
+        # budget and the rest fall to the minimum. The cap bounds a pixel's share.
+        mean = float((score * c).sum() / c.sum())
+        if mean > 0:
+            score = np.minimum(score, score_cap * mean)
     total = float((score * c).sum())
     want = m_min + (extra * score / total if total > 0 else extra / c.sum())
     rng = np.random.default_rng(seed)
@@ -156,7 +170,8 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     # per segment (smoothed like the variance: both are estimated from few samples).
     cost = _box3(COST_FIXED + 2.0 * segments)
     # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
-    counts = allocate(var.sum(-1), rest * cost.sum(), max(1, rest // MIN_FRACTION), s2, cost=cost)
+    counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
+                      score_cap=SCORE_CAP)
     main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995)
     wp = a / spp
     img = wp * pilot + (1.0 - wp) * main

@@ -36,21 +36,27 @@ def _scene(res=8, spp=4):
 
 
 def test_spp_map_counts_set_the_variance():
-    """Pixels with 16 samples have ~1/16 the variance of pixels with 1 sample."""
+    """Pixels with 16 samples have ~1/16 the variance of the same pixels with 1 sample (two
+    maps with the halves swapped, so each pixel is compared with itself)."""
     scene = _scene(8)
     sensor = scene.sensors()[0]
     integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
     counts = np.ones((8, 8), np.int64)
     counts[:, 4:] = 16
-    stack = np.stack([ads.render_spp_map(integ, scene, sensor, counts, seed=s) for s in range(40)])
+    n = 80                              # 8x8 renders: cheap; 40 left the z-test fragile
+    stack = np.stack([ads.render_spp_map(integ, scene, sensor, counts, seed=s) for s in range(n)])
+    swapped = np.stack([ads.render_spp_map(integ, scene, sensor, 17 - counts, seed=500 + s)
+                        for s in range(n)])
     var = stack.var(0, ddof=1).sum(-1)
-    ok = var > 0
-    ratio = var[:, :4][ok[:, :4]].mean() / var[:, 4:][ok[:, 4:]].mean()
-    assert 8.0 < ratio < 32.0, ratio
+    var_sw = swapped.var(0, ddof=1).sum(-1)
+    # left half: 1 sample in `stack`, 16 in `swapped`; right half the other way round
+    left = var[:, :4].mean() / var_sw[:, :4].mean()
+    right = var_sw[:, 4:].mean() / var[:, 4:].mean()
+    assert 8.0 < left < 32.0 and 8.0 < right < 32.0, (left, right)
     # same expectation on both sides' pixels as a uniform 16-spp map (z-test of the means)
     uni = np.stack([ads.render_spp_map(integ, scene, sensor, np.full((8, 8), 4), seed=100 + s)
-                    for s in range(40)])
-    se = np.sqrt(stack.var(0, ddof=1) / 40 + uni.var(0, ddof=1) / 40)
+                    for s in range(n)])
+    se = np.sqrt(stack.var(0, ddof=1) / n + uni.var(0, ddof=1) / n)
     m = se > 1e-6
     z = (stack.mean(0) - uni.mean(0))[m] / se[m]
     assert np.mean(np.abs(z) > 3) < 0.03 and abs(z.mean()) < 0.3
@@ -77,6 +83,20 @@ def test_v4_uses_adaptive_sampling_from_64_spp(monkeypatch):
     b = np.array(mi.render(scene, integrator=integ, spp=64, seed=4))
     assert np.allclose(a, b, rtol=1e-5, atol=1e-7)         # same seed, same image (up to
     #                                                        the order of atomic adds)
+
+
+def test_allocation_cap_bounds_a_pixel_share():
+    """One pixel whose pilot saw a rare bright sample: uncapped it takes most of the budget,
+    capped at 4x the mean score it takes at most its bounded share."""
+    var = np.ones((8, 8))
+    var[3, 3] = 1e6
+    free = ads.allocate(var, budget=64 * 60, m_min=30, seed=1, smooth=False)
+    capped = ads.allocate(var, budget=64 * 60, m_min=30, seed=1, smooth=False, score_cap=4.0)
+    extra = 64 * 60 - 64 * 30
+    cap = 4.0 * (63 * 1.0 + 1000.0) / 64                      # 4x the mean score (sd)
+    bound = 30 + extra * cap / (63 + cap) + 1
+    assert free[3, 3] > extra * 0.9 and capped[3, 3] <= bound < free[3, 3]
+    assert capped.min() >= 30 and abs(int(capped.sum()) - 64 * 60) <= 64
 
 
 def test_adaptive_lowers_the_error_where_noise_is_uneven():
