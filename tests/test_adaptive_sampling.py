@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import draaw_mi  # noqa: F401
 import mitsuba as mi
@@ -115,3 +116,35 @@ def test_adaptive_lowers_the_error_where_noise_is_uneven():
     e_off = np.mean([np.mean((np.array(mi.render(scene, integrator=off, spp=64, seed=s)) - ref) ** 2)
                      for s in range(6)])
     assert e_on < 0.85 * e_off, (e_on, e_off)
+
+
+@pytest.mark.parametrize("light,bsdf,expected", [
+    ({"type": "point", "position": [0, 2, 2]}, {"type": "draaw", "roughness": 0.05, "metallic": 1.0}, True),
+    ({"type": "point", "position": [0, 2, 2]}, {"type": "roughconductor", "alpha": 0.03}, True),
+    ({"type": "point", "position": [0, 2, 2]}, {"type": "draaw", "roughness": 0.3}, False),
+    ({"type": "point", "position": [0, 2, 2]}, {"type": "conductor"}, False),      # delta lobe
+    ({"type": "constant"}, {"type": "draaw", "roughness": 0.05, "metallic": 1.0}, False),
+])
+def test_glint_scenes_render_without_adaptive_sampling(monkeypatch, light, bsdf, expected):
+    """Delta lights over near-mirror surfaces make glints a small pilot cannot see: those
+    scenes (and only those) skip adaptive sampling."""
+    d = {"type": "scene", "light": light,
+         "floor": {"type": "rectangle", "bsdf": bsdf},
+         "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().look_at(
+             origin=[0, 1, 3], target=[0, 0, 0], up=[0, 1, 0]),
+             "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}}}}
+    scene = mi.load_dict(d)
+    assert ads.pilot_can_miss(scene) is expected
+    calls = []
+    real = ads.render_adaptive
+    monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3}), spp=64, seed=1)
+    assert np.isfinite(np.array(img)).all()
+    assert (len(calls) == 1) is (not expected)
+
+
+def test_allocation_without_any_variance_is_uniform():
+    """A pilot that saw no variance at all (a black image): one count per pixel, the budget
+    spread evenly (this returned a bare number before, and the main pass raised)."""
+    m = ads.allocate(np.zeros((4, 6)), budget=24 * 10 * 2.0, m_min=5, seed=0, cost=np.full((4, 6), 2.0))
+    assert m.shape == (4, 6) and (m == 10).all()

@@ -47,7 +47,8 @@ class DraawV4Integrator(DraawIntegrator):
      * - light_selection
        - |string|
        - ``power``: next-event estimation picks an emitter in proportion to its estimated
-         power where the scene's emitters differ in strength (uniform otherwise);
+         power where the scene's emitters differ in strength and none is an environment
+         (uniform otherwise);
          ``uniform``: Mitsuba's uniform choice. (Default: ``power``)
 
      * - constant_env_nee
@@ -99,17 +100,23 @@ class DraawV4Integrator(DraawIntegrator):
     (stopping bright paths adds variance) while never roulette costs speed in enclosed
     scenes; power selection because it cut the error of the 24-light scene about 8x at the
     same cost and is switched off (uniform, the same kernel as before) where the emitters
-    have similar powers; adaptive sampling because the error of most images is dominated by
+    have similar powers or an environment lights the scene (an environment's power says little
+    about what it gives the visible surfaces: on the thesis scene the table starved the point
+    light, whose glints carry most of the variance); adaptive sampling because the error of most images is dominated by
     few pixels (emitter edges, highlights, caustics), and it is off for small renders (< 64
     spp: the preview and the fit loop, where a pilot pass would be too small) and for
     differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
     the *absolute* squared error; dark pixels get fewer samples, so a relative error measure
-    (relMSE) can rise (``adaptive=False`` turns it off). Known loss: the glass (thesis) scene
-    at 256², where V4 measured 1.5x (no adaptive) to 3.5x ``path``'s MSE.
+    (relMSE) can rise (``adaptive=False`` turns it off). Each pixel keeps at least half the
+    uniform count and no pixel takes more than a capped share, which bounds the loss where a
+    small pilot misses rare bright paths. Known loss: the glass (thesis) scene, whose error
+    sits in a few pixels of point-light glints on a near-mirror floor; there adaptive sampling
+    costs about 1.3x ``path``'s variance x time at 256² (V4 without it: 0.9x), see
+    ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with
     respect to BSDF and emitter parameters. Limitations: no geometry / visibility gradients
-    (no projective sampling), no participating media, detached sampling (delta-lobe
+    (no projective sampling), detached sampling (delta-lobe
     parameters such as a glass IOR get no gradient).
 
     Deviations from GO-Draaw's V4 (``go-draaw-spec.md`` §3.6-3.7): GO-Draaw's V4 family is its
@@ -207,7 +214,8 @@ class DraawV4Integrator(DraawIntegrator):
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
                 and self.max_depth > 1
-                and isinstance(seed, int) and ads.supported(sensor)):
+                and isinstance(seed, int) and ads.supported(sensor)
+                and not ads.pilot_can_miss(scene)):
             alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
             return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
         return super().render(scene, sensor, seed, spp, develop, evaluate)
