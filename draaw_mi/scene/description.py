@@ -24,7 +24,7 @@ from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from . import camera as cam
 from .meshes import load_mesh_parts, write_ply
-from .schema import Where, boolean, check_keys, number, resolution, string, vector
+from .schema import Where, boolean, check_keys, number, resolution, rotations, string, vector
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "hide_emitters", "aovs")
@@ -125,16 +125,8 @@ def to_world(table: dict, where: Where):
         return mi.ScalarTransform4f(arr.tolist())
     if "translate" in table:
         t = t.translate(vector(table["translate"], where / "translate"))
-    if "rotate" in table:
-        rot = table["rotate"]
-        rots = rot if isinstance(rot, list) else [rot]
-        for i, r in enumerate(rots):
-            wr = where / "rotate" / i if isinstance(rot, list) else where / "rotate"
-            check_keys(r, ("axis", "angle"), wr, required=("axis", "angle"))
-            axis = vector(r["axis"], wr / "axis")
-            if np.linalg.norm(axis) == 0:
-                raise (wr / "axis").error("is the zero vector")
-            t = t.rotate(axis=axis, angle=number(r["angle"], wr / "angle"))
+    for axis, angle in rotations(table, where):
+        t = t.rotate(axis=axis, angle=angle)
     if "scale" in table:
         sc = vector(table["scale"], where / "scale")
         if any(v == 0 for v in sc):

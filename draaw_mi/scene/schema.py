@@ -106,3 +106,20 @@ def resolution(value: Any, where: Where) -> tuple[int, int]:
     w = number(value[0], where / "width", lo=1, hi=16384, integer=True)
     h = number(value[1], where / "height", lo=1, hi=16384, integer=True)
     return int(w), int(h)
+
+
+def rotations(table: dict, where: Where) -> list:
+    """``[(axis, angle in degrees), ...]`` of ``table["rotate"]`` (one table or a list of
+    them), validated; empty without ``rotate``. Shared by meshes and SDF objects."""
+    if "rotate" not in table:
+        return []
+    rot = table["rotate"]
+    out = []
+    for i, r in enumerate(rot if isinstance(rot, list) else [rot]):
+        wr = where / "rotate" / i if isinstance(rot, list) else where / "rotate"
+        check_keys(r, ("axis", "angle"), wr, required=("axis", "angle"))
+        axis = vector(r["axis"], wr / "axis")
+        if not any(axis):
+            raise (wr / "axis").error("is the zero vector")
+        out.append((axis, number(r["angle"], wr / "angle")))
+    return out

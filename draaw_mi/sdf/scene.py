@@ -141,21 +141,13 @@ def find(scene: mi.Scene) -> SDFScene | None:
 
 # --------------------------------------------------------------------------- parsing
 def _transform_of(entry: dict, where, node: SDFNode) -> SDFNode:
-    from ..scene.schema import check_keys, number, vector
+    from ..scene.schema import number, rotations, vector
     if not any(k in entry for k in ("translate", "rotate", "scale")):
         return node
     t = vector(entry.get("translate", [0, 0, 0]), where / "translate")
     R = np.eye(3)
-    if "rotate" in entry:
-        rot = entry["rotate"]
-        rots = rot if isinstance(rot, list) else [rot]
-        for i, r in enumerate(rots):
-            wr = where / "rotate" / i if isinstance(rot, list) else where / "rotate"
-            check_keys(r, ("axis", "angle"), wr, required=("axis", "angle"))
-            axis = vector(r["axis"], wr / "axis")
-            if np.linalg.norm(axis) == 0:
-                raise (wr / "axis").error("is the zero vector")
-            R = rotation_matrix(axis, number(r["angle"], wr / "angle")) @ R
+    for axis, angle in rotations(entry, where):
+        R = rotation_matrix(axis, angle) @ R
     s = entry.get("scale", 1.0)
     if isinstance(s, list):
         v = vector(s, where / "scale", lo=0.0)
