@@ -89,7 +89,12 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--no-progress", action="store_true")
 
     b = sub.add_parser("bench", help="measure what accuracy costs in time (error vs time study)")
-    b.add_argument("scenes", nargs="*", help="scene files (default: the sample scenes)")
+    b.add_argument("scenes", nargs="*", help="scene files (default: the sample scenes); with "
+                   "--suite speed: suite scene names (default: all ten)")
+    b.add_argument("--suite", choices=["speed"], help="speed: V4 (or --versions) against path on "
+                   "the speed suite's scenes, time to reach path's error (draaw_mi.speed_bench); "
+                   "--spp's first value is the spp (default 64), --gt-spp the reference spp, "
+                   "--resolution N or NxN the sizes (default 128 and 256)")
     b.add_argument("--quick", action="store_true", help="small grid, finishes in about two minutes")
     b.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
     b.add_argument("--versions", help="comma-separated, default v1,v2,v3,v4,path")
@@ -303,9 +308,41 @@ def _int_list(text, name):
     return values
 
 
+def _cmd_speed_suite(args) -> int:
+    """``draaw-mi bench --suite speed``: the speed suite (draaw_mi.speed_bench) with bench's options."""
+    from draaw_mi import speed_bench, speed_suite
+    from draaw_mi.errors import suggest
+    from draaw_mi.integrators import resolve_version
+
+    for name in args.scenes:
+        if name not in speed_suite.SCENES:
+            raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))} "
+                           f"(the suite's scenes: {', '.join(speed_suite.SCENES)})")
+    versions = args.versions.split(",") if args.versions else ["v4"]
+    plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
+    argv = ["--integrators", ";".join(plugins), "--repeats", str(args.repeats),
+            "--ref-spp", str(args.gt_spp if args.gt_spp != 4096 else 1024),
+            "--out", os.path.join(args.out, "speed_suite.md"),
+            "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
+    if args.scenes:
+        argv += ["--scenes", ",".join(args.scenes)]
+    if args.spp:
+        argv += ["--spp", args.spp.split(",")[0]]
+    if args.resolution:
+        sizes = {int(x) for x in args.resolution.lower().split("x") if x}
+        if len(sizes) != 1:
+            raise CliError(f"bench --suite speed: --resolution {args.resolution!r}; the suite's "
+                           "images are square (give N or NxN)")
+        argv += ["--res", str(sizes.pop())]
+    os.makedirs(args.out, exist_ok=True)
+    return speed_bench.main(argv, command="draaw-mi bench --suite speed " + " ".join(argv))
+
+
 def _cmd_bench(args) -> int:
     import draaw_mi
     from draaw_mi import bench
+    if args.suite == "speed":
+        return _cmd_speed_suite(args)
     from draaw_mi.scene.schema import Where, resolution as parse_res
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(draaw_mi.__file__)))

@@ -172,3 +172,26 @@ def test_cli_fit_accepts_a_png_reference(tmp_path, monkeypatch):
     assert main(["fit", scene_file, "--reference", str(tmp_path / "ref.png"), "--param", "target.metallic",
                  "--iterations", "1", "--spp", "1", "--no-progress"]) == 0
     assert len(seen["arrays"]) == 1 and np.allclose(seen["arrays"][0], 0.2158605, atol=2e-3)
+
+
+def test_bench_suite_speed(tmp_path, capsys):
+    """`draaw-mi bench --suite speed`: the speed suite on one small scene; each cell is the time
+    ratio times the MSE ratio, one column per version, the reference cached under --out."""
+    import re
+    out = tmp_path / "suite"
+    argv = ["bench", "--suite", "speed", "metal_018", "--versions", "v4,v2", "--resolution", "16",
+            "--repeats", "2", "--spp", "8", "--gt-spp", "64", "--out", str(out)]
+    assert main(argv) == 0
+    text = (out / "speed_suite.md").read_text()
+    assert "`draaw_v4` | `draaw_v2`" in text
+    row = next(line for line in text.splitlines() if line.startswith("| metal_018 |"))
+    cells = re.findall(r"\*\*([\d.]+)\*\* \(([\d.]+), ([\d.]+)\)", row)
+    assert len(cells) == 2
+    for ratio, t, mse in cells:
+        assert float(t) > 0 and float(mse) > 0
+        assert abs(float(ratio) - float(t) * float(mse)) <= 0.01 + 0.01 * float(ratio)
+    ref = out / "refs" / "metal_018_16_d5_64.exr"
+    stamp = ref.stat().st_mtime_ns
+    assert main(argv) == 0 and ref.stat().st_mtime_ns == stamp          # reused, not re-rendered
+    assert main(["bench", "--suite", "speed", "metal018", "--out", str(out)]) == 2
+    assert "did you mean 'metal_018'" in capsys.readouterr().err

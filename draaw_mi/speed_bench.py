@@ -1,0 +1,203 @@
+"""Speed suite measurement: time to reach ``path``'s 64-spp error, per scene kind (the scenes
+are in :mod:`draaw_mi.speed_suite`). Run it as ``draaw-mi bench --suite speed`` or
+``python benchmarks/speed_suite.py``.
+
+For each resolution and scene:
+
+1. a reference: ``path`` at ``--ref-spp`` in 256-spp passes with distinct seeds, cached as EXR
+   (mean and the per-pixel variance of the mean, estimated from the passes) in ``--cache``;
+2. every integrator is compiled (a warm-up render), then ``--repeats`` cycles render each
+   integrator back to back (A B A B ...) at ``--spp`` with a fresh seed per render; each render
+   gives one time and one squared error;
+3. ``MSE_X`` = mean squared error over the cycles minus the reference's own noise (the mean
+   per-pixel variance of the reference, the same for every integrator), and
+   ``t_equal / path = median over cycles of (t_X / t_path) * MSE_X / MSE_path``: Monte Carlo
+   MSE falls as 1/spp and time grows as spp, so this is the time ``X`` needs to reach the
+   error ``path`` reaches at ``--spp``, relative to ``path``'s time.
+
+Integrators are given as ``plugin[:key=value,...]`` (e.g. ``draaw_v4:rr_depth=5``), so
+variants of one integrator are compared in the same interleaved run. ``--sampler`` gives
+every integrator (``path`` included) the same sampler.
+
+Usage::
+
+    .venv/bin/python benchmarks/speed_suite.py                      # 128 and 256, all scenes
+    .venv/bin/python benchmarks/speed_suite.py --res 128 --scenes cornell,metal_018 --out ''
+
+The machine is usually shared: times are medians of back-to-back ratios, never single runs.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from . import speed_suite as ss
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CACHE = os.path.join(os.path.expanduser("~"), ".cache", "draaw-mi", "speed_refs")
+
+
+def parse_integrator(spec: str, depth: int) -> dict:
+    plugin, _, opts = spec.partition(":")
+    d = {"type": plugin, "max_depth": depth}
+    for kv in filter(None, opts.split(",")):
+        k, v = kv.split("=")
+        for conv in (int, float):
+            try:
+                v = conv(v)
+                break
+            except ValueError:
+                pass
+        if v in ("true", "false"):
+            v = v == "true"
+        d[k] = v
+    return d
+
+
+def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    t = time.perf_counter()
+    img = mi.render(scene, integrator=integ, spp=spp, seed=seed)
+    dr.eval(img)
+    dr.sync_thread()
+    dt = time.perf_counter() - t
+    return np.array(img, dtype=np.float64)[..., :3], dt
+
+
+def reference(name: str, res: int, scene, depth: int, spp: int, cache: str):
+    """(mean, per-pixel variance of the mean) of ``path`` at ``spp``; cached as EXR."""
+    from .io import read_exr, write_exr
+    path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}.exr")
+    if cache and os.path.exists(path):
+        arr = read_exr(path).astype(np.float64)
+        return arr[..., :3], arr[..., 3:6], 0.0
+    integ = mi.load_dict({"type": "path", "max_depth": depth})
+    chunk = min(spp, 64)
+    n = spp // chunk
+    t0 = time.perf_counter()
+    s1 = s2 = 0.0
+    for i in range(n):
+        img, _ = render(scene, integ, chunk, 1_000_000 + 7919 * i)
+        s1, s2 = s1 + img, s2 + img * img
+    mean = s1 / n
+    var = np.maximum(s2 / n - mean * mean, 0.0) / max(n - 1, 1)   # variance of the mean
+    if cache:
+        write_exr(path, np.concatenate([mean, var], -1), ["R", "G", "B", "v0.R", "v1.G", "v2.B"])
+    return mean, var, time.perf_counter() - t0
+
+
+def bench(name: str, res: int, args) -> dict | None:
+    d = ss.build(name, res, args.sampler)
+    if d is None:
+        print(f"[{name}] skipped: data absent", file=sys.stderr)
+        return None
+    scene = mi.load_dict(d)
+    depth = ss.max_depth(name)
+    ref_scene = scene if args.sampler == "independent" else ss.load(name, res)
+    ref, ref_var, t_ref = reference(name, res, ref_scene, depth, args.ref_spp, args.cache)
+    noise = float(ref_var.mean())
+    specs = args.integrators.split(";")
+    integs = [mi.load_dict(parse_integrator(s, depth)) for s in specs]
+    for it in integs:
+        render(scene, it, args.spp, 1)                 # compile
+    times = [[] for _ in specs]
+    errs = [[] for _ in specs]
+    for c in range(args.repeats):
+        for k, it in enumerate(integs):
+            img, dt = render(scene, it, args.spp, 100 + 7 * c)
+            times[k].append(dt)
+            errs[k].append(float(np.mean((img - ref) ** 2)))
+    mse = [max(float(np.mean(e)) - noise, 1e-30) for e in errs]
+    rows = []
+    for k, s in enumerate(specs):
+        t_ratio = statistics.median(a / b for a, b in zip(times[k], times[0]))
+        rows.append(dict(spec=s, time=statistics.median(times[k]), mse=mse[k],
+                         mse_se=float(np.std(errs[k], ddof=1) / np.sqrt(len(errs[k]))),
+                         t_ratio=t_ratio, mse_ratio=mse[k] / mse[0],
+                         ratio=t_ratio * mse[k] / mse[0]))
+    r = dict(name=name, res=res, depth=depth, rows=rows, noise=noise, t_ref=t_ref,
+             ref_mean=float(ref.mean()), kind=ss.SCENES[name][0])
+    line = "  ".join(f"{row['spec']}: {row['ratio']:.2f} (t {row['t_ratio']:.2f}, mse "
+                     f"{row['mse_ratio']:.2f})" for row in rows[1:])
+    print(f"[{res} {name}] path {rows[0]['time']:.3f}s  {line}", file=sys.stderr, flush=True)
+    return r
+
+
+def report(results: list[dict], args) -> str:
+    specs = args.integrators.split(";")
+    out = ["# Speed suite: time to reach `path`'s error (draaw_mi/speed_bench.py)", "",
+           f"Command: `{args.command}`  ",
+           f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+           f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "
+           f"{time.strftime('%Y-%m-%d %H:%M')}  ",
+           f"Box filter, sampler `{args.sampler}` for every integrator; reference `path` at "
+           f"{args.ref_spp} spp (its own noise subtracted from every MSE); {args.repeats} "
+           f"interleaved cycles at {args.spp} spp, one seed per render.", "",
+           "Cells: **time to reach `path`'s {0}-spp RMSE, relative to `path`** = median over "
+           "cycles of the back-to-back time ratio x MSE ratio; in brackets (time ratio, MSE "
+           "ratio). Below 1: faster than `path`.".format(args.spp), ""]
+    for res in sorted({r["res"] for r in results}):
+        rr = [r for r in results if r["res"] == res]
+        out += [f"## {res}x{res}", "",
+                "| scene | kind | depth | path s @ spp | " + " | ".join(f"`{s}`" for s in specs[1:]) + " |",
+                "|---|---|---|---|" + "---|" * (len(specs) - 1)]
+        for r in rr:
+            cells = [f"**{row['ratio']:.2f}** ({row['t_ratio']:.2f}, {row['mse_ratio']:.2f})"
+                     for row in r["rows"][1:]]
+            out.append(f"| {r['name']} | {r['kind']} | {r['depth']} | {r['rows'][0]['time']:.3f} | "
+                       + " | ".join(cells) + " |")
+        meds = [statistics.median(r["rows"][k]["ratio"] for r in rr) for k in range(1, len(specs))]
+        worst = [max(r["rows"][k]["ratio"] for r in rr) for k in range(1, len(specs))]
+        out.append("| **median** | | | | " + " | ".join(f"**{m:.2f}** (max {w:.2f})"
+                                                    for m, w in zip(meds, worst)) + " |")
+        out.append("")
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None, command: str | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--res", default="128,256")
+    ap.add_argument("--scenes", default=",".join(ss.SCENES))
+    ap.add_argument("--integrators", default="path;draaw_v4",
+                    help="';'-separated specs plugin[:k=v,...]; the first is the baseline")
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--ref-spp", type=int, default=1024)
+    ap.add_argument("--repeats", type=int, default=6)
+    ap.add_argument("--sampler", default="independent")
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--cache", default=CACHE)
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "speed_suite.md"))
+    args = ap.parse_args(argv)
+    args.command = command or ("python benchmarks/speed_suite.py " + " ".join(sys.argv[1:] if argv is None else argv))
+    unknown = [n for n in args.scenes.split(",") if n not in ss.SCENES]
+    if unknown:
+        from .errors import suggest
+        raise SystemExit(f"speed suite: unknown scene {unknown[0]!r}{suggest(unknown[0], list(ss.SCENES))} "
+                         f"(the suite's scenes: {', '.join(ss.SCENES)})")
+    if args.threads:
+        dr.set_thread_count(args.threads)
+    results = []
+    for res in (int(x) for x in args.res.split(",")):
+        for name in args.scenes.split(","):
+            r = bench(name, res, args)
+            if r is not None:
+                results.append(r)
+    text = report(results, args)
+    print(text)
+    if args.out:
+        from .io import atomic_path
+        with atomic_path(args.out, ".md") as tmp, open(tmp, "w") as f:
+            f.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
