@@ -227,9 +227,11 @@ def freeze_render(integrator, body):
     def call(mi_scene, seed):
         if failed:
             return body(mi_scene, seed)
-        # every live Python BSDF, also those of other scenes: without them the recording of a
-        # BSDF call fails (see materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
-        live = sorted(LIVE_INSTANCES, key=id)
+        # every live Python BSDF that the scene does not hold itself (those it holds are
+        # traversed with it): without them the recording of a BSDF call fails (see
+        # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
+        own = {id(sh.bsdf()) for sh in mi_scene.shapes()}
+        live = sorted((b for b in LIVE_INSTANCES if id(b) not in own), key=id)
         try:
             return frozen(mi_scene, seed, None if state_of is None else state_of(mi_scene), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
