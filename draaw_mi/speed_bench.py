@@ -63,13 +63,19 @@ def parse_integrator(spec: str, depth: int) -> dict:
     return d
 
 
-def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def timed_render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """``(image as float64, seconds)`` of one ``mi.render``, evaluated and synchronised."""
     t = time.perf_counter()
     img = mi.render(scene, integrator=integ, spp=spp, seed=seed)
     dr.eval(img)
     dr.sync_thread()
-    dt = time.perf_counter() - t
-    return np.array(img, dtype=np.float64)[..., :3], dt
+    return np.array(img, dtype=np.float64), time.perf_counter() - t
+
+
+def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """``(RGB image, seconds)``: :func:`timed_render` without AOV channels."""
+    img, dt = timed_render(scene, integ, spp, seed)
+    return img[..., :3], dt
 
 
 def reference(name: str, res: int, scene, depth: int, spp: int, cache: str):
