@@ -125,7 +125,9 @@ def to_world(table: dict, where: Where):
         return mi.ScalarTransform4f(arr.tolist())
     if "translate" in table:
         t = t.translate(vector(table["translate"], where / "translate"))
-    for axis, angle in rotations(table, where):
+    # chained transforms apply right to left: the list is walked backwards so that its first
+    # rotation acts first, as for SDF objects (schema.rotations)
+    for axis, angle in reversed(rotations(table, where)):
         t = t.rotate(axis=axis, angle=angle)
     if "scale" in table:
         sc = vector(table["scale"], where / "scale")

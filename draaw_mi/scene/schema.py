@@ -110,7 +110,8 @@ def resolution(value: Any, where: Where) -> tuple[int, int]:
 
 def rotations(table: dict, where: Where) -> list:
     """``[(axis, angle in degrees), ...]`` of ``table["rotate"]`` (one table or a list of
-    them), validated; empty without ``rotate``. Shared by meshes and SDF objects."""
+    them), validated; empty without ``rotate``. Shared by meshes and SDF objects: a list is
+    applied in order, its first rotation first."""
     if "rotate" not in table:
         return []
     rot = table["rotate"]

@@ -135,3 +135,19 @@ def test_go_draaw_bad_operator():
     bad = [dict(GO_SPHERES[0], sdfType="smoothUnoin")]
     with pytest.raises(SceneError, match="did you mean 'smoothUnion'"):
         go_draaw_spheres(bad)
+
+
+def test_a_list_of_rotations_turns_meshes_and_sdf_objects_alike():
+    """rotate = [x 90, y 90] applies its first rotation first, for a mesh's to_world and for an
+    SDF object's transform: (0, 0, 1) -> x 90 -> (0, -1, 0) -> y 90 -> (0, -1, 0). Applied in
+    the other order it would land on (1, 0, 0)."""
+    import numpy as np
+    from draaw_mi.scene.description import to_world
+    from draaw_mi.scene.schema import Where
+    from draaw_mi.sdf.scene import _transform_of
+    from draaw_mi.sdf.primitives import Sphere
+    table = {"rotate": [{"axis": [1, 0, 0], "angle": 90}, {"axis": [0, 1, 0], "angle": 90}]}
+    m = np.array(to_world(table, Where("t")).matrix, dtype=float).reshape(4, 4)
+    assert np.allclose(m[:3, :3] @ [0, 0, 1], [0, -1, 0], atol=1e-6)
+    node = _transform_of(table, Where("t"), Sphere(radius=0.5))
+    assert np.allclose(node.rotation @ [0, 0, 1], [0, -1, 0], atol=1e-6)
