@@ -26,21 +26,16 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import RenderError
+from .volume_tracking import coefficients, medium_interaction
 
 MAX_SEGMENTS = 16
 
 
 def _coeffs(medium, ray, t, active):
-    mei = dr.zeros(mi.MediumInteraction3f)
-    mei.t = t
-    mei.p = ray(t)
-    mei.wi = -ray.d
-    mei.sh_frame = mi.Frame3f(mei.wi)
-    mei.time = ray.time
-    mei.wavelengths = ray.wavelengths
-    mei.medium = medium
-    sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, active)
-    return mei, sigma_s, sigma_t.x
+    """(interaction, sigma_s, grey sigma_t) at ``ray(t)`` (as the tracking code computes them)."""
+    mei = medium_interaction(ray, t, medium)
+    sigma_s, sigma_t = coefficients(medium, mei, active)
+    return mei, sigma_s, sigma_t
 
 
 @dr.syntax

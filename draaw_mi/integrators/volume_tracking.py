@@ -92,6 +92,21 @@ def _dda_setup(table, idx, ray, t0):
     return cell, t_next, dt, step, res, off
 
 
+def _cell_step(table, off, res, cell, t_next, t, t1, sampler, live):
+    """In the current DDA cell: its majorant, where the ray leaves it (capped at ``t1``), and a
+    tentative collision distance sampled from the majorant (inf where it is 0). Returns
+    ``(sig_maj, t_exit, has, t_c)``."""
+    cx, cy, cz = cell
+    tnx, tny, tnz = t_next
+    flat = off + mi.UInt32(cx + res[0] * (cy + res[1] * cz))
+    sig_maj = dr.gather(mi.Float, table.values, flat, live)
+    t_exit = dr.minimum(dr.minimum(tnx, dr.minimum(tny, tnz)), t1)
+    u = sampler.next_1d(live)
+    has = live & (sig_maj > 0)
+    t_c = dr.select(has, t - dr.log(1.0 - u) / dr.select(has, sig_maj, 1.0), dr.inf)
+    return sig_maj, t_exit, has, t_c
+
+
 def _dda_advance(step_on, t, t_exit, cell, t_next, dt, step, res):
     """One DDA step for the lanes ``step_on``: move ``t`` to the cell's exit and into the
     neighbouring cell along the axis whose boundary comes first. Returns ``(t, cell, t_next,
@@ -126,13 +141,8 @@ def free_flight(table, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.S
     it = mi.UInt32(0)
     live = mi.Bool(ok)
     while live:
-        flat = off + mi.UInt32(cx + res[0] * (cy + res[1] * cz))
-        sig_maj = dr.gather(mi.Float, table.values, flat, live)
-        t_exit = dr.minimum(dr.minimum(tnx, dr.minimum(tny, tnz)), t1)
-        u = sampler.next_1d(live)
-        tau = -dr.log(1.0 - u)
-        has = live & (sig_maj > 0)
-        t_c = dr.select(has, t + tau / dr.select(has, sig_maj, 1.0), dr.inf)
+        sig_maj, t_exit, has, t_c = _cell_step(table, off, res, (cx, cy, cz), (tnx, tny, tnz),
+                                               t, t1, sampler, live)
         tentative = live & (t_c < t_exit)
         mei = medium_interaction(ray, t_c, medium)
         sigma_s, sigma_t = coefficients(medium, mei, tentative)
@@ -183,12 +193,8 @@ def ratio_track(table, medium, idx, ray: mi.Ray3f, tmax: mi.Float, sampler: mi.S
     it = mi.UInt32(0)
     live = mi.Bool(ok)
     while live:
-        flat = off + mi.UInt32(cx + res[0] * (cy + res[1] * cz))
-        sig_maj = dr.gather(mi.Float, table.values, flat, live)
-        t_exit = dr.minimum(dr.minimum(tnx, dr.minimum(tny, tnz)), t1)
-        u = sampler.next_1d(live)
-        has = live & (sig_maj > 0)
-        t_c = dr.select(has, t - dr.log(1.0 - u) / dr.select(has, sig_maj, 1.0), dr.inf)
+        sig_maj, t_exit, has, t_c = _cell_step(table, off, res, (cx, cy, cz), (tnx, tny, tnz),
+                                               t, t1, sampler, live)
         tentative = live & (t_c < t_exit)
         mei = medium_interaction(ray, t_c, medium)
         _, sigma_t = coefficients(medium, mei, tentative)
