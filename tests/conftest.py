@@ -50,3 +50,19 @@ def go_draaw_dir():
     if not os.path.isdir(GO_DRAAW):
         pytest.skip(f"GO-Draaw data folder {GO_DRAAW} is absent (it lives in ../shared beside the project)")
     return GO_DRAAW
+
+
+NOTEBOOKS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "notebooks")
+
+
+def notebook_generator(script: str):
+    """The module of ``notebooks/<script>`` (a ``make_*.py`` generator; they import
+    notebooks/_nbgen.py, so that folder goes on sys.path)."""
+    import importlib.util
+    import sys
+    if NOTEBOOKS not in sys.path:
+        sys.path.insert(0, NOTEBOOKS)
+    spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

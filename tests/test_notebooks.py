@@ -7,13 +7,12 @@ generator script (``notebooks/make_<name>.py``) writes each one and must be in s
 """
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
 import time
 
 import numpy as np
 import pytest
+from conftest import notebook_generator
 
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
@@ -30,13 +29,6 @@ SMALL_RUN = {"inverse_fitting": (("32x32", "fit"), 2),
              "sdf_csg": (("48x36",), 2)}
 
 
-def _generator(script):
-    if NOTEBOOKS not in sys.path:              # the generators import notebooks/_nbgen.py
-        sys.path.insert(0, NOTEBOOKS)
-    spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -47,7 +39,7 @@ def test_notebook_is_generated_and_has_no_outputs(name):
     for cell in nb.cells:
         if cell.cell_type == "code":
             assert cell.outputs == [] and cell.execution_count is None, "commit notebooks without outputs"
-    fresh = _generator(CASES[name]).build()
+    fresh = notebook_generator(CASES[name]).build()
     assert [(c.cell_type, c.source) for c in nb.cells] == [(c.cell_type, c.source) for c in fresh.cells], \
         f"{name}.ipynb is out of date: run python notebooks/{CASES[name]}"
 

@@ -5,11 +5,10 @@ committed without outputs, run top to bottom in a fresh ``python3`` kernel.
 """
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
 
 import pytest
+from conftest import notebook_generator
 
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
@@ -23,13 +22,6 @@ CASES = {  # name -> (generator, text that shows the small configuration ran, mi
 }
 
 
-def _generator(script):
-    if NOTEBOOKS not in sys.path:              # the generators import notebooks/_nbgen.py
-        sys.path.insert(0, NOTEBOOKS)
-    spec = importlib.util.spec_from_file_location(script[:-3], os.path.join(NOTEBOOKS, script))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -39,7 +31,7 @@ def test_notebook_is_generated_and_has_no_outputs(name):
     for cell in nb.cells:
         if cell.cell_type == "code":
             assert cell.outputs == [] and cell.execution_count is None, "commit notebooks without outputs"
-    fresh = _generator(CASES[name][0]).build()
+    fresh = notebook_generator(CASES[name][0]).build()
     assert [(c.cell_type, c.source) for c in nb.cells] == [(c.cell_type, c.source) for c in fresh.cells], \
         f"{name}.ipynb is out of date: run python notebooks/{CASES[name][0]}"
 

@@ -40,11 +40,10 @@ import itertools
 import json
 import os
 import string as _string
-import tomllib
 from dataclasses import dataclass, field
 
 from ..errors import SceneError
-from ..scene.schema import Where, boolean, check_keys, number, resolution, string, vector
+from ..scene.schema import Where, boolean, check_keys, number, read_document, resolution, string, vector
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
 JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
@@ -94,20 +93,9 @@ def read_manifest_file(path: str) -> dict:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise SceneError(f"{path}: manifest does not exist")
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read().decode("utf-8")
-        if path.lower().endswith(".json"):
-            return json.loads(raw)
-        if path.lower().endswith(".toml"):
-            return tomllib.loads(raw)
-    except UnicodeDecodeError:
-        raise SceneError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: malformed TOML: {e}") from None
-    except json.JSONDecodeError as e:
-        raise SceneError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
-    raise SceneError(f"{path}: unknown manifest format; expected .toml or .json")
+    if not path.lower().endswith((".toml", ".json")):
+        raise SceneError(f"{path}: unknown manifest format; expected .toml or .json")
+    return read_document(path, "manifest")
 
 
 def parse_manifest(source, out_dir: str | None = None) -> Manifest:

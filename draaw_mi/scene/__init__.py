@@ -15,11 +15,9 @@ True
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 import tempfile
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -156,21 +154,8 @@ def _load_dict(mi, d: dict, source: str):
 
 
 def _read_text_description(path: str) -> dict:
-    try:
-        with open(path, "rb") as f:
-            raw = f.read()
-    except OSError as e:
-        raise SceneError(f"{path}: cannot read scene file ({e.strerror})") from None
-    try:
-        if path.lower().endswith(".toml"):
-            return tomllib.loads(raw.decode("utf-8"))
-        return json.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError:
-        raise SceneError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: malformed TOML: {e}") from None
-    except json.JSONDecodeError as e:
-        raise SceneError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    from .schema import read_document
+    return read_document(path, "scene file")
 
 
 def _bare_mesh_description(path: str) -> dict:

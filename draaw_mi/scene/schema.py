@@ -124,3 +124,25 @@ def rotations(table: dict, where: Where) -> list:
             raise (wr / "axis").error("is the zero vector")
         out.append((axis, number(r["angle"], wr / "angle")))
     return out
+
+
+def read_document(path: str, what: str = "scene file") -> dict:
+    """A TOML (``.toml``) or JSON (any other name) file as a dict; every error is a
+    :class:`SceneError` naming the file (and the line, for malformed JSON)."""
+    import json
+    import tomllib
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
+    try:
+        if path.lower().endswith(".toml"):
+            return tomllib.loads(raw.decode("utf-8"))
+        return json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise SceneError(f"{path}: not a UTF-8 text file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: malformed TOML: {e}") from None
+    except json.JSONDecodeError as e:
+        raise SceneError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
