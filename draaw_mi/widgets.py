@@ -48,6 +48,26 @@ def _slider(desc, value, lo, hi, step=0.01):
                          layout=W.Layout(width="380px"))
 
 
+def close_widgets(*roots) -> None:
+    """Close ``roots`` and every widget under them (children, layouts, styles; dicts of
+    widgets are walked too). ipywidgets keeps each open widget in a global registry and a
+    box's ``close()`` leaves its children open, so without this a closed panel stays alive
+    with its callbacks, its tuner and the tuner's scene -- and every live draaw material
+    enlarges the BSDF calls of all later renders (vcalls cover every live instance)."""
+    seen, stack = set(), list(roots)
+    while stack:
+        w = stack.pop()
+        if isinstance(w, dict):
+            stack.extend(w.values())
+            continue
+        if id(w) in seen or not isinstance(w, W.Widget):
+            continue
+        seen.add(id(w))
+        stack.extend(getattr(w, "children", ()))
+        stack.extend(getattr(w, name, None) for name in ("layout", "style"))
+        w.close()
+
+
 class MaterialTuner:
     """An interactive panel for one scene (see the module docstring).
 
@@ -146,9 +166,9 @@ class MaterialTuner:
         return out
 
     def close(self):
-        """Stop the worker thread and close the widgets."""
+        """Stop the worker thread and close every widget of the panel (:func:`close_widgets`)."""
         self.preview.stop()
-        self.widget.close()
+        close_widgets(self.widget, *getattr(self, "_links", ()), *vars(self).values())
 
     def _ipython_display_(self):
         from IPython.display import display
@@ -327,7 +347,7 @@ class MaterialTuner:
         load.on_click(self._guard(lambda _b: self.load_camera_path(self.path_file.value.strip())))
         self.path_frame = W.IntSlider(value=0, min=0, max=0, description="path frame", disabled=True)
         self.path_play = W.Play(value=0, min=0, max=0, interval=100, disabled=True)
-        W.jslink((self.path_play, "value"), (self.path_frame, "value"))
+        self._links = [W.jslink((self.path_play, "value"), (self.path_frame, "value"))]
         self.path_frame.observe(self._guard(lambda ch: self._path_step(int(ch["new"]))), "value")
         self._path = None
         rows = [self.fov] + ([self.yaw, self.pitch, self.distance, get, self.camera_text] if self.camera else [])
@@ -444,7 +464,9 @@ class MaterialTuner:
             rm.on_click(self._guard(lambda _b, i=i: self._post_edit(remove=i)))
             rows.append(W.HBox([amt, upb, rm]))
         if hasattr(self, "post_rows"):
+            old = self.post_rows.children
             self.post_rows.children = rows
+            close_widgets(*old)                 # replaced rows: out of the registry
             self._syncing = True
             try:
                 self.post_json.value = json.dumps(self.post)

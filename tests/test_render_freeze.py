@@ -27,12 +27,14 @@ def test_frozen_render_replays_without_tracing(scene, version, monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(mi, "render", counting)
+    monkeypatch.setattr(R, "_FROZEN", {})          # record afresh: the first call is traced
     monkeypatch.setattr(R, "FREEZE", True)
     imgs = [np.array(draaw_mi.render(scene, version=version, spp=4, seed=s, post=[])) for s in (5, 6, 7)]
     n = len(calls)
     again = np.array(draaw_mi.render(scene, version=version, spp=4, seed=5, post=[]))
     other = np.array(draaw_mi.render(scene, version=version, spp=4, seed=8, post=[]))
-    assert len(calls) == n                      # replayed: the Python integrator was not traced
+    assert n >= 1                               # the counter sees the traced calls ...
+    assert len(calls) == n                      # ... replayed: the Python integrator was not traced
     assert np.array_equal(again, imgs[0])       # same seed, same image
     assert not np.allclose(other, imgs[0])      # the opaque seed still changes the samples
     monkeypatch.setattr(R, "FREEZE", False)
@@ -98,7 +100,8 @@ def test_frozen_replay_reads_a_new_power_table(monkeypatch):
     a = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     n = len(scene.mi_scene.emitters())
     flat = PowerSelection.from_power(scene.mi_scene, np.ones(n))
-    key = next(k for k in integ._selection if k[0] == id(scene.mi_scene))
+    key = integ.selection_key(scene.mi_scene)      # (an id-only match may be a dead scene's)
+    assert key in integ._selection
     monkeypatch.setitem(integ._selection, key, flat)
     b = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     monkeypatch.setattr(R, "FREEZE", False)
@@ -116,13 +119,14 @@ def test_recording_holds_while_other_python_bsdfs_are_alive(scene, monkeypatch):
     calls = []
     real = mi.render
     monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    monkeypatch.setattr(R, "_FROZEN", {})
     monkeypatch.setattr(R, "FREEZE", True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)      # no fallback to tracing
         first = [np.array(draaw_mi.render(scene, version="v2", spp=2, seed=s, post=[])) for s in (1, 2)]
         n = len(calls)
         again = np.array(draaw_mi.render(scene, version="v2", spp=2, seed=1, post=[]))
-    assert len(calls) == n and np.array_equal(again, first[0])
+    assert n >= 1 and len(calls) == n and np.array_equal(again, first[0])
     assert len(others) == 2
 
 

@@ -253,3 +253,25 @@ def test_missing_ipywidgets_is_one_clear_error(monkeypatch):
     monkeypatch.delitem(sys.modules, "draaw_mi.widgets")
     with pytest.raises(draaw_mi.DraawError, match=r"pip install 'draaw-mi\[notebooks\]'"):
         importlib.import_module("draaw_mi.widgets")
+
+
+def test_close_releases_every_widget_and_the_scene(tmp_path):
+    """A closed tuner leaves no widget in ipywidgets' registry (rows of the post chain that
+    were replaced included) and its scene's draaw materials die with it: a live material
+    would enlarge the BSDF calls of every later render in the kernel."""
+    import gc
+    import ipywidgets
+    from draaw_mi.materials.draaw_bsdf import LIVE_INSTANCES
+    registry = ipywidgets.widgets.widget._instances
+    gc.collect()
+    n_widgets, n_bsdfs = len(registry), len(list(LIVE_INSTANCES))
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, freeze=False)
+    t._post_edit(add="contrast")
+    t._post_edit(add="tint")
+    t._post_edit(remove=0)                      # two rebuilds of the rows
+    assert len(registry) > n_widgets and len(list(LIVE_INSTANCES)) > n_bsdfs
+    t.close()
+    del t
+    gc.collect()
+    assert len(registry) == n_widgets
+    assert len(list(LIVE_INSTANCES)) == n_bsdfs

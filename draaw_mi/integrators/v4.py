@@ -176,8 +176,7 @@ class DraawV4Integrator(DraawIntegrator):
         # every live instance enlarges BSDF calls and must enter dr.freeze recordings). The key
         # adds the emitters' registry ids to id(scene): a table found under a reused key then
         # indexes the same emitter ids, and any positive table keeps the estimate unbiased.
-        ids = tuple(int(i) for i in np.array(dr.reinterpret_array(mi.UInt32, scene.emitters_dr())))
-        key = (id(scene), ids)
+        key = self.selection_key(scene)
         if key in self._selection:
             return self._selection[key]
         sel = PowerSelection.of(scene)
@@ -185,6 +184,12 @@ class DraawV4Integrator(DraawIntegrator):
             self._selection.pop(next(iter(self._selection)))
         self._selection[key] = sel
         return sel
+
+    @staticmethod
+    def selection_key(scene) -> tuple:
+        """Key of ``scene``'s table in the cache: ``(id(scene), emitter registry ids)``."""
+        ids = tuple(int(i) for i in np.array(dr.reinterpret_array(mi.UInt32, scene.emitters_dr())))
+        return id(scene), ids
 
     def freeze_state(self, scene):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
