@@ -10,6 +10,10 @@ Usage::
 
     .venv/bin/python benchmarks/variance_study.py glass 256 16 "path;draaw_v4;draaw_v4:adaptive=false" [spp]
 
+A spec may end in ``@SAMPLER`` (``path@sobol``, ``draaw_v4@orthogonal``): that integrator renders
+the scene with that Mitsuba sampler (default ``independent``), for low-discrepancy comparisons;
+the baseline keeps its own.
+
 Prints, per integrator spec (the first is the baseline): median time, mean per-pixel variance
 (and from each half of the renders, to show its spread), image mean, and
 ``t*var/path`` = time ratio x variance ratio (below 1: faster than the baseline to equal error).
@@ -39,18 +43,19 @@ def main(argv) -> int:
     for env, attr in (("MINF", "MIN_FRACTION"), ("CAP", "SCORE_CAP"), ("CF", "COST_FIXED")):
         if os.environ.get(env):
             setattr(ads, attr, float(os.environ[env]))
-    scene = ss.load(name, res)
     depth = ss.max_depth(name)
-    integs = [mi.load_dict(parse_integrator(s, depth)) for s in specs]
+    samplers = [s.partition("@")[2] or "independent" for s in specs]
+    scenes = {smp: ss.load(name, res, smp) for smp in set(samplers)}
+    integs = [mi.load_dict(parse_integrator(s.partition("@")[0], depth)) for s in specs]
     imgs = {s: [] for s in specs}
     times = {s: [] for s in specs}
-    for it in integs:                                     # compile
-        dr.eval(mi.render(scene, integrator=it, spp=spp, seed=999))
+    for it, smp in zip(integs, samplers):                 # compile
+        dr.eval(mi.render(scenes[smp], integrator=it, spp=spp, seed=999))
         dr.sync_thread()
     for k in range(n):                                    # interleaved
-        for s, it in zip(specs, integs):
+        for s, it, smp in zip(specs, integs, samplers):
             t0 = time.perf_counter()
-            img = mi.render(scene, integrator=it, spp=spp, seed=1000 * k + 7)
+            img = mi.render(scenes[smp], integrator=it, spp=spp, seed=1000 * k + 7)
             dr.eval(img)
             dr.sync_thread()
             times[s].append(time.perf_counter() - t0)

@@ -44,8 +44,20 @@ COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera 
 
 
 def supported(sensor: mi.Sensor) -> bool:
-    """Whether :func:`render_spp_map` can render for this sensor: an ``hdrfilm``-like film
-    (not spectral-special), a box filter, no crop window and no border."""
+    """Whether adaptive sampling can render for this sensor and pays: an ``hdrfilm``-like film
+    (not spectral-special), a box filter, no crop window and no border, and the independent
+    sampler.
+
+    Not with a stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification
+    already removes most of the variance that adaptive sampling would move (multijitter has
+    a tenth of the independent sampler's variance at 64 spp on the Cornell box), a pilot's
+    sample variance no longer measures a stratified mean's error, and per-pixel counts break
+    the strata. Measured with stratified rounds (each pixel's count split into uniform
+    rounds the sampler can stratify): 1.25-1.48x the variance x time of uniform V4 with the
+    same sampler on the Cornell box, the spheres and the envmap scene at 128x128, 64 spp
+    (``benchmarks/results/speed_suite.md``)."""
+    if str(sensor.sampler()).split("[")[0].strip() != "IndependentSampler":
+        return False
     film = sensor.film()
     if mi.has_flag(film.flags(), mi.FilmFlags.Special):
         return False

@@ -56,6 +56,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=int, help="samples per pixel")
     r.add_argument("--resolution", help="WxH, e.g. 640x480")
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
+    r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (2-10x less "
+                   "variance at the same time), stratified, ldsampler, orthogonal")
     r.add_argument("--max-depth", type=int, help="maximum path depth (-1: unbounded)")
     r.add_argument("--time-budget", type=float, help="stop after this many seconds (at least one pass)")
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
@@ -144,7 +146,8 @@ def _cmd_render(args) -> int:
         if args.threads < 1:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")
         dr.set_thread_count(args.threads)
-    overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth}
+    overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
+                 "sampler": args.sampler}
     scene = draaw_mi.load_scene(args.scene, **{k: v for k, v in overrides.items() if v is not None})
     post = None
     if args.post:

@@ -190,7 +190,8 @@ def _views(scene: DraawScene, views):
             out.append(v)
             continue
         look = camera_to_look_at(v, Where("fit") / "views" / i)
-        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"])))
+        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"],
+                                            scene.settings.get("sampler", "independent"))))
     return out
 
 

@@ -68,6 +68,43 @@ def pass_seeds(seed: int, n: int) -> list[int]:
     return [seed] + [(seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF for i in range(1, n)]
 
 
+def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
+    """Samples per pass: at most ``pass_spp`` each, ``spp`` in all, each a count the scene's
+    sampler takes as it is. Stratifying samplers round other counts up (``multijitter``
+    renders 35 samples when asked for 32, ``ldsampler`` rounds to powers of four), which
+    would make a render take more samples than it says; 32 becomes 30 + 2 instead. Where a
+    sampler takes no count below some size (``ldsampler``: 4), the last pass is rounded up.
+
+    >>> import mitsuba as mi
+    >>> scene = mi.load_dict({"type": "scene", "sensor": {"type": "perspective",
+    ...     "sampler": {"type": "multijitter"}}})
+    >>> sample_passes(scene, 32, 256), sample_passes(scene, 40, 16)
+    ([30, 2], [16, 16, 8])
+    """
+    sampler = mi_scene.sensors()[0].sampler()
+    logger = mi.logger()
+
+    def taken(k: int) -> int:
+        f = sampler.fork()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)       # the probe's "rounded up" warnings
+        try:
+            f.set_sample_count(k)
+        finally:
+            logger.set_log_level(level)
+        return int(f.sample_count())
+
+    out, left = [], int(spp)
+    while left > 0:
+        k = min(left, int(pass_spp))
+        while k > 1 and taken(k) != k:
+            k -= 1
+        k = taken(k)                        # 1, or a sampler's smallest count
+        out.append(k)
+        left -= k
+    return out
+
+
 def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
@@ -124,14 +161,14 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                                 return_info)
     integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
 
-    n_passes = -(-spp // pass_spp)
-    counts = [pass_spp] * (n_passes - 1) + [spp - pass_spp * (n_passes - 1)]
+    counts = sample_passes(scene.mi_scene, spp, pass_spp)
+    n_passes = len(counts)
     seeds = pass_seeds(int(seed), n_passes)
     bar = None
     if progress:
         from tqdm.auto import tqdm
         bar = tqdm(total=spp, unit="spp", desc=f"render {version}", leave=False)
-    acc, done, t0 = None, 0, time.perf_counter()
+    acc, done, passes, t0 = None, 0, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
             img = None
@@ -144,6 +181,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             else:
                 acc = img * count if acc is None else acc + img * count
             done += count
+            passes += 1
             if n_passes > 1:
                 dr.eval(acc)
                 dr.sync_thread()
@@ -164,7 +202,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if chain:
         image = _apply_post(image, chain)
     if return_info:
-        return image, {"spp": done, "passes": -(-done // pass_spp), "seconds": time.perf_counter() - t0,
+        return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version),
                        "denoised": bool(denoise)}
     return image
@@ -220,7 +258,11 @@ def freeze_render(integrator, body):
         with use_state(state):
             return body(mi_scene, seed)
 
-    frozen = dr.freeze(recorded)
+    # Every input opaque from the first recording: with literals kept (auto_opaque), a
+    # stratifying sampler's state, which the first render changes, made the second call
+    # re-record and compile a kernel anew (a batch job recompiled at its third frame); the
+    # walls are the same (benchmarks/results/render_overhead.md).
+    frozen = dr.freeze(recorded, auto_opaque=False)
 
     failed = []                      # a recording that failed once: trace from then on
 

@@ -133,7 +133,7 @@ def test_recording_holds_while_other_python_bsdfs_are_alive(scene, monkeypatch):
 def test_a_failed_recording_falls_back_to_tracing(scene, monkeypatch):
     """A scene the recorder cannot hold is traced instead, with a warning, and gives the traced
     image (the fallback keeps renders working; the warning keeps it visible)."""
-    def refuse(fn):
+    def refuse(fn, **options):
         def frozen(*a, **k):
             raise RuntimeError("record(): stand-in failure")
         return frozen

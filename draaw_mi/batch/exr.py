@@ -31,7 +31,8 @@ def metadata(spec: dict, seconds: float) -> dict:
     """The header attributes of a rendered frame."""
     meta = {HASH_ATTR: spec["hash"], "draaw:scene": spec["scene"], "draaw:scene_sha256": spec["scene_hash"],
             "draaw:job": spec["job"], "draaw:frame": int(spec["frame"]), "draaw:version": spec["version"],
-            "draaw:spp": int(spec["spp"]), "draaw:seed": int(spec["seed"]),
+            "draaw:spp": int(spec["spp"]), "draaw:sampler": str(spec.get("sampler")),
+            "draaw:seed": int(spec["seed"]),
             "draaw:max_depth": int(spec["max_depth"]), "draaw:render_seconds": float(seconds),
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     meta.update({f"draaw:{k}": str(v) for k, v in spec["versions"].items()})

@@ -45,11 +45,13 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
-        from ..render import MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator, render
+        from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
+                              render, sample_passes)
 
         s = self.scene.settings
         spp = spec["spp"]
-        if not spec.get("freeze", True) or spp > MAX_PASS_SPP or not freeze_supported(self.scene.mi_scene):
+        if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not freeze_supported(self.scene.mi_scene)
+                or sample_passes(self.scene.mi_scene, spp, MAX_PASS_SPP) != [spp]):
             image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                                  max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                                  return_info=True)

@@ -52,9 +52,9 @@ def versions() -> dict:
 
 def frame_hash(spec: dict) -> str:
     """Hash of everything that determines a frame's pixels (not its output path or time)."""
-    keys = ("scene_hash", "resolution", "version", "spp", "seed", "max_depth", "aovs", "post", "camera",
-            "params", "half", "versions")
-    text = json.dumps({k: spec[k] for k in keys}, sort_keys=True, separators=(",", ":"))
+    keys = ("scene_hash", "resolution", "version", "spp", "sampler", "seed", "max_depth", "aovs", "post",
+            "camera", "params", "half", "versions")
+    text = json.dumps({k: spec.get(k) for k in keys}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
@@ -176,7 +176,8 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             spec = {
                 "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
                 "scene": job.scene, "scene_hash": entry.hash, "resolution": list(scene.resolution),
-                "version": version, "spp": int(spp), "seed": frame_seed(job.seed, f),
+                "version": version, "spp": int(spp), "sampler": s.get("sampler"),
+                "seed": frame_seed(job.seed, f),
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
                 "camera": cams[f] if cams else None,
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},

@@ -61,7 +61,7 @@ class DraawV4Integrator(DraawIntegrator):
      * - adaptive
        - |bool|
        - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
-         AOVs, ``max_depth`` > 1): a pilot pass of spp/16 estimates each pixel's variance
+         AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates each pixel's variance
          and path length, the rest of the budget goes where it lowers the error most per unit
          of cost (:mod:`draaw_mi.adaptive_sampling`). (Default: |true|)
 
@@ -109,9 +109,12 @@ class DraawV4Integrator(DraawIntegrator):
     the *absolute* squared error; dark pixels get fewer samples, so a relative error measure
     (relMSE) can rise (``adaptive=False`` turns it off). Each pixel keeps at least half the
     uniform count and no pixel takes more than a capped share, which bounds the loss where a
-    small pilot misses rare bright paths. Known loss: the glass (thesis) scene, whose error
-    sits in a few pixels of point-light glints on a near-mirror floor; there adaptive sampling
-    costs about 1.3x ``path``'s variance x time at 256² (V4 without it: 0.9x), see
+    small pilot misses rare bright paths. Scenes whose error sits in glints of delta lights on
+    near-mirror surfaces (the thesis glass scene) render uniformly: a small pilot misses them
+    (:func:`~draaw_mi.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
+    stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
+    2-10x off the variance of ``path`` and V4 alike, and adaptive sampling on top measured
+    1.25-1.48x the variance x time of uniform V4 with the same sampler. See
     ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with

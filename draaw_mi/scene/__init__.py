@@ -174,7 +174,7 @@ def load_scene(source, **overrides) -> DraawScene:
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
 
     ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
-    ``version``, ``seed``, ``filter``. Errors are :class:`SceneError` naming the file and field.
+    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are :class:`SceneError` naming the file and field.
     """
     import mitsuba as mi
 
@@ -224,7 +224,7 @@ def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -
 
 
 def _checked(overrides: dict, source: str) -> dict:
-    from .schema import number, resolution
+    from .schema import number, resolution, string
     where = Where(source) / "override"
     out = dict(overrides)
     if out.get("resolution") is not None:
@@ -232,7 +232,21 @@ def _checked(overrides: dict, source: str) -> dict:
     for key, lo in (("spp", 1), ("max_depth", -1), ("seed", 0)):
         if out.get(key) is not None:
             out[key] = number(out[key], where / key, lo=lo, integer=True)
+    if out.get("sampler") is not None:
+        from .description import SAMPLERS
+        out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
     return out
+
+
+_SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",
+                    "StratifiedSampler": "stratified", "LowDiscrepancySampler": "ldsampler",
+                    "OrthogonalSampler": "orthogonal"}
+
+
+def sampler_plugin(sampler) -> str:
+    """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
+    name = str(sampler).split("[")[0].strip()
+    return _SAMPLER_PLUGINS.get(name, name)
 
 
 def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None) -> DraawScene:
@@ -243,13 +257,18 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     size = sensors[0].film().size()
     settings["resolution"] = (int(size[0]), int(size[1]))
     settings["spp"] = int(sensors[0].sampler().sample_count())
+    settings["sampler"] = sampler_plugin(sensors[0].sampler())
     integ = scene.integrator()
     if integ is not None:      # C++ integrators expose max_depth only through to_string()
         m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
         if m:
             settings["max_depth"] = int(m.group(1))
     settings["post"] = []
-    settings.update({k: v for k, v in _checked(overrides, source).items() if v is not None})
+    checked = _checked(overrides, source)
+    if checked.get("sampler") not in (None, settings["sampler"]):
+        raise SceneError(f"{source}: sampler={checked['sampler']!r} cannot override the sampler of a "
+                         f"Mitsuba scene ({settings['sampler']!r}); set it in the scene itself")
+    settings.update({k: v for k, v in checked.items() if v is not None})
     d = DraawScene(scene, settings, source, {"materials": []}, mi_dict)
     if overrides.get("resolution") and tuple(overrides["resolution"]) != d.resolution:
         d = d.with_resolution(*overrides["resolution"])

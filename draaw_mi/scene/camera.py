@@ -78,7 +78,10 @@ def camera_to_look_at(cam: dict, where: Where):
     return origin, target, up, fov, fov_axis, near, far
 
 
-def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str) -> dict:
+def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,
+                sampler: str = "independent") -> dict:
+    """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with
+    ``spp`` samples, an RGB ``hdrfilm`` with the ``rfilter`` reconstruction filter."""
     import mitsuba as mi
 
     origin, target, up, fov, fov_axis, near, far = look_at
@@ -91,7 +94,7 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str) -> dic
         "to_world": mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
                                                    target=[float(v) for v in target],
                                                    up=[float(v) for v in up]),
-        "sampler": {"type": "independent", "sample_count": spp},
+        "sampler": {"type": sampler, "sample_count": spp},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
                  "rfilter": {"type": rfilter}},
     }

@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 import OpenEXR
+import pytest
 from batch_helpers import assert_bit_identical, frames_of, manifest, write_manifest, write_scene
 from conftest import tiny_description
 
@@ -134,8 +135,13 @@ def test_exr_layers_metadata_and_half(tmp_path):
     assert abs(centre_depth - (np.linalg.norm(o - [0, 0.8, 0]) - 0.8)) < 0.1
 
 
-def test_no_kernel_compiles_after_the_first_frame(tmp_path):
-    res = batch.run(manifest(tmp_path, frames=4), progress=False)
+@pytest.mark.parametrize("sampler", ["independent", "multijitter"])
+def test_no_kernel_compiles_after_the_first_frame(tmp_path, sampler):
+    """Also with a stratifying sampler, whose state in the scene changes after the first
+    render (recorded with literals, it re-recorded and compiled anew at the third frame)."""
+    doc = manifest(tmp_path, frames=4)
+    doc["jobs"][0]["scene"] = write_scene(tmp_path, "strat.toml", sampler=sampler)
+    res = batch.run(doc, progress=False)
     assert all(r["kernels"] for r in res.results)          # kernels were recorded
     assert [r.get("new_kernels") for r in res.results] == [None, 0, 0, 0]
     assert res.new_kernels == {"orbit": 0}
