@@ -130,26 +130,39 @@ def _timed_render(scene, s: Setting, seed: int) -> tuple[np.ndarray, float]:
 
 def measure(scene, s: Setting, gt: np.ndarray, repeats: int = 3, seed: int = 1) -> tuple[dict, np.ndarray]:
     """Time and error of one setting (see the module docstring): (row, last image)."""
-    _, first = _timed_render(scene, s, seed + 1000)
-    times, errs, imgs = [], [], []
+    return measure_group(scene, [s], gt, repeats, seed)[0]
+
+
+def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
+                  seed: int = 1) -> list[tuple[dict, np.ndarray]]:
+    """:func:`measure` for settings that are compared with each other (the versions at one
+    spp): after a warm-up of each, their timed renders run round-robin, so a slower or busier
+    stretch of the machine falls on all of them alike rather than on whichever ran then."""
+    first = {i: _timed_render(scene, s, seed + 1000)[1] for i, s in enumerate(settings)}
+    times = {i: [] for i in first}
+    errs = {i: [] for i in first}
+    imgs = {i: [] for i in first}
     for r in range(repeats):
-        img, t = _timed_render(scene, s, seed + r)
-        times.append(t)
-        errs.append(errors(img, gt))
-        imgs.append(np.nan_to_num(img[..., :3]))
-    last = imgs[-1]
-    median = float(np.median(times))
-    stack = np.stack(imgs)
-    # MSE of one render = bias^2 + variance; the variance is estimated from the repeats
-    mse = float(np.mean((stack - gt) ** 2))
-    var = float(np.mean(stack.var(axis=0, ddof=1))) if repeats > 1 else float("nan")
-    row = asdict(s)
-    row.update({"label": s.label, "time_s": median, "time_min_s": float(np.min(times)),
-                "compile_s": max(0.0, first - median), "repeats": repeats,
-                "finite": bool(np.isfinite(last).all()), "mse": mse, "variance": var})
-    for k in errs[0]:
-        row[k] = float(np.mean([e[k] for e in errs]))
-    return row, last
+        for i, s in enumerate(settings):
+            img, t = _timed_render(scene, s, seed + r)
+            times[i].append(t)
+            errs[i].append(errors(img, gt))
+            imgs[i].append(np.nan_to_num(img[..., :3]))
+    out = []
+    for i, s in enumerate(settings):
+        median = float(np.median(times[i]))
+        stack = np.stack(imgs[i])
+        # MSE of one render = bias^2 + variance; the variance is estimated from the repeats
+        mse = float(np.mean((stack - gt) ** 2))
+        var = float(np.mean(stack.var(axis=0, ddof=1))) if repeats > 1 else float("nan")
+        row = asdict(s)
+        row.update({"label": s.label, "time_s": median, "time_min_s": float(np.min(times[i])),
+                    "compile_s": max(0.0, first[i] - median), "repeats": repeats,
+                    "finite": bool(np.isfinite(imgs[i][-1]).all()), "mse": mse, "variance": var})
+        for k in errs[i][0]:
+            row[k] = float(np.mean([e[k] for e in errs[i]]))
+        out.append((row, imgs[i][-1]))
+    return out
 
 
 def estimate_bias(rows: list[dict]) -> dict:
@@ -244,19 +257,29 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
         gts[name] = ground_truth(s, gt_spp, cache_dir=cache_dir)
         if bar is not None:
             bar.update(1)
+    # the versions at one (scene, spp, depth, adaptive, denoise) are timed round-robin; the
+    # rows keep the plan's order (version by version) for the report
+    order = {(id(s), setting): i for i, (s, setting) in enumerate(plan)}
+    groups: dict = {}
     for s, setting in plan:
+        key = (id(s), setting.spp, setting.max_depth, setting.adaptive, setting.denoise)
+        groups.setdefault(key, (s, []))[1].append(setting)
+    for s, settings in groups.values():
         name = os.path.splitext(os.path.basename(s.source))[0]
         if bar is not None:
-            bar.set_postfix_str(f"{name}: {setting.label} {setting.spp} spp depth {setting.max_depth}")
-        row, img = measure(s, setting, gts[name], repeats=repeats, seed=seed)
-        row["scene"] = name
-        row["resolution"] = list(s.resolution)
-        rows.append(row)
-        images[(name, setting)] = img
+            first = settings[0]
+            bar.set_postfix_str(f"{name}: {first.spp} spp depth {first.max_depth}, "
+                                f"{len(settings)} version(s)")
+        for setting, (row, img) in zip(settings, measure_group(s, settings, gts[name], repeats, seed)):
+            row["scene"] = name
+            row["resolution"] = list(s.resolution)
+            rows.append((order[(id(s), setting)], row))
+            images[(name, setting)] = img
         if bar is not None:
-            bar.update(1)
+            bar.update(len(settings))
     if bar is not None:
         bar.close()
+    rows = [row for _, row in sorted(rows, key=lambda p: p[0])]
     bias = estimate_bias(rows)
     for r in rows:
         r["bias_rmse"] = bias.get((r["scene"], r["label"], r["max_depth"]))

@@ -224,3 +224,23 @@ def test_frame_times_along_a_path(go_draaw_dir, monkeypatch):
     for r in rows:
         assert r["frames"] == 4 and 0 < r["min_s"] <= r["p10_s"] <= r["median_s"] <= r["p90_s"] <= r["max_s"]
         assert np.isfinite(r["rmse"]) and np.isfinite(r["ciede2000"])
+
+
+def test_versions_at_one_spp_are_timed_round_robin(monkeypatch):
+    """A drifting machine must not favour whichever version ran first: after one warm-up each,
+    the timed renders of the versions at one spp alternate, and every row gets its own
+    renders' times, in the plan's (version-major) order."""
+    calls = []
+    clock = iter(range(1, 1000))
+
+    def fake(scene, s, seed):
+        calls.append((s.version, seed))
+        return np.full((2, 2, 3), 0.5 if s.version == "v4" else 0.25), float(next(clock))
+
+    monkeypatch.setattr(bench, "_timed_render", fake)
+    a, b = bench.Setting("v4", 4, 3), bench.Setting("path", 4, 3)
+    out = bench.measure_group(None, [a, b], np.full((2, 2, 3), 0.5), repeats=3, seed=1)
+    assert calls == [("v4", 1001), ("path", 1001)] + [(v, 1 + r) for r in range(3) for v in ("v4", "path")]
+    (ra, _), (rb, _) = out
+    assert ra["time_s"] == 5.0 and rb["time_s"] == 6.0          # medians of (3, 5, 7), (4, 6, 8)
+    assert ra["rmse"] == 0.0 and rb["rmse"] > 0.0
