@@ -25,6 +25,21 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
 
 
+def test_render_sampler_reaches_the_scene(tmp_path, monkeypatch):
+    seen = []
+    real = draaw_mi.render
+
+    def spy(scene, *a, **k):
+        seen.append(str(scene.mi_scene.sensors()[0].sampler()).split("[")[0].strip())
+        return real(scene, *a, **k)
+
+    monkeypatch.setattr(draaw_mi, "render", spy)
+    exr = tmp_path / "m.exr"
+    assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--spp", "4",
+                 "--resolution", "16x12", "--version", "path", "--sampler", "multijitter"]) == 0
+    assert seen == ["MultijitterSampler"] and exr.exists()
+
+
 def test_info_lists_setup_and_scene(capsys):
     assert main(["info"]) == 0
     out = capsys.readouterr().out
@@ -44,6 +59,7 @@ BAD_ARGS = [
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--spp", "many"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--version", "v9"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--threads", "0"],
+    ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--sampler", "sobol"],
     ["render", "{scenes}/cornell.toml"],
     ["frobnicate"],
     ["info", "{tmp}/bad.toml"],
