@@ -315,7 +315,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
     tol: plateau tolerance of ``converged`` (see :func:`_converged`).
     """
-    from .render import make_integrator
+    from .render import make_integrator, scene_changed
 
     t0 = time.perf_counter()
     if loss not in LOSSES:
@@ -383,6 +383,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         for k in keys:
             p[k] = prm[k].from_latent(opt[k])
         p.update()
+        scene_changed(scene.mi_scene)          # e.g. V4's light powers, if lights are fitted
 
     if smooth is None:
         smooth = chain is not None or loss == "l1"

@@ -51,7 +51,7 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import ParameterError, suggest
-from .render import _scene_lock, make_integrator, pass_seeds
+from .render import _scene_lock, make_integrator, pass_seeds, scene_changed
 
 GUIDES = ("albedo", "normal")
 
@@ -222,6 +222,7 @@ class Preview:
                 for key, v in pending.items():
                     p[key] = _value(v)
                 p.update()
+                scene_changed(sc.mi_scene)          # e.g. V4's light powers
 
     def _lo_scene(self):
         if self._lo is None:

@@ -51,6 +51,18 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
     return _INTEGRATOR_CACHE[key]
 
 
+def scene_changed(mi_scene) -> None:
+    """Tell the cached integrators that ``mi_scene``'s parameters changed: V4 recomputes its
+    light-selection table (powers) at the next render instead of keeping the old one. The
+    preview, the batch executor and the fitter call this after ``params.update()``; call it
+    too after changing light intensities yourself (renders stay unbiased without it, but a
+    stale table can sample a dimmed light as often as before)."""
+    for integrator in list(_INTEGRATOR_CACHE.values()):
+        forget = getattr(integrator, "forget_scene", None)
+        if forget is not None:
+            forget(mi_scene)
+
+
 def _scene_lock(scene) -> threading.Lock:
     with _LOCKS_GUARD:
         lock = _SCENE_LOCKS.get(scene)

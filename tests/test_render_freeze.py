@@ -148,3 +148,45 @@ def test_a_failed_recording_falls_back_to_tracing(scene, monkeypatch):
         assert np.allclose(img, traced, rtol=1e-5, atol=1e-6) and img.mean() > 0
     finally:
         R._FROZEN.clear()
+
+
+def test_light_changes_refresh_the_power_table(monkeypatch):
+    """V4's light-selection table follows light intensities changed between renders: after
+    scene_changed (which the preview, the batch and the fitter call after params.update) the
+    next render's table gives a light made 100x brighter a larger share; without a refresh it
+    would keep sampling it as before (unbiased, but a poor table)."""
+    from draaw_mi import speed_suite as ss
+    scene = draaw_mi.load_scene(ss.build("many_lights", 8, spp=4))
+    integ = R.make_integrator("v4", 3)
+    draaw_mi.render(scene, version="v4", spp=4, seed=1, post=[], max_depth=3)
+    before = integ.emitter_selection(scene.mi_scene)
+    key = "l1.emitter.radiance.value"                       # one of the weak lights
+    import drjit as dr
+    shape = next(sh for sh in scene.mi_scene.shapes() if sh.id() == "l1")
+    eid = int(np.array(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(shape.emitter())))[0])
+    p = scene.params
+    v0 = mi.Color3f(p[key])
+    p[key] = 100.0 * v0
+    p.update()
+    try:
+        assert integ.emitter_selection(scene.mi_scene) is before        # cached until told
+        R.scene_changed(scene.mi_scene)
+        img = np.array(draaw_mi.render(scene, version="v4", spp=4, seed=1, post=[], max_depth=3))
+        after = integ.emitter_selection(scene.mi_scene)
+    finally:
+        p[key] = v0
+        p.update()
+        R.scene_changed(scene.mi_scene)
+    pmf_before, pmf_after = np.array(before.pmf_by_id), np.array(after.pmf_by_id)
+    assert pmf_after[eid] > 10 * pmf_before[eid] > 0 and np.isfinite(img).all()
+
+
+def test_preview_parameter_changes_reach_scene_changed(monkeypatch):
+    from draaw_mi import preview as P
+    seen = []
+    monkeypatch.setattr(P, "scene_changed", lambda s: seen.append(s))
+    from conftest import tiny_description
+    pv = P.Preview(draaw_mi.load_scene(tiny_description()), freeze=False)
+    pv.update({"ball.roughness": 0.3})
+    pv.step()
+    assert pv.scene.mi_scene in seen

@@ -92,6 +92,9 @@ class CachedScene:
         for key, original in self.originals.items():
             params[key] = wanted.get(key, original)
         params.update()
+        if spec["params"]:
+            from ..render import scene_changed
+            scene_changed(self.scene.mi_scene)       # e.g. V4's light powers
 
 
 def _convert(original, value, key):

@@ -188,6 +188,12 @@ class DraawV4Integrator(DraawIntegrator):
         self._selection[key] = sel
         return sel
 
+    def forget_scene(self, scene) -> None:
+        """Drop ``scene``'s cached power table (its lights changed): the next render computes
+        it anew. :func:`draaw_mi.render.scene_changed` calls this."""
+        for key in [k for k in self._selection if k[0] == id(scene)]:
+            del self._selection[key]
+
     @staticmethod
     def selection_key(scene) -> tuple:
         """Key of ``scene``'s table in the cache: ``(id(scene), emitter registry ids)``."""
