@@ -61,10 +61,8 @@ def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.
               "that bias from the remaining noise.", ""]
     text = "\n".join(lines)
     sys.path.insert(0, os.path.dirname(HERE))
-    from draaw_mi.io import atomic_path
-    with atomic_path(out, ".tmp") as tmp:
-        with open(tmp, "w") as fh:
-            fh.write(text)
+    from draaw_mi.io import write_text
+    write_text(out, text)
     print(text)
 
 

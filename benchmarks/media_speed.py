@@ -169,10 +169,8 @@ def main(argv=None) -> int:
     lines += ["Time to a given error ∝ time x MSE (Monte Carlo MSE ∝ 1/spp); MSE includes the reference's own "
               "noise (small at the reference spp)."]
     text = "\n".join(lines) + "\n"
-    from draaw_mi.io import atomic_path
-    with atomic_path(a.out, ".md") as tmp:
-        with open(tmp, "w") as f:
-            f.write(text)
+    from draaw_mi.io import write_text
+    write_text(a.out, text)
     print(text)
     return 0
 

@@ -97,9 +97,8 @@ def main(argv=None) -> int:
     text = "\n".join(out) + "\n"
     print(text)
     if args.out:
-        from draaw_mi.io import atomic_path
-        with atomic_path(args.out, ".md") as tmp, open(tmp, "w") as fh:
-            fh.write(text)
+        from draaw_mi.io import write_text
+        write_text(args.out, text)
     return 0
 
 

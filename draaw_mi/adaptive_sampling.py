@@ -56,7 +56,8 @@ def supported(sensor: mi.Sensor) -> bool:
     rounds the sampler can stratify): 1.25-1.48x the variance x time of uniform V4 with the
     same sampler on the Cornell box, the spheres and the envmap scene at 128x128, 64 spp
     (``benchmarks/results/speed_suite.md``)."""
-    if str(sensor.sampler()).split("[")[0].strip() != "IndependentSampler":
+    from .scene.camera import sampler_plugin
+    if sampler_plugin(sensor.sampler()) != "independent":
         return False
     film = sensor.film()
     if mi.has_flag(film.flags(), mi.FilmFlags.Special):

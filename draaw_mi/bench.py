@@ -138,10 +138,8 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
     """:func:`measure` for settings that are compared with each other (the versions at one
     spp): after a warm-up of each, their timed renders run round-robin, so a slower or busier
     stretch of the machine falls on all of them alike rather than on whichever ran then."""
-    first = {i: _timed_render(scene, s, seed + 1000)[1] for i, s in enumerate(settings)}
-    times = {i: [] for i in first}
-    errs = {i: [] for i in first}
-    imgs = {i: [] for i in first}
+    first = [_timed_render(scene, s, seed + 1000)[1] for s in settings]
+    times, errs, imgs = ([[] for _ in settings] for _ in range(3))
     for r in range(repeats):
         for i, s in enumerate(settings):
             img, t = _timed_render(scene, s, seed + r)

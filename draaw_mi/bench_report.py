@@ -8,16 +8,10 @@ import os
 
 import numpy as np
 
-from .io import atomic_path
+from .io import atomic_path, write_text
 
 COLUMNS = ["scene", "label", "version", "adaptive", "max_depth", "spp", "time_s", "time_min_s", "compile_s",
            "rmse", "relmse", "ciede2000", "bias_rmse", "finite", "resolution", "denoise"]
-
-
-def _write_text(path: str, text: str) -> None:
-    with atomic_path(path, ".tmp") as tmp:
-        with open(tmp, "w") as f:
-            f.write(text)
 
 
 def time_to_error(points: list[tuple[float, float]], target: float, extrapolate: bool = False) -> float:
@@ -175,19 +169,19 @@ def rewrite_summary(out_dir: str) -> None:
     """Regenerate ``summary.md`` from ``results.json`` (after a change of the report format)."""
     with open(os.path.join(out_dir, "results.json")) as f:
         result = json.load(f)
-    _write_text(os.path.join(out_dir, "summary.md"), summary_markdown(result))
+    write_text(os.path.join(out_dir, "summary.md"), summary_markdown(result))
 
 
 def write_report(result: dict, images: dict, gts: dict, out_dir: str) -> None:
     os.makedirs(out_dir, exist_ok=True)
-    _write_text(os.path.join(out_dir, "results.json"), json.dumps(result, indent=1, default=str))
+    write_text(os.path.join(out_dir, "results.json"), json.dumps(result, indent=1, default=str))
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore")
     w.writeheader()
     for r in result["rows"]:
         w.writerow(r)
-    _write_text(os.path.join(out_dir, "results.csv"), buf.getvalue())
-    _write_text(os.path.join(out_dir, "summary.md"), summary_markdown(result))
+    write_text(os.path.join(out_dir, "results.csv"), buf.getvalue())
+    write_text(os.path.join(out_dir, "summary.md"), summary_markdown(result))
     rows = result["rows"]
     for sc in sorted({r["scene"] for r in rows}):
         for d in sorted({r["max_depth"] for r in rows if r["scene"] == sc}):

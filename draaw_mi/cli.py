@@ -285,15 +285,13 @@ def _cmd_fit(args) -> int:
     print(f"loss {res.losses[0]:.4g} -> {res.losses[-1]:.4g} in {res.iterations} iterations, "
           f"{res.seconds:.1f} s, {'converged' if res.converged else 'not converged'}")
     if args.output:
-        from draaw_mi.io import atomic_path
+        from draaw_mi.io import write_text
         if scene.description is not None:
             doc = scene.updated_description(res.values)
         else:
             doc = {"fitted": res.values}
         text = tomli_w.dumps(doc) if args.output.lower().endswith(".toml") else json.dumps(doc, indent=2)
-        with atomic_path(args.output, ".tmp") as tmp:
-            with open(tmp, "w") as fh:
-                fh.write(text)
+        write_text(args.output, text)
         print(f"wrote {args.output}")
     if args.plot:
         res.plot(args.plot)
@@ -324,6 +322,7 @@ def _cmd_speed_suite(args) -> int:
     versions = args.versions.split(",") if args.versions else ["v4"]
     plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
     argv = ["--integrators", ";".join(plugins), "--repeats", str(args.repeats),
+            # bench's --gt-spp default (4096) is the study's; the suite's reference default is 1024
             "--ref-spp", str(args.gt_spp if args.gt_spp != 4096 else 1024),
             "--out", os.path.join(args.out, "speed_suite.md"),
             "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
@@ -384,11 +383,9 @@ def _cmd_bench(args) -> int:
             raise CliError(f"--camera-path {args.camera_path!r}: {e}") from None
         scene = draaw_mi.load_scene(scenes[0], **({"resolution": res} if res else {}))
         rows = bench.frame_times(scene, keys, versions=versions, frames=args.frames, progress=progress)
-        from draaw_mi.io import atomic_path
+        from draaw_mi.io import write_text
         path = os.path.join(args.out, "frame_times.json")
-        with atomic_path(path, ".tmp") as tmp:
-            with open(tmp, "w") as fh:
-                json.dump(rows, fh, indent=1)
+        write_text(path, json.dumps(rows, indent=1))
         for r in rows:
             print(f"{r['version']:>6}: mean {r['mean_s'] * 1e3:.1f} ms, median {r['median_s'] * 1e3:.1f} ms, "
                   f"p90 {r['p90_s'] * 1e3:.1f} ms")

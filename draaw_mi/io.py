@@ -79,6 +79,19 @@ def atomic_path(path: str, suffix: str):
             os.unlink(tmp)
 
 
+def write_text(path: str, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_path`): reports, TOML, JSON, CSV.
+
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "a", "r.md")
+    >>> write_text(p, "# ok"); open(p).read()
+    '# ok'
+    """
+    with atomic_path(path, ".tmp") as tmp:
+        with open(tmp, "w") as fh:
+            fh.write(text)
+
+
 def write_exr(path: str, image, channels: Sequence[str] | None = None, half: bool = False) -> None:
     """Write an (H, W, C) image as a float32 (or half) scanline EXR, atomically.
 

@@ -109,11 +109,12 @@ def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
     out, left = [], int(spp)
     while left > 0:
         k = min(left, int(pass_spp))
-        while k > 1 and taken(k) != k:
+        got = taken(k)
+        while got != k and k > 1:
             k -= 1
-        k = taken(k)                        # 1, or a sampler's smallest count
-        out.append(k)
-        left -= k
+            got = taken(k)
+        out.append(got)                     # k, or (k = 1) a sampler's smallest count
+        left -= got
     return out
 
 

@@ -199,9 +199,8 @@ def main(argv=None, command: str | None = None) -> int:
     text = report(results, args)
     print(text)
     if args.out:
-        from .io import atomic_path
-        with atomic_path(args.out, ".md") as tmp, open(tmp, "w") as f:
-            f.write(text)
+        from .io import write_text
+        write_text(args.out, text)
     return 0
 
 

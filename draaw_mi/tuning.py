@@ -203,15 +203,12 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
 
 
 def save_toml(path: str, doc: dict) -> None:
-    """Write ``doc`` as TOML atomically (``draaw_mi.io.atomic_path``)."""
+    """Write ``doc`` as TOML atomically (``draaw_mi.io.write_text``)."""
     import tomli_w
-    from .io import atomic_path
+    from .io import write_text
     if not str(path).lower().endswith(".toml"):
         raise ParameterError(f"save: {path!r}; expected a .toml file name")
-    text = tomli_w.dumps(doc)
-    with atomic_path(path, ".tmp") as tmp:
-        with open(tmp, "w") as fh:
-            fh.write(text)
+    write_text(path, tomli_w.dumps(doc))
 
 
 def snippet(source: str, materials: dict, settings: dict | None = None) -> str:

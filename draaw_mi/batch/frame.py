@@ -40,8 +40,8 @@ class CachedScene:
         """Render the frame: with a frozen function (``dr.freeze``) when the samples fit in one
         pass, so frames after the first replay the recorded kernels instead of re-tracing the
         integrator (the trace costs more than the kernel at low spp); otherwise through
-        :func:`draaw_mi.render`. Same bits either way: the frozen call reproduces render()'s
-        arithmetic (``img * spp / spp``) and seed. Returns ``(image, channel names)``."""
+        :func:`draaw_mi.render`. Same bits either way: the frozen call is render()'s one-pass
+        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, channel names)``."""
         import drjit as dr
         import mitsuba as mi
 
@@ -62,8 +62,7 @@ class CachedScene:
         fn = self.frozen.get(key)
         if fn is None:
             def fn(scene, seed, integrator=integrator, spp=spp):
-                img = mi.render(scene, integrator=integrator, seed=seed, spp=spp)
-                return (img * spp) / spp                  # what render() computes for one pass
+                return mi.render(scene, integrator=integrator, seed=seed, spp=spp)  # as render()
             fn = self.frozen[key] = freeze_render(integrator, fn)
         image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]))
         dr.eval(image)

@@ -61,9 +61,9 @@ class DraawV4Integrator(DraawIntegrator):
      * - adaptive
        - |bool|
        - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
-         AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates each pixel's variance
-         and path length, the rest of the budget goes where it lowers the error most per unit
-         of cost (:mod:`draaw_mi.adaptive_sampling`). (Default: |true|)
+         AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates
+         each pixel's variance and path length, the rest of the budget goes where it lowers
+         the error most per unit of cost (:mod:`draaw_mi.adaptive_sampling`). (Default: |true|)
 
      * - hide_emitters
        - |bool|
@@ -102,10 +102,10 @@ class DraawV4Integrator(DraawIntegrator):
     same cost and is switched off (uniform, the same kernel as before) where the emitters
     have similar powers or an environment lights the scene (an environment's power says little
     about what it gives the visible surfaces: on the thesis scene the table starved the point
-    light, whose glints carry most of the variance); adaptive sampling because the error of most images is dominated by
-    few pixels (emitter edges, highlights, caustics), and it is off for small renders (< 64
-    spp: the preview and the fit loop, where a pilot pass would be too small) and for
-    differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
+    light, whose glints carry most of the variance); adaptive sampling because the error of
+    most images is dominated by few pixels (emitter edges, highlights, caustics), and it is
+    off for small renders (< 64 spp: the preview and the fit loop, where a pilot pass would be
+    too small) and for differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
     the *absolute* squared error; dark pixels get fewer samples, so a relative error measure
     (relMSE) can rise (``adaptive=False`` turns it off). Each pixel keeps at least half the
     uniform count and no pixel takes more than a capped share, which bounds the loss where a

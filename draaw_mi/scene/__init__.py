@@ -23,6 +23,7 @@ from typing import Any
 
 
 from ..errors import DraawError, SceneError, suggest
+from .camera import sampler_plugin
 from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
 from .schema import Where
@@ -174,7 +175,8 @@ def load_scene(source, **overrides) -> DraawScene:
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
 
     ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
-    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are :class:`SceneError` naming the file and field.
+    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are
+    :class:`SceneError` naming the file and field.
     """
     import mitsuba as mi
 
@@ -236,17 +238,6 @@ def _checked(overrides: dict, source: str) -> dict:
         from .description import SAMPLERS
         out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
     return out
-
-
-_SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",
-                    "StratifiedSampler": "stratified", "LowDiscrepancySampler": "ldsampler",
-                    "OrthogonalSampler": "orthogonal"}
-
-
-def sampler_plugin(sampler) -> str:
-    """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
-    name = str(sampler).split("[")[0].strip()
-    return _SAMPLER_PLUGINS.get(name, name)
 
 
 def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None) -> DraawScene:

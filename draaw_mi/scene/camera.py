@@ -78,6 +78,17 @@ def camera_to_look_at(cam: dict, where: Where):
     return origin, target, up, fov, fov_axis, near, far
 
 
+_SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",
+                    "StratifiedSampler": "stratified", "LowDiscrepancySampler": "ldsampler",
+                    "OrthogonalSampler": "orthogonal"}
+
+
+def sampler_plugin(sampler) -> str:
+    """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
+    name = str(sampler).split("[")[0].strip()
+    return _SAMPLER_PLUGINS.get(name, name)
+
+
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,
                 sampler: str = "independent") -> dict:
     """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with

@@ -74,7 +74,7 @@ def _render(scene, opts, spp, seed):
 def run_sdf_study(scene, out_dir: str, settings=None, spp: int = 16, repeats: int = 3,
                   progress: bool = False, quick: bool = False) -> dict:
     """Run the tracer study on one SDF scene; write the report into ``out_dir``."""
-    from ..io import atomic_path
+    from ..io import write_text
     settings = settings or default_settings(quick)
     name = os.path.splitext(os.path.basename(scene.source or "scene"))[0]
     os.makedirs(out_dir, exist_ok=True)
@@ -115,19 +115,12 @@ def run_sdf_study(scene, out_dir: str, settings=None, spp: int = 16, repeats: in
               "reference": REFERENCE, "reference_mean_steps": float(ref_steps.mean()),
               "sdf_rays": int(ref_hit.sum()), "rows": rows}
     base = os.path.join(out_dir, f"sdf_study_{name}")
-    with atomic_path(base + ".json", ".tmp") as tmp:
-        with open(tmp, "w") as f:
-            json.dump(result, f, indent=1)
-    with atomic_path(base + ".csv", ".tmp") as tmp:
-        with open(tmp, "w") as f:
-            keys = ["sdf_epsilon", "sdf_max_steps", "sdf_relaxation", "time_s", "rmse",
-                    "false_miss_share", "mean_steps"]
-            f.write(",".join(keys) + "\n")
-            for r in rows:
-                f.write(",".join(str(r[k]) for k in keys) + "\n")
-    with atomic_path(base + ".md", ".tmp") as tmp:
-        with open(tmp, "w") as f:
-            f.write(markdown(result))
+    write_text(base + ".json", json.dumps(result, indent=1))
+    keys = ["sdf_epsilon", "sdf_max_steps", "sdf_relaxation", "time_s", "rmse",
+            "false_miss_share", "mean_steps"]
+    lines = [",".join(keys)] + [",".join(str(r[k]) for k in keys) for r in rows]
+    write_text(base + ".csv", "\n".join(lines) + "\n")
+    write_text(base + ".md", markdown(result))
     plot(result, os.path.join(out_dir, f"sdf_error_vs_time_{name}.png"))
     return result
 
