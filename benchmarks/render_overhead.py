@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--res", type=int, default=64)
     ap.add_argument("--spp", type=int, default=4)
-    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--repeats", type=int, default=100)
     ap.add_argument("--versions", default="v1,v2,v3,v4,path")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_overhead.md"))
     args = ap.parse_args(argv)
@@ -72,7 +72,8 @@ def main(argv=None) -> int:
                 data[(v, f)].append(one(scene, v, args.spp, 7 + i, f))
     out = ["# Time outside kernels, small repeated renders (benchmarks/render_overhead.py)", "",
            f"Command: `.venv/bin/python benchmarks/render_overhead.py {' '.join(sys.argv[1:])}`  ",
-           f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other jobs), Dr.Jit "
+           f"Machine: {platform.machine()}, {os.cpu_count()} cores (load average "
+           f"{os.getloadavg()[0]:.1f} at the end, this job included), Dr.Jit "
            f"threads {dr.thread_count()}; {time.strftime('%Y-%m-%d %H:%M')}  ",
            f"`draaw_mi.render(scenes/cornell.toml, {args.res}x{args.res}, spp={args.spp}, new seed "
            f"each call)`: the integrator render call as `draaw_mi.render` makes it for such small "

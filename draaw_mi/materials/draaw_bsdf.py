@@ -100,14 +100,25 @@ LIVE_INSTANCES: "weakref.WeakSet" = weakref.WeakSet()
 class DraawBSDF(mi.BSDF):
     """Metallic/roughness GGX + Lambert BSDF with GO-Draaw's legacy knobs (see module doc)."""
 
+    # Every dr.freeze replay traverses each Python plugin's instance __dict__ (Dr.Jit's
+    # traverse_py_cb_ro), paying per entry: about 3 us for a plain Python value, 5 us for a
+    # nested texture. So plain options live in slots, outside the __dict__, an absent normal
+    # map is the class attribute, and constant parameters are bare Dr.Jit arrays rather than
+    # uniform textures: 0.56 -> 0.27 ms per frozen render of the Cornell box (5 BSDFs),
+    # benchmarks/results/render_overhead.md.
+    __slots__ = ("normalmap_signed", "two_sided", "alpha_min", "__dict__", "__weakref__")
+    normalmap = None
+
     def __init__(self, props: mi.Properties):
         mi.BSDF.__init__(self, props)
         LIVE_INSTANCES.add(self)
+        # each parameter: a bare Dr.Jit array when constant, else the texture
         for name, (default, lo, hi) in COLOR_PARAMS.items():
-            setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=True))
+            tex = textures.texture_property(props, name, default, lo, hi, color=True)
+            setattr(self, name, textures.as_parameter(tex))
         for name, (default, lo, hi) in SCALAR_PARAMS.items():
-            setattr(self, name, textures.texture_property(props, name, default, lo, hi, color=False))
-        self.normalmap = None
+            tex = textures.texture_property(props, name, default, lo, hi, color=False)
+            setattr(self, name, textures.as_parameter(tex))
         if "normalmap" in props:
             self.normalmap = textures.texture_property(props, "normalmap", None, None, None, color=True)
         enc = props.get("normalmap_encoding", "unsigned")
@@ -139,10 +150,10 @@ class DraawBSDF(mi.BSDF):
     def _params(self, si, active):
         # Clamp into range with a straight-through gradient: an optimiser that sits exactly on
         # a bound (metallic = 0, roughness = 1) still sees which way the loss wants to go.
-        base = _clamp_st(self.base_color.eval(si, active), 0.0, None)
-        rough = _clamp_st(self.roughness.eval_1(si, active), 0.0, 1.0)
-        metallic = _clamp_st(self.metallic.eval_1(si, active), 0.0, 1.0)
-        specular = _clamp_st(self.specular.eval_1(si, active), 0.0, 1.0)
+        base = _clamp_st(textures.evaluate(self.base_color, si, active), 0.0, None)
+        rough = _clamp_st(textures.evaluate_1(self.roughness, si, active), 0.0, 1.0)
+        metallic = _clamp_st(textures.evaluate_1(self.metallic, si, active), 0.0, 1.0)
+        specular = _clamp_st(textures.evaluate_1(self.specular, si, active), 0.0, 1.0)
         alpha = dr.sqrt(dr.square(dr.square(rough)) + self.alpha_min ** 2)
         f0 = dr.lerp(mi.Color3f(0.08 * specular), base, metallic)
         f90 = dr.minimum(1.0, 50.0 * f0)
@@ -280,29 +291,39 @@ class DraawBSDF(mi.BSDF):
 
     def eval_attribute(self, name, si, active=True):
         if name in ("base_color", "albedo"):
-            return self.base_color.eval(si, active)
+            return mi.Color3f(textures.evaluate(self.base_color, si, active))
         if name in SCALAR_PARAMS:
-            return mi.Color3f(getattr(self, name).eval_1(si, active))
+            return mi.Color3f(textures.evaluate_1(getattr(self, name), si, active))
         return mi.Color3f(0.0)
 
     def eval_attribute_1(self, name, si, active=True):
         if name in SCALAR_PARAMS:
-            return getattr(self, name).eval_1(si, active)
+            return mi.Float(textures.evaluate_1(getattr(self, name), si, active))
         if name in ("base_color", "albedo"):
-            return _lum(self.base_color.eval(si, active))
+            return _lum(textures.evaluate(self.base_color, si, active))
         return mi.Float(0.0)
 
     def eval_attribute_3(self, name, si, active=True):
         return self.eval_attribute(name, si, active)
 
     def traverse(self, cb):
+        # a constant under the key its uniform texture had: NAME.value
         for name in ALL_PARAMS:
-            cb.put(name, getattr(self, name), mi.ParamFlags.Differentiable)
+            value = getattr(self, name)
+            if isinstance(value, mi.Texture):
+                cb.put(name, value, mi.ParamFlags.Differentiable)
+            else:
+                cb.put(name + ".value", value, mi.ParamFlags.Differentiable)
         if self.normalmap is not None:
             cb.put("normalmap", self.normalmap, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        pass
+        # A constant set to a Python number is a literal: kept so, every new value would
+        # compile new kernels (a slider drag would recompile per step).
+        for name in ALL_PARAMS:
+            value = getattr(self, name)
+            if not isinstance(value, mi.Texture):
+                dr.make_opaque(value)
 
     def to_string(self):
         fields = ", ".join(f"{n}={textures.describe(getattr(self, n))}" for n in ALL_PARAMS)

@@ -1,13 +1,16 @@
 """Turn a plugin property (float, RGB, file name, array or nested texture) into an mi.Texture.
 
-Scalar material parameters are stored as textures too, so that every parameter is
-differentiable through ``mi.traverse`` under one naming scheme (``<bsdf>.<name>.value`` for
-constants, ``<bsdf>.<name>.data`` for bitmaps).
+Every material parameter is differentiable through ``mi.traverse`` under one naming scheme
+(``<bsdf>.<name>.value`` for constants, ``<bsdf>.<name>.data`` for bitmaps). The ``draaw``
+BSDF keeps a constant as a bare Dr.Jit array (:func:`as_parameter`; cheaper for ``dr.freeze``
+to traverse than a uniform texture) under the key its texture would have had;
+:func:`evaluate` / :func:`evaluate_1` read either form.
 """
 from __future__ import annotations
 
 import os
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -119,14 +122,50 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
                          + ("an RGB triple, a number" if color else "a number") + ", file name, array or texture")
 
 
+def as_parameter(tex: mi.Texture):
+    """``tex``'s value as a bare Dr.Jit array (made opaque) when ``tex`` is a constant texture
+    (not spatially varying, one ``value`` parameter), else ``tex`` itself.
+
+    A constant as an array is what a ``dr.freeze`` replay traverses cheaply (see
+    :class:`~draaw_mi.materials.draaw_bsdf.DraawBSDF`); :func:`evaluate` reads either form.
+
+    >>> import drjit as dr
+    >>> v = as_parameter(constant_texture(0.25, color=False))
+    >>> type(v).__name__, float(v[0])
+    ('Float', 0.25)
+    """
+    if tex.is_spatially_varying():
+        return tex
+    params = mi.traverse(tex)
+    if list(params.keys()) != ["value"]:
+        return tex
+    value = params["value"]
+    out = type(value)(value)
+    dr.make_opaque(out)
+    return out
+
+
+def evaluate(param, si, active):
+    """Colour of a parameter at ``si``: ``param.eval`` for a texture, the array for a constant."""
+    return param.eval(si, active) if isinstance(param, mi.Texture) else param
+
+
+def evaluate_1(param, si, active):
+    """Scalar of a parameter at ``si``: ``param.eval_1`` for a texture, the array for a constant."""
+    return param.eval_1(si, active) if isinstance(param, mi.Texture) else param
+
+
 def is_spatially_varying(tex) -> bool:
-    return tex is not None and bool(tex.is_spatially_varying())
+    return isinstance(tex, mi.Texture) and bool(tex.is_spatially_varying())
 
 
 def describe(tex) -> str:
     """Short human-readable form of a texture parameter for ``to_string``."""
     if tex is None:
         return "none"
+    if not isinstance(tex, mi.Texture):            # a constant (as_parameter)
+        v = np.array(tex).ravel()
+        return f"{v[0]:g}" if v.size == 1 else "(" + ", ".join(f"{x:g}" for x in v) + ")"
     params = mi.traverse(tex)
     if "value" in params.keys():
         v = np.array(params["value"]).ravel()

@@ -38,9 +38,13 @@ def scene():
     return cornell(32, 3, override={"type": "draaw", **MAT})
 
 
-@pytest.mark.parametrize("name,new", [("base_color", [0.3, 0.6, 0.9]), ("roughness", 0.9),
-                                      ("metallic", 0.9), ("specular", 0.0)])
-def test_update_changes_the_render_without_recompiling(scene, name, new):
+@pytest.mark.parametrize("name,new,literal", [("base_color", [0.3, 0.6, 0.9], False),
+                                              ("roughness", 0.9, False), ("metallic", 0.9, False),
+                                              ("specular", 0.0, False), ("roughness", 0.7, True),
+                                              ("base_color", [0.2, 0.4, 0.6], True)])
+def test_update_changes_the_render_without_recompiling(scene, name, new, literal):
+    """``literal``: the value set as Python numbers (as the tuner's sliders do); the BSDF's
+    ``parameters_changed`` must make it opaque, or each new value would compile new kernels."""
     p = mi.traverse(scene)
     key = f"mat.{name}.value"
     old = type(p[key])(p[key])
@@ -48,7 +52,10 @@ def test_update_changes_the_render_without_recompiling(scene, name, new):
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         dr.kernel_history()
-        p[key] = mi.Color3f(*new) if name == "base_color" else dr.opaque(mi.Float, new)
+        if literal:
+            p[key] = mi.Color3f(*new) if name == "base_color" else new
+        else:
+            p[key] = mi.Color3f(*new) if name == "base_color" else dr.opaque(mi.Float, new)
         p.update()
         after = np.array(mi.render(scene, spp=8, seed=1))
         history = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
@@ -141,3 +148,18 @@ def test_to_string_and_repr(scene):
     bitmap = draaw(base_color=mi.TensorXf(np.zeros((3, 5, 3), np.float32)))
     assert "base_color=bitmap(5x3x3)" in str(bitmap)
     assert "DraawBSDF[" in str(scene)           # printing a whole scene works too
+
+
+def test_instance_dict_holds_only_traversable_values():
+    """dr.freeze traverses a Python plugin's instance ``__dict__`` on every frozen render, at
+    about 3 us per plain Python value: plain options live in slots, constants are bare Dr.Jit
+    arrays (benchmarks/results/render_overhead.md)."""
+    for b in (draaw(**MAT), draaw(**MAT, normalmap=[0.5, 0.5, 1.0], two_sided=True, alpha_min=0.01)):
+        for name, value in vars(b).items():
+            assert isinstance(value, mi.Texture) or dr.is_array_v(value), (name, value)
+        assert b.two_sided in (False, True) and b.alpha_min > 0     # still readable
+    b = draaw(**MAT)
+    assert isinstance(b.roughness, mi.Float) and isinstance(b.base_color, mi.Color3f)
+    assert b.normalmap is None and "normalmap" not in vars(b)
+    bitmap = draaw(roughness=mi.TensorXf(np.full((3, 2), 0.4, np.float32)))
+    assert isinstance(bitmap.roughness, mi.Texture)             # spatially varying: a texture
