@@ -41,6 +41,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import speed_suite as ss
+from .scene import load_mitsuba_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CACHE = os.path.join(os.path.expanduser("~"), ".cache", "draaw-mi", "speed_refs")
@@ -105,7 +106,7 @@ def bench(name: str, res: int, args) -> dict | None:
     if d is None:
         print(f"[{name}] skipped: data absent", file=sys.stderr)
         return None
-    scene = mi.load_dict(d)
+    scene = load_mitsuba_dict(d)                   # a fixed emitter order
     depth = ss.max_depth(name)
     ref_scene = scene if args.sampler == "independent" else ss.load(name, res)
     ref, ref_var, t_ref = reference(name, res, ref_scene, depth, args.ref_spp, args.cache)

@@ -30,6 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from .integrators import reference_scenes as rs
+from .scene import load_mitsuba_dict
 
 T = mi.ScalarTransform4f
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -183,7 +184,7 @@ def build(name: str, res: int, sampler: str = "independent", spp: int = 64) -> d
 
 def load(name: str, res: int, sampler: str = "independent") -> mi.Scene | None:
     d = build(name, res, sampler)
-    return None if d is None else mi.load_dict(d)
+    return None if d is None else load_mitsuba_dict(d)    # a fixed emitter order
 
 
 def max_depth(name: str) -> int:

@@ -329,17 +329,28 @@ class DraawV4Integrator(DraawIntegrator):
                         ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
                                                               active_em, primal, sdf)
                     wo = si_em.to_local(ds.d)
-                    if dr.hint(mis_em, mode="scalar"):
+                    if dr.hint(primal, mode="scalar"):
+                        # the light sample's value and the next direction in one BSDF call,
+                        # as Mitsuba's path: one virtual-call dispatch less per bounce, 1-8 %
+                        # less kernel time on the speed suite (render_overhead.md)
+                        f_em, pdf_em, bs, bsdf_w = bsdf.eval_pdf_sample(
+                            ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)
+                        f_em = dr.select(active_em, f_em, 0.0)
+                    elif dr.hint(mis_em, mode="scalar"):
                         f_em, pdf_em = bsdf.eval_pdf(ctx, si_em, wo, active_em)
+                    else:
+                        f_em = bsdf.eval(ctx, si_em, wo, active_em)
+                    if dr.hint(mis_em, mode="scalar"):
                         w_em = mis_weight(ds.pdf, pdf_em)
                         if dr.hint(delta_em, mode="scalar"):
                             w_em = dr.select(ds.delta, 1.0, w_em)
                         Lr_dir = β * w_em * f_em * em_w
                     else:
-                        Lr_dir = β * bsdf.eval(ctx, si_em, wo, active_em) * em_w
+                        Lr_dir = β * f_em * em_w
 
             # ------------------ Detached BSDF sampling -------------------
-            bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
+            if dr.hint(not (has_nee and primal), mode="scalar"):     # else fused above
+                bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
 
             L = (L + Le + Lr_dir) if primal else (L - Le - Lr_dir)
             ray_next = si.spawn_ray(si.to_world(bs.wo))

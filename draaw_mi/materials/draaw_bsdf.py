@@ -228,28 +228,20 @@ class DraawBSDF(mi.BSDF):
         ok &= dr.isfinite(pdf)
         return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
-    def _eval_pdf(self, ctx, si, wo, active):
-        kd, f0, f90, alpha = self._params(si, active)
-        wi, flip, frame = self._local_frame(si, active)
+    def _prepare(self, si, active):
+        """Parameters and shading frame at ``si``: what eval, pdf and sample all start from."""
+        return self._params(si, active), self._local_frame(si, active)
+
+    def _eval_pdf_prepared(self, ctx, prepared, wo, active):
+        (kd, f0, f90, alpha), (wi, flip, frame) = prepared
         wo_l = self._flip(wo, flip)
         active = active & (mi.Frame3f.cos_theta(wo_l) > 0) & (mi.Frame3f.cos_theta(wi) > 0)
         if frame is not None:
             wi, wo_l = frame.to_local(wi), frame.to_local(wo_l)
         return self._eval_pdf_local(ctx, kd, f0, f90, alpha, wi, wo_l, active)
 
-    # ------------------------------------------------------------------ mi.BSDF interface
-    def eval(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active)[0]
-
-    def pdf(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active)[1]
-
-    def eval_pdf(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active)
-
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        kd, f0, f90, alpha = self._params(si, active)
-        wi_g, flip, frame = self._local_frame(si, active)
+    def _sample_prepared(self, ctx, prepared, sample1, sample2, active):
+        (kd, f0, f90, alpha), (wi_g, flip, frame) = prepared
         wi = frame.to_local(wi_g) if frame is not None else wi_g
         cos_i = mi.Frame3f.cos_theta(wi)
         active = active & (cos_i > 0) & (mi.Frame3f.cos_theta(wi_g) > 0)
@@ -281,6 +273,29 @@ class DraawBSDF(mi.BSDF):
                                     mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
         weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
         return bs, weight
+
+    # ------------------------------------------------------------------ mi.BSDF interface
+    def eval(self, ctx, si, wo, active=True):
+        return self._eval_pdf_prepared(ctx, self._prepare(si, active), wo, active)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf_prepared(ctx, self._prepare(si, active), wo, active)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf_prepared(ctx, self._prepare(si, active), wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        return self._sample_prepared(ctx, self._prepare(si, active), sample1, sample2, active)
+
+    def eval_pdf_sample(self, ctx, si, wo, sample1, sample2, active=True):
+        """``eval_pdf(wo)`` and ``sample()`` in one call that evaluates the parameters and the
+        shading frame once: a path tracer asks for both at every vertex (its light sample's
+        value and the next direction), and one BSDF call instead of two is one virtual-call
+        dispatch less per bounce (``draaw_v4`` and Mitsuba's ``path`` call this)."""
+        prepared = self._prepare(si, active)
+        value, pdf = self._eval_pdf_prepared(ctx, prepared, wo, active)
+        bs, weight = self._sample_prepared(ctx, prepared, sample1, sample2, active)
+        return value, pdf, bs, weight
 
     # ------------------------------------------------------------------ attributes
     def eval_diffuse_reflectance(self, si, active=True):

@@ -235,6 +235,27 @@ def test_sampled_weight_is_eval_over_pdf(extra):
             assert np.all(w[c <= 0] == 0) and np.all(bpdf[c <= 0] == 0)
 
 
+@pytest.mark.parametrize("extra", [{}, {"normalmap": [0.7, 0.45, 0.9], "two_sided": True}],
+                         ids=["plain", "normalmap_two_sided"])
+def test_eval_pdf_sample_is_eval_pdf_and_sample(extra):
+    """The fused call (one parameter and frame evaluation) returns what the two calls do."""
+    rng = np.random.default_rng(5)
+    n = 4096
+    si = make_si(direction(rng.random(n) * 2 - 0.2, rng.random(n) * 2 * np.pi))
+    wo = vec3(direction(rng.random(n) * 2 - 0.2, rng.random(n) * 2 * np.pi))
+    s1 = mi.Float(rng.random(n, dtype=np.float32))
+    s2 = mi.Point2f(rng.random((2, n), dtype=np.float32))
+    bsdf = draaw(roughness=0.3, metallic=0.4, base_color=[0.9, 0.5, 0.2], **extra)
+    val, pdf, bs, w = bsdf.eval_pdf_sample(CTX, si, wo, s1, s2)
+    val2, pdf2 = bsdf.eval_pdf(CTX, si, wo)
+    bs2, w2 = bsdf.sample(CTX, si, s1, s2)
+    for a, b in ((color_np(val), color_np(val2)), (np.array(pdf), np.array(pdf2)),
+                 (color_np(w), color_np(w2)), (np.array(bs.pdf), np.array(bs2.pdf)),
+                 (np.array(bs.wo), np.array(bs2.wo))):
+        assert np.abs(a).max() > 0
+        np.testing.assert_array_equal(a, b)
+
+
 # ---------------------------------------------------------------------------- chi-square
 def _chi2_functors(bsdf, wi):
     wi = [float(x) for x in wi]
