@@ -33,6 +33,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+from draaw_mi.bench import load_note  # noqa: E402
 BIN = os.path.dirname(sys.executable)
 FRAMES, RES = 24, 256
 
@@ -218,7 +219,7 @@ def main() -> int:
              f"{dr.thread_count()} Dr.Jit threads, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}, "
              f"variant llvm_ad_rgb. Wall-clock per frame of the whole command (process start-up included), "
              f"median of {args.repeats} interleaved repeats after one warm-up run each (kernels on disk). "
-             "**The machine was shared with other jobs** while this ran; compare ratios, not absolute times.", "",
+             f"Machine: {load_note()}; compare ratios, not absolute times.", "",
              "* `cli`: `mitsuba -m llvm_ad_rgb -o NNNN.exr frame_NN.xml`, one process per frame; the XML is "
              "the scene exported with Mitsuba's C++ `principled` BSDF (in `twosided`) for the Python `draaw` "
              "BSDF and the C++ `path` integrator (the `mitsuba` executable cannot load Python plugins).",

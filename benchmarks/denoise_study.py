@@ -19,6 +19,7 @@ METRICS = (("rmse", "RMSE (linear)"), ("relmse", "relMSE"), ("ciede2000", "mean 
 
 def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.join(HERE, "results", "denoise_study.md"),
          few=4, many=64):
+    from draaw_mi.bench import load_note
     with open(study) as fh:
         result = json.load(fh)
     rows = result["rows"]
@@ -27,8 +28,8 @@ def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.
              "`benchmarks/denoise_study.py`. Ground truth: Mitsuba `path`, "
              f"{result['ground_truth_spp']} spp. 128x128, max_depth 6, errors averaged over "
              f"{result['repeats']} independent seeds, times are medians.", "",
-             "**The machine was shared with other jobs during the run**: the times are noisy (and OIDN's "
-             "threads compete with Dr.Jit's); the errors are not affected.", "",
+             f"Machine: {load_note()}; OIDN's threads compete with Dr.Jit's, so the times are noisy; "
+             "the errors are not affected.", "",
              f"| scene | version | metric | {few} spp raw | {few} spp + OIDN | {many} spp raw | lower of the last two |",
              "|---|---|---|---:|---:|---:|---|"]
     wins = {}

@@ -39,6 +39,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "media"))
 import media_scenes as ms  # noqa: E402
 
+from draaw_mi.bench import load_note  # noqa: E402
 from draaw_mi.media import VoxelGrid  # noqa: E402
 from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 
@@ -134,8 +135,8 @@ def main(argv=None) -> int:
              f"`python benchmarks/media_speed.py{' --quick' if a.quick else ''}` — {a.res}x{a.res}, "
              f"{a.spp} spp, median of {a.repeats} interleaved repeats after a warm-up; reference "
              f"{a.ref_spp} spp of volpath. Machine: {platform.machine()}, {os.cpu_count()} cores, "
-             f"{dr.thread_count()} Dr.Jit threads, **shared with other jobs** (ratios are taken within "
-             "one run; absolute times are noisy).", ""]
+             f"{dr.thread_count()} Dr.Jit threads, {load_note()} (ratios are taken within "
+             "one run).", ""]
 
     # 1. one dense voxel vs empty
     lines += ["## 1. One dense voxel (density 1e4) in an empty 64³ grid vs the empty grid", "",

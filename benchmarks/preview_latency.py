@@ -140,8 +140,7 @@ def measure(args) -> str:
         f"Run inside: {'a Jupyter kernel (ipykernel via nbclient)' if os.environ.get('DRAAW_MI_IN_KERNEL') else 'a plain Python process'}.",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Dr.Jit threads {dr.thread_count()}, "
         f"Python {platform.python_version()}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. "
-        "**The machine was shared with other jobs during the run**: absolute times are noisy; the "
-        "configurations were interleaved so that load hit them alike. Load average (1 min) at the "
+        "The configurations were interleaved so that any load hit them alike. Load average (1 min) at the "
         f"start {load0[0]:.1f}, at the end {os.getloadavg()[0]:.1f} (2 cores: above 2 means other jobs waited "
         "for the CPU too).", "",
         f"Scene `scenes/cornell.toml` at {args.size}x{args.size}, version {scene.settings['version']}, "

@@ -24,6 +24,7 @@ sys.path.insert(0, ROOT)
 
 import draaw_mi  # noqa: E402
 import drjit as dr  # noqa: E402
+from draaw_mi.bench import load_note  # noqa: E402
 from draaw_mi.io import atomic_path  # noqa: E402
 from draaw_mi.sdf.study import camera_march  # noqa: E402
 
@@ -75,7 +76,7 @@ def main(argv=None):
     lines = ["# SDF sphere tracing: cost", "",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"{dr.thread_count()} Dr.Jit threads, Mitsuba {draaw_mi.__version__ and __import__('mitsuba').__version__}; "
-             "**the machine was shared with other jobs**, so absolute times are noisy; ratios come from "
+             f"{load_note()}; ratios come from "
              f"one run with the cases interleaved (A B A B ...), medians of {args.repeats} repeats after a warm-up.",
              "", "Command: `.venv/bin/python benchmarks/sdf_speed.py`", ""]
 

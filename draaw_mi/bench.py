@@ -47,6 +47,19 @@ class Setting:
 
 
 # --------------------------------------------------------------------------- error metrics
+def load_note() -> str:
+    """How busy the machine was, for a benchmark's header: the 1-minute load average now (this
+    job included) against the core count. Measured, not assumed: a report that says "shared
+    with other jobs" when it was not misleads whoever compares its absolute times.
+
+    >>> load_note().startswith("load average ")
+    True
+    """
+    load, cores = os.getloadavg()[0], os.cpu_count() or 1
+    state = "other jobs shared the cores" if load > cores + 0.5 else "no sign of other jobs"
+    return f"load average {load:.1f} at the end, this job included, on {cores} cores ({state})"
+
+
 def rmse(img: np.ndarray, gt: np.ndarray) -> float:
     return float(np.sqrt(np.mean((img - gt) ** 2)))
 

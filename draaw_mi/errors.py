@@ -29,6 +29,10 @@ class IOFailure(DraawError, OSError):
     """An image or scene file cannot be read or written."""
 
 
+class BusyError(DraawError, RuntimeError):
+    """A resource is held by another draaw-mi process (a batch output folder)."""
+
+
 def suggest(name: str, valid: Iterable[str]) -> str:
     """A ``"; did you mean 'x'?"`` suffix for an unknown ``name``, or a list of valid names.
 

@@ -41,6 +41,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import speed_suite as ss
+from .bench import load_note
 from .scene import load_mitsuba_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -142,7 +143,7 @@ def report(results: list[dict], args) -> str:
     specs = args.integrators.split(";")
     out = ["# Speed suite: time to reach `path`'s error (draaw_mi/speed_bench.py)", "",
            f"Command: `{args.command}`  ",
-           f"Machine: {platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+           f"Machine: {platform.machine()}, {os.cpu_count()} cores ({load_note()}), "
            f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "
            f"{time.strftime('%Y-%m-%d %H:%M')}  ",
            f"Box filter, sampler `{args.sampler}` for every integrator; reference `path` at "

@@ -131,6 +131,10 @@ def test_pareto_and_time_to_error():
                              "path": [(1.5, 0.4), (6, 0.1)]}.items() for t, e in pts]
     chk = pareto_check(rows, "s", 3)
     assert chk["levels"] == 2 and chk["subject_fastest"] == 2
+    # the margin to the best other method: path, 1.5x v4's time at the 0.4 level
+    first = chk["details"][-1]
+    assert first["rmse"] == pytest.approx(0.4) and first["rival"] == "path"
+    assert first["subject_s"] / first["rival_s"] == pytest.approx(1 / 1.5)
 
 
 def test_study_writes_table_summary_and_plots(tmp_path):

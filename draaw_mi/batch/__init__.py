@@ -19,7 +19,8 @@ Parameter          Meaning
 =================  ================================================================
 
 Phases: validate (bad manifest → :class:`~draaw_mi.errors.SceneError`, nothing rendered) →
-plan → remove temp files of killed runs → render → log → contact sheets.
+plan → lock the output folders (a second run on them → :class:`~draaw_mi.errors.BusyError`,
+:mod:`~draaw_mi.batch.lock`) → remove temp files of killed runs → render → log → contact sheets.
 
 >>> import draaw_mi.batch as batch                             # doctest: +SKIP
 >>> res = batch.run("scenes/batch_example.toml", out="out")    # doctest: +SKIP
@@ -176,8 +177,18 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     if dry_run:
         res.missing = len(todo)
         return res
+    from .lock import output_locks
     from .plan import prepare_outputs
+    folders = sorted({os.path.dirname(s["output"]) for s in specs} | {os.path.dirname(res.log)})
     prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {os.path.dirname(res.log)}), m.path)
+    with output_locks([f for f in folders if os.path.isdir(f)], m.path):
+        return _render(m, specs, todo, cache, res, executor, workers, scheduler, client, progress,
+                       on_result, t0)
+
+
+def _render(m, specs, todo, cache, res, executor, workers, scheduler, client, progress, on_result,
+            t0) -> BatchResult:
+    """``run``'s rendering phase, with the output folders locked."""
     remove_temp_files(specs)
     log = _Log(res.log)
     log.write(event="start", manifest=m.path, frames=len(specs), todo=len(todo), executor=executor,

@@ -249,3 +249,29 @@ def test_doctests():
     plan_mod = sys.modules["draaw_mi.batch.plan"]        # draaw_mi.batch.plan is also the function
     result = doctest.testmod(plan_mod)
     assert result.attempted >= 1 and result.failed == 0
+    from draaw_mi.batch import lock
+    result = doctest.testmod(lock)
+    assert result.attempted >= 1 and result.failed == 0
+
+
+def test_a_second_run_on_busy_folders_stops_before_touching_them(tmp_path, capsys):
+    """A run into folders another run holds would delete that run's temporary files (as a
+    killed run's leftovers) and render the same frames: it must stop with one line, exit 2."""
+    from draaw_mi.batch.lock import output_locks
+    from draaw_mi.cli import main
+    from draaw_mi.errors import BusyError
+    doc = manifest(tmp_path, frames=2)
+    path = write_manifest(tmp_path, doc)
+    folder = tmp_path / "out" / "orbit"
+    folder.mkdir(parents=True)
+    in_flight = folder / ".draaw-0000-in-flight.exr"          # the other run's temporary file
+    in_flight.write_bytes(b"partial")
+    with output_locks([str(folder), str(tmp_path / "out")], "other run"):
+        with pytest.raises(BusyError, match="is in use by another draaw-mi batch run"):
+            batch.run(doc, progress=False)
+        assert main(["batch", path, "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "orbit" in err[0] and f"pid {os.getpid()}" in err[0], err
+        assert in_flight.exists() and not frames_of(tmp_path / "out")
+    res = batch.run(doc, progress=False)                       # the lock went with its holder
+    assert res.complete and len(frames_of(tmp_path / "out")) == 2 and not in_flight.exists()

@@ -1,0 +1,87 @@
+"""One batch run per output folder: an exclusive ``flock`` on a lock file in each folder.
+
+A second run writing into the same folders would delete the first run's temporary files (it
+takes them for leftovers of a killed run, :func:`draaw_mi.batch.remove_temp_files`), so the
+first run's atomic renames fail, and both would render the same frames. :func:`output_locks`
+makes the second run stop before it touches anything, with one line that names the folder and
+the process holding it. The kernel releases a ``flock`` when its process ends, however it
+ends (kill -9 included), so a lock never outlives its run; a run that ends normally also
+deletes its lock file, and the file a killed run leaves behind is simply locked afresh.
+
+>>> import tempfile
+>>> d = tempfile.mkdtemp()
+>>> with output_locks([d], "example.toml"):
+...     try:
+...         with output_locks([d], "other.toml"):
+...             pass
+...     except BusyError as e:
+...         print(str(e).split(";")[0].endswith("is in use by another draaw-mi batch run (pid %d)" % os.getpid()))
+True
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+
+from ..errors import BusyError
+
+LOCK_NAME = ".draaw-batch.lock"
+
+try:                                    # POSIX; elsewhere runs are not locked
+    import fcntl
+except ImportError:                     # pragma: no cover - Windows
+    fcntl = None
+
+
+def _holder(fd: int) -> str:
+    try:
+        pid = os.pread(fd, 32, 0).decode().strip()
+    except OSError:
+        return ""
+    return f" (pid {pid})" if pid.isdigit() else ""
+
+
+@contextlib.contextmanager
+def output_locks(folders, where: str):
+    """Hold an exclusive lock on every folder in ``folders`` for the duration of the block.
+
+    Raises :class:`~draaw_mi.errors.BusyError` (nothing locked, nothing written) if another
+    process holds one of them. ``where``: the manifest, for the message. The folders must exist.
+    """
+    held = []
+    try:
+        for folder in sorted(set(folders)):
+            if fcntl is None:
+                break
+            path = os.path.join(folder, LOCK_NAME)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                # the holder we waited on may have deleted the file as it finished: a lock on
+                # that unlinked file would not exclude the next run, which creates a new one
+                if not _same_file(fd, path):
+                    raise BlockingIOError
+            except BlockingIOError:
+                holder = _holder(fd)
+                os.close(fd)
+                raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi "
+                                f"batch run{holder}; wait for it to finish or choose another --out") from None
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            held.append((fd, path))
+        yield
+    finally:
+        for fd, path in held:
+            try:
+                os.unlink(path)         # still locked: nobody can hold this file meanwhile
+            except OSError:
+                pass
+            os.close(fd)                # closing the descriptor releases its lock
+
+
+def _same_file(fd: int, path: str) -> bool:
+    try:
+        a, b = os.fstat(fd), os.stat(path)
+    except OSError:
+        return False
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
