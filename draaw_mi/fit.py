@@ -57,6 +57,7 @@ Example::
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import drjit as dr
@@ -193,6 +194,21 @@ def _views(scene: DraawScene, views):
         out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"],
                                             scene.settings.get("sampler", "independent"))))
     return out
+
+
+def _sampler_spp(scene: DraawScene, spp: int, name: str) -> int:
+    """The per-pixel count the scene's sampler takes nearest ``spp`` (from below where it can).
+    A stratifying sampler rounds other counts up (``multijitter``: 35 for 32) with a Mitsuba
+    warning at every render; a fit cannot split its renders into passes (one kernel per run),
+    so it says once which count it uses and uses it."""
+    from .render import sample_passes
+    got = sample_passes(scene.mi_scene, spp, spp)[0]
+    if got != spp:
+        from .scene.camera import sampler_plugin
+        warnings.warn(f"fit: the scene's {sampler_plugin(scene.mi_scene.sensors()[0].sampler())} "
+                      f"sampler takes {got} samples per pixel, not {name}={spp}; fitting with {got}",
+                      RuntimeWarning, stacklevel=3)
+    return got
 
 
 def _loss(img, ref, kind: str, exposure: str):
@@ -345,6 +361,9 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
             raise DraawError(f"fit: resolution {tuple(resolution)} differs from the references' {w}x{h}")
         scene = scene.with_resolution(w, h)
     sensors = _views(scene, views)
+    spp = _sampler_spp(scene, spp, "spp")
+    if spp_grad is not None:
+        spp_grad = _sampler_spp(scene, spp_grad, "spp_grad")
     if len(sensors) != len(refs):
         raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
     integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)

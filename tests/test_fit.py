@@ -261,6 +261,17 @@ def test_fit_leaves_the_fitted_values_in_the_scene(fit_scene):
     _set(fit_scene, START)
 
 
+def test_a_stratified_sampler_fits_with_a_count_it_takes():
+    """multijitter renders 35 samples when asked for 32 (and logs it at every iteration): the
+    fit says once that it uses 30 and does."""
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "fit_sphere.toml"), resolution=(16, 16),
+                                sampler="multijitter")
+    ref = np.array(draaw_mi.render(scene, version="path", spp=16, seed=3))
+    with pytest.warns(RuntimeWarning, match="takes 30 samples per pixel, not spp=32; fitting with 30"):
+        res = draaw_mi.fit(scene, ref, P, version="v4", spp=32, iterations=2, progress=False)
+    assert np.isfinite(res.losses).all()
+
+
 def test_bad_arguments(fit_scene):
     ref = np.zeros((RES, RES, 3), np.float32)
     with pytest.raises(DraawError, match="loss='l3'"):
