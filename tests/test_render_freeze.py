@@ -124,8 +124,8 @@ def test_frozen_replay_reads_a_new_power_table(monkeypatch):
     n = len(scene.mi_scene.emitters())
     flat = PowerSelection.from_power(scene.mi_scene, np.ones(n))
     key = integ.selection_key(scene.mi_scene)      # (an id-only match may be a dead scene's)
-    assert key in integ._selection
-    monkeypatch.setitem(integ._selection, key, flat)
+    assert key in integ._tables
+    monkeypatch.setitem(integ._tables, key, (scene.mi_scene.emitters_dr(), flat, True))
     b = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))
     monkeypatch.setattr(R, "FREEZE", False)
     c = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=4, post=[], max_depth=3))

@@ -28,13 +28,15 @@ class CachedScene:
         self.fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
         self.fov = float(scene.info.get("camera", {}).get("fov", 0.0)) or (
             float(params[self.fov_key][0]) if self.fov_key else 45.0)
+        # copies: params[key] is the scene's own value, which the next update changes in place
         self.originals: dict = {}
         if self.camera_key:
-            self.originals[self.camera_key] = params[self.camera_key]
+            self.originals[self.camera_key] = _snapshot(params[self.camera_key])
         if self.fov_key:
-            self.originals[self.fov_key] = params[self.fov_key]
+            self.originals[self.fov_key] = _snapshot(params[self.fov_key])
         self.lock = threading.Lock()
         self.frozen: dict = {}
+        self.prepared: set = set()
 
     def render(self, spec: dict):
         """Render the frame: with a frozen function (``dr.freeze``) when the samples fit in one
@@ -50,6 +52,8 @@ class CachedScene:
 
         s = self.scene.settings
         spp = spec["spp"]
+        self._prepare(make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
+                                      spec["aovs"]), spec)
         if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not freeze_supported(self.scene.mi_scene)
                 or sample_passes(self.scene.mi_scene, spp, MAX_PASS_SPP) != [spp]):
             image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
@@ -72,6 +76,21 @@ class CachedScene:
             image = _apply_post(image, chain)
         return image, ["R", "G", "B"] + list(integrator.aov_names())
 
+    def _prepare(self, integrator, spec: dict) -> None:
+        """Let ``integrator`` learn what it learns from the scene (V4's light pilot) with the
+        scene as loaded, not as this frame moved it: whichever frame a run starts with (a
+        resumed run starts mid-job), the frames then render the same bits."""
+        prepare = getattr(integrator, "prepare_selection", None)
+        if prepare is None or id(integrator) in self.prepared:
+            return
+        params = self.scene.params
+        for key, original in self.originals.items():
+            params[key] = original
+        params.update()
+        prepare(self.scene.mi_scene)
+        self.prepared.add(id(integrator))
+        self.apply(spec)
+
     def apply(self, spec: dict) -> None:
         """Set this frame's camera and overrides; restore everything else a frame changed."""
         import mitsuba as mi
@@ -80,7 +99,7 @@ class CachedScene:
         wanted = {}
         for key, value in spec["params"].items():
             if key not in self.originals:
-                self.originals[key] = params[key]
+                self.originals[key] = _snapshot(params[key])
             wanted[key] = _convert(self.originals[key], value, key)
         cam = spec.get("camera")
         if cam is not None:
@@ -94,6 +113,14 @@ class CachedScene:
         if spec["params"]:
             from ..render import scene_changed
             scene_changed(self.scene.mi_scene)       # e.g. V4's light powers
+
+
+def _snapshot(value):
+    """A copy of a scene parameter's current value (Dr.Jit values are copied by their type)."""
+    try:
+        return type(value)(value)
+    except Exception:  # noqa: BLE001 - a Python value: immutable already
+        return value
 
 
 def _convert(original, value, key):

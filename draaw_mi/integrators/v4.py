@@ -13,6 +13,7 @@ from .sampling import PowerSelection, only_constant_environment, roulette
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
 ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
+LIGHT_SELECTION = "auto"
 
 
 class DraawV4Integrator(DraawIntegrator):
@@ -46,10 +47,14 @@ class DraawV4Integrator(DraawIntegrator):
 
      * - light_selection
        - |string|
-       - ``power``: next-event estimation picks an emitter in proportion to its estimated
-         power where the scene's emitters differ in strength and none is an environment
-         (uniform otherwise);
-         ``uniform``: Mitsuba's uniform choice. (Default: ``power``)
+       - ``auto``: ``power`` where that applies, else ``learned`` (two or more emitters);
+         ``learned``: next-event estimation picks an emitter in proportion to the square root
+         of its contribution's second moment, measured by a pilot of camera paths before the
+         first render of a scene (:mod:`~draaw_mi.integrators.light_pilot`; a fifth of the
+         probability spread uniformly);
+         ``power``: in proportion to its estimated power where the scene's emitters differ in
+         strength and none is an environment (uniform otherwise);
+         ``uniform``: Mitsuba's uniform choice. (Default: ``auto``)
 
      * - constant_env_nee
        - |bool|
@@ -99,10 +104,14 @@ class DraawV4Integrator(DraawIntegrator):
     ``path``-style roulette from depth 2 cost up to 1.7x the time in environment-lit scenes
     (stopping bright paths adds variance) while never roulette costs speed in enclosed
     scenes; power selection because it cut the error of the 24-light scene about 8x at the
-    same cost and is switched off (uniform, the same kernel as before) where the emitters
-    have similar powers or an environment lights the scene (an environment's power says little
-    about what it gives the visible surfaces: on the thesis scene the table starved the point
-    light, whose glints carry most of the variance); adaptive sampling because the error of
+    same cost; where it does not apply (emitters of similar power, or an environment among
+    them: an environment's power says little about what it gives the visible surfaces, and
+    on the thesis scene a power table starved the point light, whose glints carry most of the
+    variance) selection learned by a pilot of 2^18 camera paths (about 0.2 s once per scene,
+    :mod:`~draaw_mi.integrators.light_pilot`), which took the thesis glass scene from 0.90x to
+    0.59x ``path``'s variance x time at 256x256 and the material spheres (sky and area light)
+    to 0.76x of uniform selection's; it lost 10 % to the power table on the 24-light scene,
+    hence ``auto``; adaptive sampling because the error of
     most images is dominated by few pixels (emitter edges, highlights, caustics), and it is
     off for small renders (< 64 spp: the preview and the fit loop, where a pilot pass would be
     too small) and for differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
@@ -152,11 +161,12 @@ class DraawV4Integrator(DraawIntegrator):
         if not (self.rr_threshold > 0.0):
             raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
         self.adaptive = bool(props.get("adaptive", True))
-        self.light_selection = str(props.get("light_selection", "power"))
-        if self.light_selection not in ("power", "uniform"):
+        self.light_selection = str(props.get("light_selection", LIGHT_SELECTION))
+        if self.light_selection not in ("auto", "learned", "power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
-                                 "'power' or 'uniform'")
-        self._selection = {}           # (id(scene), emitter ids) -> PowerSelection | None
+                                 "'auto', 'learned', 'power' or 'uniform'")
+        self._light_sums = None        # per-emitter second-moment sums while a light pilot runs
+        self._tables = {}              # selection key -> (emitter array, table | None, learned)
         self._frozen_selection = None  # (PowerSelection | None,) while a recording runs
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
@@ -166,33 +176,66 @@ class DraawV4Integrator(DraawIntegrator):
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
 
     def emitter_selection(self, scene):
-        """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform."""
-        if self.light_selection != "power":
-            return None
+        """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform:
+        the table :meth:`prepare_selection` learned, else the power table."""
         if self._frozen_selection is not None:
             return self._frozen_selection[0]           # the table a recording takes as input
+        if self.light_selection == "uniform":
+            return None
         if dr.flag(dr.JitFlag.FreezingScope):
             # a recording made without :meth:`freeze_state` (emitter values cannot be read
             # while recording): uniform selection, unbiased too
             return None
-        # Cached per scene without holding it (a held scene keeps its Python BSDFs alive, and
-        # every live instance enlarges BSDF calls and must enter dr.freeze recordings). The key
-        # adds the emitters' addresses and the JIT index of the scene's emitter array to
-        # id(scene), so a dead scene's entry is found only if all three were reused at once.
         key = self.selection_key(scene)
-        if key in self._selection:
-            return self._selection[key]
-        sel = PowerSelection.of(scene)
-        if len(self._selection) >= 4:
-            self._selection.pop(next(iter(self._selection)))
-        self._selection[key] = sel
-        return sel
+        entry = self._tables.get(key)
+        if entry is None:
+            entry = self._store(key, scene, PowerSelection.of(scene), learned=False)
+        return entry[1]
 
-    def forget_scene(self, scene) -> None:
+    def _store(self, key, scene, sel, learned: bool):
+        # Cached per scene without holding it (a held scene keeps its Python BSDFs alive, and
+        # every live instance enlarges BSDF calls and must enter dr.freeze recordings). The
+        # entry holds the scene's emitter array instead: while it is held, its JIT index (part
+        # of the key) cannot be given to another scene's array, so a dead scene's table is
+        # never found for a new one.
+        if len(self._tables) >= 4:
+            self._tables.pop(next(iter(self._tables)))
+        entry = self._tables[key] = (scene.emitters_dr(), sel, learned)
+        return entry
+
+    def prepare_selection(self, scene) -> None:
+        """With ``auto`` / ``learned`` selection, run the light pilot for ``scene`` unless its
+        table is learned already (outside any recording: the pilot reads its result back).
+        Called before primal renders and by :meth:`freeze_state`; adjoint passes reuse the
+        table of their primal."""
+        if self.light_selection not in ("auto", "learned") or dr.flag(dr.JitFlag.FreezingScope):
+            return
+        if self._frozen_selection is not None or self._light_sums is not None:
+            return
+        key = self.selection_key(scene)
+        entry = self._tables.get(key)
+        if entry is not None and (entry[2] or (self.light_selection == "auto" and entry[1] is not None)):
+            return                                     # learned, or auto with a power table
+        power = PowerSelection.of(scene) if entry is None else entry[1]
+        if self.light_selection == "auto" and power is not None:
+            self._store(key, scene, power, learned=False)
+            return
+        from .light_pilot import learn_selection
+        sel = None if self.features(scene)["media"] else learn_selection(self, scene)
+        self._store(key, scene, sel if sel is not None else power, learned=True)
+
+    def collecting_light_moments(self, table, sums):
+        """Context: select with ``table`` and add each light sample's ``contribution^2 * pmf``
+        to ``sums`` (:func:`~.light_pilot.light_moments`)."""
+        from .light_pilot import collecting
+        return collecting(self, table, sums)
+
+    def forget_scene(self, scene, learned: bool = False) -> None:
         """Drop ``scene``'s cached power table (its lights changed): the next render computes
-        it anew. :func:`draaw_mi.render.scene_changed` calls this."""
-        for key in [k for k in self._selection if k[0] == id(scene)]:
-            del self._selection[key]
+        it anew. :func:`draaw_mi.render.scene_changed` calls this. A learned table stays
+        (see :mod:`~.light_pilot`) unless ``learned``."""
+        for key in [k for k, e in self._tables.items() if k[0] == id(scene) and (learned or not e[2])]:
+            del self._tables[key]
 
     @staticmethod
     def selection_key(scene) -> tuple:
@@ -205,6 +248,7 @@ class DraawV4Integrator(DraawIntegrator):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
         input (:func:`draaw_mi.render.frozen_render`): the power table's arrays, or ``None``.
         Computed here, outside the recording, so frozen and traced renders choose alike."""
+        self.prepare_selection(scene)
         sel = self.emitter_selection(scene)
         return None if sel is None else sel.arrays()
 
@@ -223,6 +267,7 @@ class DraawV4Integrator(DraawIntegrator):
         AOVs, a plain seed) the unbiased two-pass adaptive render of
         :mod:`draaw_mi.adaptive_sampling`, otherwise ``RBIntegrator.render``."""
         from .. import adaptive_sampling as ads
+        self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         n = int(spp) if spp else int(sensor.sampler().sample_count())
@@ -323,8 +368,8 @@ class DraawV4Integrator(DraawIntegrator):
                     if dr.hint(sdf is not None and not primal, mode="scalar"):
                         si_em = sdf.reattach(ray, si, active_em)   # SDF shape derivatives
                     if dr.hint(sel is not None, mode="scalar"):
-                        ds, em_w, active_em = sel.sample(scene, si_em, sampler.next_2d(),
-                                                         active_em, primal, sdf)
+                        s_em = sampler.next_2d()
+                        ds, em_w, active_em = sel.sample(scene, si_em, s_em, active_em, primal, sdf)
                     else:
                         ds, em_w, active_em = sample_emitter(scene, si_em, sampler.next_2d(),
                                                               active_em, primal, sdf)
@@ -347,6 +392,12 @@ class DraawV4Integrator(DraawIntegrator):
                         Lr_dir = β * w_em * f_em * em_w
                     else:
                         Lr_dir = β * f_em * em_w
+                    if dr.hint(self._light_sums is not None and sel is not None, mode="scalar"):
+                        # light pilot (light_pilot.py): second moment per emitter
+                        idx, _, pmf = sel.sample_index(s_em.x, active_em)
+                        dr.scatter_reduce(dr.ReduceOp.Add, self._light_sums,
+                                          mi.Float64(dr.square(mi.luminance(Lr_dir)) * pmf),
+                                          idx, active_em)
 
             # ------------------ Detached BSDF sampling -------------------
             if dr.hint(not (has_nee and primal), mode="scalar"):     # else fused above

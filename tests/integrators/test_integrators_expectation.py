@@ -68,7 +68,10 @@ def test_v3_beckmann_is_cook_torrance(roughness):
 def test_max_depth_semantics(depth):
     """max_depth 1: emitters only; 2: direct light -- the same for V3, V4 and path."""
     scene = mi.load_dict(rs.feature_scene(res=12, spp=16, constant=True))
-    K, spp = 12, 1024
+    # 32 renders: V4's learned light selection gives the sky a small share here, and its rare
+    # heavy light samples skew a 12-render z-test (12: 2.8 % beyond 3 sigma; 40: 1.1 %, image
+    # means equal to 0.005 %)
+    K, spp = 32, 1024
     ref = seed_stack(scene, integrator("path", max_depth=depth), spp, range(K))
     if depth == 1:          # deterministic up to the pixel jitter: same seeds, same image
         for kind in ("draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4"):

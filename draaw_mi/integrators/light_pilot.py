@@ -1,0 +1,105 @@
+"""Emitter selection learned by a pilot: each emitter's share of next-event estimation's
+second moment, not its power.
+
+Power says how much light an emitter sends, not how much of the image's *noise* comes through
+it. On the thesis scene (a sky, an area light and a point light over a near-mirror floor) the
+point light's glints carry almost all of the variance, yet uniform selection (power selection
+is off where an environment lights the scene: a sky's power says little) gives it a third of
+the light samples. Picking emitter ``i`` with probability ``p_i``, next-event estimation's
+variance is ``sum_i M_i / p_i`` minus a constant, where ``M_i = E[f_i^2]`` is the second
+moment of emitter ``i``'s contribution; it is smallest for ``p_i`` proportional to
+``sqrt(M_i)``.
+
+:func:`learn_selection` measures the ``M_i`` with a pilot of camera paths traced by the
+integrator itself (uniform selection, a fixed seed, :data:`PILOT_PATHS` paths: about one
+sample per pixel at 256x256) and returns a :class:`~.sampling.PowerSelection` with
+``p_i = (1 - UNIFORM_SHARE) * sqrt(M_i) / sum_j sqrt(M_j) + UNIFORM_SHARE / n``. The
+probabilities are fixed before the render, so the render stays unbiased; an emitter whose
+contribution the pilot misses keeps the uniform share, which bounds what a poor pilot costs.
+Measured on the thesis scene (128x128, 12 renders of 64 spp), hand-set shares of 0.6 and 0.8
+for the point light had 0.38x and 0.27x uniform selection's variance
+(``benchmarks/results/speed_suite.md``).
+
+``draaw_v4`` (``light_selection = "auto"`` or ``"learned"``) learns the table before its first
+primal render of a scene and keeps it for the scene's lifetime: a change of lights or
+materials leaves it (still unbiased, perhaps less apt) rather than paying a pilot per change
+(a fit's iteration, a preview's slider step); ``integrator.forget_scene(scene, learned=True)``
+relearns. The pilot's paths start at the sensor as it is then, so the batch executor learns
+before it moves the camera (:class:`draaw_mi.batch.frame.CachedScene`), and a resumed batch
+renders the same bits as an uninterrupted one.
+"""
+from __future__ import annotations
+
+import contextlib
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .sampling import PowerSelection
+
+PILOT_PATHS = 1 << 18       # camera paths of the pilot (uniform over the film)
+PILOT_SEED = 0x5EED1        # fixed: the same scene learns the same table in every process
+UNIFORM_SHARE = 0.2         # part of the probability spread uniformly (a floor per emitter)
+
+
+def selection_from_moments(scene: mi.Scene, moments: np.ndarray) -> PowerSelection | None:
+    """The table for second moments ``moments`` (one per emitter, in ``scene.emitters()``
+    order), or ``None`` (uniform) when the pilot saw nothing to go by.
+
+    >>> import numpy as np
+    >>> p = np.sqrt([9.0, 1.0, 0.0]); p = 0.8 * p / p.sum() + 0.2 / 3
+    >>> [round(float(x), 3) for x in p]
+    [0.667, 0.267, 0.067]
+    """
+    m = np.asarray(moments, dtype=np.float64)
+    if m.size < 2 or not np.all(np.isfinite(m)) or m.sum() <= 0:
+        return None
+    root = np.sqrt(np.maximum(m, 0.0))
+    p = (1.0 - UNIFORM_SHARE) * root / root.sum() + UNIFORM_SHARE / m.size
+    return PowerSelection.from_power(scene, p)
+
+
+def light_moments(integrator, scene: mi.Scene, paths: int = PILOT_PATHS,
+                  seed: int = PILOT_SEED) -> np.ndarray:
+    """Per-emitter second moments ``M_i`` of next-event estimation's contribution (luminance),
+    from ``paths`` camera paths of ``integrator`` with uniform selection; in ``scene.emitters()``
+    order. ``integrator`` must support :meth:`collecting_light_moments` (``draaw_v4``)."""
+    n = len(scene.emitters())
+    uniform = PowerSelection.from_power(scene, np.ones(n))
+    sensor = scene.sensors()[0]
+    with dr.suspend_grad():
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, paths)
+        pos = sampler.next_2d()
+        ray, _ = sensor.sample_ray_differential(time=sensor.shutter_open(), sample1=0.5,
+                                                sample2=pos, sample3=mi.Point2f(0.5))
+        # float64 sums: the atomic additions' order varies from run to run, and the table
+        # must not (the same scene must render the same bits in every process)
+        sums = dr.zeros(mi.Float64, n)
+        with integrator.collecting_light_moments(uniform, sums):
+            integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
+                              depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
+                              active=mi.Bool(True))
+        dr.eval(sums)
+    m = np.array(sums, dtype=np.float64) / paths
+    # 6 significant digits: differences in the last bits of the sums vanish here
+    return np.array([float(f"{x:.6g}") for x in m])
+
+
+def learn_selection(integrator, scene: mi.Scene) -> PowerSelection | None:
+    """:func:`selection_from_moments` of :func:`light_moments`; ``None`` below two emitters."""
+    if len(scene.emitters()) < 2:
+        return None
+    return selection_from_moments(scene, light_moments(integrator, scene))
+
+
+@contextlib.contextmanager
+def collecting(integrator, table: PowerSelection, sums: mi.Float):
+    """Within this block ``integrator`` selects emitters with ``table`` and adds, for every
+    light sample, ``contribution^2 * pmf`` to ``sums[emitter index]`` (see module doc)."""
+    integrator._frozen_selection, integrator._light_sums = (table,), sums
+    try:
+        yield
+    finally:
+        integrator._frozen_selection, integrator._light_sums = None, None

@@ -1,0 +1,118 @@
+"""V4's learned emitter selection (draaw_mi.integrators.light_pilot): the pilot's second
+moments, the table it gives, when ``auto`` learns, determinism, refresh after light changes,
+and frozen renders taking the learned table."""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+import drjit as dr
+import draaw_mi
+from integrators_helpers import integrator, mi
+
+from draaw_mi.integrators import light_pilot as lp
+from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.integrators.sampling import PowerSelection
+
+R = importlib.import_module("draaw_mi.render")
+
+
+def two_point_lights(i_left: float, i_right: float, res: int = 16) -> dict:
+    """A diffuse floor seen from straight above, two point lights placed mirror-symmetrically:
+    each light's contribution is the other's mirrored and scaled by the intensity ratio, so
+    the second moments are in the ratio of the intensities squared."""
+    film, sampler = rs._film(res, 4)
+    T = mi.ScalarTransform4f
+    return {"type": "scene",
+            "sensor": {"type": "perspective", "fov": 60.0,
+                       "to_world": T().look_at(origin=[0, 4, 0], target=[0, 0, 0], up=[0, 0, 1]),
+                       "film": film, "sampler": sampler},
+            "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(4.0),
+                      "bsdf": {"type": "diffuse"}},
+            "left": {"type": "point", "position": [-1.0, 1.0, 0.0],
+                     "intensity": {"type": "rgb", "value": [i_left] * 3}},
+            "right": {"type": "point", "position": [1.0, 1.0, 0.0],
+                      "intensity": {"type": "rgb", "value": [i_right] * 3}}}
+
+
+def test_moments_follow_the_intensities_squared_and_the_table_their_roots():
+    scene = mi.load_dict(two_point_lights(3.0, 1.0))
+    integ = integrator("draaw_v4", max_depth=2, light_selection="learned")
+    m = lp.light_moments(integ, scene)
+    names = [e.id() for e in scene.emitters()]
+    ratio = m[names.index("left")] / m[names.index("right")]
+    assert ratio == pytest.approx(9.0, rel=0.05)        # symmetric scene: exactly 9 in expectation
+    sel = lp.selection_from_moments(scene, m)
+    p = dict(zip(names, sel.pmf_np))
+    # sqrt(M): 3 : 1, then 80 % of it plus a uniform 10 % each
+    assert p["left"] == pytest.approx(0.8 * 0.75 + 0.1, abs=0.01)
+    assert p["right"] == pytest.approx(0.8 * 0.25 + 0.1, abs=0.01)
+
+
+def test_nothing_seen_means_uniform():
+    scene = mi.load_dict(two_point_lights(1.0, 1.0))
+    assert lp.selection_from_moments(scene, np.zeros(2)) is None
+    assert lp.selection_from_moments(scene, np.array([np.nan, 1.0])) is None
+
+
+def test_auto_learns_where_power_does_not_apply_and_keeps_power_where_it_does():
+    sky_and_area = mi.load_dict(rs.feature_scene(res=16, spp=4, constant=True))
+    assert PowerSelection.of(sky_and_area) is None               # an environment: no power table
+    auto = integrator("draaw_v4", max_depth=3)
+    assert auto.light_selection == "auto"
+    auto.prepare_selection(sky_and_area)
+    sel = auto.emitter_selection(sky_and_area)
+    assert sel is not None and np.ptp(sel.pmf_np) > 0.2           # learned: far from uniform
+    from draaw_mi import speed_suite as ss
+    many = ss.load("many_lights", 16)
+    power = PowerSelection.of(many)
+    auto.prepare_selection(many)
+    np.testing.assert_array_equal(auto.emitter_selection(many).pmf_np, power.pmf_np)
+    off = integrator("draaw_v4", max_depth=3, light_selection="power")
+    off.prepare_selection(sky_and_area)
+    assert off.emitter_selection(sky_and_area) is None           # 'power' never learns
+
+
+def test_learned_table_is_deterministic_and_relearns_only_when_asked():
+    scene = draaw_mi.load_scene(two_point_lights(1.0, 1.0))
+    tables = []
+    for _ in range(2):
+        integ = integrator("draaw_v4", max_depth=2, light_selection="learned")
+        integ.prepare_selection(scene.mi_scene)
+        tables.append(integ.emitter_selection(scene.mi_scene).pmf_np)
+    np.testing.assert_array_equal(tables[0], tables[1])          # fixed seed, float64 sums
+    assert tables[0] == pytest.approx([0.5, 0.5], abs=0.02)
+    key = next(k for k in scene.params.keys() if k.startswith("left") and "intensity" in k)
+    scene.params[key] = mi.Color3f(16.0)
+    scene.params.update()
+    integ.forget_scene(scene.mi_scene)            # what render.scene_changed does: the learned
+    integ.prepare_selection(scene.mi_scene)       # table stays (no pilot per slider step) ...
+    np.testing.assert_array_equal(integ.emitter_selection(scene.mi_scene).pmf_np, tables[0])
+    integ.forget_scene(scene.mi_scene, learned=True)   # ... unless asked
+    integ.prepare_selection(scene.mi_scene)
+    p = dict(zip([e.id() for e in scene.mi_scene.emitters()], integ.emitter_selection(scene.mi_scene).pmf_np))
+    assert p["left"] == pytest.approx(0.8 * 16 / 17 + 0.1, abs=0.02)
+
+
+def test_frozen_and_traced_renders_use_the_learned_table(monkeypatch):
+    """The table is learned before the recording (freeze_state), enters it as an input, and
+    frozen and traced renders choose lights alike."""
+    scene = draaw_mi.load_scene(rs.feature_scene(res=16, spp=4, constant=True))
+    integ = R.make_integrator("v4", 3)
+    monkeypatch.setattr(R, "FREEZE", True)
+    frozen = [np.array(draaw_mi.render(scene, version="v4", spp=8, seed=s, post=[], max_depth=3))
+              for s in (1, 2)]
+    assert integ.emitter_selection(scene.mi_scene) is not None  # learned, not uniform
+    monkeypatch.setattr(R, "FREEZE", False)
+    traced = [np.array(draaw_mi.render(scene, version="v4", spp=8, seed=s, post=[], max_depth=3))
+              for s in (1, 2)]
+    for f, t in zip(frozen, traced):
+        assert np.isfinite(f).all() and f.mean() > 0
+        assert np.allclose(f, t, rtol=1e-5, atol=1e-6), np.abs(f - t).max()
+
+
+def test_doctests():
+    import doctest
+    assert doctest.testmod(lp).failed == 0
