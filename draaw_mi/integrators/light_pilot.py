@@ -11,13 +11,15 @@ moment of emitter ``i``'s contribution; it is smallest for ``p_i`` proportional 
 ``sqrt(M_i)``.
 
 :func:`learn_selection` measures the ``M_i`` with a pilot of camera paths traced by the
-integrator itself (uniform selection, a fixed seed, :data:`PILOT_PATHS` paths: about one
-sample per pixel at 256x256) and returns a :class:`~.sampling.PowerSelection` with
+integrator itself (uniform selection, a fixed seed, :data:`PILOT_PATHS` = 2^18 paths, 4 per
+pixel at 256x256 and about 0.2 s on two cores, whatever the render's size) and returns a
+:class:`~.sampling.PowerSelection` with
 ``p_i = (1 - UNIFORM_SHARE) * sqrt(M_i) / sum_j sqrt(M_j) + UNIFORM_SHARE / n``. The
 probabilities are fixed before the render, so the render stays unbiased; an emitter whose
 contribution the pilot misses keeps the uniform share, which bounds what a poor pilot costs.
-Measured on the thesis scene (128x128, 12 renders of 64 spp), hand-set shares of 0.6 and 0.8
-for the point light had 0.38x and 0.27x uniform selection's variance
+On the thesis glass scene the learned table took V4 from 0.93x to 0.60x ``path``'s variance
+x time at 256x256; rare contributions are what a pilot can miss (there, 2^16 paths gave the
+point light 0.34 with one seed and 0.86 with another), hence 2^18
 (``benchmarks/results/speed_suite.md``).
 
 ``draaw_v4`` (``light_selection = "auto"`` or ``"learned"``) learns the table before its first
