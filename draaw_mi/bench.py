@@ -46,7 +46,6 @@ class Setting:
                 f"{'+oidn (biased)' if self.denoise else ''}")
 
 
-# --------------------------------------------------------------------------- error metrics
 def load_note() -> str:
     """How busy the machine was, for a benchmark's header: the 1-minute load average now (this
     job included) against the core count. Measured, not assumed: a report that says "shared
@@ -60,6 +59,7 @@ def load_note() -> str:
     return f"load average {load:.1f} at the end, this job included, on {cores} cores ({state})"
 
 
+# --------------------------------------------------------------------------- error metrics
 def rmse(img: np.ndarray, gt: np.ndarray) -> float:
     return float(np.sqrt(np.mean((img - gt) ** 2)))
 

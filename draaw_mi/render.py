@@ -53,7 +53,8 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
 
 def scene_changed(mi_scene) -> None:
     """Tell the cached integrators that ``mi_scene``'s parameters changed: V4 recomputes its
-    light-selection table (powers) at the next render instead of keeping the old one. The
+    power-based light-selection table at the next render instead of keeping the old one (a
+    table its light pilot learned stays: see :mod:`draaw_mi.integrators.light_pilot`). The
     preview, the batch executor and the fitter call this after ``params.update()``; call it
     too after changing light intensities yourself (renders stay unbiased without it, but a
     stale table can sample a dimmed light as often as before)."""

@@ -179,8 +179,11 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         return res
     from .lock import output_locks
     from .plan import prepare_outputs
-    folders = sorted({os.path.dirname(s["output"]) for s in specs} | {os.path.dirname(res.log)})
-    prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {os.path.dirname(res.log)}), m.path)
+    log_dir = os.path.dirname(res.log)
+    prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {log_dir}), m.path)
+    # every folder a frame of the manifest lives in: those of finished frames exist, the rest
+    # prepare_outputs just created
+    folders = {os.path.dirname(s["output"]) for s in specs} | {log_dir}
     with output_locks([f for f in folders if os.path.isdir(f)], m.path):
         return _render(m, specs, todo, cache, res, executor, workers, scheduler, client, progress,
                        on_result, t0)

@@ -52,16 +52,15 @@ class CachedScene:
 
         s = self.scene.settings
         spp = spec["spp"]
-        self._prepare(make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
-                                      spec["aovs"]), spec)
+        integrator = make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
+                                     spec["aovs"])               # the one render() uses too
+        self._prepare(integrator, spec)
         if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not freeze_supported(self.scene.mi_scene)
                 or sample_passes(self.scene.mi_scene, spp, MAX_PASS_SPP) != [spp]):
             image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                                  max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                                  return_info=True)
             return image, info["channels"]
-        integrator = make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
-                                     spec["aovs"])
         key = (id(integrator), spp)
         fn = self.frozen.get(key)
         if fn is None:

@@ -45,28 +45,33 @@ PILOT_SEED = 0x5EED1        # fixed: the same scene learns the same table in eve
 UNIFORM_SHARE = 0.2         # part of the probability spread uniformly (a floor per emitter)
 
 
-def selection_from_moments(scene: mi.Scene, moments: np.ndarray) -> PowerSelection | None:
-    """The table for second moments ``moments`` (one per emitter, in ``scene.emitters()``
-    order), or ``None`` (uniform) when the pilot saw nothing to go by.
+def selection_probabilities(moments) -> np.ndarray | None:
+    """Selection probabilities for second moments ``moments`` (one per emitter), or ``None``
+    (uniform) when the pilot saw nothing to go by.
 
-    >>> import numpy as np
-    >>> p = np.sqrt([9.0, 1.0, 0.0]); p = 0.8 * p / p.sum() + 0.2 / 3
-    >>> [round(float(x), 3) for x in p]
+    >>> [round(float(x), 3) for x in selection_probabilities([9.0, 1.0, 0.0])]
     [0.667, 0.267, 0.067]
+    >>> selection_probabilities([0.0, 0.0]) is None, selection_probabilities([float("nan"), 1.0]) is None
+    (True, True)
     """
     m = np.asarray(moments, dtype=np.float64)
     if m.size < 2 or not np.all(np.isfinite(m)) or m.sum() <= 0:
         return None
     root = np.sqrt(np.maximum(m, 0.0))
-    p = (1.0 - UNIFORM_SHARE) * root / root.sum() + UNIFORM_SHARE / m.size
-    return PowerSelection.from_power(scene, p)
+    return (1.0 - UNIFORM_SHARE) * root / root.sum() + UNIFORM_SHARE / m.size
+
+
+def selection_from_moments(scene: mi.Scene, moments) -> PowerSelection | None:
+    """The table of :func:`selection_probabilities` (moments in ``scene.emitters()`` order)."""
+    p = selection_probabilities(moments)
+    return None if p is None else PowerSelection.from_power(scene, p)
 
 
 def light_moments(integrator, scene: mi.Scene, paths: int = PILOT_PATHS,
                   seed: int = PILOT_SEED) -> np.ndarray:
     """Per-emitter second moments ``M_i`` of next-event estimation's contribution (luminance),
     from ``paths`` camera paths of ``integrator`` with uniform selection; in ``scene.emitters()``
-    order. ``integrator`` must support :meth:`collecting_light_moments` (``draaw_v4``)."""
+    order. ``integrator``: ``draaw_v4`` (it adds to ``_light_sums`` while :func:`collecting`)."""
     n = len(scene.emitters())
     uniform = PowerSelection.from_power(scene, np.ones(n))
     sensor = scene.sensors()[0]
@@ -79,7 +84,7 @@ def light_moments(integrator, scene: mi.Scene, paths: int = PILOT_PATHS,
         # float64 sums: the atomic additions' order varies from run to run, and the table
         # must not (the same scene must render the same bits in every process)
         sums = dr.zeros(mi.Float64, n)
-        with integrator.collecting_light_moments(uniform, sums):
+        with collecting(integrator, uniform, sums):
             integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
                               depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
                               active=mi.Bool(True))

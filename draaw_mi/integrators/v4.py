@@ -5,7 +5,6 @@ import contextlib
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from ..errors import ParameterError
 from .common import DraawIntegrator, mis_weight, relative, sample_emitter
@@ -177,9 +176,20 @@ class DraawV4Integrator(DraawIntegrator):
 
     def emitter_selection(self, scene):
         """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform:
-        the table :meth:`prepare_selection` learned, else the power table."""
+        the table :meth:`prepare_selection` learned, else the power table. Never runs the
+        pilot (it is called while the render is being traced)."""
+        return self._table(scene, learn=False)
+
+    def prepare_selection(self, scene):
+        """With ``auto`` / ``learned`` selection, run the light pilot for ``scene`` unless its
+        table is learned already (outside any recording: the pilot reads its result back), and
+        return the table. Called before primal renders and by :meth:`freeze_state`; adjoint
+        passes reuse the table of their primal."""
+        return self._table(scene, learn=True)
+
+    def _table(self, scene, learn: bool):
         if self._frozen_selection is not None:
-            return self._frozen_selection[0]           # the table a recording takes as input
+            return self._frozen_selection[0]           # the pilot's or a recording's table
         if self.light_selection == "uniform":
             return None
         if dr.flag(dr.JitFlag.FreezingScope):
@@ -188,9 +198,16 @@ class DraawV4Integrator(DraawIntegrator):
             return None
         key = self.selection_key(scene)
         entry = self._tables.get(key)
-        if entry is None:
-            entry = self._store(key, scene, PowerSelection.of(scene), learned=False)
-        return entry[1]
+        learns = learn and self.light_selection in ("auto", "learned")
+        if entry is not None and (entry[2] or not learns
+                                  or (self.light_selection == "auto" and entry[1] is not None)):
+            return entry[1]                            # learned, or no reason to learn
+        power = PowerSelection.of(scene) if entry is None else entry[1]
+        if not learns or (self.light_selection == "auto" and power is not None):
+            return self._store(key, scene, power, learned=False)
+        from .light_pilot import learn_selection
+        sel = None if self.features(scene)["media"] else learn_selection(self, scene)
+        return self._store(key, scene, sel if sel is not None else power, learned=True)
 
     def _store(self, key, scene, sel, learned: bool):
         # Cached per scene without holding it (a held scene keeps its Python BSDFs alive, and
@@ -200,35 +217,8 @@ class DraawV4Integrator(DraawIntegrator):
         # never found for a new one.
         if len(self._tables) >= 4:
             self._tables.pop(next(iter(self._tables)))
-        entry = self._tables[key] = (scene.emitters_dr(), sel, learned)
-        return entry
-
-    def prepare_selection(self, scene) -> None:
-        """With ``auto`` / ``learned`` selection, run the light pilot for ``scene`` unless its
-        table is learned already (outside any recording: the pilot reads its result back).
-        Called before primal renders and by :meth:`freeze_state`; adjoint passes reuse the
-        table of their primal."""
-        if self.light_selection not in ("auto", "learned") or dr.flag(dr.JitFlag.FreezingScope):
-            return
-        if self._frozen_selection is not None or self._light_sums is not None:
-            return
-        key = self.selection_key(scene)
-        entry = self._tables.get(key)
-        if entry is not None and (entry[2] or (self.light_selection == "auto" and entry[1] is not None)):
-            return                                     # learned, or auto with a power table
-        power = PowerSelection.of(scene) if entry is None else entry[1]
-        if self.light_selection == "auto" and power is not None:
-            self._store(key, scene, power, learned=False)
-            return
-        from .light_pilot import learn_selection
-        sel = None if self.features(scene)["media"] else learn_selection(self, scene)
-        self._store(key, scene, sel if sel is not None else power, learned=True)
-
-    def collecting_light_moments(self, table, sums):
-        """Context: select with ``table`` and add each light sample's ``contribution^2 * pmf``
-        to ``sums`` (:func:`~.light_pilot.light_moments`)."""
-        from .light_pilot import collecting
-        return collecting(self, table, sums)
+        self._tables[key] = (scene.emitters_dr(), sel, learned)
+        return sel
 
     def forget_scene(self, scene, learned: bool = False) -> None:
         """Drop ``scene``'s cached power table (its lights changed): the next render computes
@@ -248,8 +238,7 @@ class DraawV4Integrator(DraawIntegrator):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
         input (:func:`draaw_mi.render.frozen_render`): the power table's arrays, or ``None``.
         Computed here, outside the recording, so frozen and traced renders choose alike."""
-        self.prepare_selection(scene)
-        sel = self.emitter_selection(scene)
+        sel = self.prepare_selection(scene)
         return None if sel is None else sel.arrays()
 
     @contextlib.contextmanager

@@ -163,7 +163,9 @@ def load_mitsuba_dict(d: dict):
 
 
 def load_mitsuba_file(path: str):
-    """``mi.load_file(path)`` with the scene's emitters in a fixed order (see above)."""
+    """``mi.load_file(path)`` with the scene's emitters in a fixed order (see above). Whether
+    a file has two or more emitting shapes shows only once it is loaded, so such files are
+    parsed twice."""
     import mitsuba as mi
     scene = mi.load_file(path)
     if sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
