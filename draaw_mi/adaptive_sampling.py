@@ -143,6 +143,12 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
         if reports_depth:
             integrator.want_depth = True
+        set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
+        if set_primary is not None:       # each ray's pixel, for its emission splitting
+            from .integrators.emission_split import PrimaryRays
+            set_primary(PrimaryRays(ray, sensor, mi.Vector2f(mi.Float(x), mi.Float(y)), (0, 0),
+                                    (w, h), mi.ScalarVector2f(1.0 / w, 1.0 / h),
+                                    mi.ScalarVector2f(0.0), weight))
         try:
             L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
@@ -151,6 +157,8 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         finally:
             if reports_depth:
                 integrator.want_depth, integrator.last_depth = False, None
+            if set_primary is not None:
+                set_primary(None)
         value = L * weight
         chans = [value.x, value.y, value.z]
         if moments:

@@ -7,6 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
+from . import emission_split
 from .common import DraawIntegrator, mis_weight, relative, sample_emitter
 from .sampling import PowerSelection, only_constant_environment, roulette
 
@@ -170,6 +171,11 @@ class DraawV4Integrator(DraawIntegrator):
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
+        self.emission_split = emission_split.check_rays(
+            int(props.get("emission_split", emission_split.DEFAULT_RAYS)))
+        self._primary = None           # emission_split.PrimaryRays of the rays being rendered
+        self._split_rects = {}         # (scene, camera) key -> (rect, opaque rect) | None
+        self._frozen_split = None      # (opaque rect | None,) while a recording runs
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -236,19 +242,76 @@ class DraawV4Integrator(DraawIntegrator):
 
     def freeze_state(self, scene):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
-        input (:func:`draaw_mi.render.frozen_render`): the power table's arrays, or ``None``.
-        Computed here, outside the recording, so frozen and traced renders choose alike."""
+        input (:func:`draaw_mi.render.frozen_render`): the light table's arrays (or ``None``)
+        and the emission-splitting rectangle of the first sensor (or ``None``). Computed here,
+        outside the recording, so frozen and traced renders choose alike."""
         sel = self.prepare_selection(scene)
-        return None if sel is None else sel.arrays()
+        rect = self.split_rect(scene, scene.sensors()[0]) if self.emission_split > 1 else None
+        return None if sel is None else sel.arrays(), rect
 
     @contextlib.contextmanager
     def frozen_state(self, state):
         """Within this block (a recording's body) use ``state`` from :meth:`freeze_state`."""
-        self._frozen_selection = None if state is None else (PowerSelection.from_arrays(state),)
+        sel, rect = state
+        self._frozen_selection = None if sel is None else (PowerSelection.from_arrays(sel),)
+        self._frozen_split = (rect,)
         try:
             yield
         finally:
-            self._frozen_selection = None
+            self._frozen_selection = self._frozen_split = None
+
+    def split_rect(self, scene, sensor):
+        """Four opaque ``mi.UInt32`` (x0, y0, x1, y1): where ``sensor`` can see ``scene``'s
+        emitting surfaces (:func:`.emission_split.emitter_rect`), or ``None``. Cached per scene,
+        camera (the JIT variables of its transform) and emitter bounds, so a repeated render
+        reads nothing back; within a recording, the one :meth:`freeze_state` passed."""
+        if self._frozen_split is not None:
+            return self._frozen_split[0]
+        if dr.flag(dr.JitFlag.FreezingScope):
+            return None                # a recording made without freeze_state: no splitting
+        m = sensor.world_transform().matrix
+        film = sensor.film()
+        key = (id(scene), id(sensor), tuple(m[i][j].index for i in range(4) for j in range(4)),
+               tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
+               tuple(tuple(e.get_shape().bbox().min) + tuple(e.get_shape().bbox().max)
+                     for e in scene.emitters() if e.get_shape() is not None))
+        if key not in self._split_rects:
+            if len(self._split_rects) >= 8:
+                self._split_rects.pop(next(iter(self._split_rects)))
+            rect = emission_split.emitter_rect(scene, sensor)
+            self._split_rects[key] = None if rect is None else tuple(
+                dr.opaque(mi.UInt32, v) for v in rect)
+        return self._split_rects[key]
+
+    # ------------------------------------------------- camera rays (emission splitting)
+    def sample_rays(self, scene, sensor, sampler, *args, **kwargs):
+        """Mitsuba's camera rays, with their pixels kept for :mod:`.emission_split`."""
+        ray, weight, pos = super().sample_rays(scene, sensor, sampler, *args, **kwargs)
+        film = sensor.film()
+        self._primary = None
+        if self.emission_split > 1 and film.rfilter().is_box_filter():
+            scale = dr.rcp(mi.ScalarVector2f(film.crop_size()))    # as Mitsuba's sample_rays
+            # with a box filter ``pos`` is the pixel's integer corner
+            self._primary = emission_split.PrimaryRays(
+                ray, sensor, mi.Vector2f(pos), tuple(film.crop_offset()), tuple(film.crop_size()),
+                scale, -mi.ScalarVector2f(film.crop_offset()) * scale, weight)
+        return ray, weight, pos
+
+    def set_primary_rays(self, primary):
+        """For ray generators other than :meth:`sample_rays` (adaptive sampling's)."""
+        self._primary = primary
+
+    def render_forward(self, *args, **kwargs):
+        try:
+            return super().render_forward(*args, **kwargs)
+        finally:
+            self._primary = None
+
+    def render_backward(self, *args, **kwargs):
+        try:
+            return super().render_backward(*args, **kwargs)
+        finally:
+            self._primary = None
 
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
@@ -267,7 +330,10 @@ class DraawV4Integrator(DraawIntegrator):
                 and not ads.pilot_can_miss(scene)):
             alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
             return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
-        return super().render(scene, sensor, seed, spp, develop, evaluate)
+        try:
+            return super().render(scene, sensor, seed, spp, develop, evaluate)
+        finally:
+            self._primary = None
 
     @dr.syntax
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
@@ -291,6 +357,13 @@ class DraawV4Integrator(DraawIntegrator):
         delta_bsdf = feats["delta_bsdfs"]
         ctx = mi.BSDFContext()
         sel = self.emitter_selection(scene) if has_nee else None
+        # emitters seen directly: from stratified extra camera rays (emission_split.py)
+        primary = self._primary if self._primary is not None and self._primary.ray is ray else None
+        split = primary is not None and emission_split.applies(
+            self.emission_split, self.hide_emitters, primary.sensor, feats)
+        rect = self.split_rect(scene, primary.sensor) if split else None
+        split = rect is not None                      # an emitting surface in view
+        edge = None                                   # samples in edge pixels (when split)
 
         # --------------------- Configure loop state ----------------------
         ray = mi.Ray3f(dr.detach(ray))                # Current ray
@@ -301,6 +374,13 @@ class DraawV4Integrator(DraawIntegrator):
         η = mi.Float(1)                               # Index of refraction
         active = mi.Bool(active)                      # Active SIMD lanes
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
+        if dr.hint(split, mode="scalar"):
+            edge = emission_split.edge_pixels(scene, primary, rect, flags, active)
+            L_vis, δL_vis = emission_split.visible_emission(
+                mode, scene, primary, sampler, self.emission_split, flags, edge, δL)
+            L = (L + L_vis) if primal else (L - L_vis)
+            if dr.hint(mode == dr.ADMode.Forward, mode="scalar"):
+                δL += δL_vis
 
         # Previous vertex (for MIS of emitters hit by BSDF sampling)
         prev_si = dr.zeros(mi.Interaction3f)          # p, n only: a smaller loop state
@@ -332,6 +412,8 @@ class DraawV4Integrator(DraawIntegrator):
                 em_active = mi.Bool(active)
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     em_active &= depth > 0
+                elif dr.hint(split, mode="scalar"):
+                    em_active &= (depth > 0) | ~edge     # edge pixels: from the split rays
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
                 if dr.hint(not has_nee, mode="scalar"):
                     w_bsdf = mi.Float(1.0)                # BSDF sampling is the only strategy
