@@ -146,9 +146,9 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
         if set_primary is not None:       # each ray's pixel, for its emission splitting
             from .integrators.emission_split import PrimaryRays
-            set_primary(PrimaryRays(ray, sensor, mi.Vector2f(mi.Float(x), mi.Float(y)), (0, 0),
-                                    (w, h), mi.ScalarVector2f(1.0 / w, 1.0 / h),
-                                    mi.ScalarVector2f(0.0), weight))
+            set_primary(PrimaryRays(ray, sensor, mi.Vector2f(mi.Float(x), mi.Float(y)),
+                                    mi.ScalarVector2f(1.0 / w, 1.0 / h), mi.ScalarVector2f(0.0),
+                                    weight))
         try:
             L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,

@@ -1,40 +1,50 @@
-"""Emitters seen directly: their emission estimated from several stratified camera rays.
+"""Emitters seen directly: their emission estimated in edge pixels from stratified extra rays.
 
 Why: in a scene that shows its lights, most of a low-spp image's squared error sits in the
 pixels that straddle the edge of a visible emitter: a sample either hits the light (radiance
-~10-20) or the dark surround. On the Cornell box at 128x128 and 2 spp, 109 pixels on the
-light (0.7 % of the image) carry 87 % of the per-pixel variance of ``path`` and V4 alike.
-The emission seen at the first hit, ``Le(x0)``, is a 2D integral over the pixel of a
+~10-20) or the dark surround. On the Cornell box at 128x128 and 4 spp, the 109 pixels with a
+light in them (0.7 % of the image) carry 87 % of the per-pixel variance of ``path`` and V4
+alike. The emission seen at the first hit, ``Le(x0)``, is a 2D integral over the pixel of a
 piecewise-constant function, and cheap to evaluate: one intersection and one emitter lookup,
-no shading. So V4 drops the camera path's own ``Le(x0)`` and estimates that term from ``k``
-extra camera rays, one in each cell of a ``sqrt(k) x sqrt(k)`` grid over the pixel, jittered
-in its cell (stratified sampling: the error of an edge falls faster than ``1/k``). The rest
-of the path (everything after the first hit) is estimated from the camera sample as before.
+no shading. So in those pixels V4 drops the camera path's own ``Le(x0)`` and estimates that
+term from ``k`` extra camera rays (16 by default), one in each cell of a ``sqrt(k) x sqrt(k)``
+grid over the pixel, jittered in its cell (stratified sampling: the error of an edge falls
+faster than ``1/k``). The rest of the path is estimated from the camera sample as before.
 
 Unbiased with a box pixel filter: with the film's box filter a sample counts only for its
 own pixel, and the pixel value is the mean over the pixel of ``W(x) L(x)`` (``W`` the
 sensor's importance weight); each stratified ray is uniform over its cell, so the ``k`` rays'
-mean ``W Le`` has the same expectation as the camera sample's. With other filters a sample is
-splatted with a weight that depends on its position, which the extra rays do not share: no
-splitting there.
+mean ``W Le`` has the same expectation as the camera sample's. Which pixels split does not
+depend on the samples (an edge map fixed before the render), so any choice keeps the
+expectation. With other filters a sample is splatted with a weight that depends on its
+position, which the extra rays do not share: no splitting there.
 
-Only where the scene calls for it (:func:`applies`): a light the camera can hit (area
-emitters, an environment), emitters shown (not ``hide_emitters``), a box filter, a sensor
-without aperture or shutter samples, no SDF objects (sphere-traced surfaces would occlude
-the light for the camera path but not for the extra rays) and no media (V4 hands those to
-:mod:`~draaw_mi.integrators.volume`). The extra rays need the camera sample's pixel, which
-Mitsuba's ``sample()`` interface does not carry: the ray generator records it in a
-:class:`PrimaryRays` beside the rays (:meth:`DraawV4Integrator.sample_rays
-<draaw_mi.integrators.v4.DraawV4Integrator.sample_rays>`,
-:func:`draaw_mi.adaptive_sampling.render_spp_map`) and ``sample()`` uses it only for
-those same ray objects.
+Which pixels (:func:`edge_map`): the emitting surfaces' bounding boxes, projected by the
+sensor, bound where a light can be seen (:func:`emitter_rect`); inside that rectangle one
+probe ray per pixel corner reads the emission seen there, and a pixel whose corners differ
+by more than ``EDGE_CONTRAST`` of the largest is an edge pixel. The map depends on the
+scene and the camera, not on the seed: V4 computes it once per camera and reuses it (a
+repeated render launches no probe kernel). A SIMD packet of samples without an edge pixel
+skips the extra rays, so their cost follows the number of edge pixels. A light thinner
+than a pixel can fall between the corners (the Cornell box's light at 16x16): its pixels
+are not split, which loses the gain there, not the expectation.
 
-Measured (``benchmarks/results/speed_suite.md``): see the V4 docstring.
+Only where the scene calls for it (:func:`applies`): an area emitter, emitters shown (not
+``hide_emitters``), a box filter, a sensor without aperture or shutter samples, no SDF
+objects (sphere-traced surfaces would occlude the light for the camera path but not for the
+extra rays), no media (V4 hands those to :mod:`~draaw_mi.integrators.volume`), and an
+emitting surface in view; otherwise the kernels are exactly those without splitting.
+The extra rays need the camera sample's pixel, which Mitsuba's ``sample()`` interface does
+not carry: the ray generator records it in a :class:`PrimaryRays` beside the rays
+(:meth:`DraawV4Integrator.sample_rays <draaw_mi.integrators.v4.DraawV4Integrator.sample_rays>`,
+:func:`draaw_mi.adaptive_sampling.render_spp_map`) and ``sample()`` uses it only for those
+same ray objects.
+
+Measured: see the V4 docstring and ``benchmarks/results/speed_suite.md``.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,28 +52,36 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
+from .common import DraawIntegrator
 
 DEFAULT_RAYS = 16       # 4 x 4 cells per camera sample in edge pixels (see the V4 docstring)
 EDGE_CONTRAST = 0.1     # a pixel is an edge pixel where its corners' emission differs by more
 
 
-@dataclass
 class PrimaryRays:
     """What a ray generator knows about its camera rays and ``sample()`` does not.
 
-    ``pixel``: integer corner of each ray's pixel in film coordinates; ``origin`` / ``size``:
-    the first pixel and the size of the pixel grid rendered (the film's crop window);
+    ``pixel``: integer corner of each ray's pixel in film coordinates (crop offset included);
     ``scale`` / ``offset``: film position -> the sensor's ``[0, 1]^2`` sample;
     ``weight``: the camera rays' importance weights (the renderer multiplies ``L`` by them).
+
+    A plain class, not a dataclass or tuple: ``dr.syntax`` loops in ``sample()`` read the
+    integrator, and Dr.Jit takes the arrays of every dataclass / tuple attribute it reaches
+    as loop state (an edge map held in a tuple broke V4's loop with a size mismatch).
     """
-    ray: object
-    sensor: mi.Sensor
-    pixel: mi.Vector2f
-    origin: tuple
-    size: tuple
-    scale: mi.ScalarVector2f
-    offset: mi.ScalarVector2f
-    weight: mi.Spectrum
+    __slots__ = ("ray", "sensor", "pixel", "scale", "offset", "weight")
+
+    def __init__(self, ray, sensor, pixel, scale, offset, weight):
+        self.ray, self.sensor, self.pixel = ray, sensor, pixel
+        self.scale, self.offset, self.weight = scale, offset, weight
+
+
+class Held:
+    """A value kept on the integrator out of ``dr.syntax`` loops' reach (see :class:`PrimaryRays`)."""
+    __slots__ = ("value",)
+
+    def __init__(self, value):
+        self.value = value
 
 
 def check_rays(k: int) -> int:
@@ -100,7 +118,7 @@ def emitter_rect(scene: mi.Scene, sensor: mi.Sensor) -> tuple[int, int, int, int
     window. A light whose box corners are all out of view while it crosses the view (a
     panel larger than the view) is taken as unseen: its pixels are not split (no gain
     there, no bias). Reads the projections back: call it outside recordings and cache it
-    (:meth:`DraawV4Integrator.split_rect <draaw_mi.integrators.v4.DraawV4Integrator.split_rect>`).
+    (:meth:`DraawV4Integrator.edge_map <draaw_mi.integrators.v4.DraawV4Integrator.edge_map>`).
     """
     film = sensor.film()
     ox, oy = (int(v) for v in film.crop_offset())
@@ -143,43 +161,57 @@ def _emission_seen(scene: mi.Scene, ray: mi.Ray3f, flags: mi.RayFlags, active: m
     return pi.compute_surface_interaction(ray, flags, seen), seen
 
 
-def _film_ray(primary: PrimaryRays, pos: mi.Vector2f, active) -> tuple:
-    sensor = primary.sensor
-    return sensor.sample_ray(sensor.shutter_open(), 0.0, dr.fma(pos, primary.scale, primary.offset),
+def _film_ray(sensor: mi.Sensor, pos: mi.Vector2f, scale, offset, active) -> tuple:
+    return sensor.sample_ray(sensor.shutter_open(), 0.0, dr.fma(pos, scale, offset),
                              mi.Point2f(0.5), active)
 
 
-def edge_pixels(scene: mi.Scene, primary: PrimaryRays, rect, flags: mi.RayFlags,
-                active: mi.Bool) -> mi.Bool:
-    """Samples whose pixel straddles an edge of a visible emitting surface: the emission seen
-    through the pixel's four corners differs by more than ``EDGE_CONTRAST`` of the largest.
+def _film_mapping(film: mi.Film) -> tuple:
+    """Film position -> the sensor's ``[0, 1]^2`` sample, as Mitsuba's ``sample_rays``."""
+    scale = dr.rcp(mi.ScalarVector2f(film.crop_size()))
+    return scale, -mi.ScalarVector2f(film.crop_offset()) * scale
 
-    ``rect``: four opaque ``mi.UInt32`` (x0, y0, x1, y1) from :func:`emitter_rect`; only
-    pixels inside it are probed, one ray per pixel corner, in a kernel of their own
-    (deterministic: the same pixels in the primal and adjoint passes; opaque bounds: a moved
-    camera compiles nothing new). Only edge pixels' samples trace the extra rays; a SIMD
-    packet without one skips them, so the cost follows the number of edge pixels. A light
-    smaller than a pixel can fall between the corners: its pixels are not split.
-    """
+
+def edge_map(scene: mi.Scene, sensor: mi.Sensor, rect: tuple[int, int, int, int],
+             flags: mi.RayFlags) -> mi.Bool:
+    """Edge pixels of the emitting surfaces seen by ``sensor``: one flag per pixel of its
+    crop window (row-major), evaluated. ``rect`` from :func:`emitter_rect`: only its pixel
+    corners are probed (one ray each), the rest of the map is false."""
+    film = sensor.film()
+    ox, oy = (int(v) for v in film.crop_offset())
+    cw, ch = (int(v) for v in film.crop_size())
     x0, y0, x1, y1 = rect
-    cw, ch = primary.size
-    idx = dr.arange(mi.UInt32, (cw + 1) * (ch + 1))
-    cy = idx // (cw + 1)
-    cx = idx - cy * (cw + 1)
-    fx, fy = cx + primary.origin[0], cy + primary.origin[1]        # film coordinates
-    probe = (fx >= x0) & (fx <= x1) & (fy >= y0) & (fy <= y1)
-    ray, _ = _film_ray(primary, mi.Vector2f(mi.Float(fx), mi.Float(fy)), probe)
-    si, seen = _emission_seen(scene, ray, flags, probe, surfaces_only=True)
-    lum = mi.luminance(si.emitter(scene).eval(si, seen))
-    lum = dr.select(seen & dr.isfinite(lum), lum, 0.0)
-    dr.eval(lum)
-    px, py = mi.UInt32(primary.pixel.x), mi.UInt32(primary.pixel.y)
-    inside = active & (px >= x0) & (px < x1) & (py >= y0) & (py < y1)
-    c = (py - primary.origin[1]) * (cw + 1) + (px - primary.origin[0])
-    e = [dr.gather(mi.Float, lum, c + d, inside) for d in (0, 1, cw + 1, cw + 2)]
-    hi = dr.maximum(dr.maximum(e[0], e[1]), dr.maximum(e[2], e[3]))
-    lo = dr.minimum(dr.minimum(e[0], e[1]), dr.minimum(e[2], e[3]))
-    return inside & (hi - lo > EDGE_CONTRAST * hi)
+    with dr.suspend_grad():
+        idx = dr.arange(mi.UInt32, (cw + 1) * (ch + 1))
+        cy = idx // (cw + 1)
+        cx = idx - cy * (cw + 1)
+        fx, fy = cx + ox, cy + oy                                   # film coordinates
+        probe = (fx >= x0) & (fx <= x1) & (fy >= y0) & (fy <= y1)
+        ray, _ = _film_ray(sensor, mi.Vector2f(mi.Float(fx), mi.Float(fy)), *_film_mapping(film), probe)
+        si, seen = _emission_seen(scene, ray, flags, probe, surfaces_only=True)
+        lum = mi.luminance(si.emitter(scene).eval(si, seen))
+        lum = dr.select(seen & dr.isfinite(lum), lum, 0.0)
+        dr.eval(lum)
+        p = dr.arange(mi.UInt32, cw * ch)
+        py = p // cw
+        c = py * (cw + 1) + (p - py * cw)                           # the pixel's top-left corner
+        e = [dr.gather(mi.Float, lum, c + d) for d in (0, 1, cw + 1, cw + 2)]
+        hi = dr.maximum(dr.maximum(e[0], e[1]), dr.maximum(e[2], e[3]))
+        lo = dr.minimum(dr.minimum(e[0], e[1]), dr.minimum(e[2], e[3]))
+        edges = hi - lo > EDGE_CONTRAST * hi
+        dr.eval(edges)
+    return edges
+
+
+def edges_of(primary: PrimaryRays, edges: mi.Bool, active: mi.Bool) -> mi.Bool:
+    """Per sample: whether its pixel is an edge pixel in ``edges`` (:func:`edge_map`)."""
+    film = primary.sensor.film()
+    ox, oy = (int(v) for v in film.crop_offset())
+    cw, ch = (int(v) for v in film.crop_size())
+    x = mi.Int32(primary.pixel.x) - ox
+    y = mi.Int32(primary.pixel.y) - oy
+    inside = active & (x >= 0) & (x < cw) & (y >= 0) & (y < ch)
+    return inside & dr.gather(mi.Bool, edges, mi.UInt32(y * cw + x), inside)
 
 
 @dr.syntax
@@ -201,7 +233,8 @@ def visible_emission(mode: dr.ADMode, scene: mi.Scene, primary: PrimaryRays, sam
     j = mi.UInt32(0)
     while active & (j < k):
         cell = mi.Vector2f(mi.Float(j % g), mi.Float(j // g))
-        ray, w = _film_ray(primary, primary.pixel + (cell + sampler.next_2d(active)) / g, active)
+        ray, w = _film_ray(primary.sensor, primary.pixel + (cell + sampler.next_2d(active)) / g,
+                           primary.scale, primary.offset, active)
         si, seen = _emission_seen(scene, dr.detach(ray), flags, active)
         with dr.resume_grad(when=not primal):
             Le = dr.detach(w) * inv_w * si.emitter(scene).eval(si, seen)
@@ -214,3 +247,75 @@ def visible_emission(mode: dr.ADMode, scene: mi.Scene, primary: PrimaryRays, sam
         total += dr.detach(Le)
         j += 1
     return total, tangent
+
+
+class EmissionSplitting(DraawIntegrator):
+    """Base of ``draaw_v4`` for emission splitting (one base class: nanobind types take no
+    mixins): keeps the camera rays' pixels (:meth:`sample_rays`) and one edge map per scene and camera
+    (:meth:`edge_map`); ``sample()`` asks :meth:`split_inputs` what to split."""
+
+    def init_emission_split(self, props: mi.Properties) -> None:
+        self.emission_split = check_rays(int(props.get("emission_split", DEFAULT_RAYS)))
+        self._primary = None           # PrimaryRays of the rays being rendered
+        self._edge_maps = {}           # (scene, camera) key -> Held(edge map | None)
+        self._frozen_edges = None      # Held(edge map | None) while a recording runs
+
+    def split_inputs(self, scene: mi.Scene, ray, feats: dict[str, bool]) -> tuple:
+        """``(primary, edge map)`` for ``sample()``'s ``ray``, or ``(None, None)``: not these
+        rays' generator, splitting off for the scene or sensor, or no emitting surface in view."""
+        primary = self._primary if self._primary is not None and self._primary.ray is ray else None
+        if primary is None or not applies(self.emission_split, self.hide_emitters, primary.sensor, feats):
+            return None, None
+        edges = self.edge_map(scene, primary.sensor)
+        return (None, None) if edges is None else (primary, edges)
+
+    def edge_map(self, scene: mi.Scene, sensor: mi.Sensor):
+        """Edge pixels of the emitting surfaces that ``sensor`` sees (:func:`edge_map`), or
+        ``None`` when none is in view. Cached per scene, camera (the JIT variables of its
+        transform, the film) and emitter bounds, so a repeated render launches no probe kernel
+        and reads nothing back; within a recording, the map that the integrator's
+        ``freeze_state`` passed. (A stale map, say after an occluder moved, costs gain, not the
+        expectation: which pixels split does not depend on the samples.)"""
+        if self._frozen_edges is not None:
+            return self._frozen_edges.value
+        if dr.flag(dr.JitFlag.FreezingScope):
+            return None                # a recording made without freeze_state: no splitting
+        film = sensor.film()
+        boxes = [e.get_shape().bbox() for e in scene.emitters() if e.get_shape() is not None]
+        key = (id(scene), id(sensor), tuple(dr.detail.collect_indices(sensor.world_transform().matrix)),
+               tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
+               tuple(tuple(b.min) + tuple(b.max) for b in boxes))
+        if key not in self._edge_maps:
+            if len(self._edge_maps) >= 8:
+                self._edge_maps.pop(next(iter(self._edge_maps)))
+            rect = emitter_rect(scene, sensor)
+            self._edge_maps[key] = Held(None if rect is None else edge_map(
+                scene, sensor, rect, self.ray_flags(self.features(scene))))
+        return self._edge_maps[key].value
+
+    def sample_rays(self, scene, sensor, sampler, *args, **kwargs):
+        """Mitsuba's camera rays, with their pixels kept for the split."""
+        ray, weight, pos = super().sample_rays(scene, sensor, sampler, *args, **kwargs)
+        film = sensor.film()
+        self._primary = None
+        if self.emission_split > 1 and film.rfilter().is_box_filter():
+            # with a box filter ``pos`` is the pixel's integer corner
+            scale, offset = _film_mapping(film)
+            self._primary = PrimaryRays(ray, sensor, mi.Vector2f(pos), scale, offset, weight)
+        return ray, weight, pos
+
+    def set_primary_rays(self, primary) -> None:
+        """For ray generators other than :meth:`sample_rays` (adaptive sampling's)."""
+        self._primary = primary
+
+    def render_forward(self, *args, **kwargs):
+        try:
+            return super().render_forward(*args, **kwargs)
+        finally:
+            self._primary = None       # the rays die with the render
+
+    def render_backward(self, *args, **kwargs):
+        try:
+            return super().render_backward(*args, **kwargs)
+        finally:
+            self._primary = None

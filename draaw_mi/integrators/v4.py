@@ -8,7 +8,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import emission_split
-from .common import DraawIntegrator, mis_weight, relative, sample_emitter
+from .common import mis_weight, relative, sample_emitter
 from .sampling import PowerSelection, only_constant_environment, roulette
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
@@ -16,7 +16,7 @@ ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates varian
 LIGHT_SELECTION = "auto"
 
 
-class DraawV4Integrator(DraawIntegrator):
+class DraawV4Integrator(emission_split.EmissionSplitting):
     r"""
     .. _integrator-draaw_v4:
 
@@ -63,6 +63,12 @@ class DraawV4Integrator(DraawIntegrator):
          sampling already matches a constant sky better than uniform sphere samples).
          (Default: |false|)
 
+     * - emission_split
+       - |int|
+       - Rays per camera sample that estimate the emission of a light seen directly, in the
+         pixels on its edges (1: off; a square: a ``sqrt x sqrt`` stratified grid over the
+         pixel; see :mod:`~draaw_mi.integrators.emission_split`). (Default: 16)
+
      * - adaptive
        - |bool|
        - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
@@ -91,6 +97,8 @@ class DraawV4Integrator(DraawIntegrator):
     - Russian roulette from ``rr_depth`` on that stops only weak paths (throughput below
       ``rr_threshold``), so bright paths in open scenes and metals are never cut;
     - emitter selection by power in many-light scenes;
+    - emission splitting: where a light is seen directly, its emission in the pixels on its
+      edges comes from 16 stratified extra camera rays (no shading, one intersection each);
     - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased);
     - a kernel specialised to the scene: each feature of
       :func:`~draaw_mi.integrators.features.detect_features` (area / delta / environment
@@ -111,7 +119,12 @@ class DraawV4Integrator(DraawIntegrator):
     :mod:`~draaw_mi.integrators.light_pilot`), which took the thesis glass scene from 0.90x to
     0.59x ``path``'s variance x time at 256x256 and the material spheres (sky and area light)
     to 0.76x of uniform selection's; it lost 10 % to the power table on the 24-light scene,
-    hence ``auto``; adaptive sampling because the error of
+    hence ``auto``; emission splitting because in a scene that shows its lights most of a
+    low-spp image's error sits in the pixels on their edges (87 % of the variance of the
+    Cornell box at 128x128, in 0.7 % of its pixels): variance x time against ``path`` at 128x128
+    and 4 spp went from 1.0 to 0.13 on the Cornell box and from 1.0 to 0.015 on the scene with a
+    small bright bulb in view, at 0-5 % more kernel time, and nothing changes where no emitting
+    surface is in view (``benchmarks/variance_study.py``); adaptive sampling because the error of
     most images is dominated by few pixels (emitter edges, highlights, caustics), and it is
     off for small renders (< 64 spp: the preview and the fit loop, where a pilot pass would be
     too small) and for differentiated renders' adjoint passes, which sample uniformly. Adaptive sampling lowers
@@ -171,11 +184,7 @@ class DraawV4Integrator(DraawIntegrator):
         self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
-        self.emission_split = emission_split.check_rays(
-            int(props.get("emission_split", emission_split.DEFAULT_RAYS)))
-        self._primary = None           # emission_split.PrimaryRays of the rays being rendered
-        self._split_rects = {}         # (scene, camera) key -> (rect, opaque rect) | None
-        self._frozen_split = None      # (opaque rect | None,) while a recording runs
+        self.init_emission_split(props)
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -243,75 +252,22 @@ class DraawV4Integrator(DraawIntegrator):
     def freeze_state(self, scene):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
         input (:func:`draaw_mi.render.frozen_render`): the light table's arrays (or ``None``)
-        and the emission-splitting rectangle of the first sensor (or ``None``). Computed here,
+        and the first sensor's edge map for emission splitting (or ``None``). Computed here,
         outside the recording, so frozen and traced renders choose alike."""
         sel = self.prepare_selection(scene)
-        rect = self.split_rect(scene, scene.sensors()[0]) if self.emission_split > 1 else None
-        return None if sel is None else sel.arrays(), rect
+        edges = self.edge_map(scene, scene.sensors()[0]) if self.emission_split > 1 else None
+        return None if sel is None else sel.arrays(), edges
 
     @contextlib.contextmanager
     def frozen_state(self, state):
         """Within this block (a recording's body) use ``state`` from :meth:`freeze_state`."""
-        sel, rect = state
+        sel, edges = state
         self._frozen_selection = None if sel is None else (PowerSelection.from_arrays(sel),)
-        self._frozen_split = (rect,)
+        self._frozen_edges = emission_split.Held(edges)
         try:
             yield
         finally:
-            self._frozen_selection = self._frozen_split = None
-
-    def split_rect(self, scene, sensor):
-        """Four opaque ``mi.UInt32`` (x0, y0, x1, y1): where ``sensor`` can see ``scene``'s
-        emitting surfaces (:func:`.emission_split.emitter_rect`), or ``None``. Cached per scene,
-        camera (the JIT variables of its transform) and emitter bounds, so a repeated render
-        reads nothing back; within a recording, the one :meth:`freeze_state` passed."""
-        if self._frozen_split is not None:
-            return self._frozen_split[0]
-        if dr.flag(dr.JitFlag.FreezingScope):
-            return None                # a recording made without freeze_state: no splitting
-        m = sensor.world_transform().matrix
-        film = sensor.film()
-        key = (id(scene), id(sensor), tuple(m[i][j].index for i in range(4) for j in range(4)),
-               tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
-               tuple(tuple(e.get_shape().bbox().min) + tuple(e.get_shape().bbox().max)
-                     for e in scene.emitters() if e.get_shape() is not None))
-        if key not in self._split_rects:
-            if len(self._split_rects) >= 8:
-                self._split_rects.pop(next(iter(self._split_rects)))
-            rect = emission_split.emitter_rect(scene, sensor)
-            self._split_rects[key] = None if rect is None else tuple(
-                dr.opaque(mi.UInt32, v) for v in rect)
-        return self._split_rects[key]
-
-    # ------------------------------------------------- camera rays (emission splitting)
-    def sample_rays(self, scene, sensor, sampler, *args, **kwargs):
-        """Mitsuba's camera rays, with their pixels kept for :mod:`.emission_split`."""
-        ray, weight, pos = super().sample_rays(scene, sensor, sampler, *args, **kwargs)
-        film = sensor.film()
-        self._primary = None
-        if self.emission_split > 1 and film.rfilter().is_box_filter():
-            scale = dr.rcp(mi.ScalarVector2f(film.crop_size()))    # as Mitsuba's sample_rays
-            # with a box filter ``pos`` is the pixel's integer corner
-            self._primary = emission_split.PrimaryRays(
-                ray, sensor, mi.Vector2f(pos), tuple(film.crop_offset()), tuple(film.crop_size()),
-                scale, -mi.ScalarVector2f(film.crop_offset()) * scale, weight)
-        return ray, weight, pos
-
-    def set_primary_rays(self, primary):
-        """For ray generators other than :meth:`sample_rays` (adaptive sampling's)."""
-        self._primary = primary
-
-    def render_forward(self, *args, **kwargs):
-        try:
-            return super().render_forward(*args, **kwargs)
-        finally:
-            self._primary = None
-
-    def render_backward(self, *args, **kwargs):
-        try:
-            return super().render_backward(*args, **kwargs)
-        finally:
-            self._primary = None
+            self._frozen_selection = self._frozen_edges = None
 
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
@@ -358,11 +314,8 @@ class DraawV4Integrator(DraawIntegrator):
         ctx = mi.BSDFContext()
         sel = self.emitter_selection(scene) if has_nee else None
         # emitters seen directly: from stratified extra camera rays (emission_split.py)
-        primary = self._primary if self._primary is not None and self._primary.ray is ray else None
-        split = primary is not None and emission_split.applies(
-            self.emission_split, self.hide_emitters, primary.sensor, feats)
-        rect = self.split_rect(scene, primary.sensor) if split else None
-        split = rect is not None                      # an emitting surface in view
+        primary, edges = self.split_inputs(scene, ray, feats)
+        split = edges is not None                     # an emitting surface in view
         edge = None                                   # samples in edge pixels (when split)
 
         # --------------------- Configure loop state ----------------------
@@ -375,7 +328,7 @@ class DraawV4Integrator(DraawIntegrator):
         active = mi.Bool(active)                      # Active SIMD lanes
         ray, pi, valid = self.trace_camera(scene, ray, active, feats)
         if dr.hint(split, mode="scalar"):
-            edge = emission_split.edge_pixels(scene, primary, rect, flags, active)
+            edge = emission_split.edges_of(primary, edges, active)
             L_vis, δL_vis = emission_split.visible_emission(
                 mode, scene, primary, sampler, self.emission_split, flags, edge, δL)
             L = (L + L_vis) if primal else (L - L_vis)

@@ -101,7 +101,7 @@ def test_split_code_where_a_light_is_seen():
     scene = cornell(16)
     on = kernels(scene, integrator("draaw_v4", max_depth=4))
     off = kernels(scene, integrator("draaw_v4", max_depth=4, emission_split=1))
-    assert len(on) == len(off) + 1           # the corner probes' kernel
+    assert len(on) == len(off)               # the edge map is made once per camera, not per render
     assert max(on) > max(off)                # the extra rays in the render kernel
 
 
@@ -117,18 +117,21 @@ def test_emitter_rect_holds_the_light(box32):
     assert emission_split.emitter_rect(down, down.sensors()[0]) is None
 
 
-def test_split_rect_follows_the_camera(box32):
+def test_edge_map_follows_the_camera(box32):
     integ = integrator("draaw_v4", max_depth=3)
     sensor = box32.sensors()[0]
-    before = tuple(int(v[0]) for v in integ.split_rect(box32, sensor))
+    before = np.array(integ.edge_map(box32, sensor))
+    assert before.any()
     params = mi.traverse(box32)
     old = mi.Transform4f(params["sensor.to_world"])
     params["sensor.to_world"] = mi.Transform4f().translate([0.3, 0.0, 0.0]) @ old
     params.update()
     try:
-        after = tuple(int(v[0]) for v in integ.split_rect(box32, sensor))
-        assert after != before
-        assert after == emission_split.emitter_rect(box32, sensor)
+        after = np.array(integ.edge_map(box32, sensor))
+        assert after.any() and (after != before).any()
+        fresh = emission_split.edge_map(box32, sensor, emission_split.emitter_rect(box32, sensor),
+                                        mi.RayFlags.ShadingFrame)
+        assert (after == np.array(fresh)).all()
     finally:
         params["sensor.to_world"] = old
         params.update()
