@@ -29,6 +29,7 @@ The machine is usually shared: times are medians of back-to-back ratios, never s
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import statistics
@@ -133,10 +134,26 @@ def bench(name: str, res: int, args) -> dict | None:
                          ratio=t_ratio * mse[k] / mse[0]))
     r = dict(name=name, res=res, depth=depth, rows=rows, noise=noise, t_ref=t_ref,
              ref_mean=float(ref.mean()), kind=ss.SCENES[name][0])
-    line = "  ".join(f"{row['spec']}: {row['ratio']:.2f} (t {row['t_ratio']:.2f}, mse "
-                     f"{row['mse_ratio']:.2f})" for row in rows[1:])
+    line = "  ".join(f"{row['spec']}: {_fmt(row['ratio'])} (t {row['t_ratio']:.2f}, mse "
+                     f"{_fmt(row['mse_ratio'])})" for row in rows[1:])
     print(f"[{res} {name}] path {rows[0]['time']:.3f}s  {line}", file=sys.stderr, flush=True)
     return r
+
+
+def _fmt(x: float) -> str:
+    """Two decimals, or two significant digits below 0.1 (a ratio of 0.004 is not 0.00);
+    never an exponent.
+
+    Below 1e-4 (an MSE under the reference's own noise is clamped to 1e-30): ``<0.0001``.
+
+    >>> _fmt(0.534), _fmt(0.0041), _fmt(0.00041), _fmt(1e-30), _fmt(0.0)
+    ('0.53', '0.0041', '0.00041', '<0.0001', '0.00')
+    """
+    if not x > 0 or x >= 0.1:
+        return f"{x:.2f}"
+    if x < 1e-4:
+        return "<0.0001"
+    return f"{x:.{1 - math.floor(math.log10(x))}f}"
 
 
 def report(results: list[dict], args) -> str:
@@ -158,13 +175,13 @@ def report(results: list[dict], args) -> str:
                 "| scene | kind | depth | path s @ spp | " + " | ".join(f"`{s}`" for s in specs[1:]) + " |",
                 "|---|---|---|---|" + "---|" * (len(specs) - 1)]
         for r in rr:
-            cells = [f"**{row['ratio']:.2f}** ({row['t_ratio']:.2f}, {row['mse_ratio']:.2f})"
+            cells = [f"**{_fmt(row['ratio'])}** ({row['t_ratio']:.2f}, {_fmt(row['mse_ratio'])})"
                      for row in r["rows"][1:]]
             out.append(f"| {r['name']} | {r['kind']} | {r['depth']} | {r['rows'][0]['time']:.3f} | "
                        + " | ".join(cells) + " |")
         meds = [statistics.median(r["rows"][k]["ratio"] for r in rr) for k in range(1, len(specs))]
         worst = [max(r["rows"][k]["ratio"] for r in rr) for k in range(1, len(specs))]
-        out.append("| **median** | | | | " + " | ".join(f"**{m:.2f}** (max {w:.2f})"
+        out.append("| **median** | | | | " + " | ".join(f"**{_fmt(m)}** (max {_fmt(w)})"
                                                     for m, w in zip(meds, worst)) + " |")
         out.append("")
     return "\n".join(out) + "\n"

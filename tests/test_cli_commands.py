@@ -190,6 +190,9 @@ def test_bench_suite_speed(tmp_path, capsys):
     for ratio, t, mse in cells:
         assert float(t) > 0 and float(mse) > 0
         assert abs(float(ratio) - float(t) * float(mse)) <= 0.01 + 0.01 * float(ratio)
+    import doctest
+    import draaw_mi.speed_bench as sb
+    assert doctest.testmod(sb).failed == 0            # the cells' number format
     ref = out / "refs" / "metal_018_16_d5_64.exr"
     stamp = ref.stat().st_mtime_ns
     assert main(argv) == 0 and ref.stat().st_mtime_ns == stamp          # reused, not re-rendered

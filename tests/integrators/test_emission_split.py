@@ -170,3 +170,9 @@ def test_bad_ray_counts_are_refused():
     from draaw_mi.errors import ParameterError
     with pytest.raises((ParameterError, RuntimeError), match="emission_split=2"):
         integrator("draaw_v4", emission_split=2)
+
+
+def test_doctests():
+    import doctest
+    res = doctest.testmod(emission_split)
+    assert res.attempted >= 2 and res.failed == 0, res
