@@ -103,8 +103,9 @@ def check_rays(k: int) -> int:
 
 def applies(k: int, hide_emitters: bool, sensor: mi.Sensor, feats: dict[str, bool]) -> bool:
     """Whether splitting is on for this scene and sensor (Python-level: no kernel code else)."""
-    if k <= 1 or hide_emitters or not feats["area_lights"] or feats["sdf"] or feats["media"]:
-        return False
+    if (k <= 1 or hide_emitters or mi.is_spectral or not feats["area_lights"] or feats["sdf"]
+            or feats["media"]):
+        return False             # (spectral: the extra rays would need the path's wavelengths)
     return (sensor.film().rfilter().is_box_filter() and not sensor.needs_aperture_sample()
             and sensor.shutter_open_time() == 0)
 
@@ -130,7 +131,10 @@ def emitter_rect(scene: mi.Scene, sensor: mi.Sensor) -> tuple[int, int, int, int
     with dr.suspend_grad():
         it = dr.zeros(mi.Interaction3f, len(pts))
         it.p = mi.Point3f(pts[:, 0], pts[:, 1], pts[:, 2])
-        ds, _ = sensor.sample_direction(it, mi.Point2f(0.5), True)
+        try:
+            ds, _ = sensor.sample_direction(it, mi.Point2f(0.5), True)
+        except RuntimeError:     # a sensor that cannot project points: no splitting
+            return None
         uv = np.array(ds.uv, dtype=np.float64).T.reshape(len(boxes), 8, 2)
         seen = (np.array(ds.pdf) > 0).reshape(len(boxes), 8)
     x0 = y0 = math.inf
