@@ -20,20 +20,22 @@ expectation. With other filters a sample is splatted with a weight that depends 
 position, which the extra rays do not share: no splitting there.
 
 Which pixels (:func:`edge_map`): the emitting surfaces' bounding boxes, projected by the
-sensor, bound where a light can be seen (:func:`emitter_rect`); inside that rectangle one
-probe ray per pixel corner reads the emission seen there, and a pixel whose corners differ
-by more than ``EDGE_CONTRAST`` of the largest is an edge pixel. The map depends on the
+sensor, bound where a light can be seen (:func:`emitter_rect`); inside that rectangle probe
+rays on a half-pixel lattice (pixel corners, edge midpoints, centres) read the emission seen
+there, and a pixel whose nine probes differ by more than ``EDGE_CONTRAST`` of the largest is
+an edge pixel. The map depends on the
 scene and the camera, not on the seed: V4 computes it once per camera and reuses it (a
 repeated render launches no probe kernel). A SIMD packet of samples without an edge pixel
 skips the extra rays, so their cost follows the number of edge pixels. A light thinner
-than a pixel can fall between the corners (the Cornell box's light at 16x16): its pixels
-are not split, which loses the gain there, not the expectation.
+than half a pixel can fall between the probes: its pixels are not split, which loses the
+gain there, not the expectation.
 
 Only where the scene calls for it (:func:`applies`): an area emitter, emitters shown (not
 ``hide_emitters``), a box filter, a sensor without aperture or shutter samples, no SDF
 objects (sphere-traced surfaces would occlude the light for the camera path but not for the
 extra rays), no media (V4 hands those to :mod:`~draaw_mi.integrators.volume`), and an
-emitting surface in view; otherwise the kernels are exactly those without splitting.
+emitting surface in view with at least one edge pixel (lights seen only from behind have
+none); otherwise the kernels are exactly those without splitting.
 The extra rays need the camera sample's pixel, which Mitsuba's ``sample()`` interface does
 not carry: the ray generator records it in a :class:`PrimaryRays` beside the rays
 (:meth:`DraawV4Integrator.sample_rays <draaw_mi.integrators.v4.DraawV4Integrator.sample_rays>`,
@@ -55,7 +57,7 @@ from ..errors import ParameterError
 from .common import DraawIntegrator
 
 DEFAULT_RAYS = 16       # 4 x 4 cells per camera sample in edge pixels (see the V4 docstring)
-EDGE_CONTRAST = 0.1     # a pixel is an edge pixel where its corners' emission differs by more
+EDGE_CONTRAST = 0.1     # an edge pixel: its probes' emission differs by more than this share
 
 
 class PrimaryRays:
@@ -179,29 +181,34 @@ def _film_mapping(film: mi.Film) -> tuple:
 def edge_map(scene: mi.Scene, sensor: mi.Sensor, rect: tuple[int, int, int, int],
              flags: mi.RayFlags) -> mi.Bool:
     """Edge pixels of the emitting surfaces seen by ``sensor``: one flag per pixel of its
-    crop window (row-major), evaluated. ``rect`` from :func:`emitter_rect`: only its pixel
-    corners are probed (one ray each), the rest of the map is false."""
+    crop window (row-major), evaluated. Probes on a half-pixel lattice (the pixel corners,
+    edge midpoints and centres: nine per pixel, shared with the neighbours), only inside
+    ``rect`` (:func:`emitter_rect`); the rest of the map is false. A pixel is an edge pixel
+    where its nine probes' emission differs by more than ``EDGE_CONTRAST`` of the largest."""
     film = sensor.film()
     ox, oy = (int(v) for v in film.crop_offset())
     cw, ch = (int(v) for v in film.crop_size())
     x0, y0, x1, y1 = rect
+    lw = 2 * cw + 1                                                 # lattice points per row
     with dr.suspend_grad():
-        idx = dr.arange(mi.UInt32, (cw + 1) * (ch + 1))
-        cy = idx // (cw + 1)
-        cx = idx - cy * (cw + 1)
-        fx, fy = cx + ox, cy + oy                                   # film coordinates
+        idx = dr.arange(mi.UInt32, lw * (2 * ch + 1))
+        ly = idx // lw
+        lx = idx - ly * lw
+        fx, fy = 0.5 * mi.Float(lx) + ox, 0.5 * mi.Float(ly) + oy   # film coordinates
         probe = (fx >= x0) & (fx <= x1) & (fy >= y0) & (fy <= y1)
-        ray, _ = _film_ray(sensor, mi.Vector2f(mi.Float(fx), mi.Float(fy)), *_film_mapping(film), probe)
+        ray, _ = _film_ray(sensor, mi.Vector2f(fx, fy), *_film_mapping(film), probe)
         si, seen = _emission_seen(scene, ray, flags, probe, surfaces_only=True)
         lum = mi.luminance(si.emitter(scene).eval(si, seen))
         lum = dr.select(seen & dr.isfinite(lum), lum, 0.0)
         dr.eval(lum)
         p = dr.arange(mi.UInt32, cw * ch)
         py = p // cw
-        c = py * (cw + 1) + (p - py * cw)                           # the pixel's top-left corner
-        e = [dr.gather(mi.Float, lum, c + d) for d in (0, 1, cw + 1, cw + 2)]
-        hi = dr.maximum(dr.maximum(e[0], e[1]), dr.maximum(e[2], e[3]))
-        lo = dr.minimum(dr.minimum(e[0], e[1]), dr.minimum(e[2], e[3]))
+        c = 2 * py * lw + 2 * (p - py * cw)                         # the pixel's top-left corner
+        hi, lo = mi.Float(0.0), mi.Float(dr.inf)
+        for dy in range(3):
+            for dx in range(3):
+                v = dr.gather(mi.Float, lum, c + dy * lw + dx)
+                hi, lo = dr.maximum(hi, v), dr.minimum(lo, v)
         edges = hi - lo > EDGE_CONTRAST * hi
         dr.eval(edges)
     return edges
@@ -293,8 +300,11 @@ class EmissionSplitting(DraawIntegrator):
             if len(self._edge_maps) >= 8:
                 self._edge_maps.pop(next(iter(self._edge_maps)))
             rect = emitter_rect(scene, sensor)
-            self._edge_maps[key] = Held(None if rect is None else edge_map(
-                scene, sensor, rect, self.ray_flags(self.features(scene))))
+            edges = None if rect is None else edge_map(scene, sensor, rect,
+                                                       self.ray_flags(self.features(scene)))
+            if edges is not None and not dr.any(edges):
+                edges = None             # lights in view but no edge (seen from behind): no code
+            self._edge_maps[key] = Held(edges)
         return self._edge_maps[key].value
 
     def sample_rays(self, scene, sensor, sampler, *args, **kwargs):
