@@ -117,6 +117,19 @@ def test_emitter_rect_holds_the_light(box32):
     assert emission_split.emitter_rect(down, down.sensors()[0]) is None
 
 
+def test_a_light_thinner_than_a_pixel_is_found():
+    """At 16x16 the Cornell box's light is a strip less than a pixel tall, between two rows of
+    pixel corners: the half-pixel probe lattice still finds it, and only where it is."""
+    scene = cornell(16)
+    sensor = scene.sensors()[0]
+    edges = np.array(emission_split.edge_map(scene, sensor, emission_split.emitter_rect(scene, sensor),
+                                             mi.RayFlags.ShadingFrame)).reshape(16, 16)
+    lit = np.array(mi.render(scene, integrator=mi.load_dict({"type": "path", "max_depth": 1}),
+                             spp=256, seed=3))[..., :3].sum(-1) > 0
+    assert edges.sum() >= 3, edges.sum()
+    assert lit[edges].all()
+
+
 def test_edge_map_follows_the_camera(box32):
     integ = integrator("draaw_v4", max_depth=3)
     sensor = box32.sensors()[0]
