@@ -80,6 +80,20 @@ def ad_gradient(scene, integ, key: str, spp: int, seed: int, weight=None) -> flo
     return out
 
 
+def forward_gradient(scene, integ, key: str, spp: int, seed: int) -> float:
+    """d(mean image)/d(param) in forward mode, the tangent 1 on every channel."""
+    params = mi.traverse(scene)
+    dr.enable_grad(params[key])
+    params.update()
+    dr.set_grad(params[key], type(params[key])(1.0))
+    img = mi.render(scene, params, integrator=integ, spp=spp, seed=seed)
+    dr.forward_to(img)
+    out = float(np.array(dr.mean(dr.grad(img), axis=None)).ravel()[0])
+    dr.disable_grad(params[key])
+    params.update()
+    return out
+
+
 def fd_gradient(scene, integ, key: str, h: float, spp: int, seed: int, weight=None) -> float:
     """Central difference (common random numbers) of the mean image, +h on every channel."""
     params = mi.traverse(scene)

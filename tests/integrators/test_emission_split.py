@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from integrators_helpers import ad_gradient, dr, fd_gradient, integrator, mi, rs, seed_stack
+from integrators_helpers import ad_gradient, dr, fd_gradient, forward_gradient, integrator, mi, rs, seed_stack
 
 from draaw_mi.integrators import emission_split
 
@@ -164,17 +164,7 @@ def test_light_gradient_through_the_split_rays(box32):
     se = np.sqrt(ad.var(ddof=1) / n + fd.var(ddof=1) / n)
     assert abs(ad.mean() - fd.mean()) <= 3 * se + 1e-7, (ad, fd, se)
     assert se < 0.05 * abs(fd.mean()), (se, fd)
-    params = mi.traverse(scene)
-    fwd = []
-    for s in range(n):
-        dr.enable_grad(params[key])
-        params.update()
-        dr.set_grad(params[key], mi.Color3f(1.0, 1.0, 1.0))
-        img = mi.render(scene, params, integrator=integ, spp=64, seed=s)
-        dr.forward_to(img)
-        fwd.append(float(np.array(dr.mean(dr.grad(img), axis=None)).ravel()[0]))
-        dr.disable_grad(params[key])
-        params.update()
+    fwd = [forward_gradient(scene, integ, key, 64, s) for s in range(n)]
     se_f = np.sqrt(np.var(fwd, ddof=1) / n + ad.var(ddof=1) / n)
     assert abs(np.mean(fwd) - ad.mean()) <= 3 * se_f + 1e-7, (fwd, ad)
 

@@ -14,8 +14,8 @@ import sys
 import numpy as np
 import pytest
 
-from integrators_helpers import (VERSIONS, ad_gradient, dr, fd_gradient, highlight_weight, integrator, mi,
-                                 rs)
+from integrators_helpers import (VERSIONS, ad_gradient, fd_gradient, forward_gradient, highlight_weight,
+                                 integrator, mi, rs)
 
 KEYS = [
     ("plane.bsdf.base_color.value", 0.02),
@@ -91,18 +91,8 @@ def test_gradient_variants(grad_scene, props, key, h):
 @pytest.mark.parametrize("kind", VERSIONS)
 def test_forward_mode_matches_backward(grad_scene, kind):
     key = "plane.bsdf.base_color.value"
-    params = mi.traverse(grad_scene)
     integ = integrator(kind, max_depth=4)
-    fwd = []
-    for s in range(4):
-        dr.enable_grad(params[key])
-        params.update()
-        dr.set_grad(params[key], mi.Color3f(1.0, 1.0, 1.0))
-        img = mi.render(grad_scene, params, integrator=integ, spp=256, seed=s)
-        dr.forward_to(img)
-        fwd.append(float(np.array(dr.mean(dr.grad(img), axis=None)).ravel()[0]))
-        dr.disable_grad(params[key])
-        params.update()
+    fwd = [forward_gradient(grad_scene, integ, key, 256, s) for s in range(4)]
     bwd = [ad_gradient(grad_scene, integ, key, 256, 20 + s) for s in range(4)]
     se = np.sqrt(np.var(fwd, ddof=1) / 4 + np.var(bwd, ddof=1) / 4)
     assert abs(np.mean(fwd) - np.mean(bwd)) <= 3 * se + 1e-6, (fwd, bwd)
