@@ -188,9 +188,11 @@ def edge_map(scene: mi.Scene, sensor: mi.Sensor, rect: tuple[int, int, int, int]
     film = sensor.film()
     ox, oy = (int(v) for v in film.crop_offset())
     cw, ch = (int(v) for v in film.crop_size())
-    x0, y0, x1, y1 = rect
     lw = 2 * cw + 1                                                 # lattice points per row
     with dr.suspend_grad():
+        # opaque bounds: a moved camera (a preview's orbit, a batch's frames) moves the
+        # rectangle, and literal bounds compiled a new probe kernel for every camera
+        x0, y0, x1, y1 = (dr.opaque(mi.Float, v) for v in rect)
         idx = dr.arange(mi.UInt32, lw * (2 * ch + 1))
         ly = idx // lw
         lx = idx - ly * lw

@@ -130,21 +130,39 @@ def test_a_light_thinner_than_a_pixel_is_found():
     assert lit[edges].all()
 
 
+def probe_kernels(fn) -> tuple:
+    """``fn()``'s result and the hashes of the JIT kernels it launched."""
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        out = fn()
+        return out, {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+
 def test_edge_map_follows_the_camera(box32):
+    """A moved camera gets its own edge map (the cache key follows the camera), made by the
+    same kernels (the moved rectangle reaches the probes as data, not as constants that
+    compile a new kernel for every camera of a preview's orbit or a batch's path)."""
     integ = integrator("draaw_v4", max_depth=3)
     sensor = box32.sensors()[0]
-    before = np.array(integ.edge_map(box32, sensor))
-    assert before.any()
     params = mi.traverse(box32)
     old = mi.Transform4f(params["sensor.to_world"])
-    params["sensor.to_world"] = mi.Transform4f().translate([0.3, 0.0, 0.0]) @ old
-    params.update()
+
+    def moved(dx):
+        params["sensor.to_world"] = mi.Transform4f().translate([dx, 0.0, 0.0]) @ old
+        params.update()
+        rect = emission_split.emitter_rect(box32, sensor)
+        return rect, probe_kernels(lambda: np.array(integ.edge_map(box32, sensor)))
+
     try:
-        after = np.array(integ.edge_map(box32, sensor))
-        assert after.any() and (after != before).any()
-        fresh = emission_split.edge_map(box32, sensor, emission_split.emitter_rect(box32, sensor),
-                                        mi.RayFlags.ShadingFrame)
-        assert (after == np.array(fresh)).all()
+        rect1, (map1, k1) = moved(0.15)
+        rect2, (map2, k2) = moved(0.3)
+        assert rect1 != rect2 and map1.any() and (map2 != map1).any()
+        assert k2 and k2 <= k1, (k1, k2)
+        fresh = emission_split.edge_map(box32, sensor, rect2, mi.RayFlags.ShadingFrame)
+        assert (map2 == np.array(fresh)).all()
     finally:
         params["sensor.to_world"] = old
         params.update()
