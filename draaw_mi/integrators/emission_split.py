@@ -103,13 +103,19 @@ def check_rays(k: int) -> int:
     return int(k)
 
 
-def applies(k: int, hide_emitters: bool, sensor: mi.Sensor, feats: dict[str, bool]) -> bool:
-    """Whether splitting is on for this scene and sensor (Python-level: no kernel code else)."""
-    if (k <= 1 or hide_emitters or mi.is_spectral or not feats["area_lights"] or feats["sdf"]
-            or feats["media"]):
+def sensor_allows(k: int, hide_emitters: bool, sensor: mi.Sensor) -> bool:
+    """The integrator's and the sensor's side of :func:`applies` (cheap: no scene walk)."""
+    if k <= 1 or hide_emitters or mi.is_spectral:
         return False             # (spectral: the extra rays would need the path's wavelengths)
     return (sensor.film().rfilter().is_box_filter() and not sensor.needs_aperture_sample()
             and sensor.shutter_open_time() == 0)
+
+
+def applies(k: int, hide_emitters: bool, sensor: mi.Sensor, feats: dict[str, bool]) -> bool:
+    """Whether splitting is on for this scene and sensor (Python-level: no kernel code else)."""
+    if not feats["area_lights"] or feats["sdf"] or feats["media"]:
+        return False
+    return sensor_allows(k, hide_emitters, sensor)
 
 
 def emitter_rect(scene: mi.Scene, sensor: mi.Sensor) -> tuple[int, int, int, int] | None:
@@ -281,6 +287,17 @@ class EmissionSplitting(DraawIntegrator):
             return None, None
         edges = self.edge_map(scene, primary.sensor)
         return (None, None) if edges is None else (primary, edges)
+
+    def frozen_edge_map(self, scene: mi.Scene):
+        """The edge map a recording of a render of ``scene`` (its first sensor) takes as input,
+        or ``None`` where the integrator or sensor rules splitting out (then nothing is built).
+        The scene's side (no area light, SDF objects, media) is not walked on this per-render
+        path (a feature walk costs ~80 us): there ``sample()`` ignores the map, which costs one
+        probe pass per camera, or none without an area light."""
+        sensor = scene.sensors()[0]
+        if not sensor_allows(self.emission_split, self.hide_emitters, sensor):
+            return None
+        return self.edge_map(scene, sensor)
 
     def edge_map(self, scene: mi.Scene, sensor: mi.Sensor):
         """Edge pixels of the emitting surfaces that ``sensor`` sees (:func:`edge_map`), or

@@ -255,8 +255,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         and the first sensor's edge map for emission splitting (or ``None``). Computed here,
         outside the recording, so frozen and traced renders choose alike."""
         sel = self.prepare_selection(scene)
-        edges = self.edge_map(scene, scene.sensors()[0]) if self.emission_split > 1 else None
-        return None if sel is None else sel.arrays(), edges
+        return None if sel is None else sel.arrays(), self.frozen_edge_map(scene)
 
     @contextlib.contextmanager
     def frozen_state(self, state):

@@ -95,6 +95,8 @@ def test_no_split_code_where_no_light_is_seen(case):
     on = kernels(scene, integrator("draaw_v4", max_depth=4, **props))
     off = kernels(scene, integrator("draaw_v4", max_depth=4, emission_split=1, **props))
     assert on == off, (on, off)
+    # nor is an edge map built for frozen recordings of it
+    assert integrator("draaw_v4", max_depth=4, **props).freeze_state(scene)[1] is None
 
 
 def test_split_code_where_a_light_is_seen():
@@ -103,6 +105,8 @@ def test_split_code_where_a_light_is_seen():
     off = kernels(scene, integrator("draaw_v4", max_depth=4, emission_split=1))
     assert len(on) == len(off)               # the edge map is made once per camera, not per render
     assert max(on) > max(off)                # the extra rays in the render kernel
+    edges = integrator("draaw_v4", max_depth=4).freeze_state(scene)[1]
+    assert edges is not None and dr.any(edges)      # frozen recordings get the map
 
 
 def test_emitter_rect_holds_the_light(box32):
