@@ -257,6 +257,22 @@ def freeze_eligible(mi_scene, spp: int) -> bool:
     return int(w) * int(h) <= FREEZE_MAX_PIXELS
 
 
+def scene_scalars(mi_scene) -> tuple:
+    """The host-side numbers of ``mi_scene`` that its kernels bake in as constants, which a
+    ``dr.freeze`` replay would keep from its recording: the emitters' sampling weights.
+    Mitsuba's ``Scene.pdf_emitter_direction`` reads them through a virtual-call getter of a
+    plain float, which Dr.Jit fills with constants when it traces; a replay after a weight
+    change sampled lights by the new distribution but weighed them by the old weights (up to
+    26 units off on the 24-light scene, tests/test_render_freeze.py). Passed to the recording
+    as Python values, which are part of its key, a change records anew.
+
+    >>> import mitsuba as mi
+    >>> scene_scalars(mi.load_dict(mi.cornell_box()))
+    (1.0,)
+    """
+    return tuple(float(e.sampling_weight()) for e in mi_scene.emitters())
+
+
 def freeze_render(integrator, body):
     """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
     with the integrator's scene-dependent state (V4's light-selection table, from its
@@ -266,7 +282,7 @@ def freeze_render(integrator, body):
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
-    def recorded(mi_scene, seed, state, live_bsdfs):
+    def recorded(mi_scene, scalars, seed, state, live_bsdfs):
         if use_state is None:
             return body(mi_scene, seed)
         with use_state(state):
@@ -289,7 +305,8 @@ def freeze_render(integrator, body):
         own = {id(sh.bsdf()) for sh in mi_scene.shapes()}
         live = sorted((b for b in LIVE_INSTANCES if id(b) not in own), key=id)
         try:
-            return frozen(mi_scene, seed, None if state_of is None else state_of(mi_scene), live)
+            return frozen(mi_scene, scene_scalars(mi_scene), seed,
+                          None if state_of is None else state_of(mi_scene), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "
