@@ -2,7 +2,8 @@
 
 For each version, renders the Cornell box (``scenes/cornell.toml``) at ``--res``² and
 ``--spp`` spp ``--repeats`` times with new seeds (after warm-up calls), with
-`frozen (``draaw_mi.render``'s ``frozen_render``) and traced (``mi.render``) calls, interleaved.
+frozen (``draaw_mi.render``'s ``frozen_render``), traced (``mi.render``) and whole
+``draaw_mi.render`` calls, interleaved.
 Per call: the time until the call returns (host: Python tracing or frozen replay), the wall
 time to the evaluated image, and the summed execution time of the kernels it launched
 (``dr.kernel_history``). Reports medians.
@@ -30,14 +31,19 @@ R = importlib.import_module("draaw_mi.render")    # the module (draaw_mi.render 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def one(scene, version, spp, seed, frozen):
+def one(scene, version, spp, seed, mode):
     """(wall, host, kernels) seconds of one render: ``host`` = until the call returns (Python
-    tracing or frozen replay; kernels run asynchronously), ``kernels`` = summed execution."""
+    tracing or frozen replay; kernels run asynchronously; ``api``: the whole call, which
+    waits for its image), ``kernels`` = summed execution. ``mode``: ``frozen`` (the
+    integrator's recorded render), ``traced`` (``mi.render``), ``api`` (``draaw_mi.render``
+    as a user calls it: the frozen render plus its argument handling)."""
     integ = R.make_integrator(version, scene.settings["max_depth"])
     dr.kernel_history_clear()
     t = time.perf_counter()
-    if frozen:
+    if mode == "frozen":
         img = R.frozen_render(integ, spp)(scene.mi_scene, dr.opaque(mi.UInt32, seed))
+    elif mode == "api":
+        img = draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[])
     else:
         img = mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed)
     host = time.perf_counter() - t
@@ -61,15 +67,16 @@ def main(argv=None) -> int:
     scene = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "cornell.toml"),
                                 resolution=(args.res, args.res))
     versions = args.versions.split(",")
-    data = {(v, f): [] for v in versions for f in (True, False)}
+    modes = ("frozen", "traced", "api")
+    data = {(v, m): [] for v in versions for m in modes}
     for v in versions:
-        for f in (True, False):
+        for m in modes:
             for s in range(3):
-                one(scene, v, args.spp, 1000 + s, f)       # compile / record
+                one(scene, v, args.spp, 1000 + s, m)       # compile / record
     for i in range(args.repeats):
         for v in versions:
-            for f in (True, False):
-                data[(v, f)].append(one(scene, v, args.spp, 7 + i, f))
+            for m in modes:
+                data[(v, m)].append(one(scene, v, args.spp, 7 + i, m))
     out = ["# Time outside kernels, small repeated renders (benchmarks/render_overhead.py)", "",
            f"Command: `.venv/bin/python benchmarks/render_overhead.py {' '.join(sys.argv[1:])}`  ",
            f"Machine: {platform.machine()}, {os.cpu_count()} cores (load average "
@@ -81,19 +88,24 @@ def main(argv=None) -> int:
            f"{args.repeats} interleaved calls after warm-up. *host* = time until the call returns "
            "(Python tracing, or the frozen replay's dispatch; kernels run asynchronously), "
            "*outside* = wall - summed kernel execution time (`dr.kernel_history`; includes "
-           "thread wake-ups and, on a shared machine, waiting for a core).", "",
+           "thread wake-ups and, on a shared machine, waiting for a core). *api* = the same "
+           "frozen render through `draaw_mi.render(scene, version, spp, seed, post=[])`, "
+           "argument handling included (what a user's call costs).", "",
            "| version | frozen: wall ms | host ms | host / wall | outside | traced: wall ms | host ms "
-           "| host / wall | outside |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "| host / wall | outside | api: wall ms | outside |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for v in versions:
         cells = []
-        for f in (True, False):
-            d = data[(v, f)]
+        for m in modes:
+            d = data[(v, m)]
             wall = statistics.median(w for w, _, _ in d)
             host = statistics.median(h for _, h, _ in d)
             frac_h = statistics.median(h / w for w, h, _ in d)
             frac_o = statistics.median((w - k) / w for w, _, k in d)
-            cells.append(f"{1e3 * wall:.1f} | {1e3 * host:.1f} | {100 * frac_h:.1f} % | {100 * frac_o:.1f} %")
+            if m == "api":
+                cells.append(f"{1e3 * wall:.1f} | {100 * frac_o:.1f} %")
+            else:
+                cells.append(f"{1e3 * wall:.1f} | {1e3 * host:.1f} | {100 * frac_h:.1f} % | {100 * frac_o:.1f} %")
         out.append(f"| {v} | " + " | ".join(cells) + " |")
     text = "\n".join(out) + "\n"
     print(text)

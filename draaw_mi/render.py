@@ -26,7 +26,11 @@ from .errors import RenderError
 from .integrators import resolve_version
 from .materials.draaw_bsdf import LIVE_INSTANCES
 
-_INTEGRATOR_CACHE: dict = {}
+_INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
+_INTEGRATOR_BY_ARGS: dict = {}    # make_integrator's arguments -> integrator (a shortcut ...
+_INTEGRATOR_KEYS: dict = {}       # ... taken only while _INTEGRATOR_CACHE still holds it)
+_SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
+_FREEZE_SUPPORTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> bool
 _SCENE_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _LOCKS_GUARD = threading.Lock()
 MAX_PASS_SPP = 256
@@ -34,6 +38,13 @@ MAX_PASS_SPP = 256
 
 def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
     """Instantiate (and cache) the integrator plugin for ``version`` with these options."""
+    try:                                 # the arguments as given (a render's first step)
+        fast = (version, max_depth, bool(hide_emitters), tuple(aovs), tuple(sorted(options.items())))
+        integrator = _INTEGRATOR_BY_ARGS.get(fast)
+    except TypeError:                    # an unhashable option value
+        fast = integrator = None
+    if integrator is not None and _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast)) is integrator:
+        return integrator
     plugin = resolve_version(version)
     props = {"type": plugin, "max_depth": int(max_depth)}
     if hide_emitters:
@@ -48,6 +59,9 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
         except Exception as e:  # noqa: BLE001
             from .scene import mitsuba_error_message
             raise RenderError(f"render: cannot create integrator {plugin!r}: {mitsuba_error_message(e)}") from None
+    if fast is not None:
+        _INTEGRATOR_BY_ARGS[fast] = _INTEGRATOR_CACHE[key]
+        _INTEGRATOR_KEYS[fast] = key
     return _INTEGRATOR_CACHE[key]
 
 
@@ -95,9 +109,15 @@ def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
     ([30, 2], [16, 16, 8])
     """
     sampler = mi_scene.sensors()[0].sampler()
+    # Mitsuba's own samplers round by their kind alone: remember what each takes (probing
+    # costs a fork and two log-level switches, about 40 us a render). A Python sampler may
+    # round by its own options, so it is probed every time.
+    kind = sampler.class_name() if type(sampler) is mi.Sampler else None
     logger = mi.logger()
 
     def taken(k: int) -> int:
+        if kind is not None and (kind, k) in _SAMPLES_TAKEN:
+            return _SAMPLES_TAKEN[(kind, k)]
         f = sampler.fork()
         level = logger.log_level()
         logger.set_log_level(mi.LogLevel.Error)       # the probe's "rounded up" warnings
@@ -105,7 +125,10 @@ def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
             f.set_sample_count(k)
         finally:
             logger.set_log_level(level)
-        return int(f.sample_count())
+        got = int(f.sample_count())
+        if kind is not None:
+            _SAMPLES_TAKEN[(kind, k)] = got
+        return got
 
     out, left = [], int(spp)
     while left > 0:
@@ -186,7 +209,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
             img = None
-            if params is None and freeze_eligible(scene.mi_scene, count):
+            if params is None and _freeze_eligible(scene, count):
                 img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
             if img is None:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
@@ -255,6 +278,18 @@ def freeze_eligible(mi_scene, spp: int) -> bool:
         return False
     w, h = mi_scene.sensors()[0].film().size()
     return int(w) * int(h) <= FREEZE_MAX_PIXELS
+
+
+def _freeze_eligible(scene, spp: int) -> bool:
+    """:func:`freeze_eligible` for a :class:`DraawScene`, its :func:`freeze_supported` (a walk
+    over the shapes, which cannot gain media or SDF objects after loading) asked once."""
+    if not FREEZE or spp > FREEZE_MAX_SPP:
+        return False
+    ok = _FREEZE_SUPPORTED.get(scene)
+    if ok is None:
+        ok = _FREEZE_SUPPORTED[scene] = freeze_supported(scene.mi_scene)
+    w, h = scene.mi_scene.sensors()[0].film().size()
+    return ok and int(w) * int(h) <= FREEZE_MAX_PIXELS
 
 
 def scene_scalars(mi_scene) -> tuple:

@@ -1,6 +1,8 @@
 """Frozen small renders (draaw_mi.render: dr.freeze of mi.render, the seed an opaque value)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -266,3 +268,35 @@ def test_doctests():
     import doctest
     res = doctest.testmod(R)
     assert res.attempted >= 3 and res.failed == 0
+
+
+def test_render_asks_freeze_support_once_per_scene_and_the_film_every_time(scene):
+    """render() remembers per scene whether it may be frozen (media and SDF objects cannot
+    appear after loading) but reads the film size each time (params can change it)."""
+    smoke = draaw_mi.load_scene(str(Path(__file__).parents[1] / "scenes" / "smoke.toml"), resolution=(16, 16))
+    for s in (scene, smoke):
+        for spp in (4, 16, 32):
+            assert R._freeze_eligible(s, spp) == R.freeze_eligible(s.mi_scene, spp), (s.source, spp)
+    assert R._freeze_eligible(scene, 4) and not R._freeze_eligible(smoke, 4)
+    p = scene.params
+    p["sensor.film.size"] = mi.ScalarVector2u(256, 256)       # over FREEZE_MAX_PIXELS
+    p.update()
+    try:
+        assert not R._freeze_eligible(scene, 4) and not R.freeze_eligible(scene.mi_scene, 4)
+    finally:
+        p["sensor.film.size"] = mi.ScalarVector2u(16, 16)
+        p.update()
+    assert R._freeze_eligible(scene, 4)
+
+
+def test_make_integrator_shortcut_follows_the_cache(monkeypatch):
+    """The same arguments give the same integrator, other arguments another; emptying the
+    integrator cache (as a fresh start) also ends the shortcut to the old integrators."""
+    a = R.make_integrator("v4", 5)
+    assert R.make_integrator("v4", 5) is a and R.make_integrator("draaw_v4", 5) is a
+    assert R.make_integrator("v4", 4) is not a
+    assert R.make_integrator("v4", 5, aovs=["albedo"]) is not a
+    assert R.make_integrator("v4", 5, rr_depth=3) is not R.make_integrator("v4", 5, rr_depth=4)
+    monkeypatch.setattr(R, "_INTEGRATOR_CACHE", {})
+    fresh = R.make_integrator("v4", 5)
+    assert fresh is not a and R.make_integrator("v4", 5) is fresh
