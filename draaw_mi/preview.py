@@ -248,7 +248,7 @@ class Preview:
         key = id(integrator)
         fn = self._frozen.get(key)
         if fn is None:
-            def render_1spp(scene, seed):
+            def render_1spp(scene, seed, owner=None):     # owner: the DraawScene (freeze_render)
                 return mi.render(scene, integrator=integrator, seed=seed, spp=1)
             from .render import freeze_render, freeze_supported   # no recording for SDF / media
             freeze = self.freeze and freeze_supported(self.scene.mi_scene)
@@ -271,7 +271,7 @@ class Preview:
         fn = self._render_fn()
         t0 = time.perf_counter()
         with _scene_lock(self.scene):
-            img = fn(target.mi_scene, seed)
+            img = fn(target.mi_scene, seed, target)
             arr = np.array(img, dtype=np.float32)       # evaluates and waits
         render_s = time.perf_counter() - t0
         with self._lock:

@@ -210,7 +210,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         for count, pseed in zip(counts, seeds):
             img = None
             if params is None and _freeze_eligible(scene, count):
-                img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed))
+                img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed), scene)
             if img is None:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
             if n_passes == 1:
@@ -292,20 +292,43 @@ def _freeze_eligible(scene, spp: int) -> bool:
     return ok and int(w) * int(h) <= FREEZE_MAX_PIXELS
 
 
-def scene_scalars(mi_scene) -> tuple:
-    """The host-side numbers of ``mi_scene`` that its kernels bake in as constants, which a
-    ``dr.freeze`` replay would keep from its recording: the emitters' sampling weights.
-    Mitsuba's ``Scene.pdf_emitter_direction`` reads them through a virtual-call getter of a
-    plain float, which Dr.Jit fills with constants when it traces; a replay after a weight
-    change sampled lights by the new distribution but weighed them by the old weights (up to
-    26 units off on the 24-light scene, tests/test_render_freeze.py). Passed to the recording
-    as Python values, which are part of its key, a change records anew.
+# Host-side parameters that no kernel reads (silhouette weights serve projective gradients,
+# thread reordering only the GPU): left out of scene_scalars' key
+_IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
+_SCALAR_ACCESS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> (params, getters)
+
+
+def scene_scalars(mi_scene, scene=None) -> tuple:
+    """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held as host
+    floats, ints or bools), read as they are now. Kernels bake these in as constants, and a
+    ``dr.freeze`` replay keeps its recording's: the lights' sampling weights (Mitsuba's
+    ``pdf_emitter_direction`` reads them through a virtual-call getter), a ``dielectric``'s
+    ``eta``, the shutter. Without this a replay after ``params.update`` of one of them went on
+    rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
+    render; a sampling weight: up to 26). Passed to the recording as Python values, which are
+    part of its key, a change records anew. ``scene``, the :class:`DraawScene` of
+    ``mi_scene`` where there is one, makes this a few microseconds (its parameter table is
+    walked once); without it ``mi_scene`` is traversed on each call.
 
     >>> import mitsuba as mi
-    >>> scene_scalars(mi.load_dict(mi.cornell_box()))
-    (1.0,)
+    >>> scene = mi.load_dict(mi.cornell_box())     # near/far clip, shutter, light's weight
+    >>> [round(x, 3) for x in scene_scalars(scene)]
+    [0.001, 100.0, 0.0, 0.0, 1.0]
     """
-    return tuple(float(e.sampling_weight()) for e in mi_scene.emitters())
+    access = None if scene is None else _SCALAR_ACCESS.get(scene)
+    if access is None or access[0] is not scene.params:
+        params = mi.traverse(mi_scene) if scene is None else scene.params
+        getters = []
+        for key in params.keys():
+            value, vtype, node, _ = params.properties[key]
+            if (vtype is not None and not key.endswith(_IGNORED_SCALARS)
+                    and type(params.get_property(value, vtype, node)) in (float, int, bool)):
+                getters.append((value, vtype, node))
+        access = (params, getters)
+        if scene is not None:
+            _SCALAR_ACCESS[scene] = access
+    get = access[0].get_property
+    return tuple(get(value, vtype, node) for value, vtype, node in access[1])
 
 
 def freeze_render(integrator, body):
@@ -331,7 +354,9 @@ def freeze_render(integrator, body):
 
     failed = []                      # a recording that failed once: trace from then on
 
-    def call(mi_scene, seed):
+    def call(mi_scene, seed, scene=None):
+        """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any (a
+        cheaper read of its plain-number parameters, see :func:`scene_scalars`)."""
         if failed:
             return body(mi_scene, seed)
         # every live Python BSDF that the scene does not hold itself (those it holds are
@@ -340,7 +365,7 @@ def freeze_render(integrator, body):
         own = {id(sh.bsdf()) for sh in mi_scene.shapes()}
         live = sorted((b for b in LIVE_INSTANCES if id(b) not in own), key=id)
         try:
-            return frozen(mi_scene, scene_scalars(mi_scene), seed,
+            return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
                           None if state_of is None else state_of(mi_scene), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))

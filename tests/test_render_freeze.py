@@ -219,26 +219,49 @@ def test_preview_parameter_changes_reach_scene_changed(monkeypatch):
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")     # a fallback to tracing fails it
-def test_replay_follows_new_emitter_sampling_weights(monkeypatch):
-    """A recording bakes the lights' sampling weights in as constants (Mitsuba reads them
-    through a virtual-call getter of a plain float); a plain ``dr.freeze`` of ``mi.render``
-    replays the old weights, up to 26 units off here. render.scene_scalars makes them part
+@pytest.mark.parametrize("name, key, values", [
+    ("many_lights", "emitter.sampling_weight", (50.0, 0.02, 7.0)),   # path's light choice
+    ("glass", "glass.eta", (2.65, 1.2)),                               # a dielectric's IOR
+])
+def test_replay_follows_plain_number_parameters(monkeypatch, name, key, values):
+    """Kernels bake plain-float parameters in as constants (a light's sampling weight, read
+    through a virtual-call getter; a dielectric's eta): a plain ``dr.freeze`` of ``mi.render``
+    replays the old values (up to 26 and 4.8 off here). render.scene_scalars makes them part
     of the recording's key, so a frozen render equals the traced one after every change."""
     from draaw_mi import speed_suite as ss
-    scene = draaw_mi.load_scene(ss.build("many_lights", 16, spp=4))
+    scene = draaw_mi.load_scene(ss.build(name, 16, spp=4))
 
-    def render(freeze):
+    def render(freeze, version):
         monkeypatch.setattr(R, "FREEZE", freeze)
-        return np.array(draaw_mi.render(scene, version="path", spp=4, seed=3, post=[], max_depth=3))
+        return np.array(draaw_mi.render(scene, version=version, spp=4, seed=3, post=[], max_depth=3))
 
-    first = [render(True) for _ in range(3)][-1]
-    key = next(k for k in scene.params.keys() if k.endswith("emitter.sampling_weight"))
-    for weight in (50.0, 0.02, 7.0):
-        scene.params[key] = weight
+    first = {v: [render(True, v) for _ in range(3)][-1] for v in ("path", "v4")}
+    key = next(k for k in scene.params.keys() if k.endswith(key))
+    for value in values:
+        scene.params[key] = value
         scene.params.update()
-        frozen, traced = render(True), render(False)
-        assert np.abs(traced - first).max() > 1e-3                  # other light samples ...
-        assert np.allclose(frozen, traced, rtol=1e-5, atol=1e-6), weight   # ... in the replay too
+        for version in ("path", "v4") if name == "glass" else ("path",):
+            frozen, traced = render(True, version), render(False, version)
+            assert np.abs(traced - first[version]).max() > 1e-3           # the change shows ...
+            assert np.allclose(frozen, traced, rtol=1e-5, atol=1e-6), (version, value)   # ... replayed too
+
+
+def test_scene_scalars_reads_values_set_through_another_parameter_table(scene):
+    """The cached reader follows the objects, not the scene's own parameter table: a value
+    changed through a fresh ``mi.traverse`` shows too (and equals the uncached read)."""
+    ms = scene.mi_scene
+    before = R.scene_scalars(ms, scene)
+    other = mi.traverse(ms)
+    key = next(k for k in other.keys() if k.endswith("sensor.far_clip"))
+    old = other[key]
+    other[key] = 77.0
+    other.update()
+    try:
+        now = R.scene_scalars(ms, scene)
+        assert now != before and 77.0 in now and now == R.scene_scalars(ms)
+    finally:
+        other[key] = old
+        other.update()
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")

@@ -67,7 +67,7 @@ class CachedScene:
             def fn(scene, seed, integrator=integrator, spp=spp):
                 return mi.render(scene, integrator=integrator, seed=seed, spp=spp)  # as render()
             fn = self.frozen[key] = freeze_render(integrator, fn)
-        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]))
+        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)
         dr.eval(image)
         dr.sync_thread()
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
