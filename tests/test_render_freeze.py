@@ -323,3 +323,22 @@ def test_make_integrator_shortcut_follows_the_cache(monkeypatch):
     monkeypatch.setattr(R, "_INTEGRATOR_CACHE", {})
     fresh = R.make_integrator("v4", 5)
     assert fresh is not a and R.make_integrator("v4", 5) is fresh
+
+
+def test_other_live_bsdfs_follows_bsdfs_made_and_dropped(scene):
+    """The scene's own BSDFs are looked up once; BSDFs made later (a notebook's other scene)
+    appear, and disappear again when dropped, with and without the cached lookup (other
+    tests' BSDFs may still be alive: the uncached walk is the reference)."""
+    import gc
+    ms = scene.mi_scene
+    own = {id(sh.bsdf()) for sh in ms.shapes()}
+    assert R.other_live_bsdfs(ms, scene) == R.other_live_bsdfs(ms)
+    extra = mi.load_dict({"type": "draaw", "roughness": 0.4})
+    with_extra = R.other_live_bsdfs(ms, scene)
+    assert with_extra == R.other_live_bsdfs(ms) and any(b is extra for b in with_extra)
+    assert not any(id(b) in own for b in with_extra)
+    del extra, with_extra
+    gc.collect()
+    assert R.other_live_bsdfs(ms, scene) == R.other_live_bsdfs(ms)
+    mine = sum(1 for b in R.LIVE_INSTANCES if id(b) in own)
+    assert len(R.other_live_bsdfs(ms, scene)) == len(R.LIVE_INSTANCES) - mine
