@@ -27,11 +27,9 @@ from .integrators import resolve_version
 from .materials.draaw_bsdf import LIVE_INSTANCES
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
-_INTEGRATOR_BY_ARGS: dict = {}    # make_integrator's arguments -> integrator (a shortcut ...
-_INTEGRATOR_KEYS: dict = {}       # ... taken only while _INTEGRATOR_CACHE still holds it)
+_INTEGRATOR_KEYS: dict = {}       # make_integrator's arguments as given -> plugin properties
 _SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
-_FREEZE_SUPPORTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> bool
-_SCENE_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_SCENE_STATES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> _SceneState
 _LOCKS_GUARD = threading.Lock()
 MAX_PASS_SPP = 256
 
@@ -40,10 +38,10 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
     """Instantiate (and cache) the integrator plugin for ``version`` with these options."""
     try:                                 # the arguments as given (a render's first step)
         fast = (version, max_depth, bool(hide_emitters), tuple(aovs), tuple(sorted(options.items())))
-        integrator = _INTEGRATOR_BY_ARGS.get(fast)
+        integrator = _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast))
     except TypeError:                    # an unhashable option value
         fast = integrator = None
-    if integrator is not None and _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast)) is integrator:
+    if integrator is not None:
         return integrator
     plugin = resolve_version(version)
     props = {"type": plugin, "max_depth": int(max_depth)}
@@ -60,7 +58,6 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
             from .scene import mitsuba_error_message
             raise RenderError(f"render: cannot create integrator {plugin!r}: {mitsuba_error_message(e)}") from None
     if fast is not None:
-        _INTEGRATOR_BY_ARGS[fast] = _INTEGRATOR_CACHE[key]
         _INTEGRATOR_KEYS[fast] = key
     return _INTEGRATOR_CACHE[key]
 
@@ -78,12 +75,30 @@ def scene_changed(mi_scene) -> None:
             forget(mi_scene)
 
 
+class _SceneState:
+    """What the renderer keeps for one :class:`DraawScene` (it goes with the scene): the lock
+    that keeps two threads from rendering it at once, and what is found once per scene:
+    whether it may be frozen (:func:`freeze_eligible`), its plain-number parameter readers
+    (:func:`scene_scalars`) and its own BSDFs (:func:`other_live_bsdfs`)."""
+    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs")
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.freezable = self.scalars = self.own_bsdfs = None
+
+
+def _scene_state(scene) -> _SceneState:
+    state = _SCENE_STATES.get(scene)
+    if state is None:
+        with _LOCKS_GUARD:
+            state = _SCENE_STATES.get(scene)
+            if state is None:
+                state = _SCENE_STATES[scene] = _SceneState()
+    return state
+
+
 def _scene_lock(scene) -> threading.Lock:
-    with _LOCKS_GUARD:
-        lock = _SCENE_LOCKS.get(scene)
-        if lock is None:
-            lock = _SCENE_LOCKS[scene] = threading.Lock()
-        return lock
+    return _scene_state(scene).lock
 
 
 def pass_seeds(seed: int, n: int) -> list[int]:
@@ -209,7 +224,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
             img = None
-            if params is None and _freeze_eligible(scene, count):
+            if params is None and freeze_eligible(scene.mi_scene, count, scene):
                 img = frozen_render(integrator, count)(scene.mi_scene, dr.opaque(mi.UInt32, pseed), scene)
             if img is None:
                 img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
@@ -272,31 +287,28 @@ def freeze_supported(mi_scene) -> bool:
     return all(s.get_medium() is None for s in mi_scene.sensors())
 
 
-def freeze_eligible(mi_scene, spp: int) -> bool:
-    """Whether a primal render of ``spp`` samples of ``mi_scene`` goes through :func:`frozen_render`."""
-    if not FREEZE or spp > FREEZE_MAX_SPP or not freeze_supported(mi_scene):
-        return False
-    w, h = mi_scene.sensors()[0].film().size()
-    return int(w) * int(h) <= FREEZE_MAX_PIXELS
-
-
-def _freeze_eligible(scene, spp: int) -> bool:
-    """:func:`freeze_eligible` for a :class:`DraawScene`, its :func:`freeze_supported` (a walk
-    over the shapes, which cannot gain media or SDF objects after loading) asked once."""
+def freeze_eligible(mi_scene, spp: int, scene=None) -> bool:
+    """Whether a primal render of ``spp`` samples of ``mi_scene`` goes through
+    :func:`frozen_render`. With ``scene``, the :class:`DraawScene` of ``mi_scene``,
+    :func:`freeze_supported` (a walk over the shapes, which cannot gain media or SDF objects
+    after loading) is asked once per scene; the film size is read every time (params can
+    change it)."""
     if not FREEZE or spp > FREEZE_MAX_SPP:
         return False
-    ok = _FREEZE_SUPPORTED.get(scene)
-    if ok is None:
-        ok = _FREEZE_SUPPORTED[scene] = freeze_supported(scene.mi_scene)
-    w, h = scene.mi_scene.sensors()[0].film().size()
+    if scene is None:
+        ok = freeze_supported(mi_scene)
+    else:
+        state = _scene_state(scene)
+        if state.freezable is None:
+            state.freezable = freeze_supported(mi_scene)
+        ok = state.freezable
+    w, h = mi_scene.sensors()[0].film().size()
     return ok and int(w) * int(h) <= FREEZE_MAX_PIXELS
 
 
 # Host-side parameters that no kernel reads (silhouette weights serve projective gradients,
 # thread reordering only the GPU): left out of scene_scalars' key
 _IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
-_SCALAR_ACCESS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> (params, getters)
-_OWN_BSDFS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> (ids, count)
 
 
 def scene_scalars(mi_scene, scene=None) -> tuple:
@@ -316,7 +328,8 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     >>> [round(x, 3) for x in scene_scalars(scene)]
     [0.001, 100.0, 0.0, 0.0, 1.0]
     """
-    access = None if scene is None else _SCALAR_ACCESS.get(scene)
+    state = None if scene is None else _scene_state(scene)
+    access = None if state is None else state.scalars
     if access is None or access[0] is not scene.params:
         params = mi.traverse(mi_scene) if scene is None else scene.params
         getters = []
@@ -326,8 +339,8 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
                     and type(params.get_property(value, vtype, node)) in (float, int, bool)):
                 getters.append((value, vtype, node))
         access = (params, getters)
-        if scene is not None:
-            _SCALAR_ACCESS[scene] = access
+        if state is not None:
+            state.scalars = access
     get = access[0].get_property
     return tuple(get(value, vtype, node) for value, vtype, node in access[1])
 
@@ -338,12 +351,13 @@ def other_live_bsdfs(mi_scene, scene=None) -> list:
     once (a shape's BSDF cannot be replaced), and while the live ones are exactly the scene's
     own, no walk over them is needed (the walk over shapes and live BSDFs took 10-67 us a
     render on the material spheres, with warm or cold caches; the lookup takes 1 us)."""
-    own = None if scene is None else _OWN_BSDFS.get(scene)
+    state = None if scene is None else _scene_state(scene)
+    own = None if state is None else state.own_bsdfs
     if own is None:
         ids = frozenset(id(sh.bsdf()) for sh in mi_scene.shapes())
         own = (ids, sum(1 for b in LIVE_INSTANCES if id(b) in ids))
-        if scene is not None:
-            _OWN_BSDFS[scene] = own
+        if state is not None:
+            state.own_bsdfs = own
     if len(LIVE_INSTANCES) == own[1]:      # all live ones are the scene's (they live with it)
         return []
     return sorted((b for b in LIVE_INSTANCES if id(b) not in own[0]), key=id)

@@ -299,17 +299,17 @@ def test_render_asks_freeze_support_once_per_scene_and_the_film_every_time(scene
     smoke = draaw_mi.load_scene(str(Path(__file__).parents[1] / "scenes" / "smoke.toml"), resolution=(16, 16))
     for s in (scene, smoke):
         for spp in (4, 16, 32):
-            assert R._freeze_eligible(s, spp) == R.freeze_eligible(s.mi_scene, spp), (s.source, spp)
-    assert R._freeze_eligible(scene, 4) and not R._freeze_eligible(smoke, 4)
+            assert R.freeze_eligible(s.mi_scene, spp, s) == R.freeze_eligible(s.mi_scene, spp), (s.source, spp)
+    assert R.freeze_eligible(scene.mi_scene, 4, scene) and not R.freeze_eligible(smoke.mi_scene, 4, smoke)
     p = scene.params
     p["sensor.film.size"] = mi.ScalarVector2u(256, 256)       # over FREEZE_MAX_PIXELS
     p.update()
     try:
-        assert not R._freeze_eligible(scene, 4) and not R.freeze_eligible(scene.mi_scene, 4)
+        assert not R.freeze_eligible(scene.mi_scene, 4, scene) and not R.freeze_eligible(scene.mi_scene, 4)
     finally:
         p["sensor.film.size"] = mi.ScalarVector2u(16, 16)
         p.update()
-    assert R._freeze_eligible(scene, 4)
+    assert R.freeze_eligible(scene.mi_scene, 4, scene)
 
 
 def test_make_integrator_shortcut_follows_the_cache(monkeypatch):
