@@ -312,37 +312,44 @@ _IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
 
 
 def scene_scalars(mi_scene, scene=None) -> tuple:
-    """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held as host
-    floats, ints or bools), read as they are now. Kernels bake these in as constants, and a
-    ``dr.freeze`` replay keeps its recording's: the lights' sampling weights (Mitsuba's
-    ``pdf_emitter_direction`` reads them through a virtual-call getter), a ``dielectric``'s
-    ``eta``, the shutter. Without this a replay after ``params.update`` of one of them went on
-    rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
-    render; a sampling weight: up to 26). Passed to the recording as Python values, which are
-    part of its key, a change records anew. ``scene``, the :class:`DraawScene` of
-    ``mi_scene`` where there is one, makes this a few microseconds (its parameter table is
-    walked once); without it ``mi_scene`` is traversed on each call.
+    """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held on the
+    host: floats, ints, bools and one-level scalar arrays such as the film's size), read as
+    they are now. Kernels bake these in as constants, and a ``dr.freeze`` replay keeps its
+    recording's: the lights' sampling weights (Mitsuba's ``pdf_emitter_direction`` reads them
+    through a virtual-call getter), a ``dielectric``'s ``eta``, the shutter, the film's size
+    (a replay after ``sensor.film.size`` changed returned an image of the old size). Without
+    this a replay after ``params.update`` of one of them went on rendering the old value
+    (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced render; a sampling
+    weight: up to 26). Passed to the recording as Python values, which are part of its key, a
+    change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
+    one, makes this a few microseconds (its parameter table is walked once); without it
+    ``mi_scene`` is traversed on each call.
 
     >>> import mitsuba as mi
-    >>> scene = mi.load_dict(mi.cornell_box())     # near/far clip, shutter, light's weight
-    >>> [round(x, 3) for x in scene_scalars(scene)]
-    [0.001, 100.0, 0.0, 0.0, 1.0]
+    >>> scene = mi.load_dict(mi.cornell_box())  # clip distances, shutter, light weight, film
+    >>> [x if isinstance(x, tuple) else round(x, 3) for x in scene_scalars(scene)]
+    [0.001, 100.0, 0.0, 0.0, 1.0, (256, 256), (256, 256), (0, 0)]
     """
     state = None if scene is None else _scene_state(scene)
     access = None if state is None else state.scalars
     if access is None or access[0] is not scene.params:
         params = mi.traverse(mi_scene) if scene is None else scene.params
-        getters = []
+        plain, arrays = [], []
         for key in params.keys():
             value, vtype, node, _ = params.properties[key]
-            if (vtype is not None and not key.endswith(_IGNORED_SCALARS)
-                    and type(params.get_property(value, vtype, node)) in (float, int, bool)):
-                getters.append((value, vtype, node))
-        access = (params, getters)
+            if vtype is None or key.endswith(_IGNORED_SCALARS):
+                continue
+            kind = type(params.get_property(value, vtype, node))
+            if kind in (float, int, bool):
+                plain.append((value, vtype, node))
+            elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
+                arrays.append((value, vtype, node))      # the film's size, crop size, offset
+        access = (params, plain, arrays)
         if state is not None:
             state.scalars = access
     get = access[0].get_property
-    return tuple(get(value, vtype, node) for value, vtype, node in access[1])
+    return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
+            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2]))
 
 
 def other_live_bsdfs(mi_scene, scene=None) -> list:

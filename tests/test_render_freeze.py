@@ -246,6 +246,36 @@ def test_replay_follows_plain_number_parameters(monkeypatch, name, key, values):
             assert np.allclose(frozen, traced, rtol=1e-5, atol=1e-6), (version, value)   # ... replayed too
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("version", ["path", "v4"])
+def test_replay_follows_the_film_size_and_crop_window(monkeypatch, version):
+    """The film's size and crop window are host-side vectors that the recorded kernels bake
+    in: a replay after ``sensor.film.size`` changed returned an image of the old size. Each
+    change must give the traced render's image, pixel for pixel."""
+    scene = draaw_mi.load_scene(rs.cornell_draaw(res=16, spp=4))
+    params = scene.params
+
+    def render(freeze):
+        monkeypatch.setattr(R, "FREEZE", freeze)
+        return np.array(draaw_mi.render(scene, version=version, spp=4, seed=3, post=[]))
+
+    for _ in range(3):
+        render(True)                                 # recorded and replayed at 16x16
+    changes = [({"sensor.film.size": mi.ScalarVector2u(24, 20)}, (20, 24)),
+               ({"sensor.film.crop_size": mi.ScalarVector2u(12, 10),
+                 "sensor.film.crop_offset": mi.ScalarPoint2u(6, 4)}, (10, 12))]
+    for change, shape in changes:
+        for key, value in change.items():
+            params[key] = value
+        params.update()
+        traced = render(False)
+        assert traced.shape[:2] == shape
+        frozen = [render(True) for _ in range(2)]
+        for image in frozen:
+            assert image.shape == traced.shape
+            assert np.allclose(image, traced, rtol=1e-5, atol=1e-6)
+
+
 def test_scene_scalars_reads_values_set_through_another_parameter_table(scene):
     """The cached reader follows the objects, not the scene's own parameter table: a value
     changed through a fresh ``mi.traverse`` shows too (and equals the uncached read)."""
