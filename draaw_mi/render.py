@@ -79,12 +79,15 @@ class _SceneState:
     """What the renderer keeps for one :class:`DraawScene` (it goes with the scene): the lock
     that keeps two threads from rendering it at once, and what is found once per scene:
     whether it may be frozen (:func:`freeze_eligible`), its plain-number parameter readers
-    (:func:`scene_scalars`) and its own BSDFs (:func:`other_live_bsdfs`)."""
-    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs")
+    (:func:`scene_scalars`), its own BSDFs (:func:`other_live_bsdfs`), and ``memo``, where
+    an integrator's ``freeze_state`` keeps what it finds once per scene
+    (:mod:`draaw_mi.integrators.scene_view`)."""
+    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs", "memo")
 
     def __init__(self):
         self.lock = threading.Lock()
         self.freezable = self.scalars = self.own_bsdfs = None
+        self.memo = {}
 
 
 def _scene_state(scene) -> _SceneState:
@@ -402,9 +405,10 @@ def freeze_render(integrator, body):
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
         live = other_live_bsdfs(mi_scene, scene)
+        memo = None if scene is None else _scene_state(scene).memo
         try:
             return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
-                          None if state_of is None else state_of(mi_scene), live)
+                          None if state_of is None else state_of(mi_scene, memo), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "

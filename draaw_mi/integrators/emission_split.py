@@ -55,6 +55,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from .common import DraawIntegrator
+from .scene_view import SceneView, scene_view
 
 DEFAULT_RAYS = 16       # 4 x 4 cells per camera sample in edge pixels (see the V4 docstring)
 EDGE_CONTRAST = 0.1     # an edge pixel: its probes' emission differs by more than this share
@@ -103,12 +104,16 @@ def check_rays(k: int) -> int:
     return int(k)
 
 
-def sensor_allows(k: int, hide_emitters: bool, sensor: mi.Sensor) -> bool:
-    """The integrator's and the sensor's side of :func:`applies` (cheap: no scene walk)."""
+def sensor_allows(k: int, hide_emitters: bool, sensor: mi.Sensor,
+                  box_no_aperture: bool | None = None) -> bool:
+    """The integrator's and the sensor's side of :func:`applies` (cheap: no scene walk).
+    ``box_no_aperture``: whether the film's filter is a box and the sensor samples no
+    aperture, if known (:class:`~.scene_view.SceneView`); the shutter is read each time."""
     if k <= 1 or hide_emitters or mi.is_spectral:
         return False             # (spectral: the extra rays would need the path's wavelengths)
-    return (sensor.film().rfilter().is_box_filter() and not sensor.needs_aperture_sample()
-            and sensor.shutter_open_time() == 0)
+    if box_no_aperture is None:
+        box_no_aperture = sensor.film().rfilter().is_box_filter() and not sensor.needs_aperture_sample()
+    return box_no_aperture and sensor.shutter_open_time() == 0
 
 
 def applies(k: int, hide_emitters: bool, sensor: mi.Sensor, feats: dict[str, bool]) -> bool:
@@ -276,7 +281,7 @@ class EmissionSplitting(DraawIntegrator):
     def init_emission_split(self, props: mi.Properties) -> None:
         self.emission_split = check_rays(int(props.get("emission_split", DEFAULT_RAYS)))
         self._primary = None           # PrimaryRays of the rays being rendered
-        self._edge_maps = {}           # (scene, camera) key -> Held(edge map | None)
+        self._edge_maps = {}           # (scene, camera) key -> Held((emitter array, edge map | None))
         self._frozen_edges = None      # Held(edge map | None) while a recording runs
 
     def split_inputs(self, scene: mi.Scene, ray, feats: dict[str, bool]) -> tuple:
@@ -288,34 +293,37 @@ class EmissionSplitting(DraawIntegrator):
         edges = self.edge_map(scene, primary.sensor)
         return (None, None) if edges is None else (primary, edges)
 
-    def frozen_edge_map(self, scene: mi.Scene):
+    def frozen_edge_map(self, scene: mi.Scene, view: SceneView | None = None):
         """The edge map a recording of a render of ``scene`` (its first sensor) takes as input,
         or ``None`` where the integrator or sensor rules splitting out (then nothing is built).
-        The scene's side (no area light, SDF objects, media) is not walked on this per-render
-        path (a feature walk costs ~80 us): there ``sample()`` ignores the map, which costs one
-        probe pass per camera, or none without an area light."""
-        sensor = scene.sensors()[0]
-        if not sensor_allows(self.emission_split, self.hide_emitters, sensor):
+        ``view``: the scene's :class:`~.scene_view.SceneView`, if the caller keeps one (fewer
+        calls into Mitsuba on this per-render path). The scene's side (no area light, SDF
+        objects, media) is not walked here (a feature walk costs ~80 us): there ``sample()``
+        ignores the map, which costs one probe pass per camera, or none without an area light."""
+        view = scene_view(scene) if view is None else view
+        if view.sensor is None or not sensor_allows(self.emission_split, self.hide_emitters,
+                                                    view.sensor, view.box_no_aperture):
             return None
-        return self.edge_map(scene, sensor)
+        return self.edge_map(scene, view.sensor, view)
 
-    def edge_map(self, scene: mi.Scene, sensor: mi.Sensor):
+    def edge_map(self, scene: mi.Scene, sensor: mi.Sensor, view: SceneView | None = None):
         """Edge pixels of the emitting surfaces that ``sensor`` sees (:func:`edge_map`), or
         ``None`` when none is in view. Cached per scene, camera (the JIT variables of its
-        transform, the film) and emitter bounds, so a repeated render launches no probe kernel
-        and reads nothing back; within a recording, the map that the integrator's
-        ``freeze_state`` passed. (A stale map, say after an occluder moved, costs gain, not the
-        expectation: which pixels split does not depend on the samples.)"""
+        transform, the film's size and crop window) and emitter bounds, so a repeated render
+        launches no probe kernel and reads nothing back; within a recording, the map that the
+        integrator's ``freeze_state`` passed. (A stale map, say after an occluder moved, costs
+        gain, not the expectation: which pixels split does not depend on the samples.)"""
         if self._frozen_edges is not None:
             return self._frozen_edges.value
         if dr.flag(dr.JitFlag.FreezingScope):
             return None                # a recording made without freeze_state: no splitting
-        film = sensor.film()
-        boxes = [e.get_shape().bbox() for e in scene.emitters() if e.get_shape() is not None]
-        key = (id(scene), id(sensor), tuple(dr.detail.collect_indices(sensor.world_transform().matrix)),
+        view = scene_view(scene) if view is None else view
+        film = view.film if sensor is view.sensor else sensor.film()
+        key = (view.key, id(sensor), tuple(dr.detail.collect_indices(sensor.world_transform().matrix)),
                tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
-               tuple(tuple(b.min) + tuple(b.max) for b in boxes))
-        if key not in self._edge_maps:
+               view.emitter_bounds())
+        entry = self._edge_maps.get(key)
+        if entry is None:
             if len(self._edge_maps) >= 8:
                 self._edge_maps.pop(next(iter(self._edge_maps)))
             rect = emitter_rect(scene, sensor)
@@ -323,8 +331,11 @@ class EmissionSplitting(DraawIntegrator):
                                                        self.ray_flags(self.features(scene)))
             if edges is not None and not dr.any(edges):
                 edges = None             # lights in view but no edge (seen from behind): no code
-            self._edge_maps[key] = Held(edges)
-        return self._edge_maps[key].value
+            # the entry holds the scene's emitter array: while it does, the array's JIT index
+            # (in the key) cannot go to another scene's, so a dead scene's map is never found;
+            # Held: a bare tuple here became V4's loop state (see PrimaryRays)
+            entry = self._edge_maps[key] = Held((view.emitter_array, edges))
+        return entry.value[1]
 
     def sample_rays(self, scene, sensor, sampler, *args, **kwargs):
         """Mitsuba's camera rays, with their pixels kept for the split."""

@@ -10,6 +10,7 @@ from ..errors import ParameterError
 from . import emission_split
 from .common import mis_weight, relative, sample_emitter
 from .sampling import PowerSelection, only_constant_environment, roulette
+from .scene_view import scene_view
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
 ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
@@ -202,7 +203,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         passes reuse the table of their primal."""
         return self._table(scene, learn=True)
 
-    def _table(self, scene, learn: bool):
+    def _table(self, scene, learn: bool, key: tuple | None = None):
         if self._frozen_selection is not None:
             return self._frozen_selection[0]           # the pilot's or a recording's table
         if self.light_selection == "uniform":
@@ -211,7 +212,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             # a recording made without :meth:`freeze_state` (emitter values cannot be read
             # while recording): uniform selection, unbiased too
             return None
-        key = self.selection_key(scene)
+        key = self.selection_key(scene) if key is None else key
         entry = self._tables.get(key)
         learns = learn and self.light_selection in ("auto", "learned")
         if entry is not None and (entry[2] or not learns
@@ -249,13 +250,16 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         synchronisation with the last render's kernels: about 0.1 ms per frozen render.)"""
         return id(scene), scene.emitters_dr().index, tuple(e.ptr for e in scene.emitters())
 
-    def freeze_state(self, scene):
+    def freeze_state(self, scene, memo: dict | None = None):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
         input (:func:`draaw_mi.render.frozen_render`): the light table's arrays (or ``None``)
         and the first sensor's edge map for emission splitting (or ``None``). Computed here,
-        outside the recording, so frozen and traced renders choose alike."""
-        sel = self.prepare_selection(scene)
-        return None if sel is None else sel.arrays(), self.frozen_edge_map(scene)
+        outside the recording, so frozen and traced renders choose alike. ``memo``: a dict
+        that lives as long as ``scene`` (:func:`~.scene_view.scene_view`), which makes this
+        per-render step cheaper (0.05 ms on the Cornell box, more with many lights)."""
+        view = scene_view(scene, memo)
+        sel = self._table(scene, learn=True, key=view.key)
+        return None if sel is None else sel.arrays(), self.frozen_edge_map(scene, view)
 
     @contextlib.contextmanager
     def frozen_state(self, state):

@@ -7,17 +7,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from integrators_helpers import check_same_expectation, integrator, mi, seed_stack
+from integrators_helpers import check_same_expectation, integrator, seed_stack
 
 from draaw_mi import speed_suite as ss
 
 
 @pytest.mark.parametrize("name", list(ss.SCENES))
 def test_v4_same_expectation_as_path(name):
-    d = ss.build(name, 10)
-    if d is None:
+    # ss.load: the emitters in declaration order. A plain mi.load_dict orders the area
+    # lights differently on each load, so this fixed-seed test gave a different verdict on
+    # each run (many_lights: up to 2.9 % of pixels beyond 3 sigma, against a 3 % limit)
+    scene = ss.load(name, 10)
+    if scene is None:
         pytest.skip("GO-Draaw data absent (../shared/data/go-draaw)")
-    scene = mi.load_dict(d)
     depth = ss.max_depth(name)
     K, spp = 12, 512
     # Emitters seen directly are hidden in both: their edge pixels are 0 or very bright

@@ -1,0 +1,77 @@
+"""What V4 reads of a scene on the host before each render, found once per scene.
+
+Why: a frozen replay (:func:`draaw_mi.render.frozen_render`) is preceded by V4's
+``freeze_state``: the light-selection table's key and the edge map's key (camera, film,
+emitting surfaces). Right after a render's kernels every call into Mitsuba runs 5-20 times
+slower than warm (cold caches: ``scene.sensors()`` 16-26 us, ``scene.emitters()`` 18 us, against 1.4 us
+warm), so
+the number of calls, not their warm cost, sets the price. The parts of a scene that cannot
+change while it lives -- its first sensor and film, its emitters, the film's filter, whether
+the sensor samples an aperture -- are looked up here once; what parameters can change (the
+camera's transform, the film's size and crop window, the shutter, the emitting shapes'
+bounds) is still read on every render.
+
+Where a view is kept: in a ``memo`` dict that lives exactly as long as the scene -- the
+renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.render.freeze_render`
+passes it). The view holds the scene itself, so its ``id`` names it for as long as the memo
+holds the view; an integrator's own caches never hold a view (a held scene keeps its Python
+BSDFs alive). Without a memo (a bare ``mi.Scene``) a view is made for each call: as many
+calls as before, no saving.
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+
+
+class SceneView:
+    """The fixed host-side parts of one scene (see the module docstring).
+
+    ``key``: ``(id(scene), JIT index of its emitter array, emitter addresses)``, the
+    light-selection table's key (:meth:`DraawV4Integrator.selection_key
+    <draaw_mi.integrators.v4.DraawV4Integrator.selection_key>`); ``emitter_array``: that
+    array (a cache entry that holds it keeps its index from going to another scene);
+    ``sensor`` / ``film``: the first sensor and its film (``None`` without sensors);
+    ``box_no_aperture``: whether that film's filter is a box and the sensor samples no
+    aperture; ``emitting_shapes``: the emitters' shapes (area lights).
+    """
+    __slots__ = ("scene", "key", "emitter_array", "sensor", "film", "box_no_aperture",
+                 "emitting_shapes")
+
+    def __init__(self, scene: mi.Scene):
+        emitters = list(scene.emitters())
+        self.scene = scene
+        self.emitter_array = scene.emitters_dr()
+        self.key = (id(scene), self.emitter_array.index, tuple(e.ptr for e in emitters))
+        sensors = scene.sensors()
+        self.sensor = sensors[0] if sensors else None
+        self.film = None if self.sensor is None else self.sensor.film()
+        self.box_no_aperture = (self.sensor is not None and self.film.rfilter().is_box_filter()
+                                and not self.sensor.needs_aperture_sample())
+        self.emitting_shapes = tuple(sh for sh in (e.get_shape() for e in emitters) if sh is not None)
+
+    def emitter_bounds(self) -> tuple:
+        """The emitting shapes' bounding boxes now (params can move them), as
+        ``(min..., max...)`` tuples."""
+        boxes = (shape.bbox() for shape in self.emitting_shapes)
+        return tuple(tuple(b.min) + tuple(b.max) for b in boxes)
+
+
+def scene_view(scene: mi.Scene, memo: dict | None = None) -> SceneView:
+    """The :class:`SceneView` of ``scene``: from ``memo`` (a dict that lives as long as the
+    scene; see the module docstring), made and stored there if absent; made anew without one.
+
+    >>> import mitsuba as mi
+    >>> scene = mi.load_dict(mi.cornell_box())
+    >>> memo = {}
+    >>> view = scene_view(scene, memo)
+    >>> scene_view(scene, memo) is view, scene_view(scene) is view
+    (True, False)
+    >>> len(view.emitting_shapes), view.box_no_aperture, view.key == scene_view(scene).key
+    (1, False, True)
+    """
+    if memo is None:
+        return SceneView(scene)
+    view = memo.get(id(scene))
+    if view is None or view.scene is not scene:
+        view = memo[id(scene)] = SceneView(scene)
+    return view
