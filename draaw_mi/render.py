@@ -317,14 +317,17 @@ _IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
 def scene_scalars(mi_scene, scene=None) -> tuple:
     """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held on the
     host: floats, ints, bools and one-level scalar arrays such as the film's size), read as
-    they are now. Kernels bake these in as constants, and a ``dr.freeze`` replay keeps its
-    recording's: the lights' sampling weights (Mitsuba's ``pdf_emitter_direction`` reads them
-    through a virtual-call getter), a ``dielectric``'s ``eta``, the shutter, the film's size
-    (a replay after ``sensor.film.size`` changed returned an image of the old size). Without
-    this a replay after ``params.update`` of one of them went on rendering the old value
-    (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced render; a sampling
-    weight: up to 26). Passed to the recording as Python values, which are part of its key, a
-    change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
+    they are now, and the shapes of its tensor parameters (textures, environment maps,
+    grids). Kernels bake these in as constants, and a ``dr.freeze`` replay keeps its
+    recording's (its key sees the inputs' types, not their sizes): the lights' sampling
+    weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
+    ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
+    ``sensor.film.size`` changed returned an image of the old size), a texture's resolution
+    (an environment map's data swapped for a smaller image: up to 45 off from the second
+    replay on). Without this a replay after ``params.update`` of one of them went on
+    rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
+    render; a sampling weight: up to 26). Passed to the recording as Python values, which are
+    part of its key, a change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
     one, makes this a few microseconds (its parameter table is walked once); without it
     ``mi_scene`` is traversed on each call.
 
@@ -337,7 +340,7 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     access = None if state is None else state.scalars
     if access is None or access[0] is not scene.params:
         params = mi.traverse(mi_scene) if scene is None else scene.params
-        plain, arrays = [], []
+        plain, arrays, tensors = [], [], []
         for key in params.keys():
             value, vtype, node, _ = params.properties[key]
             if vtype is None or key.endswith(_IGNORED_SCALARS):
@@ -345,14 +348,17 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
             kind = type(params.get_property(value, vtype, node))
             if kind in (float, int, bool):
                 plain.append((value, vtype, node))
+            elif dr.is_tensor_v(kind):
+                tensors.append((value, vtype, node))     # a texture's or grid's resolution
             elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
                 arrays.append((value, vtype, node))      # the film's size, crop size, offset
-        access = (params, plain, arrays)
+        access = (params, plain, arrays, tensors)
         if state is not None:
             state.scalars = access
     get = access[0].get_property
     return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
-            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2]))
+            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2])
+            + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[3]))
 
 
 def other_live_bsdfs(mi_scene, scene=None) -> list:

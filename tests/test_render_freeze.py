@@ -276,6 +276,31 @@ def test_replay_follows_the_film_size_and_crop_window(monkeypatch, version):
             assert np.allclose(image, traced, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("version", ["path", "v4"])
+def test_replay_follows_a_texture_of_another_resolution(monkeypatch, version):
+    """An environment map's data swapped for an image of another size: Dr.Jit's key sees the
+    tensor's type, not its shape, and the kernels bake the resolution in. The first frozen
+    render after the swap records anew (the map's inner layout changed), the second replayed
+    the old recording (up to 45 off). Every frozen render must equal the traced one."""
+    from draaw_mi import speed_suite as ss
+    scene = draaw_mi.load_scene(ss.build("envmap", 16, spp=4))
+
+    def render(freeze):
+        monkeypatch.setattr(R, "FREEZE", freeze)
+        return np.array(draaw_mi.render(scene, version=version, spp=4, seed=1, post=[]))
+
+    for _ in range(3):
+        render(True)
+    sky = np.full((16, 32, 3), 0.3, np.float32)
+    sky[2:4, 10:12] = 200.0                          # a sun elsewhere, at another resolution
+    scene.params["sky.data"] = mi.TensorXf(sky)
+    scene.params.update()
+    traced = render(False)
+    for _ in range(3):
+        assert np.allclose(render(True), traced, rtol=1e-5, atol=1e-6)
+
+
 def test_scene_scalars_reads_values_set_through_another_parameter_table(scene):
     """The cached reader follows the objects, not the scene's own parameter table: a value
     changed through a fresh ``mi.traverse`` shows too (and equals the uncached read)."""
