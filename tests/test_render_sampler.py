@@ -80,3 +80,20 @@ def test_multijitter_lowers_the_variance():
     assert v_mj < 0.7 * v_ind, (v_mj, v_ind)
     se = np.sqrt((mj.var(0, ddof=1) + ind.var(0, ddof=1)).mean() / 12 / mj[0].size)
     assert abs(mj.mean() - ind.mean()) < 4 * se
+
+
+def test_pass_plans_remembered_per_scene_equal_fresh_ones(monkeypatch):
+    """render() remembers a scene's pass plan per (spp, pass_spp) for Mitsuba's samplers: each
+    plan must be the one sample_passes makes for that pair, and render() must follow it."""
+    scene = draaw_mi.load_scene(tiny_description(sampler="multijitter"))
+    pairs = [(32, 256), (32, 16), (40, 16), (7, 256)]
+    for _ in range(2):                                    # made, then remembered
+        for spp, pass_spp in pairs:
+            got = R["_scene_passes"](scene, spp, pass_spp)
+            assert got == R["sample_passes"](scene.mi_scene, spp, pass_spp), (spp, pass_spp)
+    asked = []
+    real = R["sample_passes"]
+    monkeypatch.setitem(R, "sample_passes", lambda *a: asked.append(a[1:]) or real(*a))
+    _, info = draaw_mi.render(scene, version="path", spp=32, pass_spp=16, seed=1, post=[],
+                              return_info=True)
+    assert not asked and info["passes"] == 2 and info["spp"] == 32     # from the memo: [16, 16]
