@@ -344,8 +344,10 @@ def test_replay_follows_moved_geometry(scene, monkeypatch):
 
 def test_doctests():
     import doctest
-    res = doctest.testmod(R)
-    assert res.attempted >= 3 and res.failed == 0
+    from draaw_mi import frozen
+    for module, least in ((R, 3), (frozen, 3)):
+        res = doctest.testmod(module)
+        assert res.attempted >= least and res.failed == 0, module.__name__
 
 
 def test_render_asks_freeze_support_once_per_scene_and_the_film_every_time(scene):
@@ -385,6 +387,7 @@ def test_other_live_bsdfs_follows_bsdfs_made_and_dropped(scene):
     appear, and disappear again when dropped, with and without the cached lookup (other
     tests' BSDFs may still be alive: the uncached walk is the reference)."""
     import gc
+    from draaw_mi.materials.draaw_bsdf import LIVE_INSTANCES
     ms = scene.mi_scene
     own = {id(sh.bsdf()) for sh in ms.shapes()}
     assert R.other_live_bsdfs(ms, scene) == R.other_live_bsdfs(ms)
@@ -395,5 +398,5 @@ def test_other_live_bsdfs_follows_bsdfs_made_and_dropped(scene):
     del extra, with_extra
     gc.collect()
     assert R.other_live_bsdfs(ms, scene) == R.other_live_bsdfs(ms)
-    mine = sum(1 for b in R.LIVE_INSTANCES if id(b) in own)
-    assert len(R.other_live_bsdfs(ms, scene)) == len(R.LIVE_INSTANCES) - mine
+    mine = sum(1 for b in LIVE_INSTANCES if id(b) in own)
+    assert len(R.other_live_bsdfs(ms, scene)) == len(LIVE_INSTANCES) - mine

@@ -12,7 +12,7 @@ camera's transform, the film's size and crop window, the shutter, the emitting s
 bounds) is still read on every render.
 
 Where a view is kept: in a ``memo`` dict that lives exactly as long as the scene -- the
-renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.render.freeze_render`
+renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.frozen.freeze_render`
 passes it). The view holds the scene itself, so its ``id`` names it for as long as the memo
 holds the view; an integrator's own caches never hold a view (a held scene keeps its Python
 BSDFs alive). Without a memo (a bare ``mi.Scene``) a view is made for each call: as many

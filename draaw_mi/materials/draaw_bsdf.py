@@ -93,7 +93,7 @@ def _schlick(f0, f90, cos_theta):
 
 # Every live DraawBSDF. A dr.freeze recording that makes a BSDF virtual call fails when a
 # Python BSDF instance is alive but not among its inputs (Dr.Jit 1.5 checks the whole registry
-# domain; C++ plugins are not affected): draaw_mi.render.freeze_render passes these along.
+# domain; C++ plugins are not affected): draaw_mi.frozen.freeze_render passes these along.
 LIVE_INSTANCES: "weakref.WeakSet" = weakref.WeakSet()
 
 

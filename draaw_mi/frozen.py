@@ -1,0 +1,184 @@
+"""Frozen small renders: what a ``dr.freeze`` recording of ``mi.render`` takes as input.
+
+Small renders (the Jupyter preview, the fit loop, a batch's frames) replay a recording instead
+of re-tracing the Python integrator (:func:`draaw_mi.render.frozen_render`). A recording's key
+sees the types of its inputs, not the host constants that Mitsuba's kernels bake in, so
+everything a replay must follow is handed to it here (:func:`freeze_render`): the scene, its
+host-side parameters and tensor shapes (:func:`scene_scalars`), the integrator's
+scene-dependent state (V4's light table and edge map), and the live Python BSDFs that the
+scene does not hold (:func:`other_live_bsdfs`). What is found once per scene lives in its
+:class:`_SceneState` and goes with the :class:`~draaw_mi.scene.DraawScene`.
+"""
+from __future__ import annotations
+
+import threading
+import warnings
+import weakref
+
+import drjit as dr
+import mitsuba as mi
+
+from .materials.draaw_bsdf import LIVE_INSTANCES
+
+_SCENE_STATES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> _SceneState
+_LOCKS_GUARD = threading.Lock()
+
+class _SceneState:
+    """What the renderer keeps for one :class:`DraawScene` (it goes with the scene): the lock
+    that keeps two threads from rendering it at once, and what is found once per scene:
+    whether it may be frozen (:func:`draaw_mi.render.freeze_eligible`), its plain-number parameter readers
+    (:func:`scene_scalars`), its own BSDFs (:func:`other_live_bsdfs`), and ``memo``, where
+    an integrator's ``freeze_state`` keeps what it finds once per scene
+    (:mod:`draaw_mi.integrators.scene_view`). Also the first sensor's film (its size is read
+    on each render) and the pass plans of :func:`draaw_mi.render.sample_passes` for a Mitsuba sampler (which
+    rounds sample counts by its kind alone; a sensor's sampler cannot be replaced)."""
+    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs", "memo", "film", "passes")
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.freezable = self.scalars = self.own_bsdfs = self.film = None
+        self.memo = {}
+        self.passes = {}
+
+
+def scene_state(scene) -> _SceneState:
+    """The renderer's state of the :class:`DraawScene` ``scene`` (made on first use)."""
+    state = _SCENE_STATES.get(scene)
+    if state is None:
+        with _LOCKS_GUARD:
+            state = _SCENE_STATES.get(scene)
+            if state is None:
+                state = _SCENE_STATES[scene] = _SceneState()
+    return state
+
+
+def freeze_supported(mi_scene) -> bool:
+    """Whether renders of ``mi_scene`` may be recorded with ``dr.freeze``: not when the scene
+    has SDF objects (the tracer reads node parameters while it is traced) or participating
+    media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
+    aborts the process). The preview and the batch executor ask this too."""
+    # flags and ids only (no mi.traverse, no JIT reads): a check between replays must not
+    # disturb the recording's inputs
+    from .sdf.scene import PROXY_PREFIX
+    for sh in mi_scene.shapes():
+        if sh.id().startswith(PROXY_PREFIX):
+            return False                               # SDF proxies
+        if sh.interior_medium() is not None or sh.exterior_medium() is not None:
+            return False
+    return all(s.get_medium() is None for s in mi_scene.sensors())
+
+
+# Host-side parameters that no kernel reads (silhouette weights serve projective gradients,
+# thread reordering only the GPU): left out of scene_scalars' key
+_IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
+
+
+def scene_scalars(mi_scene, scene=None) -> tuple:
+    """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held on the
+    host: floats, ints, bools and one-level scalar arrays such as the film's size), read as
+    they are now, and the shapes of its tensor parameters (textures, environment maps,
+    grids). Kernels bake these in as constants, and a ``dr.freeze`` replay keeps its
+    recording's (its key sees the inputs' types, not their sizes): the lights' sampling
+    weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
+    ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
+    ``sensor.film.size`` changed returned an image of the old size), a texture's resolution
+    (an environment map's data swapped for a smaller image: up to 45 off from the second
+    replay on). Without this a replay after ``params.update`` of one of them went on
+    rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
+    render; a sampling weight: up to 26). Passed to the recording as Python values, which are
+    part of its key, a change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
+    one, makes this a few microseconds (its parameter table is walked once); without it
+    ``mi_scene`` is traversed on each call.
+
+    >>> import mitsuba as mi
+    >>> scene = mi.load_dict(mi.cornell_box())  # clip distances, shutter, light weight, film
+    >>> [x if isinstance(x, tuple) else round(x, 3) for x in scene_scalars(scene)]
+    [0.001, 100.0, 0.0, 0.0, 1.0, (256, 256), (256, 256), (0, 0)]
+    """
+    state = None if scene is None else scene_state(scene)
+    access = None if state is None else state.scalars
+    if access is None or access[0] is not scene.params:
+        params = mi.traverse(mi_scene) if scene is None else scene.params
+        plain, arrays, tensors = [], [], []
+        for key in params.keys():
+            value, vtype, node, _ = params.properties[key]
+            if vtype is None or key.endswith(_IGNORED_SCALARS):
+                continue
+            kind = type(params.get_property(value, vtype, node))
+            if kind in (float, int, bool):
+                plain.append((value, vtype, node))
+            elif dr.is_tensor_v(kind):
+                tensors.append((value, vtype, node))     # a texture's or grid's resolution
+            elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
+                arrays.append((value, vtype, node))      # the film's size, crop size, offset
+        access = (params, plain, arrays, tensors)
+        if state is not None:
+            state.scalars = access
+    get = access[0].get_property
+    return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
+            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2])
+            + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[3]))
+
+
+def other_live_bsdfs(mi_scene, scene=None) -> list:
+    """The live draaw BSDFs that ``mi_scene``'s shapes do not hold (ordered by ``id``). With
+    ``scene`` (the :class:`DraawScene` of ``mi_scene``) the scene's own BSDFs are looked up
+    once (a shape's BSDF cannot be replaced), and while the live ones are exactly the scene's
+    own, no walk over them is needed (the walk over shapes and live BSDFs took 10-67 us a
+    render on the material spheres, with warm or cold caches; the lookup takes 1 us)."""
+    state = None if scene is None else scene_state(scene)
+    own = None if state is None else state.own_bsdfs
+    if own is None:
+        ids = frozenset(id(sh.bsdf()) for sh in mi_scene.shapes())
+        own = (ids, sum(1 for b in LIVE_INSTANCES if id(b) in ids))
+        if state is not None:
+            state.own_bsdfs = own
+    if len(LIVE_INSTANCES) == own[1]:      # all live ones are the scene's (they live with it)
+        return []
+    return sorted((b for b in LIVE_INSTANCES if id(b) not in own[0]), key=id)
+
+
+def freeze_render(integrator, body):
+    """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
+    with the integrator's scene-dependent state (V4's light-selection table, from its
+    ``freeze_state``) passed to the recording as an input. Without it the recording would run
+    a different sampler than a traced render, or replay a stale table. The preview and the
+    batch executor record their renders through this too."""
+    state_of = getattr(integrator, "freeze_state", None)
+    use_state = getattr(integrator, "frozen_state", None)
+
+    def recorded(mi_scene, scalars, seed, state, live_bsdfs):
+        if use_state is None:
+            return body(mi_scene, seed)
+        with use_state(state):
+            return body(mi_scene, seed)
+
+    # Every input opaque from the first recording: with literals kept (auto_opaque), a
+    # stratifying sampler's state, which the first render changes, made the second call
+    # re-record and compile a kernel anew (a batch job recompiled at its third frame); the
+    # walls are the same (benchmarks/results/render_overhead.md).
+    frozen = dr.freeze(recorded, auto_opaque=False)
+
+    failed = []                      # a recording that failed once: trace from then on
+
+    def call(mi_scene, seed, scene=None):
+        """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any (a
+        cheaper read of its plain-number parameters, see :func:`scene_scalars`)."""
+        if failed:
+            return body(mi_scene, seed)
+        # every live Python BSDF that the scene does not hold itself (those it holds are
+        # traversed with it): without them the recording of a BSDF call fails (see
+        # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
+        live = other_live_bsdfs(mi_scene, scene)
+        memo = None if scene is None else scene_state(scene).memo
+        try:
+            return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
+                          None if state_of is None else state_of(mi_scene, memo), live)
+        except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
+            failed.append(str(e))
+            warnings.warn(f"freeze_render: dr.freeze could not record this render "
+                          f"({str(e).splitlines()[0][:200]}); it is traced from now on",
+                          RuntimeWarning, stacklevel=2)
+            return body(mi_scene, seed)
+    call.frozen = frozen
+    return call
