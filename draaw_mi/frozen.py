@@ -17,6 +17,7 @@ import weakref
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from .materials.draaw_bsdf import LIVE_INSTANCES
 
@@ -81,7 +82,8 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     recording's (its key sees the inputs' types, not their sizes): the lights' sampling
     weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
     ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
-    ``sensor.film.size`` changed returned an image of the old size), a texture's resolution
+    ``sensor.film.size`` changed returned an image of the old size), a texture's ``to_uv``
+    transform (a host-side matrix: a replay kept the old tiling), a texture's resolution
     (an environment map's data swapped for a smaller image: up to 45 off from the second
     replay on). Without this a replay after ``params.update`` of one of them went on
     rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
@@ -104,20 +106,29 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
             value, vtype, node, _ = params.properties[key]
             if vtype is None or key.endswith(_IGNORED_SCALARS):
                 continue
-            kind = type(params.get_property(value, vtype, node))
+            probe = params.get_property(value, vtype, node)
+            kind = type(probe)
             if kind in (float, int, bool):
                 plain.append((value, vtype, node))
             elif dr.is_tensor_v(kind):
                 tensors.append((value, vtype, node))     # a texture's or grid's resolution
-            elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
+            elif dr.is_array_v(kind) and not dr.is_jit_v(kind):
                 arrays.append((value, vtype, node))      # the film's size, crop size, offset
+            elif hasattr(probe, "matrix") and not dr.is_jit_v(type(probe.matrix)):
+                arrays.append((value, vtype, node))      # a texture's to_uv (a Scalar transform)
         access = (params, plain, arrays, tensors)
         if state is not None:
             state.scalars = access
     get = access[0].get_property
     return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
-            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2])
+            + tuple(_host_values(get(value, vtype, node)) for value, vtype, node in access[2])
             + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[3]))
+
+
+def _host_values(value) -> tuple:
+    """A host-side array or transform's entries as a flat tuple of Python numbers (not
+    ``getattr(value, "matrix")`` on an array: Dr.Jit reads that as a swizzle)."""
+    return tuple(np.asarray(value if dr.is_array_v(value) else value.matrix).ravel().tolist())
 
 
 def other_live_bsdfs(mi_scene, scene=None) -> list:
@@ -136,6 +147,10 @@ def other_live_bsdfs(mi_scene, scene=None) -> list:
     if len(LIVE_INSTANCES) == own[1]:      # all live ones are the scene's (they live with it)
         return []
     return sorted((b for b in LIVE_INSTANCES if id(b) not in own[0]), key=id)
+
+
+#: recordings one frozen render keeps (see freeze_render)
+RECORDINGS_KEPT = 8
 
 
 def freeze_render(integrator, body):
@@ -157,7 +172,11 @@ def freeze_render(integrator, body):
     # stratifying sampler's state, which the first render changes, made the second call
     # re-record and compile a kernel anew (a batch job recompiled at its third frame); the
     # walls are the same (benchmarks/results/render_overhead.md).
-    frozen = dr.freeze(recorded, auto_opaque=False)
+    # At most RECORDINGS_KEPT recordings, the least recently used dropped: each value of a
+    # plain-number parameter (scene_scalars) records anew, on purpose, so an animated light
+    # weight or a resized film would otherwise pile up compiled recordings for as long as the
+    # integrator lives, and Dr.Jit's "recorded N times" warning would fire on every render.
+    frozen = dr.freeze(recorded, auto_opaque=False, limit=RECORDINGS_KEPT, warn_after=1 << 30)
 
     failed = []                      # a recording that failed once: trace from then on
 

@@ -301,6 +301,58 @@ def test_replay_follows_a_texture_of_another_resolution(monkeypatch, version):
         assert np.allclose(render(True), traced, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("version", ["path", "v4"])
+def test_replay_follows_a_texture_transform(monkeypatch, version):
+    """A bitmap's ``to_uv`` is a host-side ``ScalarAffineTransform3f`` (neither a number nor a
+    Dr.Jit array) that the kernels bake in: a replay after it changed kept the old tiling
+    (0.22 off the traced render)."""
+    from draaw_mi.integrators import reference_scenes as rs
+    scene = draaw_mi.load_scene(rs.feature_scene(res=16, spp=4, texture=True))
+    key = next(k for k in scene.params.keys() if k.endswith("base_color.to_uv"))
+
+    def render(freeze):
+        monkeypatch.setattr(R, "FREEZE", freeze)
+        return np.array(draaw_mi.render(scene, version=version, spp=4, seed=1, post=[]))
+
+    for _ in range(3):
+        before = render(True)
+    scene.params[key] = mi.ScalarAffineTransform3f().scale(mi.ScalarPoint2f(7.0, 7.0))
+    scene.params.update()
+    traced = render(False)
+    assert np.abs(traced - before).max() > 0.05        # the tiling shows at this size
+    for _ in range(3):
+        assert np.allclose(render(True), traced, rtol=1e-5, atol=1e-6)
+
+
+def test_recordings_kept_are_bounded(monkeypatch, capfd):
+    """Each value of a plain-number parameter records anew; the oldest recordings are dropped
+    beyond ``RECORDINGS_KEPT`` (25 light weights kept 25 recordings, and Dr.Jit warned on
+    every render from the tenth on), and a dropped one records again correctly."""
+    from draaw_mi.integrators import reference_scenes as rs
+    monkeypatch.setattr(R, "FREEZE", True)
+    scene = draaw_mi.load_scene(rs.cornell_draaw(res=16, spp=4))
+    from draaw_mi import frozen
+    integ = R.make_integrator("path", scene.settings["max_depth"])
+    call = R.frozen_render(integ, 4)
+    n = frozen.RECORDINGS_KEPT + 4
+    capfd.readouterr()
+    n0 = call.frozen.n_recordings           # the integrator and its recording may be shared
+    for i in range(n):
+        scene.params["light.emitter.sampling_weight"] = 1.37 + 0.01 * i   # values no other test uses
+        scene.params.update()
+        call(scene.mi_scene, dr.opaque(mi.UInt32, 1), scene)
+    assert "has been recorded" not in capfd.readouterr().err      # Dr.Jit's log, on stderr
+    assert call.frozen.n_recordings - n0 == n
+    assert call.frozen.n_cached_recordings == frozen.RECORDINGS_KEPT
+    scene.params["light.emitter.sampling_weight"] = 1.37       # its recording was dropped
+    scene.params.update()
+    again = call(scene.mi_scene, dr.opaque(mi.UInt32, 1), scene)
+    monkeypatch.setattr(R, "FREEZE", False)
+    traced = mi.render(scene.mi_scene, integrator=integ, spp=4, seed=1)
+    assert np.allclose(np.array(again), np.array(traced), rtol=1e-5, atol=1e-6)
+
+
 def test_scene_scalars_reads_values_set_through_another_parameter_table(scene):
     """The cached reader follows the objects, not the scene's own parameter table: a value
     changed through a fresh ``mi.traverse`` shows too (and equals the uncached read)."""
