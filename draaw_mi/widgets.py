@@ -3,8 +3,11 @@
 GO-Draaw's web front end as ipywidgets (``pip install 'draaw-mi[notebooks]'``) over
 :class:`draaw_mi.preview.Preview`: every control writes Dr.Jit parameter values (no kernel is
 recompiled by a slider), a worker thread renders 1-spp frames and refines them by a running
-mean while idle, and frames reach the browser through an ``ipywidgets.Image`` as JPEG while
-you interact and as PNG once the image has been at rest for ``rest_after`` seconds.
+mean while idle, and frames reach the browser as JPEG while you interact and as PNG once the
+image has been at rest for ``rest_after`` seconds. With ``jupyter_rfb`` installed (the
+``notebooks`` extra) they go through an :class:`~draaw_mi.orbit_canvas.OrbitCanvas`: the
+browser paces the frames, and dragging on the image orbits the camera, the wheel moves it
+nearer or farther, a double-click puts it back; without it, through an ``ipywidgets.Image``.
 
 Panels: **Materials** (per material: base colour picker and exact linear RGB text field,
 sliders for every draaw parameter, base-colour texture and normal-map files), **Render**
@@ -39,13 +42,9 @@ except ImportError as _e:  # pragma: no cover - exercised by a test with the mod
     raise DraawError("draaw_mi.widgets needs ipywidgets; install it with: pip install "
                      f"'draaw-mi[notebooks]' ({_e})") from None
 
+from .tuner_camera import CameraPanel, slider as _slider  # noqa: E402 (needs ipywidgets)
+
 VERSIONS = ("v1", "v2", "v3", "v4", "path")
-
-
-def _slider(desc, value, lo, hi, step=0.01):
-    return W.FloatSlider(value=value, min=lo, max=hi, step=step, description=desc, continuous_update=True,
-                         readout_format=".3f", style={"description_width": "120px"},
-                         layout=W.Layout(width="380px"))
 
 
 def close_widgets(*roots) -> None:
@@ -68,7 +67,7 @@ def close_widgets(*roots) -> None:
         w.close()
 
 
-class MaterialTuner:
+class MaterialTuner(CameraPanel):
     """An interactive panel for one scene (see the module docstring).
 
     ==================  =======================================================================
@@ -83,13 +82,19 @@ class MaterialTuner:
     ``interactive_scale``  resolution of the first frame after a change (default 0.5)
     ``autostart``       start the worker thread now (False: call :meth:`refresh` yourself)
     ``rest_after``      seconds without a change after which frames are sent as PNG
+    ``frame_channel``   ``"auto"`` (jupyter_rfb's canvas when installed, else an image
+                        widget), ``"rfb"`` or ``"image"``
     ==================  =======================================================================
     """
 
     def __init__(self, scene, reference=None, *, version: str | None = None, max_spp: int = 256,
                  denoise: bool = False, interactive_scale: float = 0.5, autostart: bool = True,
-                 freeze: bool = True, rest_after: float = 0.5, save_path: str | None = None):
+                 freeze: bool = True, rest_after: float = 0.5, save_path: str | None = None,
+                 frame_channel: str = "auto"):
         from .scene import DraawScene, load_scene
+        if frame_channel not in ("auto", "rfb", "image"):
+            raise DraawError(f"MaterialTuner: frame_channel={frame_channel!r}; expected 'auto', 'rfb' "
+                             "or 'image'")
         self.base_scene = scene if isinstance(scene, DraawScene) else load_scene(scene)
         self.scene = self.base_scene
         self.materials = tuning.material_values(self.scene)
@@ -111,7 +116,7 @@ class MaterialTuner:
         self.sent = collections.deque(maxlen=256)    # (generation, spp, format) of pushed frames
         self._autostart = autostart
         self.preview = self._new_preview(self.scene)
-        self._build(save_path)
+        self._build(save_path, frame_channel)
         if autostart:
             self.preview.start()
 
@@ -143,9 +148,12 @@ class MaterialTuner:
         """Worker-thread callback: encode and push the frame (JPEG while interacting)."""
         at_rest = (time.perf_counter() - self._last_change) > self.rest_after or frame.spp >= self.preview.max_spp
         fmt = "png" if at_rest and not frame.interactive else "jpeg"
-        data = tuning.encode(frame.image, fmt)
-        self.image.format = fmt
-        self.image.value = data
+        if self.canvas is not None:
+            self.canvas.push(tuning.to_uint8(frame.image), lossless=fmt == "png")
+        else:
+            data = tuning.encode(frame.image, fmt)
+            self.image.format = fmt
+            self.image.value = data
         self.frames_shown += 1
         self.last_format = fmt
         self.last_frame = frame
@@ -168,7 +176,8 @@ class MaterialTuner:
     def close(self):
         """Stop the worker thread and close every widget of the panel (:func:`close_widgets`)."""
         self.preview.stop()
-        close_widgets(self.widget, *getattr(self, "_links", ()), *vars(self).values())
+        close_widgets(self.widget, *getattr(self, "_links", ()), *vars(self).values(),
+                      getattr(self.canvas, "_output_context", None))   # jupyter_rfb's error output
 
     def _ipython_display_(self):
         from IPython.display import display
@@ -180,8 +189,20 @@ class MaterialTuner:
         return np.asarray(load_reference(ref), np.float32)[..., :3]
 
     # ------------------------------------------------------------------ panels
-    def _build(self, save_path):
-        self.image = W.Image(format="jpeg", layout=W.Layout(border="1px solid #ccc"))
+    def _build(self, save_path, frame_channel):
+        self.canvas = self.image = None
+        if frame_channel in ("auto", "rfb"):
+            try:
+                from .orbit_canvas import OrbitCanvas
+            except DraawError:
+                if frame_channel == "rfb":
+                    raise
+            else:
+                self.canvas = OrbitCanvas(self.base_scene.resolution, on_orbit=self._drag_orbit,
+                                          on_drag_start=self._drag_start, on_zoom=self._zoom,
+                                          on_reset=lambda: self._orbit_to(0.0, 0.0, 1.0))
+        if self.canvas is None:
+            self.image = W.Image(format="jpeg", layout=W.Layout(border="1px solid #ccc"))
         self.status = W.HTML("")
         self.message = W.HTML("")
         self.error_label = W.HTML("")
@@ -192,7 +213,7 @@ class MaterialTuner:
         self.tabs = W.Tab(children=[t[1] for t in tabs])
         for i, (name, _) in enumerate(tabs):
             self.tabs.set_title(i, name)
-        left = W.VBox([self.image, self.status, self.message] +
+        left = W.VBox([self.canvas if self.canvas is not None else self.image, self.status, self.message] +
                       ([self.error_label, self.error_image] if self.reference is not None else []))
         self.widget = W.HBox([left, self.tabs])
 
@@ -327,90 +348,6 @@ class MaterialTuner:
                 if k.endswith(".position") and k.split(".")[0] in self.scene.info.get("lights", []):
                     vals[k] = self._camera_now()[0].tolist()
         self._changed(vals)
-
-    def _camera_panel(self):
-        fov = float(np.array(self.scene.params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self.scene.params \
-            else 40.0
-        self.fov = _slider("FOV (x)", fov, 5.0, 120.0, 0.5)
-        self.yaw = _slider("orbit yaw °", 0.0, -180.0, 180.0, 1.0)
-        self.pitch = _slider("orbit pitch °", 0.0, -85.0, 85.0, 1.0)
-        self.distance = _slider("distance ×", 1.0, 0.2, 3.0, 0.01)
-        self.fov.observe(self._guard(lambda ch: self._changed({"sensor.x_fov": float(ch["new"])})), "value")
-        for w in (self.yaw, self.pitch, self.distance):
-            w.observe(self._guard(lambda ch: self._set_camera()), "value")
-        get = W.Button(description="get camera")
-        self.camera_text = W.Textarea(layout=W.Layout(width="380px", height="90px"))
-        get.on_click(self._guard(lambda _b: self._get_camera()))
-        # a camera path (GO-Draaw camera_positions.json keyframes), stepped or played
-        self.path_file = W.Text(placeholder="camera_positions.json", description="camera path")
-        load = W.Button(description="load path")
-        load.on_click(self._guard(lambda _b: self.load_camera_path(self.path_file.value.strip())))
-        self.path_frame = W.IntSlider(value=0, min=0, max=0, description="path frame", disabled=True)
-        self.path_play = W.Play(value=0, min=0, max=0, interval=100, disabled=True)
-        self._links = [W.jslink((self.path_play, "value"), (self.path_frame, "value"))]
-        self.path_frame.observe(self._guard(lambda ch: self._path_step(int(ch["new"]))), "value")
-        self._path = None
-        rows = [self.fov] + ([self.yaw, self.pitch, self.distance, get, self.camera_text] if self.camera else [])
-        rows += [W.HBox([self.path_file, load]), W.HBox([self.path_play, self.path_frame])]
-        return W.VBox(rows)
-
-    def load_camera_path(self, keys, frames: int = 120):
-        """Load keyframes (a GO-Draaw ``camera_positions.json`` file name or a list of
-        ``(x, y, z, theta, phi)`` / dicts) and interpolate ``frames`` frames along them; the
-        *path frame* slider and its play button then move the camera."""
-        from .camera_path import interpolate
-        if isinstance(keys, str):
-            if not keys:
-                raise DraawError("camera path: no file name given")
-            try:
-                with open(keys) as fh:
-                    keys = json.load(fh)
-            except (OSError, json.JSONDecodeError) as e:
-                raise DraawError(f"camera path {keys!r}: {e}") from None
-        path = interpolate(keys, duration=frames / 60.0, fps=60)
-        self._path = path
-        for w in (self.path_frame, self.path_play):
-            w.max = len(path) - 1
-            w.disabled = False
-        self._path_step(int(self.path_frame.value))
-        return path
-
-    def _path_step(self, i):
-        if self._path is None:
-            return
-        from .scene.camera import go_draaw_look_at
-        x, y, z, theta, phi = self._path[min(i, len(self._path) - 1)]
-        try:
-            o, t, up = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
-        except ValueError as e:
-            raise DraawError(f"camera path frame {i}: {e}") from None
-        self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
-                       "up": list(map(float, up)), "fov": float(self.fov.value)}
-        self._syncing = True                 # the orbit is relative to the path's camera
-        try:
-            self.yaw.value, self.pitch.value, self.distance.value = 0.0, 0.0, 1.0
-        finally:
-            self._syncing = False
-        self._set_camera()
-
-    def _camera_now(self):
-        return tuning.orbit(self.camera, self.yaw.value, self.pitch.value, self.distance.value)
-
-    def _set_camera(self):
-        if self.camera is None:
-            raise DraawError("this scene has no [camera] table to orbit")
-        o, t, up = self._camera_now()
-        values = {"sensor.to_world": tuning.look_at(o, t, up)}
-        if self.snap_light.value:
-            self._set_lights()
-        self._changed(values)
-
-    def _get_camera(self):
-        o, t, up = self._camera_now()
-        cam = {"origin": o.round(5).tolist(), "target": t.round(5).tolist(), "up": up.round(5).tolist(),
-               "fov": round(float(self.fov.value), 4)}
-        self.camera_text.value = json.dumps(cam)
-        return cam
 
     def _post_panel(self):
         from . import post

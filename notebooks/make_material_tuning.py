@@ -20,7 +20,8 @@ CELLS = [
 pickers for every `draaw` material parameter, textures and normal maps, render options, light,
 camera orbit, the post chain, an error view against a reference, saving to TOML and a Python
 snippet. A worker thread renders 1-spp frames and refines them by a running mean while you
-pause; moving a slider writes Dr.Jit parameter values, so no kernel is recompiled.
+pause; moving a slider writes Dr.Jit parameter values, so no kernel is recompiled. Drag on
+the image to orbit the camera, scroll to move nearer or farther, double-click to go back.
 
 Set `DRAAW_MI_NOTEBOOK_SMALL=1` to run a tiny version (48x48) - CI does."""),
     ("code", """import os

@@ -4,7 +4,9 @@ JupyterLab serves a scratch copy of ``notebooks/material_tuning.ipynb`` (so noth
 into the repository), Chromium (Debian's ``/usr/bin/chromium``; installed with apt-get when
 missing and running as root) runs all cells under ``DRAAW_MI_NOTEBOOK_SMALL=1``, waits until
 the preview is at rest (budget reached), then drags the first material slider and checks that
-the displayed image changed (pixels of the ``<img>`` element, not just its URL). Screenshots
+the displayed image changed (pixels of the ``<img>`` element, not just its URL); with
+``jupyter_rfb`` installed (its canvas shows the preview) it then drags on the image and checks
+that the camera orbited (the image changed again). Screenshots
 are kept in ``out/test-artifacts/``. Skipped, with the reason, when a piece is missing.
 """
 from __future__ import annotations
@@ -133,7 +135,10 @@ def test_moving_a_slider_changes_the_displayed_image(lab):
             # the last code cell's output: everything ran
             page.wait_for_selector(".jp-OutputArea-output:has-text('metal roughness in the file')",
                                    timeout=300_000)
-            img = page.wait_for_selector(".jp-OutputArea-output img.widget-image", timeout=60_000)
+            # jupyter_rfb's canvas (an <img> it draws into) when installed, else ipywidgets.Image
+            img = page.wait_for_selector(".jp-OutputArea-output img.renderview-view, "
+                                         ".jp-OutputArea-output img.widget-image", timeout=60_000)
+            canvas = "renderview-view" in (img.get_attribute("class") or "")
             img.scroll_into_view_if_needed()
             before = _at_rest(page, img)
             page.screenshot(path=os.path.join(ARTEFACTS, "material_tuning_before.png"))
@@ -148,6 +153,17 @@ def test_moving_a_slider_changes_the_displayed_image(lab):
             img.scroll_into_view_if_needed()
             after = _at_rest(page, img)
             page.screenshot(path=os.path.join(ARTEFACTS, "material_tuning_after.png"))
+            orbited = None
+            if canvas:                   # drag on the image: the camera orbits
+                box = img.bounding_box()
+                assert box is not None, "the canvas has no box on the page"
+                cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+                page.mouse.move(cx, cy)
+                page.mouse.down()
+                page.mouse.move(cx + box["width"] / 4, cy, steps=8)
+                page.mouse.up()
+                orbited = _at_rest(page, img)
+                page.screenshot(path=os.path.join(ARTEFACTS, "material_tuning_orbited.png"))
         except Exception:
             page.screenshot(path=os.path.join(ARTEFACTS, "material_tuning_failure.png"), full_page=True)
             with open(os.path.join(ARTEFACTS, "material_tuning_failure.html"), "w") as fh:
@@ -158,3 +174,6 @@ def test_moving_a_slider_changes_the_displayed_image(lab):
     assert before.shape == after.shape
     diff = np.abs(after - before).max(axis=2)
     assert diff.max() > 10 and (diff > 10).mean() > 0.01, "the displayed image did not change"
+    if orbited is not None:
+        diff = np.abs(orbited - after).max(axis=2)
+        assert diff.max() > 10 and (diff > 10).mean() > 0.05, "dragging on the canvas did not orbit"

@@ -31,7 +31,8 @@ def tuner(tmp_path):
     path = tmp_path / "tiny.toml"
     import tomli_w
     path.write_text(tomli_w.dumps(desc))
-    t = MaterialTuner(str(path), autostart=False, freeze=False, interactive_scale=1.0, max_spp=64)
+    t = MaterialTuner(str(path), autostart=False, freeze=False, interactive_scale=1.0, max_spp=64,
+                      frame_channel="image")
     yield t
     t.close()
 
@@ -187,7 +188,8 @@ def test_snippet_runs_and_reproduces_values(tuner):
 
 
 def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
-    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), max_spp=4, rest_after=30.0, freeze=True)
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), max_spp=4, rest_after=30.0, freeze=True,
+                      frame_channel="image")
     try:
         assert t.preview.wait(spp=4, timeout=60) is not None
         t.controls["ball"]["metallic"].value = 0.5
@@ -255,17 +257,22 @@ def test_missing_ipywidgets_is_one_clear_error(monkeypatch):
         importlib.import_module("draaw_mi.widgets")
 
 
-def test_close_releases_every_widget_and_the_scene(tmp_path):
+@pytest.mark.parametrize("channel", ["image", "rfb"])
+def test_close_releases_every_widget_and_the_scene(tmp_path, channel):
     """A closed tuner leaves no widget in ipywidgets' registry (rows of the post chain that
     were replaced included) and its scene's draaw materials die with it: a live material
     would enlarge the BSDF calls of every later render in the kernel."""
     import gc
     import ipywidgets
     from draaw_mi.materials.draaw_bsdf import LIVE_INSTANCES
+    if channel == "rfb":
+        pytest.importorskip("jupyter_rfb")
     registry = ipywidgets.widgets.widget._instances
     gc.collect()
     n_widgets, n_bsdfs = len(registry), len(list(LIVE_INSTANCES))
-    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, freeze=False)
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, freeze=False,
+                      frame_channel=channel)
+    assert (t.canvas is not None) == (channel == "rfb")
     t._post_edit(add="contrast")
     t._post_edit(add="tint")
     t._post_edit(remove=0)                      # two rebuilds of the rows

@@ -1,0 +1,183 @@
+"""OrbitCanvas (jupyter_rfb) headless: frames from another thread reach the event loop, mouse
+events move the tuner's camera by the documented amounts.
+
+No browser: the canvas's ``send`` is replaced by a recorder and its "visible view" flag is set
+by hand, which is what the front end would do; events are the dicts jupyter_rfb's front end
+sends (``type``, ``x``, ``y``, ``button``, ``buttons``, ``dy``).
+"""
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import draaw_mi
+
+pytest.importorskip("ipywidgets")
+pytest.importorskip("jupyter_rfb")
+from draaw_mi.orbit_canvas import DEGREES_PER_WIDTH, MIN_DISPLAY, WHEEL_RATE, OrbitCanvas  # noqa: E402
+from draaw_mi.widgets import MaterialTuner  # noqa: E402
+from draaw_mi import tuning  # noqa: E402
+
+from conftest import tiny_description  # noqa: E402
+
+
+def _press(x, y, button=1):
+    return {"type": "pointer_down", "x": x, "y": y, "button": button, "buttons": (button,), "modifiers": ()}
+
+
+def _move(x, y, buttons=(1,)):
+    return {"type": "pointer_move", "x": x, "y": y, "button": 0, "buttons": buttons, "modifiers": ()}
+
+
+def _release(x, y):
+    return {"type": "pointer_up", "x": x, "y": y, "button": 1, "buttons": (), "modifiers": ()}
+
+
+@pytest.fixture
+def tuner():
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, freeze=False,
+                      interactive_scale=1.0, frame_channel="rfb")
+    yield t
+    t.close()
+
+
+def _origin(t):
+    t.refresh()                     # the preview applies pending parameter values per frame
+    return np.array(t.scene.params["sensor.to_world"].matrix).reshape(4, 4)[:3, 3]
+
+
+def test_a_drag_orbits_the_camera_by_the_documented_angle(tuner):
+    assert tuner.canvas.size == tuner.scene.resolution
+    k = MIN_DISPLAY // max(tuner.canvas.size)          # a small preview is shown enlarged
+    assert tuner.canvas.css_width == f"{tuner.canvas.size[0] * k}px" and k > 1
+    w = tuner.canvas.size[0] * k                       # the drag is in CSS pixels
+    tuner.canvas.handle_event(_press(10, 10))
+    tuner.canvas.handle_event(_move(10, 10, buttons=()))     # Chromium: a stale move after the press
+    tuner.canvas.handle_event(_move(10 + w / 4, 10))         # a quarter width right: -45 degrees
+    tuner.canvas.handle_event(_move(10 + w / 4, 10 + w / 8))   # and an eighth down: +22.5 degrees
+    tuner.canvas.handle_event(_release(10 + w / 4, 10 + w / 8))
+    assert tuner.message.value == ""
+    assert tuner.yaw.value == pytest.approx(-DEGREES_PER_WIDTH / 4)
+    assert tuner.pitch.value == pytest.approx(DEGREES_PER_WIDTH / 8)
+    # the scene's camera is the closed-form orbit of the scene's camera by those angles
+    want, _, _ = tuning.orbit(tuner.camera, -DEGREES_PER_WIDTH / 4, DEGREES_PER_WIDTH / 8, 1.0)
+    np.testing.assert_allclose(_origin(tuner), want, atol=1e-5)
+    # dragging right moves the camera to the viewer's left (the scene turns right under the
+    # pointer): up x view direction, from the scene's own camera
+    o, t, up = (np.asarray(tuner.camera[k], float) for k in ("origin", "target", "up"))
+    left = np.cross(up, t - o)
+    assert np.dot(_origin(tuner) - o, left) > 0.1 * np.linalg.norm(left) * np.linalg.norm(t - o)
+    # a second drag continues from where the first ended; moves without the button are ignored
+    tuner.canvas.handle_event(_move(500, 500, buttons=()))
+    tuner.canvas.handle_event(_press(0, 0))
+    tuner.canvas.handle_event(_move(-w / 4, 0))
+    assert tuner.yaw.value == pytest.approx(0.0, abs=1e-9)
+    assert tuner.pitch.value == pytest.approx(DEGREES_PER_WIDTH / 8)
+    tuner.canvas.handle_event(_release(-w / 4, 0))
+    tuner.canvas.handle_event(_move(w, w))                   # released: nothing moves
+    assert tuner.yaw.value == pytest.approx(0.0, abs=1e-9)
+
+
+def test_pitch_is_clamped_and_yaw_wraps(tuner):
+    w = tuner.canvas._view_width
+    tuner.canvas.handle_event(_press(0, 0))
+    tuner.canvas.handle_event(_move(-3 * w, 5 * w))          # +540 degrees yaw, far past the pole
+    assert tuner.pitch.value == tuner.pitch.max == 85.0
+    assert tuner.yaw.value == pytest.approx(-180.0)            # 540 degrees, wrapped into [-180, 180)
+    assert np.isfinite(_origin(tuner)).all()
+
+
+def test_the_wheel_scales_the_distance_and_a_double_click_resets(tuner):
+    t = np.asarray(tuner.camera["target"], float)
+    r0 = np.linalg.norm(_origin(tuner) - t)
+    tuner.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": 100.0, "x": 5, "y": 5, "buttons": (),
+                               "modifiers": ()})
+    assert tuner.distance.value == pytest.approx(math.exp(100 * WHEEL_RATE))
+    assert np.linalg.norm(_origin(tuner) - t) == pytest.approx(r0 * math.exp(100 * WHEEL_RATE), rel=1e-5)
+    for _ in range(50):                                      # far out: stops at the slider's end
+        tuner.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": 100.0, "x": 5, "y": 5})
+    assert tuner.distance.value == tuner.distance.max
+    tuner.canvas.handle_event(_press(0, 0))
+    tuner.canvas.handle_event(_move(30, 20))
+    tuner.canvas.handle_event(_release(30, 20))
+    tuner.canvas.handle_event({"type": "double_click", "x": 1, "y": 1, "button": 1, "buttons": ()})
+    assert (tuner.yaw.value, tuner.pitch.value, tuner.distance.value) == (0.0, 0.0, 1.0)
+    want, _, _ = tuning.orbit(tuner.camera)
+    np.testing.assert_allclose(_origin(tuner), want, atol=1e-5)
+
+
+def test_a_resized_view_changes_the_degrees_per_pixel(tuner):
+    tuner.canvas.handle_event({"type": "resize", "width": 360.0, "height": 270.0, "ratio": 1.0})
+    tuner.canvas.handle_event(_press(0, 0))
+    tuner.canvas.handle_event(_move(36, 0))
+    assert tuner.yaw.value == pytest.approx(-DEGREES_PER_WIDTH * 36 / 360)
+
+
+def test_frames_are_the_preview_in_srgb_jpeg_while_changing_png_at_rest(tuner):
+    tuner.rest_after = 1e9                                  # never at rest (a first compile is slow)
+    f = tuner.refresh()
+    got = tuner.canvas.get_frame()
+    np.testing.assert_array_equal(got, tuning.to_uint8(f.image))
+    assert tuner.canvas.quality == 80 and tuner.last_format == "jpeg"
+    tuner.rest_after = 0.0                                  # now at rest: lossless
+    tuner.refresh()
+    tuner.canvas.get_frame()
+    assert tuner.canvas.quality == 100 and tuner.last_format == "png"
+
+
+def test_a_frame_pushed_from_another_thread_is_sent_on_the_loop():
+    """jupyter_rfb draws only from the running loop of the calling thread: a push from the
+    preview's worker thread must hand the draw to the loop the canvas was made on."""
+    sent = []
+
+    async def main():
+        c = OrbitCanvas((8, 4))
+        c.send = lambda msg, buffers=None: sent.append((msg, buffers))
+        c._has_visible_views = True                         # what the front end reports
+        await asyncio.sleep(0.05)                           # (a draw attempt of its own, no frame)
+        img = np.full((4, 8, 3), 200, np.uint8)
+        th = threading.Thread(target=c.push, args=(img,))
+        th.start()
+        th.join()
+        for _ in range(100):
+            await asyncio.sleep(0.01)
+            if sent:
+                break
+        arrived = len(sent)                                 # before the browser says anything
+        c._frame_feedback = {"index": 1, "timestamp": 0.0, "localtime": 0.0}   # the browser's ack
+        await asyncio.sleep(0.45)                           # jupyter_rfb's lossless redraw (0.3 s)
+        c.close()
+        return c, arrived
+
+    c, arrived = asyncio.run(main())
+    assert c.frames_pushed == 1 and arrived == 1
+    kinds = [m["mimetype"] for m, _ in sent if m.get("type") == "framebufferdata"]
+    assert kinds[:1] == ["image/jpeg"] and kinds[-1] == "image/png", kinds
+
+
+def test_bad_sizes_and_images_are_one_clear_error():
+    with pytest.raises(draaw_mi.DraawError, match=r"OrbitCanvas: size=\(0, 4\)"):
+        OrbitCanvas((0, 4))
+    c = OrbitCanvas((4, 4))
+    try:
+        with pytest.raises(draaw_mi.DraawError, match="expected \\(H, W, 3\\) uint8"):
+            c.push(np.zeros((4, 4, 3), np.float32))
+    finally:
+        c.close()
+
+
+def test_rfb_channel_without_jupyter_rfb_is_one_clear_error(monkeypatch):
+    import sys
+    monkeypatch.setitem(sys.modules, "jupyter_rfb", None)
+    monkeypatch.delitem(sys.modules, "draaw_mi.orbit_canvas", raising=False)
+    with pytest.raises(draaw_mi.DraawError, match=r"pip install 'draaw-mi\[notebooks\]'"):
+        MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, frame_channel="rfb")
+    t = MaterialTuner(draaw_mi.load_scene(tiny_description()), autostart=False, freeze=False)
+    try:
+        assert t.canvas is None and t.image is not None                 # "auto" falls back
+    finally:
+        t.close()
