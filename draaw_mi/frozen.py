@@ -101,7 +101,7 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     access = None if state is None else state.scalars
     if access is None or access[0] is not scene.params:
         params = mi.traverse(mi_scene) if scene is None else scene.params
-        plain, arrays, tensors = [], [], []
+        plain, arrays, matrices, tensors = [], [], [], []
         for key in params.keys():
             value, vtype, node, _ = params.properties[key]
             if vtype is None or key.endswith(_IGNORED_SCALARS):
@@ -112,21 +112,24 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
                 plain.append((value, vtype, node))
             elif dr.is_tensor_v(kind):
                 tensors.append((value, vtype, node))     # a texture's or grid's resolution
-            elif dr.is_array_v(kind) and not dr.is_jit_v(kind):
+            elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
                 arrays.append((value, vtype, node))      # the film's size, crop size, offset
+            elif dr.is_array_v(kind) and not dr.is_jit_v(kind):
+                matrices.append((value, vtype, node))    # a host-side matrix
             elif hasattr(probe, "matrix") and not dr.is_jit_v(type(probe.matrix)):
-                arrays.append((value, vtype, node))      # a texture's to_uv (a Scalar transform)
-        access = (params, plain, arrays, tensors)
+                matrices.append((value, vtype, node))    # a texture's to_uv (a Scalar transform)
+        access = (params, plain, arrays, matrices, tensors)
         if state is not None:
             state.scalars = access
     get = access[0].get_property
     return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
-            + tuple(_host_values(get(value, vtype, node)) for value, vtype, node in access[2])
-            + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[3]))
+            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2])
+            + tuple(_matrix_entries(get(value, vtype, node)) for value, vtype, node in access[3])
+            + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[4]))
 
 
-def _host_values(value) -> tuple:
-    """A host-side array or transform's entries as a flat tuple of Python numbers (not
+def _matrix_entries(value) -> tuple:
+    """A host-side matrix or transform's entries as a flat tuple of Python numbers (not
     ``getattr(value, "matrix")`` on an array: Dr.Jit reads that as a swizzle)."""
     return tuple(np.asarray(value if dr.is_array_v(value) else value.matrix).ravel().tolist())
 
