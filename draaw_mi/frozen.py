@@ -83,7 +83,8 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
     ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
     ``sensor.film.size`` changed returned an image of the old size), a texture's ``to_uv``
-    transform (a host-side matrix: a replay kept the old tiling), a texture's resolution
+    transform (a host-side matrix: a replay kept the old tiling; also when a Python plugin
+    exposes it with ``cb.put``), a texture's resolution
     (an environment map's data swapped for a smaller image: up to 45 off from the second
     replay on). Without this a replay after ``params.update`` of one of them went on
     rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
@@ -101,31 +102,49 @@ def scene_scalars(mi_scene, scene=None) -> tuple:
     access = None if state is None else state.scalars
     if access is None or access[0] is not scene.params:
         params = mi.traverse(mi_scene) if scene is None else scene.params
-        plain, arrays, matrices, tensors = [], [], [], []
+        groups: tuple = ([], [], [], [], [])      # plain, vectors, matrices, tensors, others
         for key in params.keys():
             value, vtype, node, _ = params.properties[key]
-            if vtype is None or key.endswith(_IGNORED_SCALARS):
+            if key.endswith(_IGNORED_SCALARS):
                 continue
-            probe = params.get_property(value, vtype, node)
-            kind = type(probe)
-            if kind in (float, int, bool):
-                plain.append((value, vtype, node))
-            elif dr.is_tensor_v(kind):
-                tensors.append((value, vtype, node))     # a texture's or grid's resolution
-            elif dr.is_array_v(kind) and not dr.is_jit_v(kind) and dr.depth_v(kind) == 1:
-                arrays.append((value, vtype, node))      # the film's size, crop size, offset
-            elif dr.is_array_v(kind) and not dr.is_jit_v(kind):
-                matrices.append((value, vtype, node))    # a host-side matrix
-            elif hasattr(probe, "matrix") and not dr.is_jit_v(type(probe.matrix)):
-                matrices.append((value, vtype, node))    # a texture's to_uv (a Scalar transform)
-        access = (params, plain, arrays, matrices, tensors)
+            # vtype None: a Python plugin's cb.put of the object itself, which params.update
+            # changes in place (a nanobind type; a plain Python number it cannot change)
+            probe = value if vtype is None else params.get_property(value, vtype, node)
+            group = _key_group(probe, python_plugin=vtype is None)
+            if group is not None:
+                groups[group].append((value, vtype, node))
+        access = (params,) + groups
         if state is not None:
             state.scalars = access
     get = access[0].get_property
-    return (tuple(get(value, vtype, node) for value, vtype, node in access[1])
-            + tuple(tuple(get(value, vtype, node)) for value, vtype, node in access[2])
-            + tuple(_matrix_entries(get(value, vtype, node)) for value, vtype, node in access[3])
-            + tuple(tuple(get(value, vtype, node).shape) for value, vtype, node in access[4]))
+
+    def read(value, vtype, node):
+        return value if vtype is None else get(value, vtype, node)
+    return (tuple(read(*e) for e in access[1])
+            + tuple(tuple(read(*e)) for e in access[2])
+            + tuple(_matrix_entries(read(*e)) for e in access[3])
+            + tuple(tuple(read(*e).shape) for e in access[4])
+            + tuple(repr(read(*e)) for e in access[5]))
+
+
+def _key_group(value, python_plugin: bool) -> int | None:
+    """Which part of :func:`scene_scalars`' key a parameter's value goes to: 0 a plain
+    number, 1 a host-side vector (the film's size, crop size, offset), 2 a host-side matrix or
+    transform (a texture's ``to_uv``), 3 a tensor (its shape: a texture's or grid's
+    resolution), 4 another host-side value (a string, a ``Scalar*`` bounding box: its
+    ``repr``); ``None``: nothing to key (a JIT array, which ``dr.freeze`` follows itself)."""
+    kind = type(value)
+    if kind in (float, int, bool):
+        return None if python_plugin else 0
+    if dr.is_tensor_v(kind):
+        return 3
+    if dr.is_array_v(kind):
+        return None if dr.is_jit_v(kind) else (1 if dr.depth_v(kind) == 1 else 2)
+    if hasattr(value, "matrix"):
+        return None if dr.is_jit_v(type(value.matrix)) else 2
+    if isinstance(value, str) or kind.__name__.startswith("Scalar"):
+        return 4
+    return None
 
 
 def _matrix_entries(value) -> tuple:

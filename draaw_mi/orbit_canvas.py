@@ -15,7 +15,8 @@ A :class:`jupyter_rfb.RemoteFrameBuffer` (``pip install 'draaw-mi[notebooks]'``)
 
 Frames may be pushed from any thread (the preview's worker thread does): the draw is
 scheduled on the event loop the canvas was created on, because jupyter_rfb sends only from
-that loop.
+that loop. So frames reach the browser while the kernel is idle: a cell that drives the
+tuner shows its last frame when it ends (``frame_channel="image"`` shows them as they come).
 
 Example (in a notebook)::
 
@@ -60,7 +61,8 @@ class OrbitCanvas(RemoteFrameBuffer):
                         (enlarged by a whole factor below ``MIN_DISPLAY``)
     ``on_orbit``        ``f(yaw_deg, pitch_deg)``: a drag, relative to where it started
                         (dragging right turns the scene right, dragging down shows more of
-                        its top); called on every move with the left button held
+                        its top); called on every move with the left button held and at the
+                        release; ``None``: no dragging (the cursor stays the default)
     ``on_drag_start``   ``f()``: the left button went down (remember the camera there)
     ``on_zoom``         ``f(factor)``: the wheel; > 1 is farther (scrolling down)
     ``on_reset``        ``f()``: a double-click
@@ -85,7 +87,8 @@ class OrbitCanvas(RemoteFrameBuffer):
         # small previews are shown enlarged by a whole factor, to about MIN_DISPLAY pixels
         k = max(1, MIN_DISPLAY // max(w, h, 1))
         super().__init__(css_width=f"{max(w, 1) * k}px", css_height=f"{max(h, 1) * k}px",
-                         resizable=True, cursor="grab", quality=min(max(int(quality), 1), 99))
+                         resizable=True, cursor="grab" if on_orbit else "default",
+                         quality=min(max(int(quality), 1), 99))
         if problem:
             self.close()
             raise ParameterError(problem)
@@ -98,10 +101,9 @@ class OrbitCanvas(RemoteFrameBuffer):
         self._lossless = False
         self._drag: tuple[float, float] | None = None     # where the left button went down
         self._view_width = float(w * k)                   # CSS width, updated by resize events
-        try:   # the loop of the notebook's kernel, when created from a cell
-            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
-        except RuntimeError:
-            self._loop = None
+        # the loop of the notebook's kernel: running while a cell makes the canvas; else
+        # the browser's first event (a resize, which arrives on that loop) supplies it
+        self._loop: asyncio.AbstractEventLoop | None = _running_loop()
 
     # ------------------------------------------------------------------ frames
     def push(self, image: np.ndarray, lossless: bool = False) -> None:
@@ -131,9 +133,13 @@ class OrbitCanvas(RemoteFrameBuffer):
     def handle_event(self, event: dict) -> None:
         """Map jupyter_rfb's pointer, wheel and resize events onto the callbacks."""
         kind = event.get("type") or event.get("event_type")
+        if self._loop is None:               # made off the loop: frames can be drawn from now on
+            self._loop = _running_loop()
+            if self._loop is not None and self._frame is not None:
+                self.request_draw()
         if kind == "resize":
             self._view_width = max(float(event.get("width", self._view_width)), 1.0)
-        elif kind == "pointer_down" and event.get("button") == 1:
+        elif kind == "pointer_down" and event.get("button") == 1 and self.on_orbit:
             self._drag = (float(event["x"]), float(event["y"]))
             self.cursor = "grabbing"
             if self.on_drag_start:
@@ -143,12 +149,11 @@ class OrbitCanvas(RemoteFrameBuffer):
                 # not "released": the browser's throttled move from before the press can
                 # arrive after it (seen in Chromium); the drag ends with pointer_up only
                 return
-            scale = DEGREES_PER_WIDTH / self._view_width
-            yaw = -(float(event["x"]) - self._drag[0]) * scale
-            pitch = (float(event["y"]) - self._drag[1]) * scale
-            if self.on_orbit:
-                self.on_orbit(yaw, pitch)
-        elif kind == "pointer_up" and event.get("button") == 1:
+            self._orbit(event)
+        elif kind == "pointer_up" and event.get("button") == 1 and self._drag is not None:
+            # the browser holds the last move back (20 ms) but sends the release at once:
+            # the release's position is where the drag ends
+            self._orbit(event)
             self._end_drag()
         elif kind == "wheel" and self.on_zoom:
             dy = float(event.get("dy", 0.0))
@@ -157,6 +162,18 @@ class OrbitCanvas(RemoteFrameBuffer):
         elif kind == "double_click" and self.on_reset:
             self.on_reset()
 
+    def _orbit(self, event):
+        scale = DEGREES_PER_WIDTH / self._view_width
+        self.on_orbit(-(float(event["x"]) - self._drag[0]) * scale,
+                      (float(event["y"]) - self._drag[1]) * scale)
+
     def _end_drag(self):
         self._drag = None
         self.cursor = "grab"
+
+
+def _running_loop():
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None

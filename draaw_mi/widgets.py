@@ -7,7 +7,9 @@ mean while idle, and frames reach the browser as JPEG while you interact and as 
 image has been at rest for ``rest_after`` seconds. With ``jupyter_rfb`` installed (the
 ``notebooks`` extra) they go through an :class:`~draaw_mi.orbit_canvas.OrbitCanvas`: the
 browser paces the frames, and dragging on the image orbits the camera, the wheel moves it
-nearer or farther, a double-click puts it back; without it, through an ``ipywidgets.Image``.
+nearer or farther, a double-click puts it back (PNG frames at rest at most every
+``LOSSLESS_EVERY`` seconds, and the last one; frames are drawn while the kernel is idle);
+without it, through an ``ipywidgets.Image``.
 
 Panels: **Materials** (per material: base colour picker and exact linear RGB text field,
 sliders for every draaw parameter, base-colour texture and normal-map files), **Render**
@@ -45,6 +47,7 @@ except ImportError as _e:  # pragma: no cover - exercised by a test with the mod
 from .tuner_camera import CameraPanel, slider as _slider  # noqa: E402 (needs ipywidgets)
 
 VERSIONS = ("v1", "v2", "v3", "v4", "path")
+LOSSLESS_EVERY = 0.5       # seconds between PNG frames on the canvas while refining at rest
 
 
 def close_widgets(*roots) -> None:
@@ -112,6 +115,7 @@ class MaterialTuner(CameraPanel):
         self._syncing = False
         self._textures: dict = {}
         self.frames_shown = 0
+        self._lossless_at = -float("inf")            # when the canvas last got a PNG
         self.last_format = None
         self.sent = collections.deque(maxlen=256)    # (generation, spp, format) of pushed frames
         self._autostart = autostart
@@ -149,6 +153,14 @@ class MaterialTuner(CameraPanel):
         at_rest = (time.perf_counter() - self._last_change) > self.rest_after or frame.spp >= self.preview.max_spp
         fmt = "png" if at_rest and not frame.interactive else "jpeg"
         if self.canvas is not None:
+            # jupyter_rfb encodes on the kernel's loop, ahead of the widgets' messages: a PNG of
+            # every refinement frame would hold it (26 ms at 512²), so at most one per
+            # LOSSLESS_EVERY seconds and the last one (budget reached)
+            now = time.perf_counter()
+            if fmt == "png" and frame.spp < self.preview.max_spp and now - self._lossless_at < LOSSLESS_EVERY:
+                fmt = "jpeg"
+            if fmt == "png":
+                self._lossless_at = now
             self.canvas.push(tuning.to_uint8(frame.image), lossless=fmt == "png")
         else:
             data = tuning.encode(frame.image, fmt)
@@ -198,9 +210,12 @@ class MaterialTuner(CameraPanel):
                 if frame_channel == "rfb":
                     raise
             else:
-                self.canvas = OrbitCanvas(self.base_scene.resolution, on_orbit=self._drag_orbit,
-                                          on_drag_start=self._drag_start, on_zoom=self._zoom,
-                                          on_reset=lambda: self._orbit_to(0.0, 0.0, 1.0))
+                orbit = self.camera is not None          # a scene without [camera]: no orbit
+                self.canvas = OrbitCanvas(self.base_scene.resolution,
+                                          on_orbit=self._drag_orbit if orbit else None,
+                                          on_drag_start=self._drag_start if orbit else None,
+                                          on_zoom=self._zoom if orbit else None,
+                                          on_reset=(lambda: self._orbit_to(0.0, 0.0, 1.0)) if orbit else None)
         if self.canvas is None:
             self.image = W.Image(format="jpeg", layout=W.Layout(border="1px solid #ccc"))
         self.status = W.HTML("")

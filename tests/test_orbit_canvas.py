@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -82,6 +83,36 @@ def test_a_drag_orbits_the_camera_by_the_documented_angle(tuner):
     assert tuner.yaw.value == pytest.approx(0.0, abs=1e-9)
 
 
+def test_the_release_position_ends_the_drag(tuner):
+    """The browser holds a drag's last move back for 20 ms but sends the release at once: the
+    release's position must count, or the camera stops short of where the button went up."""
+    w = tuner.canvas._view_width
+    tuner.canvas.handle_event(_press(0, 0))
+    tuner.canvas.handle_event(_move(w / 8, 0))
+    tuner.canvas.handle_event(_release(w / 4, 0))
+    assert tuner.yaw.value == pytest.approx(-DEGREES_PER_WIDTH / 4)
+
+
+def test_a_scene_without_a_camera_table_has_no_orbit():
+    """A Mitsuba scene has no [camera] table to orbit about: the canvas shows the default
+    cursor and ignores drags and the wheel, without an error in the panel."""
+    import mitsuba as mi
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=16, height=16)
+    t = MaterialTuner(draaw_mi.load_scene(mi.load_dict(d)), autostart=False, freeze=False,
+                      frame_channel="rfb")
+    try:
+        assert t.camera is None and t.canvas.cursor == "default"
+        t.canvas.handle_event(_press(0, 0))
+        t.canvas.handle_event(_move(8, 8))
+        t.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": 100.0, "x": 1, "y": 1})
+        t.canvas.handle_event({"type": "double_click", "x": 1, "y": 1, "button": 1, "buttons": ()})
+        assert t.canvas.cursor == "default" and t.message.value == ""
+        assert (t.yaw.value, t.pitch.value, t.distance.value) == (0.0, 0.0, 1.0)
+    finally:
+        t.close()
+
+
 def test_pitch_is_clamped_and_yaw_wraps(tuner):
     w = tuner.canvas._view_width
     tuner.canvas.handle_event(_press(0, 0))
@@ -118,15 +149,30 @@ def test_a_resized_view_changes_the_degrees_per_pixel(tuner):
 
 
 def test_frames_are_the_preview_in_srgb_jpeg_while_changing_png_at_rest(tuner):
+    tuner.preview.configure(max_spp=4)
+    n0 = len(tuner.sent)
     tuner.rest_after = 1e9                                  # never at rest (a first compile is slow)
     f = tuner.refresh()
-    got = tuner.canvas.get_frame()
-    np.testing.assert_array_equal(got, tuning.to_uint8(f.image))
-    assert tuner.canvas.quality == 80 and tuner.last_format == "jpeg"
-    tuner.rest_after = 0.0                                  # now at rest: lossless
+    np.testing.assert_array_equal(tuner.canvas.get_frame(), tuning.to_uint8(f.image))
+    assert tuner.canvas.quality == 80 and f.spp < 4
+    tuner.rest_after = 0.0                                  # now at rest: lossless ...
     tuner.refresh()
     tuner.canvas.get_frame()
-    assert tuner.canvas.quality == 100 and tuner.last_format == "png"
+    assert tuner.canvas.quality == 100
+    f = tuner.refresh()                                     # ... at most every LOSSLESS_EVERY s
+    tuner.canvas.get_frame()
+    assert tuner.canvas.quality == 80 and f.spp < 4
+    while f.spp < 4:                                        # and the last frame of the budget
+        f = tuner.refresh()
+    tuner.canvas.get_frame()
+    assert tuner.canvas.quality == 100
+    fmts = [fmt for *_, fmt in list(tuner.sent)[n0:]]
+    assert fmts[:3] == ["jpeg", "png", "jpeg"] and fmts[-1] == "png" and set(fmts[2:-1]) == {"jpeg"}
+    tuner.rest_after = 1e9                                  # a change after a PNG: JPEG again
+    tuner.controls["ball"]["roughness"].value = 0.3
+    tuner.refresh()
+    tuner.canvas.get_frame()
+    assert tuner.canvas.quality == 80
 
 
 def test_a_frame_pushed_from_another_thread_is_sent_on_the_loop():
@@ -136,27 +182,59 @@ def test_a_frame_pushed_from_another_thread_is_sent_on_the_loop():
 
     async def main():
         c = OrbitCanvas((8, 4))
-        c.send = lambda msg, buffers=None: sent.append((msg, buffers))
+        got = asyncio.Event()
+
+        def send(msg, buffers=None):
+            sent.append((msg, buffers, time.perf_counter()))
+            got.set()
+        c.send = send
         c._has_visible_views = True                         # what the front end reports
         await asyncio.sleep(0.05)                           # (a draw attempt of its own, no frame)
         img = np.full((4, 8, 3), 200, np.uint8)
-        th = threading.Thread(target=c.push, args=(img,))
+        pushed = []
+
+        def worker():                                       # pushes while the loop is idle
+            time.sleep(0.1)
+            pushed.append(time.perf_counter())
+            c.push(img)
+        th = threading.Thread(target=worker)
         th.start()
+        try:                                                # an idle loop: only a wake-up helps
+            await asyncio.wait_for(got.wait(), 2.0)
+        except asyncio.TimeoutError:
+            pass
         th.join()
-        for _ in range(100):
-            await asyncio.sleep(0.01)
-            if sent:
-                break
-        arrived = len(sent)                                 # before the browser says anything
+        delay = sent[0][2] - pushed[0] if sent else float("inf")
         c._frame_feedback = {"index": 1, "timestamp": 0.0, "localtime": 0.0}   # the browser's ack
         await asyncio.sleep(0.45)                           # jupyter_rfb's lossless redraw (0.3 s)
         c.close()
-        return c, arrived
+        return c, delay
 
-    c, arrived = asyncio.run(main())
-    assert c.frames_pushed == 1 and arrived == 1
-    kinds = [m["mimetype"] for m, _ in sent if m.get("type") == "framebufferdata"]
+    c, delay = asyncio.run(main())
+    assert c.frames_pushed == 1 and delay < 0.5            # sent at once, not at the next wake-up
+    kinds = [m["mimetype"] for m, _, _ in sent if m.get("type") == "framebufferdata"]
     assert kinds[:1] == ["image/jpeg"] and kinds[-1] == "image/png", kinds
+
+
+def test_a_canvas_made_off_the_loop_draws_from_the_first_browser_event():
+    """Made where no loop runs (a thread, a script), the canvas learns the kernel's loop from
+    the browser's first event (a resize, which arrives on it) and draws the waiting frame."""
+    c = OrbitCanvas((8, 4))
+    sent = []
+    c.send = lambda msg, buffers=None: sent.append(msg)
+    c.push(np.full((4, 8, 3), 90, np.uint8))               # no loop yet: kept, not drawn
+
+    async def main():
+        c._has_visible_views = True
+        await asyncio.sleep(0.05)
+        before = len(sent)
+        c.handle_event({"type": "resize", "width": 8.0, "height": 4.0, "ratio": 1.0})
+        await asyncio.sleep(0.05)
+        return before
+
+    before = asyncio.run(main())
+    c.close()
+    assert before == 0 and [m["type"] for m in sent][:1] == ["framebufferdata"]
 
 
 def test_bad_sizes_and_images_are_one_clear_error():

@@ -325,6 +325,68 @@ def test_replay_follows_a_texture_transform(monkeypatch, version):
         assert np.allclose(render(True), traced, rtol=1e-5, atol=1e-6)
 
 
+class _UvGain(mi.BSDF):
+    """A Python BSDF whose albedo comes from a host-side transform it exposes with
+    ``cb.put`` (no value type: params.update changes the object in place)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        self.to_uv = mi.ScalarAffineTransform3f()
+        self.m_components = [mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide]
+        self.m_flags = self.m_components[0]
+
+    def _albedo(self):
+        return 0.2 * self.to_uv.matrix[0, 0]                 # a Python float: baked in
+
+    def sample(self, ctx, si, s1, s2, active=True):
+        bs = mi.BSDFSample3f()
+        bs.wo = mi.warp.square_to_cosine_hemisphere(s2)
+        bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+        bs.eta, bs.sampled_type = 1.0, mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        bs.sampled_component = mi.UInt32(0)
+        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
+        return bs, dr.select(ok, mi.Spectrum(self._albedo()), 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        return dr.select(ok, mi.Spectrum(self._albedo() * dr.inv_pi) * mi.Frame3f.cos_theta(wo), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        return dr.select(ok, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def traverse(self, cb):
+        cb.put("to_uv", self.to_uv, mi.ParamFlags.NonDifferentiable)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_replay_follows_a_python_plugins_host_transform(monkeypatch):
+    """A host-side value that a Python plugin exposes (``cb.put`` gives it no value type) is
+    keyed too: a replay kept the old albedo after the transform changed."""
+    mi.register_bsdf("uv_gain_test", lambda props: _UvGain(props))
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=16, height=16)
+    d["small-box"]["bsdf"] = {"type": "uv_gain_test"}
+    scene = draaw_mi.load_scene(mi.load_dict(d))
+    key = next(k for k in scene.params.keys() if k.endswith("to_uv"))
+
+    def render(freeze):
+        monkeypatch.setattr(R, "FREEZE", freeze)
+        return np.array(draaw_mi.render(scene, version="path", spp=4, seed=1, post=[]))
+
+    for _ in range(3):
+        before = render(True)
+    scene.params[key] = mi.ScalarAffineTransform3f().scale(mi.ScalarPoint2f(3.0, 3.0))
+    scene.params.update()
+    traced = render(False)
+    assert np.abs(traced - before).max() > 0.05
+    for _ in range(2):
+        assert np.allclose(render(True), traced, rtol=1e-5, atol=1e-6)
+
+
 def test_recordings_kept_are_bounded(monkeypatch, capfd):
     """Each value of a plain-number parameter records anew; the oldest recordings are dropped
     beyond ``RECORDINGS_KEPT`` (25 light weights kept 25 recordings, and Dr.Jit warned on
