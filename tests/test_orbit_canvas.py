@@ -240,6 +240,8 @@ def test_a_canvas_made_off_the_loop_draws_from_the_first_browser_event():
 def test_bad_sizes_and_images_are_one_clear_error():
     with pytest.raises(draaw_mi.DraawError, match=r"OrbitCanvas: size=\(0, 4\)"):
         OrbitCanvas((0, 4))
+    with pytest.raises(draaw_mi.DraawError, match=r"quality=100; expected 1..99"):
+        OrbitCanvas((4, 4), quality=100)                    # lossless is push(..., lossless=True)
     c = OrbitCanvas((4, 4))
     try:
         with pytest.raises(draaw_mi.DraawError, match="expected \\(H, W, 3\\) uint8"):
