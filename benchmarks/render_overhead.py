@@ -113,10 +113,8 @@ def main(argv=None) -> int:
         cells.append(f"{1e3 * paired:+.3f}")
         out.append(f"| {v} | " + " | ".join(cells) + " |")
     text = "\n".join(out) + "\n"
-    print(text)
-    if args.out:
-        from draaw_mi.io import write_text
-        write_text(args.out, text)
+    from draaw_mi.io import print_report
+    print_report(text, args.out)
     return 0
 
 

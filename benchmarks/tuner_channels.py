@@ -114,10 +114,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=OUT)
     args = p.parse_args(argv)
     text = report(run_in_kernel(args), args, argv)
-    print(text)
-    if args.out:
-        from draaw_mi.io import write_text
-        write_text(args.out, text)
+    from draaw_mi.io import print_report
+    print_report(text, args.out)
     return 0
 
 

@@ -92,6 +92,13 @@ def write_text(path: str, text: str) -> None:
             fh.write(text)
 
 
+def print_report(text: str, path: str | None) -> None:
+    """Print a benchmark's report and, when ``path`` is given, write it there atomically."""
+    print(text)
+    if path:
+        write_text(path, text)
+
+
 def write_exr(path: str, image, channels: Sequence[str] | None = None, half: bool = False) -> None:
     """Write an (H, W, C) image as a float32 (or half) scanline EXR, atomically.
 

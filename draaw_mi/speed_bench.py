@@ -216,10 +216,8 @@ def main(argv=None, command: str | None = None) -> int:
             if r is not None:
                 results.append(r)
     text = report(results, args)
-    print(text)
-    if args.out:
-        from .io import write_text
-        write_text(args.out, text)
+    from .io import print_report
+    print_report(text, args.out)
     return 0
 
 
