@@ -24,6 +24,7 @@ from .materials.draaw_bsdf import LIVE_INSTANCES
 _SCENE_STATES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()   # DraawScene -> _SceneState
 _LOCKS_GUARD = threading.Lock()
 
+
 class _SceneState:
     """What the renderer keeps for one :class:`DraawScene` (it goes with the scene): the lock
     that keeps two threads from rendering it at once, and what is found once per scene:

@@ -85,12 +85,7 @@ class CameraPanel:
             raise DraawError(f"camera path frame {i}: {e}") from None
         self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
                        "up": list(map(float, up)), "fov": float(self.fov.value)}
-        self._syncing = True                 # the orbit is relative to the path's camera
-        try:
-            self.yaw.value, self.pitch.value, self.distance.value = 0.0, 0.0, 1.0
-        finally:
-            self._syncing = False
-        self._set_camera()
+        self._orbit_to(0.0, 0.0, 1.0)        # the orbit is relative to the path's camera
 
     def _camera_now(self):
         return tuning.orbit(self.camera, self.yaw.value, self.pitch.value, self.distance.value)

@@ -210,12 +210,10 @@ class MaterialTuner(CameraPanel):
                 if frame_channel == "rfb":
                     raise
             else:
-                orbit = self.camera is not None          # a scene without [camera]: no orbit
-                self.canvas = OrbitCanvas(self.base_scene.resolution,
-                                          on_orbit=self._drag_orbit if orbit else None,
-                                          on_drag_start=self._drag_start if orbit else None,
-                                          on_zoom=self._zoom if orbit else None,
-                                          on_reset=(lambda: self._orbit_to(0.0, 0.0, 1.0)) if orbit else None)
+                mouse = {} if self.camera is None else dict(   # without [camera]: no orbit
+                    on_orbit=self._drag_orbit, on_drag_start=self._drag_start, on_zoom=self._zoom,
+                    on_reset=lambda: self._orbit_to(0.0, 0.0, 1.0))
+                self.canvas = OrbitCanvas(self.base_scene.resolution, **mouse)
         if self.canvas is None:
             self.image = W.Image(format="jpeg", layout=W.Layout(border="1px solid #ccc"))
         self.status = W.HTML("")

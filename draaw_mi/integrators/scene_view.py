@@ -23,12 +23,21 @@ from __future__ import annotations
 import mitsuba as mi
 
 
+def emitters_key(scene: mi.Scene, emitter_array=None, emitters=None) -> tuple:
+    """``(id(scene), JIT index of its emitter array, emitter addresses)``: the key of V4's
+    light-selection tables (``emitter_array`` / ``emitters``: the scene's, if already at hand).
+    A rebuilt emitter array or another set of emitters gives another key."""
+    emitter_array = scene.emitters_dr() if emitter_array is None else emitter_array
+    emitters = scene.emitters() if emitters is None else emitters
+    return id(scene), emitter_array.index, tuple(e.ptr for e in emitters)
+
+
 class SceneView:
     """The fixed host-side parts of one scene (see the module docstring).
 
-    ``key``: ``(id(scene), JIT index of its emitter array, emitter addresses)``, the
-    light-selection table's key (:meth:`DraawV4Integrator.selection_key
-    <draaw_mi.integrators.v4.DraawV4Integrator.selection_key>`); ``emitter_array``: that
+    ``key``: the light-selection table's key (:func:`emitters_key`, as
+    :meth:`DraawV4Integrator.selection_key
+    <draaw_mi.integrators.v4.DraawV4Integrator.selection_key>`); ``emitter_array``: the
     array (a cache entry that holds it keeps its index from going to another scene);
     ``sensor`` / ``film``: the first sensor and its film (``None`` without sensors);
     ``box_no_aperture``: whether that film's filter is a box and the sensor samples no
@@ -41,7 +50,7 @@ class SceneView:
         emitters = list(scene.emitters())
         self.scene = scene
         self.emitter_array = scene.emitters_dr()
-        self.key = (id(scene), self.emitter_array.index, tuple(e.ptr for e in emitters))
+        self.key = emitters_key(scene, self.emitter_array, emitters)
         sensors = scene.sensors()
         self.sensor = sensors[0] if sensors else None
         self.film = None if self.sensor is None else self.sensor.film()

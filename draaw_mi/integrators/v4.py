@@ -10,7 +10,7 @@ from ..errors import ParameterError
 from . import emission_split
 from .common import mis_weight, relative, sample_emitter
 from .sampling import PowerSelection, only_constant_environment, roulette
-from .scene_view import scene_view
+from .scene_view import emitters_key, scene_view
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
 ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
@@ -248,7 +248,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         """Key of ``scene``'s table in the cache: ``(id(scene), JIT index of its emitter array,
         emitter addresses)``, all read on the host. (Registry ids read from the device cost a
         synchronisation with the last render's kernels: about 0.1 ms per frozen render.)"""
-        return id(scene), scene.emitters_dr().index, tuple(e.ptr for e in scene.emitters())
+        return emitters_key(scene)
 
     def freeze_state(self, scene, memo: dict | None = None):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
