@@ -440,8 +440,9 @@ def _cmd_batch(args) -> int:
                 print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<8} {f['output']}"
                       + (f"  ({f['error']})" if f["error"] else ""))
         c = st["counts"]
+        nopreview = f", {c['no-preview']} without their preview" if c["no-preview"] else ""
         print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
-              f"(other job settings), {c['failed']} failed; log {st['log']}")
+              f"(other job settings){nopreview}, {c['failed']} failed; log {st['log']}")
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
                     scheduler=args.scheduler, progress=(not args.no_progress) and sys.stderr.isatty())

@@ -51,9 +51,29 @@ def channel_names(n_channels: int, aov_names: Sequence[str] | None = None) -> li
     return DEFAULT_NAMES[n_color] + aov_names
 
 
+def _fsync(path: str, folder: bool = False) -> None:
+    """Flush ``path``'s data (or a folder's entries) to the disk; best effort (some file
+    systems refuse to sync a folder)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if folder else 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str, suffix: str):
-    """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds."""
+    """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
+
+    The data is flushed to the disk before the rename and the folder after it: a rename alone
+    survives a killed process, not a power cut or OS crash, after which a renamed file can
+    hold an intact header over zeroed data (a batch would then count a broken frame as done).
+    """
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
@@ -73,7 +93,9 @@ def atomic_path(path: str, suffix: str):
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)        # mkstemp makes 0600 files; give the usual mode
+        _fsync(tmp)
         os.replace(tmp, path)
+        _fsync(folder, folder=True)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -157,10 +179,12 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def write_png(path: str, image, exposure: float = 0.0) -> None:
+def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically.
 
-    ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding).
+    ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
+    ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as
+    ``PIL.Image.open(path).text``).
     """
     import matplotlib.image
 
@@ -173,6 +197,6 @@ def write_png(path: str, image, exposure: float = 0.0) -> None:
     u8 = np.round(out * 255.0).astype(np.uint8)
     with atomic_path(path, ".png") as tmp:
         try:
-            matplotlib.image.imsave(tmp, u8, format="png")
+            matplotlib.image.imsave(tmp, u8, format="png", metadata=text)
         except Exception as e:  # noqa: BLE001
             raise IOFailure(f"write_png({path!r}): {e}") from None

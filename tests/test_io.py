@@ -51,6 +51,27 @@ def test_failed_write_keeps_the_old_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["keep.exr"]        # no temp files left
 
 
+def test_atomic_write_reaches_the_disk_before_its_rename(tmp_path, monkeypatch):
+    """The temporary file is fsynced before it is renamed into place, the folder after: a
+    rename of unflushed data survives a killed process but not a power cut (an intact EXR
+    header over zeroed pixels would count as a finished batch frame)."""
+    events = []
+    real_fsync, real_replace, real_open = os.fsync, os.replace, os.open
+    names = {}
+
+    def opening(path, flags, *a):
+        fd = real_open(path, flags, *a)
+        names[fd] = os.path.basename(os.fspath(path)) or os.fspath(path)
+        return fd
+    monkeypatch.setattr(os, "open", opening)
+    monkeypatch.setattr(os, "fsync", lambda fd: (events.append(("fsync", names.get(fd))), real_fsync(fd)))
+    monkeypatch.setattr(os, "replace", lambda a, b: (events.append(("replace", os.path.basename(b))),
+                                                     real_replace(a, b)))
+    draaw_mi.write_exr(str(tmp_path / "f.exr"), np.ones((2, 2, 3), np.float32))
+    kinds = [(k, n if k == "replace" else (n.startswith(".draaw-") and "temp" or n)) for k, n in events]
+    assert kinds == [("fsync", "temp"), ("replace", "f.exr"), ("fsync", tmp_path.name)], events
+
+
 def test_unwritable_and_bad_paths(tmp_path):
     with pytest.raises(IOFailure, match="cannot"):
         draaw_mi.write_exr("/proc/forbidden/x.exr", np.ones((2, 2, 3), np.float32))

@@ -41,7 +41,7 @@ from .plan import plan
 
 __all__ = ["run", "status", "load", "BatchResult", "parse_manifest", "plan", "frame_status", "read_header"]
 
-TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png")
+TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png", ".draaw-probe-*")   # atomic writes, folder probes
 
 
 @dataclass
@@ -51,6 +51,7 @@ class BatchResult:
     total: int
     skipped: int = 0
     rendered: int = 0
+    previews: int = 0                                 # PNGs written from finished EXRs
     failed: list = field(default_factory=list)        # result records with "error"
     seconds: float = 0.0
     log: str = ""
@@ -68,8 +69,10 @@ class BatchResult:
                  else f"{self.missing} of {self.total} frames missing")
         recompiles = sum(self.new_kernels.values())
         extra = f"; WARNING: {recompiles} kernel(s) compiled after a job's first frame" if recompiles else ""
-        return (f"batch: {self.total} frames: {self.rendered} rendered, {self.skipped} already done, "
-                f"{len(self.failed)} failed; {state} ({self.seconds:.1f} s{rate}); log {self.log}{extra}")
+        previews = f" ({self.previews} previews from their EXRs)" if self.previews else ""
+        return (f"batch: {self.total} frames: {self.rendered} rendered, {self.skipped} already done"
+                f"{previews}, {len(self.failed)} failed; {state} ({self.seconds:.1f} s{rate}); "
+                f"log {self.log}{extra}")
 
 
 def load(manifest, out: str | None = None, cache=None):
@@ -144,7 +147,7 @@ def status(manifest, out: str | None = None) -> dict:
     for rec in read_log(log_path(m, specs)):
         if rec.get("event") == "frame":
             errors[(rec.get("job"), rec.get("frame"))] = rec.get("error")
-    frames, counts = [], {"done": 0, "missing": 0, "stale": 0, "failed": 0}
+    frames, counts = [], {"done": 0, "missing": 0, "stale": 0, "no-preview": 0, "failed": 0}
     for s in specs:
         st = frame_status(s)
         err = errors.get((s["job"], s["frame"])) if st != "done" else None
@@ -185,17 +188,36 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     # prepare_outputs just created
     folders = {os.path.dirname(s["output"]) for s in specs} | {log_dir}
     with output_locks([f for f in folders if os.path.isdir(f)], m.path):
-        return _render(m, specs, todo, cache, res, executor, workers, scheduler, client, progress,
-                       on_result, t0)
+        # read again under the lock: a run that held it may have finished frames since
+        # planning, and a finished frame is never rendered twice
+        states = [frame_status(s) for s in todo]
+        previews = [s for s, st in zip(todo, states) if st == "no-preview"]
+        todo = [s for s, st in zip(todo, states) if st not in ("done", "no-preview")]
+        res.skipped = len(specs) - len(todo)
+        return _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client,
+                       progress, on_result, t0)
 
 
-def _render(m, specs, todo, cache, res, executor, workers, scheduler, client, progress, on_result,
-            t0) -> BatchResult:
-    """``run``'s rendering phase, with the output folders locked."""
+def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client, progress,
+            on_result, t0) -> BatchResult:
+    """``run``'s rendering phase, with the output folders locked. ``previews``: finished
+    frames whose PNG preview is missing or stale, written from their EXRs."""
+    from ..errors import DraawError
+    from .exr import write_preview
+
     remove_temp_files(specs)
     log = _Log(res.log)
     log.write(event="start", manifest=m.path, frames=len(specs), todo=len(todo), executor=executor,
               pid=os.getpid())
+    for s in previews:
+        try:
+            write_preview(s)
+            res.previews += 1
+            log.write(event="preview", job=s["job"], frame=s["frame"], output=s["output"])
+        except DraawError as e:
+            r = {"job": s["job"], "frame": s["frame"], "output": s["output"], "error": str(e)}
+            res.failed.append(r)
+            log.write(event="frame", **r)
     bar = None
     if progress and todo:
         from tqdm.auto import tqdm

@@ -14,6 +14,7 @@ the EXR files themselves (a shared file system is assumed for remote clusters).
 from __future__ import annotations
 
 import os
+import uuid
 
 EXECUTORS = ("inprocess", "dask")
 
@@ -75,11 +76,15 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
     cluster, threads = None, getattr(client, "draaw_drjit_threads", None)
     if own:
         client, cluster, threads = dask_client(workers, scheduler)
+    # task keys unique to this run: a key that names only the frame's content (its hash) is
+    # the same for another run of the manifest into another folder on a shared scheduler,
+    # and Dask merges tasks of one key (that run's frames went to the first run's files)
+    run_token = uuid.uuid4().hex[:12]
     try:
         futures = {}
-        for i, spec in enumerate(specs):
-            fut = client.submit(dask_render_frame, spec, threads, key=f"draaw-frame-{spec['hash']}-{i}",
-                                pure=False, retries=retries)
+        for spec in specs:
+            fut = client.submit(dask_render_frame, spec, threads, pure=False, retries=retries,
+                                key=f"draaw-frame-{spec['job']}-{spec['frame']}-{run_token}")
             futures[fut] = spec
         for fut in as_completed(list(futures)):
             spec = futures[fut]

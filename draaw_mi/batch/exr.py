@@ -6,13 +6,18 @@ with ``exrheader`` or ``OpenEXR.File(path, header_only=True).header()``)::
 
     draaw:frame_hash   identity of the job (scene hash + settings + camera + overrides + versions)
     draaw:scene        scene file      draaw:scene_sha256   its SHA-256
+    draaw:files_sha256 SHA-256 of the files the scene reads (textures, meshes...), if any
     draaw:job, draaw:frame, draaw:version, draaw:spp, draaw:seed, draaw:max_depth
     draaw:render_seconds, draaw:rendered_at (UTC ISO time)
     draaw:draaw_mi, draaw:mitsuba, draaw:drjit, draaw:variant
 
 A frame is *finished* when its file exists, its header is readable and its ``draaw:frame_hash``
 equals the planned hash (:func:`frame_status`). Because the file is renamed into place only
-after it is completely written, a present file is never a partial one.
+after it is completely written, a present file is never a partial one. A job with previews
+also wants the frame's PNG, which carries the same hash as a text chunk and is written before
+the EXR: a finished EXR whose PNG is missing or another frame's (a run killed between the two
+writes, previews turned on later) gets its PNG from the EXR, not a new render
+(:func:`write_preview`).
 """
 from __future__ import annotations
 
@@ -35,6 +40,8 @@ def metadata(spec: dict, seconds: float) -> dict:
             "draaw:seed": int(spec["seed"]),
             "draaw:max_depth": int(spec["max_depth"]), "draaw:render_seconds": float(seconds),
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    if spec.get("files_hash"):
+        meta["draaw:files_sha256"] = spec["files_hash"]
     meta.update({f"draaw:{k}": str(v) for k, v in spec["versions"].items()})
     return meta
 
@@ -71,8 +78,38 @@ def read_header(path: str) -> dict | None:
 
 
 def frame_status(spec: dict) -> str:
-    """``"done"`` (present, hash matches), ``"stale"`` (present, other job) or ``"missing"``."""
+    """``"done"`` (present, hash matches), ``"stale"`` (present, other job), ``"missing"``, or
+    ``"no-preview"`` (the EXR is done, the preview the job asks for is missing or stale)."""
     header = read_header(spec["output"])
     if header is None:
         return "stale" if os.path.exists(spec["output"]) else "missing"
-    return "done" if header.get(HASH_ATTR) == spec["hash"] else "stale"
+    if header.get(HASH_ATTR) != spec["hash"]:
+        return "stale"
+    if spec.get("preview") and _png_hash(preview_path(spec)) != spec["hash"]:
+        return "no-preview"
+    return "done"
+
+
+def preview_path(spec: dict) -> str:
+    """The PNG preview beside a frame's EXR."""
+    return os.path.splitext(spec["output"])[0] + ".png"
+
+
+def write_preview(spec: dict, image: np.ndarray | None = None) -> None:
+    """Write the frame's sRGB PNG preview, tagged with its hash; ``image``: the rendered
+    frame, or ``None`` to take it from the finished EXR."""
+    from ..io import read_exr, write_png
+
+    if image is None:
+        image = read_exr(spec["output"])
+    write_png(preview_path(spec), image[..., :3], text={HASH_ATTR: spec["hash"]})
+
+
+def _png_hash(path: str) -> str | None:
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:          # reads the chunks before the pixels only
+            return im.info.get(HASH_ATTR)
+    except (OSError, ValueError):
+        return None

@@ -14,14 +14,18 @@ import time
 import numpy as np
 
 from ..errors import DraawError, RenderError
-from .exr import metadata, write_frame
+from .exr import metadata, write_frame, write_preview
 
 
 class CachedScene:
-    """A loaded scene, its file hash and the original values of everything frames override."""
+    """A loaded scene, its file hash, the hash of the files it reads (textures, meshes, ...:
+    :func:`~draaw_mi.batch.plan.files_hash`) and the original values of everything frames
+    override."""
 
     def __init__(self, scene, digest: str):
+        from .plan import files_hash
         self.scene, self.hash = scene, digest
+        self.files_hash = files_hash(scene.info.get("files"))
         params = scene.params
         self.camera_key = "sensor.to_world" if "sensor.to_world" in params.keys() else next(
             (k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
@@ -37,6 +41,7 @@ class CachedScene:
         self.lock = threading.Lock()
         self.frozen: dict = {}
         self.prepared: set = set()
+        self.params_moved = False        # the last apply() left an override in the scene
 
     def render(self, spec: dict):
         """Render the frame: with a frozen function (``dr.freeze``) when the samples fit in one
@@ -86,6 +91,10 @@ class CachedScene:
         for key, original in self.originals.items():
             params[key] = original
         params.update()
+        if self.params_moved:                      # the lights as loaded, not as last moved
+            from ..render import scene_changed
+            scene_changed(self.scene.mi_scene)
+            self.params_moved = False
         prepare(self.scene.mi_scene)
         self.prepared.add(id(integrator))
         self.apply(spec)
@@ -109,9 +118,13 @@ class CachedScene:
         for key, original in self.originals.items():
             params[key] = wanted.get(key, original)
         params.update()
-        if spec["params"]:
+        # also when this frame only puts overrides back: a job without overrides after one
+        # that dimmed a light kept V4's power table of that light's last value (frames up to
+        # 1.4 off the same job rendered alone)
+        if spec["params"] or self.params_moved:
             from ..render import scene_changed
             scene_changed(self.scene.mi_scene)       # e.g. V4's light powers
+        self.params_moved = bool(spec["params"])
 
 
 def _snapshot(value):
@@ -147,7 +160,8 @@ class SceneCache:
         from .. import load_scene
         from .plan import file_hash
 
-        key = (os.path.abspath(path), tuple(resolution) if resolution else None)
+        where = os.path.abspath(path)
+        key = (where, tuple(resolution) if resolution else None)
         with self._guard:
             entry = self._scenes.get(key)
             if entry is not None and (digest is None or entry.hash == digest):
@@ -157,10 +171,15 @@ class SceneCache:
                 raise RenderError(f"{path}: scene file changed since the batch was planned (sha256 "
                                   f"{current[:12]}, planned {digest[:12]}); re-run the batch")
             if entry is not None:          # free the old scene first: a live twin changes kernels
-                del self._scenes[key]
+                for k in [k for k, e in self._scenes.items() if e is entry]:
+                    del self._scenes[k]
                 entry = None
             scene = load_scene(path, **({"resolution": tuple(resolution)} if resolution else {}))
             entry = self._scenes[key] = CachedScene(scene, current)
+            # the same scene under the resolution it has: planning asks without one (the
+            # scene's own), frames ask with the spec's; a second copy took a second load and
+            # its memory (and, live beside the first, other kernels)
+            self._scenes.setdefault((where, tuple(scene.resolution)), entry)
             return entry
 
 
@@ -189,10 +208,9 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")
     seconds = time.perf_counter() - t0
+    if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
+        write_preview(spec, arr)
     write_frame(spec["output"], arr, channels, metadata(spec, seconds), half=spec["half"])
-    if spec.get("preview"):
-        from ..io import write_png
-        write_png(os.path.splitext(spec["output"])[0] + ".png", arr[..., :3])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 

@@ -50,10 +50,24 @@ def versions() -> dict:
     return {"draaw_mi": __version__, "mitsuba": mi.__version__, "drjit": dr.__version__, "variant": mi.variant()}
 
 
+def files_hash(paths) -> str | None:
+    """One SHA-256 over the files a scene reads besides its own file (textures, meshes and
+    their material libraries, environment maps, volume grids: ``scene.info["files"]``), by
+    content and name; ``None`` for a scene that reads none."""
+    if not paths:
+        return None
+    h = hashlib.sha256()
+    for path in sorted(paths):
+        h.update(f"{os.path.basename(path)}\0{file_hash(path)}\n".encode())
+    return h.hexdigest()
+
+
 def frame_hash(spec: dict) -> str:
     """Hash of everything that determines a frame's pixels (not its output path or time)."""
     keys = ("scene_hash", "resolution", "version", "spp", "sampler", "seed", "max_depth", "aovs", "post",
             "camera", "params", "half", "versions")
+    if spec.get("files_hash"):     # (only then: frames of scenes that read no file keep their hash)
+        keys += ("files_hash",)
     text = json.dumps({k: spec.get(k) for k in keys}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
@@ -175,7 +189,8 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             seen[out] = f"job {job.name!r} frame {f}"
             spec = {
                 "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
-                "scene": job.scene, "scene_hash": entry.hash, "resolution": list(scene.resolution),
+                "scene": job.scene, "scene_hash": entry.hash, "files_hash": entry.files_hash,
+                "resolution": list(scene.resolution),
                 "version": version, "spp": int(spp), "sampler": s.get("sampler"),
                 "seed": frame_seed(job.seed, f),
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,

@@ -13,10 +13,11 @@
     >>> from draaw_mi.media.mitsuba_dicts import smoke_shape
     >>> g = VoxelGrid.from_arrays(density=np.ones((4, 4, 4)))
     >>> shape = mi.load_dict(smoke_shape(g, g_phase=0.3))
-    >>> shape.interior_medium().phase_function()
-    HGPhaseFunction[
-      g = 0.3
-    ]
+    >>> str(shape.interior_medium().phase_function()).split("[")[0]   # Henyey-Greenstein
+    'HGPhaseFunction'
+    >>> params = mi.traverse(shape)
+    >>> round(float(params["interior_medium.phase_function.g"][0]), 6)
+    0.3
 """
 from __future__ import annotations
 

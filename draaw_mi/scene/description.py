@@ -24,7 +24,7 @@ import numpy as np
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from . import camera as cam
-from .meshes import load_mesh_parts, write_ply
+from .meshes import load_mesh_parts, mesh_side_files, write_ply
 from .schema import Where, boolean, check_keys, number, resolution, rotations, string, vector
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
@@ -67,9 +67,14 @@ class BuildContext:
     def __init__(self, base_dir: str, tmp_dir: str, source: str):
         self.base_dir, self.tmp_dir, self.source = base_dir, tmp_dir, source
         self.counter = 0
+        self.files: list[str] = []      # every file the scene reads (info["files"])
 
     def path(self, p: str) -> str:
-        return p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
+        """A file the scene names, resolved against its folder (and remembered)."""
+        path = p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
+        if path not in self.files:
+            self.files.append(path)
+        return path
 
     def unique(self, stem: str) -> str:
         self.counter += 1
@@ -257,6 +262,7 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         if "file" not in shape:
             raise where.error("a mesh needs 'file'")
         path = ctx.path(string(shape["file"], where / "file"))
+        ctx.files.extend(f for f in mesh_side_files(path) if f not in ctx.files)
         parts = load_mesh_parts(path, where / "file")
         smooth = boolean(shape.get("smooth", False), where / "smooth")
         for part in parts:
@@ -464,6 +470,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         info["shapes"] = [k for k in info["shapes"] if k not in sdf_scene.proxy_ids]
     if volume_info:
         info["volumes"] = volume_info
+    info["files"] = [f for f in ctx.files if os.path.isfile(f)]
     return scene, settings, info
 
 

@@ -134,3 +134,64 @@ def bounds(parts: list[MeshPart], transform=None) -> tuple[np.ndarray, np.ndarra
     return pts.min(axis=0), pts.max(axis=0)
 
 
+
+
+def mesh_side_files(path: str) -> list[str]:
+    """The files a mesh file reads besides itself: an OBJ's material libraries (``mtllib``)
+    and the images they name (``map_Kd`` and the other ``map_*``, ``bump``, ``norm``,
+    ``disp``), a ``.gltf``'s external buffers and images. Those that exist, as absolute
+    paths; a batch keys its frames by their content too (:mod:`draaw_mi.batch.plan`).
+
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> _ = open(os.path.join(d, "m.obj"), "w").write("mtllib m.mtl\\nv 0 0 0\\n")
+    >>> _ = open(os.path.join(d, "m.mtl"), "w").write("newmtl a\\nmap_Kd -s 2 2 1 tex.png\\n")
+    >>> _ = open(os.path.join(d, "tex.png"), "wb").write(b"")
+    >>> [os.path.basename(p) for p in mesh_side_files(os.path.join(d, "m.obj"))]
+    ['m.mtl', 'tex.png']
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    found: list[str] = []
+
+    def add(name: str, base: str) -> str | None:
+        p = os.path.normpath(os.path.join(base, name.strip()))
+        if os.path.isfile(p) and p not in found:
+            found.append(p)
+            return p
+        return None
+
+    lower = path.lower()
+    if lower.endswith(".obj"):
+        for libs in _lines_starting(path, ("mtllib",)):
+            # one name with spaces, or several names
+            names = [libs] if os.path.isfile(os.path.join(folder, libs)) else libs.split()
+            for mtl in filter(None, (add(name, folder) for name in names)):
+                for image in _lines_starting(mtl, ("map_", "bump", "norm", "disp")):
+                    add(image.split()[-1], os.path.dirname(mtl))     # options come first
+    elif lower.endswith(".gltf"):
+        import json
+        try:
+            with open(path, encoding="utf-8") as fh:
+                doc = json.load(fh)
+        except (OSError, ValueError):
+            return found
+        for entry in list(doc.get("buffers", [])) + list(doc.get("images", [])):
+            uri = entry.get("uri") if isinstance(entry, dict) else None
+            if isinstance(uri, str) and not uri.startswith("data:"):
+                from urllib.parse import unquote
+                add(unquote(uri), folder)
+    return found
+
+
+def _lines_starting(path: str, keywords: tuple) -> list[str]:
+    """The rest of each line of a text file whose first word starts with one of ``keywords``."""
+    out = []
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                head, _, rest = line.strip().partition(" ")
+                if head.startswith(keywords) and rest.strip():
+                    out.append(rest.strip())
+    except OSError:
+        pass
+    return out

@@ -80,3 +80,24 @@ def test_existing_scheduler_address(tmp_path, client):
     res = batch.run(doc, executor="dask", scheduler=client.scheduler.address, progress=False)
     assert res.complete and res.rendered == 2
     assert all(r["pid"] != os.getpid() for r in res.results)
+
+
+def test_two_runs_into_other_folders_share_no_task_key(tmp_path, client, monkeypatch):
+    """The same manifest rendered into two folders on one scheduler: Dask merges tasks of one
+    key, so a key made of the frame's content alone sent one run's frames to the other's files."""
+    keys = []
+    real = client.submit
+
+    def recording(*args, **kwargs):
+        keys.append(kwargs["key"])
+        return real(*args, **kwargs)
+    monkeypatch.setattr(client, "submit", recording)
+    doc = manifest(tmp_path, frames=2)
+    doc["output"] = "{job}/{frame:04d}.exr"
+    runs = []
+    for folder in ("a", "b"):
+        keys.clear()
+        res = batch.run(doc, out=str(tmp_path / folder), executor="dask", client=client, progress=False)
+        assert res.complete and res.rendered == 2
+        runs.append(set(keys))
+    assert len(runs[0]) == 2 and not runs[0] & runs[1]

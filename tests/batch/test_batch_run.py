@@ -11,6 +11,7 @@ import mitsuba as mi
 import numpy as np
 import OpenEXR
 import pytest
+import tomli_w
 from batch_helpers import assert_bit_identical, frames_of, manifest, write_manifest, write_scene
 from conftest import tiny_description
 
@@ -135,7 +136,7 @@ def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
     assert [r["event"] for r in log] == ["start", "frame", "frame", "frame", "end"]
     assert sum("error" in r for r in log) == 1
     st = batch.status(doc)
-    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "failed": 1}
+    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "no-preview": 0, "failed": 1}
     from draaw_mi.cli import main
     path = write_manifest(tmp_path, doc)
     assert main(["batch", path, "--no-progress"]) == 1        # exit status: not all frames exist
@@ -302,3 +303,132 @@ def test_a_second_run_on_busy_folders_stops_before_touching_them(tmp_path, capsy
         assert in_flight.exists() and not frames_of(tmp_path / "out")
     res = batch.run(doc, progress=False)                       # the lock went with its holder
     assert res.complete and len(frames_of(tmp_path / "out")) == 2 and not in_flight.exists()
+
+
+def test_a_job_after_one_that_moved_a_light_renders_as_if_alone(tmp_path):
+    """V4 keeps a light-selection table from the lights' powers. A job that dims a light and a
+    job without overrides after it on the same scene: the second job's frames must be the bits
+    it renders alone (the restored light must refresh the table; it kept the dimmed light's
+    table, 1.4 off)."""
+    desc = tiny_description()
+    desc["lights"] = [{"type": "point", "position": [2.0, 4.0, 3.0], "intensity": 40.0},
+                      {"type": "point", "position": [-2.0, 3.0, 1.0], "intensity": 5.0}]
+    scene = os.path.join(str(tmp_path), "two_lights.toml")
+    with open(scene, "wb") as fh:
+        tomli_w.dump(desc, fh)
+    dim = {"name": "dim", "scene": scene, "frames": 2, "spp": 4, "version": "v4",
+           "params": {"point_light0.intensity.value": {"from": 1.0, "to": 2.0}}}
+    plain = {"name": "plain", "scene": scene, "frames": 2, "spp": 4, "version": "v4"}
+
+    def run(jobs, folder):
+        doc = {"output": os.path.join(str(tmp_path), folder, "{job}", "{frame:04d}.exr"), "jobs": jobs}
+        assert batch.run(doc, progress=False).complete
+        return {k: v for k, v in frames_of(os.path.join(str(tmp_path), folder)).items()
+                if k.startswith("plain")}
+    after = run([dim, plain], "after")
+    alone = run([plain], "alone")
+    assert len(alone) == 2
+    assert_bit_identical(after, alone)
+
+
+def test_a_scene_is_loaded_once_per_run(tmp_path, monkeypatch):
+    """Planning asks the cache for the scene at its own resolution (no override), frames ask
+    with the spec's resolution: one load serves both (it loaded twice, and held both)."""
+    loads = []
+    real = draaw_mi.load_scene
+
+    def counting(*args, **kwargs):
+        loads.append(kwargs.get("resolution"))
+        return real(*args, **kwargs)
+    monkeypatch.setattr(draaw_mi, "load_scene", counting)
+    assert batch.run(manifest(tmp_path, frames=2), progress=False).complete
+    assert loads == [None]
+    # a job at another resolution is another scene
+    loads.clear()
+    (tmp_path / "b").mkdir()
+    assert batch.run(manifest(tmp_path / "b", frames=1, resolution=[16, 12]), progress=False).complete
+    assert loads == [(16, 12)]
+
+
+def test_a_missing_or_stale_preview_comes_from_the_finished_exr(tmp_path, monkeypatch, capsys):
+    """A run killed between a frame's PNG and EXR, or previews turned on after the frames were
+    rendered: the EXR is finished, so the next run writes the PNG from it, renders nothing, and
+    the run is complete only once every preview exists. A PNG from other job settings (its
+    hash) is replaced. (Before: the frame counted as done and its PNG never came.)"""
+    import matplotlib.image
+    from draaw_mi.batch import frame as frame_mod
+    from draaw_mi.cli import main
+    doc = manifest(tmp_path, frames=2)
+    assert batch.run(doc, progress=False).rendered == 2            # no previews yet
+    out = tmp_path / "out" / "orbit"
+    doc["jobs"][0]["previews"] = True
+    path = write_manifest(tmp_path, doc)
+    assert main(["batch", path, "--status"]) == 1
+    assert "2 without their preview" in capsys.readouterr().out
+    stale = out / "0001.png"
+    matplotlib.image.imsave(str(stale), np.zeros((4, 4, 3), np.uint8))   # no hash: not this frame's
+
+    def no_render(*a, **k):
+        raise AssertionError("a finished frame was rendered again")
+    monkeypatch.setattr(frame_mod.CachedScene, "render", no_render)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 0 and res.previews == 2 and not res.failed
+    for f in ("0000", "0001"):
+        png = matplotlib.image.imread(str(out / f"{f}.png"))[..., :3]
+        ref = draaw_mi.io.srgb_encode(draaw_mi.read_exr(str(out / f"{f}.exr"))[..., :3])
+        assert png.shape == ref.shape and np.abs(png - ref).max() <= 0.5 / 255 + 1e-6
+    assert batch.run(doc, progress=False).previews == 0          # now done
+    assert main(["batch", path, "--status"]) == 0
+
+
+def test_frames_another_run_finished_before_the_lock_are_not_rendered_again(tmp_path, monkeypatch):
+    """Two runs of one manifest: the second plans while the first still renders, then gets the
+    lock once the first is done. It must read the frames' state again under the lock and
+    render nothing (it rendered every frame a second time)."""
+    import contextlib
+    from draaw_mi.batch import lock as lock_mod
+    doc = manifest(tmp_path, frames=2)
+    real = lock_mod.output_locks
+
+    @contextlib.contextmanager
+    def first_run_finishes_meanwhile(folders, where):
+        monkeypatch.setattr(lock_mod, "output_locks", real)
+        assert batch.run(doc, progress=False).rendered == 2     # the other run
+        with real(folders, where):
+            yield
+    monkeypatch.setattr(lock_mod, "output_locks", first_run_finishes_meanwhile)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 0 and res.skipped == 2
+
+
+def test_a_frame_is_stale_when_a_file_its_scene_reads_changes(tmp_path, capsys):
+    """Frames are keyed by the scene file and by the files it reads: a texture named in the
+    scene, an OBJ mesh, its material library and the image that names. Changing any of them
+    makes the finished frames stale (they stayed "done" and were never rendered again)."""
+    from draaw_mi.cli import main
+    (tmp_path / "quad.obj").write_text(
+        "mtllib quad.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\n"
+        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paint\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    (tmp_path / "quad.mtl").write_text("newmtl paint\nKd 0.5 0.5 0.5\nmap_Kd quad.png\n")
+    draaw_mi.write_png(str(tmp_path / "quad.png"), np.full((4, 4, 3), 0.3, np.float32))
+    draaw_mi.write_png(str(tmp_path / "ball.png"), np.full((4, 4, 3), 0.6, np.float32))
+    desc = tiny_description()
+    desc["materials"]["ball"]["base_color"] = "ball.png"
+    desc["shapes"][1] = {"type": "mesh", "file": "quad.obj", "name": "floor", "scale": 3.0}
+    scene = tmp_path / "textured.toml"
+    scene.write_bytes(tomli_w.dumps(desc).encode())
+    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+           "jobs": [{"name": "t", "scene": str(scene), "frames": 1, "spp": 1}]}
+    files = sorted(os.path.basename(f) for f in draaw_mi.load_scene(str(scene)).info["files"])
+    assert files == ["ball.png", "quad.mtl", "quad.obj", "quad.png"]
+    assert batch.run(doc, progress=False).rendered == 1
+    header = batch.read_header(str(tmp_path / "out" / "0000.exr"))
+    assert len(header["draaw:files_sha256"]) == 64
+    for name, edit in (("ball.png", lambda p: draaw_mi.write_png(p, np.full((4, 4, 3), 0.7, np.float32))),
+                       ("quad.png", lambda p: draaw_mi.write_png(p, np.full((4, 4, 3), 0.2, np.float32))),
+                       ("quad.mtl", lambda p: open(p, "a").write("Ks 0.1 0.1 0.1\n")),
+                       ("quad.obj", lambda p: open(p, "a").write("# edited\n"))):
+        assert batch.status(doc)["counts"]["done"] == 1
+        edit(str(tmp_path / name))
+        assert batch.status(doc)["counts"]["stale"] == 1, name
+        assert batch.run(doc, progress=False).rendered == 1, name
