@@ -158,7 +158,9 @@ def _cmd_render(args) -> int:
     arr = np.array(image)
     draaw_mi.write_exr(args.output, arr, channels=info["channels"])
     if args.png:
-        draaw_mi.write_png(args.png, arr[..., :3])
+        from draaw_mi.post import display_encoded
+        chain = scene.settings.get("post", []) if post is None else post
+        draaw_mi.write_png(args.png, arr[..., :3], encoded=display_encoded(chain))
     finite = bool(np.isfinite(arr).all())
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
           f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
@@ -416,7 +418,7 @@ def _cmd_post(args) -> int:
     color = np.array(post.apply(arr[..., :n_color], chain))
     result = np.concatenate([color, arr[..., n_color:]], axis=2)
     if args.output.lower().endswith(".png"):
-        draaw_mi.write_png(args.output, result[..., :3])
+        draaw_mi.write_png(args.output, result[..., :3], encoded=post.display_encoded(chain))
     else:
         draaw_mi.write_exr(args.output, result, channels=names)
     print(f"wrote {args.output}")

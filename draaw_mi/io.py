@@ -179,10 +179,13 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None) -> None:
+def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
+              encoded: bool = False) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
+    ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
+    :func:`draaw_mi.post.display_encoded`) and is stored as it is;
     ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as
     ``PIL.Image.open(path).text``).
     """
@@ -191,7 +194,10 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None)
     arr = to_numpy(image)
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
-    out = srgb_encode(rgb * (2.0 ** exposure))
+    if encoded and exposure:
+        raise IOFailure(f"write_png({path!r}): exposure={exposure!r} needs a linear image; "
+                        "this one is display-encoded (encoded=True)")
+    out = np.clip(rgb, 0.0, 1.0) if encoded else srgb_encode(rgb * (2.0 ** exposure))
     if c == 4:
         out = np.concatenate([out, np.clip(arr[..., 3:4], 0, 1)], axis=2)
     u8 = np.round(out * 255.0).astype(np.uint8)

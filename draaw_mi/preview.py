@@ -60,7 +60,8 @@ GUIDES = ("albedo", "normal")
 class PreviewFrame:
     """One published preview image and what it holds."""
 
-    image: np.ndarray          # (H, W, 3) float32, linear, denoised / post-processed as asked
+    image: np.ndarray          # (H, W, 3) float32, denoised / post-processed as asked; linear
+                               # unless ``encoded``
     raw: np.ndarray            # (H, W, 3) the running mean itself (no denoise, no post)
     spp: int                   # samples per pixel in the mean (0 for an interactive frame)
     generation: int            # parameter generation the frame shows
@@ -68,6 +69,7 @@ class PreviewFrame:
     denoised: bool
     render_s: float            # seconds spent rendering this frame
     t_ready: float             # time.perf_counter() when it became available
+    encoded: bool = False      # image is display-encoded (the post chain ends in srgb)
 
 
 def _value(v):
@@ -316,11 +318,14 @@ class Preview:
             denoised = True
         if interactive:
             image, color = self._upscale(image), self._upscale(color)
+        encoded = False
         if self.post:
             from . import post as _post
             image = np.array(_post.apply(mi.TensorXf(np.ascontiguousarray(image)), self.post), dtype=np.float32)
+            encoded = _post.display_encoded(self.post)
         return PreviewFrame(image=image, raw=color, spp=spp, generation=generation, interactive=interactive,
-                            denoised=denoised, render_s=render_s, t_ready=time.perf_counter())
+                            denoised=denoised, render_s=render_s, t_ready=time.perf_counter(),
+                            encoded=encoded)
 
     # ------------------------------------------------------------------ worker thread
     def on_frame(self, callback):

@@ -132,18 +132,20 @@ def look_at(origin, target, up):
 
 
 # --------------------------------------------------------------------------- frames and errors
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    """Linear HDR -> sRGB-encoded, clipped, uint8 (H, W, 3)."""
+def to_uint8(image: np.ndarray, encoded: bool = False) -> np.ndarray:
+    """Linear HDR -> sRGB-encoded, clipped, uint8 (H, W, 3); ``encoded``: the image is
+    display-encoded already (a post chain that ends in ``srgb``), only clipped."""
     from .io import srgb_encode
     x = np.nan_to_num(np.asarray(image, dtype=np.float32)[..., :3], nan=0.0, posinf=1.0, neginf=0.0)
-    return (np.clip(srgb_encode(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    return (np.clip(x if encoded else srgb_encode(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-def encode(image: np.ndarray, fmt: str = "jpeg", quality: int = 80) -> bytes:
-    """An image as JPEG (``quality``) or PNG bytes, for ``ipywidgets.Image``."""
+def encode(image: np.ndarray, fmt: str = "jpeg", quality: int = 80, encoded: bool = False) -> bytes:
+    """An image as JPEG (``quality``) or PNG bytes, for ``ipywidgets.Image`` (``encoded``: see
+    :func:`to_uint8`)."""
     from PIL import Image
     buf = io.BytesIO()
-    im = Image.fromarray(image if image.dtype == np.uint8 else to_uint8(image))
+    im = Image.fromarray(image if image.dtype == np.uint8 else to_uint8(image, encoded))
     if fmt == "jpeg":
         im.save(buf, format="JPEG", quality=int(quality))
     elif fmt == "png":

@@ -161,9 +161,9 @@ class MaterialTuner(CameraPanel):
                 fmt = "jpeg"
             if fmt == "png":
                 self._lossless_at = now
-            self.canvas.push(tuning.to_uint8(frame.image), lossless=fmt == "png")
+            self.canvas.push(tuning.to_uint8(frame.image, frame.encoded), lossless=fmt == "png")
         else:
-            data = tuning.encode(frame.image, fmt)
+            data = tuning.encode(frame.image, fmt, encoded=frame.encoded)
             self.image.format = fmt
             self.image.value = data
         self.frames_shown += 1

@@ -143,6 +143,27 @@ def _small_fit_scene(tmp_path):
     return str(path)
 
 
+def test_a_chain_that_ends_in_srgb_is_not_encoded_twice_in_pngs(tmp_path):
+    """A chain ending in ``srgb`` leaves display-encoded values: ``post -o x.png`` and
+    ``render --png`` store them as they are (both encoded them again: mean 108 against 53)."""
+    import matplotlib.image
+    chain = tmp_path / "srgb.json"
+    chain.write_text(json.dumps([{"type": "contrast", "contrast": 1.2}, {"type": "srgb"}]))
+    img = np.random.default_rng(3).random((6, 5, 3)).astype(np.float32) * 0.5
+    src = str(tmp_path / "in.exr")
+    draaw_mi.write_exr(src, img)
+    assert main(["post", src, "-o", str(tmp_path / "p.exr"), "--chain", str(chain)]) == 0
+    assert main(["post", src, "-o", str(tmp_path / "p.png"), "--chain", str(chain)]) == 0
+    encoded = draaw_mi.read_exr(str(tmp_path / "p.exr"))
+    png = matplotlib.image.imread(str(tmp_path / "p.png"))[..., :3]
+    assert np.abs(png - np.clip(encoded, 0, 1)).max() <= 0.5 / 255 + 1e-6
+    exr, png_path = tmp_path / "c.exr", tmp_path / "c.png"
+    assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--png", str(png_path),
+                 "--spp", "2", "--resolution", "16x12", "--version", "path", "--post", str(chain)]) == 0
+    png = matplotlib.image.imread(str(png_path))[..., :3]
+    assert np.abs(png - np.clip(draaw_mi.read_exr(str(exr)), 0, 1)).max() <= 0.5 / 255 + 1e-6
+
+
 def test_png_reference_is_srgb_decoded(tmp_path):
     """A PNG reference is display-encoded sRGB: fit() works on its linear values."""
     from draaw_mi.fit import load_reference

@@ -153,3 +153,19 @@ def test_configure_rejects_unknown_options():
         pv.configure(max_dept=3)
     with pytest.raises(ParameterError, match="interactive_scale"):
         Preview(pv.scene, interactive_scale=0)
+
+
+def test_a_post_chain_ending_in_srgb_is_shown_as_it_is():
+    """A preview whose chain ends in ``srgb`` publishes display-encoded frames: they are shown
+    clipped, not encoded a second time (the tuner's image was washed out)."""
+    from draaw_mi import tuning
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False,
+                 post=[{"type": "srgb"}])
+    f = pv.step()
+    assert f.encoded
+    shown = tuning.to_uint8(f.image, f.encoded)
+    once = tuning.to_uint8(f.raw)                                   # numpy's encoding, once
+    assert np.abs(shown.astype(int) - once).max() <= 1
+    assert np.abs(tuning.to_uint8(f.image).astype(int) - once).max() > 20    # twice
+    pv.configure(post=[{"type": "srgb"}, {"type": "srgb", "inverse": True}])
+    assert not pv.step().encoded

@@ -102,7 +102,8 @@ def write_preview(spec: dict, image: np.ndarray | None = None) -> None:
 
     if image is None:
         image = read_exr(spec["output"])
-    write_png(preview_path(spec), image[..., :3], text={HASH_ATTR: spec["hash"]})
+    write_png(preview_path(spec), image[..., :3], text={HASH_ATTR: spec["hash"]},
+              encoded=bool(spec.get("encoded")))
 
 
 def _png_hash(path: str) -> str | None:

@@ -162,6 +162,8 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
         spp = job.spp or s["spp"]
         max_depth = s["max_depth"] if job.max_depth is None else job.max_depth
         aovs = list(s.get("aovs", [])) if job.aovs is None else job.aovs
+        from ..post import display_encoded     # PNGs of a chain that ends in srgb: as they are
+        encoded = display_encoded(s.get("post", []) if job.post is None else job.post)
         try:
             make_integrator(version, max_depth, s.get("hide_emitters", False), aovs)
         except DraawError as e:
@@ -197,6 +199,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "camera": cams[f] if cams else None,
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},
                 "half": job.half, "preview": job.previews, "output": out, "versions": vers,
+                "encoded": encoded,
                 "freeze": job.freeze,
             }
             spec["hash"] = frame_hash(spec)

@@ -36,6 +36,6 @@ def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
             r, c = divmod(i, cols)
             sheet[r * h:r * h + t.shape[0], c * w:c * w + t.shape[1]] = t
         path = os.path.join(os.path.dirname(frames[0]["output"]), f"{job}_contact.png")
-        write_png(path, sheet)
+        write_png(path, sheet, encoded=bool(frames[0].get("encoded")))
         written.append(path)
     return written

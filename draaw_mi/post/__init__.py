@@ -43,7 +43,7 @@ from __future__ import annotations
 from ._spec import BOUNDARIES, Filter, FilterSpec, Param
 from .aberration import ChromaticAberration, chromatic_aberration
 from .blur import Bloom, BloomV2, Sharpen, bloom, bloom_v2, sharpen
-from .chain import FILTERS, Chain, apply, filter_class, load_chain
+from .chain import FILTERS, Chain, apply, display_encoded, filter_class, load_chain
 from .color import ColorMapping, Contrast, Lighten, Tint, color_mapping, contrast, lighten, tint
 from .crt import CRT, crt
 from .edges import EdgeDetection, edge_detection
@@ -53,6 +53,7 @@ __all__ = sorted([
     "BOUNDARIES", "Bloom", "BloomV2", "CRT", "Chain", "ChromaticAberration", "ColorMapping",
     "Contrast", "EdgeDetection", "FILTERS", "Filter", "FilterSpec", "Lighten", "Linear", "Log",
     "Param", "SRGB", "Sharpen", "Tint", "apply", "bloom", "bloom_v2", "chromatic_aberration",
-    "color_mapping", "contrast", "crt", "edge_detection", "filter_class", "lighten", "linear",
+    "color_mapping", "contrast", "crt", "display_encoded", "edge_detection", "filter_class",
+    "lighten", "linear",
     "load_chain", "log", "sharpen", "srgb", "tint",
 ])

@@ -122,6 +122,24 @@ class Chain:
         return "Chain([" + ", ".join(map(repr, self.filters)) + "])"
 
 
+def display_encoded(chain: Iterable[Any] | Chain | None) -> bool:
+    """Whether ``chain``'s output is display-encoded: its last ``srgb`` filter encodes (an
+    ``inverse=True`` one decodes, and no ``srgb`` leaves the image linear). What writes 8-bit
+    images (PNG files, the Jupyter preview) then stores the values as they are instead of
+    encoding them a second time, which washed them out.
+
+    >>> display_encoded([{"type": "bloom"}, {"type": "srgb"}]), display_encoded([])
+    (True, False)
+    >>> display_encoded([{"type": "srgb"}, {"type": "srgb", "inverse": True}])
+    False
+    """
+    encoded = False
+    for f in load_chain(chain or []):
+        if isinstance(f, SRGB):
+            encoded = not f.params["inverse"]
+    return encoded
+
+
 def load_chain(source: str | os.PathLike[str] | Iterable[Any] | Chain) -> Chain:
     """Read and validate a chain from a JSON file, or validate an in-memory list.
 

@@ -432,3 +432,18 @@ def test_a_frame_is_stale_when_a_file_its_scene_reads_changes(tmp_path, capsys):
         edit(str(tmp_path / name))
         assert batch.status(doc)["counts"]["stale"] == 1, name
         assert batch.run(doc, progress=False).rendered == 1, name
+
+
+def test_previews_of_a_chain_that_ends_in_srgb_are_not_encoded_twice(tmp_path):
+    """A job whose post chain ends in ``srgb`` writes display-encoded EXRs; its PNG previews
+    and contact sheet hold those values as they are."""
+    import matplotlib.image
+    doc = manifest(tmp_path, frames=2, previews=True, post=[{"type": "srgb"}])
+    doc["contact_sheet"] = True
+    assert batch.run(doc, progress=False).complete
+    out = tmp_path / "out" / "orbit"
+    exr = draaw_mi.read_exr(str(out / "0000.exr"))[..., :3]
+    png = matplotlib.image.imread(str(out / "0000.png"))[..., :3]
+    assert np.abs(png - np.clip(exr, 0, 1)).max() <= 0.5 / 255 + 1e-6
+    sheet = matplotlib.image.imread(str(out / "orbit_contact.png"))[..., :3]
+    assert np.abs(sheet[:exr.shape[0], :exr.shape[1]] - np.clip(exr, 0, 1)).max() <= 0.5 / 255 + 1e-6

@@ -145,7 +145,7 @@ def test_lists_and_other_drjit_tensors_are_accepted():
 
 def test_public_api_surface():
     expected = {
-        "apply", "load_chain", "Chain", "Filter", "FilterSpec", "Param", "FILTERS", "BOUNDARIES",
+        "apply", "load_chain", "display_encoded", "Chain", "Filter", "FilterSpec", "Param", "FILTERS", "BOUNDARIES",
         "filter_class", "contrast", "tint", "bloom", "bloom_v2", "sharpen", "color_mapping",
         "chromatic_aberration", "edge_detection", "lighten", "crt", "linear", "log", "srgb",
         "Contrast", "Tint", "Bloom", "BloomV2", "Sharpen", "ColorMapping", "ChromaticAberration",
