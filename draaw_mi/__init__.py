@@ -68,3 +68,11 @@ __all__ = [
     "register_plugins", "load_scene", "render", "write_exr", "read_exr", "write_png", "fit", "FitResult", "post",
     "denoise",
 ]
+
+# Subpackages that ``import draaw_mi`` does not load (each costs import time or pulls optional
+# dependencies), reachable as attributes all the same: ``draaw_mi.sdf.smooth_union(...)``,
+# ``draaw_mi.batch.run(...)`` work after a plain ``import draaw_mi``, as the README writes them.
+from ._lazy import on_first_use as _on_first_use  # noqa: E402
+
+__getattr__ = _on_first_use(__name__, ("batch", "bench", "camera_path", "media", "orbit_canvas", "preview",
+                                       "sdf", "tuning", "widgets"))

@@ -41,7 +41,6 @@ Example::
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
 from dataclasses import dataclass
@@ -51,6 +50,7 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import ParameterError, suggest
+from .materials import check_value
 from .render import _scene_lock, make_integrator, pass_seeds, scene_changed
 
 GUIDES = ("albedo", "normal")
@@ -77,35 +77,6 @@ def _value(v):
     if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
         return mi.Color3f(*[float(x) for x in v])
     return v
-
-
-def _check_value(name, key, v):
-    """Finite numbers, and the draaw BSDF's ranges for its parameters (ParameterError)."""
-    from .materials.draaw_bsdf import SCALAR_PARAMS
-    nums = None
-    if isinstance(v, bool):
-        raise ParameterError(f"Preview.update: {name}={v!r}; expected a number")
-    if isinstance(v, (int, float)):
-        nums = [float(v)]
-    elif isinstance(v, (list, tuple, np.ndarray)):
-        try:
-            nums = [float(x) for x in v]
-        except (TypeError, ValueError):
-            raise ParameterError(f"Preview.update: {name}={v!r}; expected numbers") from None
-        if len(nums) != 3:
-            raise ParameterError(f"Preview.update: {name}={v!r}; expected 3 numbers (an RGB colour)")
-    if nums is None:
-        return                                   # a Mitsuba value (transform, colour): as is
-    if not all(math.isfinite(x) for x in nums):
-        raise ParameterError(f"Preview.update: {name}={v!r}; expected finite numbers")
-    parts = key.split(".")
-    param = parts[-2] if len(parts) >= 3 and parts[-1] == "value" else None
-    if param in SCALAR_PARAMS:
-        lo, hi = SCALAR_PARAMS[param][1:]
-        if not all(lo <= x <= hi for x in nums):
-            raise ParameterError(f"Preview.update: {name}={v!r}; expected a number in [{lo}, {hi}]")
-    elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
-        raise ParameterError(f"Preview.update: {name}={v!r}; expected values >= 0")
 
 
 class Preview:
@@ -193,7 +164,7 @@ class Preview:
         checked = {}
         for name, v in values.items():
             key = self.key(name)
-            _check_value(name, key, v)
+            check_value("Preview.update", name, key, v)
             checked[key] = v
         with self._lock:
             self._pending.update(checked)

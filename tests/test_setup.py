@@ -49,3 +49,24 @@ def test_cli_reports_environment_problems_in_one_line():
     cmd = [exe, "info"] if os.path.exists(exe) else [sys.executable, "-m", "draaw_mi_cli", "info"]
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert r.returncode == 2 and r.stderr.startswith("draaw-mi: error:") and r.stderr.count("\n") == 1
+
+
+def test_subpackages_are_attributes_after_a_plain_import():
+    """``import draaw_mi`` loads neither the batch, SDF nor media code, yet the README's
+    ``draaw_mi.sdf.export.to_entries(...)`` and ``draaw_mi.batch.run(...)`` work after it (they
+    raised AttributeError); a misspelt name is still an AttributeError. In a fresh interpreter."""
+    code = (
+        "import sys, draaw_mi\n"
+        "assert not {'draaw_mi.batch', 'draaw_mi.sdf', 'draaw_mi.media'} & set(sys.modules)\n"
+        "assert callable(draaw_mi.sdf.export.to_entries) and callable(draaw_mi.sdf.smooth_union)\n"
+        "assert callable(draaw_mi.batch.run) and draaw_mi.media.VoxelGrid.__name__ == 'VoxelGrid'\n"
+        "for bad in ('draaw_mi.sdf.exprot', 'draaw_mi.batches'):\n"
+        "    try:\n"
+        "        eval(bad)\n"
+        "    except AttributeError as e:\n"
+        "        assert repr(bad.rsplit('.', 1)[1]) in str(e), e\n"
+        "    else:\n"
+        "        raise SystemExit(bad + ' did not raise')\n"
+        "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]

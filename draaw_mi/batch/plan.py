@@ -175,6 +175,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             except DraawError as e:
                 raise SceneError(f"{loc}: params: {e}") from None
             _check_shape(loc, name, job.params[name], scene.params[keys[name]])
+            _check_values(loc, name, keys[name], job.params[name], job.frames)
         cams = None
         if job.camera is not None:
             if entry.camera_key is None:
@@ -228,6 +229,23 @@ def _check_shape(loc, name, spec, current):
         if size != want and size != 1:
             raise SceneError(f"{loc}: params.{name}: value {v!r} has {size} components; the parameter "
                              f"has {want}")
+
+
+def _check_values(loc, name, key, spec, frames: int) -> None:
+    """Every frame's value of an override within the parameter's range (roughness in [0, 1],
+    colours >= 0, finite: :func:`draaw_mi.materials.check_value`), before anything renders.
+    (Out-of-range values rendered as the clamped value, with exit status 0.)"""
+    from ..materials import check_value
+    kind, data = spec
+    for f in range(frames):
+        v = param_value(kind, data, f, frames)
+        if isinstance(v, list) and len(v) == 1:
+            v = v[0]
+        if not isinstance(v, list) or len(v) == 3:
+            try:
+                check_value(f"frame {f}", f"params.{name}", key, v)
+            except DraawError as e:
+                raise SceneError(f"{loc}: {e}") from None
 
 
 def check_writable(folders, where: str) -> None:

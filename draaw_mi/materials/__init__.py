@@ -1,6 +1,12 @@
 """Materials: the ``draaw`` BSDF plugin (metallic/roughness model + GO-Draaw's legacy knobs)."""
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
+from ..errors import ParameterError
+
 _REGISTERED = False
 
 
@@ -12,3 +18,44 @@ def register() -> None:
     from .draaw_bsdf import register_draaw_bsdf
     register_draaw_bsdf()
     _REGISTERED = True
+
+
+def check_value(who: str, name: str, key: str, v) -> None:
+    """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
+    wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
+    parameters (roughness in [0, 1], ...; colours and light intensities >= 0). Raises
+    :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
+    range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
+    planner check their overrides with it.
+
+    >>> check_value("demo", "ball.roughness", "ball.roughness.value", 0.3)
+    >>> check_value("demo", "ball.roughness", "ball.roughness.value", 3.0)
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
+    """
+    from .draaw_bsdf import SCALAR_PARAMS
+    nums = None
+    if isinstance(v, bool):
+        raise ParameterError(f"{who}: {name}={v!r}; expected a number")
+    if isinstance(v, (int, float)):
+        nums = [float(v)]
+    elif isinstance(v, (list, tuple, np.ndarray)):
+        try:
+            nums = [float(x) for x in v]
+        except (TypeError, ValueError):
+            raise ParameterError(f"{who}: {name}={v!r}; expected numbers") from None
+        if len(nums) != 3:
+            raise ParameterError(f"{who}: {name}={v!r}; expected 3 numbers (an RGB colour)")
+    if nums is None:
+        return                                   # a Mitsuba value (transform, colour): as is
+    if not all(math.isfinite(x) for x in nums):
+        raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers")
+    parts = key.split(".")
+    param = parts[-2] if len(parts) >= 3 and parts[-1] == "value" else None
+    if param in SCALAR_PARAMS:
+        lo, hi = SCALAR_PARAMS[param][1:]
+        if not all(lo <= x <= hi for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
+    elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
+        raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")

@@ -30,3 +30,8 @@ __all__ = [
     "smooth_subtraction", "lse_intersection", "smooth_lse_intersection", "addition",
     "smooth_addition", "PRIMITIVES", "OPERATORS", "parameters", "SDFParameters",
 ]
+
+from .._lazy import on_first_use as _on_first_use  # noqa: E402
+
+# draaw_mi.sdf.export.to_entries(...) and the like after a plain ``import draaw_mi``
+__getattr__ = _on_first_use(__name__, ("export", "integration", "scene", "study", "tracer"))
