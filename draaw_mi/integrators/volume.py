@@ -73,7 +73,7 @@ class MediaTable:
             if m is not None:
                 if all(m is not x for x in media):
                     media.append(m)
-                    inside.append(np.array(sensor.world_transform().translation()))
+                    inside.append(np.array(sensor.world_transform().translation(), float).ravel())
                 self.sensor_media[k] = m
         self.media = media
         self.majorants = [build_majorant(m, inside=p) for m, p in zip(media, inside)]

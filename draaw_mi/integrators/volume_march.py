@@ -17,6 +17,10 @@ the whole box chord regardless of where the light was, and ignored surfaces. Her
   indirect light: biased by design (the cheap rung), ``medium_steps`` is the knob.
 * SDF objects (feature ``sdf``): the march of a segment stops at the nearer of the mesh and
   SDF hits, SDF surfaces are lit like opaque surfaces, and SDFs block the shadow rays.
+* An unbounded medium (a ``homogeneous`` one as the camera's medium) is marched up to twice
+  the scene's bounding radius; past that it lets nothing through unless its ``sigma_t`` is 0,
+  so an environment reaches neither the camera nor the fog through it (``volpath``, and V3/V4
+  with it, let in an environment's light samples as if it were at that radius).
 
 Primal only: in media scenes V1/V2 are not differentiable (use ``draaw_v3`` / ``draaw_v4``).
 """
@@ -29,6 +33,30 @@ from ..errors import RenderError
 from .volume_tracking import coefficients, medium_interaction
 
 MAX_SEGMENTS = 16
+
+
+def _segment_end(scene, ray, t0, t1, active):
+    """``(t1', unbounded)``: the end of the marched stretch ``[t0, t1]``. An unbounded medium
+    (Mitsuba's ``homogeneous`` as the camera's medium: its box is all space) along a ray that
+    leaves the scene has ``t1 = inf``, and equal steps over it gave NaN pixels. Its stretch
+    ends where the ray leaves a sphere of twice the scene's bounding radius: the light
+    scattered in beyond it is not gathered (bias, as the march's), and the transmittance
+    past it is :func:`_tail`'s."""
+    unbounded = active & ~dr.isfinite(t1)
+    bs = scene.bbox().bounding_sphere()
+    radius = 2.0 * max(float(bs.radius), 1.0)
+    oc = ray.o - mi.Point3f(bs.center)
+    b = dr.dot(oc, ray.d)
+    c = dr.squared_norm(oc) - radius * radius
+    far = -b + dr.safe_sqrt(b * b - c)            # the origin lies inside: the larger root
+    return dr.select(unbounded, dr.maximum(far, t0), t1), unbounded
+
+
+def _tail(medium, ray, t, unbounded, active):
+    """Transmittance from ``t`` to infinity through a homogeneous unbounded medium: 0 where it
+    attenuates at all, else 1 (``exp(-sigma_t * inf)`` without the NaN of ``0 * inf``)."""
+    _, _, s_t = _coeffs(medium, ray, t, active & unbounded)
+    return dr.select(active & unbounded & (s_t > 0), 0.0, 1.0)
 
 
 def _coeffs(medium, ray, t, active):
@@ -55,7 +83,7 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
         in_med = live & (med != None)  # noqa: E711
         ok, mint, maxt = med.intersect_aabb(r)
         t0 = dr.maximum(mint, 0.0)
-        t1 = dr.minimum(maxt, seg)
+        t1, unbounded = _segment_end(scene, r, t0, dr.minimum(maxt, seg), in_med & ok)
         march = in_med & ok & (t1 > t0)
         dt = dr.select(march, (t1 - t0) / steps, 0.0)
         tau = mi.Float(0.0)
@@ -64,7 +92,7 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
             _, _, s_t = _coeffs(med, r, t0 + (mi.Float(k) + u) * dt, march)
             tau += s_t * dt
             k += 1
-        T[march] = T * dr.exp(-tau)
+        T[march] = T * dr.exp(-tau) * _tail(med, r, t1, unbounded, march)
         hit = live & si.is_valid() & (si.t < rem)
         null = hit & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
         T[hit & ~null] = 0.0
@@ -84,7 +112,10 @@ def _light(scene, sampler, it, medium, steps, active, sdf=None):
     if sdf is not None:
         active &= ~sdf.occluded(it, ds, active)
     r = it.spawn_ray(ds.d)
-    dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
+    # an environment is infinitely far (Mitsuba's constant one reports twice the scene's
+    # radius): through an unbounded fog none of it arrives, as on the camera rays
+    far = ~dr.isfinite(ds.dist) | mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+    dist = dr.select(far, dr.inf, ds.dist * (1.0 - mi.math.ShadowEpsilon))
     T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active)
     return ds, dr.select(active, em_w * T, 0.0)
 
@@ -117,7 +148,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         in_med = live & (medium != None)  # noqa: E711
         ok, mint, maxt = medium.intersect_aabb(ray)
         t0 = dr.maximum(mint, 0.0)
-        t1 = dr.minimum(maxt, si.t)
+        t1, unbounded = _segment_end(scene, ray, t0, dr.minimum(maxt, si.t), in_med & ok)
         march = in_med & ok & (t1 > t0)
         dt = dr.select(march, (t1 - t0) / steps, 0.0)
         u = sampler.next_1d(march)
@@ -132,6 +163,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
             L[march] = L + T_half * s_s * ph * Lw * dt
             T[march] = T * dr.exp(-s_t * dt)
             k += 1
+        T[march] = T * _tail(medium, ray, t1, unbounded, march)
         valid |= live & si.is_valid()
         bsdf = si.bsdf(ray)
         hit = live & si.is_valid()

@@ -44,10 +44,13 @@ def grid(kind: str, n: int = 8) -> VoxelGrid:
     return g
 
 
-def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3) -> dict:
+def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3,
+               fog_sigma_t: float = 0.5) -> dict:
     """``uniform``, ``gradient``, ``blobs``, ``albedo`` (grid smoke in a null cube),
     ``mesh`` (a grid medium inside a null-BSDF sphere), ``homogeneous`` (Mitsuba's
-    homogeneous medium in a null cube), ``inside`` (the camera inside a grid medium)."""
+    homogeneous medium in a null cube), ``inside`` (the camera inside a grid medium), ``fog``
+    (the camera in an unbounded homogeneous medium, which is all space: no environment light,
+    since ``volpath`` ends a path that leaves the scene inside a medium; ``fog_sigma_t``)."""
     if kind in ("uniform", "gradient", "blobs", "albedo"):
         d = base(integrator, res)
         d["smoke"] = smoke_shape(grid(kind), g_phase=g_phase)
@@ -70,6 +73,12 @@ def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3)
         medium = mi.load_dict(smoke_medium(g, g_phase=g_phase))
         d = base(integrator, res, sensor_medium=medium, origin=(0.1, 0.2, 0.6))
         d["smoke"] = {"type": "cube", "bsdf": {"type": "null"}, "interior": medium}
+        return d
+    if kind == "fog":
+        fog = mi.load_dict({"type": "homogeneous", "sigma_t": fog_sigma_t, "albedo": 0.8,
+                            "phase": {"type": "hg", "g": g_phase}})
+        d = base(integrator, res, sensor_medium=fog)
+        del d["env"]
         return d
     raise ValueError(kind)
 

@@ -28,23 +28,49 @@ def test_bench_study_on_smoke_scene(tmp_path):
         assert r["finite"] and np.isfinite(r["rmse"])
 
 
-def test_v1_march_matches_single_scattering_volpath():
+@pytest.mark.parametrize("kind", ["gradient", "fog"])
+def test_v1_march_matches_single_scattering_volpath(kind):
     """V1/V2's march (single scattering + direct light at the first surface, real
     transmittance) is exactly volpath at max_depth 2, up to the march's quadrature error,
-    which falls with ``medium_steps``."""
+    which falls with ``medium_steps``. ``fog``: the camera in an unbounded medium, whose
+    escaping rays marched over an infinite stretch (NaN in 2 of 3 pixels)."""
     import sys
     sys.path.insert(0, os.path.dirname(__file__))
     import media_scenes as ms
     import mitsuba as mi
-    ref = ms.scene("gradient", "volpath", res=10, max_depth=2)
+    ref = ms.scene(kind, "volpath", res=10, max_depth=2)
     a = np.stack([np.array(mi.render(ref, spp=64, seed=s)) for s in range(4)])
     for v in ("draaw_v1", "draaw_v2"):
-        sc = mi.load_dict(ms.scene_dict("gradient", {"type": v, "medium_steps": 32}, 10))
+        sc = mi.load_dict(ms.scene_dict(kind, {"type": v, "medium_steps": 32}, 10))
         b = np.stack([np.array(mi.render(sc, spp=64, seed=10 + s)) for s in range(4)])
         assert np.all(np.isfinite(b))
         diff = b.mean() - a.mean()
         se = np.hypot(a.mean(axis=(1, 2, 3)).std(ddof=1), b.mean(axis=(1, 2, 3)).std(ddof=1)) / 2
         assert abs(diff) < 4 * se + 0.005 * a.mean(), (diff, se)
+
+
+def test_v1_in_an_unbounded_fog_sees_the_environment_only_through_clear_air():
+    """An unbounded homogeneous medium lets ``exp(-sigma_t * inf)`` of an environment through,
+    to the camera and to the fog's light samples: all of it when ``sigma_t = 0`` (a clear fog
+    renders as no medium), none when it attenuates (the same fog without the environment;
+    Mitsuba's constant environment reports a finite distance, and its light got in)."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    import media_scenes as ms
+    import mitsuba as mi
+
+    def mean(d, seeds):
+        sc = mi.load_dict(d)
+        m = np.array([np.array(mi.render(sc, spp=32, seed=s)).mean() for s in seeds])
+        return m.mean(), m.std(ddof=1) / np.sqrt(len(m))
+    integ = {"type": "draaw_v1", "medium_steps": 8}
+    env = {"type": "constant", "radiance": 0.4}
+    clear = dict(ms.scene_dict("fog", integ, 10, fog_sigma_t=0.0), env=env)
+    (a, sa), (b, sb) = mean(clear, range(4)), mean(ms.base(integ, 10), range(4, 8))
+    assert abs(a - b) < 4 * np.hypot(sa, sb) + 1e-3 * b, (a, b, sa, sb)
+    thick = ms.scene_dict("fog", integ, 10, fog_sigma_t=0.5)
+    (c, sc_), (d, sd) = mean(dict(thick, env=env), range(4)), mean(thick, range(4, 8))
+    assert abs(c - d) < 4 * np.hypot(sc_, sd) + 1e-3 * d and a > 5 * c, (c, d, sc_, sd, a)
 
 
 def test_v1_v2_media_scenes_are_primal_only_with_one_line():

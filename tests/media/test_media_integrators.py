@@ -38,7 +38,7 @@ def same_expectation(kind, integ, seeds=5, spp=32, res=10, **kw):
     return s
 
 
-@pytest.mark.parametrize("kind", ["blobs", "mesh", "inside"])
+@pytest.mark.parametrize("kind", ["blobs", "mesh", "inside", "fog"])
 def test_v4_matches_volpath(kind):
     same_expectation(kind, "draaw_v4")
 
