@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import drjit as dr
+import numpy as np
 import mitsuba as mi
 
 from ..errors import ParameterError
@@ -128,6 +129,16 @@ class SDFNode:
                                  f"{suggest(key, self._params)}")
         old = self._params[key]
         if dr.is_array_v(value) and type(value) is type(old):
+            lo = getattr(self, "_lower_bounds", {}).get(key)
+            if lo is not None:
+                # an optimiser's step can leave the range (a negative radius made the object
+                # vanish with a zero gradient; a zero cone height gave NaN distances)
+                low = float(np.min(np.array(dr.detach(value))))
+                if not low > lo:
+                    raise ParameterError(
+                        f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number > {lo} "
+                        f"(clamp an optimiser's value before the update, e.g. "
+                        f"opt[k] = dr.maximum(opt[k], 1e-3))")
             new = value
         elif isinstance(old, mi.Point3f):
             new = dr.opaque(mi.Point3f, _vec3(value, f"sdf.{self.kind} {self.name!r}", key))

@@ -284,6 +284,27 @@ def test_parameter_errors():
         s.set_param("radius_", 2.0)
 
 
+def test_an_optimisers_out_of_range_value_is_one_clear_error():
+    """Dr.Jit values (an optimiser's, with gradients) are range-checked like numbers: a
+    negative radius made the sphere vanish with a zero gradient, a zero cone height gave NaN
+    distances, a zero scale a distance of 0 everywhere. Values in range pass unchanged."""
+    from draaw_mi.sdf import Transform
+    s = Sphere(radius=1.0, name="ball")
+    r = mi.Float(0.5)
+    dr.enable_grad(r)
+    s.set_param("radius", r)
+    assert s.own_params()["radius"] is r and dr.grad_enabled(s.radius)
+    cone = Cone(name="c")
+    moved = Transform(Sphere(radius=1.0), scale=2.0, name="t")
+    for node, key, bad in ((s, "radius", -0.5), (cone, "height", 0.0), (moved, "scale", 0.0),
+                           (s, "radius", float("nan"))):
+        value = mi.Float(bad)
+        dr.enable_grad(value)
+        with pytest.raises(ParameterError, match=rf"{key}=.*expected a number > 0.*clamp"):
+            node.set_param(key, value)
+    assert float(s.radius[0]) == 0.5                      # the bad value was not kept
+
+
 def test_params_and_gradient_of_distance():
     s = Sphere((0, 0, 0), 1.0, name="ball")
     u = smooth_union(s, Box((2, 0, 0), (1, 1, 1), name="b"), 0.2, name="u")
