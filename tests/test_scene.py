@@ -179,7 +179,10 @@ BAD = [
     (("camera", "fov"), 180, r"camera.fov: 180 is out of range"),
     (("camera", "angles"), [0.1, 0.2], r"cannot be combined"),
     (("lights", 0, "intensity"), -2, r"lights\[0\].intensity: -2 is out of range"),
-    (("lights", 0, "type"), "sun", r"lights\[0\].type: 'sun' is not one of"),
+    (("lights", 0, "type"), "sun", r"lights\[0\].type: 'sun' is not one of [a-z, ]+$"),
+    (("lights", 0, "type"), KeyError, r"lights\[0\]: missing key 'type'; expected one of point"),
+    (("shapes", 0, "type"), KeyError, r"shapes\[0\]: missing key 'type'; expected one of mesh, sphere"),
+    (("render", "version"), "v9", r"render.version: 'v9' is unknown; expected v1, v2, v3, v4, path"),
     (("lights", 0, "position"), KeyError, r"needs 'position'"),
     (("colour",), {}, r"unknown key 'colour'"),
 ]

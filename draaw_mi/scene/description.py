@@ -25,7 +25,7 @@ from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from . import camera as cam
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
-from .schema import Where, boolean, check_keys, number, resolution, rotations, string, vector
+from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -104,6 +104,12 @@ def parse_settings(desc: dict, where: Where) -> dict:
         s["max_depth"] = number(render["max_depth"], w / "max_depth", lo=-1, hi=1024, integer=True)
     if "version" in render:
         s["version"] = string(render["version"], w / "version")
+        from ..errors import DraawError
+        from ..integrators import resolve_version
+        try:
+            resolve_version(s["version"])          # a typo names the file and the field
+        except DraawError as e:
+            raise (w / "version").error(str(e).replace("render version ", "", 1)) from None
     if "seed" in render:
         s["seed"] = number(render["seed"], w / "seed", lo=0, hi=2 ** 32 - 1, integer=True)
     if "filter" in render:
@@ -231,7 +237,7 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
     """Mitsuba dicts (keyed by unique ids) for one ``[[shapes]]`` entry."""
     if not isinstance(shape, dict):
         raise where.error(f"expected a shape table, got {shape!r}")
-    kind = string(shape.get("type", "mesh" if "file" in shape else ""), where / "type", SHAPE_KEYS)
+    kind = kind_of(shape, where, SHAPE_KEYS, default="mesh" if "file" in shape else None)
     check_keys(shape, COMMON_SHAPE_KEYS + SHAPE_KEYS[kind], where)
     name = string(shape.get("name", f"{kind}{index}"), where / "name")
     if safe_id(name) != name or not name:
@@ -299,7 +305,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
 
     if not isinstance(light, dict):
         raise where.error(f"expected a light table, got {light!r}")
-    kind = string(light.get("type", ""), where / "type", LIGHT_KEYS)
+    kind = kind_of(light, where, LIGHT_KEYS)
     check_keys(light, COMMON_LIGHT_KEYS + LIGHT_KEYS[kind], where)
     name = string(light.get("name", f"{kind}_light{index}"), where / "name")
     if safe_id(name) != name or not name:

@@ -81,8 +81,28 @@ def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> st
     if choices is not None:
         choices = list(choices)
         if value not in choices:
-            raise where.error(f"{value!r} is not one of {', '.join(choices)}{suggest(value, choices)}")
+            hint = suggest(value, choices)           # (its list of valid names would repeat ours)
+            hint = hint if hint.startswith("; did you mean") else ""
+            raise where.error(f"{value!r} is not one of {', '.join(choices)}{hint}")
     return value
+
+
+def kind_of(table: dict, where: Where, choices: Iterable[str], default: str | None = None) -> str:
+    """A table's ``type``: one of ``choices``; a table without one gets ``default`` or one
+    clear error ("missing key 'type'", not "'' is not one of ...").
+
+    >>> kind_of({"type": "sphere"}, Where("s.toml") / "shapes" / 0, ("sphere", "cube"))
+    'sphere'
+    >>> kind_of({"radius": 1}, Where("s.toml") / "shapes" / 0, ("sphere", "cube"))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.SceneError: s.toml: shapes[0]: missing key 'type'; expected one of sphere, cube
+    """
+    if "type" not in table:
+        if default is not None:
+            return default
+        raise where.error(f"missing key 'type'; expected one of {', '.join(choices)}")
+    return string(table["type"], where / "type", choices)
 
 
 def boolean(value: Any, where: Where) -> bool:
