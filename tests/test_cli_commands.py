@@ -205,6 +205,11 @@ def test_bench_suite_speed(tmp_path, capsys):
     assert main(argv) == 0
     text = (out / "speed_suite.md").read_text()
     assert "`draaw_v4` | `draaw_v2`" in text
+    # the report's command is the one typed, runnable as pasted (it was the script's flags,
+    # with an unquoted ';')
+    import shlex
+    command = re.search(r"Command: `([^`]*)`", text).group(1)
+    assert shlex.split(command) == ["draaw-mi"] + argv
     row = next(line for line in text.splitlines() if line.startswith("| metal_018 |"))
     cells = re.findall(r"\*\*([\d.]+)\*\* \(([\d.]+), ([\d.]+)\)", row)
     assert len(cells) == 2
