@@ -106,6 +106,21 @@ def test_mitsuba_dict_and_xml_pass_through(tmp_path):
     assert s.resolution == (20, 10) and s.settings["spp"] == 8 and s.settings["max_depth"] == 3
     img = np.array(draaw_mi.render(s, version="path"))
     assert img.shape == (10, 20, 3) and np.isfinite(img).all()
+    # the integrator a file names is its render version (it rendered with v4); -1 stays -1
+    # (Mitsuba prints it unsigned: 4294967295); a file without one gets draaw-mi's default
+    assert s.settings["version"] == "path" and s.summary()["shapes"] == ["unnamed"]
+    text = xml.read_text()
+    xml.write_text(text.replace('<integer name="max_depth" value="3"/>', "").replace('"path"', '"volpath"'))
+    s = draaw_mi.load_scene(str(xml))
+    assert s.settings["version"] == "volpath" and s.settings["max_depth"] == -1
+    _, info = draaw_mi.render(s, spp=1, return_info=True)
+    assert info["integrator"] == "volpath"
+    start, end = text.index("<integrator"), text.index("</integrator>") + len("</integrator>")
+    xml.write_text(text[:start] + text[end:])
+    assert draaw_mi.load_scene(str(xml)).settings["version"] == "v4"
+    xml.write_text(text[:start] + '<integrator type="direct"/>' + text[end:])
+    with pytest.warns(RuntimeWarning, match="DirectIntegrator is not one of draaw-mi's render versions"):
+        assert draaw_mi.load_scene(str(xml)).settings["version"] == "v4"
 
 
 def test_with_resolution_rebuilds_film(tiny_scene):

@@ -134,7 +134,9 @@ class DraawScene:
         return {
             "source": self.source,
             "resolution": list(self.resolution),
-            "shapes": [sh.id() for sh in s.shapes() if not sh.id().startswith("__sdf_")],
+            # the description's names (Mitsuba merges meshes into one unnamed shape)
+            "shapes": self.info.get("shapes") or [sh.id() or "unnamed" for sh in s.shapes()
+                                                  if not sh.id().startswith("__sdf_")],
             "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
             "materials": self.info.get("materials", []),
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
@@ -218,7 +220,8 @@ def load_scene(source, **overrides) -> DraawScene:
         return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
     if isinstance(source, dict):
         if source.get("type") == "scene":
-            return _from_mitsuba_scene(_load_dict(mi, source, "<dict>"), "<dict>", overrides, source)
+            return _from_mitsuba_scene(_load_dict(mi, source, "<dict>"), "<dict>", overrides, source,
+                                       named_integrator="integrator" in source)
         return _from_description(source, "<dict>", os.getcwd(), overrides)
     if not isinstance(source, (str, os.PathLike)):
         raise SceneError(f"load_scene: expected a file name, dict or mi.Scene, got {type(source).__name__}")
@@ -235,7 +238,9 @@ def load_scene(source, **overrides) -> DraawScene:
             scene = load_mitsuba_file(path)
         except Exception as e:  # noqa: BLE001
             raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
-        return _from_mitsuba_scene(scene, path, overrides)
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            named = re.search(r"<integrator\b", fh.read()) is not None
+        return _from_mitsuba_scene(scene, path, overrides, named_integrator=named)
     if lower.endswith((".toml", ".json")):
         desc = _read_text_description(path)
     else:
@@ -268,7 +273,16 @@ def _checked(overrides: dict, source: str) -> dict:
     return out
 
 
-def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None) -> DraawScene:
+# Mitsuba integrator classes (their to_string() names) -> the render version that is them
+_INTEGRATOR_VERSIONS = {"PathIntegrator": "path", "PRBIntegrator": "prb",
+                        "VolumetricSimplePathIntegrator": "volpath", "PRBVolpathIntegrator": "prbvolpath",
+                        **{f"DraawV{i}Integrator": f"draaw_v{i}" for i in range(1, 5)}}
+
+
+def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None,
+                        named_integrator: bool = False) -> DraawScene:
+    """``named_integrator``: the XML file or dict names its integrator, which then becomes
+    the scene's render version (a scene without one renders with draaw-mi's default)."""
     sensors = scene.sensors()
     if not sensors:
         raise SceneError(f"{source}: the scene has no sensor (camera)")
@@ -281,7 +295,17 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     if integ is not None:      # C++ integrators expose max_depth only through to_string()
         m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
         if m:
-            settings["max_depth"] = int(m.group(1))
+            depth = int(m.group(1))
+            settings["max_depth"] = depth - 2 ** 32 if depth >= 2 ** 31 else depth   # -1 prints unsigned
+        if named_integrator:
+            kind = str(integ).split("[", 1)[0].strip()
+            if kind in _INTEGRATOR_VERSIONS:
+                settings["version"] = _INTEGRATOR_VERSIONS[kind]
+            else:
+                import warnings
+                warnings.warn(f"{source}: its integrator {kind} is not one of draaw-mi's render "
+                              f"versions; it renders with {settings['version']!r} unless a version "
+                              "is given", RuntimeWarning, stacklevel=3)
     settings["post"] = []
     checked = _checked(overrides, source)
     if checked.get("sampler") not in (None, settings["sampler"]):
