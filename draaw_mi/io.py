@@ -121,6 +121,10 @@ def print_report(text: str, path: str | None) -> None:
         write_text(path, text)
 
 
+# names that promise another format: an EXR written under them opens nowhere
+OTHER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".hdr", ".webp")
+
+
 def write_exr(path: str, image, channels: Sequence[str] | None = None, half: bool = False) -> None:
     """Write an (H, W, C) image as a float32 (or half) scanline EXR, atomically.
 
@@ -129,6 +133,9 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     """
     import OpenEXR
 
+    if os.fspath(path).lower().endswith(OTHER_IMAGE_SUFFIXES):
+        raise IOFailure(f"write_exr({path!r}): the name says another image format; expected a "
+                        "'.exr' name (write_png writes PNGs)")
     arr = to_numpy(image)
     names = list(channels) if channels is not None else channel_names(arr.shape[2])
     if len(names) != arr.shape[2]:

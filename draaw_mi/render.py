@@ -167,12 +167,26 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     pass_spp: samples per pass (default: all at once up to 256, 16 with a progress bar/budget).
     post: a post-processing chain (list of dicts) to apply; default the scene's ``post``;
         ``[]`` disables it.
+    hide_emitters: hide directly seen lights (default: the scene's ``render.hide_emitters``).
+    aovs: extra outputs after the colour, any of ``"depth"``, ``"depth_log"``, ``"normal"``,
+        ``"albedo"`` (or ``"all"``): channels ``depth.Z``, ``N.X/Y/Z``, ``albedo.R/G/B``
+        (draaw versions only; default the scene's ``render.aovs``).
+    integrator_options: further properties of the integrator plugin, e.g. ``{"rr_depth": 8}``
+        or V4's ``{"light_selection": "power"}`` (see each integrator's docstring).
     return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``.
     adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
         interpolation (see :mod:`draaw_mi.adaptive`; biased, not differentiable, no AOVs).
     denoise: denoise the colour with Intel OIDN (:func:`draaw_mi.denoise`, needs ``pyoidn``),
         guided by albedo and normal AOVs rendered for it (returned only if asked for in
         ``aovs``); applied before the post chain. Biased, not differentiable.
+
+    Example::
+
+        >>> import draaw_mi
+        >>> img, info = draaw_mi.render("scenes/cornell.toml", spp=4, resolution=(32, 24),
+        ...                             aovs=["depth"], return_info=True)
+        >>> img.shape, info["channels"]
+        ((24, 32, 4), ['R', 'G', 'B', 'depth.Z'])
     """
     from .scene import DraawScene, load_scene
 

@@ -73,6 +73,9 @@ def test_atomic_write_reaches_the_disk_before_its_rename(tmp_path, monkeypatch):
 
 
 def test_unwritable_and_bad_paths(tmp_path):
+    with pytest.raises(IOFailure, match="another image format.*write_png"):
+        draaw_mi.write_exr(str(tmp_path / "x.png"), np.ones((2, 2, 3), np.float32))
+    assert not list(tmp_path.iterdir())
     with pytest.raises(IOFailure, match="cannot"):
         draaw_mi.write_exr("/proc/forbidden/x.exr", np.ones((2, 2, 3), np.float32))
     with pytest.raises(IOFailure, match="does not exist"):

@@ -207,6 +207,13 @@ def load_scene(source, **overrides) -> DraawScene:
     ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
     ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are
     :class:`SceneError` naming the file and field.
+
+    Example::
+
+        >>> import draaw_mi
+        >>> scene = draaw_mi.load_scene("scenes/cornell.toml", resolution=(32, 24), spp=4)
+        >>> scene.resolution, scene.settings["spp"], scene.key("metal.roughness")
+        ((32, 24), 4, 'metal.roughness.value')
     """
     import mitsuba as mi
 
