@@ -52,6 +52,7 @@ class BatchResult:
     skipped: int = 0
     rendered: int = 0
     previews: int = 0                                 # PNGs written from finished EXRs
+    sheet_error: str = ""                             # why the contact sheets were not written
     failed: list = field(default_factory=list)        # result records with "error"
     seconds: float = 0.0
     log: str = ""
@@ -70,6 +71,8 @@ class BatchResult:
         recompiles = sum(self.new_kernels.values())
         extra = f"; WARNING: {recompiles} kernel(s) compiled after a job's first frame" if recompiles else ""
         previews = f" ({self.previews} previews from their EXRs)" if self.previews else ""
+        if self.sheet_error:
+            extra += f"; contact sheets not written: {self.sheet_error}"
         return (f"batch: {self.total} frames: {self.rendered} rendered, {self.skipped} already done"
                 f"{previews}, {len(self.failed)} failed; {state} ({self.seconds:.1f} s{rate}); "
                 f"log {self.log}{extra}")
@@ -87,6 +90,10 @@ def log_path(m: Manifest, specs) -> str:
     if m.log:
         return m.log
     root = os.path.commonpath([os.path.dirname(s["output"]) for s in specs])
+    if os.path.dirname(root) == root:
+        # outputs in unrelated trees (/data/..., /scratch/...): not a log (and a lock) at the
+        # file system's root, but beside the first job's frames
+        root = os.path.dirname(specs[0]["output"])
     if m.path.startswith("<"):
         return os.path.join(root, "batch.jsonl")
     return os.path.join(root, os.path.splitext(os.path.basename(m.path))[0] + ".batch.jsonl")
@@ -262,6 +269,10 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
                   seconds=round(res.seconds, 3))
         log.close()
     if m.contact_sheet:
+        from ..errors import DraawError
         from .sheet import contact_sheets
-        contact_sheets(specs)
+        try:
+            contact_sheets(specs)
+        except DraawError as e:      # the frames are what the run is for: report, keep the result
+            res.sheet_error = str(e)
     return res

@@ -21,6 +21,7 @@ True
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 
 from ..errors import BusyError
@@ -54,7 +55,16 @@ def output_locks(folders, where: str):
             if fcntl is None:
                 break
             path = os.path.join(folder, LOCK_NAME)
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as e:
+                if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+                    # a folder nobody may write (finished frames kept read-only): no run can
+                    # add or remove its files, so there is nothing to exclude (it raised a
+                    # PermissionError traceback); one with frames to render failed earlier
+                    continue
+                raise BusyError(f"{where}: output folder {folder!r} cannot be locked "
+                                f"({e.strerror or e})") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 # the holder we waited on may have deleted the file as it finished: a lock on

@@ -447,3 +447,58 @@ def test_previews_of_a_chain_that_ends_in_srgb_are_not_encoded_twice(tmp_path):
     assert np.abs(png - np.clip(exr, 0, 1)).max() <= 0.5 / 255 + 1e-6
     sheet = matplotlib.image.imread(str(out / "orbit_contact.png"))[..., :3]
     assert np.abs(sheet[:exr.shape[0], :exr.shape[1]] - np.clip(exr, 0, 1)).max() <= 0.5 / 255 + 1e-6
+
+
+def test_outputs_in_unrelated_trees_log_beside_the_first_job(tmp_path):
+    """Jobs writing under two unrelated roots: the log went to their common ancestor, the
+    file system's root."""
+    import tempfile
+    other = tempfile.mkdtemp(dir="/var/tmp" if not str(tmp_path).startswith("/var/tmp") else "/dev/shm")
+    try:
+        doc = manifest(tmp_path, frames=1)
+        second = dict(doc["jobs"][0], name="elsewhere", output=os.path.join(other, "{frame:04d}.exr"))
+        doc["jobs"].append(second)
+        res = batch.run(doc, dry_run=True, progress=False)
+        assert os.path.dirname(res.log) == str(tmp_path / "out" / "orbit")
+    finally:
+        import shutil
+        shutil.rmtree(other, ignore_errors=True)
+
+
+def test_a_contact_sheet_that_cannot_be_written_leaves_the_run_complete(tmp_path, monkeypatch, capsys):
+    """Every frame rendered, then the sheet fails: the result (and the exit status) say the
+    frames are all there and the summary says why there is no sheet (it was exit 2 and no
+    summary, as for a bad manifest)."""
+    from draaw_mi.batch import sheet
+    from draaw_mi.cli import main
+    from draaw_mi.errors import IOFailure
+
+    def failing(specs):
+        raise IOFailure("write_png('x_contact.png'): disk full")
+    monkeypatch.setattr(sheet, "contact_sheets", failing)
+    doc = manifest(tmp_path, frames=2)
+    doc["contact_sheet"] = True
+    path = write_manifest(tmp_path, doc)
+    assert main(["batch", path, "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "all 2 frames present" in out and "contact sheets not written: write_png" in out
+
+
+def test_a_read_only_folder_of_finished_frames_is_not_locked(tmp_path, monkeypatch):
+    """A folder the run may not write (finished frames kept read-only) cannot hold a lock
+    file; no run can change it either, so the run goes on (a PermissionError traceback)."""
+    import errno as errno_mod
+    from draaw_mi.batch import lock as lock_mod
+    doc = manifest(tmp_path, frames=2)
+    doc["log"] = str(tmp_path / "batch.jsonl")
+    assert batch.run(doc, progress=False).complete
+    frozen = str(tmp_path / "out" / "orbit")
+    real = lock_mod.os.open
+
+    def refusing(path, *args, **kwargs):
+        if str(path) == os.path.join(frozen, lock_mod.LOCK_NAME):
+            raise PermissionError(errno_mod.EACCES, "Permission denied", str(path))
+        return real(path, *args, **kwargs)
+    monkeypatch.setattr(lock_mod.os, "open", refusing)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.skipped == 2
