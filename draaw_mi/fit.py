@@ -509,16 +509,19 @@ def _short(v):
     return f"{v:.3f}" if isinstance(v, float) else "[" + ",".join(f"{x:.2f}" for x in v) + "]"
 
 
-def _converged(history: list, tol: float, drift_ratio: float = 0.25) -> bool:
+def _converged(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
     """True when, for every parameter, the mean over the last eighth of the run differs from
     the mean over the eighth before by less than ``tol`` (absolute; parameters live in
     [0, 1]) *and* the optimiser's own coordinate (``latent``: the value, or its log for
-    roughness) drifted by less than ``drift_ratio`` of what steps of those iterations'
-    learning rates in one direction would make (Adam moves about ``lr`` a step while its
+    roughness; the RMS over a colour's entries) drifted by less than ``drift_ratio`` of what
+    steps of those iterations' learning rates in one direction would make (Adam moves about
+    ``lr`` a step while its
     gradient keeps its sign); and the loss is finite. Noise-robust: it looks at averaged
     iterates, not the last step. The drift test is what tells a decayed learning rate from
     an optimum: the cosine decay stops every parameter, and a 20-iteration run still
-    descending (metallic at 1.0 for a truth of 0.8) was called converged.
+    descending (metallic at 1.0 for a truth of 0.8) was called converged. Measured on the
+    fit-sphere scene (16 spp): drift ratios 0.01-0.2 after 100 iterations, 0.55 after 40,
+    0.76 after 20.
 
     >>> still = [{"loss": 1.0, "lr": 0.01, "values": {"m": 0.5}, "latent": {"m": 0.5}}] * 32
     >>> _converged(still, 5e-3)
@@ -541,7 +544,9 @@ def _converged(history: list, tol: float, drift_ratio: float = 0.25) -> bool:
             return False
         if "latent" in history[-1] and path > 0:
             u = np.array([h["latent"][name] for h in history], dtype=float)
-            if np.any(np.abs(u[-q:].mean(axis=0) - u[-2 * q:-q].mean(axis=0)) > drift_ratio * path):
+            # (the RMS over a colour's or texture's entries: one noisy texel must not decide)
+            drift = np.sqrt(np.mean(np.square(u[-q:].mean(axis=0) - u[-2 * q:-q].mean(axis=0))))
+            if drift > drift_ratio * path:
                 return False
     return True
 

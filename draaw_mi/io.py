@@ -204,7 +204,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     if encoded and exposure:
         raise IOFailure(f"write_png({path!r}): exposure={exposure!r} needs a linear image; "
                         "this one is display-encoded (encoded=True)")
-    out = np.clip(rgb, 0.0, 1.0) if encoded else srgb_encode(rgb * (2.0 ** exposure))
+    out = np.clip(np.nan_to_num(rgb), 0.0, 1.0) if encoded else srgb_encode(rgb * (2.0 ** exposure))
     if c == 4:
         out = np.concatenate([out, np.clip(arr[..., 3:4], 0, 1)], axis=2)
     u8 = np.round(out * 255.0).astype(np.uint8)

@@ -42,6 +42,7 @@ from .plan import plan
 __all__ = ["run", "status", "load", "BatchResult", "parse_manifest", "plan", "frame_status", "read_header"]
 
 TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png", ".draaw-probe-*")   # atomic writes, folder probes
+PROBE_GRACE_S = 60.0          # a folder probe younger than this may be another run's
 
 
 @dataclass
@@ -139,6 +140,8 @@ def remove_temp_files(specs) -> list[str]:
         for pattern in TEMP_PATTERNS:
             for path in glob.glob(os.path.join(glob.escape(folder), pattern)):
                 try:
+                    if "probe" in pattern and time.time() - os.path.getmtime(path) < PROBE_GRACE_S:
+                        continue      # another run's folder probe, in the instant before its lock
                     os.unlink(path)
                     removed.append(path)
                 except OSError:

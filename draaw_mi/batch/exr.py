@@ -85,8 +85,12 @@ def frame_status(spec: dict) -> str:
         return "stale" if os.path.exists(spec["output"]) else "missing"
     if header.get(HASH_ATTR) != spec["hash"]:
         return "stale"
-    if spec.get("preview") and _png_hash(preview_path(spec)) != spec["hash"]:
-        return "no-preview"
+    if spec.get("preview"):
+        tag = _png_hash(preview_path(spec))
+        # a PNG without a hash was written by draaw-mi before previews carried one, after its
+        # EXR: it is this frame's
+        if tag is None or (tag and tag != spec["hash"]):
+            return "no-preview"
     return "done"
 
 
@@ -107,10 +111,12 @@ def write_preview(spec: dict, image: np.ndarray | None = None) -> None:
 
 
 def _png_hash(path: str) -> str | None:
+    """The frame hash a preview carries, ``""`` for a PNG without one, ``None`` for a missing
+    or unreadable file."""
     from PIL import Image
 
     try:
         with Image.open(path) as im:          # reads the chunks before the pixels only
-            return im.info.get(HASH_ATTR)
+            return str(im.info.get(HASH_ATTR, ""))
     except (OSError, ValueError):
         return None

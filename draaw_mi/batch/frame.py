@@ -193,6 +193,9 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
 
     t0 = time.perf_counter()
     entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"])
+    if entry.files_hash != spec.get("files_hash"):
+        raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
+                          "the batch was planned; re-run the batch")
     with entry.lock:
         entry.apply(spec)
         if track_kernels:

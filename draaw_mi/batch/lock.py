@@ -21,7 +21,6 @@ True
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 
 from ..errors import BusyError
@@ -47,7 +46,7 @@ def output_locks(folders, where: str):
     """Hold an exclusive lock on every folder in ``folders`` for the duration of the block.
 
     Raises :class:`~draaw_mi.errors.BusyError` (nothing locked, nothing written) if another
-    process holds one of them. ``where``: the manifest, for the message. The folders must exist.
+    process holds one of them, or its lock file cannot be opened (another user's). ``where``: the manifest, for the message. The folders must exist.
     """
     held = []
     try:
@@ -58,13 +57,10 @@ def output_locks(folders, where: str):
             try:
                 fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
             except OSError as e:
-                if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-                    # a folder nobody may write (finished frames kept read-only): no run can
-                    # add or remove its files, so there is nothing to exclude (it raised a
-                    # PermissionError traceback); one with frames to render failed earlier
-                    continue
+                # (planning checked the folder is writable) a lock file this run may not open
+                # is another user's: a busy folder, in one line (was a PermissionError traceback)
                 raise BusyError(f"{where}: output folder {folder!r} cannot be locked "
-                                f"({e.strerror or e})") from None
+                                f"({e.strerror or e}); another user's batch run may hold it") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 # the holder we waited on may have deleted the file as it finished: a lock on

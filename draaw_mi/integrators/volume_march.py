@@ -19,12 +19,15 @@ the whole box chord regardless of where the light was, and ignored surfaces. Her
   SDF hits, SDF surfaces are lit like opaque surfaces, and SDFs block the shadow rays.
 * An unbounded medium (a ``homogeneous`` one as the camera's medium) is marched up to twice
   the scene's bounding radius; past that it lets nothing through unless its ``sigma_t`` is 0,
-  so an environment reaches neither the camera nor the fog through it (``volpath``, and V3/V4
-  with it, let in an environment's light samples as if it were at that radius).
+  so a camera ray does not see the environment through it (as in ``volpath`` and V3/V4, where
+  such a ray always scatters). Light samples of the sun or an environment are attenuated over
+  the distance Mitsuba gives them (twice the scene's radius), as in ``volpath`` and V3/V4.
 
 Primal only: in media scenes V1/V2 are not differentiable (use ``draaw_v3`` / ``draaw_v4``).
 """
 from __future__ import annotations
+
+import math
 
 import drjit as dr
 import mitsuba as mi
@@ -43,12 +46,15 @@ def _segment_end(scene, ray, t0, t1, active):
     scattered in beyond it is not gathered (bias, as the march's), and the transmittance
     past it is :func:`_tail`'s."""
     unbounded = active & ~dr.isfinite(t1)
-    bs = scene.bbox().bounding_sphere()
-    radius = 2.0 * max(float(bs.radius), 1.0)
-    oc = ray.o - mi.Point3f(bs.center)
+    box = scene.bbox()
+    bs = box.bounding_sphere() if box.valid() else None          # (no shapes: no box)
+    ok = bs is not None and all(math.isfinite(float(x)) for x in (*bs.center, bs.radius))
+    centre, r0 = (mi.Point3f(bs.center), max(float(bs.radius), 1.0)) if ok else (mi.Point3f(0.0), 1.0)
+    oc = ray.o - centre
+    # a sphere around the origin too (a camera far outside the scene): the larger root
+    radius = dr.maximum(2.0 * r0, dr.norm(oc) + r0)
     b = dr.dot(oc, ray.d)
-    c = dr.squared_norm(oc) - radius * radius
-    far = -b + dr.safe_sqrt(b * b - c)            # the origin lies inside: the larger root
+    far = -b + dr.safe_sqrt(b * b - (dr.squared_norm(oc) - radius * radius))
     return dr.select(unbounded, dr.maximum(far, t0), t1), unbounded
 
 
@@ -112,10 +118,7 @@ def _light(scene, sampler, it, medium, steps, active, sdf=None):
     if sdf is not None:
         active &= ~sdf.occluded(it, ds, active)
     r = it.spawn_ray(ds.d)
-    # an environment is infinitely far (Mitsuba's constant one reports twice the scene's
-    # radius): through an unbounded fog none of it arrives, as on the camera rays
-    far = ~dr.isfinite(ds.dist) | mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
-    dist = dr.select(far, dr.inf, ds.dist * (1.0 - mi.math.ShadowEpsilon))
+    dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
     T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active)
     return ds, dr.select(active, em_w * T, 0.0)
 

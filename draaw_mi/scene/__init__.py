@@ -246,7 +246,8 @@ def load_scene(source, **overrides) -> DraawScene:
         except Exception as e:  # noqa: BLE001
             raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
         with open(path, encoding="utf-8", errors="replace") as fh:
-            named = re.search(r"<integrator\b", fh.read()) is not None
+            text = re.sub(r"<!--.*?-->", "", fh.read(), flags=re.S)      # not a commented-out one
+            named = re.search(r"<integrator\b", text) is not None
         return _from_mitsuba_scene(scene, path, overrides, named_integrator=named)
     if lower.endswith((".toml", ".json")):
         desc = _read_text_description(path)

@@ -184,14 +184,15 @@ def mesh_side_files(path: str) -> list[str]:
 
 
 def _lines_starting(path: str, keywords: tuple) -> list[str]:
-    """The rest of each line of a text file whose first word starts with one of ``keywords``."""
-    out = []
+    """The rest of each line of a text file whose first word starts with one of ``keywords``
+    (one regular-expression pass over the bytes: a Python loop over a 3-million-line OBJ took
+    about a second on every load)."""
+    import re
     try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                head, _, rest = line.strip().partition(" ")
-                if head.startswith(keywords) and rest.strip():
-                    out.append(rest.strip())
+        with open(path, "rb") as fh:
+            data = fh.read()
     except OSError:
-        pass
-    return out
+        return []
+    words = b"|".join(re.escape(k.encode()) for k in keywords)
+    pattern = re.compile(rb"^[ \t]*(?:" + words + rb")\S*[ \t]+(\S[^\r\n]*?)[ \t]*\r?$", re.M)
+    return [m.group(1).decode("utf-8", "replace") for m in pattern.finditer(data)]

@@ -353,8 +353,9 @@ def test_a_scene_is_loaded_once_per_run(tmp_path, monkeypatch):
 def test_a_missing_or_stale_preview_comes_from_the_finished_exr(tmp_path, monkeypatch, capsys):
     """A run killed between a frame's PNG and EXR, or previews turned on after the frames were
     rendered: the EXR is finished, so the next run writes the PNG from it, renders nothing, and
-    the run is complete only once every preview exists. A PNG from other job settings (its
-    hash) is replaced. (Before: the frame counted as done and its PNG never came.)"""
+    the run is complete only once every preview exists. A PNG of another frame (its hash) is
+    replaced; one without a hash (older draaw-mi) is kept. (Before: the frame counted as done
+    and its PNG never came.)"""
     import matplotlib.image
     from draaw_mi.batch import frame as frame_mod
     from draaw_mi.cli import main
@@ -365,8 +366,8 @@ def test_a_missing_or_stale_preview_comes_from_the_finished_exr(tmp_path, monkey
     path = write_manifest(tmp_path, doc)
     assert main(["batch", path, "--status"]) == 1
     assert "2 without their preview" in capsys.readouterr().out
-    stale = out / "0001.png"
-    matplotlib.image.imsave(str(stale), np.zeros((4, 4, 3), np.uint8))   # no hash: not this frame's
+    stale = out / "0001.png"                                     # another frame's preview
+    matplotlib.image.imsave(str(stale), np.zeros((4, 4, 3), np.uint8), metadata={"draaw:frame_hash": "0" * 32})
 
     def no_render(*a, **k):
         raise AssertionError("a finished frame was rendered again")
@@ -378,6 +379,9 @@ def test_a_missing_or_stale_preview_comes_from_the_finished_exr(tmp_path, monkey
         ref = draaw_mi.io.srgb_encode(draaw_mi.read_exr(str(out / f"{f}.exr"))[..., :3])
         assert png.shape == ref.shape and np.abs(png - ref).max() <= 0.5 / 255 + 1e-6
     assert batch.run(doc, progress=False).previews == 0          # now done
+    assert main(["batch", path, "--status"]) == 0
+    # a preview from before previews carried a hash (written after its EXR) stays this frame's
+    matplotlib.image.imsave(str(out / "0000.png"), np.zeros((4, 4, 3), np.uint8))
     assert main(["batch", path, "--status"]) == 0
 
 
@@ -432,6 +436,14 @@ def test_a_frame_is_stale_when_a_file_its_scene_reads_changes(tmp_path, capsys):
         edit(str(tmp_path / name))
         assert batch.status(doc)["counts"]["stale"] == 1, name
         assert batch.run(doc, progress=False).rendered == 1, name
+    # a file edited between planning and rendering (a Dask worker loads the scene late): the
+    # frame fails instead of being tagged with the planned files' hash
+    from draaw_mi.batch.frame import SceneCache, render_frame
+    from draaw_mi.errors import RenderError
+    _, specs, _ = batch.load(doc)
+    draaw_mi.write_png(str(tmp_path / "ball.png"), np.full((4, 4, 3), 0.1, np.float32))
+    with pytest.raises(RenderError, match="a file the scene reads .* changed since the batch was planned"):
+        render_frame(specs[0], SceneCache())
 
 
 def test_previews_of_a_chain_that_ends_in_srgb_are_not_encoded_twice(tmp_path):
@@ -484,21 +496,21 @@ def test_a_contact_sheet_that_cannot_be_written_leaves_the_run_complete(tmp_path
     assert "all 2 frames present" in out and "contact sheets not written: write_png" in out
 
 
-def test_a_read_only_folder_of_finished_frames_is_not_locked(tmp_path, monkeypatch):
-    """A folder the run may not write (finished frames kept read-only) cannot hold a lock
-    file; no run can change it either, so the run goes on (a PermissionError traceback)."""
+def test_a_lock_file_another_user_holds_is_one_clear_line(tmp_path, monkeypatch):
+    """A lock file this run may not open (another user's run created it, in a folder both may
+    write): the folder is busy, said in one line (it was a PermissionError traceback)."""
     import errno as errno_mod
     from draaw_mi.batch import lock as lock_mod
+    from draaw_mi.errors import BusyError
     doc = manifest(tmp_path, frames=2)
-    doc["log"] = str(tmp_path / "batch.jsonl")
-    assert batch.run(doc, progress=False).complete
-    frozen = str(tmp_path / "out" / "orbit")
+    lock_file = os.path.join(str(tmp_path / "out" / "orbit"), lock_mod.LOCK_NAME)
     real = lock_mod.os.open
 
     def refusing(path, *args, **kwargs):
-        if str(path) == os.path.join(frozen, lock_mod.LOCK_NAME):
+        if str(path) == lock_file:
             raise PermissionError(errno_mod.EACCES, "Permission denied", str(path))
         return real(path, *args, **kwargs)
     monkeypatch.setattr(lock_mod.os, "open", refusing)
-    res = batch.run(doc, progress=False)
-    assert res.complete and res.skipped == 2
+    with pytest.raises(BusyError, match="cannot be locked \\(Permission denied\\); another user"):
+        batch.run(doc, progress=False)
+    assert not frames_of(tmp_path / "out")

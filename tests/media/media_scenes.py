@@ -50,7 +50,8 @@ def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3,
     ``mesh`` (a grid medium inside a null-BSDF sphere), ``homogeneous`` (Mitsuba's
     homogeneous medium in a null cube), ``inside`` (the camera inside a grid medium), ``fog``
     (the camera in an unbounded homogeneous medium, which is all space: no environment light,
-    since ``volpath`` ends a path that leaves the scene inside a medium; ``fog_sigma_t``)."""
+    since ``volpath`` ends a path that leaves the scene inside a medium; ``fog_sigma_t``),
+    ``fog_sun`` (the same under a directional light)."""
     if kind in ("uniform", "gradient", "blobs", "albedo"):
         d = base(integrator, res)
         d["smoke"] = smoke_shape(grid(kind), g_phase=g_phase)
@@ -74,11 +75,13 @@ def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3,
         d = base(integrator, res, sensor_medium=medium, origin=(0.1, 0.2, 0.6))
         d["smoke"] = {"type": "cube", "bsdf": {"type": "null"}, "interior": medium}
         return d
-    if kind == "fog":
+    if kind in ("fog", "fog_sun"):
         fog = mi.load_dict({"type": "homogeneous", "sigma_t": fog_sigma_t, "albedo": 0.8,
                             "phase": {"type": "hg", "g": g_phase}})
         d = base(integrator, res, sensor_medium=fog)
         del d["env"]
+        if kind == "fog_sun":                  # a directional light instead of the point light
+            d["light"] = {"type": "directional", "direction": [-0.4, -1.0, -0.3], "irradiance": 3.0}
         return d
     raise ValueError(kind)
 
