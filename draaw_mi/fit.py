@@ -511,8 +511,8 @@ def _short(v):
 
 def _converged(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
     """True when, for every parameter, the mean over the last eighth of the run differs from
-    the mean over the eighth before by less than ``tol`` (absolute; parameters live in
-    [0, 1]) *and* the optimiser's own coordinate (``latent``: the value, or its log for
+    the mean over the eighth before by less than ``tol`` (absolute, RMS over a colour's
+    entries; parameters live in [0, 1]) *and* the optimiser's own coordinate (``latent``: the value, or its log for
     roughness; the RMS over a colour's entries) drifted by less than ``drift_ratio`` of what
     steps of those iterations' learning rates in one direction would make (Adam moves about
     ``lr`` a step while its
@@ -530,6 +530,10 @@ def _converged(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
     ...          "latent": {"m": 0.5 + 0.001 * i}} for i in range(32)]
     >>> _converged(slow, 5e-3)                       # moves 0.004 per eighth: under tol, yet steadily
     False
+    >>> one_noisy = [{"loss": 1.0, "lr": 0.01, "values": {"c": [0.5] * 99 + [0.5 + 0.02 * (i % 2)]},
+    ...               "latent": {"c": [0.5] * 99 + [0.5 + 0.02 * (i % 2)]}} for i in range(31)]
+    >>> _converged(one_noisy, 5e-3)                  # one entry of 100 jitters (0.01 between means)
+    True
     """
     n = len(history)
     q = max(1, n // 8)
@@ -540,11 +544,11 @@ def _converged(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
     path = q * float(np.mean([h.get("lr", 0.0) for h in history[-2 * q:]]))
     for name in history[-1]["values"]:
         v = np.array([h["values"][name] for h in history], dtype=float)
-        if np.any(np.abs(v[-q:].mean(axis=0) - v[-2 * q:-q].mean(axis=0)) > tol):
+        # (RMS over a colour's or texture's entries: one noisy texel must not decide)
+        if np.sqrt(np.mean(np.square(v[-q:].mean(axis=0) - v[-2 * q:-q].mean(axis=0)))) > tol:
             return False
         if "latent" in history[-1] and path > 0:
             u = np.array([h["latent"][name] for h in history], dtype=float)
-            # (the RMS over a colour's or texture's entries: one noisy texel must not decide)
             drift = np.sqrt(np.mean(np.square(u[-q:].mean(axis=0) - u[-2 * q:-q].mean(axis=0))))
             if drift > drift_ratio * path:
                 return False

@@ -149,6 +149,9 @@ def _is_flat(x) -> bool:
     return dr.depth_v(x) <= 1
 
 
+_ANY = object()          # SceneCache.get: any hash of the scene's files will do
+
+
 class SceneCache:
     """Scenes loaded once per process, keyed by (file, resolution); reloaded if the file changes."""
 
@@ -156,7 +159,10 @@ class SceneCache:
         self._scenes: dict = {}
         self._guard = threading.Lock()
 
-    def get(self, path: str, resolution=None, digest: str | None = None) -> CachedScene:
+    def get(self, path: str, resolution=None, digest: str | None = None, files=_ANY) -> CachedScene:
+        """The scene of ``path`` at ``resolution``; ``digest`` / ``files``: the hashes of the
+        scene file and of the files it reads that the caller planned with (a cached scene
+        whose files changed since it was loaded is loaded again: a long-lived Dask worker)."""
         from .. import load_scene
         from .plan import file_hash
 
@@ -164,7 +170,8 @@ class SceneCache:
         key = (where, tuple(resolution) if resolution else None)
         with self._guard:
             entry = self._scenes.get(key)
-            if entry is not None and (digest is None or entry.hash == digest):
+            if entry is not None and (digest is None or entry.hash == digest) \
+                    and (files is _ANY or entry.files_hash == files):
                 return entry
             current = file_hash(path)
             if digest is not None and current != digest:
@@ -192,7 +199,7 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     import drjit as dr
 
     t0 = time.perf_counter()
-    entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"])
+    entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"], spec.get("files_hash"))
     if entry.files_hash != spec.get("files_hash"):
         raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
                           "the batch was planned; re-run the batch")

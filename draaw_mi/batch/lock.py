@@ -46,7 +46,9 @@ def output_locks(folders, where: str):
     """Hold an exclusive lock on every folder in ``folders`` for the duration of the block.
 
     Raises :class:`~draaw_mi.errors.BusyError` (nothing locked, nothing written) if another
-    process holds one of them, or its lock file cannot be opened (another user's). ``where``: the manifest, for the message. The folders must exist.
+    process holds one of them (another user's lock file is locked through a read-only
+    descriptor), or a lock file cannot be opened at all. ``where``: the manifest, for the
+    message. The folders must exist.
     """
     held = []
     try:
@@ -56,11 +58,18 @@ def output_locks(folders, where: str):
             path = os.path.join(folder, LOCK_NAME)
             try:
                 fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            except PermissionError:
+                # another user's lock file (0644): a read-only descriptor locks it just as well
+                # (flock does not care how the file was opened); its holder, if alive, still
+                # makes the flock below fail
+                try:
+                    fd = os.open(path, os.O_RDONLY)
+                except OSError as e:
+                    raise BusyError(f"{where}: output folder {folder!r} cannot be locked: "
+                                    f"{path!r} ({e.strerror or e})") from None
             except OSError as e:
-                # (planning checked the folder is writable) a lock file this run may not open
-                # is another user's: a busy folder, in one line (was a PermissionError traceback)
-                raise BusyError(f"{where}: output folder {folder!r} cannot be locked "
-                                f"({e.strerror or e}); another user's batch run may hold it") from None
+                raise BusyError(f"{where}: output folder {folder!r} cannot be locked: {path!r} "
+                                f"({e.strerror or e})") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 # the holder we waited on may have deleted the file as it finished: a lock on
@@ -72,8 +81,11 @@ def output_locks(folders, where: str):
                 os.close(fd)
                 raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi "
                                 f"batch run{holder}; wait for it to finish or choose another --out") from None
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            except OSError:
+                pass                    # a read-only descriptor: the lock holds, without our pid
             held.append((fd, path))
         yield
     finally:

@@ -17,8 +17,9 @@ the whole box chord regardless of where the light was, and ignored surfaces. Her
   indirect light: biased by design (the cheap rung), ``medium_steps`` is the knob.
 * SDF objects (feature ``sdf``): the march of a segment stops at the nearer of the mesh and
   SDF hits, SDF surfaces are lit like opaque surfaces, and SDFs block the shadow rays.
-* An unbounded medium (a ``homogeneous`` one as the camera's medium) is marched up to twice
-  the scene's bounding radius; past that it lets nothing through unless its ``sigma_t`` is 0,
+* An unbounded medium (a ``homogeneous`` one as the camera's medium) is marched up to a
+  sphere around the scene (twice its bounding radius, larger for a camera outside that);
+  past that it lets nothing through unless its ``sigma_t`` is 0,
   so a camera ray does not see the environment through it (as in ``volpath`` and V3/V4, where
   such a ray always scatters). Light samples of the sun or an environment are attenuated over
   the distance Mitsuba gives them (twice the scene's radius), as in ``volpath`` and V3/V4.

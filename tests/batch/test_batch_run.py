@@ -444,6 +444,13 @@ def test_a_frame_is_stale_when_a_file_its_scene_reads_changes(tmp_path, capsys):
     draaw_mi.write_png(str(tmp_path / "ball.png"), np.full((4, 4, 3), 0.1, np.float32))
     with pytest.raises(RenderError, match="a file the scene reads .* changed since the batch was planned"):
         render_frame(specs[0], SceneCache())
+    # a long-lived cache (a Dask worker across runs) loads the scene again for the new plan
+    worker = SceneCache()
+    _, specs, _ = batch.load(doc)
+    render_frame(specs[0], worker)
+    draaw_mi.write_png(str(tmp_path / "ball.png"), np.full((4, 4, 3), 0.9, np.float32))
+    _, specs, _ = batch.load(doc)
+    assert render_frame(specs[0], worker)["output"] == specs[0]["output"]
 
 
 def test_previews_of_a_chain_that_ends_in_srgb_are_not_encoded_twice(tmp_path):
@@ -496,21 +503,34 @@ def test_a_contact_sheet_that_cannot_be_written_leaves_the_run_complete(tmp_path
     assert "all 2 frames present" in out and "contact sheets not written: write_png" in out
 
 
-def test_a_lock_file_another_user_holds_is_one_clear_line(tmp_path, monkeypatch):
-    """A lock file this run may not open (another user's run created it, in a folder both may
-    write): the folder is busy, said in one line (it was a PermissionError traceback)."""
+def test_another_users_lock_file_locks_read_only(tmp_path, monkeypatch):
+    """A lock file this run may not open for writing (another user's run made it, 0644, in a
+    folder both may write): it is locked through a read-only descriptor, so a stale one (its
+    run was killed) does not block the folder, and a live holder still does (this was a
+    PermissionError traceback)."""
     import errno as errno_mod
+    import fcntl
     from draaw_mi.batch import lock as lock_mod
     from draaw_mi.errors import BusyError
     doc = manifest(tmp_path, frames=2)
-    lock_file = os.path.join(str(tmp_path / "out" / "orbit"), lock_mod.LOCK_NAME)
+    folder = tmp_path / "out" / "orbit"
+    folder.mkdir(parents=True)
+    lock_file = os.path.join(str(folder), lock_mod.LOCK_NAME)
+    with open(lock_file, "w") as fh:
+        fh.write("999999\n")                                      # the other user's
     real = lock_mod.os.open
 
-    def refusing(path, *args, **kwargs):
-        if str(path) == lock_file:
+    def not_for_writing(path, flags, *args, **kwargs):
+        if str(path) == lock_file and flags & (os.O_RDWR | os.O_WRONLY):
             raise PermissionError(errno_mod.EACCES, "Permission denied", str(path))
-        return real(path, *args, **kwargs)
-    monkeypatch.setattr(lock_mod.os, "open", refusing)
-    with pytest.raises(BusyError, match="cannot be locked \\(Permission denied\\); another user"):
-        batch.run(doc, progress=False)
-    assert not frames_of(tmp_path / "out")
+        return real(path, flags, *args, **kwargs)
+    monkeypatch.setattr(lock_mod.os, "open", not_for_writing)
+    holder = real(lock_file, os.O_RDONLY)
+    fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)             # a live run of that user
+    try:
+        with pytest.raises(BusyError, match="in use by another draaw-mi batch run"):
+            batch.run(doc, progress=False)
+    finally:
+        os.close(holder)                                           # ... which ends (or was killed)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 2 and not os.path.exists(lock_file)
