@@ -1,0 +1,109 @@
+"""What :func:`draaw_mi.fit` returns (:class:`FitResult`), and when a run counts as
+converged (:func:`settled`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class FitResult:
+    """What :func:`draaw_mi.fit` returns.
+
+    ``values``: fitted value per parameter (float, or list for colours); ``history``: one dict
+    per iteration (``loss``, every parameter's value, the learning rate ``lr`` and the
+    optimiser's coordinates ``latent``); ``image``: the final render of the
+    first view (numpy, post chain applied); ``converged``: whether the parameters settled
+    (their averaged iterates moved less than ``tol``, and not steadily in one direction: see
+    :func:`settled`); ``exposure_stops``: the fitted exposure (0 unless ``exposure="fit"``).
+    """
+
+    values: dict
+    history: list = field(default_factory=list, repr=False)      # (repr: no array dumps)
+    image: np.ndarray | None = field(default=None, repr=False)
+    converged: bool = False
+    iterations: int = 0
+    seconds: float = 0.0
+    kernel_compiles: int = 0          # JIT kernels compiled after the first iteration (0 = none)
+    exposure_stops: float = 0.0
+
+    @property
+    def losses(self) -> np.ndarray:
+        return np.array([h["loss"] for h in self.history])
+
+    def plot(self, path: str | None = None):
+        """Loss (log scale) and parameter values over iterations; saved to ``path`` if given."""
+        import matplotlib
+        if path is not None:
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6))
+        a.semilogy(self.losses)
+        a.set_xlabel("iteration")
+        a.set_ylabel("loss")
+        a.set_title("loss")
+        for name in self.values:
+            v = np.array([h["values"][name] for h in self.history], dtype=float)
+            if v.ndim == 1:
+                b.plot(v, label=name)
+            else:
+                for c in range(v.shape[1]):
+                    b.plot(v[:, c], label=f"{name}[{c}]")
+        b.set_xlabel("iteration")
+        b.set_title("parameters")
+        b.legend(fontsize=8)
+        fig.tight_layout()
+        if path is not None:
+            from .io import atomic_path
+            with atomic_path(path, ".png") as tmp:
+                fig.savefig(tmp, dpi=100, format="png")
+            plt.close(fig)
+        return fig
+
+
+def settled(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
+    """True when, for every parameter, the mean over the last eighth of the run differs from
+    the mean over the eighth before by less than ``tol`` (absolute, RMS over a colour's
+    entries; parameters live in [0, 1]) *and* the optimiser's own coordinate (``latent``: the value, or its log for
+    roughness; the RMS over a colour's entries) drifted by less than ``drift_ratio`` of what
+    steps of those iterations' learning rates in one direction would make (Adam moves about
+    ``lr`` a step while its
+    gradient keeps its sign); and the loss is finite. Noise-robust: it looks at averaged
+    iterates, not the last step. The drift test is what tells a decayed learning rate from
+    an optimum: the cosine decay stops every parameter, and a 20-iteration run still
+    descending (metallic at 1.0 for a truth of 0.8) was called converged. Measured on the
+    fit-sphere scene (16 spp): drift ratios 0.01-0.2 after 100 iterations, 0.55 after 40,
+    0.76 after 20.
+
+    >>> still = [{"loss": 1.0, "lr": 0.01, "values": {"m": 0.5}, "latent": {"m": 0.5}}] * 32
+    >>> settled(still, 5e-3)
+    True
+    >>> slow = [{"loss": 1.0, "lr": 0.001, "values": {"m": 0.5 + 0.001 * i},
+    ...          "latent": {"m": 0.5 + 0.001 * i}} for i in range(32)]
+    >>> settled(slow, 5e-3)                       # moves 0.004 per eighth: under tol, yet steadily
+    False
+    >>> one_noisy = [{"loss": 1.0, "lr": 0.01, "values": {"c": [0.5] * 99 + [0.5 + 0.02 * (i % 2)]},
+    ...               "latent": {"c": [0.5] * 99 + [0.5 + 0.02 * (i % 2)]}} for i in range(31)]
+    >>> settled(one_noisy, 5e-3)                  # one entry of 100 jitters (0.01 between means)
+    True
+    """
+    n = len(history)
+    q = max(1, n // 8)
+    if n < 16:
+        return False
+    if not np.isfinite(history[-1]["loss"]):
+        return False
+    path = q * float(np.mean([h.get("lr", 0.0) for h in history[-2 * q:]]))
+    for name in history[-1]["values"]:
+        v = np.array([h["values"][name] for h in history], dtype=float)
+        # (RMS over a colour's or texture's entries: one noisy texel must not decide)
+        if np.sqrt(np.mean(np.square(v[-q:].mean(axis=0) - v[-2 * q:-q].mean(axis=0)))) > tol:
+            return False
+        if "latent" in history[-1] and path > 0:
+            u = np.array([h["latent"][name] for h in history], dtype=float)
+            drift = np.sqrt(np.mean(np.square(u[-q:].mean(axis=0) - u[-2 * q:-q].mean(axis=0))))
+            if drift > drift_ratio * path:
+                return False
+    return True
