@@ -51,7 +51,7 @@ import numpy as np
 
 from .errors import ParameterError, suggest
 from .materials import check_value
-from .render import _scene_lock, make_integrator, pass_seeds, scene_changed
+from .render import _scene_lock, make_integrator, pass_seed, scene_changed
 
 GUIDES = ("albedo", "normal")
 
@@ -129,6 +129,7 @@ class Preview:
         self._thread = None
         self._stop = threading.Event()
         self._callbacks = []
+        self._error_callbacks = []
         self.frame: PreviewFrame | None = None
         self.error: Exception | None = None
         self._integrator = self._make_integrator()
@@ -145,13 +146,25 @@ class Preview:
         for k in options:
             if k not in allowed:
                 raise ParameterError(f"Preview.configure: unknown option {k!r}{suggest(k, allowed)}")
+        if "interactive_scale" in options and not (0.0 < float(options["interactive_scale"]) <= 1.0):
+            raise ParameterError(f"Preview.configure: interactive_scale={options['interactive_scale']!r}; "
+                                 "expected a number in (0, 1]")
         with self._lock:
-            for k, v in options.items():
-                setattr(self, k, v)
-            if options.get("denoise"):
-                from .denoise import _pyoidn
-                _pyoidn()
-            self._integrator = self._make_integrator()
+            old = {k: getattr(self, k) for k in options}
+            try:
+                for k, v in options.items():
+                    setattr(self, k, float(v) if k == "interactive_scale" else v)
+                if options.get("denoise"):
+                    from .denoise import _pyoidn
+                    _pyoidn()
+                integrator = self._make_integrator()
+            except Exception:
+                for k, v in old.items():        # all or nothing (a half-applied change stuck)
+                    setattr(self, k, v)
+                raise
+            self._integrator = integrator
+            if "interactive_scale" in options:
+                self._lo = None                 # made again at the new scale
             self._bump()
 
     def key(self, name: str) -> str:
@@ -235,12 +248,13 @@ class Preview:
         ``denoise_interval`` seconds; the first frame after a change is always published)."""
         with self._lock:
             generation = self._generation
-            interactive = self._spp == 0 and self.interactive_scale < 1.0 and generation != self._shown_generation
+            interactive = (self._spp == 0 and self.interactive_scale < 1.0 and generation != self._shown_generation
+                           and self.scene.mi_dict is not None)   # (XML / mi.Scene: no second resolution)
             index = self._frame_index
             self._frame_index += 1
         self._apply_pending()
         target = self._lo_scene() if interactive else self.scene
-        seed = dr.opaque(mi.UInt32, pass_seeds(self.seed, index + 2)[-1])
+        seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
         fn = self._render_fn()
         t0 = time.perf_counter()
         with _scene_lock(self.scene):
@@ -304,9 +318,16 @@ class Preview:
         with self._lock:
             self._callbacks.append(callback)
 
+    def on_error(self, callback):
+        """Call ``callback(exception)`` (from the worker thread) when a frame fails; the
+        worker then waits for the next change (``error`` holds the exception until then)."""
+        with self._lock:
+            self._error_callbacks.append(callback)
+
     def start(self):
         """Start the worker thread (idempotent)."""
         if self._thread is not None and self._thread.is_alive():
+            self._stop.clear()        # a worker that did not stop in time goes on: not a second
             return
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="draaw-mi-preview", daemon=True)
@@ -322,14 +343,21 @@ class Preview:
                     self._wake.wait(0.5)
             if self._stop.is_set():
                 break
+            with self._lock:
+                generation = self._generation
             try:
                 self.step()
             except Exception as e:  # noqa: BLE001 - shown by the UI; the thread waits for a change
                 with self._lock:
+                    if generation != self._generation:
+                        continue          # changed meanwhile: the next frame tries the new values
                     self.error = e
-                    self._spp = self.max_spp
-                    self._shown_generation = self._generation
+                    self._spp = self.max_spp      # idle until the next change
+                    self._shown_generation = generation
                     self._wake.notify_all()
+                    callbacks = list(self._error_callbacks)
+                for cb in callbacks:
+                    cb(e)
 
     def stop(self, timeout: float = 10.0):
         """Ask the worker to stop after its current frame and wait for it."""
@@ -338,7 +366,8 @@ class Preview:
             self._wake.notify_all()
         if self._thread is not None:
             self._thread.join(timeout)
-            self._thread = None
+            if not self._thread.is_alive():       # (a worker still in its frame stays known:
+                self._thread = None               # start() must not run a second one)
 
     @property
     def running(self) -> bool:

@@ -82,7 +82,17 @@ def pass_seeds(seed: int, n: int) -> list[int]:
     >>> pass_seeds(7, 3)[0]
     7
     """
-    return [seed] + [(seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF for i in range(1, n)]
+    return [pass_seed(seed, i) for i in range(n)]
+
+
+def pass_seed(seed: int, i: int) -> int:
+    """The ``i``-th of :func:`pass_seeds` (without building the list: a preview asks for its
+    ten-thousandth).
+
+    >>> pass_seed(7, 5) == pass_seeds(7, 6)[-1]
+    True
+    """
+    return seed if i == 0 else (seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF
 
 
 def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:

@@ -130,6 +130,7 @@ class MaterialTuner(CameraPanel):
         pv = Preview(scene, version=o["version"], max_spp=o["max_spp"], denoise=o["denoise"], post=self.post,
                      interactive_scale=o["interactive_scale"], freeze=o["freeze"])
         pv.on_frame(self._show)
+        pv.on_error(self._show_error)
         return pv
 
     def _guard(self, fn):
@@ -172,11 +173,20 @@ class MaterialTuner(CameraPanel):
         self.sent.append((frame.generation, frame.spp, fmt))
         text = (f"{frame.spp} spp · {frame.render_s * 1e3:.0f} ms/frame · {self.preview.version}"
                 f"{' · denoised (biased)' if frame.denoised else ''}{' · preview' if frame.interactive else ''} · {fmt}")
-        if self.reference is not None and frame.image.shape == self.reference.shape:
-            e = tuning.errors(frame.image, self.reference)
+        # against the (linear) reference: the linear mean when a chain's srgb encoded the image
+        linear = frame.raw if frame.encoded else frame.image
+        if self.reference is not None and linear.shape == self.reference.shape:
+            e = tuning.errors(linear, self.reference)
             self.error_label.value = f"vs reference: RMSE {e['rmse']:.4f} · display RMSE {e['display_rmse']:.4f}"
-            self.error_image.value = tuning.encode(tuning.error_image(frame.image, self.reference), "png")
+            self.error_image.value = tuning.encode(tuning.error_image(linear, self.reference), "png")
         self.status.value = text
+
+    def _show_error(self, error):
+        """Worker-thread callback: a frame failed; say so in red (the preview waits for the
+        next change; before, the panel kept its last frame without a word)."""
+        self.message.value = (f"<span style='color:#b00020'>render failed: {_html(str(error))}; "
+                              "change a value to try again</span>")
+        self.status.value = "render failed"
 
     def refresh(self, frames: int = 1):
         """Render ``frames`` frames now in this thread (for scripts/tests without the worker)."""
@@ -291,8 +301,13 @@ class MaterialTuner(CameraPanel):
             files[param] = os.path.abspath(path)
         if not files:
             raise DraawError(f"{m}: no texture or normal-map file given")
+        previous = {k: dict(v) for k, v in self._textures.items()}
         self._textures.setdefault(m, {}).update(files)
-        self._reload()
+        try:
+            self._reload()
+        except Exception:
+            self._textures = previous        # a file that does not load is not kept (it blocked
+            raise                            # every later reload and went into save())
         if "base_color" in files:               # now a texture: no single colour to pick
             self.controls[m]["base_color"].disabled = True
             self.controls[m]["base_color_text"].disabled = True
@@ -303,17 +318,20 @@ class MaterialTuner(CameraPanel):
         doc = self.document()
         for m, files in self._textures.items():
             doc["materials"][m].update(files)
-            if "base_color" in files:
-                self.materials[m].pop("base_color", None)
         base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
         scale = self.controls_render["scale"].value if scale is None else scale
         w, h = self.base_scene.resolution
         doc["render"]["resolution"] = [max(8, round(w * scale)), max(8, round(h * scale))]
         scene = _from_description(doc, self.scene.source, base, {})
+        for m, files in self._textures.items():
+            if "base_color" in files:                   # a texture now: no single colour
+                self.materials[m].pop("base_color", None)
         running = self.preview.running
         self.preview.stop()
         self.scene = scene
-        self._light_base = {k: v for k, v in tuning.light_values(scene).items()}
+        # (the lights' base values stay the loaded scene's: the new scene's lights are already
+        # scaled by the intensity and colour controls, and taking them as the base applied
+        # the scale twice at the next change)
         self.preview = self._new_preview(scene)
         if running:
             self.preview.start()
@@ -442,7 +460,8 @@ class MaterialTuner(CameraPanel):
             o, t, up = self._camera_now()
             cam = {"origin": o, "target": t, "up": up, "fov": float(self.fov.value)}
         render = {"version": self.preview.version, "max_depth": int(self.preview.max_depth)}
-        doc = tuning.document(self.scene, self.materials, camera=cam, render=render, post=self.post,
+        # from the loaded scene's description: a reloaded scene's holds scaled lights already
+        doc = tuning.document(self.base_scene, self.materials, camera=cam, render=render, post=self.post,
                               light_scale=float(self.light_scale.value),
                               light_color=tuning.hex_to_linear(self.light_color.value))
         for m, files in self._textures.items():

@@ -169,3 +169,76 @@ def test_a_post_chain_ending_in_srgb_is_shown_as_it_is():
     assert np.abs(tuning.to_uint8(f.image).astype(int) - once).max() > 20    # twice
     pv.configure(post=[{"type": "srgb"}, {"type": "srgb", "inverse": True}])
     assert not pv.step().encoded
+
+
+def test_a_frame_failing_while_the_values_change_does_not_spoil_the_next_mean():
+    """A frame fails after update() bumped the generation: the worker must not mark the new
+    generation as finished (it did: the next frame accumulated onto spp = max_spp, reporting
+    9 spp at 0.11x the brightness, or the worker idled)."""
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False,
+                 max_spp=8, seed=5)
+    real = pv._render_fn
+    calls = []
+
+    def failing_once():
+        if not calls:
+            calls.append(1)
+            pv.update({"ball.roughness": 0.3})                 # the user moves a slider meanwhile
+            raise RuntimeError("transient")
+        return real()
+    pv._render_fn = failing_once
+    pv.start()
+    try:
+        f = pv.wait(spp=8, timeout=60)
+        assert f is not None and f.spp == 8 and pv.error is None
+        assert pv.frame.generation == pv._generation
+    finally:
+        pv.stop()
+
+
+def test_a_scene_without_a_description_previews_at_full_size():
+    """An XML file or mi.Scene cannot be reloaded at another size: the first frame after a
+    change is then a full-size one (a reduced one raised on every change: a blank tuner)."""
+    d = mi.cornell_box()
+    d["sensor"]["film"]["width"] = d["sensor"]["film"]["height"] = 16
+    pv = Preview(draaw_mi.load_scene(mi.load_dict(d)), version="v4", max_depth=3, freeze=False,
+                 interactive_scale=0.5)
+    f = pv.step()
+    assert f is not None and not f.interactive and f.image.shape == (16, 16, 3)
+
+
+def test_configure_is_all_or_nothing_and_rescales_the_interactive_frame():
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False,
+                 interactive_scale=0.5)
+    assert pv.step().image.shape == (24, 32, 3) and pv._lo.resolution == (16, 12)
+    pv.configure(interactive_scale=0.25)
+    assert pv.step().interactive and pv._lo.resolution == (8, 6)   # (kept 16x12 before)
+    with pytest.raises(ParameterError, match="interactive_scale"):
+        pv.configure(interactive_scale=2.0)
+    with pytest.raises(DraawError, match="v9"):
+        pv.configure(version="v9", max_depth=2)
+    assert pv.version == "v4" and pv.max_depth == 4                # nothing half-applied
+
+
+def test_a_worker_that_outlives_stop_is_not_doubled_by_start(monkeypatch):
+    """stop() gave up waiting for a slow frame and forgot the thread, so start() ran a second
+    worker beside it."""
+    import threading
+    pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False,
+                 max_spp=4)
+    real = pv._finish
+
+    def slow(*args, **kwargs):
+        time.sleep(0.5)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(pv, "_finish", slow)
+    pv.start()
+    time.sleep(0.1)
+    pv.stop(timeout=0.01)
+    pv.start()
+    try:
+        workers = [t for t in threading.enumerate() if t.name == "draaw-mi-preview" and t.is_alive()]
+        assert len(workers) == 1
+        assert pv.wait(spp=4, timeout=60) is not None                # and it goes on working
+    finally:
+        pv.stop()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import time
 
 import numpy as np
 import pytest
@@ -282,3 +283,67 @@ def test_close_releases_every_widget_and_the_scene(tmp_path, channel):
     gc.collect()
     assert len(registry) == n_widgets
     assert len(list(LIVE_INSTANCES)) == n_bsdfs
+
+
+def test_light_controls_survive_a_reload_without_compounding(tuner):
+    """Intensity ×2, then a reload (resolution), then a colour change: the light is the
+    loaded value × 2, not × 4 (the reloaded scene's scaled lights became the base), and
+    what save() writes is × 2 too."""
+    k = "point_light0.intensity.value"
+    base = np.array(tuner.scene.params[k]).ravel().copy()
+    tuner.light_scale.value = 2.0
+    tuner.controls_render["scale"].value = 0.5                     # reloads the scene
+    tuner.light_color.value = "#ffffff"
+    tuner.light_scale.value = 2.0 + 1e-9                           # any light change re-applies
+    tuner.refresh()
+    np.testing.assert_allclose(np.array(tuner.scene.params[k]).ravel(), base * 2, rtol=1e-6)
+    assert tuner.document()["lights"][0]["intensity"] == pytest.approx(40.0 * 2.0)
+    tuner.controls_render["scale"].value = 1.0                     # a second reload
+    assert tuner.document()["lights"][0]["intensity"] == pytest.approx(40.0 * 2.0)
+    np.testing.assert_allclose(np.array(tuner.scene.params[k]).ravel(), base * 2, rtol=1e-6)
+
+
+def test_a_texture_that_does_not_load_is_not_kept(tuner, tmp_path):
+    """A file that exists but is no image: one red error, and the tuner goes on as before
+    (the bad path blocked every later reload and went into save())."""
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not an image")
+    tuner.controls["ball"]["texture"].value = str(bad)
+    tuner._guard(lambda: tuner._apply_textures("ball"))()
+    assert "error" in tuner.message.value
+    assert tuner._textures == {} and "base_color" in tuner.materials["ball"]
+    tuner.controls_render["scale"].value = 0.5                     # a reload works
+    assert tuner.scene.resolution == (16, 12)
+    assert tuner.document()["materials"]["ball"]["base_color"] == pytest.approx([0.8, 0.3, 0.2])
+
+
+def test_a_frame_that_fails_is_shown_in_red_and_a_change_recovers(tuner, monkeypatch):
+    """The worker's render error reaches the panel (it kept its last frame without a word);
+    the next change renders again."""
+    tuner.preview.start()
+    try:
+        real = tuner.preview._render_fn
+        monkeypatch.setattr(tuner.preview, "_render_fn",
+                            lambda: (_ for _ in ()).throw(RuntimeError("kernel exploded")))
+        g = tuner.preview.update({"ball.roughness": 0.3})
+        deadline = time.time() + 30
+        while "render failed" not in tuner.message.value and time.time() < deadline:
+            time.sleep(0.02)
+        assert "render failed: kernel exploded" in tuner.message.value
+        assert tuner.preview.error is not None
+        monkeypatch.setattr(tuner.preview, "_render_fn", real)
+        g = tuner.preview.update({"ball.roughness": 0.4})
+        f = tuner.preview.wait(g, spp=2, timeout=30)
+        assert f is not None and f.spp >= 2 and tuner.preview.error is None
+    finally:
+        tuner.preview.stop()
+
+
+def test_the_error_line_of_an_srgb_chain_compares_the_linear_mean(tuner):
+    """With a chain that ends in srgb the shown image is display-encoded; the reference is
+    linear, so the error uses the linear mean (RMSE 0.27 for a reference equal to it)."""
+    tuner.preview.configure(post=[{"type": "srgb"}])
+    f = tuner.refresh(2)
+    tuner.reference = f.raw.copy()
+    tuner._show(f)
+    assert "RMSE 0.0000" in tuner.error_label.value
