@@ -32,6 +32,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
+from ..materials.draaw_bsdf import clamp_st
 from .features import detect_features
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
@@ -58,9 +59,12 @@ def lum(c: mi.Color3f) -> mi.Float:
 
 
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
-    """Power-heuristic weight of strategy ``a`` (detached; 0 where not finite)."""
-    a2 = dr.square(pdf_a)
-    w = a2 / (a2 + dr.square(pdf_b))
+    """Power-heuristic weight of strategy ``a`` (detached; 0 where not finite), as
+    ``1 / (1 + (b/a)^2)``: squaring the pdfs themselves overflowed above 1.8e19 (a tiny or
+    grazing area light) and gave inf / inf, weight 0 instead of 1."""
+    ok = pdf_a > 0
+    r = pdf_b / dr.select(ok, pdf_a, 1.0)
+    w = dr.select(ok, dr.rcp(1.0 + dr.square(r)), 0.0)
     return dr.detach(dr.select(dr.isfinite(w), w, 0.0))
 
 
@@ -298,12 +302,14 @@ def phong_material(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Boo
     is_draaw = mi.Bool(False)
     if feats["draaw_materials"]:
         is_draaw = active & bsdf.has_attribute("direct_to_scatter", active)
-        base = dr.clip(bsdf.eval_attribute("base_color", si, is_draaw), 0.0, 1.0)
-        rough = dr.clip(bsdf.eval_attribute_1("roughness", si, is_draaw), 0.0, 1.0)
-        metal = dr.clip(bsdf.eval_attribute_1("metallic", si, is_draaw), 0.0, 1.0)
-        spec = dr.clip(bsdf.eval_attribute_1("specular", si, is_draaw), 0.0, 1.0)
-        refl = dr.clip(bsdf.eval_attribute_1("reflection", si, is_draaw), 0.0, 1.0)
-        d2s = dr.clip(bsdf.eval_attribute_1("direct_to_scatter", si, is_draaw), 0.0, 1.0)
+        # straight-through clamps, as the draaw BSDF's: a plain clip gave no gradient at a
+        # bound (reflection and metallic sit at 0 by default, and a fit never left them)
+        base = clamp_st(bsdf.eval_attribute("base_color", si, is_draaw), 0.0, 1.0)
+        rough = clamp_st(bsdf.eval_attribute_1("roughness", si, is_draaw), 0.0, 1.0)
+        metal = clamp_st(bsdf.eval_attribute_1("metallic", si, is_draaw), 0.0, 1.0)
+        spec = clamp_st(bsdf.eval_attribute_1("specular", si, is_draaw), 0.0, 1.0)
+        refl = clamp_st(bsdf.eval_attribute_1("reflection", si, is_draaw), 0.0, 1.0)
+        d2s = clamp_st(bsdf.eval_attribute_1("direct_to_scatter", si, is_draaw), 0.0, 1.0)
         ks_d = dr.lerp(mi.Color3f(0.08 * spec), base, metal)
         kd_d = base * (1.0 - metal) * (1.0 - dr.max(ks_d))
         alpha2 = dr.square(dr.square(rough)) + 1e-6          # alpha^2, alpha = sqrt(r^4 + 1e-6)
@@ -404,10 +410,10 @@ class DraawParams:
 
 
 def draaw_params(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Bool) -> DraawParams:
-    base = dr.maximum(bsdf.eval_attribute("base_color", si, active), 0.0)
-    rough = dr.clip(bsdf.eval_attribute_1("roughness", si, active), 0.0, 1.0)
-    metal = dr.clip(bsdf.eval_attribute_1("metallic", si, active), 0.0, 1.0)
-    spec = dr.clip(bsdf.eval_attribute_1("specular", si, active), 0.0, 1.0)
+    base = clamp_st(bsdf.eval_attribute("base_color", si, active), 0.0, None)
+    rough = clamp_st(bsdf.eval_attribute_1("roughness", si, active), 0.0, 1.0)
+    metal = clamp_st(bsdf.eval_attribute_1("metallic", si, active), 0.0, 1.0)
+    spec = clamp_st(bsdf.eval_attribute_1("specular", si, active), 0.0, 1.0)
     alpha = dr.sqrt(dr.square(dr.square(rough)) + ALPHA_MIN ** 2)
     f0 = dr.lerp(mi.Color3f(0.08 * spec), base, metal)
     return DraawParams(base * (1.0 - metal), f0, dr.minimum(1.0, 50.0 * f0), alpha)
@@ -440,7 +446,8 @@ def draaw_spec_probability(p: DraawParams, cos_i: mi.Float) -> mi.Float:
     w_spec = lum(schlick(p.f0, p.f90, cos_i))
     w_diff = lum(p.kd) * (1.0 - w_spec)
     total = w_spec + w_diff
-    return dr.detach(dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5))
+    # clipped into [0, 1]: a base colour above 1 makes w_diff negative (see the draaw BSDF)
+    return dr.detach(dr.clip(dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5), 0.0, 1.0))
 
 
 def draaw_ndf_sample(p: DraawParams, mtype: mi.MicrofacetType, wi: mi.Vector3f,

@@ -79,7 +79,7 @@ def _lum(c):
     return _LUM[0] * c.x + _LUM[1] * c.y + _LUM[2] * c.z
 
 
-def _clamp_st(x, lo, hi):
+def clamp_st(x, lo, hi):
     """Clamp the value into [lo, hi] but pass the gradient straight through (documented)."""
     clamped = dr.maximum(x, lo) if hi is None else dr.clip(x, lo, hi)
     return dr.replace_grad(clamped, x)
@@ -150,10 +150,10 @@ class DraawBSDF(mi.BSDF):
     def _params(self, si, active):
         # Clamp into range with a straight-through gradient: an optimiser that sits exactly on
         # a bound (metallic = 0, roughness = 1) still sees which way the loss wants to go.
-        base = _clamp_st(textures.evaluate(self.base_color, si, active), 0.0, None)
-        rough = _clamp_st(textures.evaluate_1(self.roughness, si, active), 0.0, 1.0)
-        metallic = _clamp_st(textures.evaluate_1(self.metallic, si, active), 0.0, 1.0)
-        specular = _clamp_st(textures.evaluate_1(self.specular, si, active), 0.0, 1.0)
+        base = clamp_st(textures.evaluate(self.base_color, si, active), 0.0, None)
+        rough = clamp_st(textures.evaluate_1(self.roughness, si, active), 0.0, 1.0)
+        metallic = clamp_st(textures.evaluate_1(self.metallic, si, active), 0.0, 1.0)
+        specular = clamp_st(textures.evaluate_1(self.specular, si, active), 0.0, 1.0)
         alpha = dr.sqrt(dr.square(dr.square(rough)) + self.alpha_min ** 2)
         f0 = dr.lerp(mi.Color3f(0.08 * specular), base, metallic)
         f90 = dr.minimum(1.0, 50.0 * f0)
@@ -165,7 +165,9 @@ class DraawBSDF(mi.BSDF):
         w_spec = _lum(_schlick(f0, f90, cos_i))
         w_diff = _lum(kd) * (1.0 - w_spec)
         total = w_spec + w_diff
-        return dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5)
+        # clipped: a base colour above 1 (an optimiser's step) made w_diff negative, p > 1
+        # and the mixture pdf negative in 11 % of directions
+        return dr.clip(dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5), 0.0, 1.0)
 
     # ------------------------------------------------------------------ shading frame
     def _local_frame(self, si, active):
@@ -302,7 +304,9 @@ class DraawBSDF(mi.BSDF):
         return self._params(si, active)[0]
 
     def has_attribute(self, name, active=True):
-        return name in ALL_PARAMS or name == "albedo"
+        # "normalmap": whether this BSDF perturbs its shading frame (draaw_v3 samples those
+        # lanes with sample(), in that frame)
+        return name in ALL_PARAMS or name == "albedo" or (name == "normalmap" and self.normalmap is not None)
 
     def eval_attribute(self, name, si, active=True):
         if name in ("base_color", "albedo"):

@@ -122,3 +122,29 @@ def test_same_expectation_official_scenes_high_spp(name):
     for i, kind in enumerate(("draaw_v4", "draaw_v3")):
         st = seed_stack(scene, integrator(kind), spp, range(100 * (i + 1), 100 * (i + 1) + K))
         check_same_expectation(ref, st, max_frac3=0.01, max_mean=0.15)
+
+
+def test_v3_near_mirror_with_a_normal_map():
+    """A draaw metal of roughness 0.1 whose normal map tilts the shading normal by 17 degrees,
+    under an environment map: V3 sampled the NDF around the unperturbed normal while the BSDF
+    evaluates in the perturbed frame, so its glossy peak got near-zero pdfs (image means 0.43
+    to 41 over seeds, pixels up to 1e4); it now samples such lanes with the BSDF's own
+    sample() and has path's expectation."""
+    t = np.deg2rad(17.0)
+    n = (np.array([np.sin(t), 0.0, np.cos(t)]) + 1.0) / 2.0
+    normalmap = mi.TensorXf(np.tile(n.astype(np.float32), (8, 8, 1)))
+    sky = np.dstack([np.linspace(0.2, 3.0, 32)[None, :].repeat(16, 0)] * 3).astype(np.float32)
+    d = {"type": "scene",
+         "sensor": {"type": "perspective", "fov": 30,
+                    "to_world": mi.ScalarTransform4f().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": 12, "height": 12, "rfilter": {"type": "box"}}},
+         "ball": {"type": "sphere", "bsdf": {"type": "draaw", "roughness": 0.1, "metallic": 1.0,
+                                            "base_color": {"type": "rgb", "value": [0.9, 0.9, 0.9]},
+                                            "normalmap": {"type": "bitmap", "data": normalmap, "raw": True}}},
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(sky)}}
+    scene = mi.load_dict(d)
+    K, spp = 10, 64
+    ref = seed_stack(scene, integrator("path", max_depth=4), spp, range(K))
+    st = seed_stack(scene, integrator("draaw_v3", max_depth=4), spp, range(50, 50 + K))
+    assert np.isfinite(st).all() and st.max() < 10 * ref.max()
+    check_same_expectation(ref, st)

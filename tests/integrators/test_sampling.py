@@ -80,3 +80,13 @@ def test_power_selection_samples_its_pmf_and_reuses_the_sample():
     lo = np.concatenate([[0.0], cdf[:-1]])[idx]
     assert np.allclose(u, np.clip((x - lo) / p[idx], 0, 1), atol=1e-4)
     assert (u >= 0).all() and (u < 1).all()
+
+
+def test_mis_weight_is_the_power_heuristic_without_overflow():
+    """w = a^2 / (a^2 + b^2), also for pdfs whose squares overflow float32 (a tiny or grazing
+    area light: 1e20 gave inf / inf and a weight of 0 instead of 1)."""
+    from draaw_mi.integrators.common import mis_weight
+    a = mi.Float([1.0, 1.0, 2.0, 0.0, 1e20, 1e20, 1e-30])
+    b = mi.Float([1.0, 0.0, 1.0, 1.0, 1.0, 1e20, 1e-30])
+    w = np.array(mis_weight(a, b))
+    np.testing.assert_allclose(w, [0.5, 1.0, 0.8, 0.0, 1.0, 0.5, 0.5], rtol=1e-6)
