@@ -104,6 +104,9 @@ def emitter_power(emitter: mi.Emitter, scene: mi.Scene) -> float:
     return lum * 4.0 * math.pi                       # point / spot: intensity over the sphere
 
 
+POWER_UNIFORM_SHARE = 0.05     # of the power table's probability, spread evenly over the lights
+
+
 class PowerSelection:
     """Emitter selection proportional to :func:`emitter_power`; ``None`` from :meth:`of` when
     uniform selection (Mitsuba's) is as good: a single emitter or similar powers.
@@ -121,8 +124,11 @@ class PowerSelection:
 
     @staticmethod
     def from_power(scene: mi.Scene, power: np.ndarray) -> "PowerSelection":
-        power = np.maximum(np.asarray(power, np.float64), 1e-6 * np.max(power))
-        pmf = power / power.sum()
+        power = np.maximum(np.asarray(power, np.float64), 0.0)
+        # a share spread evenly: a dark light (intensity 0, or 1e-3 of the others) was
+        # practically never sampled, so its gradient came out 0, or 35x off on the seed that
+        # drew it; a light being fitted up from dark is a normal inverse-lighting case
+        pmf = (1.0 - POWER_UNIFORM_SHARE) * power / power.sum() + POWER_UNIFORM_SHARE / power.size
         cdf = np.cumsum(pmf)
         cdf[-1] = 1.0
         ids = np.array(dr.reinterpret_array(mi.UInt32, scene.emitters_dr()), dtype=np.int64)

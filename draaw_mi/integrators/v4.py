@@ -97,7 +97,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
       heuristic);
     - Russian roulette from ``rr_depth`` on that stops only weak paths (throughput below
       ``rr_threshold``), so bright paths in open scenes and metals are never cut;
-    - emitter selection by power in many-light scenes;
+    - emitter selection by power in many-light scenes (5 % spread evenly, so a dark light
+      still gets the samples its gradient needs);
     - emission splitting: where a light is seen directly, its emission in the pixels on its
       edges comes from 16 stratified extra camera rays (no shading, one intersection each);
     - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased);

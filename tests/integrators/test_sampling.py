@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import draaw_mi  # noqa: F401
 import drjit as dr
@@ -75,7 +76,10 @@ def test_power_selection_samples_its_pmf_and_reuses_the_sample():
     want = np.minimum(np.searchsorted(cdf, x, side="right"), len(cdf) - 1)
     assert np.array_equal(idx, want)
     p = np.array(sel.pmf_dr)
-    assert p[4] > 0 and p[4] < 1e-5                    # a dark light keeps a tiny probability
+    from draaw_mi.integrators.sampling import POWER_UNIFORM_SHARE
+    # a dark light keeps an even share of the table (its gradient needs samples)
+    assert p[4] == pytest.approx(POWER_UNIFORM_SHARE / 5, rel=1e-5)
+    np.testing.assert_allclose(p, 0.95 * np.array([1.0, 10.0, 0.5, 3.0, 0.0]) / 14.5 + 0.01, rtol=1e-5)
     assert np.allclose(pmf, p[idx])
     lo = np.concatenate([[0.0], cdf[:-1]])[idx]
     assert np.allclose(u, np.clip((x - lo) / p[idx], 0, 1), atol=1e-4)
