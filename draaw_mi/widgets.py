@@ -142,7 +142,7 @@ class MaterialTuner(CameraPanel):
             try:
                 fn(*args)
             except (DraawError, ValueError, OSError, KeyError, TypeError) as e:
-                self.message.value = f"<span style='color:#b00020'>error: {_html(str(e))}</span>"
+                self.message.value = _error_html(f"error: {e}")
         return run
 
     def _changed(self, values: dict):
@@ -184,8 +184,7 @@ class MaterialTuner(CameraPanel):
     def _show_error(self, error):
         """Worker-thread callback: a frame failed; say so in red (the preview waits for the
         next change; before, the panel kept its last frame without a word)."""
-        self.message.value = (f"<span style='color:#b00020'>render failed: {_html(str(error))}; "
-                              "change a value to try again</span>")
+        self.message.value = _error_html(f"render failed: {error}; change a value to try again")
         self.status.value = "render failed"
 
     def refresh(self, frames: int = 1):
@@ -484,6 +483,11 @@ class MaterialTuner(CameraPanel):
 
 def _html(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _error_html(text: str) -> str:
+    """``text`` as the panel's red error line (escaped)."""
+    return f"<span style='color:#b00020'>{_html(text)}</span>"
 
 
 __all__ = ["MaterialTuner"]
