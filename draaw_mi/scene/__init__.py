@@ -245,10 +245,9 @@ def load_scene(source, **overrides) -> DraawScene:
             scene = load_mitsuba_file(path)
         except Exception as e:  # noqa: BLE001
             raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            text = re.sub(r"<!--.*?-->", "", fh.read(), flags=re.S)      # not a commented-out one
-            named = re.search(r"<integrator\b", text) is not None
-        return _from_mitsuba_scene(scene, path, overrides, named_integrator=named)
+        from .mitsuba_xml import xml_references
+        files, named = xml_references(path)      # (includes followed, comments ignored)
+        return _from_mitsuba_scene(scene, path, overrides, named_integrator=named, files=files)
     if lower.endswith((".toml", ".json")):
         desc = _read_text_description(path)
     else:
@@ -288,9 +287,10 @@ _INTEGRATOR_VERSIONS = {"PathIntegrator": "path", "PRBIntegrator": "prb",
 
 
 def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None,
-                        named_integrator: bool = False) -> DraawScene:
+                        named_integrator: bool = False, files: list | None = None) -> DraawScene:
     """``named_integrator``: the XML file or dict names its integrator, which then becomes
-    the scene's render version (a scene without one renders with draaw-mi's default)."""
+    the scene's render version (a scene without one renders with draaw-mi's default).
+    ``files``: the files the scene reads besides its own (``info["files"]``)."""
     sensors = scene.sensors()
     if not sensors:
         raise SceneError(f"{source}: the scene has no sensor (camera)")
@@ -320,7 +320,7 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         raise SceneError(f"{source}: sampler={checked['sampler']!r} cannot override the sampler of a "
                          f"Mitsuba scene ({settings['sampler']!r}); set it in the scene itself")
     settings.update({k: v for k, v in checked.items() if v is not None})
-    d = DraawScene(scene, settings, source, {"materials": []}, mi_dict)
+    d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
     if overrides.get("resolution") and tuple(overrides["resolution"]) != d.resolution:
         d = d.with_resolution(*overrides["resolution"])
     return d

@@ -1,0 +1,137 @@
+"""What a Mitsuba XML scene file refers to: the files it reads and whether it names an integrator.
+
+Mitsuba loads the scene itself (``mi.load_file``); this module only reads the XML text again,
+after a successful load, to learn what the load depended on:
+
+- the **files** it reads (``<include>`` files, meshes, textures, environment maps, volume
+  grids, spectra: every ``filename``), so that batch frames of the scene go stale when one of
+  them changes (:func:`draaw_mi.batch.plan.files_hash`), as for TOML scenes;
+- whether it, or a file it includes, declares an ``<integrator>`` (which then becomes the
+  scene's render version).
+
+Relative names are looked up as Mitsuba does: beside the file that names them, beside the
+scene file and in the folders of ``<path>`` tags; ``$name`` takes the value of a
+``<default name=...>``. A name found in none of them is left out (Mitsuba would have failed
+the load). Listing a file Mitsuba did not read costs at most a needless re-render, so every
+candidate that exists is kept.
+
+Example::
+
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> _ = open(os.path.join(d, "tex.png"), "wb").write(b"x")
+    >>> _ = open(os.path.join(d, "s.xml"), "w").write(
+    ...     '<scene version="3.0.0"><default name="t" value="tex.png"/>'
+    ...     '<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+    ...     '<string name="filename" value="$t"/></texture></bsdf></scene>')
+    >>> files, named = xml_references(os.path.join(d, "s.xml"))
+    >>> [os.path.basename(f) for f in files], named
+    (['tex.png'], False)
+"""
+from __future__ import annotations
+
+import os
+import re
+import xml.etree.ElementTree as ET
+
+#: includes deeper than this are not followed (Mitsuba's own limit is 15)
+MAX_INCLUDE_DEPTH = 15
+
+
+def xml_references(path: str) -> tuple[list[str], bool]:
+    """``(files, names_integrator)`` of the Mitsuba XML scene ``path``: the absolute paths of
+    the existing files it and its includes read (``path`` itself not included), and whether
+    any of them declares an ``<integrator>``."""
+    path = os.path.abspath(path)
+    scene_dir = os.path.dirname(path)
+    files: list[str] = []
+    named = [False]
+    seen: set[str] = set()
+
+    def visit(file: str, defaults: dict, search: list[str], depth: int) -> None:
+        if file in seen or depth > MAX_INCLUDE_DEPTH:
+            return
+        seen.add(file)
+        root = _parse(file)
+        if root is None:
+            named[0] |= _names_integrator_text(file)
+            return
+        here = os.path.dirname(file)
+        defaults = dict(defaults)
+        for node in root.iter("default"):
+            if node.get("name") is not None and node.get("value") is not None:
+                defaults.setdefault(node.get("name"), node.get("value"))
+        search = search + [_resolve_dir(_subst(n.get("value", ""), defaults), here)
+                           for n in root.iter("path")]
+        for node in root.iter():
+            if node.tag == "integrator":
+                named[0] = True
+            if node.tag == "include" and node.get("filename"):
+                inc = _find(_subst(node.get("filename"), defaults), [here, scene_dir] + search)
+                if inc:
+                    _add(files, inc)
+                    visit(inc, defaults, search, depth + 1)
+                continue
+            name = None
+            if node.get("name", "").endswith("filename") and node.get("value"):
+                name = node.get("value")                     # <string name="filename" value=...>
+            elif node.tag == "spectrum" and node.get("filename"):
+                name = node.get("filename")                  # <spectrum filename=...>
+            if name:
+                found = _find(_subst(name, defaults), [here, scene_dir] + search)
+                if found:
+                    _add(files, found)
+
+    visit(path, {}, [], 0)
+    return files, named[0]
+
+
+def _parse(file: str):
+    try:
+        return ET.parse(file).getroot()
+    except (ET.ParseError, OSError, ValueError):
+        return None
+
+
+def _names_integrator_text(file: str) -> bool:
+    """The text test for a file ElementTree cannot parse (comments dropped)."""
+    try:
+        with open(file, encoding="utf-8", errors="replace") as fh:
+            text = re.sub(r"<!--.*?-->", "", fh.read(), flags=re.S)
+    except OSError:
+        return False
+    return re.search(r"<integrator\b", text) is not None
+
+
+def _subst(value: str, defaults: dict) -> str:
+    if "$" not in value:
+        return value
+    # longest names first, so that $spp_max is not read as $spp followed by "_max"
+    for name in sorted(defaults, key=len, reverse=True):
+        value = value.replace("$" + name, str(defaults[name]))
+    return value
+
+
+def _resolve_dir(value: str, here: str) -> str:
+    return value if os.path.isabs(value) else os.path.join(here, value)
+
+
+def _find(name: str, folders: list[str]) -> str | None:
+    if "$" in name:                   # a parameter given only at load time: cannot be known here
+        return None
+    name = os.path.expanduser(name)
+    if os.path.isabs(name):
+        return name if os.path.isfile(name) else None
+    for folder in folders:
+        candidate = os.path.normpath(os.path.join(folder, name))
+        if os.path.isfile(candidate):
+            return candidate
+    return None
+
+
+def _add(files: list[str], path: str) -> None:
+    if path not in files:
+        files.append(path)
+
+
+__all__ = ["xml_references"]

@@ -1,0 +1,84 @@
+"""Mitsuba XML scenes: the files they read (batch frames go stale with them) and an integrator
+declared in an included file (draaw_mi.scene.mitsuba_xml)."""
+import os
+
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi import batch
+from draaw_mi.scene.mitsuba_xml import xml_references
+
+SENSOR = ('<sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 4" '
+          'target="0, 0, 0" up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" '
+          'value="16"/><integer name="height" value="16"/><rfilter type="box"/></film>'
+          '<sampler type="independent"><integer name="sample_count" value="1"/></sampler></sensor>')
+
+
+def _scene(tmp_path):
+    """scene.xml: a texture named through a <default>, an OBJ mesh in a sub-folder, an
+    <include> of parts/light.xml (which names its own integrator and a file beside it), a
+    commented-out integrator and a file that exists nowhere Mitsuba looks."""
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "quad.obj").write_text(
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    draaw_mi.write_png(str(tmp_path / "wood.png"), np.full((4, 4, 3), 0.4, np.float32))
+    (tmp_path / "parts" / "light.xml").write_text(
+        '<scene version="3.0.0"><integrator type="path"><integer name="max_depth" value="3"/>'
+        '</integrator><emitter type="constant"><rgb name="radiance" value="1"/></emitter></scene>')
+    (tmp_path / "scene.xml").write_text(
+        f'<scene version="3.0.0"><default name="tex" value="wood.png"/>'
+        f'<!-- <integrator type="direct"/> --><include filename="parts/light.xml"/>{SENSOR}'
+        '<shape type="obj"><string name="filename" value="meshes/quad.obj"/>'
+        '<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+        '<string name="filename" value="$tex"/></texture></bsdf></shape></scene>')
+    return tmp_path / "scene.xml"
+
+
+def test_the_files_an_xml_scene_reads_are_listed(tmp_path):
+    path = _scene(tmp_path)
+    files, named = xml_references(str(path))
+    assert sorted(os.path.relpath(f, tmp_path) for f in files) == \
+        ["meshes/quad.obj", "parts/light.xml", "wood.png"]
+    assert named                                  # declared in the included file only
+    s = draaw_mi.load_scene(str(path))
+    assert sorted(s.info["files"]) == sorted(files)
+    assert s.settings["version"] == "path" and s.settings["max_depth"] == 3
+    # the same scene without the include: the commented-out integrator does not count
+    text = path.read_text().replace('<include filename="parts/light.xml"/>', "")
+    path.write_text(text)
+    files, named = xml_references(str(path))
+    assert not named and sorted(os.path.relpath(f, tmp_path) for f in files) == ["meshes/quad.obj", "wood.png"]
+    assert draaw_mi.load_scene(str(path)).settings["version"] != "path"
+
+
+def test_a_name_given_only_at_load_time_or_missing_is_left_out(tmp_path):
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><shape type="ply"><string name="filename" value="$mesh"/></shape>'
+        '<shape type="obj"><string name="filename" value="gone.obj"/></shape>'
+        '<include filename="$part"/></scene>')
+    assert xml_references(str(tmp_path / "s.xml")) == ([], False)
+
+
+def test_an_unparsable_file_falls_back_to_the_text_test(tmp_path):
+    (tmp_path / "s.xml").write_text('<scene version="3.0.0"><integrator type="path"/>&undefined;</scene>')
+    assert xml_references(str(tmp_path / "s.xml")) == ([], True)
+
+
+def test_batch_frames_of_an_xml_scene_go_stale_when_a_file_it_reads_changes(tmp_path):
+    """A texture, a mesh or an included file of an XML scene edited: its finished frames are
+    stale (they stayed "done": XML scenes listed no files)."""
+    path = _scene(tmp_path)
+    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+           "jobs": [{"name": "x", "scene": str(path), "frames": 1, "spp": 1}]}
+    assert batch.run(doc, progress=False).rendered == 1
+    assert len(batch.read_header(str(tmp_path / "out" / "0000.exr"))["draaw:files_sha256"]) == 64
+    for name, edit in (("wood.png", lambda p: draaw_mi.write_png(p, np.full((4, 4, 3), 0.8, np.float32))),
+                       ("meshes/quad.obj", lambda p: open(p, "a").write("# edited\n")),
+                       ("parts/light.xml", lambda p: open(p, "a").write("<!-- edited -->\n"))):
+        assert batch.status(doc)["counts"]["done"] == 1, name
+        edit(str(tmp_path / name))
+        assert batch.status(doc)["counts"]["stale"] == 1, name
+        assert batch.run(doc, progress=False).rendered == 1, name
