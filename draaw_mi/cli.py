@@ -261,7 +261,6 @@ def _volume_line(v: dict) -> str:
 
 def _cmd_fit(args) -> int:
     import draaw_mi
-    import tomli_w
 
     if args.output:
         _writable(args.output, (".toml", ".json"), "output")
@@ -275,26 +274,30 @@ def _cmd_fit(args) -> int:
         except (OSError, json.JSONDecodeError) as e:
             raise CliError(f"--views {args.views!r}: {e}") from None
     scene = draaw_mi.load_scene(args.scene)
+    if args.output:               # fail before the fit, not after it: can the values be written?
+        if scene.description is None and not args.output.lower().endswith(".json"):
+            raise CliError(f"-o {args.output!r}: {args.scene} is not a TOML/JSON scene; only the "
+                           "values can be written, to a .json file")
+        if scene.description is not None:
+            scene.updated_description({name: 0.0 for name in args.param})
     post = _load_chain(args.post) if args.post else None
     res = draaw_mi.fit(scene, list(args.reference), params=list(args.param), version=args.version,
                        spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
                        post=post, exposure=args.exposure, seed=args.seed,
                        progress=(not args.no_progress) and sys.stderr.isatty())
     for name, value in res.values.items():
-        print(f"{name} = {value if isinstance(value, list) else round(value, 5)}")
+        if hasattr(value, "shape"):        # a texture
+            mean = ", ".join(f"{m:.4g}" for m in value.reshape(-1, value.shape[-1]).mean(axis=0))
+            print(f"{name} = texture {'x'.join(map(str, value.shape))} (mean {mean})")
+        else:
+            print(f"{name} = {value if isinstance(value, list) else round(value, 5)}")
     if args.exposure == "fit":
         print(f"exposure = {res.exposure_stops:+.4f} stops (render x {2 ** res.exposure_stops:.4f} matches the reference)")
     print(f"loss {res.losses[0]:.4g} -> {res.losses[-1]:.4g} in {res.iterations} iterations, "
           f"{res.seconds:.1f} s, {'converged' if res.converged else 'not converged'}")
     if args.output:
-        from draaw_mi.io import write_text
-        if scene.description is not None:
-            doc = scene.updated_description(res.values)
-        else:
-            doc = {"fitted": res.values}
-        text = tomli_w.dumps(doc) if args.output.lower().endswith(".toml") else json.dumps(doc, indent=2)
-        write_text(args.output, text)
-        print(f"wrote {args.output}")
+        for path in res.save(args.output, scene):
+            print(f"wrote {path}")
     if args.plot:
         res.plot(args.plot)
         print(f"wrote {args.plot}")

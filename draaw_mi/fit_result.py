@@ -2,6 +2,7 @@
 converged (:func:`settled`)."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,7 +12,8 @@ import numpy as np
 class FitResult:
     """What :func:`draaw_mi.fit` returns.
 
-    ``values``: fitted value per parameter (float, or list for colours); ``history``: one dict
+    ``values``: fitted value per parameter (float, list for colours, float32 array of the
+    texture's shape for textures); ``history``: one dict
     per iteration (``loss``, every parameter's value, the learning rate ``lr`` and the
     optimiser's coordinates ``latent``); ``image``: the final render of the
     first view (numpy, post chain applied); ``converged``: whether the parameters settled
@@ -48,9 +50,13 @@ class FitResult:
             v = np.array([h["values"][name] for h in self.history], dtype=float)
             if v.ndim == 1:
                 b.plot(v, label=name)
-            else:
+            elif v.ndim == 2:
                 for c in range(v.shape[1]):
                     b.plot(v[:, c], label=f"{name}[{c}]")
+            else:              # a texture: the mean of each channel over its texels
+                v = v.reshape(len(v), -1, v.shape[-1]).mean(axis=1)
+                for c in range(v.shape[1]):
+                    b.plot(v[:, c], label=f"mean {name}[{c}]")
         b.set_xlabel("iteration")
         b.set_title("parameters")
         b.legend(fontsize=8)
@@ -61,6 +67,51 @@ class FitResult:
                 fig.savefig(tmp, dpi=100, format="png")
             plt.close(fig)
         return fig
+
+
+    def save(self, path: str, scene=None) -> list[str]:
+        """Write the fit to ``path``: for a scene described in TOML/JSON (``scene``, a
+        :class:`~draaw_mi.scene.DraawScene`) the description with the fitted values (``.toml``
+        or ``.json``), otherwise ``{"fitted": values}`` (``.json``). A fitted texture goes to
+        an EXR beside ``path`` (``<stem>.<material>.<parameter>.exr``, linear float32) that the
+        written scene names. Atomic writes; returns the files written.
+
+        >>> import os, tempfile
+        >>> out = os.path.join(tempfile.mkdtemp(), "fit.json")
+        >>> FitResult(values={"gold.roughness": 0.25}).save(out) == [out]
+        True
+        >>> open(out).read().split()
+        ['{', '"fitted":', '{', '"gold.roughness":', '0.25', '}', '}']
+        """
+        import json
+
+        from .io import write_exr, write_text
+        lower = path.lower()
+        described = scene is not None and getattr(scene, "description", None) is not None
+        if not lower.endswith((".toml", ".json") if described else (".json",)):
+            raise ValueError(f"FitResult.save: {path!r}; expected a .toml or .json file"
+                             if described else f"FitResult.save: {path!r}; without a TOML/JSON "
+                             "scene only the values can be written, to a .json file")
+        written, values = [], {}
+        stem = os.path.splitext(path)[0]
+        for name, value in self.values.items():
+            if isinstance(value, np.ndarray):          # a texture: an image file of its own
+                base = name.removesuffix(".data")
+                file = f"{stem}.{base}.exr"
+                channels = {1: ["Y"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}.get(value.shape[-1])
+                write_exr(file, value.reshape(value.shape[0], value.shape[1], -1), channels=channels)
+                written.append(file)
+                value = os.path.relpath(file, os.path.dirname(os.path.abspath(path)))
+                name = base
+            values[name] = value
+        doc = scene.updated_description(values, dest=path) if described else {"fitted": values}
+        if lower.endswith(".toml"):
+            import tomli_w
+            text = tomli_w.dumps(doc)
+        else:
+            text = json.dumps(doc, indent=2)
+        write_text(path, text)
+        return written + [path]
 
 
 def settled(history: list, tol: float, drift_ratio: float = 0.35) -> bool:

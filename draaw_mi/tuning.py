@@ -176,10 +176,12 @@ def error_image(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- saving
 def document(scene, materials: dict, *, camera: dict | None = None, render: dict | None = None,
-             post=None, light_scale: float = 1.0, light_color=(1.0, 1.0, 1.0)) -> dict:
-    """The scene description with the tuned values written in (for ``tomli_w``)."""
+             post=None, light_scale: float = 1.0, light_color=(1.0, 1.0, 1.0),
+             dest: str | None = None) -> dict:
+    """The scene description with the tuned values written in (for ``tomli_w``); ``dest``:
+    the file it goes to (relative file names follow, see ``DraawScene.updated_description``)."""
     flat = {f"{m}.{p}": v for m, vals in materials.items() for p, v in vals.items()}
-    desc = scene.updated_description(flat)
+    desc = scene.updated_description(flat, dest)
     if camera is not None:
         cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles")}
         cam.update({k: [float(x) for x in camera[k]] for k in ("origin", "target", "up")})

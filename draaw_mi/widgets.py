@@ -452,8 +452,9 @@ class MaterialTuner(CameraPanel):
         return W.VBox([W.HBox([self.save_path, save]), show, self.snippet_text])
 
     # ------------------------------------------------------------------ results
-    def document(self) -> dict:
-        """The tuned scene as a description dict (what :meth:`save` writes)."""
+    def document(self, dest: str | None = None) -> dict:
+        """The tuned scene as a description dict (what :meth:`save` writes; ``dest``: the
+        file it goes to, for file names relative to the scene's folder)."""
         cam = None
         if self.camera is not None:
             o, t, up = self._camera_now()
@@ -462,7 +463,7 @@ class MaterialTuner(CameraPanel):
         # from the loaded scene's description: a reloaded scene's holds scaled lights already
         doc = tuning.document(self.base_scene, self.materials, camera=cam, render=render, post=self.post,
                               light_scale=float(self.light_scale.value),
-                              light_color=tuning.hex_to_linear(self.light_color.value))
+                              light_color=tuning.hex_to_linear(self.light_color.value), dest=dest)
         for m, files in self._textures.items():
             doc["materials"][m].update(files)
         w, h = self.base_scene.resolution
@@ -471,7 +472,7 @@ class MaterialTuner(CameraPanel):
 
     def save(self, path: str) -> str:
         """Write the tuned scene to a TOML file (atomically) and return its path."""
-        tuning.save_toml(path, self.document())
+        tuning.save_toml(path, self.document(dest=path))
         self.message.value = f"saved {_html(path)}"
         return path
 

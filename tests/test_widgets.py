@@ -166,6 +166,29 @@ def test_save_then_reload_gives_the_same_scene(tuner, tmp_path):
     np.testing.assert_allclose(img_a, img_b, rtol=1e-4, atol=1e-5)
 
 
+def test_a_scene_saved_to_another_folder_keeps_its_files(tmp_path):
+    """A scene naming a texture relative to its folder, saved by the tuner two folders away:
+    the written scene names the texture relative to its own folder and renders the same image
+    (the name was copied as written, and the saved scene failed to load)."""
+    import tomli_w
+    (tmp_path / "a").mkdir()
+    draaw_mi.write_png(str(tmp_path / "a" / "wood.png"), np.array([[[0.9, 0.3, 0.1], [0.1, 0.3, 0.9]]], np.float32))
+    desc = tiny_description()
+    desc["materials"]["ground"]["base_color"] = "wood.png"
+    (tmp_path / "a" / "s.toml").write_text(tomli_w.dumps(desc))
+    t = MaterialTuner(str(tmp_path / "a" / "s.toml"), autostart=False, freeze=False, interactive_scale=1.0)
+    try:
+        out = tmp_path / "b" / "c" / "tuned.toml"
+        t.save(str(out))
+        again = draaw_mi.load_scene(str(out))
+        assert again.description["materials"]["ground"]["base_color"] == os.path.join("..", "..", "a", "wood.png")
+        img_a = np.array(draaw_mi.render(t.scene, spp=4, seed=9, post=[]))
+        img_b = np.array(draaw_mi.render(again, spp=4, seed=9, post=[]))
+        np.testing.assert_allclose(img_a, img_b, rtol=1e-4, atol=1e-5)
+    finally:
+        t.close()
+
+
 def test_reference_error_line_matches_numpy(tuner):
     tuner.refresh(3)
     ref = tuner.last_frame.image * 0.5

@@ -102,17 +102,21 @@ class DraawScene:
         return DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
 
-    def updated_description(self, values: dict) -> dict:
+    def updated_description(self, values: dict, dest: str | None = None) -> dict:
         """The scene description with ``{"material.parameter": value}`` written into its
-        ``[materials]`` tables (for saving fitted scenes)."""
+        ``[materials]`` tables (for saving fitted scenes). ``dest``: the file it will be
+        written to; file names relative to the scene's folder are rewritten relative to
+        ``dest``'s folder (written elsewhere, the scene lost its meshes and textures)."""
         import copy
         if self.description is None:
             raise SceneError(f"{self.source}: only TOML/JSON/dict scenes can be written back")
         desc = copy.deepcopy(self.description)
+        if dest is not None:
+            desc = _rebased(desc, self.info.get("relative_files", {}), os.path.dirname(os.path.abspath(dest)))
         mats = desc.setdefault("materials", {})
         for name, value in values.items():
             mat, _, param = name.partition(".")
-            param = param.removesuffix(".value")
+            param = param.removesuffix(".value").removesuffix(".data")
             if mat not in mats or not param or "." in param:
                 raise SceneError(f"{self.source}: cannot write {name!r} back: no material {mat!r} in the file")
             mats[mat][param] = value
@@ -198,6 +202,19 @@ def _bare_mesh_description(path: str) -> dict:
     camera = auto_camera(lo, hi)
     return {"shapes": [{"type": "mesh", "file": os.path.abspath(path)}], "camera": camera,
             "lights": auto_light(lo, hi, camera["origin"])}
+
+
+def _rebased(node, files: dict, folder: str):
+    """``node`` (a description) with every string that is one of ``files``' relative names
+    replaced by the name of that file relative to ``folder`` (the names the loader resolved
+    against the scene's folder: only those, so a material called like a file stays)."""
+    if isinstance(node, dict):
+        return {k: _rebased(v, files, folder) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_rebased(v, files, folder) for v in node]
+    if isinstance(node, str) and node in files:
+        return os.path.relpath(files[node], folder)
+    return node
 
 
 def load_scene(source, **overrides) -> DraawScene:

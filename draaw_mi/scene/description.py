@@ -68,12 +68,15 @@ class BuildContext:
         self.base_dir, self.tmp_dir, self.source = base_dir, tmp_dir, source
         self.counter = 0
         self.files: list[str] = []      # every file the scene reads (info["files"])
+        self.relative: dict[str, str] = {}   # relative name as written -> the file (info["relative_files"])
 
     def path(self, p: str) -> str:
         """A file the scene names, resolved against its folder (and remembered)."""
         path = p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
         if path not in self.files:
             self.files.append(path)
+        if not os.path.isabs(p):
+            self.relative[p] = path
         return path
 
     def unique(self, stem: str) -> str:
@@ -477,6 +480,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if volume_info:
         info["volumes"] = volume_info
     info["files"] = [f for f in ctx.files if os.path.isfile(f)]
+    info["relative_files"] = dict(ctx.relative)
     return scene, settings, info
 
 

@@ -11,6 +11,22 @@ from typing import Any, Iterable
 from ..errors import SceneError, suggest
 
 
+def shown(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters, for error messages (a texture given
+    inline as nested lists printed thousands of numbers).
+
+    >>> shown([[0.5, 0.5, 0.5]] * 64)
+    '[[0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0. ... (a list of 64)'
+    >>> shown(0.25)
+    '0.25'
+    """
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    size = f" (a {type(value).__name__} of {len(value)})" if hasattr(value, "__len__") else ""
+    return text[:limit] + " ..." + size
+
+
 class Where:
     """A location in a scene description, used to prefix error messages."""
 
@@ -32,7 +48,7 @@ class Where:
 def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iterable[str] = ()) -> None:
     """Reject keys not in ``allowed`` (suggesting the closest) and missing ``required`` keys."""
     if not isinstance(table, dict):
-        raise where.error(f"expected a table, got {type(table).__name__} {table!r}")
+        raise where.error(f"expected a table, got {type(table).__name__} {shown(table)}")
     allowed = list(allowed)
     for key in table:
         if key not in allowed:
@@ -46,15 +62,15 @@ def number(value: Any, where: Where, lo: float | None = None, hi: float | None =
            integer: bool = False, lo_open: bool = False) -> float:
     """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise where.error(f"{value!r} is not a number")
+        raise where.error(f"{shown(value)} is not a number")
     if not math.isfinite(value):
-        raise where.error(f"{value!r} is not finite")
+        raise where.error(f"{shown(value)} is not finite")
     if integer and int(value) != value:
-        raise where.error(f"{value!r} is not an integer")
+        raise where.error(f"{shown(value)} is not an integer")
     if lo is not None and (value < lo or (lo_open and value == lo)):
-        raise where.error(f"{value!r} is out of range; expected {_range_text(lo, hi, lo_open)}")
+        raise where.error(f"{shown(value)} is out of range; expected {_range_text(lo, hi, lo_open)}")
     if hi is not None and value > hi:
-        raise where.error(f"{value!r} is out of range; expected {_range_text(lo, hi, lo_open)}")
+        raise where.error(f"{shown(value)} is out of range; expected {_range_text(lo, hi, lo_open)}")
     return int(value) if integer else float(value)
 
 
@@ -71,19 +87,19 @@ def vector(value: Any, where: Where, n: int = 3, lo: float | None = None) -> lis
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = [value] * n
     if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise where.error(f"{value!r} is not a list of {n} numbers")
+        raise where.error(f"{shown(value)} is not a list of {n} numbers")
     return [number(v, where / i, lo=lo) for i, v in enumerate(value)]
 
 
 def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> str:
     if not isinstance(value, str):
-        raise where.error(f"{value!r} is not a string")
+        raise where.error(f"{shown(value)} is not a string")
     if choices is not None:
         choices = list(choices)
         if value not in choices:
             hint = suggest(value, choices)           # (its list of valid names would repeat ours)
             hint = hint if hint.startswith("; did you mean") else ""
-            raise where.error(f"{value!r} is not one of {', '.join(choices)}{hint}")
+            raise where.error(f"{shown(value)} is not one of {', '.join(choices)}{hint}")
     return value
 
 
@@ -107,7 +123,7 @@ def kind_of(table: dict, where: Where, choices: Iterable[str], default: str | No
 
 def boolean(value: Any, where: Where) -> bool:
     if not isinstance(value, bool):
-        raise where.error(f"{value!r} is not true or false")
+        raise where.error(f"{shown(value)} is not true or false")
     return value
 
 
@@ -118,11 +134,11 @@ def resolution(value: Any, where: Where) -> tuple[int, int]:
         try:
             value = [int(p) for p in parts]
         except ValueError:
-            raise where.error(f"{value!r} is not a resolution; expected 'WxH' such as '256x256'") from None
+            raise where.error(f"{shown(value)} is not a resolution; expected 'WxH' such as '256x256'") from None
     if isinstance(value, int) and not isinstance(value, bool):
         value = [value, value]
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise where.error(f"{value!r} is not a resolution; expected [width, height] or 'WxH'")
+        raise where.error(f"{shown(value)} is not a resolution; expected [width, height] or 'WxH'")
     w = number(value[0], where / "width", lo=1, hi=16384, integer=True)
     h = number(value[1], where / "height", lo=1, hi=16384, integer=True)
     return int(w), int(h)
