@@ -70,6 +70,16 @@ def test_a_drag_orbits_the_camera_by_the_documented_angle(tuner):
     # dragging right moves the camera to the viewer's left (the scene turns right under the
     # pointer): up x view direction, from the scene's own camera
     o, t, up = (np.asarray(tuner.camera[k], float) for k in ("origin", "target", "up"))
+    # independently of tuning.orbit: the distance is kept, the elevation above the target's
+    # horizon rises by the pitch and the azimuth about up turns by the yaw
+    up = up / np.linalg.norm(up)
+    d0, d1 = o - t, _origin(tuner) - t
+    assert np.linalg.norm(d1) == pytest.approx(np.linalg.norm(d0), rel=1e-5)
+    elevation = [np.degrees(np.arcsin(np.dot(d, up) / np.linalg.norm(d))) for d in (d0, d1)]
+    assert elevation[1] - elevation[0] == pytest.approx(DEGREES_PER_WIDTH / 8, abs=1e-3)
+    flat = [d - np.dot(d, up) * up for d in (d0, d1)]
+    turn = np.degrees(np.arctan2(np.dot(np.cross(flat[0], flat[1]), up), np.dot(flat[0], flat[1])))
+    assert abs(turn) == pytest.approx(DEGREES_PER_WIDTH / 4, abs=1e-3)
     left = np.cross(up, t - o)
     assert np.dot(_origin(tuner) - o, left) > 0.1 * np.linalg.norm(left) * np.linalg.norm(t - o)
     # a second drag continues from where the first ended; moves without the button are ignored

@@ -239,6 +239,12 @@ def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
     tuner.refresh()
     m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
     np.testing.assert_allclose(m[:3, 3], keys[-1][:3], atol=1e-5)      # camera at the last keyframe
+    # and looking along the keyframe's angles (theta, phi), converted as GO-Draaw does (that
+    # conversion is tested against the spec in test_scene.py): the frame's forward and up axes
+    from draaw_mi.scene.camera import go_draaw_look_at
+    o, t, up = go_draaw_look_at(keys[-1][:3], keys[-1][3], keys[-1][4], float(tuner.fov.value))
+    np.testing.assert_allclose(m[:3, 2], (t - o) / np.linalg.norm(t - o), atol=1e-5)
+    np.testing.assert_allclose(m[:3, 1], up, atol=1e-5)
     tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
     assert "camera path" in tuner.message.value
 

@@ -215,12 +215,31 @@ def test_dry_run_and_status_render_nothing(tmp_path, capsys):
 
 
 def test_out_dir_and_expansion(tmp_path):
+    """A job over two versions expands to one job per version under ``--out``; each frame is
+    that version's render (a version that did not reach the renderer left only the names
+    right): frame 1 of each equals an independent render with its version, camera, roughness
+    and seed, and the two versions' frames differ."""
     doc = manifest(tmp_path, frames=2, version=["v1", "v4"])
     doc["output"] = "{job}/{version}_{frame:02d}.exr"
     res = batch.run(doc, out=str(tmp_path / "elsewhere"), progress=False)
     assert res.complete
     names = sorted(frames_of(tmp_path / "elsewhere"))
     assert names == ["orbit-v1/v1_00.exr", "orbit-v1/v1_01.exr", "orbit-v4/v4_00.exr", "orbit-v4/v4_01.exr"]
+    _, specs, _ = batch.load(doc, out=str(tmp_path / "elsewhere"))
+    got = {}
+    for s in (s for s in specs if s["output"].endswith("_01.exr")):
+        scene = draaw_mi.load_scene(tiny_description())
+        draaw_mi.render(scene, version=s["version"], seed=99, spp=1)    # (V4 learns as the batch does)
+        p = scene.params
+        p["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+            origin=s["camera"]["origin"], target=s["camera"]["target"], up=s["camera"]["up"])
+        p[scene.key("ball.roughness")] = param_value("linear", (0.1, 0.9), 1, 2)
+        p.update()
+        ref = np.array(draaw_mi.render(scene, version=s["version"], seed=s["seed"], spp=4))
+        got[s["version"]] = draaw_mi.read_exr(s["output"])
+        assert np.array_equal(got[s["version"]], ref), s["version"]
+    assert sorted(got) == ["v1", "v4"]
+    assert not np.array_equal(got.popitem()[1], got.popitem()[1])
 
 
 def test_example_manifest_plans(tmp_path):

@@ -90,12 +90,39 @@ def test_face_colours_equal_colour_groups_and_are_differentiable():
     a = np.array(mi.render(s1, spp=64, seed=0))
     b = np.array(mi.render(s2, spp=64, seed=0))
     assert a[..., 0].sum() > 0.2 * a.sum()          # the red voxel is visible
-    assert abs(a.mean() - b.mean()) < 0.03 * a.mean() + 1e-3
+    # the same triangles, colours and samples: the same pixels (measured: bit-identical); the
+    # two voxels' colours have equal channel sums, so only pixels see a face given the other's
+    np.testing.assert_allclose(a, b, atol=1e-5)
+    # the derivative of the mean image along each voxel's face colours (scaled about their
+    # values), against a central difference with the same samples. Measured: the AD estimate's
+    # spread over seeds (16 spp) is 8 % (red) and 2 % (blue) of its mean
     params = mi.traverse(s1)
     key = "voxels.face_color"
-    dr.enable_grad(params[key])
+    c0 = np.array(params[key])
+    red = np.zeros_like(c0).reshape(-1, 3)
+    red[:10] = c0.reshape(-1, 3)[:10]          # (per triangle) the first voxel's 5 exterior faces
+    red = red.ravel()
+    grads = []
+    for seed in range(4):
+        dr.enable_grad(params[key])
+        params.update()
+        dr.backward(dr.mean(mi.render(s1, params, spp=16, seed=10 + seed), axis=None))
+        grads.append(np.array(dr.grad(params[key])))
+        params[key] = mi.Float(c0)
+        params.update()
+    grads = np.array(grads)
+    assert np.all(np.isfinite(grads))
+
+    def mean_at(c):
+        params[key] = mi.Float(c)
+        params.update()
+        return float(np.mean(np.array(mi.render(s1, spp=16, seed=1))))
+
+    h = 0.02
+    for direction in (red, c0 - red):
+        fd = (mean_at(c0 + h * direction) - mean_at(c0 - h * direction)) / (2 * h)
+        ad = grads @ direction
+        assert fd > 1e-3
+        assert abs(ad.mean() - fd) < 4 * ad.std(ddof=1) / 2 + 0.02 * fd, (ad, fd)
+    params[key] = mi.Float(c0)
     params.update()
-    img = mi.render(s1, params, spp=8, seed=1)
-    dr.backward(dr.mean(img, axis=None))
-    grad = np.array(dr.grad(params[key]))
-    assert np.all(np.isfinite(grad)) and np.abs(grad).sum() > 0

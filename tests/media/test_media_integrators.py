@@ -104,12 +104,10 @@ def test_density_block_gradient_matches_fd():
     _grads("sigma_t.data", block, h=0.2, albedo=0.3)
 
 
-@pytest.mark.slow
 def test_albedo_gradient_matches_fd():
     _grads("albedo.data", lambda v0: mi.TensorXf(np.ones(v0.shape, np.float32)), h=0.05)
 
 
-@pytest.mark.slow
 def test_g_gradient_matches_fd():
     _grads("phase_function.g", lambda v0: mi.Float(1.0), h=0.1, n=8, spp_fd=512)
 
@@ -161,10 +159,20 @@ def test_stability_grazing_rays_along_grid_planes():
     sc = mi.load_dict(d)
     img = np.array(mi.render(sc, spp=4, seed=0))
     assert np.all(np.isfinite(img))
+    # the expectation, pixel by pixel, against volpath with the same grid-aligned orthographic
+    # view (jittered now: un-jittered renders are fixed quadratures, which differ between
+    # integrators by more than their noise)
+    d["sensor"]["sampler"] = {"type": "independent"}
     ref = mi.load_dict(dict(d, integrator={"type": "volpath", "max_depth": 4}))
-    a = np.array(mi.render(ref, spp=128, seed=1))
-    b = np.array(mi.render(sc, spp=128, seed=2))
-    assert abs(a.mean() - b.mean()) < 0.05 * a.mean()
+    sc = mi.load_dict(d)
+    a = seed_stack(ref, ref.integrator(), 32, range(8))
+    b = seed_stack(sc, sc.integrator(), 32, range(8, 16))
+    z = z_summary(zscores(a, b))
+    # (only the 96 values behind the wall vary: the bound on the mean z is 4 of its standard
+    # errors; 12 + 12 seeds at 64 spp gave a mean z of 0.03)
+    assert np.all(np.isfinite(b)) and z["n"] >= 90, z
+    assert z["frac_gt3"] <= 0.05 and abs(z["mean"]) <= 4 * z["std"] / np.sqrt(z["n"]), z
+    assert 0.7 <= z["std"] <= 1.4, z
 
 
 @pytest.mark.slow
@@ -181,12 +189,39 @@ def test_stability_camera_inside_medium_gradient():
     assert np.all(np.isfinite(np.array(img))) and np.all(np.isfinite(g)) and np.abs(g).sum() > 0
 
 
-def test_exhausted_tracking_is_a_miss_not_nan(monkeypatch):
+def test_exhausted_tracking_stays_finite(monkeypatch):
     monkeypatch.setattr(tracking, "MAX_TRACKING_STEPS", 2)
     volume._TABLES.clear()
     sc = ms.scene("gradient", "draaw_v4", res=8)
     img = np.array(mi.render(sc, spp=4, seed=0))
     assert np.all(np.isfinite(img))
+
+
+@pytest.mark.parametrize("integrator", ["draaw_v3", "draaw_v4"])
+def test_an_exhausted_flight_counts_as_absorbed(monkeypatch, integrator):
+    """A free flight that runs out of steps is absorbed, as documented (volume_tracking): a
+    black, thin (albedo 0, density 0.06 at most) smoke box that fills the view, in front of a
+    constant sky of 0.4 and nothing else. With one step per flight every camera ray, which
+    crosses several majorant cells, stops: the image is exactly 0. Counted as a miss instead,
+    the rays would reach the sky (means 0.37: the test fails); with the default step budget
+    the sky shows through (mean 0.3)."""
+    from draaw_mi.media.mitsuba_dicts import smoke_shape
+
+    def scene():
+        d = ms.base({"type": integrator}, res=8)
+        del d["floor"], d["light"]
+        g = ms.grid("gradient")
+        g.density *= 0.1
+        g.smoke_color[:] = 0.0
+        d["smoke"] = smoke_shape(g)
+        return mi.load_dict(d)
+
+    volume._TABLES.clear()
+    full = np.array(mi.render(scene(), spp=16, seed=0))
+    assert 0.2 < full.mean() < 0.4
+    monkeypatch.setattr(tracking, "MAX_TRACKING_STEPS", 1)
+    volume._TABLES.clear()
+    assert np.array_equal(np.array(mi.render(scene(), spp=16, seed=0)), np.zeros_like(full))
 
 
 def test_rgb_extinction_is_one_clear_error():
