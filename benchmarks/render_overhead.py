@@ -41,7 +41,7 @@ def one(scene, version, spp, seed, mode):
     dr.kernel_history_clear()
     t = time.perf_counter()
     if mode == "frozen":
-        img = R.frozen_render(integ, spp)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene)
+        img = R.frozen_render(integ, spp, scene)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene)
     elif mode == "api":
         img = draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[])
     else:

@@ -27,7 +27,8 @@ class CliError(Exception):
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, status 2, no usage dump
-        raise CliError(f"{self.prog}: {message} (see --help)")
+        command = self.prog.removeprefix("draaw-mi").strip()      # ("draaw-mi: error:" comes first)
+        raise CliError(f"{command + ': ' if command else ''}{message} (see --help)")
 
 
 def _writable(path: str, suffixes: tuple[str, ...], what: str) -> str:

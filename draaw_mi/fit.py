@@ -339,6 +339,12 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         value = p[k]
         if init and (names[k] in init or k in init):
             value = init.get(names[k], init.get(k))
+            lo, hi = _range_for(k)
+            v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
+            if not np.all(np.isfinite(v)) or (lo is not None and np.any(v < lo)) or (hi is not None and np.any(v > hi)):
+                from .scene.schema import shown
+                raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected values in "
+                                     f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]")
         prm[k] = _Param(k, names[k], p[k], scene)
         if prm[k].space == "log" and dr.width(p[k]) != 1:
             prm[k].space = "linear"            # textures: optimise texels linearly

@@ -11,6 +11,8 @@ scene does not hold (:func:`other_live_bsdfs`). What is found once per scene liv
 """
 from __future__ import annotations
 
+import contextlib
+import gc
 import threading
 import warnings
 import weakref
@@ -32,15 +34,17 @@ class _SceneState:
     (:func:`scene_scalars`), its own BSDFs (:func:`other_live_bsdfs`), and ``memo``, where
     an integrator's ``freeze_state`` keeps what it finds once per scene
     (:mod:`draaw_mi.integrators.scene_view`). Also the first sensor's film (its size is read
-    on each render) and the pass plans of :func:`draaw_mi.render.sample_passes` for a Mitsuba sampler (which
-    rounds sample counts by its kind alone; a sensor's sampler cannot be replaced)."""
-    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs", "memo", "film", "passes")
+    on each render), the pass plans of :func:`draaw_mi.render.sample_passes` for a Mitsuba sampler (which
+    rounds sample counts by its kind alone; a sensor's sampler cannot be replaced) and the
+    scene's own recordings (``frozen``, see :func:`draaw_mi.render.frozen_render`)."""
+    __slots__ = ("lock", "freezable", "scalars", "own_bsdfs", "memo", "film", "passes", "frozen")
 
     def __init__(self):
         self.lock = threading.Lock()
         self.freezable = self.scalars = self.own_bsdfs = self.film = None
         self.memo = {}
         self.passes = {}
+        self.frozen = {}
 
 
 def scene_state(scene) -> _SceneState:
@@ -176,6 +180,31 @@ def other_live_bsdfs(mi_scene, scene=None) -> list:
 RECORDINGS_KEPT = 8
 
 
+_PAUSES = [0]
+_PAUSES_GUARD = threading.Lock()
+
+
+@contextlib.contextmanager
+def _collector_paused():
+    """Python's cycle collector off for the block (nested and across threads: on again when
+    the last block ends). A collection during a ``dr.freeze`` recording that frees Dr.Jit
+    memory (a dead scene's buffers, a dead preview's recordings) aborts the process:
+    "RecordThreadState::enqueue_host_func(): this function cannot be recorded!" (seen in the
+    test suite once recordings went with their scenes)."""
+    with _PAUSES_GUARD:
+        if _PAUSES[0] == 0:
+            _PAUSES.append(gc.isenabled())
+            gc.disable()
+        _PAUSES[0] += 1
+    try:
+        yield
+    finally:
+        with _PAUSES_GUARD:
+            _PAUSES[0] -= 1
+            if _PAUSES[0] == 0 and _PAUSES.pop():
+                gc.enable()
+
+
 def freeze_render(integrator, body):
     """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
     with the integrator's scene-dependent state (V4's light-selection table, from its
@@ -214,8 +243,9 @@ def freeze_render(integrator, body):
         live = other_live_bsdfs(mi_scene, scene)
         memo = None if scene is None else scene_state(scene).memo
         try:
-            return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
-                          None if state_of is None else state_of(mi_scene, memo), live)
+            with _collector_paused():
+                return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
+                              None if state_of is None else state_of(mi_scene, memo), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "

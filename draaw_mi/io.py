@@ -47,7 +47,8 @@ def channel_names(n_channels: int, aov_names: Sequence[str] | None = None) -> li
     n_color = n_channels - len(aov_names)
     if n_color not in DEFAULT_NAMES:
         raise IOFailure(f"{n_channels} channels with {len(aov_names)} AOV names leaves {n_color} colour "
-                        "channels; expected 1 to 4")
+                        "channels; expected 1 to 4 (name every channel with channels=, e.g. the "
+                        "'channels' of render(..., return_info=True))")
     return DEFAULT_NAMES[n_color] + aov_names
 
 

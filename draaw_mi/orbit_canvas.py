@@ -28,6 +28,8 @@ Example (in a notebook)::
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import io
 import math
 import threading
 from typing import Callable
@@ -35,6 +37,17 @@ from typing import Callable
 import numpy as np
 
 from .errors import DraawError, ParameterError
+
+
+def _in_notebook() -> bool:
+    """Whether an IPython kernel (Jupyter) runs this process."""
+    try:
+        from IPython import get_ipython
+    except ImportError:
+        return False
+    shell = get_ipython()
+    return shell is not None and getattr(shell, "kernel", None) is not None
+
 
 try:
     from jupyter_rfb import RemoteFrameBuffer
@@ -86,9 +99,13 @@ class OrbitCanvas(RemoteFrameBuffer):
         # the widget is made before the check can fail: a half-made one breaks in __del__;
         # small previews are shown enlarged by a whole factor, to about MIN_DISPLAY pixels
         k = max(1, MIN_DISPLAY // max(w, h, 1))
-        super().__init__(css_width=f"{max(w, 1) * k}px", css_height=f"{max(h, 1) * k}px",
-                         resizable=True, cursor="grab" if on_orbit else "default",
-                         quality=min(max(int(quality), 1), 99))
+        # jupyter_rfb displays an output context while it is made; outside a notebook that
+        # display is a print ("RFBOutputContext()" in a script's output): keep it quiet there
+        quiet = contextlib.nullcontext() if _in_notebook() else contextlib.redirect_stdout(io.StringIO())
+        with quiet:
+            super().__init__(css_width=f"{max(w, 1) * k}px", css_height=f"{max(h, 1) * k}px",
+                             resizable=True, cursor="grab" if on_orbit else "default",
+                             quality=min(max(int(quality), 1), 99))
         if problem:
             self.close()
             raise ParameterError(problem)

@@ -51,7 +51,7 @@ import numpy as np
 
 from .errors import ParameterError, suggest
 from .materials import check_value
-from .render import _scene_lock, make_integrator, pass_seed, scene_changed
+from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 
 GUIDES = ("albedo", "normal")
 
@@ -109,6 +109,8 @@ class Preview:
         if not (0.0 < float(interactive_scale) <= 1.0):
             raise ParameterError(f"Preview: interactive_scale={interactive_scale!r}; expected a number in (0, 1]")
         self.interactive_scale = float(interactive_scale)
+        if isinstance(max_spp, bool) or not isinstance(max_spp, int) or max_spp < 1:
+            raise ParameterError(f"Preview: max_spp={max_spp!r}; expected an integer >= 1")
         self.max_spp, self.freeze, self.seed = int(max_spp), bool(freeze), int(seed)
         self.denoise = bool(denoise)
         if self.denoise:
@@ -136,7 +138,9 @@ class Preview:
 
     # ------------------------------------------------------------------ configuration
     def _make_integrator(self):
-        return make_integrator(self.version, self.max_depth, False, GUIDES if self.denoise else ())
+        check_version_sees(self.scene, self.version)
+        return make_integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
+                               GUIDES if self.denoise else ())
 
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or

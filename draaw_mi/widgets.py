@@ -108,6 +108,12 @@ class MaterialTuner(CameraPanel):
             self.camera["fov"] = float(cam.get("fov", 40.0))
         self.post = list(self.scene.settings.get("post", []))
         self.reference = None if reference is None else self._load_reference(reference)
+        w, h = self.scene.resolution
+        if self.reference is not None and self.reference.shape[:2] != (h, w):
+            raise DraawError(f"MaterialTuner: reference of {self.reference.shape[1]}x{self.reference.shape[0]} "
+                             f"pixels; expected the scene's {w}x{h} (the error line compares pixels)")
+        if isinstance(max_spp, bool) or not isinstance(max_spp, int) or max_spp < 1:
+            raise DraawError(f"MaterialTuner: max_spp={max_spp!r}; expected an integer >= 1")
         self.rest_after = float(rest_after)
         self._options = dict(version=version or self.scene.settings["version"], max_spp=int(max_spp),
                              denoise=bool(denoise), interactive_scale=float(interactive_scale), freeze=freeze)
@@ -338,7 +344,8 @@ class MaterialTuner(CameraPanel):
     def _render_panel(self):
         o = self._options
         c = self.controls_render = {
-            "version": W.Dropdown(options=VERSIONS, value=o["version"] if o["version"] in VERSIONS else "v4",
+            "version": W.Dropdown(options=VERSIONS if o["version"] in VERSIONS else VERSIONS + (o["version"],),
+                                  value=o["version"],
                                   description="version"),
             "max_depth": W.IntSlider(value=self.preview.max_depth, min=1, max=16, description="max depth"),
             "max_spp": W.BoundedIntText(value=o["max_spp"], min=1, max=1 << 16, description="spp budget"),

@@ -15,13 +15,28 @@ from conftest import SCENES
 
 
 def test_render_writes_exr_and_png(tmp_path, capsys):
+    """The EXR is Mitsuba's own ``path`` render of the scene at the resolution, spp, seed and
+    depth given on the command line (each flag reaching render() is checked by the pixels),
+    and the PNG is its sRGB encoding."""
+    import matplotlib.image
+    import mitsuba as mi
     exr, png = tmp_path / "c.exr", tmp_path / "c.png"
     rc = main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--png", str(png),
-               "--spp", "4", "--resolution", "24x16", "--version", "path", "--seed", "3"])
+               "--spp", "4", "--resolution", "24x16", "--version", "path", "--seed", "3", "--max-depth", "3"])
     assert rc == 0
     img = draaw_mi.read_exr(str(exr))
     assert img.shape == (16, 24, 3) and np.isfinite(img).all()
-    assert png.stat().st_size > 0
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=(24, 16))
+    assert not scene.settings["post"]
+    ref = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "path", "max_depth": 3}),
+                             spp=4, seed=3))
+    np.testing.assert_allclose(img, ref, rtol=1e-6, atol=1e-7)
+    deeper = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "path", "max_depth": 6}),
+                                spp=4, seed=3))
+    assert not np.allclose(deeper, ref)                # (the depth flag matters here)
+    shown = matplotlib.image.imread(str(png))[..., :3]
+    from draaw_mi.io import srgb_encode
+    assert np.abs(shown - srgb_encode(ref)).max() <= 1.0 / 255 + 1e-6
     assert "wrote" in capsys.readouterr().out
 
 
@@ -63,6 +78,8 @@ BAD_ARGS = [
     ["render", "{scenes}/cornell.toml"],
     ["frobnicate"],
     ["info", "{tmp}/bad.toml"],
+    ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--bogus"],
+    ["render", "{scenes}/sdf_csg.toml", "-o", "{tmp}/x.exr", "--version", "path", "--resolution", "8x8"],
 ]
 
 
@@ -73,6 +90,7 @@ def test_bad_input_exits_2_with_one_line(argv, tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("draaw-mi: error:") and "\n" not in err and "Traceback" not in err
+    assert "error: draaw-mi" not in err                # the program named once
     assert not (tmp_path / "x.exr").exists()
 
 

@@ -111,6 +111,38 @@ def test_render_denoise_channels_and_errors(cornell):
         draaw_mi.render(cornell, spp=1, denoise=True, adaptive=8)
 
 
+def test_denoise_is_oidn_with_its_guides_in_their_places(cornell):
+    """denoise() equals OIDN called directly with the albedo and normal as named arguments,
+    HDR on (pyoidn's default is off) and the colour clipped at 0; guides given in each other's
+    places give another image, so the comparison sees a swap."""
+    img, info = draaw_mi.render(cornell, spp=4, seed=2, aovs=["albedo", "normal"], post=[], return_info=True)
+    arr = np.array(img)
+    idx = aux_channels(info["channels"])
+    c, a, n = arr[..., :3], arr[..., idx["albedo"]], arr[..., idx["normal"]]
+    ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(c, 0)), albedo=np.ascontiguousarray(np.clip(a, 0, 1)),
+                         normal=np.ascontiguousarray(np.clip(n, -1, 1)), hdr=True, quality="high")
+    out = draaw_mi.denoise(c, a, n)
+    np.testing.assert_allclose(out, np.asarray(ref), atol=1e-6)
+    swapped = pyoidn.denoise(np.ascontiguousarray(np.maximum(c, 0)), albedo=np.ascontiguousarray(np.clip(n, 0, 1)),
+                             normal=np.ascontiguousarray(np.clip(a, -1, 1)), hdr=True, quality="high")
+    assert np.abs(np.asarray(swapped) - out).max() > 1e-3
+    ldr = pyoidn.denoise(np.ascontiguousarray(np.maximum(c, 0)), albedo=np.ascontiguousarray(np.clip(a, 0, 1)),
+                         normal=np.ascontiguousarray(np.clip(n, -1, 1)), hdr=False, quality="high")
+    assert np.abs(np.asarray(ldr) - out).max() > 1e-3
+
+
+def test_render_denoise_renders_and_uses_the_guides(cornell):
+    """render(denoise=True) with a draaw version renders the albedo and normal AOVs and hands
+    them to OIDN: it equals denoise_aovs of the same render with those AOVs, not the
+    colour-only denoising."""
+    img = np.array(draaw_mi.render(cornell, spp=2, seed=4, denoise=True, post=[]))
+    raw, info = draaw_mi.render(cornell, spp=2, seed=4, aovs=["albedo", "normal"], post=[], return_info=True)
+    ref = denoise_aovs(np.array(raw), info["channels"])[..., :3]
+    np.testing.assert_allclose(img, ref, rtol=1e-5, atol=1e-6)
+    colour_only = draaw_mi.denoise(np.array(raw)[..., :3])
+    assert np.abs(colour_only - img).max() > 1e-3
+
+
 def test_cli_render_denoise(tmp_path, capsys):
     out = tmp_path / "d.exr"
     rc = main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(out), "--spp", "2",

@@ -242,3 +242,33 @@ def test_a_worker_that_outlives_stop_is_not_doubled_by_start(monkeypatch):
         assert pv.wait(spp=4, timeout=60) is not None                # and it goes on working
     finally:
         pv.stop()
+
+
+def test_the_preview_hides_emitters_as_the_scene_asks():
+    """``render.hide_emitters`` holds in the preview too: it equals the mean of Mitsuba renders
+    with an integrator that hides them (the preview showed them: the Cornell box's ceiling
+    light at max 18.4 against 1.86); here the sky seen directly is hidden."""
+    desc = tiny_description()
+    desc["render"]["hide_emitters"] = True
+    scene = draaw_mi.load_scene(desc)
+    pv = Preview(scene, version="v4", max_depth=4, freeze=False, seed=3)
+    frames = [pv.step() for _ in range(2)]
+    seeds = [pass_seeds(3, i + 2)[-1] for i in range(2)]
+    integ = make_integrator("v4", 4, True)
+    ref = np.mean([np.array(mi.render(scene.mi_scene, integrator=integ, seed=s, spp=1)) for s in seeds], axis=0)
+    np.testing.assert_allclose(frames[-1].raw, ref[..., :3], rtol=1e-5, atol=1e-6)
+    shown = _direct(scene, seeds)
+    sky = np.all(np.abs(shown - 0.2) < 1e-6, axis=2)   # pixels that see the sky (0.2) directly
+    assert sky.sum() > 20 and np.all(frames[-1].raw[sky] == 0)
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5, True])
+def test_a_refinement_budget_below_one_sample_is_refused(bad):
+    with pytest.raises(ParameterError, match="max_spp"):
+        Preview(draaw_mi.load_scene(tiny_description()), max_spp=bad)
+
+
+def test_a_preview_with_a_version_that_cannot_see_the_scene_fails_clearly():
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "sdf_csg.toml"), resolution=(16, 12))
+    with pytest.raises(DraawError, match=r"\[\[sdf\]\] objects"):
+        Preview(scene, version="path")

@@ -30,16 +30,20 @@ def _floor_scene(lights, res=(15, 15), max_depth=2, extra_shapes=(), camera=None
     })
 
 
-def _hit_points(scene):
-    """World positions seen through the pixel centres (Mitsuba ray casts), (H, W, 3)."""
+def _hit_points(scene, sub: int = 0):
+    """World positions seen through the pixel centres (Mitsuba ray casts), (H, W, 3); with
+    ``sub``, through ``sub`` x ``sub`` points of each pixel, (H, W, sub * sub, 3)."""
     mis, (w, h) = scene.mi_scene, scene.resolution
-    yy, xx = np.mgrid[0:h, 0:w]
-    pos = mi.Point2f(mi.Float(((xx.ravel() + 0.5) / w).astype(np.float32)),
-                     mi.Float(((yy.ravel() + 0.5) / h).astype(np.float32)))
+    k = max(sub, 1)
+    yy, xx = np.mgrid[0:h * k, 0:w * k]
+    pos = mi.Point2f(mi.Float(((xx.ravel() + 0.5) / (w * k)).astype(np.float32)),
+                     mi.Float(((yy.ravel() + 0.5) / (h * k)).astype(np.float32)))
     ray, _ = mis.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
     si = mis.ray_intersect(ray)
     assert np.array(si.is_valid()).all()
-    return np.stack([np.array(si.p.x), np.array(si.p.y), np.array(si.p.z)], -1).reshape(h, w, 3)
+    p = np.stack([np.array(si.p.x), np.array(si.p.y), np.array(si.p.z)], -1).reshape(h, k, w, k, 3)
+    p = p.transpose(0, 2, 1, 3, 4).reshape(h, w, k * k, 3)
+    return p if sub else p[:, :, 0]
 
 
 def _render(scene, spp, seed=0):
@@ -58,6 +62,23 @@ def test_spot_light_cone_and_falloff():
     assert inner.sum() >= 9 and outer.sum() >= 9
     assert np.allclose(img[inner], expected[inner], rtol=0.02)
     assert np.all(img[outer] == 0)
+    # between beam_width and cutoff_angle the intensity falls linearly in the angle (Mitsuba's
+    # spot: (cutoff - theta) / (cutoff - beam_width)): each pixel touching the band against
+    # that law averaged over 8x8 points of its footprint (a pixel spans several degrees and the
+    # ramp has kinks at 20 and 30 degrees); 256 spp: the estimate's noise is about 1 %
+    p8 = _hit_points(scene, sub=8)
+    cos8 = h / np.sqrt(p8[..., 0] ** 2 + h ** 2 + p8[..., 2] ** 2)
+    ramp8 = np.clip((30.0 - np.degrees(np.arccos(cos8))) / (30.0 - 20.0), 0.0, 1.0)
+    values = ALBEDO / math.pi * (intensity * cos8 ** 3 / h ** 2 * ramp8)[..., None]     # (H, W, 64, 3)
+    law = values.mean(axis=2)
+    band = (angle > 18.0) & (angle < 32.0) & (law[..., 0] > 0.01)
+    assert band.sum() >= 9
+    img256 = _render(scene, 256)
+    # the only noise is where in the pixel each of the 256 samples lands: 4 of its standard errors
+    se = values.std(axis=2) / np.sqrt(256)
+    assert np.all(np.abs(img256[band] - law[band]) <= 4 * se[band] + 2e-3 * law[band])
+    hard = ALBEDO / math.pi * (intensity * cos8 ** 3 / h ** 2 * (np.degrees(np.arccos(cos8)) < 30)).mean(axis=2)[..., None]
+    assert np.abs(img256[band] / hard[band] - 1).max() > 0.2       # (a hard-edged cone fails this)
 
 
 def test_directional_light_irradiance():

@@ -376,3 +376,21 @@ def test_the_error_line_of_an_srgb_chain_compares_the_linear_mean(tuner):
     tuner.reference = f.raw.copy()
     tuner._show(f)
     assert "RMSE 0.0000" in tuner.error_label.value
+
+
+def test_bad_tuner_arguments_fail_at_once(tuner, capsys):
+    """A reference of another size (the error line then never showed), a budget below one
+    sample; a version outside the dropdown's list is shown as chosen (the dropdown said v4
+    while the preview rendered volpath); a script's tuner prints nothing."""
+    w, h = tuner.scene.resolution
+    with pytest.raises(draaw_mi.DraawError, match=f"expected the scene's {w}x{h}"):
+        MaterialTuner(tuner.scene, reference=np.zeros((h + 1, w, 3), np.float32), autostart=False)
+    with pytest.raises(draaw_mi.DraawError, match="max_spp"):
+        MaterialTuner(tuner.scene, max_spp=0, autostart=False)
+    capsys.readouterr()
+    t = MaterialTuner(tuner.scene, version="prb", autostart=False, freeze=False)
+    try:
+        assert t.controls_render["version"].value == "prb" and t.preview.version == "prb"
+        assert capsys.readouterr().out == ""           # (jupyter_rfb printed RFBOutputContext())
+    finally:
+        t.close()

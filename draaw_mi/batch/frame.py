@@ -7,7 +7,9 @@ Both executors call it; the Dask executor keeps one :class:`SceneCache` per work
 """
 from __future__ import annotations
 
+import hashlib
 import os
+import re
 import threading
 import time
 
@@ -211,7 +213,7 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         arr = np.array(image, dtype=np.float32)
         kernels = []
         if track_kernels:
-            kernels = sorted({str(k["hash"]) for k in dr.kernel_history()
+            kernels = sorted({kernel_signature(k) for k in dr.kernel_history()
                               if k["type"] == dr.KernelType.JIT})
     bad = int(np.count_nonzero(~np.isfinite(arr)))
     if bad:
@@ -223,6 +225,28 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     write_frame(spec["output"], arr, channels, metadata(spec, seconds), half=spec["half"])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
+
+
+_ALIGNMENT = re.compile(r"\balign \d+|drjit_[0-9a-f]{32}")
+_SIGNATURES: dict = {}          # kernel hash -> signature (one hash is one code)
+
+
+def kernel_signature(entry: dict) -> str:
+    """What a kernel computes, from its ``dr.kernel_history()`` entry: the hash of its code
+    with the load alignments and its own name left out. Dr.Jit specialises a kernel to the
+    alignment of the buffers it is given, so a small kernel outside the recorded render (an
+    8-wide camera update) came with a new hash on frames whose buffers the PNG previews had
+    moved, and a batch warned of recompiles that computed the same thing."""
+    key = str(entry["hash"])
+    sig = _SIGNATURES.get(key)          # (a replayed frame's kernels: found, not read again)
+    if sig is None:
+        ir = entry.get("ir")
+        text = ir.getvalue() if hasattr(ir, "getvalue") else ir
+        sig = hashlib.sha256(_ALIGNMENT.sub("", text).encode()).hexdigest()[:32] if text else key
+        if len(_SIGNATURES) > 4096:
+            _SIGNATURES.clear()
+        _SIGNATURES[key] = sig
+    return sig
 
 
 def safe_render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:

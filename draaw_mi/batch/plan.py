@@ -143,7 +143,7 @@ def param_value(kind: str, data, frame: int, frames: int):
 # --------------------------------------------------------------------------- plan
 def plan(manifest: Manifest, cache=None) -> list[dict]:
     """Every frame of every job as a spec dict, validated against the loaded scenes."""
-    from ..render import make_integrator
+    from ..render import check_version_sees, make_integrator
     from .frame import SceneCache
 
     cache = cache if cache is not None else SceneCache()
@@ -166,6 +166,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
         encoded = display_encoded(s.get("post", []) if job.post is None else job.post)
         try:
             make_integrator(version, max_depth, s.get("hide_emitters", False), aovs)
+            check_version_sees(scene, version)
         except DraawError as e:
             raise SceneError(f"{loc}: {e}") from None
         keys = {}

@@ -205,6 +205,20 @@ class DraawIntegrator(RBIntegrator):
     def zero_aovs(self) -> list[mi.Float]:
         return [mi.Float(0.0) for _ in self.aov_names()]
 
+    def camera_aovs(self, scene: mi.Scene, ray: mi.Ray3f, active: mi.Bool, feats: dict[str, bool],
+                    sdf=None) -> list[mi.Float]:
+        """AOVs of the camera ray's first surface, for ``sample()`` bodies that follow the ray
+        their own way (through media): the first intersection, a medium's null boundary
+        included, as Mitsuba's ``aov`` integrator reports it (a medium has no depth, normal
+        or albedo of its own). Nothing is traced when no AOV is asked for."""
+        if not self.aovs:
+            return []
+        ray, pi, _ = self.trace_camera(scene, mi.Ray3f(dr.detach(ray)), active, feats)
+        si = pi.compute_surface_interaction(ray, ray_flags=self.ray_flags(feats), active=active)
+        if sdf is not None:
+            si = sdf.intersect(ray, si, None, active)      # (no random numbers: the largest weight)
+        return self.eval_aovs(si, si.bsdf(ray), active, feats)
+
 
 # ---------------------------------------------------------------------------------------
 #  Emitters

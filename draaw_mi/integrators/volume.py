@@ -208,6 +208,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     rr_depth = max(integ.rr_depth, MEDIA_RR_DEPTH)
     rr_min = getattr(integ, "rr_min", 0.05)
 
+    aovs = integ.camera_aovs(scene, ray, active, integ.features(scene), sdf) if primal else integ.zero_aovs()
     ray = mi.Ray3f(dr.detach(ray))
     ray.d = dr.normalize(ray.d)
     depth = mi.UInt32(0)
@@ -386,4 +387,4 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
             active &= ~rr_on | (sampler.next_1d(rr_on) < q)
         active &= dr.max(β) > 0
         active &= depth < max_depth
-    return (L if primal else δL), valid | mi.Bool(scene.environment() is not None), integ.zero_aovs(), L
+    return (L if primal else δL), valid | mi.Bool(scene.environment() is not None), aovs, L

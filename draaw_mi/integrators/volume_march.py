@@ -134,6 +134,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
     # SDF objects (feature 'sdf'): the march stops at the nearer of the mesh / SDF hit
     sdf = integ.sdf_hook(scene, integ.features(scene))
     ctx = mi.BSDFContext()
+    aovs = integ.camera_aovs(scene, ray, active, integ.features(scene), sdf)
     ray = mi.Ray3f(ray)
     ray.d = dr.normalize(ray.d)
     L = mi.Spectrum(0.0)
@@ -188,4 +189,4 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         ray[null] = si.spawn_ray(ray.d)
         n += 1
         live &= null & (n < MAX_SEGMENTS)
-    return L, valid | mi.Bool(scene.environment() is not None), integ.zero_aovs(), L
+    return L, valid | mi.Bool(scene.environment() is not None), aovs, L

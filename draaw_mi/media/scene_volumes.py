@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import DraawError, ParameterError
 from .faces import solid_meshes
-from .mitsuba_dicts import FILTERS, check_g, smoke_shape
+from .mitsuba_dicts import FILTERS, smoke_shape
 from .voxel_grid import VoxelGrid
 
 VOLUME_KEYS = ("name", "mode", "file", "procedural", "density", "occupied", "bounds", "resolution", "fill",
@@ -59,6 +59,16 @@ def _array(value, where, key):
     return arr
 
 
+def _grid_resolution(value, where):
+    """Voxels per axis: one integer >= 1 for all three, or a list of three."""
+    from ..scene.schema import number
+    if isinstance(value, (list, tuple)):
+        if len(value) != 3:
+            raise where.error(f"{value!r}; expected an integer or a list of 3 integers (voxels per axis)")
+        return tuple(int(number(v, where / i, lo=1, integer=True)) for i, v in enumerate(value))
+    return int(number(value, where, lo=1, integer=True))
+
+
 def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
     """Build the :class:`VoxelGrid` an entry describes (no Mitsuba objects yet)."""
     from ..scene.schema import number, string
@@ -81,7 +91,7 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
             elif low.endswith(".vol"):
                 g = VoxelGrid.from_vol(path, seed=seed)
             elif low.endswith(MESH_SUFFIXES):
-                res = entry.get("resolution", 64)
+                res = _grid_resolution(entry.get("resolution", 64), where / "resolution")
                 fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))
                 g = VoxelGrid.from_mesh(path, res, fill, seed=seed, **({} if bounds is None else
                                                                       {"bbox_min": bounds[0], "bbox_max": bounds[1]}))
@@ -99,7 +109,8 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
             extra = set(p) - {"type", "seed", "resolution"}
             if extra:
                 raise (where / "procedural").error(f"unknown key {sorted(extra)[0]!r}; valid: type, seed, resolution")
-            dens = plume(p.get("resolution", (48, 64, 48)), seed=int(p.get("seed", 0)))
+            dens = plume(_grid_resolution(p.get("resolution", [48, 64, 48]), where / "procedural" / "resolution"),
+                         seed=int(number(p.get("seed", 0), where / "procedural" / "seed", lo=0, integer=True)))
             g = VoxelGrid.from_arrays(density=dens, seed=seed, **kw)
         else:
             dens = _array(entry["density"], where, "density") if "density" in entry else None
@@ -126,7 +137,9 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
             "bounds": [grid.bbox_min.tolist(), grid.bbox_max.tolist()]}
     try:
         if mode == "smoke":
-            g_phase = check_g(number(entry.get("g", 0.0), where / "g"), f"{where}.g") if "g" in entry else 0.0
+            g_phase = number(entry.get("g", 0.0), where / "g")
+            if not abs(g_phase) < 1.0:
+                raise (where / "g").error(f"{g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
             scale = number(entry.get("density_scale", 1.0), where / "density_scale", lo=0)
             filt = string(entry.get("filter", "trilinear"), where / "filter", FILTERS)
             albedo = vector(entry["albedo"], where / "albedo", lo=0) if "albedo" in entry else None

@@ -37,8 +37,9 @@ def _color(value, where: str) -> np.ndarray:
     c = np.asarray(value, dtype=np.float64).reshape(-1)
     if c.size == 1:
         c = np.repeat(c, 3)
-    if c.size != 3 or not np.all(np.isfinite(c)) or np.any(c < 0):
-        raise ParameterError(f"{where}: colour {value!r}; expected 3 finite values >= 0")
+    if c.size != 3 or not np.all(np.isfinite(c)) or np.any(c < 0) or np.any(c > 1):
+        # (a colour above 1 was clipped to 1 without a word)
+        raise ParameterError(f"{where}: colour {value!r}; expected 3 values in [0, 1]")
     return c.astype(np.float32)
 
 
@@ -363,6 +364,9 @@ class VoxelGrid:
     def save(self, path: str) -> None:
         """Write the grid to a compressed ``.npz`` (atomically: a crash leaves the old file)."""
         path = os.fspath(path)
+        if not path.lower().endswith(".npz"):
+            raise ParameterError(f"VoxelGrid.save({path!r}): expected a .npz file name "
+                                 "(save_vol writes Mitsuba .vol grids)")
         with atomic_path(path, ".npz") as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, occupied=self.occupied, color=self.color, density=self.density,

@@ -113,6 +113,14 @@ def test_bad_version_aov_and_camera(tmp_path, capsys):
          ["keyframe 0", "5 finite numbers"])
 
 
+def test_a_version_that_cannot_see_the_scene_is_a_bad_manifest(tmp_path, capsys):
+    """Mitsuba's path on a scene with [[sdf]] objects rendered every frame without them."""
+    from conftest import SCENES
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(scene=os.path.join(SCENES, "sdf_csg.toml"),
+                                                            version="path", resolution=[8, 8]),
+         ["job 'orbit'", "[[sdf]] objects"])
+
+
 def test_same_file_for_two_frames(tmp_path, capsys):
     def two_jobs(d, t):
         d["jobs"].append(dict(d["jobs"][0], name="other"))

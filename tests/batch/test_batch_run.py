@@ -191,6 +191,33 @@ def test_kernel_check_sees_a_recompile(tmp_path):
     assert set(got[2]["kernels"]) - first
 
 
+def test_kernel_signatures_ignore_alignment_not_code():
+    """Kernels are told apart by their code without load alignments (which Dr.Jit takes from
+    the buffers it is handed: a batch with previews warned of 2 recompiles that computed the
+    same thing); another operation or literal is another kernel. Real history entries carry
+    their code, so the signature is not the plain hash."""
+    import io
+
+    import drjit as dr
+    from draaw_mi.batch.frame import kernel_signature
+
+    name = "drjit_" + "0" * 32
+    code = "define void @{}() {{ %f = load <8 x float>, ptr %p, align {} ; fmul %f, 2.0 }}"
+    a = {"hash": 1, "ir": io.StringIO(code.format(name, 32))}
+    b = {"hash": 2, "ir": io.StringIO(code.format("drjit_" + "f" * 32, 1))}
+    c = {"hash": 3, "ir": io.StringIO(code.format(name, 32).replace("2.0", "3.0"))}
+    assert kernel_signature(a) == kernel_signature(b) != kernel_signature(c)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        x = dr.arange(mi.Float, 64) * 3.0
+        dr.eval(x)
+        entry = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT][0]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert kernel_signature(entry) != str(entry["hash"])
+
+
 def test_previews_and_contact_sheet(tmp_path):
     doc = manifest(tmp_path, frames=3, previews=True)
     doc["contact_sheet"] = True

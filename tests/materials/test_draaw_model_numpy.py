@@ -12,6 +12,8 @@ dielectric highlights, the diffuse-Fresnel coupling, coloured F0 and the F90 cla
 """
 from __future__ import annotations
 
+import zlib
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -91,17 +93,22 @@ CASES = {
     "coloured_metal_dark_channel": ([0.9, 0.5, 0.004], 0.5, 1.0, 0.5),    # F0 = 0.004: F90 = 0.2
     "half_metal": ([0.3, 0.8, 0.4], 0.45, 0.5, 0.7),
     "near_mirror_alpha_clamp": ([0.6, 0.6, 0.6], 0.03, 0.0, 0.5),
+    # (base, roughness, metallic, specular, alpha_min): the clamp set on the material, not 1e-3
+    "near_mirror_own_alpha_min": ([0.6, 0.6, 0.6], 0.05, 1.0, 0.5, 0.05),
 }
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_eval_matches_numpy_model(case):
-    base, rough, metal, spec = CASES[case]
-    rng = np.random.default_rng(abs(hash(case)) % 2 ** 32)
+    base, rough, metal, spec, *own = CASES[case]
+    # (a fixed seed per case: hash() of a string changes with every interpreter)
+    rng = np.random.default_rng(zlib.crc32(case.encode()))
     wi, wo = _directions(rng, 4000)
     props = {"base_color": {"type": "rgb", "value": base}, "roughness": rough, "metallic": metal, "specular": spec}
+    if own:
+        props["alpha_min"] = own[0]
     got = _plugin_eval(props, wi, wo)
-    want = model(base, rough, metal, spec, wi, wo)
+    want = model(base, rough, metal, spec, wi, wo, **({"alpha_min": own[0]} if own else {}))
     assert np.isfinite(got).all()
     scale = np.abs(want).max()
     assert scale > 0.05                                   # the case exercises a visible lobe
@@ -112,13 +119,17 @@ def test_eval_matches_numpy_model(case):
 
 @pytest.mark.parametrize("case,variant", [("coloured_metal_dark_channel", {"f90_clamp": False}),
                                           ("dielectric_no_specular_f90_zero", {"f90_clamp": False}),
-                                          ("dielectric_rough", {"coupling": False})])
+                                          ("dielectric_rough", {"coupling": False}),
+                                          ("near_mirror_own_alpha_min", {"alpha_min": 1e-3})])
 def test_the_comparison_sees_f90_clamp_and_coupling(case, variant):
-    """The same comparison against the model without the F90 clamp or without the diffuse-
-    Fresnel coupling fails clearly: the test can tell these parts of §3 apart."""
-    base, rough, metal, spec = CASES[case]
+    """The same comparison against the model without the F90 clamp, without the diffuse-
+    Fresnel coupling or with the default alpha_min instead of the material's fails clearly:
+    the test can tell these parts of §3 apart."""
+    base, rough, metal, spec, *own = CASES[case]
     wi, wo = _directions(np.random.default_rng(5), 2000)
     props = {"base_color": {"type": "rgb", "value": base}, "roughness": rough, "metallic": metal, "specular": spec}
+    if own:
+        props["alpha_min"] = own[0]
     got = _plugin_eval(props, wi, wo)
     wrong = model(base, rough, metal, spec, wi, wo, **variant)
     assert np.abs(got - wrong).max() > 0.01 * np.abs(got).max()

@@ -54,6 +54,27 @@ def test_matches_volpath_all_scenes(kind, integ):
     same_expectation(kind, integ, seeds=8, spp=64)
 
 
+@pytest.mark.parametrize("integ", ["draaw_v1", "draaw_v2", "draaw_v3", "draaw_v4"])
+def test_aovs_of_a_scene_with_media_are_its_first_surfaces(integ):
+    """Depth, normal and albedo AOVs in a scene with smoke are those of the camera ray's first
+    surface, the smoke's null box included, as Mitsuba's ``aov`` integrator reports them
+    (they were all 0, and batch EXR layers and the denoiser's guides with them)."""
+    d = ms.scene_dict("uniform", {"type": integ, "aovs": "depth,normal,albedo"}, res=12)
+    d["sensor"]["fov"] = 90                                 # the floor and the sky beside the box
+    sc = mi.load_dict(d)
+    img = np.array(mi.render(sc, spp=1, seed=3))
+    ref = np.array(mi.render(sc, integrator=mi.load_dict(
+        {"type": "aov", "aovs": "dd.y:depth,nn:sh_normal,aa:albedo"}), spp=1, seed=3))
+    hit = ref[..., 0] > 0
+    assert hit.any() and (~hit).any()
+    np.testing.assert_allclose(img[..., 3], ref[..., 0], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(img[..., 4:7][hit], ref[..., 1:4][hit], atol=1e-4)
+    assert not img[~hit][:, 3:].any()
+    np.testing.assert_allclose(img[..., 7:10], ref[..., 4:7], atol=1e-5)
+    albedo = img[..., 7]
+    assert (albedo == 0).any() and (albedo > 0.4).any()      # the smoke's null box and the floor
+
+
 # --------------------------------------------------------------------------- gradients
 def _grads(key_suffix, direction_fn, h, n=4, kind="uniform", spp_ad=32, spp_fd=256, albedo=None):
     sc = ms.scene(kind, "draaw_v4", res=8)

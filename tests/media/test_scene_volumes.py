@@ -86,11 +86,20 @@ def base_desc(**vol):
     ({"mode": "fog"}, r"mode.*solid, smoke"),
     ({"material": "x"}, r"mode = solid volumes only"),
     ({"densty": 1}, r"did you mean 'density'"),
+    ({"density": None, "procedural": {"type": "plume", "seed": "x"}}, r"procedural\.seed: 'x' is not a number"),
+    ({"density": None, "procedural": {"type": "plume", "resolution": [8.5, 8, 8]}},
+     r"procedural\.resolution\[0\]: 8\.5 is not an integer"),
+    ({"density": None, "procedural": {"type": "plume", "resolution": [8, 8]}}, r"list of 3 integers"),
 ])
 def test_bad_volume_entries_are_one_scene_error(vol, match):
+    desc = base_desc(**vol)
+    v = desc["volumes"][0]
+    for key in [k for k, value in v.items() if value is None]:
+        del v[key]                                  # (None: the entry has no such key)
     with pytest.raises(SceneError, match=match) as e:
-        draaw_mi.load_scene(base_desc(**vol))
+        draaw_mi.load_scene(desc)
     assert "\n" not in str(e.value)
+    assert str(e.value).count("volumes[0]") == 1     # one location (g named it twice)
 
 
 def test_truncated_vol_file_is_a_scene_error_and_cli_exit_2(tmp_path):

@@ -274,6 +274,20 @@ def test_npz_round_trip_and_atomic_save(tmp_path, monkeypatch):
     assert [f.name for f in tmp_path.iterdir()] == ["g.npz"]
 
 
+def test_a_grid_is_saved_to_npz_names_only(tmp_path):
+    with pytest.raises(ParameterError, match=r"expected a \.npz file name"):
+        VoxelGrid.empty(2).save(tmp_path / "g.txt")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("color", [(2.0, 0.0, 0.0), (-0.1, 0.5, 0.5), (0.5, float("nan"), 0.5)])
+def test_colours_outside_0_1_are_refused_not_clipped(color):
+    g = VoxelGrid.empty(2)
+    with pytest.raises(ParameterError, match=r"expected 3 values in \[0, 1\]"):
+        g.draw((0, 0, 0), color)
+    assert not g.occupied.any()
+
+
 def test_load_errors(tmp_path):
     with pytest.raises(IOFailure, match="missing.npz"):
         VoxelGrid.load(tmp_path / "missing.npz")
