@@ -8,6 +8,9 @@ Per call: the time until the call returns (host: Python tracing or frozen replay
 time to the evaluated image, and the summed execution time of the kernels it launched
 (``dr.kernel_history``). Reports medians.
 
+Then the same render repeated back to back (as a fit loop or a preview repeats it), per
+version and mode.
+
 Usage::
 
     .venv/bin/python benchmarks/render_overhead.py            # 64x64, 4 spp, V1..V4 and path
@@ -111,6 +114,21 @@ def main(argv=None) -> int:
         paired = statistics.median((wa - ka) - (wf - kf) for (wa, _, ka), (wf, _, kf)
                                    in zip(data[(v, "api")], data[(v, "frozen")]))
         cells.append(f"{1e3 * paired:+.3f}")
+        out.append(f"| {v} | " + " | ".join(cells) + " |")
+    # The same render repeated back to back, as a fit loop or a preview repeats it (the table
+    # above interleaves versions and traced renders, which leave the caches and threads cold)
+    out += ["", f"Back to back: per version, {args.repeats} calls of one mode in a row after 3 warm-up "
+            "calls (frozen, then api), medians:", "",
+            "| version | frozen: wall ms | outside | api: wall ms | outside |", "|---|---|---|---|---|"]
+    for v in versions:
+        cells = []
+        for m in ("frozen", "api"):
+            for s in range(3):
+                one(scene, v, args.spp, 500 + s, m)
+            d = [one(scene, v, args.spp, 600 + i, m) for i in range(args.repeats)]
+            wall = statistics.median(w for w, _, _ in d)
+            frac_o = statistics.median((w - k) / w for w, _, k in d)
+            cells.append(f"{1e3 * wall:.1f} | {100 * frac_o:.1f} %")
         out.append(f"| {v} | " + " | ".join(cells) + " |")
     text = "\n".join(out) + "\n"
     from draaw_mi.io import print_report

@@ -106,12 +106,16 @@ def _scene_key(scene, spp: int, max_depth: int) -> str:
     elif scene.description is not None:
         h.update(json.dumps(scene.description, sort_keys=True, default=str).encode())
     h.update(repr((scene.resolution, spp, max_depth)).encode())
+    version = reference_version(scene)
+    if version != "path":            # (a cached path render of an SDF scene lacked its objects)
+        h.update(version.encode())
     return h.hexdigest()[:16]
 
 
 def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir: str | None = None,
                  progress: bool = False) -> np.ndarray:
-    """Mitsuba ``path`` at high spp, cached as ``<cache_dir>/gt-<hash>.exr`` (atomic write)."""
+    """The :func:`reference_version` render at high spp (Mitsuba's ``path`` unless the scene
+    has media or SDF objects), cached as ``<cache_dir>/gt-<hash>.exr`` (atomic write)."""
     from .render import render
 
     max_depth = scene.settings["max_depth"] if max_depth is None else max_depth
@@ -121,7 +125,7 @@ def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir
         path = os.path.join(cache_dir, f"gt-{name}-{_scene_key(scene, spp, max_depth)}.exr")
         if os.path.isfile(path):
             return read_exr(path)[..., :3]
-    version = "volpath" if scene.features().get("media") else "path"     # media need volpath
+    version = reference_version(scene)
     img = np.array(render(scene, version=version, spp=spp, seed=2 ** 31 - 1, max_depth=max_depth,
                           progress=progress, post=[]))[..., :3]
     if path:
@@ -211,6 +215,32 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
     return sorted(front)
 
 
+def reference_version(scene) -> str:
+    """The ground truth's integrator: Mitsuba's ``path``, ``volpath`` for media, and V4 (the
+    only unbiased one that traces them) for scenes with ``[[sdf]]`` objects."""
+    from .render import scene_holds
+    holds = scene_holds(scene)
+    return "v4" if holds["sdf"] else "volpath" if holds["media"] else "path"
+
+
+def scene_versions(scene, versions) -> list[str]:
+    """``versions`` as they apply to ``scene``: with media ``path`` / ``prb`` become
+    ``volpath`` (:func:`_media_versions`); with ``[[sdf]]`` objects Mitsuba's integrators,
+    which cannot see them, are left out (with a warning)."""
+    from .render import _BLIND, scene_holds
+    from .integrators import resolve_version
+    holds = scene_holds(scene)
+    out = _media_versions(versions) if holds["media"] else list(versions)
+    if holds["sdf"]:
+        blind = [v for v in out if "sdf" in _BLIND.get(resolve_version(v), ())]
+        if blind:
+            import warnings
+            warnings.warn(f"{scene.source}: {', '.join(blind)} cannot see its [[sdf]] objects; left out",
+                          RuntimeWarning, stacklevel=3)
+        out = [v for v in out if v not in blind]
+    return out
+
+
 def _media_versions(versions) -> list[str]:
     """Versions for a scene with participating media: ``path``/``prb`` ignore media, so
     Mitsuba's ``volpath`` stands in for them (V1/V2 render GO-Draaw's single-scattering march,
@@ -246,7 +276,7 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
         depths = max_depths or [s.settings["max_depth"]]
         media = bool(s.features().get("media"))
         for d in depths:
-            for v in (_media_versions(versions) if media else versions):
+            for v in scene_versions(s, versions):
                 for spp in spps:
                     plan.append((s, Setting(v, spp, d, None)))
                 for spp in denoise_spp:
@@ -344,9 +374,11 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
     gts = {}
     for i in sorted(check):
         set_camera(path[i])
-        gts[i] = np.array(render(scene, version="path", spp=gt_spp, seed=777, post=[]))[..., :3]
+        gts[i] = np.array(render(scene, version=reference_version(scene), spp=gt_spp, seed=777,
+                                 post=[]))[..., :3]
     out = []
     bar = None
+    versions = scene_versions(scene, versions)
     if progress:
         from tqdm.auto import tqdm
         bar = tqdm(total=len(versions) * len(path), desc="frame times", unit="frame")

@@ -278,7 +278,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
     tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fit_result.settled`).
     """
-    from .render import make_integrator, scene_changed
+    from .render import check_version_sees, make_integrator, scene_changed
 
     t0 = time.perf_counter()
     if loss not in LOSSES:
@@ -313,6 +313,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         spp_grad = _sampler_spp(scene, spp_grad, "spp_grad")
     if len(sensors) != len(refs):
         raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
+    check_version_sees(scene, version)   # (prb fitted a smoke scene as if it had no smoke)
     integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
         raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")

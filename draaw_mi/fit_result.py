@@ -86,12 +86,15 @@ class FitResult:
         import json
 
         from .io import write_exr, write_text
+        from .errors import ParameterError
         lower = path.lower()
         described = scene is not None and getattr(scene, "description", None) is not None
         if not lower.endswith((".toml", ".json") if described else (".json",)):
-            raise ValueError(f"FitResult.save: {path!r}; expected a .toml or .json file"
-                             if described else f"FitResult.save: {path!r}; without a TOML/JSON "
-                             "scene only the values can be written, to a .json file")
+            raise ParameterError(f"FitResult.save: {path!r}; expected a .toml or .json file"
+                                 if described else f"FitResult.save: {path!r}; without a TOML/JSON "
+                                 "scene only the values can be written, to a .json file")
+        if described:                  # every value can be written back, before any file is
+            scene.updated_description({name: 0.0 for name in self.values})
         written, values = [], {}
         stem = os.path.splitext(path)[0]
         for name, value in self.values.items():

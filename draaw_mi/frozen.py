@@ -11,7 +11,6 @@ scene does not hold (:func:`other_live_bsdfs`). What is found once per scene liv
 """
 from __future__ import annotations
 
-import contextlib
 import gc
 import threading
 import warnings
@@ -180,29 +179,36 @@ def other_live_bsdfs(mi_scene, scene=None) -> list:
 RECORDINGS_KEPT = 8
 
 
-_PAUSES = [0]
-_PAUSES_GUARD = threading.Lock()
+class _CollectorPaused:
+    """Python's cycle collector off while a frozen render runs (nested and across threads: on
+    again when the last one ends, if it was on when the first began). A collection during a
+    ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's buffers, a dead preview's
+    recordings) aborts the process: "RecordThreadState::enqueue_host_func(): this function
+    cannot be recorded!" (seen in the test suite once recordings went with their scenes).
+    A class rather than a generator context manager: this runs on every replay (1 us, not 2)."""
+    __slots__ = ()
+    depth = 0
+    was_enabled = False
+    guard = threading.Lock()
 
+    def __enter__(self):
+        cls = _CollectorPaused
+        with cls.guard:
+            if cls.depth == 0:
+                cls.was_enabled = gc.isenabled()
+                gc.disable()
+            cls.depth += 1
 
-@contextlib.contextmanager
-def _collector_paused():
-    """Python's cycle collector off for the block (nested and across threads: on again when
-    the last block ends). A collection during a ``dr.freeze`` recording that frees Dr.Jit
-    memory (a dead scene's buffers, a dead preview's recordings) aborts the process:
-    "RecordThreadState::enqueue_host_func(): this function cannot be recorded!" (seen in the
-    test suite once recordings went with their scenes)."""
-    with _PAUSES_GUARD:
-        if _PAUSES[0] == 0:
-            _PAUSES.append(gc.isenabled())
-            gc.disable()
-        _PAUSES[0] += 1
-    try:
-        yield
-    finally:
-        with _PAUSES_GUARD:
-            _PAUSES[0] -= 1
-            if _PAUSES[0] == 0 and _PAUSES.pop():
+    def __exit__(self, *exc):
+        cls = _CollectorPaused
+        with cls.guard:
+            cls.depth -= 1
+            if cls.depth == 0 and cls.was_enabled:
                 gc.enable()
+        return False
+
+
+_PAUSED = _CollectorPaused()
 
 
 def freeze_render(integrator, body):
@@ -243,7 +249,7 @@ def freeze_render(integrator, body):
         live = other_live_bsdfs(mi_scene, scene)
         memo = None if scene is None else scene_state(scene).memo
         try:
-            with _collector_paused():
+            with _PAUSED:
                 return frozen(mi_scene, scene_scalars(mi_scene, scene), seed,
                               None if state_of is None else state_of(mi_scene, memo), live)
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead

@@ -51,9 +51,22 @@ import numpy as np
 
 from .errors import ParameterError, suggest
 from .materials import check_value
+from .integrators import resolve_version
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 
 GUIDES = ("albedo", "normal")
+
+
+def _budget(value, where: str) -> int:
+    """A refinement budget: an integer number of samples per pixel >= 1."""
+    import operator
+    try:
+        n = operator.index(value)
+    except TypeError:
+        n = None
+    if n is None or isinstance(value, bool) or n < 1:
+        raise ParameterError(f"{where}: max_spp={value!r}; expected an integer >= 1")
+    return int(n)
 
 
 @dataclass
@@ -109,9 +122,7 @@ class Preview:
         if not (0.0 < float(interactive_scale) <= 1.0):
             raise ParameterError(f"Preview: interactive_scale={interactive_scale!r}; expected a number in (0, 1]")
         self.interactive_scale = float(interactive_scale)
-        if isinstance(max_spp, bool) or not isinstance(max_spp, int) or max_spp < 1:
-            raise ParameterError(f"Preview: max_spp={max_spp!r}; expected an integer >= 1")
-        self.max_spp, self.freeze, self.seed = int(max_spp), bool(freeze), int(seed)
+        self.max_spp, self.freeze, self.seed = _budget(max_spp, "Preview"), bool(freeze), int(seed)
         self.denoise = bool(denoise)
         if self.denoise:
             from .denoise import _pyoidn
@@ -139,8 +150,10 @@ class Preview:
     # ------------------------------------------------------------------ configuration
     def _make_integrator(self):
         check_version_sees(self.scene, self.version)
+        # the denoiser's guides come from the draaw versions; Mitsuba's are denoised colour-only
+        guides = GUIDES if self.denoise and resolve_version(self.version).startswith("draaw") else ()
         return make_integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
-                               GUIDES if self.denoise else ())
+                               guides)
 
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or
@@ -150,6 +163,8 @@ class Preview:
         for k in options:
             if k not in allowed:
                 raise ParameterError(f"Preview.configure: unknown option {k!r}{suggest(k, allowed)}")
+        if "max_spp" in options:
+            options["max_spp"] = _budget(options["max_spp"], "Preview.configure")
         if "interactive_scale" in options and not (0.0 < float(options["interactive_scale"]) <= 1.0):
             raise ParameterError(f"Preview.configure: interactive_scale={options['interactive_scale']!r}; "
                                  "expected a number in (0, 1]")
@@ -299,11 +314,14 @@ class Preview:
     def _finish(self, mean, spp, generation, interactive, render_s) -> PreviewFrame:
         color = mean[..., :3]
         image, denoised = color, False
-        if self.denoise and mean.shape[2] >= 9:
+        if self.denoise:
             from .denoise import denoise
-            # channel order of the guides: N.X..N.Z then albedo.R..B (AOV_CHANNELS order)
-            image = denoise(np.ascontiguousarray(color), mean[..., 6:9], mean[..., 3:6],
-                            quality="fast" if interactive else "high")
+            quality = "fast" if interactive else "high"
+            if mean.shape[2] >= 9:
+                # channel order of the guides: N.X..N.Z then albedo.R..B (AOV_CHANNELS order)
+                image = denoise(np.ascontiguousarray(color), mean[..., 6:9], mean[..., 3:6], quality=quality)
+            else:                        # Mitsuba's integrators: no guides
+                image = denoise(np.ascontiguousarray(color), quality=quality)
             denoised = True
         if interactive:
             image, color = self._upscale(image), self._upscale(color)

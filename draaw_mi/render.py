@@ -71,9 +71,8 @@ def _integrator_error(plugin: str, props: dict, e: Exception) -> RenderError:
     if "unreferenced propert" in text and names:
         known = _plugin_parameters(plugin)
         hint = suggest(names[0], known) if known else ""
-        listed = f"; it takes {', '.join(known)}" if known and not hint else ""
         return RenderError(f"render: the integrator {plugin!r} has no option "
-                           f"{', '.join(repr(n) for n in names)}{hint}{listed}")
+                           f"{', '.join(repr(n) for n in names)}{hint}")
     return RenderError(f"render: cannot create integrator {plugin!r}: {mitsuba_error_message(e)}")
 
 
@@ -236,9 +235,12 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
 
     Parameters
     ----------
-    scene: a :class:`DraawScene`, file name, description dict or ``mi.Scene``.
-    version: ``"v1"`` .. ``"v4"`` (GO-Draaw names accepted), ``"path"`` or ``"prb"``;
-        default the scene's ``render.version``.
+    scene: a :class:`DraawScene`, file name, description dict or ``mi.Scene`` (load a file
+        once and pass the scene: small renders replay a recording kept with it).
+    version: ``"v1"`` .. ``"v4"`` (GO-Draaw names accepted), ``"path"`` or ``"prb"``, and
+        ``"volpath"`` / ``"prbvolpath"`` for media; default the scene's ``render.version``.
+        Mitsuba's integrators cannot see ``[[sdf]]`` objects, ``path`` / ``prb`` not media:
+        such a request raises :class:`RenderError`.
     spp, seed, max_depth, resolution ((W, H)): override the scene's render settings.
     params: ``mi.traverse`` parameters, for differentiable renders (``dr.backward`` works).
     progress: show a tqdm progress bar over passes.

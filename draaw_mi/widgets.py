@@ -112,8 +112,8 @@ class MaterialTuner(CameraPanel):
         if self.reference is not None and self.reference.shape[:2] != (h, w):
             raise DraawError(f"MaterialTuner: reference of {self.reference.shape[1]}x{self.reference.shape[0]} "
                              f"pixels; expected the scene's {w}x{h} (the error line compares pixels)")
-        if isinstance(max_spp, bool) or not isinstance(max_spp, int) or max_spp < 1:
-            raise DraawError(f"MaterialTuner: max_spp={max_spp!r}; expected an integer >= 1")
+        from .preview import _budget
+        max_spp = _budget(max_spp, "MaterialTuner")
         self.rest_after = float(rest_after)
         self._options = dict(version=version or self.scene.settings["version"], max_spp=int(max_spp),
                              denoise=bool(denoise), interactive_scale=float(interactive_scale), freeze=freeze)

@@ -13,7 +13,7 @@ from draaw_mi import bench
 from draaw_mi.bench_report import pareto_check, time_to_error
 from draaw_mi.camera_path import GO_DRAAW_BENCHMARK_PATH, interpolate
 
-from conftest import tiny_description
+from conftest import SCENES, tiny_description
 
 
 # Sharma, Wu & Dalal (2005), "The CIEDE2000 color-difference formula: implementation notes,
@@ -248,3 +248,20 @@ def test_versions_at_one_spp_are_timed_round_robin(monkeypatch):
     (ra, _), (rb, _) = out
     assert ra["time_s"] == 5.0 and rb["time_s"] == 6.0          # medians of (3, 5, 7), (4, 6, 8)
     assert ra["rmse"] == 0.0 and rb["rmse"] > 0.0
+
+
+def test_an_sdf_scene_is_measured_against_v4_without_mitsubas_integrators(tmp_path):
+    """Mitsuba's integrators cannot see [[sdf]] objects: the study leaves them out (with a
+    warning) and takes its ground truth from V4 (a path render of the floor alone was the
+    reference, and path a measured version, before they were refused)."""
+    from draaw_mi.bench import reference_version, scene_versions
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "sdf_csg.toml"), resolution=(12, 8))
+    assert reference_version(scene) == "v4"
+    with pytest.warns(RuntimeWarning, match="path cannot see"):
+        assert scene_versions(scene, ["v2", "path", "v4"]) == ["v2", "v4"]
+    gt = bench.ground_truth(scene, spp=8)
+    ref = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=2 ** 31 - 1, post=[]))[..., :3]
+    np.testing.assert_array_equal(gt, ref)
+    smoke = draaw_mi.load_scene(os.path.join(SCENES, "smoke.toml"), resolution=(12, 8))
+    assert reference_version(smoke) == "volpath" and scene_versions(smoke, ["path", "v4"]) == ["volpath", "v4"]
+    assert reference_version(draaw_mi.load_scene(tiny_description())) == "path"

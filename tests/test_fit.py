@@ -316,6 +316,10 @@ def test_bad_arguments(fit_scene):
                      progress=False)
     with pytest.raises(DraawError, match="average_last"):
         draaw_mi.fit(fit_scene, ref, ["target.roughness"], average_last=0, iterations=1, progress=False)
+    smoke = draaw_mi.load_scene(os.path.join(SCENES, "smoke.toml"), resolution=(8, 8))
+    with pytest.raises(DraawError, match="participating media, which Mitsuba's 'prb'"):
+        draaw_mi.fit(smoke, np.zeros((8, 8, 3), np.float32), ["plume.albedo"], version="prb", iterations=1,
+                     progress=False)
     with pytest.raises(DraawError, match=r"init target.roughness=1.5; expected values in \[0.0, 1.0\]"):
         draaw_mi.fit(fit_scene, ref, ["target.roughness"], init={"target.roughness": 1.5}, iterations=1,
                      progress=False)
@@ -411,6 +415,12 @@ def test_cli_fit_of_a_texture_writes_it_beside_the_scene_elsewhere(tmp_path, cap
     written = draaw_mi.read_exr(str(tmp_path / "b" / "c" / "fitted.m.base_color.exr"))
     np.testing.assert_allclose(np.array(fitted.params["m.base_color.data"]), written[..., :3], atol=1e-6)
     assert not np.allclose(written[..., :3], TEXTURE)          # (6 steps: moved, not converged)
+    # a value that cannot be written back is said before any texture file is written
+    from draaw_mi.fit_result import FitResult
+    bad = FitResult(values={"nomat.base_color": np.zeros((2, 2, 3), np.float32)})
+    with pytest.raises(DraawError, match="nomat"):
+        bad.save(str(tmp_path / "d" / "x.toml"), fitted)
+    assert not (tmp_path / "d").exists()
     # an XML scene has no description to write into: the values only, to JSON; said before fitting
     xml = tmp_path / "s.xml"
     xml.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"><integer '

@@ -272,3 +272,24 @@ def test_a_preview_with_a_version_that_cannot_see_the_scene_fails_clearly():
     scene = draaw_mi.load_scene(os.path.join(SCENES, "sdf_csg.toml"), resolution=(16, 12))
     with pytest.raises(DraawError, match=r"\[\[sdf\]\] objects"):
         Preview(scene, version="path")
+
+
+def test_the_budget_is_checked_on_configure_too_and_takes_numpy_integers():
+    pv = Preview(draaw_mi.load_scene(tiny_description()), max_spp=np.int64(8), freeze=False)
+    assert pv.max_spp == 8
+    for bad in (0, 2.5):
+        with pytest.raises(ParameterError, match="max_spp"):
+            pv.configure(max_spp=bad)
+    assert pv.max_spp == 8
+
+
+def test_mitsubas_path_previews_denoised_colour_only():
+    """denoise=True with Mitsuba's path (no AOVs to guide OIDN): the colour alone is denoised,
+    as render(denoise=True) does (it raised "AOVs (albedo,normal) come from the draaw
+    versions" although no AOV was asked for)."""
+    pytest.importorskip("pyoidn")
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="path", max_depth=4, denoise=True, freeze=False, seed=3)
+    f = pv.step()
+    assert f.denoised
+    np.testing.assert_allclose(f.image, draaw_mi.denoise(np.ascontiguousarray(f.raw)), rtol=1e-5, atol=1e-6)

@@ -588,3 +588,19 @@ def test_other_live_bsdfs_follows_bsdfs_made_and_dropped(scene):
     assert R.other_live_bsdfs(ms, scene) == R.other_live_bsdfs(ms)
     mine = sum(1 for b in LIVE_INSTANCES if id(b) in own)
     assert len(R.other_live_bsdfs(ms, scene)) == len(LIVE_INSTANCES) - mine
+
+
+def test_a_bare_mitsuba_scene_rendered_again_replays(monkeypatch):
+    """render(mi_scene) wraps the Mitsuba scene in the same DraawScene each time, so a
+    repeated small render replays its recording (a new wrapper per call recorded anew: 28 ms
+    against 6.5 ms a call at 16x16)."""
+    calls = []
+    real = mi.render
+    monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    monkeypatch.setattr(R, "FREEZE", True)
+    mi_scene = draaw_mi.load_scene(rs.cornell_draaw(res=16, spp=4)).mi_scene
+    assert draaw_mi.load_scene(mi_scene) is draaw_mi.load_scene(mi_scene)
+    first = [np.array(draaw_mi.render(mi_scene, version="v4", spp=4, seed=s, post=[])) for s in (1, 2)]
+    n = len(calls)
+    again = np.array(draaw_mi.render(mi_scene, version="v4", spp=4, seed=1, post=[]))
+    assert n >= 1 and len(calls) == n and np.array_equal(again, first[0])

@@ -82,3 +82,16 @@ def test_batch_frames_of_an_xml_scene_go_stale_when_a_file_it_reads_changes(tmp_
         edit(str(tmp_path / name))
         assert batch.status(doc)["counts"]["stale"] == 1, name
         assert batch.run(doc, progress=False).rendered == 1, name
+
+
+def test_a_name_found_in_two_folders_lists_both(tmp_path):
+    """Mitsuba looks in the <path> folders before the scene's; a name in both could be either:
+    both are listed (the one it reads, sub/t.png here, was left out and its edits went unseen)."""
+    (tmp_path / "sub").mkdir()
+    for folder in (tmp_path, tmp_path / "sub"):
+        draaw_mi.write_png(str(folder / "t.png"), np.full((2, 2, 3), 0.5, np.float32))
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><path value="sub"/><bsdf type="diffuse"><texture type="bitmap" '
+        'name="reflectance"><string name="filename" value="t.png"/></texture></bsdf></scene>')
+    files, _ = xml_references(str(tmp_path / "s.xml"))
+    assert sorted(os.path.relpath(f, tmp_path) for f in files) == ["sub/t.png", "t.png"]

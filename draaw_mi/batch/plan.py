@@ -140,6 +140,14 @@ def param_value(kind: str, data, frame: int, frames: int):
     return a + (b - a) * t
 
 
+def _draaw(version: str) -> bool:
+    from ..integrators import resolve_version
+    try:
+        return resolve_version(version).startswith("draaw")
+    except DraawError:
+        return True                      # (an unknown version fails later, with its own message)
+
+
 # --------------------------------------------------------------------------- plan
 def plan(manifest: Manifest, cache=None) -> list[dict]:
     """Every frame of every job as a spec dict, validated against the loaded scenes."""
@@ -162,6 +170,8 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
         spp = job.spp or s["spp"]
         max_depth = s["max_depth"] if job.max_depth is None else job.max_depth
         aovs = list(s.get("aovs", [])) if job.aovs is None else job.aovs
+        if job.aovs is None and aovs and not _draaw(version):
+            aovs = []                    # the scene's AOVs come from v1..v4 (as render() does)
         from ..post import display_encoded     # PNGs of a chain that ends in srgb: as they are
         encoded = display_encoded(s.get("post", []) if job.post is None else job.post)
         try:

@@ -59,14 +59,19 @@ def _array(value, where, key):
     return arr
 
 
+#: voxels per axis at most (4800 per axis asked for 885 GB of float64 and killed the process)
+MAX_GRID_RESOLUTION = 1024
+
+
 def _grid_resolution(value, where):
-    """Voxels per axis: one integer >= 1 for all three, or a list of three."""
+    """Voxels per axis: one integer in [1, MAX_GRID_RESOLUTION] for all three, or a list of three."""
     from ..scene.schema import number
+    hi = MAX_GRID_RESOLUTION
     if isinstance(value, (list, tuple)):
         if len(value) != 3:
             raise where.error(f"{value!r}; expected an integer or a list of 3 integers (voxels per axis)")
-        return tuple(int(number(v, where / i, lo=1, integer=True)) for i, v in enumerate(value))
-    return int(number(value, where, lo=1, integer=True))
+        return tuple(int(number(v, where / i, lo=1, hi=hi, integer=True)) for i, v in enumerate(value))
+    return int(number(value, where, lo=1, hi=hi, integer=True))
 
 
 def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:

@@ -204,12 +204,17 @@ def _bare_mesh_description(path: str) -> dict:
             "lights": auto_light(lo, hi, camera["origin"])}
 
 
+# description fields that name things, never files
+_NAME_FIELDS = frozenset({"name", "material", "type", "shape", "mode", "children", "version"})
+
+
 def _rebased(node, files: dict, folder: str):
     """``node`` (a description) with every string that is one of ``files``' relative names
     replaced by the name of that file relative to ``folder`` (the names the loader resolved
-    against the scene's folder: only those, so a material called like a file stays)."""
+    against the scene's folder: only those, and not in fields that name things, so a shape
+    whose material is called like a texture file keeps it)."""
     if isinstance(node, dict):
-        return {k: _rebased(v, files, folder) for k, v in node.items()}
+        return {k: v if k in _NAME_FIELDS else _rebased(v, files, folder) for k, v in node.items()}
     if isinstance(node, list):
         return [_rebased(v, files, folder) for v in node]
     if isinstance(node, str) and node in files:
@@ -241,7 +246,9 @@ def load_scene(source, **overrides) -> DraawScene:
     if isinstance(source, DraawScene):
         return source
     if isinstance(source, mi.Scene):
-        return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
+        if overrides:
+            return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
+        return _wrapped(source)
     if isinstance(source, dict):
         if source.get("type") == "scene":
             return _from_mitsuba_scene(_load_dict(mi, source, "<dict>"), "<dict>", overrides, source,
@@ -270,6 +277,24 @@ def load_scene(source, **overrides) -> DraawScene:
     else:
         desc = _bare_mesh_description(path)
     return _from_description(desc, path, os.path.dirname(os.path.abspath(path)), overrides)
+
+
+# The DraawScene of each recent bare mi.Scene (render(mi_scene) wraps it on every call, and the
+# renderer keeps its recordings per DraawScene: a new wrapper recorded anew, 5x slower than a
+# replay). Holding the mi.Scene keeps its id from being reused; the oldest is let go.
+_WRAPPED: dict = {}
+WRAPPED_KEPT = 4
+
+
+def _wrapped(mi_scene) -> DraawScene:
+    key = id(mi_scene)
+    entry = _WRAPPED.pop(key, None)
+    if entry is None or entry[0] is not mi_scene:
+        entry = (mi_scene, _from_mitsuba_scene(mi_scene, "<mi.Scene>", {}))
+    _WRAPPED[key] = entry                       # (most recent last)
+    while len(_WRAPPED) > WRAPPED_KEPT:
+        _WRAPPED.pop(next(iter(_WRAPPED)))
+    return entry[1]
 
 
 def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -> DraawScene:

@@ -9,11 +9,11 @@ after a successful load, to learn what the load depended on:
 - whether it, or a file it includes, declares an ``<integrator>`` (which then becomes the
   scene's render version).
 
-Relative names are looked up as Mitsuba does: beside the file that names them, beside the
-scene file and in the folders of ``<path>`` tags; ``$name`` takes the value of a
+Relative names are looked up where Mitsuba may find them: beside the file that names them,
+beside the scene file and in the folders of ``<path>`` tags; ``$name`` takes the value of a
 ``<default name=...>``. A name found in none of them is left out (Mitsuba would have failed
 the load). Listing a file Mitsuba did not read costs at most a needless re-render, so every
-candidate that exists is kept.
+candidate that exists is kept, not only the one Mitsuba's resolver picks.
 
 Example::
 
@@ -67,8 +67,7 @@ def xml_references(path: str) -> tuple[list[str], bool]:
             if node.tag == "integrator":
                 named[0] = True
             if node.tag == "include" and node.get("filename"):
-                inc = _find(_subst(node.get("filename"), defaults), [here, scene_dir] + search)
-                if inc:
+                for inc in _find(_subst(node.get("filename"), defaults), [here, scene_dir] + search):
                     _add(files, inc)
                     visit(inc, defaults, search, depth + 1)
                 continue
@@ -78,8 +77,7 @@ def xml_references(path: str) -> tuple[list[str], bool]:
             elif node.tag == "spectrum" and node.get("filename"):
                 name = node.get("filename")                  # <spectrum filename=...>
             if name:
-                found = _find(_subst(name, defaults), [here, scene_dir] + search)
-                if found:
+                for found in _find(_subst(name, defaults), [here, scene_dir] + search):
                     _add(files, found)
 
     visit(path, {}, [], 0)
@@ -116,17 +114,21 @@ def _resolve_dir(value: str, here: str) -> str:
     return value if os.path.isabs(value) else os.path.join(here, value)
 
 
-def _find(name: str, folders: list[str]) -> str | None:
+def _find(name: str, folders: list[str]) -> list[str]:
+    """Every existing file ``name`` can mean: Mitsuba's resolver order (the ``<path>`` folders
+    first, an include's folder only while it is parsed) is not copied here, and a file listed
+    that Mitsuba did not read costs at most a re-render, while one left out is a stale frame."""
     if "$" in name:                   # a parameter given only at load time: cannot be known here
-        return None
+        return []
     name = os.path.expanduser(name)
     if os.path.isabs(name):
-        return name if os.path.isfile(name) else None
+        return [name] if os.path.isfile(name) else []
+    found = []
     for folder in folders:
         candidate = os.path.normpath(os.path.join(folder, name))
-        if os.path.isfile(candidate):
-            return candidate
-    return None
+        if os.path.isfile(candidate) and candidate not in found:
+            found.append(candidate)
+    return found
 
 
 def _add(files: list[str], path: str) -> None:

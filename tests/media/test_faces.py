@@ -94,35 +94,38 @@ def test_face_colours_equal_colour_groups_and_are_differentiable():
     # two voxels' colours have equal channel sums, so only pixels see a face given the other's
     np.testing.assert_allclose(a, b, atol=1e-5)
     # the derivative of the mean image along each voxel's face colours (scaled about their
-    # values), against a central difference with the same samples. Measured: the AD estimate's
-    # spread over seeds (16 spp) is 8 % (red) and 2 % (blue) of its mean
+    # values): AD and central differences, each over 6 seeds, agree within 4 standard errors
+    # of their difference (both are estimates with their own noise)
     params = mi.traverse(s1)
     key = "voxels.face_color"
     c0 = np.array(params[key])
     red = np.zeros_like(c0).reshape(-1, 3)
     red[:10] = c0.reshape(-1, 3)[:10]          # (per triangle) the first voxel's 5 exterior faces
     red = red.ravel()
+    seeds = range(6)
     grads = []
-    for seed in range(4):
+    for seed in seeds:
         dr.enable_grad(params[key])
         params.update()
-        dr.backward(dr.mean(mi.render(s1, params, spp=16, seed=10 + seed), axis=None))
+        dr.backward(dr.mean(mi.render(s1, params, spp=16, seed=10 + seed, seed_grad=500 + seed), axis=None))
         grads.append(np.array(dr.grad(params[key])))
         params[key] = mi.Float(c0)
         params.update()
     grads = np.array(grads)
     assert np.all(np.isfinite(grads))
 
-    def mean_at(c):
+    def mean_at(c, seed):
         params[key] = mi.Float(c)
         params.update()
-        return float(np.mean(np.array(mi.render(s1, spp=16, seed=1))))
+        return float(np.mean(np.array(mi.render(s1, spp=16, seed=seed))))
 
     h = 0.02
     for direction in (red, c0 - red):
-        fd = (mean_at(c0 + h * direction) - mean_at(c0 - h * direction)) / (2 * h)
+        fd = np.array([(mean_at(c0 + h * direction, 900 + s) - mean_at(c0 - h * direction, 900 + s)) / (2 * h)
+                       for s in seeds])
         ad = grads @ direction
-        assert fd > 1e-3
-        assert abs(ad.mean() - fd) < 4 * ad.std(ddof=1) / 2 + 0.02 * fd, (ad, fd)
+        se = np.sqrt(ad.var(ddof=1) / len(ad) + fd.var(ddof=1) / len(fd))
+        assert fd.mean() > 1e-3
+        assert abs(ad.mean() - fd.mean()) < 4 * se, (ad, fd)
     params[key] = mi.Float(c0)
     params.update()

@@ -90,6 +90,7 @@ def base_desc(**vol):
     ({"density": None, "procedural": {"type": "plume", "resolution": [8.5, 8, 8]}},
      r"procedural\.resolution\[0\]: 8\.5 is not an integer"),
     ({"density": None, "procedural": {"type": "plume", "resolution": [8, 8]}}, r"list of 3 integers"),
+    ({"density": None, "procedural": {"type": "plume", "resolution": 4800}}, r"4800 is out of range"),
 ])
 def test_bad_volume_entries_are_one_scene_error(vol, match):
     desc = base_desc(**vol)
