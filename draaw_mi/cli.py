@@ -157,7 +157,8 @@ def _cmd_render(args) -> int:
                                   progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True,
                                   denoise=args.denoise)
     arr = np.array(image)
-    draaw_mi.write_exr(args.output, arr, channels=info["channels"])
+    from draaw_mi.batch.exr import render_metadata
+    draaw_mi.write_exr(args.output, arr, channels=info["channels"], metadata=render_metadata(args.scene, scene, info))
     if args.png:
         from draaw_mi.post import display_encoded
         chain = scene.settings.get("post", []) if post is None else post
@@ -425,7 +426,13 @@ def _cmd_post(args) -> int:
     if args.output.lower().endswith(".png"):
         draaw_mi.write_png(args.output, result[..., :3], encoded=post.display_encoded(chain))
     else:
-        draaw_mi.write_exr(args.output, result, channels=names)
+        # the input's draaw:* attributes go along (what rendered it), with the chain applied
+        from draaw_mi.batch.exr import read_header
+        header = read_header(args.input) or {}
+        meta = {k: v for k, v in header.items() if k.startswith("draaw:") and isinstance(v, (str, int, float))}
+        with open(args.chain, encoding="utf-8") as fh:          # (valid: load_chain read it)
+            meta["draaw:post"] = json.dumps(json.load(fh))
+        draaw_mi.write_exr(args.output, result, channels=names, metadata=meta)
     print(f"wrote {args.output}")
     return 0
 

@@ -126,11 +126,13 @@ def print_report(text: str, path: str | None) -> None:
 OTHER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".hdr", ".webp")
 
 
-def write_exr(path: str, image, channels: Sequence[str] | None = None, half: bool = False) -> None:
+def write_exr(path: str, image, channels: Sequence[str] | None = None, half: bool = False,
+              metadata: dict | None = None) -> None:
     """Write an (H, W, C) image as a float32 (or half) scanline EXR, atomically.
 
     ``channels`` names every channel (default ``R, G, B[, A]`` then error); values that overflow
-    float32 become ``inf`` as in any EXR writer — they are not clipped silently.
+    float32 become ``inf`` as in any EXR writer — they are not clipped silently. ``metadata``:
+    extra header attributes (str, int or float values), e.g. draaw-mi's ``draaw:*`` keys.
     """
     import OpenEXR
 
@@ -147,6 +149,11 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     dtype = np.float16 if half else np.float32
     chans = {n: np.ascontiguousarray(arr[..., i].astype(dtype)) for i, n in enumerate(names)}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (metadata or {}).items():
+        if key in header or not isinstance(value, (str, int, float)) or isinstance(value, bool):
+            raise IOFailure(f"write_exr({path!r}): metadata {key!r} = {value!r}; expected a new "
+                            "attribute name and a str, int or float value")
+        header[key] = value
     with atomic_path(path, ".exr") as tmp:
         try:
             with OpenEXR.File(header, chans) as f:

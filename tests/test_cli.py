@@ -37,6 +37,15 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     shown = matplotlib.image.imread(str(png))[..., :3]
     from draaw_mi.io import srgb_encode
     assert np.abs(shown - srgb_encode(ref)).max() <= 1.0 / 255 + 1e-6
+    # the header says what rendered it, as batch frames do
+    import hashlib
+    from draaw_mi.batch.exr import read_header
+    header = read_header(str(exr))
+    with open(os.path.join(SCENES, "cornell.toml"), "rb") as fh:
+        digest = hashlib.sha256(fh.read()).hexdigest()
+    assert (header["draaw:version"], header["draaw:spp"], header["draaw:seed"], header["draaw:max_depth"]) == \
+        ("path", 4, 3, 3)
+    assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
     assert "wrote" in capsys.readouterr().out
 
 

@@ -43,8 +43,14 @@ def test_post_applies_the_chain_to_colour_and_keeps_other_channels(tmp_path, cha
     rng = np.random.default_rng(2)
     img = rng.random((7, 9, 5)).astype(np.float32)
     src = str(tmp_path / "in.exr")
-    draaw_mi.write_exr(src, img, channels=["R", "G", "B", "depth", "normal.X"])
+    draaw_mi.write_exr(src, img, channels=["R", "G", "B", "depth", "normal.X"],
+                       metadata={"draaw:version": "draaw_v4", "draaw:spp": 16, "other": "x"})
     assert main(["post", src, "-o", str(tmp_path / "out.exr"), "--chain", chain_file]) == 0
+    from draaw_mi.batch.exr import read_header
+    header = read_header(str(tmp_path / "out.exr"))
+    # what rendered the input goes along, with the chain applied; other attributes do not
+    assert header["draaw:version"] == "draaw_v4" and header["draaw:spp"] == 16 and "other" not in header
+    assert json.loads(header["draaw:post"]) == json.loads(open(chain_file).read())
     out, names = draaw_mi.read_exr(str(tmp_path / "out.exr"), with_names=True)
     assert names == ["R", "G", "B", "depth", "normal.X"]
     assert np.allclose(out[..., :3], _contrast(img[..., :3]), atol=1e-6)

@@ -46,6 +46,23 @@ def metadata(spec: dict, seconds: float) -> dict:
     return meta
 
 
+def render_metadata(scene_file, scene, info: dict) -> dict:
+    """The ``draaw:*`` header attributes of one ``draaw-mi render`` EXR, as batch frames carry
+    them: the scene (and its file's SHA-256), the integrator, spp, seed, depth, time and the
+    versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(..., return_info=True)``
+    returned."""
+    from .plan import file_hash, versions
+    meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["integrator"],
+            "draaw:spp": int(info["spp"]), "draaw:seed": int(scene.settings["seed"]),
+            "draaw:max_depth": int(scene.settings["max_depth"]),
+            "draaw:render_seconds": float(info["seconds"]), "draaw:denoised": int(bool(info.get("denoised"))),
+            "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    if os.path.isfile(scene_file):
+        meta["draaw:scene_sha256"] = file_hash(scene_file)
+    meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})
+    return meta
+
+
 def write_frame(path: str, image: np.ndarray, channels, meta: dict, half: bool = False) -> None:
     """Write an (H, W, C) frame with named channels and header attributes, atomically."""
     import OpenEXR
