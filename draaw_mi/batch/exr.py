@@ -27,7 +27,6 @@ import time
 import numpy as np
 
 from ..errors import IOFailure
-from ..io import atomic_path
 
 HASH_ATTR = "draaw:frame_hash"
 
@@ -64,21 +63,14 @@ def render_metadata(scene_file, scene, info: dict) -> dict:
 
 
 def write_frame(path: str, image: np.ndarray, channels, meta: dict, half: bool = False) -> None:
-    """Write an (H, W, C) frame with named channels and header attributes, atomically."""
-    import OpenEXR
+    """Write an (H, W, C) frame with named channels and header attributes, atomically
+    (:func:`draaw_mi.io.write_exr` with ``metadata``)."""
+    from ..io import write_exr
 
     if image.ndim != 3 or image.shape[2] != len(channels):
         raise IOFailure(f"write_frame({path!r}): {len(channels)} channel names for an image of shape "
                         f"{image.shape}")
-    dtype = np.float16 if half else np.float32
-    chans = {n: np.ascontiguousarray(image[..., i].astype(dtype)) for i, n in enumerate(channels)}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **meta}
-    with atomic_path(path, ".exr") as tmp:
-        try:
-            with OpenEXR.File(header, chans) as f:
-                f.write(tmp)
-        except Exception as e:  # noqa: BLE001 - OpenEXR raises bare RuntimeErrors
-            raise IOFailure(f"write_frame({path!r}): {e}") from None
+    write_exr(path, image, channels=list(channels), half=half, metadata=meta)
 
 
 def read_header(path: str) -> dict | None:
