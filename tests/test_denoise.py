@@ -118,7 +118,8 @@ def test_denoise_is_oidn_with_its_guides_in_their_places(cornell):
     img, info = draaw_mi.render(cornell, spp=4, seed=2, aovs=["albedo", "normal"], post=[], return_info=True)
     arr = np.array(img)
     idx = aux_channels(info["channels"])
-    c, a, n = arr[..., :3], arr[..., idx["albedo"]], arr[..., idx["normal"]]
+    c, a, n = arr[..., :3].copy(), arr[..., idx["albedo"]].copy(), arr[..., idx["normal"]]
+    c[0, 0, 0], a[1, 1, 2] = -1.0, 1.5           # out-of-range values the wrapper clips
     ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(c, 0)), albedo=np.ascontiguousarray(np.clip(a, 0, 1)),
                          normal=np.ascontiguousarray(np.clip(n, -1, 1)), hdr=True, quality="high")
     out = draaw_mi.denoise(c, a, n)
