@@ -274,14 +274,16 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
     plan = []
     for s in loaded:
         depths = max_depths or [s.settings["max_depth"]]
-        media = bool(s.features().get("media"))
+        from .render import scene_holds
+        holds = scene_holds(s)
+        blind = holds["media"] or holds["sdf"]        # adaptive subsampling cannot see them
         for d in depths:
             for v in scene_versions(s, versions):
                 for spp in spps:
                     plan.append((s, Setting(v, spp, d, None)))
                 for spp in denoise_spp:
                     plan.append((s, Setting(v, spp, d, None, True)))
-                if adaptive and any(a for a in adaptive) and not media:
+                if adaptive and any(a for a in adaptive) and not blind:
                     for a in adaptive:
                         if a:
                             for spp in adaptive_spp:

@@ -51,7 +51,7 @@ import numpy as np
 
 from .errors import ParameterError, suggest
 from .materials import check_value
-from .integrators import resolve_version
+from .integrators import is_draaw
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 
 GUIDES = ("albedo", "normal")
@@ -67,6 +67,15 @@ def _budget(value, where: str) -> int:
     if n is None or isinstance(value, bool) or n < 1:
         raise ParameterError(f"{where}: max_spp={value!r}; expected an integer >= 1")
     return int(n)
+
+
+def _scale(value, where: str) -> float:
+    """The interactive frame's resolution factor: a number in (0, 1]."""
+    import numbers
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and 0.0 < value <= 1.0
+    if not ok:
+        raise ParameterError(f"{where}: interactive_scale={value!r}; expected a number in (0, 1]")
+    return float(value)
 
 
 @dataclass
@@ -119,9 +128,7 @@ class Preview:
         self.version = s["version"] if version is None else version
         self.max_depth = s["max_depth"] if max_depth is None else max_depth
         self.post = s.get("post", []) if post is None else post
-        if not (0.0 < float(interactive_scale) <= 1.0):
-            raise ParameterError(f"Preview: interactive_scale={interactive_scale!r}; expected a number in (0, 1]")
-        self.interactive_scale = float(interactive_scale)
+        self.interactive_scale = _scale(interactive_scale, "Preview")
         self.max_spp, self.freeze, self.seed = _budget(max_spp, "Preview"), bool(freeze), int(seed)
         self.denoise = bool(denoise)
         if self.denoise:
@@ -151,7 +158,7 @@ class Preview:
     def _make_integrator(self):
         check_version_sees(self.scene, self.version)
         # the denoiser's guides come from the draaw versions; Mitsuba's are denoised colour-only
-        guides = GUIDES if self.denoise and resolve_version(self.version).startswith("draaw") else ()
+        guides = GUIDES if self.denoise and is_draaw(self.version) else ()
         return make_integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
                                guides)
 
@@ -165,14 +172,13 @@ class Preview:
                 raise ParameterError(f"Preview.configure: unknown option {k!r}{suggest(k, allowed)}")
         if "max_spp" in options:
             options["max_spp"] = _budget(options["max_spp"], "Preview.configure")
-        if "interactive_scale" in options and not (0.0 < float(options["interactive_scale"]) <= 1.0):
-            raise ParameterError(f"Preview.configure: interactive_scale={options['interactive_scale']!r}; "
-                                 "expected a number in (0, 1]")
+        if "interactive_scale" in options:
+            options["interactive_scale"] = _scale(options["interactive_scale"], "Preview.configure")
         with self._lock:
             old = {k: getattr(self, k) for k in options}
             try:
                 for k, v in options.items():
-                    setattr(self, k, float(v) if k == "interactive_scale" else v)
+                    setattr(self, k, v)
                 if options.get("denoise"):
                     from .denoise import _pyoidn
                     _pyoidn()

@@ -23,7 +23,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .errors import RenderError, suggest
-from .integrators import resolve_version
+from .integrators import is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
 
@@ -98,11 +98,10 @@ def scene_holds(scene) -> dict:
     memo = scene_state(scene).memo
     key = ("draaw_mi.render.holds",)
     holds = memo.get(key)
-    if holds is None:
-        mi_scene = scene.mi_scene
-        media = any(sh.interior_medium() is not None or sh.exterior_medium() is not None
-                    for sh in mi_scene.shapes()) or any(s.get_medium() is not None for s in mi_scene.sensors())
-        holds = memo[key] = {"sdf": scene.sdf is not None, "media": media}
+    if holds is None:                  # (the integrators' own feature detection, once per scene)
+        from .integrators.features import detect_features
+        feats = detect_features(scene.mi_scene)
+        holds = memo[key] = {"sdf": bool(feats["sdf"]), "media": bool(feats["media"])}
     return holds
 
 
@@ -293,7 +292,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     if aovs is None:
         aovs = s.get("aovs", [])
-        if aovs and not resolve_version(version).startswith("draaw"):
+        if aovs and not is_draaw(version):
             warnings.warn(f"render: {version!r} renders colour only; the scene's AOVs "
                           f"({', '.join(aovs)}) come from v1..v4", RuntimeWarning, stacklevel=2)
             aovs = []
@@ -439,7 +438,7 @@ def _denoise_aovs(params, adaptive, aovs, version):
         raise RenderError("render: denoise=True cannot be combined with adaptive= (no AOVs there)")
     _pyoidn()                            # the one-line install hint before any rendering
     aovs = [aovs] if isinstance(aovs, str) else list(aovs)
-    if not resolve_version(version).startswith("draaw"):
+    if not is_draaw(version):
         return aovs, []
     asked = {a.strip() for item in aovs for a in str(item).split(",")}
     if "all" in asked:

@@ -259,6 +259,13 @@ def test_an_sdf_scene_is_measured_against_v4_without_mitsubas_integrators(tmp_pa
     assert reference_version(scene) == "v4"
     with pytest.warns(RuntimeWarning, match="path cannot see"):
         assert scene_versions(scene, ["v2", "path", "v4"]) == ["v2", "v4"]
+    # the study plans no adaptive settings for it (they raised: adaptive cannot see SDFs)
+    res = bench.run_study([scene], versions=("v4", "path"), spps=(1,), adaptive=(None, 4), repeats=1,
+                          gt_spp=8, out_dir=str(tmp_path / "study"), progress=False)
+    assert [r["label"] for r in res["rows"]] == ["v4"]
+    # a bare Mitsuba scene with SDF proxies is recognised as well (by its shapes)
+    with pytest.raises(draaw_mi.RenderError, match=r"\[\[sdf\]\] objects"):
+        draaw_mi.render(scene.mi_scene, version="path", spp=1)
     gt = bench.ground_truth(scene, spp=8)
     ref = np.array(draaw_mi.render(scene, version="v4", spp=8, seed=2 ** 31 - 1, post=[]))[..., :3]
     np.testing.assert_array_equal(gt, ref)

@@ -153,6 +153,10 @@ def test_configure_rejects_unknown_options():
         pv.configure(max_dept=3)
     with pytest.raises(ParameterError, match="interactive_scale"):
         Preview(pv.scene, interactive_scale=0)
+    with pytest.raises(ParameterError, match="interactive_scale"):      # (a raw ValueError before)
+        Preview(pv.scene, interactive_scale="x")
+    with pytest.raises(ParameterError, match="interactive_scale"):
+        pv.configure(interactive_scale=None)
 
 
 def test_a_post_chain_ending_in_srgb_is_shown_as_it_is():

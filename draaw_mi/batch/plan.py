@@ -141,9 +141,9 @@ def param_value(kind: str, data, frame: int, frames: int):
 
 
 def _draaw(version: str) -> bool:
-    from ..integrators import resolve_version
+    from ..integrators import is_draaw
     try:
-        return resolve_version(version).startswith("draaw")
+        return is_draaw(version)
     except DraawError:
         return True                      # (an unknown version fails later, with its own message)
 

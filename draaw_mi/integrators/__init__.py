@@ -70,6 +70,15 @@ def resolve_version(name: str) -> str:
     raise RenderError(f"render version {name!r} is unknown{hint}{MAIN_VERSIONS}")
 
 
+def is_draaw(version: str) -> bool:
+    """Whether ``version`` names one of draaw-mi's integrators (v1..v4), not one of Mitsuba's.
+
+    >>> is_draaw("V2M"), is_draaw("path")
+    (True, False)
+    """
+    return resolve_version(version) in PLUGINS
+
+
 # the error's list: the names a user picks from (the 35 aliases made one unreadable line)
 MAIN_VERSIONS = ("expected v1, v2, v3, v4, path, prb, volpath or prbvolpath (or a GO-Draaw name "
                  "such as V2M or V4-Log-Optim; all: draaw_mi.integrators.VERSION_ALIASES)")

@@ -190,13 +190,15 @@ def sample(integ, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi
     table = media_table(scene)
     # SDF objects beside the media (feature 'sdf'): None when the scene has none, so no SDF
     # code enters the kernel. Segments end at the nearer of the mesh and SDF hits.
-    sdf = integ.sdf_hook(scene, integ.features(scene))
+    feats = integ.features(scene)
+    sdf = integ.sdf_hook(scene, feats)
+    aovs = integ.camera_aovs(scene, ray, active, feats, sdf) if mode == dr.ADMode.Primal else integ.zero_aovs()
     return _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table,
-                   sdf)
+                   aovs, sdf)
 
 
 @dr.syntax
-def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table, sdf=None):
+def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_roulette, table, aovs, sdf=None):
     primal = mode == dr.ADMode.Primal
     has_tracked = table.has_tracked
     has_homog = table.has_homogeneous
@@ -208,7 +210,6 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     rr_depth = max(integ.rr_depth, MEDIA_RR_DEPTH)
     rr_min = getattr(integ, "rr_min", 0.05)
 
-    aovs = integ.camera_aovs(scene, ray, active, integ.features(scene), sdf) if primal else integ.zero_aovs()
     ray = mi.Ray3f(dr.detach(ray))
     ray.d = dr.normalize(ray.d)
     depth = mi.UInt32(0)

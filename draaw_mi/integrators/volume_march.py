@@ -132,9 +132,10 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
                           "by V1/V2 (single-scattering march); differentiate with draaw_v3 / draaw_v4")
     steps = int(getattr(integ, "medium_steps", 12))
     # SDF objects (feature 'sdf'): the march stops at the nearer of the mesh / SDF hit
-    sdf = integ.sdf_hook(scene, integ.features(scene))
+    feats = integ.features(scene)
+    sdf = integ.sdf_hook(scene, feats)
     ctx = mi.BSDFContext()
-    aovs = integ.camera_aovs(scene, ray, active, integ.features(scene), sdf)
+    aovs = integ.camera_aovs(scene, ray, active, feats, sdf)
     ray = mi.Ray3f(ray)
     ray.d = dr.normalize(ray.d)
     L = mi.Spectrum(0.0)

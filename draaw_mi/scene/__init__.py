@@ -289,7 +289,7 @@ WRAPPED_KEPT = 4
 def _wrapped(mi_scene) -> DraawScene:
     key = id(mi_scene)
     entry = _WRAPPED.pop(key, None)
-    if entry is None or entry[0] is not mi_scene:
+    if entry is None:             # (an entry holds its scene: its id is not reused meanwhile)
         entry = (mi_scene, _from_mitsuba_scene(mi_scene, "<mi.Scene>", {}))
     _WRAPPED[key] = entry                       # (most recent last)
     while len(_WRAPPED) > WRAPPED_KEPT:
