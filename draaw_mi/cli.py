@@ -76,7 +76,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--reference", action="append", required=True,
                    help="reference image (.exr linear, or .png sRGB); repeat once per view")
     f.add_argument("--param", action="append", required=True,
-                   help="parameter to fit, as material.parameter (e.g. gold.roughness); repeatable")
+                   help="parameter to fit, as material.parameter (e.g. gold.roughness) or an SDF object's "
+                        "sdf.NODE.PARAM (e.g. sdf.ball.radius); repeatable")
     f.add_argument("-o", "--output", help="write the fitted scene (.toml/.json) or the values (.json)")
     f.add_argument("--plot", help="write a PNG plot of loss and parameters over iterations")
     f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference")

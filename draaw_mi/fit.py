@@ -84,7 +84,10 @@ ROUGHNESS_FLOOR_FACTOR = 0.6
 DEFAULT_ALPHA_MIN = 1e-3
 
 
-def _range_for(key: str):
+def _range_for(key: str, scene: DraawScene | None = None):
+    from .sdf.params import PREFIX
+    if scene is not None and scene.sdf is not None and key.startswith(PREFIX) and key not in scene.params:
+        return scene.sdf.param_range(key[len(PREFIX):])      # an SDF object's radius > 0, ...
     parts = key.split(".")
     for p in reversed(parts):
         if p in RANGES:
@@ -192,7 +195,7 @@ class _Param:
         self.key, self.name, self.type = key, name, type(value)
         # a texture (a tensor): its shape, to give the scene back a value it takes
         self.shape = tuple(value.shape) if dr.is_tensor_v(value) else None
-        self.lo, self.hi = _range_for(key)
+        self.lo, self.hi = _range_for(key, scene)
         self.space = _space_for(key)
         if self.space == "log":
             floor = self.lo if self.lo else 0.0
@@ -322,7 +325,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         from . import post as post_mod
         chain = post_mod.load_chain(post) if hasattr(post_mod, "load_chain") and not callable(post) else post
 
-    p = scene.params
+    p = scene.all_params                 # mi.traverse plus the SDF objects' "sdf.NODE.PARAM"
     keys = [scene.key(name) for name in params]
     if len(set(keys)) != len(keys):
         raise ParameterError(f"fit: params name a parameter twice: {params}")
@@ -340,7 +343,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         value = p[k]
         if init and (names[k] in init or k in init):
             value = init.get(names[k], init.get(k))
-            lo, hi = _range_for(k)
+            lo, hi = _range_for(k, scene)
             v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
             if not np.all(np.isfinite(v)) or (lo is not None and np.any(v < lo)) or (hi is not None and np.any(v > hi)):
                 from .scene.schema import shown

@@ -50,7 +50,6 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import ParameterError, suggest
-from .materials import check_value
 from .integrators import is_draaw
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 
@@ -202,7 +201,7 @@ class Preview:
         checked = {}
         for name, v in values.items():
             key = self.key(name)
-            check_value("Preview.update", name, key, v)
+            self.scene.check_value("Preview.update", name, key, v)
             checked[key] = v
         with self._lock:
             self._pending.update(checked)
@@ -229,7 +228,7 @@ class Preview:
         scenes = [self.scene] + ([self._lo] if self._lo is not None else [])
         with _scene_lock(self.scene):
             for sc in scenes:
-                p = sc.params
+                p = sc.all_params               # (SDF objects' parameters too)
                 for key, v in pending.items():
                     p[key] = _value(v)
                 p.update()
@@ -240,8 +239,8 @@ class Preview:
             w, h = self.scene.resolution
             s = self.interactive_scale
             self._lo = self.scene.with_resolution(max(1, round(w * s)), max(1, round(h * s)))
-            p = self._lo.params                  # copy every current value over
-            src = self.scene.params
+            p = self._lo.all_params              # copy every current value over
+            src = self.scene.all_params
             for key in p.keys():
                 if key.endswith((".faces", ".vertex_positions", ".vertex_normals", ".vertex_texcoords")):
                     continue

@@ -12,7 +12,7 @@ import pytest
 import draaw_mi
 from draaw_mi.errors import DraawError, ParameterError
 from draaw_mi.preview import Preview
-from draaw_mi.render import _scene_lock, make_integrator, pass_seeds
+from draaw_mi.render import _scene_lock, make_integrator, pass_seeds, scene_changed
 
 from conftest import SCENES, tiny_description
 
@@ -297,3 +297,30 @@ def test_mitsubas_path_previews_denoised_colour_only():
     f = pv.step()
     assert f.denoised
     np.testing.assert_allclose(f.image, draaw_mi.denoise(np.ascontiguousarray(f.raw)), rtol=1e-5, atol=1e-6)
+
+
+def test_an_sdf_object_moved_in_the_preview_renders_as_a_scene_built_that_way():
+    """``sdf.NODE.PARAM`` keys reach the tracer (the preview wrote only ``mi.traverse`` keys);
+    a bad value is refused by the call, not by the render thread."""
+    def described(radius):
+        d = tiny_description()
+        d["sdf"] = [{"type": "sphere", "name": "blob", "material": "ball", "center": [0.8, 0.4, 0.3],
+                     "radius": radius}]
+        return d
+    scene = draaw_mi.load_scene(described(0.3))
+    pv = Preview(scene, version="v4", max_depth=3, freeze=False, seed=4)
+    pv.step()
+    with pytest.raises(ParameterError, match="Preview.update: sdf.blob.radius: .*expected a number > 0"):
+        pv.update({"sdf.blob.radius": 0.0})
+    pv.update({"sdf.blob.radius": 0.45})
+    f, f2 = pv.step(), pv.step()
+    seed = pass_seeds(4, pv._frame_index + 1)[-1]
+    # V4 learns its light selection with the scene as first rendered (radius 0.3), so the
+    # reference learns there too, then moves the sphere as a user would
+    other = draaw_mi.load_scene(described(0.3))
+    old = _direct(other, [seed], depth=3)[..., :3]
+    other.sdf.set("blob.radius", 0.45)
+    scene_changed(other.mi_scene)
+    ref = _direct(other, [seed], depth=3)[..., :3]
+    np.testing.assert_allclose(f2.raw * 2 - f.raw, ref, rtol=1e-4, atol=1e-5)
+    assert np.abs(ref - old).max() > 0.05                  # the radius shows in this image

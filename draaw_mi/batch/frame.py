@@ -89,7 +89,7 @@ class CachedScene:
         prepare = getattr(integrator, "prepare_selection", None)
         if prepare is None or id(integrator) in self.prepared:
             return
-        params = self.scene.params
+        params = self.scene.all_params          # (SDF objects' parameters too)
         for key, original in self.originals.items():
             params[key] = original
         params.update()
@@ -105,7 +105,7 @@ class CachedScene:
         """Set this frame's camera and overrides; restore everything else a frame changed."""
         import mitsuba as mi
 
-        params = self.scene.params
+        params = self.scene.all_params          # (SDF objects' parameters too)
         wanted = {}
         for key, value in spec["params"].items():
             if key not in self.originals:

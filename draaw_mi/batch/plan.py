@@ -185,8 +185,8 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 keys[name] = scene.key(name)
             except DraawError as e:
                 raise SceneError(f"{loc}: params: {e}") from None
-            _check_shape(loc, name, job.params[name], scene.params[keys[name]])
-            _check_values(loc, name, keys[name], job.params[name], job.frames)
+            _check_shape(loc, name, job.params[name], scene.all_params[keys[name]])
+            _check_values(loc, name, keys[name], job.params[name], job.frames, scene)
         cams = None
         if job.camera is not None:
             if entry.camera_key is None:
@@ -242,11 +242,12 @@ def _check_shape(loc, name, spec, current):
                              f"has {want}")
 
 
-def _check_values(loc, name, key, spec, frames: int) -> None:
+def _check_values(loc, name, key, spec, frames: int, scene) -> None:
     """Every frame's value of an override within the parameter's range (roughness in [0, 1],
-    colours >= 0, finite: :func:`draaw_mi.materials.check_value`), before anything renders.
-    (Out-of-range values rendered as the clamped value, with exit status 0.)"""
-    from ..materials import check_value
+    colours >= 0, finite: :func:`draaw_mi.materials.check_value`; an SDF object's radius > 0,
+    a round box's radius within its size, ...: :meth:`SDFScene.check
+    <draaw_mi.sdf.scene.SDFScene.check>`), before anything renders. (Out-of-range values
+    rendered as the clamped value, with exit status 0.)"""
     kind, data = spec
     for f in range(frames):
         v = param_value(kind, data, f, frames)
@@ -254,7 +255,7 @@ def _check_values(loc, name, key, spec, frames: int) -> None:
             v = v[0]
         if not isinstance(v, list) or len(v) == 3:
             try:
-                check_value(f"frame {f}", f"params.{name}", key, v)
+                scene.check_value(f"frame {f}", f"params.{name}", key, v)
             except DraawError as e:
                 raise SceneError(f"{loc}: {e}") from None
 

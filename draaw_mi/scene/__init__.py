@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 
-from ..errors import DraawError, SceneError, suggest
+from ..errors import DraawError, ParameterError, SceneError, suggest
 from .camera import sampler_plugin
 from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
@@ -60,6 +60,7 @@ class DraawScene:
     _tmp: Any = None
     description: dict | None = None
     _params: Any = None
+    _all_params: Any = None
 
     @property
     def resolution(self) -> tuple[int, int]:
@@ -75,12 +76,44 @@ class DraawScene:
             self._params = mi.traverse(self.mi_scene)
         return self._params
 
+    @property
+    def all_params(self):
+        """:attr:`params` plus the parameters of the scene's ``[[sdf]]`` objects as
+        ``"sdf.NODE.PARAM"`` (a :class:`draaw_mi.sdf.SDFParameters` over the same
+        ``mi.traverse``); :attr:`params` itself when the scene has none. Batch overrides, the
+        fit and the preview read and write parameters through it.
+
+        >>> # scene.all_params["sdf.red_ball.radius"] = 0.6; scene.all_params.update()
+        """
+        if self.sdf is None:
+            return self.params
+        if self._all_params is None:
+            from ..sdf.params import SDFParameters
+            self._all_params = SDFParameters(self, base=self.params)
+        return self._all_params
+
+    def check_value(self, who: str, name: str, key: str, value) -> None:
+        """Raise :class:`~draaw_mi.errors.ParameterError` (naming ``who``) if ``value`` is
+        not one parameter ``key`` (of :attr:`all_params`; ``name`` as the user wrote it) takes:
+        an SDF object's range (radius > 0, ...), else the materials' ranges
+        (:func:`draaw_mi.materials.check_value`). Nothing changes."""
+        from ..sdf.params import PREFIX
+        if self.sdf is not None and key.startswith(PREFIX) and key not in self.params:
+            try:
+                self.sdf.check(key[len(PREFIX):], value)
+            except ParameterError as e:
+                raise ParameterError(f"{who}: {name}: {e}") from None
+            return
+        from ..materials import check_value
+        check_value(who, name, key, value)
+
     def key(self, name: str) -> str:
-        """Resolve ``material.parameter`` (or a full traverse key) to an ``mi.traverse`` key.
+        """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's
+        ``sdf.NODE.PARAM``) to a key of :attr:`all_params`.
 
         >>> # scene.key("gold.roughness") -> "gold.roughness.value"
         """
-        keys = list(self.params.keys())
+        keys = list(self.all_params.keys())
         for cand in (name, f"{name}.value", f"{name}.data"):
             if cand in keys:
                 return cand
@@ -104,7 +137,8 @@ class DraawScene:
 
     def updated_description(self, values: dict, dest: str | None = None) -> dict:
         """The scene description with ``{"material.parameter": value}`` written into its
-        ``[materials]`` tables (for saving fitted scenes). ``dest``: the file it will be
+        ``[materials]`` tables and ``{"sdf.NODE.PARAM": value}`` into its ``[[sdf]]`` tables
+        (for saving fitted scenes). ``dest``: the file it will be
         written to; file names relative to the scene's folder are rewritten relative to
         ``dest``'s folder (written elsewhere, the scene lost its meshes and textures)."""
         import copy
@@ -114,7 +148,15 @@ class DraawScene:
         if dest is not None:
             desc = _rebased(desc, self.info.get("relative_files", {}), os.path.dirname(os.path.abspath(dest)))
         mats = desc.setdefault("materials", {})
+        from ..sdf.params import PREFIX
         for name, value in values.items():
+            if self.sdf is not None and name.startswith(PREFIX) and name not in self.params:
+                from ..sdf.scene import write_back
+                try:
+                    write_back(desc.get("sdf"), name[len(PREFIX):], value)
+                except ValueError as e:
+                    raise SceneError(f"{self.source}: cannot write {name!r} back: {e}") from None
+                continue
             mat, _, param = name.partition(".")
             param = param.removesuffix(".value").removesuffix(".data")
             if mat not in mats or not param or "." in param:

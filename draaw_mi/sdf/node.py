@@ -28,6 +28,8 @@ import mitsuba as mi
 from ..errors import ParameterError
 
 INF = float("inf")
+# how far inside an open lower bound (radius > 0) an optimiser's projection stays
+OPEN_MARGIN = 1e-4
 
 
 def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
@@ -118,18 +120,64 @@ class SDFNode:
     def set_param(self, key: str, value) -> None:
         """Set parameter ``key`` (e.g. ``"radius"``) of this node to a number, a 3-vector or
         a Dr.Jit array (which may carry gradients); checks the same ranges as the constructor.
+        A value that fails a check leaves the node as it was.
 
         >>> from draaw_mi.sdf import Sphere
         >>> s = Sphere(radius=1.0); s.set_param("radius", 2.0); s.bbox().max.x
         2.0
         """
+        new = self._checked_value(key, value)
+        old = self._params[key]
+        self._assign(key, new)
+        try:
+            self._check()
+        except ParameterError:
+            # (a round box's radius above half its size was kept after the error)
+            self._assign(key, old)
+            raise
+
+    def check_param(self, key: str, value) -> None:
+        """Raise :class:`~draaw_mi.errors.ParameterError` if :meth:`set_param` would refuse
+        ``value``; the node is not changed (a batch plan checks every frame's value with it).
+
+        >>> from draaw_mi.sdf import RoundBox
+        >>> b = RoundBox(size=(1, 1, 1), radius=0.1)
+        >>> b.check_param("radius", 0.8)
+        Traceback (most recent call last):
+        ...
+        draaw_mi.errors.ParameterError: sdf.round_box 'round_box': radius=0.8; expected a value in [0, min(size)/2 = 0.5]
+        >>> round(float(b.radius[0]), 6)
+        0.1
+        """
+        old = self._params.get(key)
+        self.set_param(key, value)
+        self._assign(key, old)
+
+    def param_range(self, key: str) -> tuple:
+        """``(low, high)`` that an optimiser may project parameter ``key`` onto (``None``: no
+        bound): an open lower bound (radius > 0) becomes ``bound + OPEN_MARGIN``.
+
+        >>> from draaw_mi.sdf import Sphere
+        >>> Sphere(radius=1.0).param_range("radius")
+        (0.0001, None)
+        """
+        self._checked_value(key, self._params[key])           # (an unknown key: the error)
+        lo = getattr(self, "_lower_bounds", {}).get(key)
+        return (None if lo is None else lo + OPEN_MARGIN, None)
+
+    def _assign(self, key: str, new) -> None:
+        self._params[key] = new
+        setattr(self, key, new)
+
+    def _checked_value(self, key: str, value):
+        """``value`` as this node stores parameter ``key`` (range-checked, not cross-checked)."""
         if key not in self._params:
             from ..errors import suggest
             raise ParameterError(f"sdf.{self.kind} {self.name!r}: no parameter {key!r}"
                                  f"{suggest(key, self._params)}")
         old = self._params[key]
+        lo = getattr(self, "_lower_bounds", {}).get(key)
         if dr.is_array_v(value) and type(value) is type(old):
-            lo = getattr(self, "_lower_bounds", {}).get(key)
             if lo is not None:
                 # an optimiser's step can leave the range (a negative radius made the object
                 # vanish with a zero gradient; a zero cone height gave NaN distances)
@@ -139,16 +187,15 @@ class SDFNode:
                         f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number > {lo} "
                         f"(clamp an optimiser's value before the update, e.g. "
                         f"opt[k] = dr.maximum(opt[k], 1e-3))")
-            new = value
-        elif isinstance(old, mi.Point3f):
-            new = dr.opaque(mi.Point3f, _vec3(value, f"sdf.{self.kind} {self.name!r}", key))
-        else:
-            lo = getattr(self, "_lower_bounds", {}).get(key)
-            new = dr.opaque(mi.Float, _scalar(value, f"sdf.{self.kind} {self.name!r}", key,
-                                              lo, lo_open=lo is not None))
-        self._params[key] = new
-        setattr(self, key, new)
-        self._check()
+            # a copy made opaque (AD edges kept): a literal such as mi.Float(0.6) would be
+            # baked into the kernel, which then compiled anew for every value
+            value = type(value)(value)
+            dr.make_opaque(value)
+            return value
+        if isinstance(old, mi.Point3f):
+            return dr.opaque(mi.Point3f, _vec3(value, f"sdf.{self.kind} {self.name!r}", key))
+        return dr.opaque(mi.Float, _scalar(value, f"sdf.{self.kind} {self.name!r}", key,
+                                           lo, lo_open=lo is not None))
 
     def _check(self) -> None:
         """Cross-parameter checks (overridden where needed)."""

@@ -86,6 +86,11 @@ class Operator(SDFNode):
     def children(self):
         return (self.a, self.b)
 
+    def param_range(self, key):
+        if key == "k" and self.smooth:
+            return (0.0, None)
+        return super().param_range(key)
+
     def _k(self):
         return dr.maximum(self.k, K_MIN)
 

@@ -20,9 +20,11 @@ PREFIX = "sdf."
 
 
 class SDFParameters(mi.SceneParameters):
-    def __init__(self, scene):
+    """``base`` (``mi.traverse`` of the scene, made if not given) plus ``"sdf.NODE.PARAM"``."""
+
+    def __init__(self, scene, base=None):
         super().__init__({}, {})
-        self._base = mi.traverse(scene.mi_scene)
+        self._base = mi.traverse(scene.mi_scene) if base is None else base
         self._sdf = scene.sdf
 
     def _sdf_keys(self):
@@ -66,7 +68,9 @@ class SDFParameters(mi.SceneParameters):
 
 
 def parameters(scene) -> SDFParameters:
-    """``mi.traverse`` of a loaded draaw scene plus its ``"sdf.NODE.PARAM"`` keys."""
+    """``mi.traverse`` of a loaded draaw scene plus its ``"sdf.NODE.PARAM"`` keys (a fresh
+    traversal; :attr:`DraawScene.all_params <draaw_mi.scene.DraawScene.all_params>` is the
+    scene's own, shared with ``scene.params``)."""
     from ..scene import DraawScene, load_scene
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)

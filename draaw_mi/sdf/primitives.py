@@ -109,6 +109,11 @@ class RoundBox(Box):
             raise ParameterError(f"sdf.round_box {self.name!r}: radius={r:g}; expected a value "
                                  f"in [0, min(size)/2 = {0.5 * min(vec_of(self.size)):g}]")
 
+    def param_range(self, key):
+        if key == "radius":
+            return (0.0, 0.5 * min(vec_of(self.size)))
+        return super().param_range(key)
+
     def distance(self, p):
         return self._rounded(p, self.radius)
 

@@ -110,11 +110,27 @@ class SDFScene:
 
     def set(self, key: str, value) -> None:
         """Set ``"NODE.PARAM"`` (e.g. ``"ball.radius"``) to a number, vector or Dr.Jit array."""
+        node, param = self._node(key)
+        node.set_param(param, value)
+
+    def check(self, key: str, value) -> None:
+        """Raise :class:`~draaw_mi.errors.ParameterError` if :meth:`set` would refuse
+        ``value``; nothing changes."""
+        node, param = self._node(key)
+        node.check_param(param, value)
+
+    def param_range(self, key: str) -> tuple:
+        """``(low, high)`` of ``"NODE.PARAM"`` for an optimiser's projection
+        (:meth:`SDFNode.param_range <draaw_mi.sdf.node.SDFNode.param_range>`)."""
+        node, param = self._node(key)
+        return node.param_range(param)
+
+    def _node(self, key: str):
         node, _, param = key.partition(".")
         if node not in self.nodes:
             from ..errors import ParameterError
             raise ParameterError(f"sdf: no node {node!r}{suggest(node, self.nodes)}")
-        self.nodes[node].set_param(param, value)
+        return self.nodes[node], param
 
     def describe(self) -> list[str]:
         """One line per node (roots first, children indented), for ``draaw-mi info``."""
@@ -137,6 +153,39 @@ def find(scene: mi.Scene) -> SDFScene | None:
             token = sid[len(PROXY_PREFIX):].rsplit("_", 1)[0]
             return REGISTRY.get(token)
     return None
+
+
+def write_back(entries, key: str, value) -> None:
+    """Write ``value`` of ``"NODE.PARAM"`` (a key of :meth:`SDFScene.params`) into the
+    ``[[sdf]]`` table ``entries`` that made the node, for saving a fitted or tuned scene.
+    Raises ``ValueError`` (why) for nodes and parameters that no table key holds: an
+    operator's inner node (``NAME_0``: three or more children), a rotation, a
+    ``go_draaw_spheres`` file's spheres, and the ``k`` of an operator of three or more
+    children (one table key holds the ``k`` of all its inner nodes).
+
+    >>> entries = [{"type": "sphere", "name": "ball", "radius": 0.5}]
+    >>> write_back(entries, "ball.radius", 0.6); entries[0]["radius"]
+    0.6
+    """
+    node, _, param = key.partition(".")
+    name = node
+    if node.endswith("_xf") and param in ("translate", "scale"):
+        name = node[:-len("_xf")]                  # the entry's own translate / scale
+    for i, entry in enumerate(entries if isinstance(entries, list) else []):
+        if not isinstance(entry, dict) or entry.get("name", f"sdf{i}") != name:
+            continue
+        kind = entry.get("type")
+        allowed = (("translate", "scale") if name != node else
+                   PRIMITIVE_KEYS.get(kind, ()) if kind in PRIMITIVES else
+                   ("k",) if kind in OPERATORS and OPERATORS[kind].smooth else ())
+        if param not in allowed:
+            raise ValueError(f"[[sdf]] {name!r} ({kind}) has no key {param!r}")
+        if param == "k" and len(entry.get("children", [])) > 2:
+            raise ValueError(f"[[sdf]] {name!r} has {len(entry['children'])} children; its one 'k' "
+                             "is the k of every inner operator")
+        entry[param] = value
+        return
+    raise ValueError(f"no [[sdf]] table makes the node {node!r}")
 
 
 # --------------------------------------------------------------------------- parsing

@@ -150,3 +150,19 @@ def test_api_raises_scene_error(tmp_path):
     doc["jobs"][0]["params"] = {"nosuch.thing": 1.0}
     with pytest.raises(SceneError, match="no parameter 'nosuch.thing'"):
         batch.run(doc, progress=False)
+
+
+def test_an_sdf_override_out_of_range_names_the_frame(tmp_path, capsys):
+    """Checked for every frame before anything renders (a round box's radius grows past half
+    its size at frame 2 of 3)."""
+    def mutate(d, t):
+        from conftest import tiny_description
+        import tomli_w
+        desc = tiny_description()
+        desc["sdf"] = [{"type": "round_box", "name": "block", "material": "ball", "center": [1, 0.3, 0],
+                        "size": [0.6, 0.6, 0.6], "radius": 0.05}]
+        path = t / "sdf.toml"
+        path.write_bytes(tomli_w.dumps(desc).encode())
+        d["jobs"][0].update(scene=str(path), params={"sdf.block.radius": {"from": 0.1, "to": 0.4}})
+    _bad(tmp_path, capsys, mutate, ["job 'orbit'", "frame 2", "params.sdf.block.radius",
+                                    "radius=0.4", "min(size)/2 = 0.3"])

@@ -1,0 +1,132 @@
+"""SDF object parameters as scene parameters (``sdf.NODE.PARAM``): checks that leave nothing
+changed, ranges for optimisers, the shared ``all_params`` table, writing values back."""
+from __future__ import annotations
+
+import copy
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+from sdf_helpers import base_description
+
+import draaw_mi
+from draaw_mi.errors import ParameterError, SceneError
+from draaw_mi.sdf import RoundBox, Sphere
+
+
+def _scene(extra=None):
+    d = base_description((16, 12))
+    d["sdf"] = [{"type": "sphere", "name": "ball", "material": "ball", "center": [0.0, 0.8, 0.0],
+                 "radius": 0.5},
+                {"type": "round_box", "name": "block", "material": "blocker",
+                 "center": [0.9, 0.3, 0.0], "size": [0.6, 0.6, 0.6], "radius": 0.1,
+                 "translate": [0.0, 0.0, 0.2]},
+                {"type": "smooth_union", "name": "blend", "children": ["ball", "block"], "k": 0.2}]
+    d["sdf"] += extra or []
+    return draaw_mi.load_scene(d), d
+
+
+def test_a_refused_value_leaves_the_node_as_it_was():
+    """A round box's radius above half its size passes the range check and fails the
+    cross-check; the node kept the refused value after the error."""
+    b = RoundBox(size=(1.0, 1.0, 1.0), radius=0.1)
+    with pytest.raises(ParameterError, match=r"radius=0.8.*min\(size\)/2 = 0.5"):
+        b.set_param("radius", 0.8)
+    assert b.radius[0] == pytest.approx(0.1) and b.own_params()["radius"][0] == pytest.approx(0.1)
+    b.check_param("radius", 0.3)                      # accepted, yet nothing changes
+    assert b.radius[0] == pytest.approx(0.1)
+    b.set_param("radius", 0.3)
+    assert b.radius[0] == pytest.approx(0.3)
+
+
+def test_a_literal_value_is_made_opaque_and_keeps_its_gradient():
+    """``mi.Float(0.6)`` is a literal, which a kernel bakes in: every new value compiled anew."""
+    s = Sphere(radius=1.0)
+    s.set_param("radius", mi.Float(0.6))
+    assert s.radius.state != dr.VarState.Literal
+    x = mi.Float(0.5)
+    dr.enable_grad(x)
+    s.set_param("radius", 2.0 * x)
+    dr.backward(s.radius * 3.0)
+    assert dr.grad(x)[0] == pytest.approx(6.0)
+
+
+def test_all_params_resolves_sdf_keys_and_shares_the_scene_table():
+    sc, _ = _scene()
+    assert sc.key("sdf.ball.radius") == "sdf.ball.radius"
+    with pytest.raises(SceneError, match="did you mean 'sdf.ball.radius'"):
+        sc.key("sdf.bal.radius")
+    p = sc.all_params
+    assert p is sc.all_params and p._base is sc.params       # one mi.traverse, not two
+    p["ball.roughness.value"] = 0.7                            # a material through all_params
+    p["sdf.ball.radius"] = 0.6
+    p.update()
+    assert sc.params["ball.roughness.value"][0] == pytest.approx(0.7)
+    assert sc.sdf.nodes["ball"].radius[0] == pytest.approx(0.6)
+    # a scene without SDF objects: all_params is params itself
+    plain = draaw_mi.load_scene(base_description((16, 12)))
+    assert plain.all_params is plain.params
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("sdf.ball.radius", -0.1, r"expected a number > 0"),
+    ("sdf.block.radius", 0.5, r"min\(size\)/2 = 0.3"),
+    ("sdf.blend.k", -1.0, r"k=-1.0; expected >= 0"),
+    ("sdf.ball.center", [1.0, 2.0], r"expected 3 finite numbers"),
+    ("sdf.ball.radius", float("nan"), r"finite"),
+])
+def test_check_value_refuses_without_changing_anything(key, value, match):
+    sc, _ = _scene()
+    before = {k: np.array(v).copy() for k, v in sc.sdf.params().items()}
+    with pytest.raises(ParameterError, match=match) as e:
+        sc.check_value("demo", key, key, value)
+    assert str(e.value).startswith(f"demo: {key}: ")
+    after = sc.sdf.params()
+    assert all(np.array_equal(before[k], np.array(after[k])) for k in before)
+    sc.check_value("demo", key, key, [0.0, 1.0, 0.0] if key.endswith("center") else 0.25)
+
+
+def test_ranges_an_optimiser_projects_onto():
+    from draaw_mi.fit import _range_for
+    from draaw_mi.sdf.node import OPEN_MARGIN
+    sc, _ = _scene()
+    assert _range_for("sdf.ball.radius", sc) == (OPEN_MARGIN, None)
+    assert _range_for("sdf.block.radius", sc) == (0.0, pytest.approx(0.3))
+    assert _range_for("sdf.blend.k", sc) == (0.0, None)
+    assert _range_for("sdf.ball.center", sc) == (None, None)
+    assert _range_for("sdf.block_xf.scale", sc) == (OPEN_MARGIN, None)
+
+
+def test_values_written_back_load_as_they_were_set():
+    """A fitted scene saved to TOML: radius, k, centre and a transform's translation go into
+    the [[sdf]] tables that made the nodes; the reloaded scene has them."""
+    sc, d = _scene()
+    values = {"sdf.ball.radius": 0.61, "sdf.blend.k": 0.33, "sdf.ball.center": [0.1, 0.9, -0.1],
+              "sdf.block_xf.translate": [0.0, 0.1, 0.3], "ball.roughness": 0.4}
+    desc = sc.updated_description(values)
+    assert d["sdf"][0]["radius"] == 0.5                      # the scene's own copy untouched
+    again = draaw_mi.load_scene(desc)
+    got = {k: np.array(v).ravel().tolist() for k, v in again.sdf.params().items()}
+    assert got["ball.radius"] == pytest.approx([0.61])
+    assert got["blend.k"] == pytest.approx([0.33])
+    assert got["ball.center"] == pytest.approx([0.1, 0.9, -0.1])
+    assert got["block_xf.translate"] == pytest.approx([0.0, 0.1, 0.3])
+    assert desc["materials"]["ball"]["roughness"] == 0.4
+
+
+@pytest.mark.parametrize("key, match", [
+    ("sdf.nope.radius", "no \\[\\[sdf\\]\\] table makes the node 'nope'"),
+    ("sdf.trio_0.k", "no \\[\\[sdf\\]\\] table makes the node 'trio_0'"),
+    ("sdf.trio.k", "has 3 children"),
+    ("sdf.ball.k", "has no key 'k'"),
+])
+def test_values_no_table_holds_are_refused_by_name(key, match):
+    extra = [{"type": "sphere", "name": "s1", "radius": 0.2, "center": [-1, 0.2, 0]},
+             {"type": "sphere", "name": "s2", "radius": 0.2, "center": [-1.3, 0.2, 0]},
+             {"type": "sphere", "name": "s3", "radius": 0.2, "center": [-1.6, 0.2, 0]},
+             {"type": "smooth_union", "name": "trio", "children": ["s1", "s2", "s3"], "k": 0.1,
+              "material": "ball"}]
+    sc, _ = _scene(copy.deepcopy(extra))
+    with pytest.raises(SceneError, match=f"cannot write '{key}' back: .*{match}"):
+        sc.updated_description({key: 0.3})
