@@ -187,9 +187,8 @@ class SDFNode:
                         f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number > {lo} "
                         f"(clamp an optimiser's value before the update, e.g. "
                         f"opt[k] = dr.maximum(opt[k], 1e-3))")
-            # a copy made opaque (AD edges kept): a literal such as mi.Float(0.6) would be
-            # baked into the kernel, which then compiled anew for every value
-            value = type(value)(value)
+            # made opaque in place (the caller's array, AD edges kept): a literal such as
+            # mi.Float(0.6) was baked into the kernel, which then compiled anew for every value
             dr.make_opaque(value)
             return value
         if isinstance(old, mi.Point3f):
