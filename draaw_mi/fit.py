@@ -56,6 +56,7 @@ Example::
 """
 from __future__ import annotations
 
+import os
 import time
 import warnings
 
@@ -95,13 +96,37 @@ def _range_for(key: str, scene: DraawScene | None = None):
     return (None, None)
 
 
+# references read from these are display images: clipped to [0, 1] (and 8-bit)
+DISPLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
+# a display reference's values at or above this (linear; 254/255 in sRGB) may have been clipped
+SATURATED = 0.99
+
+
+def is_display_reference(ref) -> bool:
+    """Whether reference ``ref`` is a display image (a PNG/JPEG path), whose values were
+    clipped to [0, 1] when it was written: its saturated pixels say only "at least 1", so the
+    loss leaves them out (:func:`unclipped_mask`)."""
+    return isinstance(ref, (str, os.PathLike)) and os.fspath(ref).lower().endswith(DISPLAY_SUFFIXES)
+
+
+def unclipped_mask(ref: np.ndarray) -> np.ndarray:
+    """1 where a display reference's channel is below :data:`SATURATED`, else 0.
+
+    >>> unclipped_mask(np.array([[[0.2, 0.995, 1.0]]], dtype=np.float32)).tolist()
+    [[[1.0, 0.0, 0.0]]]
+    """
+    return (ref < SATURATED).astype(np.float32)
+
+
 def load_reference(ref) -> np.ndarray:
     """An (H, W, 3) linear float32 reference from an EXR/PNG path or an array/tensor."""
     from .io import read_exr, to_numpy
+    if isinstance(ref, os.PathLike):
+        ref = os.fspath(ref)
     if isinstance(ref, str):
         if ref.lower().endswith(".exr"):
             arr = read_exr(ref)
-        elif ref.lower().endswith((".png", ".jpg", ".jpeg")):
+        elif ref.lower().endswith(DISPLAY_SUFFIXES):
             import matplotlib.image
             try:
                 arr = matplotlib.image.imread(ref).astype(np.float32)
@@ -159,20 +184,26 @@ def _sampler_spp(scene: DraawScene, spp: int, name: str) -> int:
     return got
 
 
-def _loss(img, ref, kind: str, exposure: str):
+def _loss(img, ref, kind: str, exposure: str, mask=None):
     """(loss, scale) of one view. With ``exposure="fit"`` the render is scaled by
     ``s = <ref, ref> / <image, ref>`` (detached): the scale at which the render's projection onto
     the reference equals the reference. Both dot products are unbiased under Monte Carlo noise
     (``<image, ref>`` is linear in the image), unlike the least-squares ``<image, ref> /
     <image, image>``, whose denominator picks up the pixel variance and biased the scale low
-    (-0.07 stops at 16 spp, 128x128) and with it metallic (+0.03)."""
+    (-0.07 stops at 16 spp, 128x128) and with it metallic (+0.03). ``mask`` (a
+    :class:`mi.TensorXf` of 0/1 like ``ref``): the pixels that count (a display reference's
+    unclipped ones); the loss stays linear in the render, so unbiased under noise (clipping the
+    render to [0, 1] instead biased metallic by +0.18 at 8 spp)."""
     scale = mi.Float(1.0)
     if exposure == "fit":
-        num = dr.sum(ref.array * ref.array)
-        den = dr.sum(dr.detach(img.array) * ref.array)
+        r = ref.array if mask is None else ref.array * mask.array
+        num = dr.sum(r * r)
+        den = dr.sum(dr.detach(img.array) * r)
         ok = (den > 0) & dr.isfinite(den)
         scale = dr.detach(dr.select(ok, num / dr.select(ok, den, 1.0), 1.0))
     d = img.array * scale - ref.array
+    if mask is not None:
+        d = d * mask.array
     if kind == "l2":
         return dr.mean(dr.square(d)), scale
     if kind == "l1":
@@ -260,6 +291,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     scene: a DraawScene, scene file or description dict. On return the scene holds the
         fitted values.
     references: one reference per view: an EXR/PNG path, an (H, W, 3) array or tensor (linear).
+        A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
+        saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
+        pixels above 1 fitted roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
+        when they counted).
     params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
     version: integrator (``v1``..``v4``, ``prb``); must be differentiable.
     spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
@@ -302,7 +337,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
-    refs = [load_reference(r) for r in (references if isinstance(references, (list, tuple)) else [references])]
+    given = references if isinstance(references, (list, tuple)) else [references]
+    refs = [load_reference(r) for r in given]
+    masks = [mi.TensorXf(unclipped_mask(r)) if is_display_reference(g) else None
+             for g, r in zip(given, refs)]
     h, w = refs[0].shape[:2]
     if any(r.shape != refs[0].shape for r in refs):
         raise DraawError(f"fit: references differ in shape: {[r.shape for r in refs]}")
@@ -397,7 +435,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
                     img = means[v] + (img - flat)
                 if chain is not None:
                     img = _apply_chain(img, chain)
-                lv, sv = _loss(img, ref, loss, exposure)
+                lv, sv = _loss(img, ref, loss, exposure, masks[v])
                 if v == 0:
                     scale = sv
                 lv = lv / len(sensors)
