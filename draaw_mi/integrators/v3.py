@@ -261,7 +261,9 @@ class DraawV3Integrator(DraawIntegrator):
                 delta &= ~is_draaw
             weight = safe_div(f, pdf, active & (pdf > 0))
             ray_next = si.spawn_ray(si.to_world(wo))
-            active_next = active & (dr.max(weight) != 0)
+            # a path whose throughput reached 0 carries nothing more (with max_depth = -1
+            # in a closed scene it bounced on: 28 s for an 8x8 image that 1024 bounces make)
+            active_next = active & (dr.max(weight) != 0) & (dr.max(β * weight) > 0)
             si_next = scene.ray_intersect(ray_next, ray_flags=flags, coherent=False,
                                           active=active_next)
             if dr.hint(sdf is not None, mode="scalar"):

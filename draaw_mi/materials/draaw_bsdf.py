@@ -72,6 +72,8 @@ SCALAR_PARAMS = {
 COLOR_PARAMS = {"base_color": (0.5, 0.0, None)}
 ALL_PARAMS = tuple(COLOR_PARAMS) + tuple(SCALAR_PARAMS)
 OPTIONS = ("normalmap", "normalmap_encoding", "two_sided", "alpha_min")
+# a signed normal map's components may exceed +-1 by float rounding of a normalised vector
+NORMALMAP_SLACK = 1e-3
 NORMALMAP_ENCODINGS = ("unsigned", "signed")
 
 
@@ -119,13 +121,16 @@ class DraawBSDF(mi.BSDF):
         for name, (default, lo, hi) in SCALAR_PARAMS.items():
             tex = textures.texture_property(props, name, default, lo, hi, color=False)
             setattr(self, name, textures.as_parameter(tex))
-        if "normalmap" in props:
-            self.normalmap = textures.texture_property(props, "normalmap", None, None, None, color=True)
         enc = props.get("normalmap_encoding", "unsigned")
         if enc not in NORMALMAP_ENCODINGS:
             raise ParameterError(f"draaw BSDF: normalmap_encoding={enc!r}; expected one of "
                                  f"{', '.join(NORMALMAP_ENCODINGS)}")
         self.normalmap_signed = enc == "signed"
+        if "normalmap" in props:
+            # values within the encoding's range (a texel of 1e30 or Inf overflowed the
+            # normalisation: black patches, where NaN and zero-length texels fall back)
+            lo, hi = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK) if self.normalmap_signed else (0.0, 1.0)
+            self.normalmap = textures.texture_property(props, "normalmap", None, lo, hi, color=True)
         two_sided = props.get("two_sided", False)
         if not isinstance(two_sided, bool):
             raise ParameterError(f"draaw BSDF: two_sided={two_sided!r}; expected true or false")

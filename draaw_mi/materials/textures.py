@@ -97,7 +97,7 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
     if isinstance(value, mi.Texture):
         tex = value
         vals = texture_values(tex)
-        if vals is not None and (lo is not None or hi is not None):
+        if vals is not None:                 # finite always; the range where there is one
             _check_range(name, lo, hi, vals, "texture values")
         return tex
     if isinstance(value, bool):

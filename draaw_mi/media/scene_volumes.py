@@ -143,7 +143,8 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
     try:
         if mode == "smoke":
             g_phase = number(entry.get("g", 0.0), where / "g")
-            if not abs(g_phase) < 1.0:
+            # (|g| < 1 checked in float32, as Mitsuba reads it: 0.99999999 is 1 there)
+            if not abs(float(np.float32(g_phase))) < 1.0:
                 raise (where / "g").error(f"{g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
             scale = number(entry.get("density_scale", 1.0), where / "density_scale", lo=0)
             filt = string(entry.get("filter", "trilinear"), where / "filter", FILTERS)

@@ -18,6 +18,10 @@ from .schema import Where, check_keys, number, string, vector
 CAMERA_KEYS = ("origin", "target", "up", "position", "angles", "fov", "fov_axis", "near_clip",
                "far_clip")
 
+# target - origin must exceed this fraction of their distance from the world origin (float32
+# resolves about 1.2e-7 of it; a direction from a few ulps is noise)
+FLOAT32_SEPARATION = 1e-5
+
 
 def spherical(theta: float, phi: float) -> np.ndarray:
     """GO-Draaw's unit-sphere point ``S(θ, φ)``.
@@ -73,6 +77,13 @@ def camera_to_look_at(cam: dict, where: Where):
         d = target - origin
         if np.linalg.norm(d) < 1e-9:
             raise (where / "target").error("equals 'origin'; the camera needs a view direction")
+        if np.linalg.norm(d) < FLOAT32_SEPARATION * max(1.0, np.linalg.norm(origin), np.linalg.norm(target)):
+            # Mitsuba builds the camera in float32: origin [1e4, 1, 0] and a target 1e-4 away
+            # are one point there, and the transform came out NaN (an image of plain sky)
+            raise (where / "target").error(
+                f"is {np.linalg.norm(d):g} from 'origin', too close to tell apart in float32 at "
+                f"{max(np.linalg.norm(origin), np.linalg.norm(target)):g} from the world origin; "
+                "move it further along the view direction")
         if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
             raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
     return origin, target, up, fov, fov_axis, near, far
@@ -112,12 +123,22 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,
 
 
 def auto_camera(bbox_min, bbox_max, fov: float = 40.0):
-    """A camera framing a bounding box from the front-top-right, for bare mesh files."""
+    """A camera framing a bounding box from the front-top-right, for bare mesh files, with
+    clip planes that follow the box's size (the defaults, 0.01 and 1e4, showed plain sky for
+    a mesh 1e-4 or 1e4 across).
+
+    >>> cam = auto_camera([0, 0, 0], [1e-4, 1e-4, 1e-4])
+    >>> cam["near_clip"] < 1e-4 < cam["far_clip"] < 1e-2
+    True
+    """
     lo, hi = np.asarray(bbox_min, float), np.asarray(bbox_max, float)
     centre = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    if not radius > 0:
+        radius = 1.0                                   # a point (or nothing): a unit view
     dist = radius / math.sin(math.radians(fov) / 2) * 1.05
     direction = np.array([0.45, 0.35, 1.0])
     direction /= np.linalg.norm(direction)
     origin = centre + direction * dist
-    return {"origin": origin.tolist(), "target": centre.tolist(), "up": [0.0, 1.0, 0.0], "fov": fov}
+    return {"origin": origin.tolist(), "target": centre.tolist(), "up": [0.0, 1.0, 0.0], "fov": fov,
+            "near_clip": 1e-3 * dist, "far_clip": 10.0 * (dist + radius)}

@@ -165,6 +165,26 @@ def _matrix_of(t) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- materials
+def _check_image_values(path: str, shown: str, where: Where, what: str, nonneg: bool = True) -> None:
+    """Refuse an image file with a non-finite value, or a negative one with ``nonneg`` (a
+    half-float HDRI stores a sun above 65504 as +Inf: its environment map rendered NaN / Inf
+    pixels in V3, V4 and Mitsuba's ``path``), naming the first bad pixel."""
+    import mitsuba as mi
+    try:
+        arr = np.asarray(mi.Bitmap(path))
+    except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
+        raise where.error(f"{what} {shown!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
+    if np.issubdtype(arr.dtype, np.integer):
+        return                                    # 8/16-bit: finite and >= 0 by construction
+    arr = arr.reshape(arr.shape[0], arr.shape[1], -1)
+    bad = ~np.isfinite(arr) | (arr < 0) if nonneg else ~np.isfinite(arr)
+    if bad.any():
+        y, x, c = (int(i[0]) for i in np.nonzero(bad))
+        raise where.error(f"{what} {shown!r} has the value {float(arr[y, x, c]):g} at pixel "
+                          f"(x={x}, y={y}), channel {c}; expected finite values"
+                          + (" >= 0" if nonneg else ""))
+
+
 def _texture_value(value, name: str, ctx: BuildContext, where: Where):
     """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts."""
     import mitsuba as mi
@@ -218,11 +238,21 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             elif key == "alpha_min":
                 out[key] = number(value, wk, lo=0.0, hi=0.1, lo_open=True)
         return out
-    # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures.
+    # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures,
+    # whose values must be finite (a NaN texel of a diffuse reflectance rendered NaN pixels in
+    # every version), and >= 0 for reflectances and transmittances.
     out = {"type": kind}
     for key, value in table.items():
         if key != "type":
             out[key] = _texture_value(value, key, ctx, where / key)
+            nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
+            if isinstance(value, str) and out[key].get("type") == "bitmap":
+                _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
+            elif isinstance(value, np.ndarray):
+                arr = np.asarray(value, dtype=np.float64)
+                if not np.isfinite(arr).all() or (nonneg and (arr < 0).any()):
+                    raise (where / key).error("texture array has a non-finite"
+                                              + (" or negative" if nonneg else "") + " value")
     return out
 
 
@@ -349,6 +379,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         path = ctx.path(string(light["file"], where / "file"))
         if not os.path.isfile(path):
             raise (where / "file").error(f"environment map {light['file']!r} does not exist")
+        _check_image_values(path, light["file"], where / "file", "environment map")
         return {name: {"type": "envmap", "filename": path, "scale": intensity}}
     if kind == "directional":
         d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")

@@ -79,6 +79,7 @@ def base_desc(**vol):
 @pytest.mark.parametrize("vol, match", [
     ({"g": 1.0}, r"volumes\[0\]\.g.*\|g\| < 1"),
     ({"g": -1.5}, r"\|g\| < 1"),
+    ({"g": 0.99999999}, r"volumes\[0\]\.g: 0\.99999999; .*\|g\| < 1"),   # 1 in float32
     ({"density": [[[1.0, -2.0]]]}, r"volumes\[0\].*density\[0, 0, 1\] = -2"),
     ({"density": [[[1.0, float("nan")]]]}, r"density.*nan"),
     ({"bounds": [[0, 0, 0], [1, 0, 1]]}, r"volumes\[0\]\.bounds.*empty"),

@@ -114,7 +114,7 @@ def test_gradients_at_parameter_bounds_are_finite(param, value):
 
 
 @pytest.mark.parametrize("encoding,value", [("unsigned", [0.5, 0.5, 0.5]), ("unsigned", [0.5, 0.5, 0.0]),
-                                            ("signed", [0.0, 0.0, -1.0]), ("signed", [1e30, 0.0, 1.0])])
+                                            ("signed", [0.0, 0.0, -1.0]), ("signed", [0.0, 0.0, 0.0])])
 def test_degenerate_normal_maps_fall_back(encoding, value):
     nm = np.tile(np.array(value, np.float32), (2, 2, 1))
     bsdf = _bsdf(normalmap={"type": "bitmap", "data": mi.TensorXf(nm), "raw": True},
@@ -124,3 +124,19 @@ def test_degenerate_normal_maps_fall_back(encoding, value):
                                 rng.random((N, 2)))
     for arr in (f, pdf, spdf, w, swo):
         assert np.isfinite(arr).all()
+
+
+
+@pytest.mark.parametrize("encoding,value,match", [
+    ("signed", [1e30, 0.0, 1.0], "above 1.001"), ("signed", [np.inf, 0.0, 1.0], "not finite"),
+    ("unsigned", [0.5, 1.5, 1.0], "above 1"), ("unsigned", [0.5, -0.2, 1.0], "below 0"),
+    ("unsigned", [np.nan, 0.5, 1.0], "not finite")])
+def test_a_normal_map_outside_its_encoding_is_refused_at_load(encoding, value, match):
+    """A texel of 1e30 or Inf overflowed the normalisation: 77 of 256 pixels black in V3/V4
+    (NaN and zero-length texels fell back to the geometric normal)."""
+    nm = np.tile(np.array([0.5, 0.5, 1.0] if encoding == "unsigned" else [0.0, 0.0, 1.0], np.float32),
+                 (4, 4, 1))
+    nm[1, 2] = value
+    with pytest.raises(Exception, match=rf"normalmap=.*{match}"):
+        _bsdf(normalmap={"type": "bitmap", "data": mi.TensorXf(nm), "raw": True},
+              normalmap_encoding=encoding)

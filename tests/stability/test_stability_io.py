@@ -65,3 +65,77 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
     assert np.isfinite(vals).all() and np.isfinite([h["loss"] for h in res.history]).all()
     # no jump: the iterates stay near the truth, far from the range's bounds (0.019, 1)
     assert np.all((vals > 0.25) & (vals < 0.6)), vals
+
+
+def _image(tmp_path, name, bad=None, value=None, half=False):
+    arr = np.full((8, 16, 3), 0.3, np.float32)
+    if bad is not None:
+        arr[bad] = value
+    path = str(tmp_path / name)
+    with np.errstate(over="ignore"):
+        draaw_mi.write_exr(path, arr, half=half)
+    return path
+
+
+@pytest.mark.parametrize("value, shown", [(1e6, "inf"), (np.nan, "nan"), (-0.5, "-0.5")])
+def test_an_environment_map_with_a_bad_pixel_is_refused_at_load(tmp_path, value, shown):
+    """A half-float HDRI stores a sun above 65504 as +Inf: it loaded, and V3 / V4 / path
+    rendered Inf and NaN pixels."""
+    from conftest import tiny_description
+    from draaw_mi.errors import SceneError
+    sky = _image(tmp_path, "sky.exr", (2, 5, 1), value, half=True)
+    d = tiny_description()
+    d["lights"] = [{"type": "envmap", "file": sky}]
+    with pytest.raises(SceneError, match=rf"lights\[0\]\.file: environment map .*sky.exr' has the "
+                                         rf"value {shown} at pixel \(x=5, y=2\), channel 1"):
+        draaw_mi.load_scene(d)
+    d["lights"] = [{"type": "envmap", "file": _image(tmp_path, "ok.exr", half=True)}]
+    img = np.array(draaw_mi.render(draaw_mi.load_scene(d), version="v4", spp=2, seed=0, post=[]))
+    assert np.isfinite(img).all() and img.mean() > 0
+
+
+def test_textures_of_other_mitsuba_bsdfs_are_checked_like_the_draaw_ones(tmp_path):
+    """A NaN texel of a ``diffuse`` reflectance rendered NaN in every version (the same file
+    as a draaw base_color was refused); a negative one is no reflectance either."""
+    from conftest import tiny_description
+    from draaw_mi.errors import SceneError
+    for name, value, shown in (("nan.exr", np.nan, "nan"), ("neg.exr", -1.0, "-1")):
+        d = tiny_description()
+        d["materials"]["ground"] = {"type": "diffuse", "reflectance": _image(tmp_path, name, (0, 0, 0), value)}
+        with pytest.raises(SceneError, match=rf"materials\.ground\.reflectance: texture .*{name}' has "
+                                             rf"the value {shown} at pixel \(x=0, y=0\)"):
+            draaw_mi.load_scene(d)
+    d["materials"]["ground"] = {"type": "diffuse", "reflectance": np.full((2, 2, 3), np.nan)}
+    with pytest.raises(SceneError, match="reflectance: texture array has a non-finite"):
+        draaw_mi.load_scene(d)
+
+
+def test_a_camera_target_float32_cannot_tell_from_its_origin_is_refused():
+    """origin [1e4, 1, 0] and a target 1e-4 away are one point in float32: the camera
+    transform was NaN and the image plain sky, without a word."""
+    from conftest import tiny_description
+    from draaw_mi.errors import SceneError
+    d = tiny_description()
+    d["camera"] = {"origin": [1e4, 1.0, 0.0], "target": [1e4 - 1e-4, 1.0, 0.0]}
+    with pytest.raises(SceneError, match=r"camera\.target: is 0\.0001 from 'origin', too close .* float32"):
+        draaw_mi.load_scene(d)
+    d["camera"] = {"origin": [1e4, 1.0, 0.0], "target": [1e4 - 1.0, 1.0, 0.0]}    # 1 unit: fine
+    sc = draaw_mi.load_scene(d)
+    assert np.isfinite(np.array(sc.params["sensor.to_world"].matrix)).all()
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e4])
+def test_a_bare_mesh_of_any_size_is_framed_and_not_clipped(tmp_path, scale):
+    """The automatic camera kept the default clip planes (0.01, 1e4): a mesh 1e-3 or 1e4
+    across rendered as plain sky. Its image now equals the unit-size one."""
+    import trimesh
+    imgs = []
+    for s in (1.0, scale):
+        mesh = trimesh.creation.box(extents=(1.0, 0.6, 0.8))
+        mesh.apply_scale(s)
+        path = str(tmp_path / f"box_{s:g}.obj")
+        mesh.export(path)
+        sc = draaw_mi.load_scene(path, resolution=(24, 24))
+        imgs.append(np.array(draaw_mi.render(sc, version="v4", spp=4, seed=0, post=[])))
+    assert np.abs(imgs[0] - imgs[1]).max() < 1e-3 * max(imgs[0].max(), 1e-3) + 1e-4
+    assert imgs[0].std() > 0.01                                   # the box is in the picture
