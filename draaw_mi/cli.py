@@ -159,10 +159,11 @@ def _cmd_render(args) -> int:
                                   denoise=args.denoise)
     arr = np.array(image)
     from draaw_mi.batch.exr import render_metadata
-    draaw_mi.write_exr(args.output, arr, channels=info["channels"], metadata=render_metadata(args.scene, scene, info))
+    chain = scene.settings.get("post", []) if post is None else post     # what render() applied
+    draaw_mi.write_exr(args.output, arr, channels=info["channels"],
+                       metadata=render_metadata(args.scene, scene, info, post=chain))
     if args.png:
         from draaw_mi.post import display_encoded
-        chain = scene.settings.get("post", []) if post is None else post
         draaw_mi.write_png(args.png, arr[..., :3], encoded=display_encoded(chain))
     finite = bool(np.isfinite(arr).all())
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
@@ -269,13 +270,7 @@ def _cmd_fit(args) -> int:
         _writable(args.output, (".toml", ".json"), "output")
     if args.plot:
         _writable(args.plot, (".png",), "--plot")
-    views = None
-    if args.views:
-        try:
-            with open(args.views) as fh:
-                views = json.load(fh)
-        except (OSError, json.JSONDecodeError) as e:
-            raise CliError(f"--views {args.views!r}: {e}") from None
+    views = _read_json(args.views, "--views") if args.views else None
     scene = draaw_mi.load_scene(args.scene)
     if args.output:               # fail before the fit, not after it: can the values be written?
         if scene.description is None and not args.output.lower().endswith(".json"):
@@ -305,6 +300,20 @@ def _cmd_fit(args) -> int:
         res.plot(args.plot)
         print(f"wrote {args.plot}")
     return 0
+
+
+def _read_json(path: str, option: str):
+    """The JSON document in ``path`` (named ``option`` in the one-line error)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except OSError as e:
+        raise CliError(f"{option} {path!r}: cannot read it ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise CliError(f"{option} {path!r}: not a text (UTF-8 JSON) file") from None
+    except json.JSONDecodeError as e:
+        raise CliError(f"{option} {path!r}: malformed JSON at line {e.lineno} column {e.colno}: "
+                       f"{e.msg}") from None
 
 
 def _int_list(text, name):
@@ -375,6 +384,17 @@ def _cmd_bench(args) -> int:
         spps = _int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
         gt_spp, repeats = args.gt_spp, args.repeats
     depths = _int_list(args.max_depth, "--max-depth") if args.max_depth else None
+    # every number checked before the ground truth renders (minutes at the defaults)
+    for name, values, lo in (("--spp", spps, 1), ("--gt-spp", [gt_spp], 1), ("--max-depth", depths or [], -1),
+                             ("--frames", [args.frames], 1)):
+        bad = [v for v in values if v < lo]
+        if bad:
+            raise CliError(f"bench: {name} {bad[0]}; expected an integer >= {lo}"
+                           + (" (-1: unbounded)" if name == "--max-depth" else ""))
+    if args.adaptive and (args.adaptive < 2 or args.adaptive & (args.adaptive - 1)):
+        raise CliError(f"bench: --adaptive {args.adaptive}; expected a power of two >= 2 (block size "
+                       "in pixels) or 0 (none)")
+    keys = _read_json(args.camera_path, "--camera-path") if args.camera_path else None
     progress = (not args.no_progress) and sys.stderr.isatty()
     scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
     if not scenes:
@@ -384,12 +404,7 @@ def _cmd_bench(args) -> int:
                              repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress,
                              **_bench_denoise(args))
     print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
-    if args.camera_path:
-        try:
-            with open(args.camera_path) as fh:
-                keys = json.load(fh)
-        except (OSError, json.JSONDecodeError) as e:
-            raise CliError(f"--camera-path {args.camera_path!r}: {e}") from None
+    if keys is not None:
         scene = draaw_mi.load_scene(scenes[0], **({"resolution": res} if res else {}))
         rows = bench.frame_times(scene, keys, versions=versions, frames=args.frames, progress=progress)
         from draaw_mi.io import write_text

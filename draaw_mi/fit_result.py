@@ -71,7 +71,7 @@ class FitResult:
 
     def save(self, path: str, scene=None) -> list[str]:
         """Write the fit to ``path``: for a scene described in TOML/JSON (``scene``, a
-        :class:`~draaw_mi.scene.DraawScene`) the description with the fitted values (``.toml``
+        :class:`~draaw_mi.scene.DraawScene` or the scene file's path) the description with the fitted values (``.toml``
         or ``.json``), otherwise ``{"fitted": values}`` (``.json``). A fitted texture goes to
         an EXR beside ``path`` (``<stem>.<material>.<parameter>.exr``, linear float32) that the
         written scene names. Atomic writes; returns the files written.
@@ -87,6 +87,9 @@ class FitResult:
 
         from .io import write_exr, write_text
         from .errors import ParameterError
+        if isinstance(scene, (str, os.PathLike)):        # a scene file: the scene it describes
+            from .scene import load_scene
+            scene = load_scene(os.fspath(scene))
         lower = path.lower()
         described = scene is not None and getattr(scene, "description", None) is not None
         if not lower.endswith((".toml", ".json") if described else (".json",)):

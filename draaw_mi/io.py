@@ -206,6 +206,9 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     """
     import matplotlib.image
 
+    if not os.fspath(path).lower().endswith(".png"):
+        # (an 8-bit PNG was written under an .exr name; write_exr refuses the mirror case)
+        raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
     arr = to_numpy(image)
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]

@@ -46,7 +46,57 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     assert (header["draaw:version"], header["draaw:spp"], header["draaw:seed"], header["draaw:max_depth"]) == \
         ("path", 4, 3, 3)
     assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
+    assert header["draaw:sampler"] == "independent" and "draaw:post" not in header   # no chain ran
     assert "wrote" in capsys.readouterr().out
+
+
+def test_render_records_the_post_chain_it_applied(tmp_path):
+    """``render --post`` applied the chain and said nothing of it in the header, unlike
+    ``draaw-mi post``."""
+    import json
+    from draaw_mi.batch.exr import read_header
+    chain = tmp_path / "c.json"
+    chain.write_text('[{"type": "contrast", "amount": 0.3}]')
+    exr = tmp_path / "r.exr"
+    assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--spp", "2",
+                 "--resolution", "16x16", "--post", str(chain), "--sampler", "multijitter", "--no-progress"]) == 0
+    header = read_header(str(exr))
+    assert json.loads(header["draaw:post"])[0]["type"] == "contrast"
+    assert json.loads(header["draaw:post"])[0]["amount"] == 0.3
+    assert header["draaw:sampler"] == "multijitter"
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["--spp", "0"], "bench: --spp 0; expected an integer >= 1"),
+    (["--gt-spp", "0"], "--gt-spp 0"),
+    (["--max-depth", "-5"], "--max-depth -5; expected an integer >= -1"),
+    (["--adaptive", "3"], "--adaptive 3; expected a power of two"),
+    (["--frames", "0", "--camera-path", "x.json"], "--frames 0"),
+    (["--camera-path", "BINARY"], "--camera-path"),
+])
+def test_bench_refuses_bad_numbers_before_the_ground_truth(tmp_path, capsys, argv, expect):
+    """Checked before any rendering: the ground truth (minutes at the defaults) was rendered
+    and cached first, and the camera path read after the whole study."""
+    binary = tmp_path / "b.json"
+    binary.write_bytes(bytes(range(256)))
+    argv = [str(binary) if a == "BINARY" else a for a in argv]
+    out = tmp_path / "study"
+    assert main(["bench", os.path.join(SCENES, "cornell.toml"), "--quick", "--versions", "v4",
+                 "--out", str(out), "--no-progress"] + argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expect in err[0], err
+    assert not out.exists()
+
+
+def test_json_files_that_are_not_text_are_one_line_errors(tmp_path, capsys):
+    binary = tmp_path / "b.json"
+    binary.write_bytes(bytes(range(256)))
+    scene = os.path.join(SCENES, "cornell.toml")
+    for argv in (["render", scene, "-o", str(tmp_path / "x.exr"), "--post", str(binary)],
+                 ["fit", scene, "--reference", str(binary), "--param", "x.roughness", "--views", str(binary)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "b.json" in err[0] and ("not a" in err[0]), err
 
 
 def test_render_sampler_reaches_the_scene(tmp_path, monkeypatch):

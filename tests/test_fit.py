@@ -492,3 +492,13 @@ def test_a_png_reference_fits_as_its_exr_does(tmp_path):
                        spp=8, progress=False, seed=0)
     assert abs(res.values["target.roughness"] - 0.25) < 0.025, res.values
     assert abs(res.values["target.metallic"] - 0.8) < 0.06, res.values
+
+
+def test_a_fit_is_saved_beside_a_scene_given_by_its_path(tmp_path):
+    """``res.save("fitted.toml", "scenes/fit_sphere.toml")`` said that without a TOML/JSON
+    scene only the values could be written, though the path named one."""
+    from draaw_mi.fit_result import FitResult
+    out = str(tmp_path / "fitted.toml")
+    FitResult(values={"target.roughness": 0.31}).save(out, os.path.join(SCENES, "fit_sphere.toml"))
+    again = draaw_mi.load_scene(out)
+    assert float(again.params[again.key("target.roughness")][0]) == pytest.approx(0.31)

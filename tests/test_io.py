@@ -104,3 +104,14 @@ def test_png_is_srgb_encoded(tmp_path):
     assert back.shape[:2] == (2, 3)
     assert abs(back[0, 0, 0] * 255 - round((1.055 * 0.18 ** (1 / 2.4) - 0.055) * 255)) < 0.51
     assert os.listdir(tmp_path) == ["p.png"]
+
+
+def test_png_and_exr_names_are_not_swapped(tmp_path):
+    """write_png wrote an 8-bit PNG under an .exr name (write_exr refused the mirror case)."""
+    from draaw_mi.errors import IOFailure
+    img = np.full((2, 3, 3), 0.18, np.float32)
+    with pytest.raises(IOFailure, match=r"write_png\('.*oops.exr'\): expected a '.png' name"):
+        draaw_mi.write_png(str(tmp_path / "oops.exr"), img)
+    with pytest.raises(IOFailure, match=r"write_exr\('.*oops.png'\)"):
+        draaw_mi.write_exr(str(tmp_path / "oops.png"), img)
+    assert not list(tmp_path.iterdir())

@@ -292,3 +292,18 @@ def test_scenes_with_one_area_light_keep_merged_meshes():
     s = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"))
     declared = [v for v in s.mi_dict.values() if isinstance(v, dict) and "bsdf" in v]
     assert len(s.mi_scene.shapes()) < len(declared)          # the white walls merged into one
+
+
+def test_a_parameter_name_without_its_material_lists_the_materials_that_have_it():
+    """``--param roughness`` listed every Mitsuba key of the scene (sensor.film.crop_offset,
+    ...) or suggested an arbitrary one of 16 materials."""
+    import draaw_mi
+    from draaw_mi.errors import SceneError
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "material_spheres.toml"))
+    with pytest.raises(SceneError, match=r"no parameter 'roughness'; name the material too: "
+                                         r"'ground.roughness', 'r0m0.roughness', .*, \.\.\.$"):
+        scene.key("roughness")
+    with pytest.raises(SceneError, match=r"did you mean 'r0m0.metallic'\?$"):   # no .value
+        scene.key("r0m0.metalic")
+    with pytest.raises(SceneError, match=r"`draaw-mi info` lists the scene's materials$"):
+        scene.key("zzz")

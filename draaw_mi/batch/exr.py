@@ -45,11 +45,12 @@ def metadata(spec: dict, seconds: float) -> dict:
     return meta
 
 
-def render_metadata(scene_file, scene, info: dict) -> dict:
+def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     """The ``draaw:*`` header attributes of one ``draaw-mi render`` EXR, as batch frames carry
-    them: the scene (and its file's SHA-256), the integrator, spp, seed, depth, time and the
-    versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(..., return_info=True)``
-    returned."""
+    them: the scene (and its file's SHA-256), the integrator, sampler, spp, seed, depth, time,
+    the post chain applied (``post``: a chain or a list of filter dicts; none: no attribute) and
+    the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
+    return_info=True)`` returned."""
     from .plan import file_hash, versions
     meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["integrator"],
             "draaw:spp": int(info["spp"]), "draaw:seed": int(scene.settings["seed"]),
@@ -58,6 +59,12 @@ def render_metadata(scene_file, scene, info: dict) -> dict:
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if os.path.isfile(scene_file):
         meta["draaw:scene_sha256"] = file_hash(scene_file)
+    meta["draaw:sampler"] = str(scene.settings.get("sampler") or "independent")
+    if post:
+        import json
+
+        from ..post import load_chain
+        meta["draaw:post"] = json.dumps(load_chain(post).to_list())
     meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})
     return meta
 

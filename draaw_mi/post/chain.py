@@ -113,10 +113,10 @@ class Chain:
         return [f.to_dict() for f in self.filters]
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write :meth:`to_list` as JSON (readable by :func:`load_chain`)."""
-        with open(path, "w", encoding="utf-8") as fh:
-            json.dump(self.to_list(), fh, indent=2)
-            fh.write("\n")
+        """Write :meth:`to_list` as JSON (readable by :func:`load_chain`), atomically (a
+        crash mid-write left a truncated file in place of the previous chain)."""
+        from ..io import write_text
+        write_text(os.fspath(path), json.dumps(self.to_list(), indent=2) + "\n")
 
     def __repr__(self) -> str:
         return "Chain([" + ", ".join(map(repr, self.filters)) + "])"
@@ -161,6 +161,8 @@ def load_chain(source: str | os.PathLike[str] | Iterable[Any] | Chain) -> Chain:
         except OSError as exc:
             raise IOFailure(f"{path}: cannot read post chain file ({exc.strerror or exc})"
                             ) from None
+        except UnicodeDecodeError:
+            raise ParameterError(f"{path}: not a post chain file (UTF-8 JSON text)") from None
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:

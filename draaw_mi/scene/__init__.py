@@ -117,7 +117,16 @@ class DraawScene:
         for cand in (name, f"{name}.value", f"{name}.data"):
             if cand in keys:
                 return cand
-        raise SceneError(f"{self.source}: no parameter {name!r}{suggest(name, keys)}")
+        # the names people write: material.parameter (not Mitsuba's .value / .data keys)
+        short = sorted({k.removesuffix(".value").removesuffix(".data") for k in keys})
+        ending = [k for k in short if k.endswith("." + name)]
+        if ending:                 # a bare parameter name ("roughness"): the materials that have it
+            shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
+            raise SceneError(f"{self.source}: no parameter {name!r}; name the material too: {shown}")
+        hint = suggest(name, short) if "; did you mean" in suggest(name, short) else suggest(name, keys)
+        if hint.startswith("; valid:") and len(short) > 12:
+            hint = "; `draaw-mi info` lists the scene's materials"
+        raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
 
     def with_resolution(self, width: int, height: int) -> "DraawScene":
         """The same scene with another film size (reloads the Mitsuba scene)."""

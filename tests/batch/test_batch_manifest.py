@@ -52,7 +52,7 @@ def test_bad_pattern(tmp_path, capsys, pattern, expect):
 
 def test_override_of_a_parameter_that_does_not_exist(tmp_path, capsys):
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(params={"ball.roughnes": 0.3}),
-         ["job 'orbit'", "no parameter 'ball.roughnes'", "did you mean 'ball.roughness.value'?"])
+         ["job 'orbit'", "no parameter 'ball.roughnes'", "did you mean 'ball.roughness'?"])
 
 
 def test_override_with_the_wrong_shape(tmp_path, capsys):

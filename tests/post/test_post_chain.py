@@ -145,3 +145,25 @@ def test_load_chain_missing_file(tmp_path):
     with pytest.raises(IOFailure, match="missing.json") as info:
         post.load_chain(path)
     assert isinstance(info.value, DraawError)
+
+
+def test_save_replaces_a_chain_only_when_the_new_one_is_complete(tmp_path, monkeypatch):
+    """Chain.save wrote into the target directly: a crash mid-write left '[{"type": "bl' in
+    place of the previous chain."""
+    path = tmp_path / "chain.json"
+    post.Chain([{"type": "srgb"}]).save(path)
+    before = path.read_text()
+
+    def crash(*args, **kwargs):
+        raise KeyboardInterrupt("killed while writing")
+    monkeypatch.setattr(json, "dumps", crash)
+    with pytest.raises(KeyboardInterrupt):
+        post.Chain([{"type": "bloom"}]).save(path)
+    assert path.read_text() == before and [p.name for p in tmp_path.iterdir()] == ["chain.json"]
+
+
+def test_a_binary_file_is_no_chain(tmp_path):
+    path = tmp_path / "image.json"
+    path.write_bytes(bytes(range(256)))
+    with pytest.raises(ParameterError, match=r"image.json: not a post chain file"):
+        post.load_chain(path)
