@@ -69,13 +69,10 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
 
 
 def _plot_error_vs_time(rows, scene, depth, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from .bench import pareto_front
+    from .plotting import save, subplots
     sel = [r for r in rows if r["scene"] == scene and r["max_depth"] == depth]
-    fig, ax = plt.subplots(figsize=(7, 4.8))
+    fig, ax = subplots(figsize=(7, 4.8))
     labels = sorted({r["label"] for r in sel})
     for lab in labels:
         pts = sorted((r["time_s"], r["rmse"], r["spp"]) for r in sel if r["label"] == lab)
@@ -96,24 +93,19 @@ def _plot_error_vs_time(rows, scene, depth, path):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(path, ".png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save(fig, path, dpi=110)
 
 
 def _plot_error_images(images, gts, scene, spp, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from .io import srgb_encode
+    from .plotting import save, subplots
     items = [(s, img) for (sc, s), img in images.items() if sc == scene and s.spp == spp and not s.adaptive]
     items += [(s, img) for (sc, s), img in images.items() if sc == scene and s.adaptive]
     if not items:
         return
     gt = gts[scene]
     n = len(items) + 1
-    fig, axes = plt.subplots(2, n, figsize=(2.4 * n, 5))
+    fig, axes = subplots(2, n, figsize=(2.4 * n, 5), squeeze=False)
     axes[0, 0].imshow(srgb_encode(gt))
     axes[0, 0].set_title("ground truth", fontsize=8)
     axes[1, 0].axis("off")
@@ -127,9 +119,7 @@ def _plot_error_images(images, gts, scene, spp, path):
         a.set_xticks([])
         a.set_yticks([])
     fig.tight_layout()
-    with atomic_path(path, ".png") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def summary_markdown(result: dict) -> str:

@@ -36,12 +36,12 @@ class FitResult:
 
     def plot(self, path: str | None = None):
         """Loss (log scale) and parameter values over iterations; saved to ``path`` if given."""
-        import matplotlib
-        if path is not None:
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6))
+        if path is None:                  # shown where pyplot shows (a notebook's inline backend)
+            import matplotlib.pyplot as plt
+            fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6))
+        else:                             # a file: no pyplot, no backend switch
+            from .plotting import subplots
+            fig, (a, b) = subplots(1, 2, figsize=(10, 3.6))
         a.semilogy(self.losses)
         a.set_xlabel("iteration")
         a.set_ylabel("loss")
@@ -58,14 +58,13 @@ class FitResult:
                 for c in range(v.shape[1]):
                     b.plot(v[:, c], label=f"mean {name}[{c}]")
         b.set_xlabel("iteration")
+        b.set_ylabel("value")
         b.set_title("parameters")
-        b.legend(fontsize=8)
+        b.legend(fontsize=8, loc="best")
         fig.tight_layout()
         if path is not None:
-            from .io import atomic_path
-            with atomic_path(path, ".png") as tmp:
-                fig.savefig(tmp, dpi=100, format="png")
-            plt.close(fig)
+            from .plotting import save
+            save(fig, path, dpi=100)
         return fig
 
 

@@ -502,3 +502,21 @@ def test_a_fit_is_saved_beside_a_scene_given_by_its_path(tmp_path):
     FitResult(values={"target.roughness": 0.31}).save(out, os.path.join(SCENES, "fit_sphere.toml"))
     again = draaw_mi.load_scene(out)
     assert float(again.params[again.key("target.roughness")][0]) == pytest.approx(0.31)
+
+
+def test_plots_written_to_files_leave_the_session_backend_alone(tmp_path):
+    """``FitResult.plot(path)`` (and the study's and the SDF study's plots) called
+    ``matplotlib.use("Agg")``: a notebook's inline backend was gone for the rest of the session."""
+    import matplotlib
+    from draaw_mi.fit_result import FitResult
+    before = matplotlib.get_backend()
+    matplotlib.use("pdf")            # a backend none of them would pick
+    try:
+        res = FitResult(values={"a.roughness": 0.3},
+                        history=[{"loss": 1.0 / (i + 1), "values": {"a.roughness": 0.3 + 0.01 * i}}
+                                 for i in range(5)])
+        fig = res.plot(str(tmp_path / "fit.png"))
+        assert matplotlib.get_backend() == "pdf"
+        assert (tmp_path / "fit.png").stat().st_size > 1000 and fig.axes[1].get_ylabel() == "value"
+    finally:
+        matplotlib.use(before)

@@ -141,11 +141,8 @@ def markdown(result: dict) -> str:
 
 
 def plot(result: dict, path: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from ..io import atomic_path
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    from ..plotting import save, subplots
+    fig, (a1, a2) = subplots(1, 2, figsize=(10, 4))
     for relax, marker in ((1.0, "o"), (1.5, "s")):
         for knob, color in (("steps", "tab:blue"), ("eps", "tab:orange")):
             rows = [r for r in result["rows"] if r["sdf_relaxation"] == relax and
@@ -170,9 +167,7 @@ def plot(result: dict, path: str) -> None:
     a2.legend(fontsize=7)
     a2.set_title("rays ending as false misses")
     fig.tight_layout()
-    with atomic_path(path, ".tmp.png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save(fig, path, dpi=110)
 
 
 def has_sdf(scene_file) -> bool:
