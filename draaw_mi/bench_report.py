@@ -11,7 +11,7 @@ import numpy as np
 from .io import atomic_path, write_text
 
 COLUMNS = ["scene", "label", "version", "adaptive", "max_depth", "spp", "time_s", "time_min_s", "compile_s",
-           "rmse", "relmse", "ciede2000", "bias_rmse", "finite", "resolution", "denoise"]
+           "rmse", "relmse", "ciede2000", "bias_rmse", "bias_resolved", "finite", "resolution", "denoise"]
 
 
 def time_to_error(points: list[tuple[float, float]], target: float, extrapolate: bool = False) -> float:
@@ -125,10 +125,13 @@ def _plot_error_images(images, gts, scene, spp, path):
 def summary_markdown(result: dict) -> str:
     rows = result["rows"]
     lines = ["# draaw-mi benchmark: what accuracy costs in time", "",
-             f"Ground truth: Mitsuba `{'volpath' if any(r.get('label') == 'volpath' for r in rows) else 'path'}` "
-             f"(`volpath` for scenes with media), {result['ground_truth_spp']} spp, same materials. "
-             f"Times: median of {result['repeats']} renders after a warm-up (compile time separate). "
-             f"Machine: {result['machine']}.", ""]
+             f"Ground truth: Mitsuba `path` (`volpath` for scenes with media, V4 for scenes with "
+             f"SDF objects), {result['ground_truth_spp']} spp, same materials. "
+             f"Times: median of {result['repeats']} renders after warm-up (compile time separate). "
+             f"Machine: {result['machine']}" + (f"; {result['load']}." if result.get("load") else "."), "",
+             "*Bias*: the RMSE that does not fall with spp, pooled over the highest spp levels, "
+             "the ground truth's own noise taken out; `< x`: not resolved from the noise of "
+             f"{result['repeats']} repeats, at most x.", ""]
     scenes = sorted({r["scene"] for r in rows})
     for sc in scenes:
         depths = sorted({r["max_depth"] for r in rows if r["scene"] == sc})
@@ -140,7 +143,8 @@ def summary_markdown(result: dict) -> str:
                       "| setting | spp | time [s] | compile [s] | RMSE | relMSE | ΔE2000 | bias (RMSE) |",
                       "|---|---:|---:|---:|---:|---:|---:|---:|"]
             for r in sorted(sel, key=lambda r: (r["label"], r["spp"])):
-                bias = "" if r["bias_rmse"] is None else f"{r['bias_rmse']:.4f}"
+                bias = ("" if r["bias_rmse"] is None else f"{r['bias_rmse']:.4f}" if r.get("bias_resolved", True)
+                        else f"< {r['bias_rmse']:.4f}")
                 lines.append(f"| {r['label']} | {r['spp']} | {r['time_s']:.4f} | {r['compile_s']:.3f} | "
                              f"{r['rmse']:.4f} | {r['relmse']:.4f} | {r['ciede2000']:.3f} | {bias} |")
             chk = pareto_check(rows, sc, d)

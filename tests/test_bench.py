@@ -107,19 +107,51 @@ def test_ciede2000_of_images_is_the_mean_over_pixels_of_published_pairs():
     assert np.allclose(bench.srgb_to_lab(g)[:, 0, 0], 116 * np.cbrt(g[:, 0, 0]) - 16, atol=1e-3)
 
 
+def _bias_rows(rng, truth, gt, label, bias, spps, repeats=3, sigma=0.5):
+    rows = []
+    for spp in spps:
+        imgs = [truth + bias + rng.normal(0, sigma / np.sqrt(spp), truth.shape) for _ in range(repeats)]
+        st = np.stack(imgs)
+        sq = [float(((i - gt) ** 2).mean()) for i in imgs]
+        rows.append({"scene": "s", "label": label, "max_depth": 3, "spp": spp, "resolution": truth.shape[:2],
+                     "repeats": repeats,
+                     "mse": float(((st - gt) ** 2).mean()), "variance": float(st.var(axis=0, ddof=1).mean()),
+                     "mse_se": float(np.std(sq, ddof=1) / np.sqrt(repeats))})
+    return rows
+
+
 def test_bias_separates_noise_from_bias():
     rng = np.random.default_rng(0)
     gt = np.zeros((32, 32, 3))
     rows = []
     for label, b in (("unbiased", 0.0), ("biased", 0.1)):
-        for spp in (4, 64):
-            imgs = [gt + b + rng.normal(0, 0.5 / np.sqrt(spp), gt.shape) for _ in range(4)]
-            st = np.stack(imgs)
-            rows.append({"scene": "s", "label": label, "max_depth": 3, "spp": spp,
-                         "mse": float(((st - gt) ** 2).mean()), "variance": float(st.var(axis=0, ddof=1).mean())})
+        rows += _bias_rows(rng, gt, gt, label, b, (4, 64))
     est = bench.estimate_bias(rows)
-    assert est[("s", "unbiased", 3)] < 0.02
-    assert est[("s", "biased", 3)] == pytest.approx(0.1, abs=0.01)
+    assert est[("s", "unbiased", 3)][0] < 0.02 and not est[("s", "unbiased", 3)][1]
+    assert est[("s", "biased", 3)][0] == pytest.approx(0.1, abs=0.01) and est[("s", "biased", 3)][1]
+
+
+def test_the_ground_truths_own_noise_is_not_a_bias():
+    """The ground truth is itself a noisy render (gt_spp samples): every method's MSE holds
+    its noise, which the estimate at the highest spp alone reported as a bias of whichever
+    method's repeats happened to show it (V4 0.0145 on the Cornell box, path 0).
+    Over 20 seeds the one with a bias of 0.03 (below the ground truth's noise of
+    0.5 / sqrt(256) = 0.031) is always resolved, the unbiased ones at most once in 40 (the
+    3-sigma test flagged 1 % of them over 200 seeds, a bias of 0.01 68 % of the time)."""
+    flagged = {"a": 0, "b": 0, "biased": 0}
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        truth = np.zeros((32, 32, 3))
+        gt = truth + rng.normal(0, 0.5 / np.sqrt(256), truth.shape)         # gt_spp = 256
+        rows = []
+        for label, b in (("a", 0.0), ("b", 0.0), ("biased", 0.03)):
+            rows += _bias_rows(rng, truth, gt, label, b, (16, 64, 256, 1024))
+        est = bench.estimate_bias(rows, gt_spp=256)
+        for k in flagged:
+            flagged[k] += est[("s", k, 3)][1]
+        assert est[("s", "biased", 3)][0] == pytest.approx(0.03, abs=0.01)
+        assert est[("s", "a", 3)][0] < 0.015                 # a bound near 0, not the floor (0.031)
+    assert flagged["biased"] == 20 and flagged["a"] + flagged["b"] <= 1, flagged
 
 
 def test_pareto_and_time_to_error():
