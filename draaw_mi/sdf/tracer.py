@@ -5,8 +5,9 @@ implicit re-attachment of the hit to the SDF parameters.
 option              meaning (integrator property ``sdf_*``; defaults)
 ==================  =====================================================================
 ``hit_epsilon``     relative hit tolerance: ``p = o + t d`` is on the surface when
-                    ``|f(p)| < hit_epsilon * (1 + t) + 1e-6 max|p|`` (grows with the
-                    distance travelled; the second term, ~16 float spacings of ``p``,
+                    ``|f(p)| < hit_epsilon * (L + t) + 1e-6 max|p|`` (grows with the
+                    distance travelled; ``L``: the objects' size, at most 1
+                    (:func:`length_scale`); the last term, ~16 float spacings of ``p``,
                     keeps far-away objects convergent). (``sdf_epsilon``, 1e-5)
 ``max_steps``       iteration cap; a ray that has not converged then is a **miss**
                     (``sdf_max_steps``, 256)
@@ -49,7 +50,8 @@ class TracerOptions:
     def __init__(self, hit_epsilon: float = 1e-5, max_steps: int = 256, relaxation: float = 1.0):
         if not (isinstance(hit_epsilon, (int, float)) and 0 < hit_epsilon <= 5e-5):
             raise ParameterError(f"sdf tracer: hit_epsilon={hit_epsilon!r}; expected a number in "
-                                 "(0, 5e-5] (relative to 1 + max|p|; Mitsuba offsets rays by ~9e-5)")
+                                 "(0, 5e-5] (relative to the objects' size plus the distance; Mitsuba offsets rays "
+                                 "by ~9e-5)")
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ParameterError(f"sdf tracer: max_steps={max_steps!r}; expected an integer >= 1")
         if not (isinstance(relaxation, (int, float)) and 1.0 <= relaxation < 2.0):
@@ -87,6 +89,21 @@ def _max_abs(p) -> mi.Float:
     return dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
 
 
+def length_scale(sdf) -> float:
+    """The largest side of the SDF roots' finite boxes, at most 1 (1 if none is finite).
+
+    >>> from draaw_mi.sdf import Sphere
+    >>> class One:  # a stand-in holding one root
+    ...     def __init__(self, r): self.r = r
+    ...     def bboxes(self): return [self.r.bbox()]
+    >>> round(length_scale(One(Sphere(radius=1e-4))), 9), length_scale(One(Sphere(radius=3.0)))
+    (0.0002, 1.0)
+    """
+    sides = [max(float(h) - float(l) for l, h in zip(bb.min, bb.max))
+             for bb in sdf.bboxes() if not is_infinite(bb)]
+    return min(1.0, max(sides)) if sides and max(sides) > 0 else 1.0
+
+
 def ray_interval(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool):
     """``(t0, t1, active)``: the part of the ray inside the union of the roots' boxes."""
     t0 = mi.Float(math.inf)
@@ -120,7 +137,10 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
     with dr.suspend_grad():
         o, d, tmax = dr.detach(o), dr.detach(d), dr.detach(tmax)
         t0, t1, act = ray_interval(sdf, o, d, tmax, mi.Bool(active))
-        eps_rel = opts.hit_epsilon
+        # the band's absolute part in the scene's own length (at most 1): for objects 1e-4
+        # across the band of 1e-5 was a fifth of their radius (inflated silhouettes); opaque,
+        # so a moving or growing object does not compile a new kernel
+        eps_rel = opts.hit_epsilon * dr.opaque(mi.Float, length_scale(sdf))
         omega0 = opts.relaxation
         relax = omega0 > 1.0
         t = mi.Float(dr.select(act, t0, 0.0))
@@ -129,6 +149,7 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
         # test is at the origin, not at the box entry (tight boxes touch the surface)
         f_o = dr.abs(sdf.distance(mi.Point3f(o)))
         armed = mi.Bool(f_o >= eps_rel + 1e-6 * _max_abs(o))
+        eps_t = opts.hit_epsilon
         steps = mi.UInt32(0)
         omega = mi.Float(omega0)
         r_prev = mi.Float(0.0)
@@ -140,7 +161,7 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
         def body(t, hit, armed, steps, omega, r_prev, step_prev):
             p = dr.fma(d, t, o)
             f = dr.abs(sdf.distance(mi.Point3f(p)))
-            eps = eps_rel * (1.0 + t) + 1e-6 * _max_abs(p)
+            eps = eps_rel + eps_t * t + 1e-6 * _max_abs(p)
             if relax:
                 fail = (omega > 1.0) & (f + r_prev < step_prev)
                 # the spheres of the last two points do not overlap: a surface may lie in

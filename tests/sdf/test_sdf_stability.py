@@ -133,3 +133,22 @@ def test_grazing_plane_rays_end_as_misses_not_hangs():
     d = mi.Vector3f(np.ones(n, np.float32), np.zeros(n, np.float32), np.zeros(n, np.float32))
     t, hit, steps = march(sdf, o, d, mi.Float(np.inf), mi.Bool(True), TracerOptions(max_steps=500))
     assert not np.array(hit).any() and np.all(np.array(steps) <= 500)
+
+
+@pytest.mark.parametrize("radius", [1e-4, 1.0, 1e3])
+def test_a_small_sphere_is_hit_where_the_analytic_one_is(radius):
+    """The hit band had an absolute part of 1e-5 world units: a sphere of radius 1e-4 was hit
+    by rays passing up to a tenth of its radius outside it (an inflated silhouette). Rays on a
+    grid across the silhouette, against the closed-form ray-sphere test; rays within 1e-3 of
+    the radius of the edge are left out (the band is relative, about 1e-5 of the distance)."""
+    from draaw_mi.sdf.tracer import TracerOptions, march
+    sdf = SDFScene([Sphere((0.0, 0.0, 0.0), radius)], ["m"])
+    xs = np.linspace(-1.3, 1.3, 81) * radius
+    x, y = (a.ravel().astype(np.float32) for a in np.meshgrid(xs, xs))
+    n = x.size
+    o = mi.Point3f(x, y, np.full(n, -4 * radius, np.float32))
+    d = mi.Vector3f(np.zeros(n, np.float32), np.zeros(n, np.float32), np.ones(n, np.float32))
+    _, hit, _ = march(sdf, o, d, mi.Float(np.inf), mi.Bool(True), TracerOptions())
+    r = np.hypot(x.astype(np.float64), y) / radius
+    clear = np.abs(r - 1.0) > 1e-3
+    assert np.array_equal(np.array(hit)[clear], (r < 1.0)[clear])
