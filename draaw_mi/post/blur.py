@@ -66,7 +66,10 @@ BLOOM_V2 = FilterSpec("bloom_v2", _bloom_params(
 
 def bloom(image: Any, threshold: float = 0.05, intensity: float = 1.1, *, clamp: bool = True,
           boundary: str = "reflect", amount: float = 1.0, multipass: int = 3) -> mi.TensorXf:
-    """Glow around bright pixels (GO-Draaw ``bloom``).
+    """GO-Draaw's ``bloom``: pixels at or above the luminance ``threshold`` get their blurred
+    neighbourhood added (and, with ``clamp``, are clipped to 1); darker pixels are left as they
+    are, so no glow spreads into them, and with ``clamp`` an HDR highlight loses its energy
+    (``clamp=False`` keeps it).
 
     ``B = 0.5·G₁ ∗ c + 0.3·G₂ ∗ c + 0.3·G₄ ∗ c`` where G_σ is a normalised 5×5 Gaussian (weights
     exp(-(x²+y²)/2σ²) at integer pixel offsets -2..2); then per pixel ``f(c) = c`` if
