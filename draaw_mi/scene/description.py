@@ -535,8 +535,10 @@ def _scene_bounds(shape_entries: dict):
 
 
 def auto_light(bbox_min, bbox_max, origin) -> list[dict]:
-    """Lights for a bare mesh file: a point light at the camera and a dim sky."""
+    """Lights for a bare mesh file: a point light at the camera, its intensity following the
+    mesh's size (a floor at 1e-3 made a mesh 1e-4 across 5x too bright), and a dim sky."""
     diag = float(np.linalg.norm(np.subtract(bbox_max, bbox_min)))
-    return [{"type": "point", "position": [float(v) for v in origin], "intensity": max(diag, 1e-3) ** 2 * 3.0},
+    diag = diag if diag > 0 else 1.0
+    return [{"type": "point", "position": [float(v) for v in origin], "intensity": diag ** 2 * 3.0},
             {"type": "constant", "intensity": 0.15}]
 
