@@ -56,6 +56,8 @@ def load_note() -> str:
     >>> load_note().startswith("load average ")
     True
     """
+    if not hasattr(os, "getloadavg"):                  # (not on Windows)
+        return "load average unknown on this system"
     load, cores = os.getloadavg()[0], os.cpu_count() or 1
     state = "other jobs shared the cores" if load > cores + 0.5 else "no sign of other jobs"
     return f"load average {load:.1f} at the end, this job included, on {cores} cores ({state})"
@@ -210,15 +212,26 @@ def _bias_term_se(row: dict, n: int | None) -> float:
     return float(np.sqrt(max(se ** 2, 2.0 * var ** 2 / (n * r)) + 2.0 * var ** 2 / (n * (r - 1))))
 
 
-def estimate_bias(rows: list[dict], gt_spp: int | None = None) -> dict:
+def _noise_per_sample(rows: list[dict]) -> float | None:
+    """A method's pixel variance per sample (``variance * spp``), pooled over its
+    :data:`BIAS_LEVELS` highest spp levels with the weights of :func:`estimate_bias`."""
+    top = sorted((r for r in rows if np.isfinite(r.get("variance", np.nan))), key=lambda r: r["spp"])[-BIAS_LEVELS:]
+    if not top:
+        return None
+    w = np.array([1.0 / max(r["variance"], 1e-30) ** 2 for r in top])
+    return float(np.sum(w * [r["variance"] * r["spp"] for r in top]) / w.sum())
+
+
+def estimate_bias(rows: list[dict], gt_spp: int | None = None, reference: dict | None = None) -> dict:
     """``{(scene, label, max_depth): (bias, resolved)}``: the RMSE that does not fall with spp.
 
     Per setting, ``bias^2 + floor = MSE - variance`` (the variance of one render estimated from
     the independent repeats). The :data:`BIAS_LEVELS` highest spp levels of a method are pooled,
     weighted by ``1 / variance^2`` (the estimate's noise grows with the variance term).
-    ``floor`` is the ground truth's own noise, ``variance * spp / gt_spp`` of the method
-    (with ``gt_spp``; the ground truth's integrator has about the variance of the methods
-    it is compared with): every method, ``path`` included, showed it as a bias. ``resolved``
+    ``floor`` is the ground truth's own noise, ``variance * spp / gt_spp`` of the ground
+    truth's integrator (``reference``: ``{scene: label}``, its rows in the study at the same
+    depth; without them the method's own variance stands in): every method, ``path``
+    included, showed it as a bias. ``resolved``
     is False where the estimate is within :data:`BIAS_SIGMAS` standard errors of zero (from the
     spread of the repeats' errors, ``mse_se``); ``bias`` is then an upper bound. (Taken at the
     highest spp alone, from 2-3 repeats, V4 showed the ground truth's noise as a bias of
@@ -241,7 +254,11 @@ def estimate_bias(rows: list[dict], gt_spp: int | None = None) -> dict:
         se = [_bias_term_se(r, n) for r in top]
         se2 = float(sum((wi * s) ** 2 for wi, s in zip(w, se))) if all(np.isfinite(se)) else np.nan
         if gt_spp:
-            floor = float(sum(wi * r["variance"] * r["spp"] for wi, r in zip(w, top))) / gt_spp
+            ref = (reference or {}).get(key[0])
+            per_sample = _noise_per_sample(groups.get((key[0], ref, key[2]), [])) if ref else None
+            if per_sample is None:
+                per_sample = _noise_per_sample(rs)
+            floor = per_sample / gt_spp
             b2 -= floor
             # the ground truth's noise is one realisation, common to every repeat: its mean
             # square over the n pixel values is off its expectation by about floor * sqrt(2 / n)
@@ -376,7 +393,8 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
     if bar is not None:
         bar.close()
     rows = [row for _, row in sorted(rows, key=lambda p: p[0])]
-    bias = estimate_bias(rows, gt_spp)
+    refs = {os.path.splitext(os.path.basename(s.source))[0]: reference_version(s) for s in loaded}
+    bias = estimate_bias(rows, gt_spp, refs)
     for r in rows:
         r["bias_rmse"], r["bias_resolved"] = bias.get((r["scene"], r["label"], r["max_depth"]), (None, None))
     result = {"rows": rows, "ground_truth_spp": gt_spp, "repeats": repeats,

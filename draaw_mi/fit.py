@@ -258,6 +258,8 @@ class _Param:
 
 
 def _space_for(key: str) -> str:
+    if key.startswith("sdf."):
+        return "linear"        # (an SDF node named 'alpha' or 'roughness' is no such parameter)
     for part in reversed(key.split(".")):
         if part in SPACES:
             return SPACES[part]

@@ -198,11 +198,9 @@ class Preview:
     def update(self, values: dict) -> int:
         """Queue parameter changes (``{"gold.roughness": 0.3, "sensor.x_fov": 40}``); the next
         frame shows them and the mean restarts. Returns the new generation number."""
-        checked = {}
-        for name, v in values.items():
-            key = self.key(name)
-            self.scene.check_value("Preview.update", name, key, v)
-            checked[key] = v
+        named = {name: (self.key(name), v) for name, v in values.items()}
+        self.scene.check_values("Preview.update", named)       # (SDF values with each other)
+        checked = {key: v for key, v in named.values()}
         with self._lock:
             self._pending.update(checked)
             return self._bump()

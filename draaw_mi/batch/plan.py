@@ -186,7 +186,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             except DraawError as e:
                 raise SceneError(f"{loc}: params: {e}") from None
             _check_shape(loc, name, job.params[name], scene.all_params[keys[name]])
-            _check_values(loc, name, keys[name], job.params[name], job.frames, scene)
+        _check_values(loc, keys, job.params, job.frames, scene)
         cams = None
         if job.camera is not None:
             if entry.camera_key is None:
@@ -242,22 +242,25 @@ def _check_shape(loc, name, spec, current):
                              f"has {want}")
 
 
-def _check_values(loc, name, key, spec, frames: int, scene) -> None:
+def _check_values(loc, keys: dict, specs: dict, frames: int, scene) -> None:
     """Every frame's value of an override within the parameter's range (roughness in [0, 1],
     colours >= 0, finite: :func:`draaw_mi.materials.check_value`; an SDF object's radius > 0,
     a round box's radius within its size, ...: :meth:`SDFScene.check
     <draaw_mi.sdf.scene.SDFScene.check>`), before anything renders. (Out-of-range values
-    rendered as the clamped value, with exit status 0.)"""
-    kind, data = spec
+    rendered as the clamped value, with exit status 0.) A frame's values are checked
+    together, on the scene as loaded (each frame starts from it)."""
     for f in range(frames):
-        v = param_value(kind, data, f, frames)
-        if isinstance(v, list) and len(v) == 1:
-            v = v[0]
-        if not isinstance(v, list) or len(v) == 3:
-            try:
-                scene.check_value(f"frame {f}", f"params.{name}", key, v)
-            except DraawError as e:
-                raise SceneError(f"{loc}: {e}") from None
+        values = {}
+        for name, (kind, data) in specs.items():
+            v = param_value(kind, data, f, frames)
+            if isinstance(v, list) and len(v) == 1:
+                v = v[0]
+            if not isinstance(v, list) or len(v) == 3:
+                values[f"params.{name}"] = (keys[name], v)
+        try:
+            scene.check_values(f"frame {f}", values)
+        except DraawError as e:
+            raise SceneError(f"{loc}: {e}") from None
 
 
 def check_writable(folders, where: str) -> None:

@@ -72,8 +72,9 @@ SCALAR_PARAMS = {
 COLOR_PARAMS = {"base_color": (0.5, 0.0, None)}
 ALL_PARAMS = tuple(COLOR_PARAMS) + tuple(SCALAR_PARAMS)
 OPTIONS = ("normalmap", "normalmap_encoding", "two_sided", "alpha_min")
-# a signed normal map's components may exceed +-1 by float rounding of a normalised vector
-NORMALMAP_SLACK = 1e-3
+# how far a float normal map's components may overshoot their encoding's range (rounding of
+# a normalised vector, resampling): 1e30 and Inf texels are what the range check is for
+NORMALMAP_SLACK = 1e-2
 NORMALMAP_ENCODINGS = ("unsigned", "signed")
 
 
@@ -129,7 +130,8 @@ class DraawBSDF(mi.BSDF):
         if "normalmap" in props:
             # values within the encoding's range (a texel of 1e30 or Inf overflowed the
             # normalisation: black patches, where NaN and zero-length texels fall back)
-            lo, hi = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK) if self.normalmap_signed else (0.0, 1.0)
+            lo, hi = (-1.0, 1.0) if self.normalmap_signed else (0.0, 1.0)
+            lo, hi = lo - NORMALMAP_SLACK, hi + NORMALMAP_SLACK
             self.normalmap = textures.texture_property(props, "normalmap", None, lo, hi, color=True)
         two_sided = props.get("two_sided", False)
         if not isinstance(two_sided, bool):

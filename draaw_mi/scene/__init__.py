@@ -97,15 +97,26 @@ class DraawScene:
         not one parameter ``key`` (of :attr:`all_params`; ``name`` as the user wrote it) takes:
         an SDF object's range (radius > 0, ...), else the materials' ranges
         (:func:`draaw_mi.materials.check_value`). Nothing changes."""
-        from ..sdf.params import PREFIX
-        if self.sdf is not None and key.startswith(PREFIX) and key not in self.params:
-            try:
-                self.sdf.check(key[len(PREFIX):], value)
-            except ParameterError as e:
-                raise ParameterError(f"{who}: {name}: {e}") from None
-            return
+        self.check_values(who, {name: (key, value)})
+
+    def check_values(self, who: str, values: dict) -> None:
+        """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are
+        checked with each other (a round box's new size with its new radius), on top of the
+        scene's current values."""
         from ..materials import check_value
-        check_value(who, name, key, value)
+        from ..sdf.params import PREFIX
+        sdf = {}
+        for name, (key, value) in values.items():
+            if self.sdf is not None and key.startswith(PREFIX) and key not in self.params:
+                sdf[key[len(PREFIX):]] = value
+            else:
+                check_value(who, name, key, value)
+        if sdf:
+            try:
+                self.sdf.check_many(sdf)
+            except ParameterError as e:
+                names = ", ".join(n for n, (k, _) in values.items() if k[len(PREFIX):] in sdf)
+                raise ParameterError(f"{who}: {names}: {e}") from None
 
     def key(self, name: str) -> str:
         """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's

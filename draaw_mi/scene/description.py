@@ -165,10 +165,15 @@ def _matrix_of(t) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- materials
+# negative values a resampled image keeps (Lanczos overshoot) and that are let through
+NEGATIVE_SLACK = 1e-2
+
+
 def _check_image_values(path: str, shown: str, where: Where, what: str, nonneg: bool = True) -> None:
-    """Refuse an image file with a non-finite value, or a negative one with ``nonneg`` (a
-    half-float HDRI stores a sun above 65504 as +Inf: its environment map rendered NaN / Inf
-    pixels in V3, V4 and Mitsuba's ``path``), naming the first bad pixel."""
+    """Refuse an image file with a non-finite value in its colour channels, or, with
+    ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
+    +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
+    naming the first bad pixel. Alpha and other layers are not looked at."""
     import mitsuba as mi
     try:
         arr = np.asarray(mi.Bitmap(path))
@@ -176,8 +181,8 @@ def _check_image_values(path: str, shown: str, where: Where, what: str, nonneg: 
         raise where.error(f"{what} {shown!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
     if np.issubdtype(arr.dtype, np.integer):
         return                                    # 8/16-bit: finite and >= 0 by construction
-    arr = arr.reshape(arr.shape[0], arr.shape[1], -1)
-    bad = ~np.isfinite(arr) | (arr < 0) if nonneg else ~np.isfinite(arr)
+    arr = arr.reshape(arr.shape[0], arr.shape[1], -1)[..., :3]
+    bad = ~np.isfinite(arr) | (arr < -NEGATIVE_SLACK) if nonneg else ~np.isfinite(arr)
     if bad.any():
         y, x, c = (int(i[0]) for i in np.nonzero(bad))
         raise where.error(f"{what} {shown!r} has the value {float(arr[y, x, c]):g} at pixel "
@@ -250,7 +255,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                 _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
             elif isinstance(value, np.ndarray):
                 arr = np.asarray(value, dtype=np.float64)
-                if not np.isfinite(arr).all() or (nonneg and (arr < 0).any()):
+                if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):
                     raise (where / key).error("texture array has a non-finite"
                                               + (" or negative" if nonneg else "") + " value")
     return out
@@ -379,7 +384,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         path = ctx.path(string(light["file"], where / "file"))
         if not os.path.isfile(path):
             raise (where / "file").error(f"environment map {light['file']!r} does not exist")
-        _check_image_values(path, light["file"], where / "file", "environment map")
+        _check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
         return {name: {"type": "envmap", "filename": path, "scale": intensity}}
     if kind == "directional":
         d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")

@@ -19,6 +19,7 @@ recompile the render kernel.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import drjit as dr
@@ -149,9 +150,11 @@ class SDFNode:
         >>> round(float(b.radius[0]), 6)
         0.1
         """
-        old = self._params.get(key)
-        self.set_param(key, value)
-        self._assign(key, old)
+        # on a copy: the node may be in a render on another thread (a preview's), which must
+        # not see the value being checked
+        probe = copy.copy(self)
+        probe._params = dict(self._params)
+        probe.set_param(key, value)
 
     def param_range(self, key: str) -> tuple:
         """``(low, high)`` that an optimiser may project parameter ``key`` onto (``None``: no
@@ -161,7 +164,7 @@ class SDFNode:
         >>> Sphere(radius=1.0).param_range("radius")
         (0.0001, None)
         """
-        self._checked_value(key, self._params[key])           # (an unknown key: the error)
+        self._checked_value(key, self._params.get(key))       # (an unknown key: the error)
         lo = getattr(self, "_lower_bounds", {}).get(key)
         return (None if lo is None else lo + OPEN_MARGIN, None)
 

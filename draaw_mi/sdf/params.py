@@ -26,6 +26,7 @@ class SDFParameters(mi.SceneParameters):
         super().__init__({}, {})
         self._base = mi.traverse(scene.mi_scene) if base is None else base
         self._sdf = scene.sdf
+        self._pending: dict = {}        # SDF values set, applied together by update()
 
     def _sdf_keys(self):
         return [PREFIX + k for k in self._sdf.params()] if self._sdf is not None else []
@@ -47,12 +48,25 @@ class SDFParameters(mi.SceneParameters):
 
     def __getitem__(self, key):
         if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
-            return self._sdf.params()[key[len(PREFIX):]]
+            name = key[len(PREFIX):]
+            return self._pending[name] if name in self._pending else self._sdf.params()[name]
         return self._base[key]
 
     def __setitem__(self, key, value):
+        """An SDF value takes effect at once when its node accepts it as the node stands;
+        one that only fails the node's cross-check (a round box's new size with the radius
+        it still has) waits for :meth:`update`, which sets the waiting values together, so
+        that a frame's size and radius are checked with each other, in either order."""
         if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
-            self._sdf.set(key[len(PREFIX):], value)
+            from ..errors import ParameterError
+            name = key[len(PREFIX):]
+            self._pending.pop(name, None)
+            try:
+                self._sdf.set(name, value)
+            except ParameterError:
+                node, param = self._sdf._node(name)
+                node._checked_value(param, value)        # out of range on its own: the error
+                self._pending[name] = value
         else:
             self._base[key] = value
 
@@ -61,6 +75,9 @@ class SDFParameters(mi.SceneParameters):
             for k, v in values.items():
                 if k in self:
                     self[k] = v
+        if self._pending:
+            pending, self._pending = self._pending, {}
+            self._sdf.set_many(pending)         # all or nothing
         return self._base.update()
 
     def __repr__(self):

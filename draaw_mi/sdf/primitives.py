@@ -30,7 +30,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from .node import SDFNode, _scalar, _vec3, box, infinite_box, safe_norm, scalar_of, vec_of
+from .node import OPEN_MARGIN, SDFNode, _scalar, _vec3, box, infinite_box, safe_norm, scalar_of, vec_of
 
 
 def _len2(x, y):
@@ -81,6 +81,11 @@ class Box(SDFNode):
 
     def distance(self, p):
         return self._rounded(p, 0.0)
+
+    def param_range(self, key):
+        if key == "size":              # every side > 0 (an optimiser's step made one negative)
+            return (OPEN_MARGIN, None)
+        return super().param_range(key)
 
     def bbox(self):
         c, s = vec_of(self.center), vec_of(self.size)

@@ -624,3 +624,21 @@ def test_sdf_objects_are_animated_by_overrides(tmp_path):
         ref = np.array(draaw_mi.render(ref_scene, seed=frame_seed(5, f), spp=4))
         assert np.array_equal(frames[f], ref), f
     assert np.abs(frames[0] - frames[2]).max() > 0.1       # the objects moved
+
+
+def test_an_sdf_size_and_radius_animated_together_plan_and_render(tmp_path):
+    """Each frame's values are checked with each other, on the scene as loaded: a round box
+    that shrinks with its radius (valid at every frame) was refused at frame 1 because its
+    new size was checked against the loaded radius."""
+    d = tiny_description()
+    d["sdf"] = [{"type": "round_box", "name": "block", "material": "ball", "center": [0.9, 0.3, 0.6],
+                 "size": [0.6, 0.6, 0.6], "radius": 0.25}]
+    scene_file = str(tmp_path / "rb.toml")
+    with open(scene_file, "wb") as fh:
+        tomli_w.dump(d, fh)
+    doc = {"output": str(tmp_path / "out" / "{job}" / "{frame:04d}.exr"), "jobs": [
+        {"name": "shrink", "scene": scene_file, "frames": 2, "spp": 2,
+         "params": {"sdf.block.size": {"values": [[0.6, 0.6, 0.6], [0.3, 0.3, 0.3]]},
+                    "sdf.block.radius": {"values": [0.25, 0.1]}}}]}
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 2 and not res.failed

@@ -154,9 +154,11 @@ def test_save_replaces_a_chain_only_when_the_new_one_is_complete(tmp_path, monke
     post.Chain([{"type": "srgb"}]).save(path)
     before = path.read_text()
 
-    def crash(*args, **kwargs):
+    import os
+
+    def crash(*args, **kwargs):         # killed after the new text is written, before it replaces
         raise KeyboardInterrupt("killed while writing")
-    monkeypatch.setattr(json, "dumps", crash)
+    monkeypatch.setattr(os, "replace", crash)
     with pytest.raises(KeyboardInterrupt):
         post.Chain([{"type": "bloom"}]).save(path)
     assert path.read_text() == before and [p.name for p in tmp_path.iterdir()] == ["chain.json"]

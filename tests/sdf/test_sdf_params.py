@@ -96,6 +96,11 @@ def test_ranges_an_optimiser_projects_onto():
     assert _range_for("sdf.blend.k", sc) == (0.0, None)
     assert _range_for("sdf.ball.center", sc) == (None, None)
     assert _range_for("sdf.block_xf.scale", sc) == (OPEN_MARGIN, None)
+    assert _range_for("sdf.block.size", sc) == (OPEN_MARGIN, None)     # each side
+    with pytest.raises(ParameterError, match="no parameter 'radus'; did you mean 'radius'"):
+        sc.sdf.param_range("ball.radus")
+    from draaw_mi.fit import _space_for
+    assert _space_for("sdf.alpha.center") == "linear"     # a node named like a BSDF parameter
 
 
 def test_values_written_back_load_as_they_were_set():
@@ -130,3 +135,28 @@ def test_values_no_table_holds_are_refused_by_name(key, match):
     sc, _ = _scene(copy.deepcopy(extra))
     with pytest.raises(SceneError, match=f"cannot write '{key}' back: .*{match}"):
         sc.updated_description({key: 0.3})
+
+
+@pytest.mark.parametrize("order", [("size", "radius"), ("radius", "size")])
+def test_values_set_together_are_checked_together(order):
+    """A round box shrunk from size 0.6 / radius 0.25 to size 0.3 / radius 0.1 is valid, but
+    set one key at a time against the other's old value it was refused (size first) or made
+    the render fail later; through all_params (batch frames, fit, preview) either order works
+    and a refused group leaves every value as it was."""
+    sc, _ = _scene()
+    p = sc.all_params
+    p["sdf.block.radius"] = 0.25
+    p.update()
+    new = {"size": [0.3, 0.3, 0.3], "radius": 0.1}
+    sc.check_values("demo", {f"sdf.block.{k}": (f"sdf.block.{k}", new[k]) for k in order})
+    for k in order:
+        p[f"sdf.block.{k}"] = new[k]
+    p.update()
+    node = sc.sdf.nodes["block"]
+    assert float(node.radius[0]) == pytest.approx(0.1) and float(node.size.x[0]) == pytest.approx(0.3)
+    with pytest.raises(ParameterError, match=r"demo: sdf.block.size, sdf.block.radius: .*radius=0.2"):
+        sc.check_values("demo", {"sdf.block.size": ("sdf.block.size", [0.3] * 3),
+                                 "sdf.block.radius": ("sdf.block.radius", 0.2)})
+    with pytest.raises(ParameterError, match="radius=0.2"):
+        sc.sdf.set_many({"block.size": [0.3] * 3, "block.radius": 0.2, "ball.radius": 0.9})
+    assert float(node.radius[0]) == pytest.approx(0.1) and float(sc.sdf.nodes["ball"].radius[0]) == 0.5
