@@ -86,9 +86,9 @@ DEFAULT_ALPHA_MIN = 1e-3
 
 
 def _range_for(key: str, scene: DraawScene | None = None):
-    from .sdf.params import PREFIX
-    if scene is not None and scene.sdf is not None and key.startswith(PREFIX) and key not in scene.params:
-        return scene.sdf.param_range(key[len(PREFIX):])      # an SDF object's radius > 0, ...
+    node_param = None if scene is None else scene.sdf_param(key)
+    if node_param is not None:
+        return scene.sdf.param_range(node_param)             # an SDF object's radius > 0, ...
     parts = key.split(".")
     for p in reversed(parts):
         if p in RANGES:

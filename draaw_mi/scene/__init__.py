@@ -92,6 +92,11 @@ class DraawScene:
             self._all_params = SDFParameters(self, base=self.params)
         return self._all_params
 
+    def sdf_param(self, key: str) -> str | None:
+        """``"NODE.PARAM"`` when ``key`` is one of the scene's ``"sdf.NODE.PARAM"`` keys,
+        else ``None``."""
+        return None if self.sdf is None else self.all_params.sdf_name(key)
+
     def check_value(self, who: str, name: str, key: str, value) -> None:
         """Raise :class:`~draaw_mi.errors.ParameterError` (naming ``who``) if ``value`` is
         not one parameter ``key`` (of :attr:`all_params`; ``name`` as the user wrote it) takes:
@@ -104,19 +109,19 @@ class DraawScene:
         checked with each other (a round box's new size with its new radius), on top of the
         scene's current values."""
         from ..materials import check_value
-        from ..sdf.params import PREFIX
-        sdf = {}
+        sdf, names = {}, []
         for name, (key, value) in values.items():
-            if self.sdf is not None and key.startswith(PREFIX) and key not in self.params:
-                sdf[key[len(PREFIX):]] = value
+            node_param = self.sdf_param(key)
+            if node_param is not None:
+                sdf[node_param] = value
+                names.append(name)
             else:
                 check_value(who, name, key, value)
         if sdf:
             try:
                 self.sdf.check_many(sdf)
             except ParameterError as e:
-                names = ", ".join(n for n, (k, _) in values.items() if k[len(PREFIX):] in sdf)
-                raise ParameterError(f"{who}: {names}: {e}") from None
+                raise ParameterError(f"{who}: {', '.join(names)}: {e}") from None
 
     def key(self, name: str) -> str:
         """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's
@@ -134,7 +139,9 @@ class DraawScene:
         if ending:                 # a bare parameter name ("roughness"): the materials that have it
             shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
             raise SceneError(f"{self.source}: no parameter {name!r}; name the material too: {shown}")
-        hint = suggest(name, short) if "; did you mean" in suggest(name, short) else suggest(name, keys)
+        hint = suggest(name, short)
+        if "; did you mean" not in hint:
+            hint = suggest(name, keys)
         if hint.startswith("; valid:") and len(short) > 12:
             hint = "; `draaw-mi info` lists the scene's materials"
         raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
@@ -170,6 +177,7 @@ class DraawScene:
         mats = desc.setdefault("materials", {})
         from ..sdf.params import PREFIX
         for name, value in values.items():
+            # (every sdf.* name goes to the [[sdf]] tables, which say why one cannot be written)
             if self.sdf is not None and name.startswith(PREFIX) and name not in self.params:
                 from ..sdf.scene import write_back
                 try:

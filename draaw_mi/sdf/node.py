@@ -127,19 +127,12 @@ class SDFNode:
         >>> s = Sphere(radius=1.0); s.set_param("radius", 2.0); s.bbox().max.x
         2.0
         """
-        new = self._checked_value(key, value)
-        old = self._params[key]
-        self._assign(key, new)
-        try:
-            self._check()
-        except ParameterError:
-            # (a round box's radius above half its size was kept after the error)
-            self._assign(key, old)
-            raise
+        # (a round box's radius above half its size was kept after the error)
+        self._assign(key, self.with_values({key: value})._params[key])
 
     def check_param(self, key: str, value) -> None:
         """Raise :class:`~draaw_mi.errors.ParameterError` if :meth:`set_param` would refuse
-        ``value``; the node is not changed (a batch plan checks every frame's value with it).
+        ``value``; the node is not changed.
 
         >>> from draaw_mi.sdf import RoundBox
         >>> b = RoundBox(size=(1, 1, 1), radius=0.1)
@@ -150,11 +143,19 @@ class SDFNode:
         >>> round(float(b.radius[0]), 6)
         0.1
         """
-        # on a copy: the node may be in a render on another thread (a preview's), which must
-        # not see the value being checked
+        self.with_values({key: value})
+
+    def with_values(self, values: dict) -> "SDFNode":
+        """A copy of this node with ``{param: value}`` set, every value range-checked and the
+        node's cross-checks run on them together; raises
+        :class:`~draaw_mi.errors.ParameterError` otherwise. The node itself is not touched
+        (it may be in a render on another thread, a preview's)."""
         probe = copy.copy(self)
         probe._params = dict(self._params)
-        probe.set_param(key, value)
+        for key, value in values.items():
+            probe._assign(key, probe._checked_value(key, value))
+        probe._check()
+        return probe
 
     def param_range(self, key: str) -> tuple:
         """``(low, high)`` that an optimiser may project parameter ``key`` onto (``None``: no

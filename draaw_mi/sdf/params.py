@@ -31,6 +31,13 @@ class SDFParameters(mi.SceneParameters):
     def _sdf_keys(self):
         return [PREFIX + k for k in self._sdf.params()] if self._sdf is not None else []
 
+    def sdf_name(self, key: str) -> str | None:
+        """``"NODE.PARAM"`` when ``key`` is an SDF object's ``"sdf.NODE.PARAM"``, else ``None``."""
+        if self._sdf is None or not key.startswith(PREFIX) or key in self._base:
+            return None
+        name = key[len(PREFIX):]
+        return name if name in self._sdf.params() else None
+
     def keys(self):
         return list(self._base.keys()) + self._sdf_keys()
 
@@ -44,22 +51,22 @@ class SDFParameters(mi.SceneParameters):
         return len(self.keys())
 
     def __contains__(self, key):
-        return key in self._base or key in self._sdf_keys()
+        return key in self._base or self.sdf_name(key) is not None
 
     def __getitem__(self, key):
-        if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
-            name = key[len(PREFIX):]
-            return self._pending[name] if name in self._pending else self._sdf.params()[name]
-        return self._base[key]
+        name = self.sdf_name(key)
+        if name is None:
+            return self._base[key]
+        return self._pending[name] if name in self._pending else self._sdf.params()[name]
 
     def __setitem__(self, key, value):
         """An SDF value takes effect at once when its node accepts it as the node stands;
         one that only fails the node's cross-check (a round box's new size with the radius
         it still has) waits for :meth:`update`, which sets the waiting values together, so
         that a frame's size and radius are checked with each other, in either order."""
-        if key.startswith(PREFIX) and self._sdf is not None and key[len(PREFIX):] in self._sdf.params():
+        name = self.sdf_name(key)
+        if name is not None:
             from ..errors import ParameterError
-            name = key[len(PREFIX):]
             self._pending.pop(name, None)
             try:
                 self._sdf.set(name, value)

@@ -113,24 +113,12 @@ class SDFScene:
         self.set_many({key: value})
 
     def set_many(self, values: dict) -> None:
-        """Set several ``"NODE.PARAM"`` at once: every value is range-checked, all are
-        assigned, then each touched node checks its parameters together (a round box shrunk
-        to size 0.3 with radius 0.1 was refused when the size came first: the old radius 0.25
-        no longer fitted). On an error nothing has changed."""
-        done, touched = [], {}
-        try:
-            for key, value in values.items():
-                node, param = self._node(key)
-                new = node._checked_value(param, value)
-                done.append((node, param, node._params[param]))
-                node._assign(param, new)
-                touched[id(node)] = node
-            for node in touched.values():
-                node._check()
-        except Exception:
-            for node, param, old in reversed(done):
-                node._assign(param, old)
-            raise
+        """Set several ``"NODE.PARAM"`` at once, each node's values checked with each other
+        (a round box shrunk to size 0.3 with radius 0.1 was refused when the size came first:
+        the old radius 0.25 no longer fitted). On an error nothing has changed."""
+        for node, probe, params in self._probes(values):
+            for param in params:
+                node._assign(param, probe._params[param])
 
     def check(self, key: str, value) -> None:
         """Raise :class:`~draaw_mi.errors.ParameterError` if :meth:`set` would refuse
@@ -139,19 +127,17 @@ class SDFScene:
 
     def check_many(self, values: dict) -> None:
         """Raise :class:`~draaw_mi.errors.ParameterError` if :meth:`set_many` would refuse
-        ``values``; nothing changes (checked on copies of the nodes: a render on another
-        thread must not see the values)."""
-        import copy
-        probes: dict = {}
+        ``values``; nothing changes."""
+        self._probes(values)
+
+    def _probes(self, values: dict) -> list:
+        """``[(node, checked copy with the new values, their names)]`` for the nodes that
+        ``values`` touch (:meth:`SDFNode.with_values <draaw_mi.sdf.node.SDFNode.with_values>`)."""
+        by_node: dict = {}
         for key, value in values.items():
             node, param = self._node(key)
-            probe = probes.get(id(node))
-            if probe is None:
-                probe = probes[id(node)] = copy.copy(node)
-                probe._params = dict(node._params)
-            probe._assign(param, probe._checked_value(param, value))
-        for probe in probes.values():
-            probe._check()
+            by_node.setdefault(id(node), (node, {}))[1][param] = value
+        return [(node, node.with_values(vals), list(vals)) for node, vals in by_node.values()]
 
     def param_range(self, key: str) -> tuple:
         """``(low, high)`` of ``"NODE.PARAM"`` for an optimiser's projection
