@@ -62,6 +62,15 @@ def test_a_scene_collected_while_another_records_does_not_abort():
                          text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().endswith("ok True")
+    # the mechanism itself, in this process: off inside (nested too), on again after
+    import gc
+    from draaw_mi.frozen import _PAUSED
+    assert gc.isenabled()
+    with _PAUSED:
+        with _PAUSED:
+            assert not gc.isenabled()
+        assert not gc.isenabled()
+    assert gc.isenabled()
 
 
 @pytest.mark.parametrize("version", ["v2", "v4"])

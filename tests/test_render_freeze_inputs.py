@@ -258,3 +258,7 @@ def test_replay_follows_moved_geometry(scene, monkeypatch):
         p.update()
     assert np.abs(traced - before).max() > 1e-3
     assert np.allclose(frozen, traced, rtol=1e-5, atol=1e-6)
+    # and back: a replay after the mesh returned is the first image again (no stale replay)
+    monkeypatch.setattr(R, "FREEZE", True)
+    again = np.array(draaw_mi.render(scene, version="v1", spp=4, seed=2, post=[]))
+    assert np.allclose(again, before, rtol=1e-5, atol=1e-6)

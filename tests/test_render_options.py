@@ -159,7 +159,10 @@ def test_path_refuses_media_and_volpath_renders_them():
     for version in ("path", "prb"):
         with pytest.raises(draaw_mi.RenderError, match="participating media, which Mitsuba's"):
             draaw_mi.render(scene, version=version, spp=1)
-    assert np.isfinite(np.array(draaw_mi.render(scene, version="volpath", spp=1))).all()
+    got = np.array(draaw_mi.render(scene, version="volpath", spp=1, seed=0, post=[]))
+    ref = np.array(mi.render(scene.mi_scene, spp=1, seed=0, integrator=mi.load_dict(
+        {"type": "volpath", "max_depth": scene.settings["max_depth"]})))
+    assert np.isfinite(got).all() and got.mean() > 0 and np.allclose(got, ref, rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["sdf_csg.toml", "smoke.toml"])

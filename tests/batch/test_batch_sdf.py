@@ -68,8 +68,16 @@ def test_an_sdf_size_and_radius_animated_together_plan_and_render(tmp_path):
     with open(scene_file, "wb") as fh:
         tomli_w.dump(d, fh)
     doc = {"output": str(tmp_path / "out" / "{job}" / "{frame:04d}.exr"), "jobs": [
-        {"name": "shrink", "scene": scene_file, "frames": 2, "spp": 2,
+        {"name": "shrink", "scene": scene_file, "frames": 2, "spp": 2, "seed": 7,
          "params": {"sdf.block.size": {"values": [[0.6, 0.6, 0.6], [0.3, 0.3, 0.3]]},
                     "sdf.block.radius": {"values": [0.25, 0.1]}}}]}
     res = batch.run(doc, progress=False)
     assert res.complete and res.rendered == 2 and not res.failed
+    # frame 1 is the scene loaded once and shrunk as a whole
+    m, specs, _ = batch.load(doc)
+    frames = [draaw_mi.read_exr(s["output"]) for s in specs]
+    ref = draaw_mi.load_scene(scene_file)
+    draaw_mi.render(ref, seed=99, spp=1)                   # V4 learns with the scene as loaded
+    ref.sdf.set_many({"block.size": [0.3, 0.3, 0.3], "block.radius": 0.1})
+    assert np.array_equal(frames[1], np.array(draaw_mi.render(ref, seed=frame_seed(7, 1), spp=2)))
+    assert np.abs(frames[0] - frames[1]).max() > 0.05
