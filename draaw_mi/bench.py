@@ -30,6 +30,7 @@ import numpy as np
 
 from .errors import DraawError
 from .io import read_exr, srgb_encode, write_exr
+from .progress import check_mode, progress_bar
 
 DEFAULT_VERSIONS = ("v1", "v2", "v3", "v4", "path")
 
@@ -117,7 +118,7 @@ def _scene_key(scene, spp: int, max_depth: int) -> str:
 
 
 def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir: str | None = None,
-                 progress: bool = False) -> np.ndarray:
+                 progress: bool | str = False) -> np.ndarray:
     """The :func:`reference_version` render at high spp (Mitsuba's ``path`` unless the scene
     has media or SDF objects), cached as ``<cache_dir>/gt-<hash>.exr`` (atomic write)."""
     from .render import render
@@ -326,12 +327,13 @@ def _media_versions(versions) -> list[str]:
 def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024),
               max_depths=None, adaptive=(None, 8), adaptive_spp=(1,), repeats: int = 3,
               resolution=None, gt_spp: int = 4096, out_dir: str = "out/bench", cache_dir: str | None = None,
-              progress: bool = True, seed: int = 1, denoise_spp=()) -> dict:
+              progress: bool | str = True, seed: int = 1, denoise_spp=()) -> dict:
     """Run the grid on every scene; write results into ``out_dir`` and return them.
 
     ``denoise_spp``: also measure every version at these spp with OIDN denoising
     (``render(..., denoise=True)``; labelled ``+oidn (biased)``; needs ``pyoidn``).
     """
+    check_mode(progress, "bench.run_study")
     from . import load_scene
     from .bench_report import write_report
 
@@ -358,10 +360,7 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
                         if a:
                             for spp in adaptive_spp:
                                 plan.append((s, Setting(v, spp, d, a)))
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=len(plan) + len(loaded), desc="bench", unit="setting")
+    bar = progress_bar(len(plan) + len(loaded), "bench", "setting", progress, where="bench.run_study")
     rows, images, gts = [], {}, {}
     for s in loaded:
         name = os.path.splitext(os.path.basename(s.source))[0]
@@ -414,7 +413,7 @@ def _machine() -> dict:
 # --------------------------------------------------------------------------- frame times
 def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, spp: int = 1,
                 fov: float | None = None, faithful: bool = False, error_frames: int = 3,
-                gt_spp: int = 256, progress: bool = True) -> list[dict]:
+                gt_spp: int = 256, progress: bool | str = True) -> list[dict]:
     """GO-Draaw's frame-time statistics along a camera path, per version.
 
     The camera follows GO-Draaw's keyframes (position + angles) interpolated to ``frames``
@@ -422,6 +421,7 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
     is a full render call, evaluated and synchronised) and the mean RMSE / CIEDE2000 against a
     ``path`` ground truth on ``error_frames`` evenly spaced frames.
     """
+    check_mode(progress, "bench.frame_times")
     import mitsuba as mi
 
     from .camera_path import interpolate
@@ -450,11 +450,9 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
         gts[i] = np.array(render(scene, version=reference_version(scene), spp=gt_spp, seed=777,
                                  post=[]))[..., :3]
     out = []
-    bar = None
     versions = scene_versions(scene, versions)
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=len(versions) * len(path), desc="frame times", unit="frame")
+    bar = progress_bar(len(versions) * len(path), "frame times", "frame", progress,
+                       where="bench.frame_times")
     for v in versions:
         set_camera(path[0])
         render(scene, version=v, spp=spp, post=[])          # warm-up (compilation)

@@ -19,10 +19,19 @@ import os
 import sys
 
 EXIT_BAD_INPUT = 2
+PROGRESS_HELP = ("no progress report (by default a bar on a terminal, else a line every "
+                 "10 s on standard error)")
 
 
 class CliError(Exception):
     """Bad command-line input: printed as one line, exit status 2."""
+
+
+def progress_mode(no_progress: bool):
+    """A bar on a terminal, lines now and then in a log or pipe, none with ``--no-progress``
+    (:func:`draaw_mi.progress.progress_mode`; imported late, as draaw_mi checks the set-up)."""
+    from draaw_mi.progress import progress_mode as mode
+    return mode(no_progress)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -42,6 +51,15 @@ def _writable(path: str, suffixes: tuple[str, ...], what: str) -> str:
         raise CliError(f"{what} {path!r} is a folder")
     if not os.path.isdir(probe) or not os.access(probe, os.W_OK | os.X_OK):
         raise CliError(f"{what} {path!r} is not writable (folder {probe!r})")
+    # permission bits do not tell for root, read-only mounts or /proc: write and delete a file
+    # in the nearest existing folder (else the render ran for nothing, and failed at its write)
+    import tempfile
+    try:
+        fd, name = tempfile.mkstemp(prefix=".draaw-probe-", dir=probe)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as e:
+        raise CliError(f"{what} {path!r} is not writable (folder {probe!r}: {e.strerror})") from None
     return path
 
 
@@ -63,7 +81,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--time-budget", type=float, help="stop after this many seconds (at least one pass)")
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads (default: all cores)")
-    r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    r.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
     r.add_argument("--denoise", action="store_true",
                    help="denoise with Intel OIDN guided by albedo/normal AOVs (biased; needs pyoidn)")
 
@@ -90,7 +108,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="'fit' makes the loss insensitive to a global exposure difference")
     f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss")
     f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--no-progress", action="store_true")
+    f.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 
     b = sub.add_parser("bench", help="measure what accuracy costs in time (error vs time study)")
     b.add_argument("scenes", nargs="*", help="scene files (default: the sample scenes); with "
@@ -111,7 +129,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--camera-path", help="JSON keyframes (GO-Draaw camera_positions.json form): "
                    "also measure frame-time statistics along this path")
     b.add_argument("--frames", type=int, default=60, help="frames along --camera-path")
-    b.add_argument("--no-progress", action="store_true")
+    b.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
     b.add_argument("--denoise", help="comma-separated spp list: also measure OIDN-denoised renders "
                    "at these spp (biased points; needs pyoidn)")
 
@@ -132,7 +150,7 @@ def _batch_parser(sub) -> None:
     a.add_argument("--executor", default="inprocess", choices=["inprocess", "dask"])
     a.add_argument("--workers", type=int, help="Dask LocalCluster worker processes (default: min(cores, 2))")
     a.add_argument("--scheduler", help="address of an existing Dask scheduler, tcp://HOST:PORT")
-    a.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    a.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 
 
 def _cmd_render(args) -> int:
@@ -155,7 +173,7 @@ def _cmd_render(args) -> int:
     if args.post:
         post = _load_chain(args.post)
     image, info = draaw_mi.render(scene, version=args.version, time_budget=args.time_budget, post=post,
-                                  progress=(not args.no_progress) and sys.stderr.isatty(), return_info=True,
+                                  progress=progress_mode(args.no_progress), return_info=True,
                                   denoise=args.denoise)
     arr = np.array(image)
     from draaw_mi.batch.exr import render_metadata
@@ -282,7 +300,7 @@ def _cmd_fit(args) -> int:
     res = draaw_mi.fit(scene, list(args.reference), params=list(args.param), version=args.version,
                        spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
                        post=post, exposure=args.exposure, seed=args.seed,
-                       progress=(not args.no_progress) and sys.stderr.isatty())
+                       progress=progress_mode(args.no_progress))
     for name, value in res.values.items():
         if hasattr(value, "shape"):        # a texture
             mean = ", ".join(f"{m:.4g}" for m in value.reshape(-1, value.shape[-1]).mean(axis=0))
@@ -395,7 +413,7 @@ def _cmd_bench(args) -> int:
         raise CliError(f"bench: --adaptive {args.adaptive}; expected a power of two >= 2 (block size "
                        "in pixels) or 0 (none)")
     keys = _read_json(args.camera_path, "--camera-path") if args.camera_path else None
-    progress = (not args.no_progress) and sys.stderr.isatty()
+    progress = progress_mode(args.no_progress)
     scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
     if not scenes:
         return 0
@@ -475,7 +493,7 @@ def _cmd_batch(args) -> int:
               f"(other job settings){nopreview}, {c['failed']} failed; log {st['log']}")
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
-                    scheduler=args.scheduler, progress=(not args.no_progress) and sys.stderr.isatty())
+                    scheduler=args.scheduler, progress=progress_mode(args.no_progress))
     for r in res.failed:
         print(f"failed: {r['job']} frame {r['frame']}: {r['error']}", file=sys.stderr)
     print(res.summary())

@@ -66,6 +66,7 @@ import numpy as np
 
 from .errors import DraawError, ParameterError
 from .fit_result import FitResult, settled
+from .progress import check_mode, progress_bar
 from .scene import DraawScene, load_scene
 
 LOSSES = ("l2", "l1", "relative_l2")
@@ -282,7 +283,7 @@ def _alpha_min(scene: DraawScene, key: str) -> float:
 
 
 def fit(scene, references, params, version: str = "v4", spp: int = 16, iterations: int = 100,
-        lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool = True,
+        lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
         seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,
         average_last: float = 0.25, tol: float = 5e-3, resolution=None, lr_final: float = 0.1,
         spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None) -> FitResult:
@@ -317,7 +318,9 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     smooth: feed the loss a running mean of recent renders carrying the current render's
         derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
     tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fit_result.settled`).
+    progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
     """
+    check_mode(progress, "fit")
     from .render import check_version_sees, make_integrator, scene_changed
 
     t0 = time.perf_counter()
@@ -404,10 +407,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     if smooth is None:
         smooth = chain is not None or loss == "l1"
     means: list = [None] * len(sensors)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=iterations, desc="fit", unit="it")
+    bar = progress_bar(iterations, "fit", "it", progress, where="fit")
     history: list = []
     scale = mi.Float(1.0)
     compiles = 0
@@ -463,8 +463,8 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
             if it > 0:
                 compiles += new
             if bar is not None:
-                bar.update(1)
                 bar.set_postfix(loss=f"{loss_value:.3g}", **{n.split(".")[-1][:5]: _short(v) for n, v in values.items()})
+                bar.update(1)
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
         if bar is not None:
@@ -518,4 +518,14 @@ def _record(v, shape):
 
 
 def _short(v):
-    return f"{v:.3f}" if isinstance(v, float) else "[" + ",".join(f"{x:.2f}" for x in v) + "]"
+    """A parameter's value for the progress report: a number, a colour, or a texture's mean.
+
+    >>> _short(0.25), _short([0.5, 0.25, 1.0]), _short(np.full((4, 4, 3), 0.5))
+    ('0.250', '[0.50,0.25,1.00]', 'mean 0.500')
+    """
+    arr = np.asarray(v, dtype=np.float64)
+    if arr.ndim == 0:
+        return f"{float(arr):.3f}"
+    if arr.size <= 4:
+        return "[" + ",".join(f"{x:.2f}" for x in arr.ravel()) + "]"
+    return f"mean {arr.mean():.3f}"

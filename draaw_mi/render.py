@@ -23,6 +23,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .errors import RenderError, suggest
+from .progress import check_mode, progress_bar
 from .integrators import is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
@@ -226,7 +227,7 @@ def _scene_passes(scene, spp: int, pass_spp: int) -> list[int]:
 
 
 def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
-           max_depth: int | None = None, resolution=None, *, params=None, progress: bool = False,
+           max_depth: int | None = None, resolution=None, *, params=None, progress: bool | str = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
            integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
@@ -242,7 +243,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         such a request raises :class:`RenderError`.
     spp, seed, max_depth, resolution ((W, H)): override the scene's render settings.
     params: ``mi.traverse`` parameters, for differentiable renders (``dr.backward`` works).
-    progress: show a tqdm progress bar over passes.
+    progress: ``True``/``"bar"`` a tqdm bar over passes, ``"lines"`` a line now and then
+        (for logs, :mod:`draaw_mi.progress`).
     time_budget: seconds; stop after the pass that reaches it (at least one pass runs); the
         image is the mean of the passes done (``return_info`` tells how many samples).
     pass_spp: samples per pass (default: all at once up to 256, 16 with a progress bar/budget).
@@ -269,6 +271,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         >>> img.shape, info["channels"]
         ((24, 32, 4), ['R', 'G', 'B', 'depth.Z'])
     """
+    check_mode(progress, "render")
     from .scene import DraawScene, load_scene
 
     if not isinstance(scene, DraawScene):
@@ -287,7 +290,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
         raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
     if pass_spp is None:
-        pass_spp = min(spp, 16 if (progress or time_budget) else MAX_PASS_SPP)
+        pass_spp = min(spp, 16 if (progress in (True, "bar") or time_budget) else MAX_PASS_SPP)
     _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     if aovs is None:
@@ -309,10 +312,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     counts = _scene_passes(scene, spp, pass_spp)
     n_passes = len(counts)
     seeds = pass_seeds(int(seed), n_passes)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=spp, unit="spp", desc=f"render {version}", leave=False)
+    bar = progress_bar(spp, f"render {version}", "spp", progress, leave=False, where="render")
     acc, done, passes, t0 = None, 0, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
@@ -331,8 +331,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 dr.eval(acc)
                 dr.sync_thread()
             if bar is not None:
-                bar.update(count)
                 bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
+                bar.update(count)
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
     image = acc if n_passes == 1 else acc / done

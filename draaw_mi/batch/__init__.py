@@ -14,7 +14,7 @@ Parameter          Meaning
 ``workers``        Dask LocalCluster worker processes (default: 2 or the core count)
 ``scheduler``      ``tcp://host:port`` of an existing Dask scheduler (instead of a LocalCluster)
 ``dry_run``        plan and report, render nothing
-``progress``       tqdm bar with frames done / failed and ETA
+``progress``       tqdm bar with frames done / failed and ETA; ``"lines"``: a line every 10 s (logs)
 ``on_result``      callback called with every frame's result record (tests, UIs)
 =================  ================================================================
 
@@ -35,6 +35,7 @@ import os
 import time
 from dataclasses import dataclass, field
 
+from ..progress import check_mode, progress_bar
 from .exr import frame_status, read_header
 from .manifest import Manifest, parse_manifest
 from .plan import plan
@@ -169,9 +170,10 @@ def status(manifest, out: str | None = None) -> dict:
 
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
-        scheduler: str | None = None, progress: bool = True, on_result=None, dry_run: bool = False,
+        scheduler: str | None = None, progress: bool | str = True, on_result=None, dry_run: bool = False,
         client=None) -> BatchResult:
     """Render every unfinished frame of ``manifest``; see the module docstring."""
+    check_mode(progress, "batch.run")
     from .executors import EXECUTORS
     from ..errors import ParameterError, suggest
 
@@ -228,10 +230,7 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
             r = {"job": s["job"], "frame": s["frame"], "output": s["output"], "error": str(e)}
             res.failed.append(r)
             log.write(event="frame", **r)
-    bar = None
-    if progress and todo:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=len(todo), unit="frame", desc="batch", dynamic_ncols=True)
+    bar = progress_bar(len(todo), "batch", "frames", progress if todo else False, where="batch.run")
     first_kernels: dict = {}
 
     def handle(r):
@@ -251,8 +250,8 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
                 first_kernels[r["job"]] |= new
         log.write(event="frame", **{k: v for k, v in r.items() if k != "kernels"})
         if bar is not None:
-            bar.update(1)
-            bar.set_postfix(done=res.rendered, failed=len(res.failed))
+            bar.set_postfix(done=res.rendered, failed=len(res.failed))   # (before the step: a line
+            bar.update(1)                                                 # is written on update)
         if on_result is not None:
             on_result(r)
 

@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..progress import check_mode, progress_bar
 from .tracer import TracerOptions, march
 
 REFERENCE = {"sdf_epsilon": 1e-6, "sdf_max_steps": 4096, "sdf_relaxation": 1.0}
@@ -72,8 +73,9 @@ def _render(scene, opts, spp, seed):
 
 
 def run_sdf_study(scene, out_dir: str, settings=None, spp: int = 16, repeats: int = 3,
-                  progress: bool = False, quick: bool = False) -> dict:
+                  progress: bool | str = False, quick: bool = False) -> dict:
     """Run the tracer study on one SDF scene; write the report into ``out_dir``."""
+    check_mode(progress, "sdf study")
     from ..io import write_text
     settings = settings or default_settings(quick)
     name = os.path.splitext(os.path.basename(scene.source or "scene"))[0]
@@ -81,10 +83,8 @@ def run_sdf_study(scene, out_dir: str, settings=None, spp: int = 16, repeats: in
     seeds = [11 + 7 * r for r in range(repeats)]
     refs = [_render(scene, REFERENCE, spp, s) for s in seeds]
     ref_hit, ref_steps = camera_march(scene, REFERENCE)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=len(settings) * (repeats + 1), desc=f"sdf study {name}", unit="render")
+    bar = progress_bar(len(settings) * (repeats + 1), f"sdf study {name}", "render", progress,
+                       where="sdf study")
     for s in settings:                               # warm-up (compilation)
         _render(scene, s, spp, 1)
         if bar is not None:

@@ -241,6 +241,18 @@ def test_dry_run_and_status_render_nothing(tmp_path, capsys):
     assert "3 frames: 3 done" in capsys.readouterr().out
 
 
+def test_a_batch_away_from_a_terminal_reports_progress_in_lines(tmp_path, capsys):
+    """Standard error captured (a log file, not a terminal): whole progress lines, no bar's
+    carriage returns, and the last one counts every frame."""
+    from draaw_mi.cli import main
+    path = write_manifest(tmp_path, manifest(tmp_path, frames=2))
+    assert main(["batch", path]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    assert err.splitlines()[-1].startswith("batch: 2/2 frames (100 %), ")
+    assert err.splitlines()[-1].endswith("done=2 failed=0")
+
+
 def test_out_dir_and_expansion(tmp_path):
     """A job over two versions expands to one job per version under ``--out``; each frame is
     that version's render (a version that did not reach the renderer left only the names

@@ -1,0 +1,80 @@
+"""Progress reports: a bar on a terminal, whole lines at a bounded rate in a log, refused modes."""
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from draaw_mi.errors import ParameterError
+from draaw_mi.progress import LineProgress, progress_bar, progress_mode
+
+
+class Clock:
+    """A clock the test moves by hand."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_lines_are_written_at_most_every_interval_and_at_the_end():
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(100, "batch", "frames", file=out, every=10.0, clock=clock)
+    for _ in range(100):          # one step every 0.5 s: 50 s in all
+        clock.now += 0.5
+        bar.update(1)
+    bar.close()
+    lines = out.getvalue().splitlines()
+    # one line when 10 s have passed (steps 20, 40, 60, 80), one at the last step, none at close
+    assert [line.split(",")[0] for line in lines] == [f"batch: {n}/100 frames ({n} %)"
+                                                      for n in (20, 40, 60, 80, 100)]
+    assert "\r" not in out.getvalue()
+
+
+def test_a_line_tells_elapsed_time_eta_and_the_postfix():
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(8, "fit", "it", file=out, every=5.0, clock=clock)
+    clock.now += 6.0
+    bar.set_postfix(done=2, failed=1)
+    bar.update(2)
+    # 2 of 8 in 6 s: 18 s to go at that rate
+    assert out.getvalue() == "fit: 2/8 it (25 %), 6.0 s, ETA 18 s, done=2 failed=1\n"
+
+
+def test_close_writes_the_last_state_once():
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(10, "render", "spp", file=out, every=60.0, clock=clock)
+    bar.update(3)                 # stopped early (a time budget): no line yet
+    bar.close()
+    bar.close()
+    assert out.getvalue().splitlines() == ["render: 3/10 spp (30 %), 0.0 s, ETA 0 s"]
+
+
+class Stream(io.StringIO):
+    def __init__(self, tty):
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+
+def test_command_line_mode_follows_the_stream():
+    assert progress_mode(False, Stream(True)) == "bar"
+    assert progress_mode(False, Stream(False)) == "lines"
+    assert progress_mode(True, Stream(True)) is False
+
+
+def test_modes_are_checked_by_name():
+    assert progress_bar(3, "x", "it", False) is None
+    assert isinstance(progress_bar(3, "x", "it", "lines", file=io.StringIO()), LineProgress)
+    with pytest.raises(ParameterError, match=r"fit: progress='yes'; expected False, True, 'bar' or 'lines'"):
+        progress_bar(3, "x", "it", "yes", where="fit")
+
+
+def test_render_refuses_a_bad_mode_before_it_loads_anything():
+    import draaw_mi
+    with pytest.raises(ParameterError, match="render: progress=2"):
+        draaw_mi.render("no-such-scene.toml", progress=2)
