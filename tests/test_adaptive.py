@@ -97,6 +97,32 @@ def test_edges_and_shadows_are_refined_to_pixels(tiny_scene, monkeypatch):
     assert np.isfinite(np.array(img)).all() and (np.array(img).sum(axis=2) > 0).mean() > 0.95
 
 
+def test_traced_pixels_have_the_expectation_of_a_full_render(tiny_scene, monkeypatch):
+    """The pixels that are traced (silhouettes and shadow edges, mostly) are the image's own
+    pixels: over independent seeds their values have the expectation of Mitsuba's ``path``
+    render of the whole image at the same pixels (box filter; per-pixel z-test with the
+    suite's bounds). A sample position off by one pixel puts the edge pixels at |z| >> 3."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "integrators"))
+    from integrators_helpers import check_same_expectation
+
+    from draaw_mi import adaptive
+    real, calls = adaptive._sample_points, []
+    monkeypatch.setattr(adaptive, "_sample_points",
+                        lambda scene, integ, xs, ys, spp, seed: (calls.append((xs.copy(), ys.copy())),
+                                                                 real(scene, integ, xs, ys, spp, seed))[1])
+    seeds = range(10)
+    stack = np.stack([np.array(render_adaptive(tiny_scene, block=8, spp=16, seed=s, version="path")[0])
+                      for s in seeds])
+    xs, ys = calls[0]
+    assert all(np.array_equal(c[0], xs) and np.array_equal(c[1], ys) for c in calls)  # same pixels
+    full = np.stack([np.array(draaw_mi.render(tiny_scene, version="path", spp=16, seed=100 + s, post=[]))
+                     for s in seeds])
+    assert len(xs) > 100
+    check_same_expectation(stack[:, ys, xs][:, :, None], full[:, ys, xs][:, :, None])
+
+
 @pytest.mark.parametrize("res", [(1, 1), (2, 2), (3, 5), (17, 9)])
 def test_tiny_and_odd_images(res):
     scene = _plane_scene(res)

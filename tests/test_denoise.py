@@ -104,7 +104,8 @@ def test_render_denoise_channels_and_errors(cornell):
     img, info = draaw_mi.render(cornell, version="path", spp=2, seed=1, denoise=True, return_info=True)
     assert info["channels"] == ["R", "G", "B"] and info["denoised"]       # colour-only guides
     raw = np.array(draaw_mi.render(cornell, version="path", spp=2, seed=1))
-    np.testing.assert_allclose(np.array(img), draaw_mi.denoise(raw), rtol=1e-5, atol=1e-6)
+    ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(raw, 0)), hdr=True, quality="high")
+    np.testing.assert_allclose(np.array(img), np.asarray(ref), rtol=1e-5, atol=1e-6)
     with pytest.raises(RenderError, match="not differentiable"):
         draaw_mi.render(cornell, spp=1, denoise=True, params=cornell.params)
     with pytest.raises(RenderError, match="adaptive"):
@@ -132,15 +133,48 @@ def test_denoise_is_oidn_with_its_guides_in_their_places(cornell):
     assert np.abs(np.asarray(ldr) - out).max() > 1e-3
 
 
+@pytest.mark.parametrize("quality,hdr,clean_aux", [("fast", True, False), ("balanced", True, True),
+                                                   ("high", False, False), ("fast", False, True)])
+def test_every_option_reaches_oidn(cornell, quality, hdr, clean_aux):
+    """denoise() and Denoiser() with each option equal OIDN called directly with the same
+    options (the colour clipped at 0 only for HDR input); the options change OIDN's output
+    here, so one the wrapper dropped or fixed would show."""
+    img, info = draaw_mi.render(cornell, spp=4, seed=3, aovs=["albedo", "normal"], post=[], return_info=True)
+    arr = np.array(img)
+    idx = aux_channels(info["channels"])
+    c, a, n = arr[..., :3], arr[..., idx["albedo"]], arr[..., idx["normal"]]
+
+    def oidn(quality, hdr, clean_aux):
+        colour = np.maximum(c, 0) if hdr else c
+        return np.asarray(pyoidn.denoise(np.ascontiguousarray(colour), albedo=np.ascontiguousarray(np.clip(a, 0, 1)),
+                                         normal=np.ascontiguousarray(np.clip(n, -1, 1)), hdr=hdr,
+                                         clean_aux=clean_aux, quality=quality))
+    ref = oidn(quality, hdr, clean_aux)
+    np.testing.assert_allclose(draaw_mi.denoise(c, a, n, quality=quality, hdr=hdr, clean_aux=clean_aux),
+                               ref, atol=1e-6)
+    np.testing.assert_allclose(Denoiser(quality=quality, hdr=hdr, clean_aux=clean_aux)(c, a, n),
+                               ref, atol=1e-6)
+    for other in ({"quality": "high" if quality != "high" else "fast"}, {"hdr": not hdr}):
+        changed = oidn(**{"quality": quality, "hdr": hdr, "clean_aux": clean_aux, **other})
+        assert np.abs(changed - ref).max() > 1e-3, other
+
+
 def test_render_denoise_renders_and_uses_the_guides(cornell):
     """render(denoise=True) with a draaw version renders the albedo and normal AOVs and hands
-    them to OIDN: it equals denoise_aovs of the same render with those AOVs, not the
-    colour-only denoising."""
+    them to OIDN: it equals OIDN called directly on the same render with those AOVs (HDR,
+    quality "high"), not the colour-only denoising."""
     img = np.array(draaw_mi.render(cornell, spp=2, seed=4, denoise=True, post=[]))
     raw, info = draaw_mi.render(cornell, spp=2, seed=4, aovs=["albedo", "normal"], post=[], return_info=True)
-    ref = denoise_aovs(np.array(raw), info["channels"])[..., :3]
-    np.testing.assert_allclose(img, ref, rtol=1e-5, atol=1e-6)
-    colour_only = draaw_mi.denoise(np.array(raw)[..., :3])
+    raw = np.array(raw)
+    idx = aux_channels(info["channels"])
+    ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(raw[..., :3], 0)),
+                         albedo=np.ascontiguousarray(np.clip(raw[..., idx["albedo"]], 0, 1)),
+                         normal=np.ascontiguousarray(np.clip(raw[..., idx["normal"]], -1, 1)),
+                         hdr=True, quality="high")
+    np.testing.assert_allclose(img, np.asarray(ref), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(denoise_aovs(raw, info["channels"])[..., :3], img, rtol=1e-5, atol=1e-6)
+    colour_only = np.asarray(pyoidn.denoise(np.ascontiguousarray(np.maximum(raw[..., :3], 0)), hdr=True,
+                                            quality="high"))
     assert np.abs(colour_only - img).max() > 1e-3
 
 

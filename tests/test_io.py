@@ -115,3 +115,23 @@ def test_png_and_exr_names_are_not_swapped(tmp_path):
     with pytest.raises(IOFailure, match=r"write_exr\('.*oops.png'\)"):
         draaw_mi.write_exr(str(tmp_path / "oops.png"), img)
     assert not list(tmp_path.iterdir())
+
+
+def test_png_exposure_scales_by_two_to_the_stops(tmp_path):
+    """``exposure`` in stops multiplies the linear image by 2**exposure before encoding: 0.18
+    written at +1 stop reads back as the sRGB code of 0.36, at -1 stop as that of 0.09 (the
+    IEC 61966-2-1 transfer written out here, not the module's). Tolerance: the 8-bit rounding
+    of the stored value (±0.5 level, +0.01 for float32 input); the two codes (162 and 85) are
+    far from any rounding boundary, and a sign slip in the exponent swaps them."""
+    from PIL import Image
+
+    def srgb(x):                      # IEC 61966-2-1, for 0.0031308 < x <= 1
+        return 1.055 * x ** (1 / 2.4) - 0.055
+
+    img = np.full((2, 3, 3), 0.18, np.float32)
+    for stops, linear in ((1.0, 0.36), (-1.0, 0.09)):
+        path = str(tmp_path / f"e{stops:+.0f}.png")
+        draaw_mi.write_png(path, img, exposure=stops)
+        back = np.asarray(Image.open(path).convert("RGB"), dtype=float)
+        assert back.shape == (2, 3, 3)
+        assert np.all(np.abs(back - round(srgb(linear) * 255)) <= 0.51), (stops, back[0, 0], srgb(linear) * 255)

@@ -137,14 +137,25 @@ def test_worker_respects_the_scene_render_lock():
 
 
 def test_denoised_preview_uses_the_guides():
-    pytest.importorskip("pyoidn")
+    """The denoised frame is OIDN called directly on the frame's mean, with the albedo and
+    normal AOVs found by their channel names in a render's channel list (not the slices the
+    preview uses), HDR, quality "high"."""
+    pyoidn = pytest.importorskip("pyoidn")
+    from draaw_mi.denoise import aux_channels
     scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=(48, 48))
     pv = Preview(scene, denoise=True, freeze=False, max_depth=4)
     f = pv.step()
     assert f.denoised and f.image.shape == (48, 48, 3) and np.isfinite(f.image).all()
     assert not np.array_equal(f.image, f.raw)
-    ref = draaw_mi.denoise(f.raw, pv._acc[..., 6:9].astype(np.float32), pv._acc[..., 3:6].astype(np.float32))
-    np.testing.assert_allclose(f.image, ref, rtol=1e-5, atol=1e-6)
+    _, info = draaw_mi.render(scene, spp=1, max_depth=4, aovs=["albedo", "normal"], post=[], return_info=True)
+    idx = aux_channels(info["channels"])
+    acc = pv._acc.astype(np.float32)
+    assert acc.shape[2] == len(info["channels"])
+    ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(f.raw, 0)),
+                         albedo=np.ascontiguousarray(np.clip(acc[..., idx["albedo"]], 0, 1)),
+                         normal=np.ascontiguousarray(np.clip(acc[..., idx["normal"]], -1, 1)),
+                         hdr=True, quality="high")
+    np.testing.assert_allclose(f.image, np.asarray(ref), rtol=1e-5, atol=1e-6)
 
 
 def test_configure_rejects_unknown_options():

@@ -231,20 +231,43 @@ def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
     assert not t.preview.running
 
 
+def _go_draaw_camera_to_world(position, theta, phi, fov_deg):
+    """Camera-to-world matrix for a GO-Draaw camera, written from go-draaw-spec.md §2.8 and
+    Mitsuba's look_at convention (columns: left = up x forward, up, forward, origin).
+    GO-Draaw's image is the bilinear patch TL, TR = S(θ+F, φ), BL = S(θ, φ+F): its centre ray
+    is (TR + BL) / 2 and its image-up direction TL - BL (made orthogonal to the centre ray)."""
+    def S(th, ph):
+        return np.array([np.sin(ph) * np.cos(th), np.sin(ph) * np.sin(th), np.cos(ph)])
+    F = np.radians(fov_deg)
+    tl, tr, bl = S(theta, phi), S(theta + F, phi), S(theta, phi + F)
+    fwd = (tr + bl) / np.linalg.norm(tr + bl)
+    up = (tl - bl) - fwd * np.dot(tl - bl, fwd)
+    up /= np.linalg.norm(up)
+    left = np.cross(up, fwd)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, up, fwd, position
+    return m
+
+
 def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
-    keys = [(0.0, 1.0, 6.0, -1.5708, 1.5708), (2.0, 1.5, 5.0, -1.2, 1.5)]
-    path = tuner.load_camera_path(keys, frames=10)
+    """Stepping the *path frame* slider puts the camera on that frame of the path: frames 0, 4
+    and 9 of 10 between two keys are at u = j/9, i.e. key0 + (key1 - key0) s(j/9) with
+    smoothstep s (the default interpolation, closed form here), and the sensor's to_world
+    equals the GO-Draaw camera of that (x, y, z, θ, φ) built from the spec (helper above).
+    Tolerance 1e-5: the float32 matrix of entries below 7 (a frame off by one is ~1e-2 away)."""
+    keys = np.array([(0.0, 1.0, 6.0, -1.5708, 1.5708), (2.0, 1.5, 5.0, -1.2, 1.5)])
+    path = tuner.load_camera_path([tuple(k) for k in keys], frames=10)
     assert len(path) == 10 and tuner.path_frame.max == 9 and not tuner.path_play.disabled
-    tuner.path_frame.value = 9
-    tuner.refresh()
-    m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
-    np.testing.assert_allclose(m[:3, 3], keys[-1][:3], atol=1e-5)      # camera at the last keyframe
-    # and looking along the keyframe's angles (theta, phi), converted as GO-Draaw does (that
-    # conversion is tested against the spec in test_scene.py): the frame's forward and up axes
-    from draaw_mi.scene.camera import go_draaw_look_at
-    o, t, up = go_draaw_look_at(keys[-1][:3], keys[-1][3], keys[-1][4], float(tuner.fov.value))
-    np.testing.assert_allclose(m[:3, 2], (t - o) / np.linalg.norm(t - o), atol=1e-5)
-    np.testing.assert_allclose(m[:3, 1], up, atol=1e-5)
+    fov = float(tuner.fov.value)
+    assert fov == pytest.approx(40.0)                        # the scene's x_fov
+    for j in (4, 9, 0):                                      # 0 last: the slider really moves back
+        tuner.path_frame.value = j
+        tuner.refresh()
+        t = j / 9
+        x, y, z, theta, phi = keys[0] + (keys[1] - keys[0]) * t * t * (3 - 2 * t)
+        m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
+        np.testing.assert_allclose(m, _go_draaw_camera_to_world((x, y, z), theta, phi, fov), rtol=0, atol=1e-5,
+                                   err_msg=f"path frame {j}")
     tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
     assert "camera path" in tuner.message.value
 
