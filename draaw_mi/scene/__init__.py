@@ -228,14 +228,24 @@ class DraawScene:
 # images in different processes (a resumed batch frame was not bit-identical). Such scenes
 # load without the optimisation (declaration order); the others keep the merged meshes, which
 # are cheaper for dr.freeze to traverse (about 0.02 ms per shape and frozen render).
+# Scenes with [[sdf]] objects load without it too: the merge swallowed the proxy meshes of two
+# SDF objects with equal materials into one shape without an id, and the tracer, which finds
+# its objects by their proxies' ids, drew nothing (GO-Draaw's sphere lists, whose spheres
+# mostly share the default colour, rendered as an empty floor).
 def _emitting_shapes(d: dict) -> int:
     return sum(1 for v in d.values() if isinstance(v, dict) and isinstance(v.get("emitter"), dict))
 
 
+def _has_sdf_proxies(d: dict) -> bool:
+    from ..sdf.scene import PROXY_PREFIX
+    return any(isinstance(k, str) and k.startswith(PROXY_PREFIX) for k in d)
+
+
 def load_mitsuba_dict(d: dict):
-    """``mi.load_dict(d)`` with the scene's emitters in a fixed order (see above)."""
+    """``mi.load_dict(d)`` with the scene's emitters in a fixed order and its SDF proxies
+    kept apart (see above)."""
     import mitsuba as mi
-    return mi.load_dict(d, optimize=_emitting_shapes(d) < 2)
+    return mi.load_dict(d, optimize=_emitting_shapes(d) < 2 and not _has_sdf_proxies(d))
 
 
 def load_mitsuba_file(path: str):

@@ -56,6 +56,11 @@ class SDFHook:
         self.sdf = sdf
         self.opts = opts
         by_id = {sh.id(): sh for sh in scene.shapes()}
+        missing = [pid for pid in sdf.proxy_ids if pid not in by_id]
+        if missing:     # (merged into another mesh: load with optimize=False, scene.load_mitsuba_dict)
+            from ..errors import RenderError
+            raise RenderError(f"SDF tracer: the scene lacks the proxy shapes {missing} of its SDF "
+                              "objects (merged by Mitsuba's scene optimisation?)")
         self.proxies = [by_id[pid] for pid in sdf.proxy_ids]
         self.proxy_ptrs = mi.ShapePtr(self.proxies)
 
@@ -137,10 +142,14 @@ class SDFHook:
     def emitter_geometry(si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f, em_weight, active):
         """Re-attach ``ds.d`` and the ``1 / dist^2`` (and, for area lights, the emitter-side
         cosine) factor of ``em_weight`` to the (attached) point ``si.p``; values unchanged.
-        Directional and environment samples (infinite ``dist``) depend on the direction only.
-        ``common.sample_emitter`` evaluates the emitter at the detached point in SDF scenes, so
-        that a point light's own ``1 / dist^2`` is not counted twice."""
-        finite = active & dr.isfinite(ds.dist) & (ds.dist > 0)
+        Directional and environment samples depend on the direction only: they are told by
+        their emitter's ``Infinite`` flag, as a directional light's samples carry a finite
+        ``dist`` (twice the scene's radius; by that alone a sun was a point light, with a
+        gradient 2.2x too large). ``common.sample_emitter`` evaluates the emitter at the
+        detached point in SDF scenes, so that a point light's own ``1 / dist^2`` is not
+        counted twice."""
+        infinite = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+        finite = active & ~infinite & dr.isfinite(ds.dist) & (ds.dist > 0)
         v = mi.Vector3f(dr.detach(ds.p)) - si.p
         dist2 = dr.squared_norm(v)
         ok = finite & (dist2 > 0)

@@ -18,11 +18,13 @@ from sdf_helpers import base_description
 RES = (32, 24)
 
 
-def _scene(sdf_entries, light_at_camera=True, light=(0.3, 1.5, 5.0)):
+def _scene(sdf_entries, light_at_camera=True, light=(0.3, 1.5, 5.0), sun=False):
     d = base_description(RES)
     d["shapes"] = d["shapes"][:1]                    # floor only (no occluder)
     d["render"]["max_depth"] = 2                     # direct light: the differentiated part
-    if light_at_camera:                              # shadows fall behind the objects
+    if sun:                                          # a directional light from the camera side
+        d["lights"] = [{"type": "directional", "direction": [-0.3, -0.6, -1.0], "intensity": 3.0}]
+    elif light_at_camera:                            # shadows fall behind the objects
         d["lights"] = [{"type": "point", "position": list(light), "intensity": 30.0}]
     d["sdf"] = sdf_entries
     return draaw_mi.load_scene(d)
@@ -113,6 +115,14 @@ def test_radius_gradient_matches_fd(version):
 
 def test_centre_gradient_matches_fd():
     check(*ad_fd(_scene(SPHERE), "sdf.ball.center", 2, 0.01, "v4", range(4)))
+
+
+@pytest.mark.parametrize("key,comp", [("sdf.ball.radius", 0), ("sdf.ball.center", 2)])
+def test_gradients_under_a_directional_light_match_fd(key, comp):
+    """A sun (Mitsuba's ``directional``) has a direction and no position, though its samples
+    carry a finite distance (twice the scene's radius): the shading point's gradient must not
+    see a 1/dist^2 fall-off or a direction towards a point (the radius gradient was 2.2x FD)."""
+    check(*ad_fd(_scene(SPHERE, sun=True), key, comp, 0.01, "v4", range(4)))
 
 
 def test_smooth_k_gradient_matches_fd():

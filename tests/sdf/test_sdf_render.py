@@ -122,6 +122,25 @@ def test_same_image_as_mitsuba_shape(version, kind):
     assert b.mean(0).std() > 0.02
 
 
+def test_two_objects_with_equal_materials_are_both_drawn():
+    """Two SDF spheres whose material slots are equal (two names, one value; GO-Draaw's sphere
+    lists, whose spheres share the default colour, make such slots): the same image as two
+    Mitsuba spheres. Mitsuba's mesh merging once fused the slots' proxy shapes and the tracer
+    drew neither (the floor alone, no error)."""
+    import copy
+
+    from sdf_helpers import base_description
+    a = base_description()
+    a["materials"]["twin"] = dict(a["materials"]["ball"])
+    b = copy.deepcopy(a)
+    balls = [{"type": "sphere", "name": f"ball{i}", "material": m, "center": [x, 0.45, 0.0],
+              "radius": 0.45} for i, (x, m) in enumerate(((-0.6, "ball"), (0.7, "twin")))]
+    a["shapes"] += balls
+    b["sdf"] = copy.deepcopy(balls)
+    ref, sdf = draaw_mi.load_scene(a), draaw_mi.load_scene(b)
+    check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
+
+
 def test_same_image_under_area_light_v4():
     ref, sdf = twin_scenes("sphere", light="area")
     check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
