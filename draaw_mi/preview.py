@@ -93,10 +93,21 @@ class PreviewFrame:
     encoded: bool = False      # image is display-encoded (the post chain ends in srgb)
 
 
-def _value(v):
-    """A Python value -> what ``params[key] = ...`` accepts."""
+def _value(v, current):
+    """A Python value -> what ``params[key] = ...`` accepts, given the parameter's ``current``
+    value: three numbers become its own 3-vector type (a ``Color3f`` for a colour, a
+    ``Point3f`` for an SDF object's centre; everything was a ``Color3f`` once, which an SDF
+    centre refused at the next frame, dropping the change), anything else goes as it is.
+
+    >>> p = _value([0.1, 0.2, 0.3], mi.Point3f(0.0))
+    >>> type(p).__name__, type(_value([1, 1, 1], mi.Color3f(0.0))).__name__, _value(0.5, mi.Float(0.0))
+    ('Point3f', 'Color3f', 0.5)
+    """
     if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
-        return mi.Color3f(*[float(x) for x in v])
+        kind = type(current)
+        if not (dr.is_array_v(kind) and dr.depth_v(kind) == 2 and dr.size_v(kind) == 3):
+            kind = mi.Color3f
+        return kind(*[float(x) for x in v])
     return v
 
 
@@ -228,7 +239,7 @@ class Preview:
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
                 for key, v in pending.items():
-                    p[key] = _value(v)
+                    p[key] = _value(v, p[key])
                 p.update()
                 scene_changed(sc.mi_scene)          # e.g. V4's light powers
 

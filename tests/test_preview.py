@@ -311,8 +311,9 @@ def test_mitsubas_path_previews_denoised_colour_only():
 
 
 def test_an_sdf_object_moved_in_the_preview_renders_as_a_scene_built_that_way():
-    """``sdf.NODE.PARAM`` keys reach the tracer (the preview wrote only ``mi.traverse`` keys);
-    a bad value is refused by the call, not by the render thread."""
+    """``sdf.NODE.PARAM`` keys reach the tracer (the preview wrote only ``mi.traverse`` keys),
+    a centre given as a list too (it was made a colour, which the next frame refused, dropping
+    the change); a bad value is refused by the call, not by the render thread."""
     def described(radius):
         d = tiny_description()
         d["sdf"] = [{"type": "sphere", "name": "blob", "material": "ball", "center": [0.8, 0.4, 0.3],
@@ -323,7 +324,7 @@ def test_an_sdf_object_moved_in_the_preview_renders_as_a_scene_built_that_way():
     pv.step()
     with pytest.raises(ParameterError, match="Preview.update: sdf.blob.radius: .*expected a number > 0"):
         pv.update({"sdf.blob.radius": 0.0})
-    pv.update({"sdf.blob.radius": 0.45})
+    pv.update({"sdf.blob.radius": 0.45, "sdf.blob.center": [0.7, 0.45, 0.3]})
     f, f2 = pv.step(), pv.step()
     seed = pass_seeds(4, pv._frame_index + 1)[-1]
     # V4 learns its light selection with the scene as first rendered (radius 0.3), so the
@@ -331,6 +332,7 @@ def test_an_sdf_object_moved_in_the_preview_renders_as_a_scene_built_that_way():
     other = draaw_mi.load_scene(described(0.3))
     old = _direct(other, [seed], depth=3)[..., :3]
     other.sdf.set("blob.radius", 0.45)
+    other.sdf.set("blob.center", [0.7, 0.45, 0.3])
     scene_changed(other.mi_scene)
     ref = _direct(other, [seed], depth=3)[..., :3]
     np.testing.assert_allclose(f2.raw * 2 - f.raw, ref, rtol=1e-4, atol=1e-5)

@@ -23,7 +23,9 @@ def register() -> None:
 def check_value(who: str, name: str, key: str, v) -> None:
     """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
     wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
-    parameters (roughness in [0, 1], ...; colours and light intensities >= 0). Raises
+    parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
+    as a scene file's ``[[volumes]]`` table has them (``phase_function.g``: |g| < 1 in float32,
+    ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 rendered negative pixels). Raises
     :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
     range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
     planner check their overrides with it.
@@ -52,6 +54,9 @@ def check_value(who: str, name: str, key: str, v) -> None:
     if not all(math.isfinite(x) for x in nums):
         raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers")
     parts = key.split(".")
+    if any(p.endswith("medium") for p in parts[:-1]):
+        _check_medium_value(who, name, parts, v, nums)
+        return
     param = parts[-2] if len(parts) >= 3 and parts[-1] == "value" else None
     if param in SCALAR_PARAMS:
         lo, hi = SCALAR_PARAMS[param][1:]
@@ -59,3 +64,18 @@ def check_value(who: str, name: str, key: str, v) -> None:
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
     elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
         raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
+
+
+def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None:
+    """:func:`check_value` for a participating medium's parameter (``parts``: its key split
+    at the dots, e.g. ``plume.interior_medium.phase_function.g``)."""
+    if parts[-2:] == ["phase_function", "g"]:
+        if not all(abs(float(np.float32(x))) < 1.0 for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g with |g| < 1 "
+                                 "(in float32)")
+    elif parts[-1] == "scale":
+        if not all(0.0 <= x <= float(np.finfo(np.float32).max) for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected a density scale >= 0 (finite in float32)")
+    elif "albedo" in parts:
+        if not all(0.0 <= x <= 1.0 for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected values in [0, 1]")

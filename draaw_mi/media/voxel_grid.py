@@ -349,8 +349,13 @@ class VoxelGrid:
 
         Fixed quirks: GO-Draaw copied colours of cells with alpha > 10 but kept one global
         density (the medium stayed homogeneous); here the density is per cell."""
-        if not np.isfinite(density) or density < 0:
-            raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a finite value >= 0")
+        if isinstance(density, bool) or not isinstance(density, (int, float, np.integer, np.floating)):
+            raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a number")
+        density = float(density)
+        # (finite where it is stored: in float32, 1e39 was Inf)
+        if not 0 <= density <= float(np.finfo(np.float32).max):
+            raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a value >= 0 "
+                                 "and finite in float32")
         m = self.occupied
         self.smoke_color[m] = np.clip(self.color[m], 0.0, 1.0)
         self.density[m] = density

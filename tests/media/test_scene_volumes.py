@@ -80,6 +80,8 @@ def base_desc(**vol):
     ({"g": 1.0}, r"volumes\[0\]\.g.*\|g\| < 1"),
     ({"g": -1.5}, r"\|g\| < 1"),
     ({"g": 0.99999999}, r"volumes\[0\]\.g: 0\.99999999; .*\|g\| < 1"),   # 1 in float32
+    ({"density_scale": 1e39}, r"volumes\[0\]\.density_scale: 1e\+39 times .* beyond float32"),
+    ({"density": [[[1e38, 1.0]]], "density_scale": 10.0}, r"density 1e\+38 is 1e\+39, beyond float32"),
     ({"density": [[[1.0, -2.0]]]}, r"volumes\[0\].*density\[0, 0, 1\] = -2"),
     ({"density": [[[1.0, float("nan")]]]}, r"density.*nan"),
     ({"bounds": [[0, 0, 0], [1, 0, 1]]}, r"volumes\[0\]\.bounds.*empty"),
@@ -146,3 +148,28 @@ def test_mesh_source_voxelises_go_draaw_monkey(tmp_path):
     s = draaw_mi.load_scene(desc)
     v = s.summary()["volumes"][0]
     assert v["mode"] == "solid" and v["voxels"] > 500 and v["faces"] > v["voxels"]
+
+
+@pytest.mark.parametrize("key,good,bad,match", [
+    ("plume.interior_medium.phase_function.g", 0.3, 1.5, r"\|g\| < 1"),
+    ("plume.interior_medium.scale", 2.0, -5.0, r"density scale >= 0"),
+    ("plume.interior_medium.albedo.value.value", [0.9, 0.9, 0.9], [1.2, 0.5, 0.5], r"values in \[0, 1\]"),
+])
+def test_medium_values_set_after_loading_are_checked_as_in_scene_files(tmp_path, key, good, bad, match):
+    """A medium's g, density scale and albedo, set by a preview or a batch override, are held
+    to the ranges of a scene file's [[volumes]] table (a g of 1.5 rendered negative pixels,
+    exit 0); the good value passes the same checks."""
+    from draaw_mi import ParameterError, batch
+    from draaw_mi.preview import Preview
+    scene_file = os.path.join(ROOT, "scenes", "smoke.toml")
+    pv = Preview(draaw_mi.load_scene(scene_file, resolution=(8, 6)), freeze=False)
+    pv.update({key: good})
+    with pytest.raises(ParameterError, match=r"Preview.update: " + key.replace(".", r"\.") + ".*" + match):
+        pv.update({key: bad})
+    doc = {"output": str(tmp_path / "{job}" / "{frame:04d}.exr"),
+           "jobs": [{"name": "m", "scene": scene_file, "resolution": [8, 6], "spp": 1, "frames": 2,
+                     "params": {key: {"values": [good, bad]}}}]}
+    with pytest.raises(SceneError, match=r"frame 1.*" + match):
+        batch.load(doc)
+    doc["jobs"][0]["params"][key]["values"] = [good, good]
+    batch.load(doc)

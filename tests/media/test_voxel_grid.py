@@ -169,6 +169,17 @@ def test_to_smoke_moves_colour_and_per_cell_density():
     assert np.allclose(g.smoke_color[1, 2, 3], (0.9, 0.1, 0.2))
 
 
+@pytest.mark.parametrize("density", [1e39, float("nan"), -1.0, "1", True])
+def test_to_smoke_refuses_a_density_float32_cannot_hold(density):
+    """The grid stores float32: 1e39 was stored as Inf (NaN pixels at render), "1" raised a
+    bare TypeError; the grid is left as it was."""
+    g = VoxelGrid.empty((2, 2, 2))
+    g.draw((0, 0, 0), (0.5, 0.5, 0.5))
+    with pytest.raises(ParameterError, match="VoxelGrid.to_smoke: density="):
+        g.to_smoke(density)
+    assert g.occupied[0, 0, 0] and not g.density.any()
+
+
 # --------------------------------------------------------------------------- voxelisation
 def test_surface_voxelisation_of_a_sphere_is_a_closed_shell():
     import trimesh
