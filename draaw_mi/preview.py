@@ -49,7 +49,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .errors import ParameterError, suggest
+from .errors import DraawError, ParameterError, suggest
 from .integrators import is_draaw
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 
@@ -66,6 +66,29 @@ def _budget(value, where: str) -> int:
     if n is None or isinstance(value, bool) or n < 1:
         raise ParameterError(f"{where}: max_spp={value!r}; expected an integer >= 1")
     return int(n)
+
+
+def _depth(value, where: str) -> int:
+    """A path depth: an integer >= -1 (-1: unbounded; 0 renders nothing, as in Mitsuba)."""
+    import operator
+    try:
+        n = operator.index(value)
+    except TypeError:
+        n = None
+    if n is None or isinstance(value, bool) or n < -1:
+        raise ParameterError(f"{where}: max_depth={value!r}; expected an integer >= -1")
+    return int(n)
+
+
+def _chain(value, where: str):
+    """A post chain as given, once it is known to load (an unknown filter failed at the first
+    frame, on the render thread)."""
+    from .post import load_chain
+    try:
+        load_chain(value)
+    except DraawError as e:
+        raise ParameterError(f"{where}: {e}") from None
+    return value
 
 
 def _scale(value, where: str) -> float:
@@ -136,8 +159,8 @@ class Preview:
         self.scene = scene if isinstance(scene, DraawScene) else load_scene(scene)
         s = self.scene.settings
         self.version = s["version"] if version is None else version
-        self.max_depth = s["max_depth"] if max_depth is None else max_depth
-        self.post = s.get("post", []) if post is None else post
+        self.max_depth = _depth(s["max_depth"] if max_depth is None else max_depth, "Preview")
+        self.post = _chain(s.get("post", []) if post is None else post, "Preview")
         self.interactive_scale = _scale(interactive_scale, "Preview")
         self.max_spp, self.freeze, self.seed = _budget(max_spp, "Preview"), bool(freeze), int(seed)
         self.denoise = bool(denoise)
@@ -184,6 +207,10 @@ class Preview:
             options["max_spp"] = _budget(options["max_spp"], "Preview.configure")
         if "interactive_scale" in options:
             options["interactive_scale"] = _scale(options["interactive_scale"], "Preview.configure")
+        if "max_depth" in options:
+            options["max_depth"] = _depth(options["max_depth"], "Preview.configure")
+        if options.get("post") is not None:
+            options["post"] = _chain(options["post"], "Preview.configure")
         with self._lock:
             old = {k: getattr(self, k) for k in options}
             try:

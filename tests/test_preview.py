@@ -168,6 +168,18 @@ def test_configure_rejects_unknown_options():
         Preview(pv.scene, interactive_scale="x")
     with pytest.raises(ParameterError, match="interactive_scale"):
         pv.configure(interactive_scale=None)
+    # a bad chain or depth is refused by the call (it failed at the first frame, on the
+    # render thread, or rendered black), and the preview keeps its settings
+    with pytest.raises(ParameterError, match=r"Preview: post chain\[0\]: unknown filter type 'blom'; did you mean 'bloom'"):
+        Preview(pv.scene, post=[{"type": "blom"}])
+    for depth in ("3", -2, True, 2.5):
+        with pytest.raises(ParameterError, match=r"Preview: max_depth=.*expected an integer >= -1"):
+            Preview(pv.scene, max_depth=depth)
+    with pytest.raises(ParameterError, match=r"Preview.configure: post chain\[0\]"):
+        pv.configure(post=[{"type": "blom"}])
+    with pytest.raises(ParameterError, match=r"Preview.configure: max_depth=2.5"):
+        pv.configure(max_depth=2.5)
+    assert pv.max_depth == 4 and pv.post == []
 
 
 def test_a_post_chain_ending_in_srgb_is_shown_as_it_is():

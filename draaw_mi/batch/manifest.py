@@ -43,6 +43,7 @@ import string as _string
 from dataclasses import dataclass, field
 
 from ..errors import SceneError
+from ..scene.camera import check_look_at
 from ..scene.schema import Where, boolean, check_keys, number, read_document, resolution, string, vector
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
@@ -239,8 +240,10 @@ def _camera(cam, where: Where, base: str) -> dict:
         for i, k in enumerate(keys):
             wk = where / "look_at" / i
             check_keys(k, LOOK_AT_KEYS, wk, required=("origin", "target"))
-            rows.append(vector(k["origin"], wk / "origin") + vector(k["target"], wk / "target")
-                        + vector(k.get("up", [0, 1, 0]), wk / "up"))
+            row = (vector(k["origin"], wk / "origin") + vector(k["target"], wk / "target")
+                   + vector(k.get("up", [0, 1, 0]), wk / "up"))
+            check_look_at(row[0:3], row[3:6], row[6:9], wk)   # (a camera at its target: a flat frame)
+            rows.append(row)
         out["look_at"] = rows
     else:
         if kind == "file":

@@ -110,8 +110,12 @@ def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
             origin = target + up * o["height"] + o["radius"] * (math.cos(a) * e1 + math.sin(a) * e2)
             out.append((origin, target, up))
     elif cam["kind"] == "look_at":
+        from ..scene.camera import check_look_at
+        from ..scene.schema import Where
         rows = _ease(np.asarray(cam["look_at"], float), frames)
         out = [(r[0:3], r[3:6], r[6:9]) for r in rows]
+        for i, (o, t, u) in enumerate(out):          # (the keys are checked; eased frames too)
+            check_look_at(o, t, u, Where(f"camera look_at frame {i}"))
     else:
         keys = cam["keyframes"]
         if len(keys) == 1 or frames == 1:

@@ -200,8 +200,10 @@ class VoxelGrid:
             a = getattr(self, name)
             if a.shape != shape + (3,):
                 raise ParameterError(f"{where}: {name} has shape {a.shape}; expected {shape + (3,)}")
-            if not np.all(np.isfinite(a)) or np.any(a < 0):
-                raise ParameterError(f"{where}: {name} has negative or non-finite values; expected >= 0")
+            if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1):
+                # (above 1: a solid colour amplified light, a smoke albedo was clipped unsaid)
+                raise ParameterError(f"{where}: {name} has values outside [0, 1] or non-finite ones; "
+                                     "expected colours in [0, 1]")
         d = self.density
         if not np.all(np.isfinite(d)):
             bad = np.argwhere(~np.isfinite(d))[0]
@@ -261,7 +263,12 @@ class VoxelGrid:
         """``at`` is a cell index ``(ix, iy, iz)`` or a ray ``(origin, direction)``."""
         if at is None:
             return None
-        a = np.asarray(at, dtype=float)
+        try:
+            a = np.asarray(at, dtype=float)
+        except (TypeError, ValueError):
+            a = np.empty(0)
+        if a.shape in ((3,), (2, 3)) and not np.all(np.isfinite(a)):    # (int(nan): a bare ValueError)
+            raise ParameterError(f"VoxelGrid.{what}: at={at!r}; expected finite numbers")
         if a.shape == (3,):
             i = tuple(int(v) for v in a)
             if any(v != int(v) for v in a) or not all(0 <= i[k] < self.shape[k] for k in range(3)):

@@ -74,19 +74,27 @@ def camera_to_look_at(cam: dict, where: Where):
         origin = np.array(vector(cam.get("origin", [0.0, 0.0, 5.0]), where / "origin"))
         target = np.array(vector(cam.get("target", [0.0, 0.0, 0.0]), where / "target"))
         up = np.array(vector(cam.get("up", [0.0, 1.0, 0.0]), where / "up"))
-        d = target - origin
-        if np.linalg.norm(d) < 1e-9:
-            raise (where / "target").error("equals 'origin'; the camera needs a view direction")
-        if np.linalg.norm(d) < FLOAT32_SEPARATION * max(1.0, np.linalg.norm(origin), np.linalg.norm(target)):
-            # Mitsuba builds the camera in float32: origin [1e4, 1, 0] and a target 1e-4 away
-            # are one point there, and the transform came out NaN (an image of plain sky)
-            raise (where / "target").error(
-                f"is {np.linalg.norm(d):g} from 'origin', too close to tell apart in float32 at "
-                f"{max(np.linalg.norm(origin), np.linalg.norm(target)):g} from the world origin; "
-                "move it further along the view direction")
-        if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
-            raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
+        check_look_at(origin, target, up, where)
     return origin, target, up, fov, fov_axis, near, far
+
+
+def check_look_at(origin, target, up, where) -> None:
+    """Raise ``where``'s error unless ``origin``, ``target`` and ``up`` make a camera: a view
+    direction float32 can hold and an ``up`` not parallel to it (scene files' cameras and the
+    batch's ``look_at`` keyframes and frames)."""
+    origin, target, up = (np.asarray(v, dtype=np.float64) for v in (origin, target, up))
+    d = target - origin
+    if np.linalg.norm(d) < 1e-9:
+        raise (where / "target").error("equals 'origin'; the camera needs a view direction")
+    if np.linalg.norm(d) < FLOAT32_SEPARATION * max(1.0, np.linalg.norm(origin), np.linalg.norm(target)):
+        # Mitsuba builds the camera in float32: origin [1e4, 1, 0] and a target 1e-4 away
+        # are one point there, and the transform came out NaN (an image of plain sky)
+        raise (where / "target").error(
+            f"is {np.linalg.norm(d):g} from 'origin', too close to tell apart in float32 at "
+            f"{max(np.linalg.norm(origin), np.linalg.norm(target)):g} from the world origin; "
+            "move it further along the view direction")
+    if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
+        raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
 
 
 _SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",

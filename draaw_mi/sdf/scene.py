@@ -35,6 +35,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import re
 
 import drjit as dr
 import mitsuba as mi
@@ -47,6 +48,8 @@ from .primitives import PRIMITIVES
 from .transforms import Transform, rotation_matrix
 
 PROXY_PREFIX = "__sdf_"
+#: what an [[sdf]] entry's name may be (it is part of the keys ``sdf.NAME.PARAM``)
+NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 REGISTRY: dict[str, "SDFScene"] = {}
 _TOKENS = itertools.count()
 
@@ -250,9 +253,11 @@ def _primitive(entry: dict, kind: str, name: str, where) -> SDFNode:
         raise where.error(str(e)) from None
 
 
-def build_nodes(entries: list, material_slot, where) -> tuple[list[SDFNode], dict]:
+def build_nodes(entries: list, material_slot, where, resolve=None) -> tuple[list[SDFNode], dict]:
     """Parse ``[[sdf]]`` entries into root nodes. ``material_slot(value, where) -> (id, slot)``
-    resolves a ``material`` value (name or inline table) to a material slot."""
+    resolves a ``material`` value (name or inline table) to a material slot; ``resolve(path)``
+    a file the entries name (a ``go_draaw_spheres`` file) to where it is, relative to the
+    scene file's folder (default: as written)."""
     from ..scene.schema import check_keys, number, string
     if not isinstance(entries, list):
         raise where.error("expected a list of SDF tables ([[sdf]])")
@@ -271,9 +276,14 @@ def build_nodes(entries: list, material_slot, where) -> tuple[list[SDFNode], dic
             raise (w / "type").error(f"unknown SDF type {kind!r}{suggest(kind, kinds)}")
         if kind == "go_draaw_spheres":
             check_keys(entry, ("type", "spheres", "file", "scale"), w)
-            extra_roots.append(_go_draaw_entry(entry, material_slot, w))
+            # (the nodes of a second list are named go2_sphere0, ...: names are keys)
+            prefix = "go_" if not extra_roots else f"go{len(extra_roots) + 1}_"
+            extra_roots.append(_go_draaw_entry(entry, material_slot, w, resolve, prefix))
             continue
         name = string(entry.get("name", f"sdf{i}"), w / "name")
+        if not NAME_PATTERN.fullmatch(name):
+            raise (w / "name").error(f"{name!r}; expected letters, digits, '_' or '-', not starting "
+                                     "with a digit (a name is part of the keys sdf.NAME.PARAM)")
         if name in tables:
             raise (w / "name").error(f"duplicate SDF name {name!r}")
         tables[name] = (entry, w)
@@ -322,7 +332,14 @@ def build_nodes(entries: list, material_slot, where) -> tuple[list[SDFNode], dic
     for name in order:
         build(name)
     roots = [built[n] for n in order if n not in referenced] + extra_roots
-    nodes = {n.name: n for r in roots for n in r.nodes()}
+    nodes: dict[str, SDFNode] = {}
+    for r in roots:
+        for n in r.nodes():
+            if nodes.setdefault(n.name, n) is not n:     # (a shared child is the same node)
+                raise where.error(f"two SDF nodes are named {n.name!r}: names ending in '_xf' or "
+                                  "'_0', '_1', ... are given to transforms and to the inner nodes of "
+                                  "operators of three or more children, 'go_...' to GO-Draaw spheres; "
+                                  "rename the entry")
     return roots, nodes
 
 
@@ -334,13 +351,15 @@ def _assign(node: SDFNode, slot: int) -> None:
             _assign(c, slot)
 
 
-def _go_draaw_entry(entry: dict, material_slot, where) -> SDFNode:
+def _go_draaw_entry(entry: dict, material_slot, where, resolve=None, prefix: str = "go_") -> SDFNode:
     from ..scene.schema import number, string
     if ("spheres" in entry) == ("file" in entry):
         raise where.error("a go_draaw_spheres entry needs exactly one of 'spheres' or 'file'")
     spheres = entry.get("spheres")
     if "file" in entry:
         path = string(entry["file"], where / "file")
+        if resolve is not None:
+            path = resolve(path)
         try:
             with open(path, encoding="utf-8") as f:
                 spheres = json.load(f)
@@ -350,10 +369,11 @@ def _go_draaw_entry(entry: dict, material_slot, where) -> SDFNode:
             raise (where / "file").error(f"malformed JSON at line {e.lineno}: {e.msg}") from None
     s = number(entry.get("scale", 1.0), where / "scale", lo=0.0, lo_open=True)
     return go_draaw_spheres(spheres, lambda i, col: material_slot(
-        {"base_color": col}, where / "spheres" / i), scale=s, where=where / "spheres")
+        {"base_color": col}, where / "spheres" / i), scale=s, where=where / "spheres", prefix=prefix)
 
 
-def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, where=None) -> SDFNode:
+def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, where=None,
+                     prefix: str = "go_") -> SDFNode:
     """A GO-Draaw sphere list (``/getSpheres`` records) as one SDF tree.
 
     Each sphere ``i`` contributes ``op_i(sphere_i, sphere_j)`` with ``j =
@@ -394,7 +414,7 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
                                             f"{suggest(str(rec['sdfType']), names)}")
         elif isinstance(t, bool) or not isinstance(t, int) or t not in GO_DRAAW_TYPES:
             raise (w / "sdfType").error(f"{t!r} is not a GO-Draaw operator; expected 0..9 or a name")
-        sp = Sphere(c, r, name=f"go_sphere{i}")
+        sp = Sphere(c, r, name=f"{prefix}sphere{i}")
         if material_slot is not None:
             sp.material, sp.slot = material_slot(i, col)
         prims.append(sp)
@@ -409,7 +429,7 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
         if isinstance(j, bool) or not isinstance(j, int) or not (0 <= j < len(prims)):
             continue                                   # GO-Draaw skips these
         o = prims[j]
-        nm = f"go_op{i}"
+        nm = f"{prefix}op{i}"
         node = {1: lambda: union(sp, o, name=nm), 2: lambda: smooth_union(sp, o, k, name=nm),
                 9: lambda: smooth_union(sp, o, k, name=nm, material=sp.material),
                 3: lambda: intersection(sp, o, name=nm),
@@ -425,7 +445,7 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
         raise SceneError(f"{where}: no sphere survives (every operator names a missing other sphere)")
     root = parts[0]
     for n, p in enumerate(parts[1:]):
-        root = union(root, p, name=f"go_union{n}")
+        root = union(root, p, name=f"{prefix}union{n}")
     return root
 
 
@@ -458,7 +478,7 @@ def sdf_dicts(entries, materials: dict, ctx, where):
             slots.append(mid)
         return mid, slots.index(mid)
 
-    roots, nodes = build_nodes(entries, material_slot, where)
+    roots, nodes = build_nodes(entries, material_slot, where, resolve=ctx.path)
     if not roots:
         raise where.error("no SDF roots: every entry is a child of another")
     # nodes without any material (no own, no inherited) use a default slot

@@ -111,6 +111,14 @@ def test_bad_version_aov_and_camera(tmp_path, capsys):
          ["exactly one of"])
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"keyframes": [[0, 0, 0, 1]]}),
          ["keyframe 0", "5 finite numbers"])
+    # a look_at key with the camera at its target (a flat frame, exit 0, before), and keys
+    # fine on their own whose eased frame 1 of 3 puts the camera at the target
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"look_at": [
+        {"origin": [0, 1, 5], "target": [0, 1, 5]}, {"origin": [0, 1, 5], "target": [0, 0, 0]}]}),
+        ["look_at[0].target: equals 'origin'"])
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"look_at": [
+        {"origin": [0, 0, 5], "target": [0, 0, 0]}, {"origin": [0, 0, -5], "target": [0, 0, 0]}]}),
+        ["look_at frame 1", "equals 'origin'"])
 
 
 def test_a_version_that_cannot_see_the_scene_is_a_bad_manifest(tmp_path, capsys):

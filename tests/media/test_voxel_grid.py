@@ -299,6 +299,24 @@ def test_colours_outside_0_1_are_refused_not_clipped(color):
     assert not g.occupied.any()
 
 
+def test_per_voxel_colours_and_indices_are_held_to_the_same_rules():
+    """Per-voxel arrays follow draw()'s rules: a solid colour of 2 amplified light (image max
+    1.245), a smoke albedo of 2 was clipped unsaid; a NaN index raised a bare ValueError."""
+    occ = np.ones((2, 2, 2), bool)
+    for name in ("color", "smoke_color"):
+        arr = np.full((2, 2, 2, 3), 0.5)
+        arr[1, 0, 1, 2] = 2.0
+        with pytest.raises(ParameterError, match=f"from_arrays: {name} has values outside"):
+            VoxelGrid.from_arrays(occupied=occ, **{name: arr})
+        arr[1, 0, 1, 2] = 1.0
+        VoxelGrid.from_arrays(occupied=occ, **{name: arr})           # 1 itself is a colour
+    g = VoxelGrid.empty(2)
+    for at in ((float("nan"), 0, 0), ((0, 0, 5), (0, float("inf"), -1)), "abc"):
+        with pytest.raises(ParameterError, match=r"VoxelGrid.draw: "):
+            g.draw(at, (0.5, 0.5, 0.5))
+    assert not g.occupied.any()
+
+
 def test_load_errors(tmp_path):
     with pytest.raises(IOFailure, match="missing.npz"):
         VoxelGrid.load(tmp_path / "missing.npz")

@@ -70,6 +70,15 @@ def test_sphere_moves_from_shapes_to_sdf_by_renaming():
     ([{"type": "sphere", "radus": 1}], r"did you mean 'radius'"),
     ([{"type": "union", "children": ["x"]}], r"two or more"),
     ([{"type": "sphere", "scale": [1, 2, 1]}], r"uniform"),
+    # names are keys (sdf.NAME.PARAM): a dot or nothing cannot be addressed, and a name the
+    # loader gives to a transform or an inner operator node would hide that node
+    ([{"type": "sphere", "name": "my.ball"}], r"sdf\[0\]\.name: 'my\.ball'; expected letters, digits"),
+    ([{"type": "sphere", "name": ""}], r"sdf\[0\]\.name: ''; expected letters"),
+    ([{"type": "sphere", "name": "ball", "translate": [1, 0, 0]}, {"type": "sphere", "name": "ball_xf"}],
+     r"two SDF nodes are named 'ball_xf'"),
+    ([{"type": "sphere", "name": "a"}, {"type": "sphere", "name": "b"}, {"type": "sphere", "name": "c"},
+      {"type": "union", "name": "u", "children": ["a", "b", "c"]}, {"type": "sphere", "name": "u_0"}],
+     r"two SDF nodes are named 'u_0'"),
 ])
 def test_bad_input_one_line(sdf, match):
     with pytest.raises(SceneError, match=match) as e:
@@ -129,6 +138,26 @@ def test_go_draaw_entry_in_scene_blends_colours():
     _, w = s.sdf.eval(mi.Point3f(0.2, 0.0, 0.0))
     w = [float(x[0]) for x in w]
     assert 0.05 < w[0] < 0.95 and abs(sum(w) - 1) < 1e-6
+
+
+def test_go_draaw_sphere_file_is_found_beside_the_scene_file(tmp_path, monkeypatch):
+    """A ``file =`` of a ``go_draaw_spheres`` entry is relative to the scene file, as every
+    other file a scene names (it was opened from the working folder), and it is among the
+    scene's files (batch jobs hash them); two lists in one scene get their own node names."""
+    import tomli_w
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    (folder / "spheres.json").write_text(json.dumps(GO_SPHERES[:2]))
+    d = _desc([{"type": "go_draaw_spheres", "file": "spheres.json", "scale": 0.02},
+               {"type": "go_draaw_spheres", "spheres": [dict(GO_SPHERES[0], sdfType=0)], "scale": 0.01}])
+    with open(folder / "s.toml", "wb") as fh:
+        tomli_w.dump(d, fh)
+    monkeypatch.chdir(tmp_path)                         # elsewhere than the scene's folder
+    s = draaw_mi.load_scene(str(folder / "s.toml"))
+    assert str(folder / "spheres.json") in s.info["files"]
+    names = [n for n in s.sdf.params()]
+    assert "go_sphere0.radius" in names and "go2_sphere0.radius" in names
+    assert len(s.sdf.roots) == 2
 
 
 def test_go_draaw_bad_operator():
