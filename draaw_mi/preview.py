@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import threading
 import time
+import weakref
 from dataclasses import dataclass
 
 import drjit as dr
@@ -66,6 +67,15 @@ def _budget(value, where: str) -> int:
     if n is None or isinstance(value, bool) or n < 1:
         raise ParameterError(f"{where}: max_spp={value!r}; expected an integer >= 1")
     return int(n)
+
+
+class PreviewSuperseded(DraawError):
+    """A preview's worker was stopped because another preview of its scene started."""
+
+
+# the running preview of each scene (Preview.start): one worker renders a scene at a time
+_ACTIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_ACTIVE_GUARD = threading.Lock()
 
 
 def _depth(value, where: str) -> int:
@@ -388,13 +398,34 @@ class Preview:
             self._error_callbacks.append(callback)
 
     def start(self):
-        """Start the worker thread (idempotent)."""
+        """Start the worker thread (idempotent). One worker renders a scene at a time: a
+        running preview of the same :class:`~draaw_mi.scene.DraawScene` (a notebook cell run
+        again makes a new panel; the old one went on refining, fought the new one for the
+        scene's lock and rendered its parameter changes without restarting its mean) is
+        stopped, and its error callbacks get :class:`PreviewSuperseded`."""
+        with _ACTIVE_GUARD:
+            ref = _ACTIVE.get(self.scene)
+            _ACTIVE[self.scene] = weakref.ref(self)
+        other = None if ref is None else ref()
+        if other is not None and other is not self and other.running:
+            other._supersede()
         if self._thread is not None and self._thread.is_alive():
             self._stop.clear()        # a worker that did not stop in time goes on: not a second
             return
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="draaw-mi-preview", daemon=True)
         self._thread.start()
+
+    def _supersede(self):
+        """Stop: another preview of this scene started (see :meth:`start`)."""
+        self.stop()
+        error = PreviewSuperseded("stopped: a newer preview of this scene is running "
+                                  "(start() this one again to take the scene back)")
+        with self._lock:
+            self.error = error
+            callbacks = list(self._error_callbacks)
+        for cb in callbacks:
+            cb(error)
 
     def _idle(self) -> bool:
         return self._spp >= self.max_spp and not self._pending and self._shown_generation == self._generation

@@ -190,6 +190,11 @@ class MaterialTuner(CameraPanel):
     def _show_error(self, error):
         """Worker-thread callback: a frame failed; say so in red (the preview waits for the
         next change; before, the panel kept its last frame without a word)."""
+        from .preview import PreviewSuperseded
+        if isinstance(error, PreviewSuperseded):        # another panel of this scene started
+            self.message.value = _error_html(f"{error}")
+            self.status.value = "stopped"
+            return
         self.message.value = _error_html(f"render failed: {error}; change a value to try again")
         self.status.value = "render failed"
 

@@ -136,6 +136,33 @@ def test_worker_respects_the_scene_render_lock():
         pv.stop()
 
 
+def test_a_new_preview_of_a_scene_stops_the_running_one():
+    """A notebook cell run again makes a second panel of the same scene: its worker stops the
+    first one, which is told why (PreviewSuperseded, shown in its panel); a preview of another
+    scene keeps running, and the first one takes the scene back when started again."""
+    from draaw_mi.preview import PreviewSuperseded
+    scene, other_scene = draaw_mi.load_scene(tiny_description()), draaw_mi.load_scene(tiny_description())
+    a = Preview(scene, version="v4", max_depth=2, max_spp=10 ** 6, freeze=False)
+    c = Preview(other_scene, version="v4", max_depth=2, max_spp=10 ** 6, freeze=False)
+    b = Preview(scene, version="v4", max_depth=2, max_spp=10 ** 6, freeze=False)
+    errors = []
+    a.on_error(errors.append)
+    try:
+        a.start()
+        c.start()
+        assert a.wait(spp=2, timeout=60) is not None
+        b.start()
+        assert not a.running and b.running and c.running
+        assert len(errors) == 1 and isinstance(errors[0], PreviewSuperseded) and a.error is errors[0]
+        n = a.spp
+        assert b.wait(spp=3, timeout=60) is not None and a.spp == n      # a no longer renders
+        a.start()
+        assert a.running and not b.running
+    finally:
+        for p in (a, b, c):
+            p.stop()
+
+
 def test_denoised_preview_uses_the_guides():
     """The denoised frame is OIDN called directly on the frame's mean, with the albedo and
     normal AOVs found by their channel names in a render's channel list (not the slices the

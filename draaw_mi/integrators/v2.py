@@ -6,7 +6,7 @@ import mitsuba as mi
 
 from .common import (DraawIntegrator, flip_z, parse_int, phong_eval,
                      phong_material, phong_sample, relative, safe_div, sample_emitter,
-                     side_sign)
+                     separate_adjoints, side_sign)
 
 
 class DraawV2Integrator(DraawIntegrator):
@@ -259,6 +259,7 @@ class DraawV2Integrator(DraawIntegrator):
                 Lo = Lo + L_k * relative(self._value(mat, wi, wo, is_mirror, active_next))
             if dr.grad_enabled(Lo):
                 if mode == dr.ADMode.Backward:
+                    separate_adjoints(mode)            # (the loop's backward_from ran first)
                     dr.backward_from(δL * Lo)
                 else:
                     δL_out = δL_out + dr.forward_to(Lo)

@@ -6,7 +6,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError, suggest
 from .common import (DraawIntegrator, draaw_spec_eval, draaw_ndf_sample, draaw_params, flip_z,
-                     relative, safe_div, sample_emitter, side_sign)
+                     relative, safe_div, sample_emitter, separate_adjoints, side_sign)
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
 
@@ -308,6 +308,7 @@ class DraawV3Integrator(DraawIntegrator):
                 Le = si_cam.emitter(scene).eval(si_cam, cam_active)
                 if dr.hint(dr.grad_enabled(Le), mode="scalar"):
                     if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
+                        separate_adjoints(mode)        # (the loop's backward_from ran first)
                         dr.backward_from(δL * Le)
                     else:
                         δL += dr.forward_to(Le)

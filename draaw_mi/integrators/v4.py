@@ -8,7 +8,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import emission_split
-from .common import mis_weight, relative, sample_emitter
+from .common import mis_weight, relative, sample_emitter, separate_adjoints
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
 
@@ -335,6 +335,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             edge = emission_split.edges_of(primary, edges, active)
             L_vis, δL_vis = emission_split.visible_emission(
                 mode, scene, primary, sampler, self.emission_split, flags, edge, δL)
+            separate_adjoints(mode)      # (its backward_from before the main loop's)
             L = (L + L_vis) if primal else (L - L_vis)
             if dr.hint(mode == dr.ADMode.Forward, mode="scalar"):
                 δL += δL_vis
