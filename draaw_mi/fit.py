@@ -383,6 +383,11 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     for k in keys:
         if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
             raise DraawError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
+        # what the plugin declares non-differentiable (a point light's position: its samples
+        # are taken without gradients) got a zero gradient and stayed where it started
+        if k in scene.params and scene.params.flags(k) & int(mi.ParamFlags.NonDifferentiable):
+            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
+                             "its Mitsuba plugin (it would keep its starting value)")
         value = p[k]
         if init and (names[k] in init or k in init):
             value = init.get(names[k], init.get(k))

@@ -295,6 +295,20 @@ def test_a_stratified_sampler_fits_with_a_count_it_takes():
     assert np.isfinite(res.losses).all()
 
 
+def test_a_parameter_its_plugin_declares_non_differentiable_is_refused():
+    """A point light's position (Mitsuba: NonDifferentiable; its samples carry no gradient):
+    its gradient was 0 in every version, so a fit kept the starting value without a word."""
+    d = {"shapes": [{"type": "sphere", "material": "m"}], "materials": {"m": {"base_color": [0.5, 0.5, 0.5]}},
+         "lights": [{"type": "point", "name": "pl", "position": [0, 3, 3], "intensity": 20}],
+         "render": {"resolution": [8, 8], "spp": 4}}
+    scene = draaw_mi.load_scene(d)
+    ref = np.zeros((8, 8, 3), np.float32)
+    with pytest.raises(DraawError, match=r"fit: parameter 'pl.position' .* declared non-differentiable"):
+        draaw_mi.fit(scene, ref, ["pl.position"], iterations=1, spp=4, progress=False)
+    res = draaw_mi.fit(scene, ref, ["pl.intensity"], iterations=2, spp=4, progress=False)
+    assert np.isfinite(res.losses).all()
+
+
 def test_bad_arguments(fit_scene):
     ref = np.zeros((RES, RES, 3), np.float32)
     with pytest.raises(DraawError, match="loss='l3'"):

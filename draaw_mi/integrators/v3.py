@@ -284,7 +284,10 @@ class DraawV3Integrator(DraawIntegrator):
             # ------------------ Differential phase only ------------------
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
-                    f_ad, f_ad_glossy = self._eval(bsdf, si, wo, active_next, is_draaw, params,
+                    si_f, wo_f = si, wo
+                    if dr.hint(sdf is not None, mode="scalar"):       # SDF shape derivatives
+                        si_f, wo_f = sdf.reattach_sampled(ray, si, wo, active_next)
+                    f_ad, f_ad_glossy = self._eval(bsdf, si_f, wo_f, active_next, is_draaw, params,
                                                    sign, feats, split)
                     Lo = Lr_dir + L * relative(f_ad)
                     if dr.hint(hit_em and split, mode="scalar"):

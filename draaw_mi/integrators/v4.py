@@ -454,7 +454,10 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             # ------------------ Differential phase only ------------------
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
-                    f = bsdf.eval(ctx, si, bs.wo, active_next)
+                    si_f, wo_f = si, bs.wo
+                    if dr.hint(sdf is not None, mode="scalar"):       # SDF shape derivatives
+                        si_f, wo_f = sdf.reattach_sampled(ray, si, bs.wo, active_next)
+                    f = bsdf.eval(ctx, si_f, wo_f, active_next)
                     Lo = Le + Lr_dir + L * relative(f)
                     if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
                         if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):

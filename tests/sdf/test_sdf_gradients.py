@@ -117,6 +117,22 @@ def test_centre_gradient_matches_fd():
     check(*ad_fd(_scene(SPHERE), "sdf.ball.center", 2, 0.01, "v4", range(4)))
 
 
+@pytest.mark.parametrize("version", ["v3", "v4"])
+@pytest.mark.parametrize("depth", [2, 3])
+def test_radius_gradient_under_an_environment_reached_by_bsdf_sampling(version, depth):
+    """A sphere alone under a constant sky, which V4 reaches by BSDF sampling alone (V3 by
+    emitter sampling, and by BSDF sampling for its glossy lobe): the sampled direction is held
+    fixed in world space when the BSDF is re-evaluated at the re-attached point. Held in the
+    local frame it turned with the normal: V4's radius gradient was 0, V3's glossy part was
+    missing. (No floor: its occlusion of the sky is a visibility term, not differentiated.)"""
+    d = base_description(RES)
+    d["shapes"] = []
+    d["lights"] = [{"type": "constant", "intensity": 1.0}]
+    d["render"]["max_depth"] = depth
+    d["sdf"] = SPHERE
+    check(*ad_fd(draaw_mi.load_scene(d), "sdf.ball.radius", 0, 0.01, version, range(6), spp=32))
+
+
 @pytest.mark.parametrize("key,comp", [("sdf.ball.radius", 0), ("sdf.ball.center", 2)])
 def test_gradients_under_a_directional_light_match_fd(key, comp):
     """A sun (Mitsuba's ``directional``) has a direction and no position, though its samples
