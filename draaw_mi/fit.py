@@ -414,6 +414,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     means: list = [None] * len(sensors)
     bar = progress_bar(iterations, "fit", "it", progress, where="fit")
     history: list = []
+    moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -449,8 +450,12 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
                 dr.backward(lv)      # one view at a time; gradients accumulate in the latents
                 total += dr.detach(lv)
             for k in keys:
-                g = dr.grad(opt[k])
-                dr.set_grad(opt[k], dr.select(dr.isfinite(g), g, 0.0))
+                g = dr.select(dr.isfinite(dr.grad(opt[k])), dr.grad(opt[k]), 0.0)
+                dr.set_grad(opt[k], g)
+                if k not in moved and dr.any(g != 0, axis=None):
+                    moved.add(k)
+            if it == min(iterations, ZERO_GRADIENT_ITERATIONS) - 1:
+                _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)
             opt.step()
             for k in keys:
                 opt[k] = prm[k].clip(opt[k])
@@ -520,6 +525,22 @@ def _record(v, shape):
     if shape is None:
         return _scalar(v)
     return np.array(v, dtype=np.float32).reshape(shape)
+
+
+#: iterations after which a parameter that never got a gradient is reported (_warn_unmoved)
+ZERO_GRADIENT_ITERATIONS = 5
+
+
+def _warn_unmoved(names: list, iterations: int) -> None:
+    """Warn about parameters whose gradient was zero in every iteration so far: the renders
+    do not depend on them through anything the version differentiates (an environment map's
+    texels in Mitsuba 3.9, a light its plugin samples without gradients), so they keep their
+    starting values."""
+    if names:
+        warnings.warn(f"fit: {', '.join(names)} got a zero gradient in all of the first {iterations} "
+                      "iterations: the renders do not depend on it through anything this version "
+                      "differentiates (is it visible? differentiable?); it keeps its value",
+                      RuntimeWarning, stacklevel=3)
 
 
 def _short(v):

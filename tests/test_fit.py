@@ -309,6 +309,25 @@ def test_a_parameter_its_plugin_declares_non_differentiable_is_refused():
     assert np.isfinite(res.losses).all()
 
 
+def test_a_parameter_without_any_gradient_is_reported():
+    """A material no camera ray reaches gets a zero gradient in every iteration: the fit says
+    so (after 5 iterations) instead of returning its starting value as a fitted one; the
+    visible material's parameter is not named."""
+    import warnings
+    d = {"shapes": [{"type": "sphere", "material": "m"}, {"type": "sphere", "material": "hidden",
+                                                         "center": [0, 0, -20]}],
+         "materials": {"m": {"base_color": [0.5, 0.5, 0.5]}, "hidden": {"base_color": [0.2, 0.5, 0.5]}},
+         "lights": [{"type": "point", "position": [0, 3, 3], "intensity": 20}],
+         "camera": {"origin": [0, 0, 5], "target": [0, 0, 0]}, "render": {"resolution": [8, 8], "spp": 4}}
+    ref = np.zeros((8, 8, 3), np.float32)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        draaw_mi.fit(draaw_mi.load_scene(d), ref, ["m.roughness", "hidden.roughness"], iterations=6, spp=4,
+                     progress=False)
+    said = [str(w.message) for w in caught if str(w.message).startswith("fit:")]
+    assert len(said) == 1 and said[0].startswith("fit: hidden.roughness got a zero gradient in all of the first 5")
+
+
 def test_bad_arguments(fit_scene):
     ref = np.zeros((RES, RES, 3), np.float32)
     with pytest.raises(DraawError, match="loss='l3'"):

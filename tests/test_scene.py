@@ -294,6 +294,27 @@ def test_scenes_with_one_area_light_keep_merged_meshes():
     assert len(s.mi_scene.shapes()) < len(declared)          # the white walls merged into one
 
 
+def test_materials_that_start_alike_stay_apart():
+    """Two materials with the same values (a scene about to be tuned): Mitsuba's scene
+    optimisation made them one BSDF, and the second one's keys were gone. Each keeps its keys,
+    and changing one changes only its own object: the image equals a scene built that way."""
+    def desc(color_b):
+        return {"render": {"resolution": [24, 16], "spp": 4, "filter": "box", "max_depth": 3},
+                "camera": {"origin": [0, 0.5, 5], "target": [0, 0.5, 0]},
+                "materials": {"a": {"base_color": [0.5, 0.5, 0.5]}, "b": {"base_color": color_b}},
+                "shapes": [{"type": "sphere", "material": "a", "center": [-1.1, 0.5, 0]},
+                           {"type": "sphere", "material": "b", "center": [1.1, 0.5, 0]}],
+                "lights": [{"type": "point", "position": [0, 3, 3], "intensity": 30}]}
+    s = draaw_mi.load_scene(desc([0.5, 0.5, 0.5]))
+    assert {s.key("a.base_color"), s.key("b.base_color")} == {"a.base_color.value", "b.base_color.value"}
+    s.params[s.key("b.base_color")] = mi.Color3f(0.9, 0.1, 0.1)
+    s.params.update()
+    img = np.array(draaw_mi.render(s, version="path", seed=3, post=[]))
+    ref = np.array(draaw_mi.render(draaw_mi.load_scene(desc([0.9, 0.1, 0.1])), version="path", seed=3, post=[]))
+    np.testing.assert_allclose(img, ref, atol=1e-6)
+    assert np.abs(img[:, 12:, 0] - img[:, 12:, 1]).max() > 0.1          # the right sphere is red
+
+
 def test_a_parameter_name_without_its_material_lists_the_materials_that_have_it():
     """``--param roughness`` listed every Mitsuba key of the scene (sensor.film.crop_offset,
     ...) or suggested an arbitrary one of 16 materials."""

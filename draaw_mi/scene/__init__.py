@@ -241,11 +241,46 @@ def _has_sdf_proxies(d: dict) -> bool:
     return any(isinstance(k, str) and k.startswith(PROXY_PREFIX) for k in d)
 
 
+def _canonical(v):
+    """A hashable form of a plugin dict's value, for telling equal materials apart (arrays by
+    their shape and bytes, other objects by identity)."""
+    import hashlib
+
+    import numpy as np
+    if isinstance(v, dict):
+        return tuple(sorted((k, _canonical(x)) for k, x in v.items() if k != "id"))
+    if isinstance(v, (list, tuple)):
+        return tuple(_canonical(x) for x in v)
+    if isinstance(v, (str, int, float, bool)) or v is None:
+        return v
+    try:
+        arr = np.ascontiguousarray(np.asarray(v))
+        if arr.dtype != object:
+            return ("array", arr.shape, str(arr.dtype), hashlib.sha1(arr.tobytes()).hexdigest())
+    except Exception:  # noqa: BLE001 - not array-like: identity
+        pass
+    return ("object", id(v))
+
+
+def _has_equal_materials(d: dict) -> bool:
+    """Whether two of the BSDFs the shapes of ``d`` refer to (``{"type": "ref"}``) are equal."""
+    ids = {b.get("id") for v in d.values() if isinstance(v, dict)
+           for b in [v.get("bsdf")] if isinstance(b, dict) and b.get("type") == "ref"}
+    forms = [_canonical(d[i]) for i in ids if isinstance(d.get(i), dict)]
+    return len(set(forms)) < len(forms)
+
+
 def load_mitsuba_dict(d: dict):
-    """``mi.load_dict(d)`` with the scene's emitters in a fixed order and its SDF proxies
-    kept apart (see above)."""
+    """``mi.load_dict(d)`` with the scene's emitters in a fixed order, its SDF proxies kept
+    apart and every material its own BSDF (see above).
+
+    The optimisation also merges *equal* objects: two materials with the same values became
+    one BSDF, and the second one's parameters were gone (``no parameter 'b.roughness'``: two
+    materials that start alike could not be tuned, fitted or animated apart). Such scenes load
+    without it too."""
     import mitsuba as mi
-    return mi.load_dict(d, optimize=_emitting_shapes(d) < 2 and not _has_sdf_proxies(d))
+    optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
+    return mi.load_dict(d, optimize=optimize)
 
 
 def load_mitsuba_file(path: str):
