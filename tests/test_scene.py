@@ -315,6 +315,21 @@ def test_materials_that_start_alike_stay_apart():
     assert np.abs(img[:, 12:, 0] - img[:, 12:, 1]).max() > 0.1          # the right sphere is red
 
 
+def test_equal_materials_of_a_mitsuba_xml_file_stay_apart(tmp_path):
+    """The same for a Mitsuba XML scene: two equal ``<bsdf>`` elements, each referred to by
+    a shape, keep their own keys (the file is parsed again without the optimisation)."""
+    xml = tmp_path / "s.xml"
+    xml.write_text("""<scene version="3.0.0">
+      <bsdf type="diffuse" id="a"><rgb name="reflectance" value="0.5"/></bsdf>
+      <bsdf type="diffuse" id="b"><rgb name="reflectance" value="0.5"/></bsdf>
+      <shape type="sphere"><ref id="a"/></shape>
+      <shape type="sphere"><point name="center" x="0" y="0" z="-5"/><ref id="b"/></shape>
+      <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>
+      <integer name="height" value="8"/></film></sensor></scene>""")
+    keys = draaw_mi.load_scene(str(xml)).params.keys()
+    assert "a.reflectance.value" in keys and "b.reflectance.value" in keys
+
+
 def test_a_parameter_name_without_its_material_lists_the_materials_that_have_it():
     """``--param roughness`` listed every Mitsuba key of the scene (sensor.film.crop_offset,
     ...) or suggested an arbitrary one of 16 materials."""

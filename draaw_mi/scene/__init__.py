@@ -283,13 +283,27 @@ def load_mitsuba_dict(d: dict):
     return mi.load_dict(d, optimize=optimize)
 
 
+def _xml_shape_bsdfs(path: str) -> set:
+    """The ids of a Mitsuba XML file's top-level ``<bsdf>`` elements that its shapes refer to
+    with ``<ref id=...>`` (best effort: an unreadable file gives none; Mitsuba reports its
+    errors itself)."""
+    import xml.etree.ElementTree as ET
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return set()
+    declared = {b.get("id") for b in root.findall("bsdf") if b.get("id")}
+    return {r.get("id") for shape in root.iter("shape") for r in shape.findall("ref")} & declared
+
+
 def load_mitsuba_file(path: str):
-    """``mi.load_file(path)`` with the scene's emitters in a fixed order (see above). Whether
-    a file has two or more emitting shapes shows only once it is loaded, so such files are
-    parsed twice."""
+    """``mi.load_file(path)`` with the scene's emitters in a fixed order and every material
+    its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
+    materials, shows only once it is loaded, so such files are parsed twice."""
     import mitsuba as mi
     scene = mi.load_file(path)
-    if sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
+    merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
+    if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
         scene = mi.load_file(path, optimize=False)
     return scene
 
