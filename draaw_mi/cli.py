@@ -371,8 +371,11 @@ def _cmd_speed_suite(args) -> int:
             raise CliError(f"bench --suite speed: --resolution {args.resolution!r}; the suite's "
                            "images are square (give N or NxN)")
         argv += ["--res", str(sizes.pop())]
-    os.makedirs(args.out, exist_ok=True)
     import shlex                            # the user's command, quoted so it runs when pasted
+    if not any(speed_suite.build(n, 8) is not None for n in (args.scenes or speed_suite.SCENES)):
+        raise CliError("bench --suite speed: every requested scene was skipped (the GO-Draaw data "
+                       f"is absent: looked for {speed_suite.GO_DRAAW}/monkey.obj); nothing to measure")
+    os.makedirs(args.out, exist_ok=True)
     return speed_bench.main(argv, command="draaw-mi " + shlex.join(args.argv))
 
 
@@ -465,7 +468,15 @@ def _cmd_post(args) -> int:
         header = read_header(args.input) or {}
         meta = {k: v for k, v in header.items() if k.startswith("draaw:") and isinstance(v, (str, int, float))}
         with open(args.chain, encoding="utf-8") as fh:          # (valid: load_chain read it)
-            meta["draaw:post"] = json.dumps(json.load(fh))
+            chain_doc = json.load(fh)
+        # the chain the image has been through: the one render applied, then this one (the
+        # render's was overwritten, though the README says post keeps it)
+        try:
+            before = json.loads(header.get("draaw:post", "[]"))
+        except (TypeError, ValueError):
+            before = []
+        after = chain_doc["chain"] if isinstance(chain_doc, dict) else chain_doc     # ({"chain": [...]})
+        meta["draaw:post"] = json.dumps((before if isinstance(before, list) else []) + after)
         draaw_mi.write_exr(args.output, result, channels=names, metadata=meta)
     print(f"wrote {args.output}")
     return 0

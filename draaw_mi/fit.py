@@ -381,6 +381,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     opt = mi.ad.Adam(lr=lr, beta_2=beta_2)
     prm: dict[str, _Param] = {}
     for k in keys:
+        if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
+            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
+                             "Mitsuba stores as integers (not differentiable); give the texture as a "
+                             "float image (EXR) to fit it")
         if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
             raise DraawError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
         # what the plugin declares non-differentiable (a point light's position: its samples

@@ -106,7 +106,7 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str):
 def bench(name: str, res: int, args) -> dict | None:
     d = ss.build(name, res, args.sampler)
     if d is None:
-        print(f"[{name}] skipped: data absent", file=sys.stderr)
+        print(f"[{name}] skipped: its GO-Draaw data is absent (looked for {ss.GO_DRAAW}/monkey.obj)", file=sys.stderr)
         return None
     scene = load_mitsuba_dict(d)                   # a fixed emitter order
     depth = ss.max_depth(name)
@@ -215,6 +215,8 @@ def main(argv=None, command: str | None = None) -> int:
             r = bench(name, res, args)
             if r is not None:
                 results.append(r)
+    if not results:          # (an empty table and exit 0 looked like a finished run)
+        raise SystemExit("speed suite: every requested scene was skipped; nothing was measured")
     text = report(results, args)
     from .io import print_report
     print_report(text, args.out)

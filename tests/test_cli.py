@@ -139,12 +139,16 @@ BAD_ARGS = [
     ["info", "{tmp}/bad.toml"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--bogus"],
     ["render", "{scenes}/sdf_csg.toml", "-o", "{tmp}/x.exr", "--version", "path", "--resolution", "8x8"],
+    ["render", "{tmp}/s.xml", "-o", "{tmp}/x.exr", "--resolution", "32x32"],   # (a TypeError traceback)
 ]
 
 
 @pytest.mark.parametrize("argv", BAD_ARGS, ids=[" ".join(a)[:60] for a in BAD_ARGS])
 def test_bad_input_exits_2_with_one_line(argv, tmp_path, capsys):
     (tmp_path / "bad.toml").write_text("[render]\nspp = -1\n")
+    (tmp_path / "s.xml").write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
+                                    '<integer name="width" value="16"/><integer name="height" value="8"/>'
+                                    '</film></sensor><shape type="sphere"/></scene>')
     argv = [a.format(tmp=tmp_path, scenes=SCENES) for a in argv]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()

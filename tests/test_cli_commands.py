@@ -51,6 +51,10 @@ def test_post_applies_the_chain_to_colour_and_keeps_other_channels(tmp_path, cha
     # what rendered the input goes along, with the chain applied; other attributes do not
     assert header["draaw:version"] == "draaw_v4" and header["draaw:spp"] == 16 and "other" not in header
     assert json.loads(header["draaw:post"]) == json.loads(open(chain_file).read())
+    # a second post run: the header lists both chains, in the order they ran (the first one
+    # was overwritten, though the image had been through it)
+    assert main(["post", str(tmp_path / "out.exr"), "-o", str(tmp_path / "twice.exr"), "--chain", chain_file]) == 0
+    assert json.loads(read_header(str(tmp_path / "twice.exr"))["draaw:post"]) == 2 * CHAIN
     out, names = draaw_mi.read_exr(str(tmp_path / "out.exr"), with_names=True)
     assert names == ["R", "G", "B", "depth", "normal.X"]
     assert np.allclose(out[..., :3], _contrast(img[..., :3]), atol=1e-6)
@@ -201,7 +205,7 @@ def test_cli_fit_accepts_a_png_reference(tmp_path, monkeypatch):
     assert len(seen["arrays"]) == 1 and np.allclose(seen["arrays"][0], 0.2158605, atol=2e-3)
 
 
-def test_bench_suite_speed(tmp_path, capsys):
+def test_bench_suite_speed(tmp_path, capsys, monkeypatch):
     """`draaw-mi bench --suite speed`: the speed suite on one small scene; each cell is the time
     ratio times the MSE ratio, one column per version, the reference cached under --out."""
     import re
@@ -230,3 +234,11 @@ def test_bench_suite_speed(tmp_path, capsys):
     assert main(argv) == 0 and ref.stat().st_mtime_ns == stamp          # reused, not re-rendered
     assert main(["bench", "--suite", "speed", "metal018", "--out", str(out)]) == 2
     assert "did you mean 'metal_018'" in capsys.readouterr().err
+    # the GO-Draaw mesh absent: the scene is skipped saying where it was looked for, and a run
+    # that measured nothing fails (it wrote an empty table and exited 0)
+    from draaw_mi import speed_suite
+    monkeypatch.setattr(speed_suite, "GO_DRAAW", str(tmp_path / "nowhere"))
+    assert main(["bench", "--suite", "speed", "monkey", "--out", str(out / "m")]) == 2
+    err = capsys.readouterr().err
+    assert f"looked for {tmp_path / 'nowhere'}/monkey.obj" in err and "every requested scene was skipped" in err
+    assert not (out / "m").exists()

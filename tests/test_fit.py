@@ -309,6 +309,20 @@ def test_a_parameter_its_plugin_declares_non_differentiable_is_refused():
     assert np.isfinite(res.losses).all()
 
 
+def test_an_8_bit_texture_is_refused_with_what_to_do(tmp_path):
+    """A PNG texture is stored as 8-bit integers by Mitsuba: no gradient. The error says so and
+    what to use instead (it said "not differentiable" only)."""
+    from PIL import Image
+    Image.fromarray(np.full((4, 4), 128, np.uint8)).save(tmp_path / "rough.png")
+    d = {"shapes": [{"type": "sphere", "material": "m"}],
+         "materials": {"m": {"base_color": [0.5, 0.5, 0.5], "roughness": str(tmp_path / "rough.png")}},
+         "lights": [{"type": "point", "position": [0, 3, 3], "intensity": 20}],
+         "render": {"resolution": [8, 8], "spp": 4}}
+    with pytest.raises(DraawError, match=r"8-bit image texture.*float image \(EXR\)"):
+        draaw_mi.fit(draaw_mi.load_scene(d), np.zeros((8, 8, 3), np.float32), ["m.roughness"],
+                     iterations=1, spp=4, progress=False)
+
+
 def test_a_parameter_without_any_gradient_is_reported():
     """A material no camera ray reaches gets a zero gradient in every iteration: the fit says
     so (after 5 iterations) instead of returning its starting value as a fitted one; the

@@ -185,6 +185,8 @@ BAD = [
     (("materials", "ball", "metalic"), 0.5, r"unknown key 'metalic'; did you mean 'metallic'\?"),
     (("materials", "ball", "base_color"), [1, -1, 0], r"base_color\[1\]: -1 is out of range"),
     (("materials", "ball", "base_color"), "missing.png", r"texture file 'missing.png' does not exist"),
+    (("materials", "ball", "roughness"), [[0.1, 0.9], [0.5]], r"ball.roughness: .* not a rectangular array"),
+    (("materials", "ball", "roughness"), [[[0.1, 0.9]]], r"ball.roughness: an array of shape \(1, 1, 2\)"),
     (("shapes", 0, "material"), "bal", r"unknown material 'bal'; did you mean 'ball'\?"),
     (("shapes", 0, "type"), "spehre", r"did you mean 'sphere'"),
     (("shapes", 0, "radius"), -1, r"radius: -1 is out of range"),
@@ -292,6 +294,21 @@ def test_scenes_with_one_area_light_keep_merged_meshes():
     s = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"))
     declared = [v for v in s.mi_dict.values() if isinstance(v, dict) and "bsdf" in v]
     assert len(s.mi_scene.shapes()) < len(declared)          # the white walls merged into one
+
+
+def test_a_texture_written_as_nested_arrays_is_the_numpy_texture(tiny_desc):
+    """``roughness = [[0.1, 0.9], [0.5, 0.3]]`` in a scene file (TOML and JSON have no numpy)
+    is the texture a numpy array gives in a Python description (it was refused: "not a list of
+    3 numbers"); rows of RGB triples are a colour texture."""
+    rough = [[0.1, 0.9], [0.5, 0.3]]
+    color = [[[0.9, 0.2, 0.1], [0.1, 0.8, 0.2]], [[0.2, 0.2, 0.9], [0.7, 0.7, 0.7]]]
+    a, b = copy.deepcopy(tiny_desc), copy.deepcopy(tiny_desc)
+    a["materials"]["ball"].update(roughness=rough, base_color=color)
+    b["materials"]["ball"].update(roughness=np.array(rough), base_color=np.array(color))
+    sa, sb = draaw_mi.load_scene(a), draaw_mi.load_scene(b)
+    for k in ("ball.roughness.data", "ball.base_color.data"):
+        np.testing.assert_array_equal(np.array(sa.params[k]), np.array(sb.params[k]))
+    np.testing.assert_array_equal(np.array(draaw_mi.render(sa, spp=2, seed=1)), np.array(draaw_mi.render(sb, spp=2, seed=1)))
 
 
 def test_materials_that_start_alike_stay_apart():

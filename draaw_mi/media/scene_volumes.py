@@ -153,8 +153,14 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
             albedo = vector(entry["albedo"], where / "albedo", lo=0) if "albedo" in entry else None
             if albedo is not None and max(albedo) > 1:
                 raise (where / "albedo").error(f"{albedo!r} is above 1; expected values in [0, 1]")
+            if not np.any(grid.density > 0) and np.any(grid.occupied):
+                # a voxelised mesh or an occupancy grid as smoke: density 1 per voxel (times
+                # density_scale) and the voxel colours as albedo, as VoxelGrid.to_smoke does
+                # (it was refused: "no density > 0", for a source that has no density)
+                grid.to_smoke(1.0)
             if not np.any(grid.density > 0):
-                raise (where / "density").error("the grid has no density > 0 (nothing to render as smoke)")
+                raise (where / "density").error("the grid has no density > 0 and no occupied voxel "
+                                                "(nothing to render as smoke)")
             # Mitsuba multiplies in float32: a product beyond its range is Inf, and NaN pixels
             peak = float(grid.density.max()) * scale
             if not peak <= F32_MAX:

@@ -492,8 +492,9 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
                          f"Mitsuba scene ({settings['sampler']!r}); set it in the scene itself")
     settings.update({k: v for k, v in checked.items() if v is not None})
     d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
-    if overrides.get("resolution") and tuple(overrides["resolution"]) != d.resolution:
-        d = d.with_resolution(*overrides["resolution"])
+    # (the checked value: the command line's "32x32" went in as a string, and a traceback out)
+    if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:
+        d = d.with_resolution(*checked["resolution"])
     return d
 
 

@@ -25,7 +25,7 @@ from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from . import camera as cam
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
-from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
+from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, shown, string, vector
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -169,7 +169,7 @@ def _matrix_of(t) -> np.ndarray:
 NEGATIVE_SLACK = 1e-2
 
 
-def _check_image_values(path: str, shown: str, where: Where, what: str, nonneg: bool = True) -> None:
+def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> None:
     """Refuse an image file with a non-finite value in its colour channels, or, with
     ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
     +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
@@ -178,14 +178,14 @@ def _check_image_values(path: str, shown: str, where: Where, what: str, nonneg: 
     try:
         arr = np.asarray(mi.Bitmap(path))
     except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
-        raise where.error(f"{what} {shown!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
+        raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
     if np.issubdtype(arr.dtype, np.integer):
         return                                    # 8/16-bit: finite and >= 0 by construction
     arr = arr.reshape(arr.shape[0], arr.shape[1], -1)[..., :3]
     bad = ~np.isfinite(arr) | (arr < -NEGATIVE_SLACK) if nonneg else ~np.isfinite(arr)
     if bad.any():
         y, x, c = (int(i[0]) for i in np.nonzero(bad))
-        raise where.error(f"{what} {shown!r} has the value {float(arr[y, x, c]):g} at pixel "
+        raise where.error(f"{what} {label!r} has the value {float(arr[y, x, c]):g} at pixel "
                           f"(x={x}, y={y}), channel {c}; expected finite values"
                           + (" >= 0" if nonneg else ""))
 
@@ -202,6 +202,8 @@ def _texture_value(value, name: str, ctx: BuildContext, where: Where):
             raise where.error(f"{value!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
         raw = name not in ("base_color", "reflectance", "specular_reflectance", "diffuse_reflectance")
         return {"type": "bitmap", "filename": path, "raw": raw}
+    if _is_nested(value):
+        value = _nested_array(value, where)
     if isinstance(value, np.ndarray):
         arr = value.astype(np.float32)
         if arr.ndim == 2:
@@ -210,6 +212,24 @@ def _texture_value(value, name: str, ctx: BuildContext, where: Where):
     if isinstance(value, (list, tuple)):
         return {"type": "rgb", "value": vector(value, where)}
     return value
+
+
+def _is_nested(value) -> bool:
+    return isinstance(value, (list, tuple)) and len(value) > 0 and isinstance(value[0], (list, tuple))
+
+
+def _nested_array(value, where: Where) -> np.ndarray:
+    """A TOML/JSON array of rows (``[[0.1, 0.9], [0.5, 0.3]]``: a 2x2 texture; rows of RGB
+    triples: a colour texture) as a float array."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise where.error(f"{shown(value)} is not a rectangular array of numbers (a texture: rows "
+                          "of values, or rows of RGB triples)") from None
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)):
+        raise where.error(f"an array of shape {arr.shape}; a texture is rows of values (H, W) or "
+                          "rows of RGB triples (H, W, 3)")
+    return arr
 
 
 def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_sided_default=True) -> dict:
@@ -230,7 +250,8 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                 out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float)) \
                     else _texture_value(value, key, ctx, wk)
             elif key in COLOR_PARAMS:
-                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool):
+                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool) \
+                        and not _is_nested(value):
                     out[key] = {"type": "rgb", "value": vector(value, wk, lo=0.0)}
                 else:
                     out[key] = _texture_value(value, key, ctx, wk)

@@ -150,6 +150,26 @@ def test_mesh_source_voxelises_go_draaw_monkey(tmp_path):
     assert v["mode"] == "solid" and v["voxels"] > 500 and v["faces"] > v["voxels"]
 
 
+def test_a_mesh_as_smoke_is_its_voxels_at_density_scale(tmp_path):
+    """``mode = "smoke"`` with a mesh (no density of its own): each voxel the mesh fills is
+    smoke of density ``density_scale`` (it was refused: "no density > 0"). The medium's grid
+    equals an independent voxelisation of the same mesh."""
+    import trimesh
+    from draaw_mi.media import VoxelGrid
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.8)
+    mesh.export(tmp_path / "ball.obj")
+    desc = base_desc(mode="smoke", file=str(tmp_path / "ball.obj"), resolution=12, fill="solid",
+                     density_scale=4.0)
+    del desc["volumes"][0]["density"], desc["volumes"][0]["bounds"]
+    s = draaw_mi.load_scene(desc)
+    ref = VoxelGrid.from_mesh(mesh, resolution=12, fill="solid")
+    v = s.summary()["volumes"][0]
+    assert v["mode"] == "smoke" and v["cells"] == int(ref.occupied.sum()) > 100 and v["max_sigma_t"] == 4.0
+    grid = np.array(s.params["v.interior_medium.sigma_t.data"])[..., 0]        # (z, y, x)
+    np.testing.assert_array_equal(grid, ref.occupied.transpose(2, 1, 0).astype(np.float32))
+    assert np.isfinite(np.array(draaw_mi.render(s, version="v4", spp=2))).all()
+
+
 @pytest.mark.parametrize("key,good,bad,match", [
     ("plume.interior_medium.phase_function.g", 0.3, 1.5, r"\|g\| < 1"),
     ("plume.interior_medium.scale", 2.0, -5.0, r"density scale >= 0"),
