@@ -71,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("scene", help="scene file: .toml, .json, .xml or a mesh (.obj, .ply, .glb, ...)")
     r.add_argument("-o", "--output", required=True, help="output EXR file (float32, AOVs as named channels)")
     r.add_argument("--png", help="also write an sRGB PNG")
-    r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), path, prb")
+    r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), path, prb; volpath, prbvolpath for media")
     r.add_argument("--spp", type=int, help="samples per pixel")
     r.add_argument("--resolution", help="WxH, e.g. 640x480")
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
