@@ -400,7 +400,10 @@ def _cmd_bench(args) -> int:
         spps = _int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
         res = res or (64, 64)
         gt_spp = min(args.gt_spp, 1024)
-        repeats = min(args.repeats, 2)
+        # (3, not 2: a small render's dr.freeze recording is made again once while the other
+        # versions' recordings settle, and the median of two was half that render: the first
+        # scene's 1-spp times came out 5-10x high)
+        repeats = min(args.repeats, 3)
     else:
         spps = _int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
         gt_spp, repeats = args.gt_spp, args.repeats
