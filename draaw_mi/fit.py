@@ -454,9 +454,11 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
                 dr.backward(lv)      # one view at a time; gradients accumulate in the latents
                 total += dr.detach(lv)
             for k in keys:
-                g = dr.select(dr.isfinite(dr.grad(opt[k])), dr.grad(opt[k]), 0.0)
+                g = dr.grad(opt[k])
+                g = dr.select(dr.isfinite(g), g, 0.0)
                 dr.set_grad(opt[k], g)
-                if k not in moved and dr.any(g != 0, axis=None):
+                # (a host read per parameter, in the first iterations only)
+                if it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None):
                     moved.add(k)
             if it == min(iterations, ZERO_GRADIENT_ITERATIONS) - 1:
                 _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)

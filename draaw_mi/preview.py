@@ -53,6 +53,7 @@ import numpy as np
 from .errors import DraawError, ParameterError, suggest
 from .integrators import is_draaw
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
+from .scene import value_like
 
 GUIDES = ("albedo", "normal")
 
@@ -126,24 +127,6 @@ class PreviewFrame:
     encoded: bool = False      # image is display-encoded (the post chain ends in srgb)
 
 
-def _value(v, current):
-    """A Python value -> what ``params[key] = ...`` accepts, given the parameter's ``current``
-    value: three numbers become its own 3-vector type (a ``Color3f`` for a colour, a
-    ``Point3f`` for an SDF object's centre; everything was a ``Color3f`` once, which an SDF
-    centre refused at the next frame, dropping the change), anything else goes as it is.
-
-    >>> p = _value([0.1, 0.2, 0.3], mi.Point3f(0.0))
-    >>> type(p).__name__, type(_value([1, 1, 1], mi.Color3f(0.0))).__name__, _value(0.5, mi.Float(0.0))
-    ('Point3f', 'Color3f', 0.5)
-    """
-    if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
-        kind = type(current)
-        if not (dr.is_array_v(kind) and dr.depth_v(kind) == 2 and dr.size_v(kind) == 3):
-            kind = mi.Color3f
-        return kind(*[float(x) for x in v])
-    return v
-
-
 class Preview:
     """Progressive running-mean renderer of one scene (see the module docstring).
 
@@ -202,8 +185,10 @@ class Preview:
         check_version_sees(self.scene, self.version)
         # the denoiser's guides come from the draaw versions; Mitsuba's are denoised colour-only
         guides = GUIDES if self.denoise and is_draaw(self.version) else ()
+        # its own instance: the worker traces it on its thread (another preview's worker, or
+        # the notebook's own renders, trace theirs at the same time)
         return make_integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
-                               guides)
+                               guides, shared=False)
 
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or
@@ -276,7 +261,7 @@ class Preview:
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
                 for key, v in pending.items():
-                    p[key] = _value(v, p[key])
+                    p[key] = value_like(p[key], v, key)
                 p.update()
                 scene_changed(sc.mi_scene)          # e.g. V4's light powers
 

@@ -18,6 +18,7 @@ import re
 import threading
 import time
 import warnings
+import weakref
 
 import drjit as dr
 import mitsuba as mi
@@ -29,16 +30,23 @@ from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa:
                      scene_scalars, scene_state)
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
+_OWN_INTEGRATORS = weakref.WeakSet()   # integrators made with shared=False (scene_changed)
 _INTEGRATOR_KEYS: dict = {}       # make_integrator's arguments as given -> plugin properties
 _SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
 MAX_PASS_SPP = 256
 
 
-def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
-    """Instantiate (and cache) the integrator plugin for ``version`` with these options."""
+def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(),
+                    shared: bool = True, **options):
+    """Instantiate (and cache) the integrator plugin for ``version`` with these options.
+
+    ``shared=False``: a new instance, not cached, for a caller that renders on a thread of its
+    own (the preview's worker). Integrators keep state between and during traces (V4's light
+    pilot, its selection table), so one instance traced by two threads at once failed: two
+    previews of different scenes in one process ("loop state variable ... changed")."""
     try:                                 # the arguments as given (a render's first step)
         fast = (version, max_depth, bool(hide_emitters), tuple(aovs), tuple(sorted(options.items())))
-        integrator = _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast))
+        integrator = _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast)) if shared else None
     except TypeError:                    # an unhashable option value
         fast = integrator = None
     if integrator is not None:
@@ -51,6 +59,16 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
         props["aovs"] = ",".join(aovs)
     props.update(options)
     key = tuple(sorted((k, str(v)) for k, v in props.items()))
+    if not shared:
+        try:
+            own = mi.load_dict(props)
+        except Exception as e:  # noqa: BLE001
+            raise _integrator_error(plugin, props, e) from None
+        try:
+            _OWN_INTEGRATORS.add(own)
+        except TypeError:         # a C++ plugin (no weak references): it keeps no scene state
+            pass
+        return own
     if key not in _INTEGRATOR_CACHE:
         try:
             _INTEGRATOR_CACHE[key] = mi.load_dict(props)
@@ -135,7 +153,7 @@ def scene_changed(mi_scene) -> None:
     preview, the batch executor and the fitter call this after ``params.update()``; call it
     too after changing light intensities yourself (renders stay unbiased without it, but a
     stale table can sample a dimmed light as often as before)."""
-    for integrator in list(_INTEGRATOR_CACHE.values()):
+    for integrator in list(_INTEGRATOR_CACHE.values()) + list(_OWN_INTEGRATORS):
         forget = getattr(integrator, "forget_scene", None)
         if forget is not None:
             forget(mi_scene)

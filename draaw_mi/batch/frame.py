@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import DraawError, RenderError
 from .exr import metadata, write_frame, write_preview
+from ..scene import value_like
 
 
 class CachedScene:
@@ -110,7 +111,7 @@ class CachedScene:
         for key, value in spec["params"].items():
             if key not in self.originals:
                 self.originals[key] = _snapshot(params[key])
-            wanted[key] = _convert(self.originals[key], value, key)
+            wanted[key] = value_like(self.originals[key], value, key)
         cam = spec.get("camera")
         if cam is not None:
             wanted[self.camera_key] = mi.ScalarTransform4f().look_at(
@@ -135,20 +136,6 @@ def _snapshot(value):
         return type(value)(value)
     except Exception:  # noqa: BLE001 - a Python value: immutable already
         return value
-
-
-def _convert(original, value, key):
-    try:
-        return type(original)(*value) if isinstance(value, list) and len(value) == len(original) \
-            and not _is_flat(original) else type(original)(value)
-    except Exception as e:  # noqa: BLE001
-        raise RenderError(f"params[{key!r}] = {value!r}: cannot convert to {type(original).__name__} ({e})") \
-            from None
-
-
-def _is_flat(x) -> bool:
-    import drjit as dr
-    return dr.depth_v(x) <= 1
 
 
 _ANY = object()          # SceneCache.get: any hash of the scene's files will do

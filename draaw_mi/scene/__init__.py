@@ -498,4 +498,28 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     return d
 
 
-__all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES"]
+def value_like(current, value, key: str):
+    """``value`` for ``params[key] = ...``, in the type of the parameter's ``current`` value: a
+    list of as many numbers as a vector parameter holds becomes that vector (a ``Color3f``
+    colour, a ``Point3f`` light position or SDF centre), anything else is converted whole.
+    Batch frames and preview updates set parameters through it (the preview made any three
+    numbers a colour, which an SDF centre refused at the next frame, dropping the change).
+
+    >>> import mitsuba as mi
+    >>> type(value_like(mi.Point3f(0.0), [0.1, 0.2, 0.3], "sdf.ball.center")).__name__
+    'Point3f'
+    """
+    import drjit as dr
+    import numpy as np
+    seq = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)
+    try:
+        if seq and dr.depth_v(current) > 1 and len(value) == len(current):
+            return type(current)(*[float(x) for x in value])
+        return type(current)(value)
+    except Exception as e:  # noqa: BLE001 - Dr.Jit / Mitsuba constructors: many kinds
+        from ..errors import RenderError
+        raise RenderError(f"params[{key!r}] = {value!r}: cannot convert to {type(current).__name__} "
+                          f"({e})") from None
+
+
+__all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES", "value_like"]

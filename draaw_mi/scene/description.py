@@ -274,8 +274,8 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
             if isinstance(value, str) and out[key].get("type") == "bitmap":
                 _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
-            elif isinstance(value, np.ndarray):
-                arr = np.asarray(value, dtype=np.float64)
+            elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
+                arr = np.asarray(out[key]["data"], dtype=np.float64)
                 if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):
                     raise (where / key).error("texture array has a non-finite"
                                               + (" or negative" if nonneg else "") + " value")
