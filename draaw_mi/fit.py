@@ -321,6 +321,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
     """
     check_mode(progress, "fit")
+    from .guard import RENDER_GUARD
     from .render import check_version_sees, make_integrator, scene_changed
 
     t0 = time.perf_counter()
@@ -427,44 +428,45 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         for it in range(iterations):
             frac = it / max(iterations - 1, 1)
             opt.set_learning_rate(lr * (lr_final + (1.0 - lr_final) * 0.5 * (1.0 + np.cos(np.pi * frac))))
-            total = mi.Float(0.0)
-            for v, (sensor, ref) in enumerate(zip(sensors, ref_t)):
-                push()          # fresh AD edges latent -> scene value for this view's backward pass
-                img = mi.render(scene.mi_scene, p, sensor=sensor, integrator=integrator,
-                                seed=(seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF, spp=spp,
-                                spp_grad=spp if spp_grad is None else spp_grad)
-                img = img[:, :, :3] if img.shape[2] > 3 else img
-                if smooth:
-                    # Value: running mean of the recent renders; derivative: this render's.
-                    # Weight = the current learning-rate fraction (1 -> lr_final), so the mean
-                    # spans more iterations as the parameters slow down.
-                    flat = dr.detach(img)
-                    w = dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
-                    if means[v] is None:            # w = 1 on the first iteration: mean = flat
-                        means[v] = dr.zeros(mi.TensorXf, flat.shape)
-                    means[v] = means[v] + w * (flat - means[v])
-                    dr.eval(means[v])
-                    img = means[v] + (img - flat)
-                if chain is not None:
-                    img = _apply_chain(img, chain)
-                lv, sv = _loss(img, ref, loss, exposure, masks[v])
-                if v == 0:
-                    scale = sv
-                lv = lv / len(sensors)
-                dr.backward(lv)      # one view at a time; gradients accumulate in the latents
-                total += dr.detach(lv)
-            for k in keys:
-                g = dr.grad(opt[k])
-                g = dr.select(dr.isfinite(g), g, 0.0)
-                dr.set_grad(opt[k], g)
-                # (a host read per parameter, in the first iterations only)
-                if it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None):
-                    moved.add(k)
-            if it == min(iterations, ZERO_GRADIENT_ITERATIONS) - 1:
-                _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)
-            opt.step()
-            for k in keys:
-                opt[k] = prm[k].clip(opt[k])
+            with RENDER_GUARD:        # one render at a time in this process (draaw_mi.guard)
+                total = mi.Float(0.0)
+                for v, (sensor, ref) in enumerate(zip(sensors, ref_t)):
+                    push()          # fresh AD edges latent -> scene value for this view's backward pass
+                    img = mi.render(scene.mi_scene, p, sensor=sensor, integrator=integrator,
+                                    seed=(seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF, spp=spp,
+                                    spp_grad=spp if spp_grad is None else spp_grad)
+                    img = img[:, :, :3] if img.shape[2] > 3 else img
+                    if smooth:
+                        # Value: running mean of the recent renders; derivative: this render's.
+                        # Weight = the current learning-rate fraction (1 -> lr_final), so the mean
+                        # spans more iterations as the parameters slow down.
+                        flat = dr.detach(img)
+                        w = dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
+                        if means[v] is None:            # w = 1 on the first iteration: mean = flat
+                            means[v] = dr.zeros(mi.TensorXf, flat.shape)
+                        means[v] = means[v] + w * (flat - means[v])
+                        dr.eval(means[v])
+                        img = means[v] + (img - flat)
+                    if chain is not None:
+                        img = _apply_chain(img, chain)
+                    lv, sv = _loss(img, ref, loss, exposure, masks[v])
+                    if v == 0:
+                        scale = sv
+                    lv = lv / len(sensors)
+                    dr.backward(lv)      # one view at a time; gradients accumulate in the latents
+                    total += dr.detach(lv)
+                for k in keys:
+                    g = dr.grad(opt[k])
+                    g = dr.select(dr.isfinite(g), g, 0.0)
+                    dr.set_grad(opt[k], g)
+                    # (a host read per parameter, in the first iterations only)
+                    if it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None):
+                        moved.add(k)
+                if it == min(iterations, ZERO_GRADIENT_ITERATIONS) - 1:
+                    _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)
+                opt.step()
+                for k in keys:
+                    opt[k] = prm[k].clip(opt[k])
             loss_value = float(total[0])
             values = {names[k]: _record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape) for k in keys}
             new = sum(1 for kk in dr.kernel_history() if kk["type"] == dr.KernelType.JIT and not kk["cache_hit"])
@@ -488,7 +490,8 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         if len(history) < iterations:      # interrupted: leave the last iterate, detached
             for k in keys:
                 p[k] = prm[k].from_latent(dr.detach(opt[k]))
-            p.update()
+            with RENDER_GUARD:
+                p.update()
 
     n_avg = max(1, int(round(iterations * average_last)))
     fitted = {}
@@ -501,8 +504,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         else:
             fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
             p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
-    p.update()
-    final = mi.render(scene.mi_scene, sensor=sensors[0], integrator=integrator, seed=seed + 12345, spp=spp)
+    with RENDER_GUARD:
+        p.update()
+        final = mi.render(scene.mi_scene, sensor=sensors[0], integrator=integrator, seed=seed + 12345, spp=spp)
+        dr.eval(final)
     final = final[:, :, :3] if final.shape[2] > 3 else final
     if chain is not None:
         final = _apply_chain(final, chain)

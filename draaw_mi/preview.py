@@ -52,6 +52,7 @@ import numpy as np
 
 from .errors import DraawError, ParameterError, suggest
 from .integrators import is_draaw
+from .guard import RENDER_GUARD
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 from .scene import value_like
 
@@ -257,7 +258,7 @@ class Preview:
         if not pending:
             return
         scenes = [self.scene] + ([self._lo] if self._lo is not None else [])
-        with _scene_lock(self.scene):
+        with _scene_lock(self.scene), RENDER_GUARD:       # (draaw_mi.guard: updates too)
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
                 for key, v in pending.items():
@@ -281,7 +282,8 @@ class Preview:
                     p[key] = src[key]
                 except Exception:  # noqa: BLE001 - a non-writable entry: keep the loaded value
                     pass
-            p.update()
+            with RENDER_GUARD:
+                p.update()
         return self._lo
 
     def _render_fn(self):
@@ -312,7 +314,7 @@ class Preview:
         seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
         fn = self._render_fn()
         t0 = time.perf_counter()
-        with _scene_lock(self.scene):
+        with _scene_lock(self.scene), RENDER_GUARD:
             img = fn(target.mi_scene, seed, target)
             arr = np.array(img, dtype=np.float32)       # evaluates and waits
         render_s = time.perf_counter() - t0

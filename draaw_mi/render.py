@@ -28,6 +28,7 @@ from .progress import check_mode, progress_bar
 from .integrators import is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
+from .guard import RENDER_GUARD
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
 _OWN_INTEGRATORS = weakref.WeakSet()   # integrators made with shared=False (scene_changed)
@@ -325,45 +326,51 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if adaptive is not None:
         return _render_adaptive(scene, adaptive, version, spp, seed, max_depth, params, aovs, post,
                                 return_info)
-    integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
-
-    counts = _scene_passes(scene, spp, pass_spp)
+    with RENDER_GUARD:    # (both may make plugins: the integrator, a sampler probed for its counts)
+        integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
+        counts = _scene_passes(scene, spp, pass_spp)
     n_passes = len(counts)
     seeds = pass_seeds(int(seed), n_passes)
     bar = progress_bar(spp, f"render {version}", "spp", progress, leave=False, where="render")
     acc, done, passes, t0 = None, 0, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
-            img = None
-            if params is None and freeze_eligible(scene.mi_scene, count, scene):
-                img = frozen_render(integrator, count, scene)(scene.mi_scene, dr.opaque(mi.UInt32, pseed), scene)
-            if img is None:
-                img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
-            if n_passes == 1:
-                acc = img            # one pass: no extra scaling kernels (small renders)
-            else:
-                acc = img * count if acc is None else acc + img * count
-            done += count
-            passes += 1
-            if n_passes > 1:
+            # every evaluation of the pass, its sync too, under the guard (draaw_mi.guard)
+            with RENDER_GUARD:        # (per pass: a preview's frame can render between passes)
+                img = None
+                if params is None and freeze_eligible(scene.mi_scene, count, scene):
+                    img = frozen_render(integrator, count, scene)(scene.mi_scene, dr.opaque(mi.UInt32, pseed), scene)
+                if img is None:
+                    img = mi.render(scene.mi_scene, params, integrator=integrator, seed=pseed, spp=count)
+                if n_passes == 1:
+                    acc = img            # one pass: no extra scaling kernels (small renders)
+                else:
+                    acc = img * count if acc is None else acc + img * count
                 dr.eval(acc)
                 dr.sync_thread()
+            done += count
+            passes += 1
             if bar is not None:
                 bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
                 bar.update(count)
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
-    image = acc if n_passes == 1 else acc / done
-    dr.eval(image)
-    dr.sync_thread()
+    image = acc
+    if n_passes > 1:
+        with RENDER_GUARD:
+            image = acc / done
+            dr.eval(image)
+            dr.sync_thread()
     if bar is not None:
         bar.close()
     names = ["R", "G", "B"] + list(integrator.aov_names())
-    if denoise:
-        image, names = _denoised(image, names, extra_aovs)
     chain = s.get("post", []) if post is None else post
-    if chain:
-        image = _apply_post(image, chain)
+    if denoise or chain:
+        with RENDER_GUARD:            # (their kernels and reads back)
+            if denoise:
+                image, names = _denoised(image, names, extra_aovs)
+            if chain:
+                image = _apply_post(image, chain)
     if return_info:
         return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version),
@@ -433,7 +440,7 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
         what = "[[sdf]] objects" if holds["sdf"] else "participating media"
         raise RenderError(f"render: adaptive subsampling cannot see {what} ({scene.source}); drop adaptive=")
     t0 = time.perf_counter()
-    with _scene_lock(scene):
+    with _scene_lock(scene), RENDER_GUARD:
         image, stats = render_adaptive(scene, block=block, spp=spp, seed=seed, version=version,
                                        max_depth=max_depth)
     chain = scene.settings.get("post", []) if post is None else post

@@ -55,6 +55,7 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
+        from ..guard import RENDER_GUARD
         from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
                               render, sample_passes)
 
@@ -75,9 +76,10 @@ class CachedScene:
             def fn(scene, seed, integrator=integrator, spp=spp):
                 return mi.render(scene, integrator=integrator, seed=seed, spp=spp)  # as render()
             fn = self.frozen[key] = freeze_render(integrator, fn)
-        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)
-        dr.eval(image)
-        dr.sync_thread()
+        with RENDER_GUARD:                # (render_frame holds it already; re-entrant)
+            image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)
+            dr.eval(image)
+            dr.sync_thread()
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:
             image = _apply_post(image, chain)
@@ -192,7 +194,10 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     if entry.files_hash != spec.get("files_hash"):
         raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
                           "the batch was planned; re-run the batch")
-    with entry.lock:
+    from ..guard import RENDER_GUARD
+    # (render() below takes the scene's lock inside the guard, the other order than
+    # draaw_mi.guard asks: safe, no other thread renders the batch's own scene)
+    with entry.lock, RENDER_GUARD:      # the frame's parameter updates too (draaw_mi.guard)
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history

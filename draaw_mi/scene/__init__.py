@@ -309,8 +309,10 @@ def load_mitsuba_file(path: str):
 
 
 def _load_dict(mi, d: dict, source: str):
+    from ..guard import RENDER_GUARD
     try:
-        return load_mitsuba_dict(d)
+        with RENDER_GUARD:            # (see load_scene; with_resolution comes here directly)
+            return load_mitsuba_dict(d)
     except DraawError:
         raise
     except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
@@ -366,6 +368,12 @@ def load_scene(source, **overrides) -> DraawScene:
         >>> scene.resolution, scene.settings["spp"], scene.key("metal.roughness")
         ((32, 24), 4, 'metal.roughness.value')
     """
+    from ..guard import RENDER_GUARD
+    with RENDER_GUARD:       # (plugins made while another thread replayed a recording broke it)
+        return _load_scene(source, **overrides)
+
+
+def _load_scene(source, **overrides) -> DraawScene:
     import mitsuba as mi
 
     bad = set(overrides) - set(DEFAULT_SETTINGS)
