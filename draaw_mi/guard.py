@@ -25,6 +25,10 @@ differentiable render, ``mi.render``) is not guarded: hold it there too while a 
     from draaw_mi.guard import RENDER_GUARD
     with RENDER_GUARD:
         dr.backward(loss)
+
+Take it around such calls, never inside a Dr.Jit callback (an integrator's
+``render_backward``, a ``dr.CustomOp``): Dr.Jit holds its AD lock there, which a preview's
+frozen call waits for while it holds the guard -- tried, the two threads deadlocked.
 """
 from __future__ import annotations
 
