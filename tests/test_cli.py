@@ -45,6 +45,7 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
         digest = hashlib.sha256(fh.read()).hexdigest()
     assert (header["draaw:version"], header["draaw:spp"], header["draaw:seed"], header["draaw:max_depth"]) == \
         ("path", 4, 3, 3)
+    assert header["draaw:integrator"] == "path"
     assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
     assert header["draaw:sampler"] == "independent" and "draaw:post" not in header   # no chain ran
     assert "wrote" in capsys.readouterr().out
@@ -59,8 +60,12 @@ def test_render_records_the_post_chain_it_applied(tmp_path):
     chain.write_text('[{"type": "contrast", "amount": 0.3}]')
     exr = tmp_path / "r.exr"
     assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--spp", "2",
-                 "--resolution", "16x16", "--post", str(chain), "--sampler", "multijitter", "--no-progress"]) == 0
+                 "--resolution", "16x16", "--post", str(chain), "--sampler", "multijitter", "--no-progress",
+                 "--version", "V2M"]) == 0
     header = read_header(str(exr))
+    # the version as given, as batch frames write it, and the plugin it names (GO-Draaw's V2M
+    # is V3 here)
+    assert (header["draaw:version"], header["draaw:integrator"]) == ("V2M", "draaw_v3")   # (spec §3)
     assert json.loads(header["draaw:post"])[0]["type"] == "contrast"
     assert json.loads(header["draaw:post"])[0]["amount"] == 0.3
     assert header["draaw:sampler"] == "multijitter"

@@ -7,7 +7,8 @@ with ``exrheader`` or ``OpenEXR.File(path, header_only=True).header()``)::
     draaw:frame_hash   identity of the job (scene hash + settings + camera + overrides + versions)
     draaw:scene        scene file      draaw:scene_sha256   its SHA-256
     draaw:files_sha256 SHA-256 of the files the scene reads (textures, meshes...), if any
-    draaw:job, draaw:frame, draaw:version, draaw:spp, draaw:seed, draaw:max_depth
+    draaw:job, draaw:frame, draaw:version (as given: v4, V2M, path), draaw:integrator (its
+    Mitsuba plugin: draaw_v4, draaw_v2, path), draaw:spp, draaw:seed, draaw:max_depth
     draaw:render_seconds, draaw:rendered_at (UTC ISO time)
     draaw:draaw_mi, draaw:mitsuba, draaw:drjit, draaw:variant
 
@@ -27,6 +28,7 @@ import time
 import numpy as np
 
 from ..errors import IOFailure
+from ..integrators import resolve_version
 
 HASH_ATTR = "draaw:frame_hash"
 
@@ -35,6 +37,7 @@ def metadata(spec: dict, seconds: float) -> dict:
     """The header attributes of a rendered frame."""
     meta = {HASH_ATTR: spec["hash"], "draaw:scene": spec["scene"], "draaw:scene_sha256": spec["scene_hash"],
             "draaw:job": spec["job"], "draaw:frame": int(spec["frame"]), "draaw:version": spec["version"],
+            "draaw:integrator": resolve_version(spec["version"]),
             "draaw:spp": int(spec["spp"]), "draaw:sampler": str(spec.get("sampler")),
             "draaw:seed": int(spec["seed"]),
             "draaw:max_depth": int(spec["max_depth"]), "draaw:render_seconds": float(seconds),
@@ -52,7 +55,8 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
     return_info=True)`` returned."""
     from .plan import file_hash, versions
-    meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["integrator"],
+    meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["version"],
+            "draaw:integrator": info["integrator"],
             "draaw:spp": int(info["spp"]), "draaw:seed": int(scene.settings["seed"]),
             "draaw:max_depth": int(scene.settings["max_depth"]),
             "draaw:render_seconds": float(info["seconds"]), "draaw:denoised": int(bool(info.get("denoised"))),

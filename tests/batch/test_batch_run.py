@@ -153,7 +153,8 @@ def test_exr_layers_metadata_and_half(tmp_path):
     assert set(chans) == {"R", "G", "B", "depth.Z", "N.X", "N.Y", "N.Z"}
     assert all(c.dtype == np.float16 and c.shape == (24, 32) for c in chans.values())
     assert h["draaw:frame_hash"] == specs[1]["hash"] and h["draaw:spp"] == 4
-    assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4"
+    assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4" \
+        and h["draaw:integrator"] == "draaw_v4"
     assert h["draaw:mitsuba"] == "3.9.1" and h["draaw:draaw_mi"] == draaw_mi.__version__
     from draaw_mi.batch.plan import file_hash
     assert h["draaw:scene_sha256"] == file_hash(specs[1]["scene"])
