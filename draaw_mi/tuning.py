@@ -57,7 +57,7 @@ def parse_rgb(text: str, where: str) -> list[float]:
                              "'0.8, 0.3, 0.2'") from None
     if len(nums) == 1:
         nums = nums * 3
-    if len(nums) != 3 or not all(math.isfinite(x) and x >= 0 for x in nums):
+    if len(nums) != 3 or not all(math.isfinite(x) and 0 <= x <= 3.4028234663852886e38 for x in nums):
         raise ParameterError(f"{where}: {text!r}; expected three finite numbers >= 0 (linear RGB)")
     return nums
 

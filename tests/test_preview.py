@@ -89,6 +89,7 @@ def test_interactive_first_frame_is_low_resolution_and_not_accumulated():
 @pytest.mark.parametrize("values, match", [
     ({"ball.roughness": 1.5}, r"ball.roughness=1.5; expected a number in \[0.0, 1.0\]"),
     ({"ball.roughness": float("nan")}, "finite"),
+    ({"ball.base_color": [1e40, 0.5, 0.5]}, "in float32"),      # (inf in the scene: NaN pixels)
     ({"ball.base_color": [0.1, 0.2]}, "3 numbers"),
     ({"ball.base_color": [0.1, -0.2, 0.3]}, ">= 0"),
     ({"ball.roughnes": 0.3}, "did you mean"),

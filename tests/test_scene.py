@@ -184,6 +184,8 @@ BAD = [
     (("materials", "ball", "roughness"), 1.5, r"materials.ball.roughness: 1.5 is out of range; expected a value in \[0.0, 1.0\]"),
     (("materials", "ball", "metalic"), 0.5, r"unknown key 'metalic'; did you mean 'metallic'\?"),
     (("materials", "ball", "base_color"), [1, -1, 0], r"base_color\[1\]: -1 is out of range"),
+    # (float64, but float32 inf: NaN pixels; the tuner saved such a colour)
+    (("materials", "ball", "base_color"), [1e40, 0.5, 0.5], r"base_color\[0\]: 1e\+40 is beyond float32"),
     (("materials", "ball", "base_color"), "missing.png", r"texture file 'missing.png' does not exist"),
     (("materials", "ball", "roughness"), [[0.1, 0.9], [0.5]], r"ball.roughness: .* not a rectangular array"),
     (("materials", "ball", "roughness"), [[[0.1, 0.9]]], r"ball.roughness: an array of shape \(1, 1, 2\)"),

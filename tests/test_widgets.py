@@ -77,6 +77,7 @@ def test_colour_picker_and_text_field_agree(tuner):
     ("base_color_text", "1, x, 2", "is not a colour"),
     ("base_color_text", "1, 2", "three finite numbers"),
     ("base_color_text", "-1, 0, 0", "three finite numbers"),
+    ("base_color_text", "1e40, 0, 0", "three finite numbers"),     # (float32: inf, NaN pixels)
 ])
 def test_bad_text_value_shows_an_error_not_a_traceback(tuner, field, value, match):
     k = tuner.scene.key("ball.base_color")

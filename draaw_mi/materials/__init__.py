@@ -7,6 +7,8 @@ import numpy as np
 
 from ..errors import ParameterError
 
+FLOAT32_MAX = 3.4028234663852886e38
+
 _REGISTERED = False
 
 
@@ -51,8 +53,8 @@ def check_value(who: str, name: str, key: str, v) -> None:
             raise ParameterError(f"{who}: {name}={v!r}; expected 3 numbers (an RGB colour)")
     if nums is None:
         return                                   # a Mitsuba value (transform, colour): as is
-    if not all(math.isfinite(x) for x in nums):
-        raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers")
+    if not all(math.isfinite(x) and abs(x) <= FLOAT32_MAX for x in nums):   # (stored as float32)
+        raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers (in float32, |x| <= 3.4e38)")
     parts = key.split(".")
     if any(p.endswith("medium") for p in parts[:-1]):
         _check_medium_value(who, name, parts, v, nums)

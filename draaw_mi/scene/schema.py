@@ -58,6 +58,9 @@ def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iter
             raise where.error(f"missing required key {key!r}")
 
 
+FLOAT32_MAX = 3.4028234663852886e38
+
+
 def number(value: Any, where: Where, lo: float | None = None, hi: float | None = None,
            integer: bool = False, lo_open: bool = False) -> float:
     """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``)."""
@@ -65,6 +68,8 @@ def number(value: Any, where: Where, lo: float | None = None, hi: float | None =
         raise where.error(f"{shown(value)} is not a number")
     if not math.isfinite(value):
         raise where.error(f"{shown(value)} is not finite")
+    if abs(value) > FLOAT32_MAX:        # (Mitsuba stores it as float32: inf, then NaN pixels)
+        raise where.error(f"{shown(value)} is beyond float32 (|x| <= 3.4e38)")
     if integer and int(value) != value:
         raise where.error(f"{shown(value)} is not an integer")
     if lo is not None and (value < lo or (lo_open and value == lo)):
