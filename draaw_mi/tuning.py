@@ -185,8 +185,9 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
     if camera is not None:
         cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles")}
         cam.update({k: [float(x) for x in camera[k]] for k in ("origin", "target", "up")})
-        if "fov" in camera:
+        if "fov" in camera:             # the horizontal FOV (Mitsuba's x_fov)
             cam["fov"] = float(camera["fov"])
+            cam["fov_axis"] = "x"       # (a "y" kept beside it made 56.4 degrees 94 on reload)
         desc["camera"] = cam
     if render:
         desc["render"] = dict(desc.get("render", {}), **render)

@@ -480,6 +480,10 @@ class MaterialTuner(CameraPanel):
             doc["materials"][m].update(files)
         w, h = self.base_scene.resolution
         doc["render"]["resolution"] = [w, h]
+        if self.snap_light.value and cam is not None:     # point lights where _set_lights put them
+            for light in doc.get("lights", []):
+                if light.get("type") == "point":
+                    light["position"] = [float(x) for x in cam["origin"]]
         return doc
 
     def save(self, path: str) -> str:

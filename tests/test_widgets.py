@@ -167,6 +167,36 @@ def test_save_then_reload_gives_the_same_scene(tuner, tmp_path):
     np.testing.assert_allclose(img_a, img_b, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.parametrize("fov, axis", [(150.0, "x"), (30.0, "y")])
+def test_save_keeps_the_camera_and_snapped_lights(tmp_path, fov, axis):
+    """A 150-degree camera (the slider stopped at 120: saving wrote 120), a vertical FOV (saved
+    as the x FOV with fov_axis "y" kept: 56.4 degrees came back as 94) and point lights snapped
+    to the orbited camera (saved where they were loaded)."""
+    import tomli_w
+    desc = tiny_description()
+    desc["camera"].update(fov=fov, fov_axis=axis)
+    path = tmp_path / "wide.toml"
+    path.write_text(tomli_w.dumps(desc))
+    t = MaterialTuner(str(path), autostart=False, freeze=False, interactive_scale=1.0, max_spp=4,
+                      frame_channel="image")
+    try:
+        t.snap_light.value = True
+        t.yaw.value = 30.0
+        t.controls["ball"]["roughness"].value = 0.2
+        t.refresh()
+        out = str(tmp_path / "saved.toml")
+        t.save(out)
+        again = draaw_mi.load_scene(out)
+        for key in ("sensor.x_fov", "sensor.to_world", "point_light0.position"):
+            a, b = t.scene.params[key], again.params[key]
+            a, b = (a.matrix, b.matrix) if key.endswith("to_world") else (a, b)
+            np.testing.assert_allclose(np.array(b), np.array(a), rtol=1e-5, atol=1e-5, err_msg=key)
+        if axis == "x":
+            assert float(np.array(again.params["sensor.x_fov"]).ravel()[0]) == pytest.approx(fov)
+    finally:
+        t.close()
+
+
 def test_a_scene_saved_to_another_folder_keeps_its_files(tmp_path):
     """A scene naming a texture relative to its folder, saved by the tuner two folders away:
     the written scene names the texture relative to its own folder and renders the same image
