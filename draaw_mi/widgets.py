@@ -144,6 +144,13 @@ class MaterialTuner(CameraPanel):
         def run(*args):
             if self._syncing:
                 return
+            from .preview import PreviewSuperseded
+            if isinstance(self.preview.error, PreviewSuperseded):
+                # (a change here went into the scene the newer panel shows, unrendered here,
+                # and cleared this panel's only word of why it had stopped)
+                self.message.value = _error_html(f"{self.preview.error}; this panel no longer "
+                                                 "changes the scene")
+                return
             self.message.value = ""
             try:
                 fn(*args)

@@ -448,3 +448,31 @@ def test_bad_tuner_arguments_fail_at_once(tuner, capsys):
         assert capsys.readouterr().out == ""           # (jupyter_rfb printed RFBOutputContext())
     finally:
         t.close()
+
+
+def test_a_panel_stopped_by_a_newer_one_refuses_changes():
+    """A second tuner of one scene stops the first (its panel says so). A slider moved in the
+    first then cleared that message, wrote into the scene the newer panel shows and rendered
+    nothing: the first panel's values and the scene parted ways."""
+    scene = draaw_mi.load_scene(tiny_description())
+    first = MaterialTuner(scene, freeze=False, interactive_scale=1.0, max_spp=2, frame_channel="image")
+    second = None
+    try:
+        assert first.preview.wait(spp=1, timeout=60) is not None
+        second = MaterialTuner(scene, freeze=False, interactive_scale=1.0, max_spp=2, frame_channel="image")
+        deadline = time.time() + 30
+        while first.status.value != "stopped" and time.time() < deadline:
+            time.sleep(0.05)
+        assert first.status.value == "stopped" and "newer preview" in first.message.value
+        key = scene.key("ball.roughness")
+        held = np.array(scene.params[key]).ravel().copy()
+        first.controls["ball"]["roughness"].value = 0.05
+        assert "no longer changes the scene" in first.message.value
+        assert first.materials["ball"]["roughness"] != 0.05
+        np.testing.assert_array_equal(np.array(scene.params[key]).ravel(), held)
+        second.controls["ball"]["roughness"].value = 0.07          # the newer panel works
+        assert second.message.value == ""
+    finally:
+        first.close()
+        if second is not None:
+            second.close()
