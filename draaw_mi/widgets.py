@@ -421,15 +421,16 @@ class MaterialTuner(CameraPanel):
 
     def _set_post(self, chain):
         from . import post
-        post.Chain(chain)                      # validates names and values (ParameterError)
-        self.post = [dict(e) for e in chain]
+        # validated (ParameterError) and in one form: every parameter at the top level (an
+        # entry written with "params": {...} showed amount 1.0 and refused the slider's value)
+        self.post = post.Chain(chain).to_list()
         self._configure(post=self.post)
         self._post_rows_refresh()
 
     def _post_edit(self, add=None, remove=None, up=None, amount=None):
         chain = [dict(e) for e in self.post]
-        if add is not None:
-            chain.append({"type": add, "amount": 0.5})
+        if add is not None:             # (a start that shows: contrast 1 is the identity)
+            chain.append({"type": add, "amount": 0.5, **_POST_START.get(add, {})})
         if remove is not None:
             chain.pop(remove)
         if up is not None and up > 0:
@@ -503,6 +504,11 @@ class MaterialTuner(CameraPanel):
         """Python code reproducing the tuned materials."""
         return tuning.snippet(self.scene.source, self.materials,
                               {"version": self.preview.version, "max_depth": int(self.preview.max_depth)})
+
+
+#: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing
+#: (contrast 1.0) or something neither linear nor encoded (half an sRGB encoding)
+_POST_START = {"contrast": {"contrast": 2.0}, "srgb": {"amount": 1.0}}
 
 
 def _html(text: str) -> str:

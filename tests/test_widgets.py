@@ -140,6 +140,25 @@ def test_camera_light_and_render_options(tuner):
     assert tuner.refresh().spp == 1
 
 
+def test_post_filters_added_change_the_image_and_params_entries_take_the_slider(tuner):
+    """"add contrast" gave contrast 1.0 (the identity: the image moved by 1.5e-8 at any
+    amount); a chain entry written with "params" showed amount 1.0 and refused its slider."""
+    import mitsuba as mi
+    rng = np.random.default_rng(1)
+    img = mi.TensorXf(rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32))
+    for name in ("contrast", "tint", "sharpen", "lighten"):
+        tuner._set_post([])
+        tuner._post_edit(add=name)
+        out = np.array(draaw_mi.post.apply(img, tuner.post))
+        assert np.abs(out - np.array(img)).max() > 0.01, name
+    tuner._post_from_json('[{"type": "bloomV2", "params": {"amount": 0.2, "spread": 0.5}}]')
+    slider = tuner.post_rows.children[0].children[0]
+    assert slider.value == pytest.approx(0.2)
+    slider.value = 0.4
+    assert tuner.message.value == "" and tuner.post[0]["amount"] == pytest.approx(0.4)
+    assert tuner.post[0]["spread"] == pytest.approx(0.5)
+
+
 def test_save_then_reload_gives_the_same_scene(tuner, tmp_path):
     tuner.controls["ball"]["roughness"].value = 0.12
     tuner.controls["ground"]["base_color_text"].value = "0.1, 0.6, 0.2"
