@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import io
 import math
+import os
 
 import numpy as np
 
@@ -216,15 +217,22 @@ def save_toml(path: str, doc: dict) -> None:
     write_text(path, tomli_w.dumps(doc))
 
 
-def snippet(source: str, materials: dict, settings: dict | None = None) -> str:
-    """Python code that loads the scene and sets the tuned values."""
-    lines = ["import draaw_mi", "", f"scene = draaw_mi.load_scene({source!r})", "params = scene.params"]
+def snippet(source: str, materials: dict, settings: dict | None = None, resolution=None) -> str:
+    """Python code that loads the scene and sets the tuned values (materials; the camera,
+    lights and post chain go into a saved scene file). ``source``: the scene file (made
+    absolute) or ``"<dict>"``; ``resolution``: (W, H) the scene was loaded at."""
+    if source.startswith("<"):       # a dict or mi.Scene: no file to name
+        load = "draaw_mi.load_scene(description)   # the dict the tuner was given"
+    else:
+        res = f", resolution={tuple(int(x) for x in resolution)!r}" if resolution else ""
+        load = f"draaw_mi.load_scene({os.path.abspath(source)!r}{res})"
+    lines = ["import draaw_mi", "", f"scene = {load}", "params = scene.params"]
     for m, vals in materials.items():
-        for p, v in vals.items():
+        for p, v in vals.items():        # (repr: every digit; 4 figures made 0.123456 0.1235)
             if isinstance(v, list):
-                lines.append(f"params[{f'{m}.{p}.value'!r}] = mi.Color3f({', '.join(f'{x:.4g}' for x in v)})")
+                lines.append(f"params[{f'{m}.{p}.value'!r}] = mi.Color3f({', '.join(repr(float(x)) for x in v)})")
             else:
-                lines.append(f"params[{f'{m}.{p}.value'!r}] = {v:.4g}")
+                lines.append(f"params[{f'{m}.{p}.value'!r}] = {float(v)!r}")
     lines.insert(1, "import mitsuba as mi")
     lines.append("params.update()")
     args = ", ".join(f"{k}={v!r}" for k, v in (settings or {}).items())

@@ -192,6 +192,10 @@ class MaterialTuner(CameraPanel):
             e = tuning.errors(linear, self.reference)
             self.error_label.value = f"vs reference: RMSE {e['rmse']:.4f} · display RMSE {e['display_rmse']:.4f}"
             self.error_image.value = tuning.encode(tuning.error_image(linear, self.reference), "png")
+        elif self.reference is not None:    # (the last frame's numbers stayed, stale)
+            rh, rw = self.reference.shape[:2]
+            self.error_label.value = (f"vs reference: none (the reference is {rw}x{rh}, this frame "
+                                      f"{linear.shape[1]}x{linear.shape[0]}: resolution scale 1 compares)")
         self.status.value = text
 
     def _show_error(self, error):
@@ -502,8 +506,9 @@ class MaterialTuner(CameraPanel):
 
     def snippet(self) -> str:
         """Python code reproducing the tuned materials."""
-        return tuning.snippet(self.scene.source, self.materials,
-                              {"version": self.preview.version, "max_depth": int(self.preview.max_depth)})
+        return tuning.snippet(self.base_scene.source, self.materials,
+                              {"version": self.preview.version, "max_depth": int(self.preview.max_depth)},
+                              resolution=self.base_scene.resolution)
 
 
 #: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing

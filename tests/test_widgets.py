@@ -248,17 +248,36 @@ def test_reference_error_line_matches_numpy(tuner):
         rmse = float(np.sqrt(np.mean((f.image - ref) ** 2)))
         assert f"RMSE {rmse:.4f}" in t2.error_label.value
         assert len(t2.error_image.value) > 100
+        t2.controls_render["scale"].value = 0.5          # frames 16x12 against a 32x24 reference
+        t2.refresh()
+        assert "RMSE" not in t2.error_label.value and "32x24" in t2.error_label.value
     finally:
         t2.close()
 
 
-def test_snippet_runs_and_reproduces_values(tuner):
-    tuner.controls["ball"]["roughness"].value = 0.22
-    code = tuner.snippet()
+def test_snippet_runs_and_reproduces_values(tuner, tmp_path, monkeypatch):
+    """Run from another folder, on a scene the tuner was given at another resolution: the
+    snippet named the file relative to the start folder, left the resolution out (256x256
+    instead of the tuned size) and printed 4 figures (0.123456 became 0.1235)."""
+    monkeypatch.chdir(os.path.dirname(tuner.scene.source))
+    relative = os.path.basename(tuner.scene.source)
+    t = MaterialTuner(draaw_mi.load_scene(relative, resolution=(16, 12)), autostart=False,
+                      freeze=False, frame_channel="image")
+    try:
+        t.controls["ball"]["roughness"].value = 0.123456
+        t.controls["ground"]["base_color_text"].value = "0.885809, 0.1, 0.2"
+        code = t.snippet()
+    finally:
+        t.close()
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
     ns: dict = {}
     exec(compile(code.replace("image = draaw_mi.render(", "image = (lambda *a, **k: None)("), "snippet", "exec"), ns)
-    k = ns["scene"].key("ball.roughness")
-    assert float(np.array(ns["scene"].params[k]).ravel()[0]) == pytest.approx(0.22)
+    sc = ns["scene"]
+    assert sc.resolution == (16, 12)
+    assert float(np.array(sc.params[sc.key("ball.roughness")]).ravel()[0]) == np.float32(0.123456)
+    np.testing.assert_array_equal(np.array(sc.params[sc.key("ground.base_color")]).ravel(),
+                                  np.float32([0.885809, 0.1, 0.2]))
 
 
 def test_worker_thread_pushes_jpeg_while_interacting_then_png_at_rest():
