@@ -65,6 +65,7 @@ def test_override_with_the_wrong_shape(tmp_path, capsys):
     ({"ball.base_color": {"values": [[0.1, 0.2, 0.3], [0.1, -1.0, 0.2], [0.1, 0.2, 0.3]]}},
      ["frame 1", "ball.base_color=[0.1, -1.0, 0.2]", ">= 0"]),
     ({"point_light0.intensity": -5.0}, ["frame 0", ">= 0"]),
+    ({"point_light0.intensity": {"values": [40.0, 1e39, 40.0]}}, ["1e+39", "beyond float32"]),  # (inf)
 ])
 def test_override_values_outside_the_parameters_range(tmp_path, capsys, params, expect):
     """Values a scene file would refuse are a bad manifest too (roughness 3.0 rendered as 1.0,

@@ -124,10 +124,11 @@ def test_resume_renders_only_missing_corrupt_and_stale_frames(tmp_path):
 
 def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
     doc = manifest(tmp_path, frames=3)
-    # 1e39 overflows float32: frame 1 renders inf pixels, which the NaN guard refuses
-    doc["jobs"][0]["params"] = {"point_light0.intensity": {"values": [40.0, 1e39, 40.0]}}
+    # 3.4e38 fits float32, four samples of it seen directly do not: frame 1 renders inf pixels,
+    # which the NaN guard refuses (1e39 itself is refused with the manifest, before any frame)
+    doc["jobs"][0]["params"] = {"constant_light1.radiance": {"values": [0.2, 3.4e38, 0.2]}}
     _, specs, _ = batch.load(doc)
-    assert "intensity" in next(iter(specs[1]["params"]))
+    assert "radiance" in next(iter(specs[1]["params"]))
     res = batch.run(doc, progress=False)
     assert [r["frame"] for r in res.failed] == [1] and "non-finite" in res.failed[0]["error"]
     assert res.rendered == 2 and not res.complete and res.missing == 1
