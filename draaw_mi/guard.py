@@ -16,9 +16,10 @@ by up to 1.6), seen in ``tests/test_render_threads.py``.
 
 So draaw-mi holds :data:`RENDER_GUARD` around each render pass (with its evaluation and
 sync), each preview frame and parameter update, each fit iteration (renders, gradient
-passes, the optimiser's update), each batch frame and each scene load. Kernels use every core already, so taking turns costs
-little. It is re-entrant (a guarded block may render again: the batch's fallback to
-:func:`draaw_mi.render`). Take a scene's own lock (``draaw_mi.frozen._SceneState.lock``)
+passes, the optimiser's update), each batch frame and each scene load. Kernels use every
+core already, so taking turns costs little. One integrator instance per setting serves every
+thread for the same reason (:func:`draaw_mi.render.make_integrator`). It is re-entrant (a
+guarded block may render again: the batch's fallback to :func:`draaw_mi.render`). Take a scene's own lock (``draaw_mi.frozen._SceneState.lock``)
 before it, never after. Your own Dr.Jit work in another thread (a ``dr.backward`` of a
 differentiable render, ``mi.render``) is not guarded: hold it there too while a preview runs::
 

@@ -186,10 +186,10 @@ class Preview:
         check_version_sees(self.scene, self.version)
         # the denoiser's guides come from the draaw versions; Mitsuba's are denoised colour-only
         guides = GUIDES if self.denoise and is_draaw(self.version) else ()
-        # its own instance: the worker traces it on its thread (another preview's worker, or
-        # the notebook's own renders, trace theirs at the same time)
+        # (the cached instance: its worker traces it under draaw_mi.guard.RENDER_GUARD, one
+        # thread at a time, as everyone else does)
         return make_integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
-                               guides, shared=False)
+                               guides)
 
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or

@@ -18,7 +18,6 @@ import re
 import threading
 import time
 import warnings
-import weakref
 
 import drjit as dr
 import mitsuba as mi
@@ -31,23 +30,21 @@ from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa:
 from .guard import RENDER_GUARD
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
-_OWN_INTEGRATORS = weakref.WeakSet()   # integrators made with shared=False (scene_changed)
 _INTEGRATOR_KEYS: dict = {}       # make_integrator's arguments as given -> plugin properties
 _SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
 MAX_PASS_SPP = 256
 
 
-def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(),
-                    shared: bool = True, **options):
+def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
     """Instantiate (and cache) the integrator plugin for ``version`` with these options.
 
-    ``shared=False``: a new instance, not cached, for a caller that renders on a thread of its
-    own (the preview's worker). Integrators keep state between and during traces (V4's light
-    pilot, its selection table), so one instance traced by two threads at once failed: two
-    previews of different scenes in one process ("loop state variable ... changed")."""
+    One instance serves every thread: integrators keep state between and during traces (V4's
+    light pilot, its selection table), and :data:`draaw_mi.guard.RENDER_GUARD` lets one
+    thread trace at a time (two previews' workers tracing one V4 instance at once failed:
+    "loop state variable ... changed")."""
     try:                                 # the arguments as given (a render's first step)
         fast = (version, max_depth, bool(hide_emitters), tuple(aovs), tuple(sorted(options.items())))
-        integrator = _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast)) if shared else None
+        integrator = _INTEGRATOR_CACHE.get(_INTEGRATOR_KEYS.get(fast))
     except TypeError:                    # an unhashable option value
         fast = integrator = None
     if integrator is not None:
@@ -60,16 +57,6 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
         props["aovs"] = ",".join(aovs)
     props.update(options)
     key = tuple(sorted((k, str(v)) for k, v in props.items()))
-    if not shared:
-        try:
-            own = mi.load_dict(props)
-        except Exception as e:  # noqa: BLE001
-            raise _integrator_error(plugin, props, e) from None
-        try:
-            _OWN_INTEGRATORS.add(own)
-        except TypeError:         # a C++ plugin (no weak references): it keeps no scene state
-            pass
-        return own
     if key not in _INTEGRATOR_CACHE:
         try:
             _INTEGRATOR_CACHE[key] = mi.load_dict(props)
@@ -154,7 +141,7 @@ def scene_changed(mi_scene) -> None:
     preview, the batch executor and the fitter call this after ``params.update()``; call it
     too after changing light intensities yourself (renders stay unbiased without it, but a
     stale table can sample a dimmed light as often as before)."""
-    for integrator in list(_INTEGRATOR_CACHE.values()) + list(_OWN_INTEGRATORS):
+    for integrator in list(_INTEGRATOR_CACHE.values()):
         forget = getattr(integrator, "forget_scene", None)
         if forget is not None:
             forget(mi_scene)
@@ -355,18 +342,17 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 bar.update(count)
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
-    image = acc
-    if n_passes > 1:
-        with RENDER_GUARD:
-            image = acc / done
-            dr.eval(image)
-            dr.sync_thread()
     if bar is not None:
         bar.close()
     names = ["R", "G", "B"] + list(integrator.aov_names())
     chain = s.get("post", []) if post is None else post
-    if denoise or chain:
-        with RENDER_GUARD:            # (their kernels and reads back)
+    image = acc
+    if n_passes > 1 or denoise or chain:
+        with RENDER_GUARD:            # the mean, denoising, post: their kernels and reads back
+            if n_passes > 1:
+                image = acc / done
+                dr.eval(image)
+                dr.sync_thread()
             if denoise:
                 image, names = _denoised(image, names, extra_aovs)
             if chain:

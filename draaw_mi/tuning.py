@@ -17,6 +17,7 @@ import os
 import numpy as np
 
 from .errors import ParameterError
+from .limits import FLOAT32_MAX
 from .materials.draaw_bsdf import ALL_PARAMS, COLOR_PARAMS, SCALAR_PARAMS
 
 LIGHT_SUFFIXES = (".emitter.radiance.value", ".radiance.value", ".intensity.value", ".irradiance.value")
@@ -58,7 +59,7 @@ def parse_rgb(text: str, where: str) -> list[float]:
                              "'0.8, 0.3, 0.2'") from None
     if len(nums) == 1:
         nums = nums * 3
-    if len(nums) != 3 or not all(math.isfinite(x) and 0 <= x <= 3.4028234663852886e38 for x in nums):
+    if len(nums) != 3 or not all(0 <= x <= FLOAT32_MAX for x in nums):      # (NaN fails too)
         raise ParameterError(f"{where}: {text!r}; expected three finite numbers >= 0 (linear RGB)")
     return nums
 

@@ -55,7 +55,6 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
-        from ..guard import RENDER_GUARD
         from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
                               render, sample_passes)
 
@@ -76,10 +75,9 @@ class CachedScene:
             def fn(scene, seed, integrator=integrator, spp=spp):
                 return mi.render(scene, integrator=integrator, seed=seed, spp=spp)  # as render()
             fn = self.frozen[key] = freeze_render(integrator, fn)
-        with RENDER_GUARD:                # (render_frame holds it already; re-entrant)
-            image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)
-            dr.eval(image)
-            dr.sync_thread()
+        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)   # (render_frame
+        dr.eval(image)                                                          # holds the guard)
+        dr.sync_thread()
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:
             image = _apply_post(image, chain)

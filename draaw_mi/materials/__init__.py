@@ -6,8 +6,7 @@ import math
 import numpy as np
 
 from ..errors import ParameterError
-
-FLOAT32_MAX = 3.4028234663852886e38
+from ..limits import FLOAT32_MAX
 
 _REGISTERED = False
 
@@ -76,7 +75,7 @@ def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None
             raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g with |g| < 1 "
                                  "(in float32)")
     elif parts[-1] == "scale":
-        if not all(0.0 <= x <= float(np.finfo(np.float32).max) for x in nums):
+        if not all(0.0 <= x <= FLOAT32_MAX for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a density scale >= 0 (finite in float32)")
     elif "albedo" in parts:
         if not all(0.0 <= x <= 1.0 for x in nums):

@@ -29,6 +29,7 @@ import os
 import numpy as np
 
 from ..errors import DraawError, ParameterError
+from ..limits import FLOAT32_MAX
 from .faces import solid_meshes
 from .mitsuba_dicts import FILTERS, smoke_shape
 from .voxel_grid import VoxelGrid
@@ -62,7 +63,6 @@ def _array(value, where, key):
 #: voxels per axis at most (4800 per axis asked for 885 GB of float64 and killed the process)
 MAX_GRID_RESOLUTION = 1024
 #: the largest float32, where Mitsuba's sigma_t = density_scale * density must stay
-F32_MAX = float(np.finfo(np.float32).max)
 
 
 def _grid_resolution(value, where):
@@ -163,10 +163,10 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
                                                 "(nothing to render as smoke)")
             # Mitsuba multiplies in float32: a product beyond its range is Inf, and NaN pixels
             peak = float(grid.density.max()) * scale
-            if not peak <= F32_MAX:
+            if not peak <= FLOAT32_MAX:
                 raise (where / "density_scale").error(
                     f"{scale!r} times the grid's largest density {float(grid.density.max()):g} is "
-                    f"{peak:g}, beyond float32 ({F32_MAX:.3g}); expected a smaller scale")
+                    f"{peak:g}, beyond float32 ({FLOAT32_MAX:.3g}); expected a smaller scale")
             info.update(cells=int((grid.density > 0).sum()), max_sigma_t=float(grid.density.max() * scale), g=g_phase)
             return {name: smoke_shape(grid, g_phase=g_phase, scale=scale, filter_type=filt, albedo=albedo)}, info
         mat_params: dict = {}

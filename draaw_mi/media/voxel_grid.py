@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import IOFailure, ParameterError
 from ..io import atomic_path
+from ..limits import FLOAT32_MAX
 from .pick import traverse
 
 Index = tuple[int, int, int]
@@ -360,7 +361,7 @@ class VoxelGrid:
             raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a number")
         density = float(density)
         # (finite where it is stored: in float32, 1e39 was Inf)
-        if not 0 <= density <= float(np.finfo(np.float32).max):
+        if not 0 <= density <= FLOAT32_MAX:
             raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a value >= 0 "
                                  "and finite in float32")
         m = self.occupied

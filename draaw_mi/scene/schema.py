@@ -9,6 +9,7 @@ import math
 from typing import Any, Iterable
 
 from ..errors import SceneError, suggest
+from ..limits import FLOAT32_MAX
 
 
 def shown(value: Any, limit: int = 60) -> str:
@@ -56,9 +57,6 @@ def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iter
     for key in required:
         if key not in table:
             raise where.error(f"missing required key {key!r}")
-
-
-FLOAT32_MAX = 3.4028234663852886e38
 
 
 def number(value: Any, where: Where, lo: float | None = None, hi: float | None = None,
