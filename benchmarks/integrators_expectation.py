@@ -1,6 +1,6 @@
 """Same expectation (V3, V4 vs Mitsuba's ``path``) and bias of V1/V2, per pixel.
 
-For each official scene at ``--res`` x ``--res``: ``--seeds`` independent renders of
+For each scene of ``--scenes`` (files in ``scenes/``) at ``--res`` x ``--res``: ``--seeds`` independent renders of
 ``--spp`` spp per integrator (distinct seeds per integrator); per-pixel means and standard
 errors; z = (mean_a - mean_b) / sqrt(se_a^2 + se_b^2) over all pixels and channels with
 non-zero variance. For N(0, 1) z-scores: |z| > 3 for 0.27 %, |z| > 2 for 4.6 %, mean 0,
@@ -8,7 +8,7 @@ std 1. V1/V2: relative bias of the image mean and the mean absolute per-pixel bi
 the ``path`` mean.
 
 Usage: ``.venv/bin/python benchmarks/integrators_expectation.py [--res 32 --spp 4096
---seeds 16] [--out FILE]`` (default ``benchmarks/results/integrators_expectation.md``).
+--seeds 16 --scenes cornell,material_spheres] [--out FILE]`` (default ``benchmarks/results/integrators_expectation.md``).
 """
 from __future__ import annotations
 
@@ -47,6 +47,8 @@ def main(argv=None) -> int:
     ap.add_argument("--res", type=int, default=32)
     ap.add_argument("--spp", type=int, default=4096)
     ap.add_argument("--seeds", type=int, default=16)
+    ap.add_argument("--scenes", default="cornell,material_spheres",
+                    help="comma-separated scene names in scenes/ (e.g. thesis)")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results",
                                                   "integrators_expectation.md"))
     args = ap.parse_args(argv)
@@ -57,7 +59,7 @@ def main(argv=None) -> int:
            f"integrator (distinct seeds), Mitsuba {mi.__version__}, {mi.variant()}, "
            f"{time.strftime('%Y-%m-%d')}.", "",
            "Reference values for N(0, 1): |z|>3 0.27 %, |z|>2 4.55 %, mean 0, std 1.", ""]
-    for name in ("cornell", "material_spheres"):
+    for name in args.scenes.split(","):
         sc = draaw_mi.load_scene(os.path.join(ROOT, "scenes", f"{name}.toml"),
                                  resolution=(args.res, args.res))
         depth = int(sc.settings.get("max_depth", 6))

@@ -53,7 +53,7 @@ def supported(sensor: mi.Sensor) -> bool:
     a tenth of the independent sampler's variance at 64 spp on the Cornell box), a pilot's
     sample variance no longer measures a stratified mean's error, and per-pixel counts break
     the strata. Measured with stratified rounds (each pixel's count split into uniform
-    rounds the sampler can stratify): 1.25-1.48x the variance x time of uniform V4 with the
+    rounds the sampler can stratify): 1.23-1.44x the variance x time of uniform V4 with the
     same sampler on the Cornell box, the spheres and the envmap scene at 128x128, 64 spp
     (``benchmarks/results/speed_suite.md``)."""
     from .scene.camera import sampler_plugin

@@ -75,7 +75,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=int, help="samples per pixel")
     r.add_argument("--resolution", help="WxH, e.g. 640x480")
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
-    r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (2-10x less "
+    r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (up to 10x less "
                    "variance at the same time), stratified, ldsampler, orthogonal")
     r.add_argument("--max-depth", type=int, help="maximum path depth (-1: unbounded)")
     r.add_argument("--time-budget", type=float, help="stop after this many seconds (at least one pass)")
@@ -142,12 +142,22 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _batch_parser(sub) -> None:
-    a = sub.add_parser("batch", help="render the frames of a batch manifest to multi-layer EXR (resumable)")
+    a = sub.add_parser("batch", help="render the frames of a batch manifest to multi-layer EXR (resumable)",
+                       description="Render every unfinished frame of a batch manifest (see "
+                       "draaw_mi.batch.manifest for its keys; output pattern fields: {job} {scene} "
+                       "{version} {spp} {frame}, e.g. out/{job}/{frame:04d}.exr). A frame whose EXR "
+                       "is present, complete and made with the same settings is not rendered again.",
+                       epilog="Exit status: 0 when every frame exists, 1 when some are missing "
+                       "(failed frames are listed and logged), 2 for a bad manifest or "
+                       "arguments (nothing rendered), 130 when interrupted.")
     a.add_argument("manifest", help="batch manifest (.toml or .json)")
     a.add_argument("--out", help="put every output under this folder (relative patterns resolve there)")
-    a.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
-    a.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
-    a.add_argument("--executor", default="inprocess", choices=["inprocess", "dask"])
+    mode = a.add_mutually_exclusive_group()
+    mode.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
+    mode.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
+    a.add_argument("--executor", default="inprocess", choices=["inprocess", "dask"],
+                   help="inprocess (default: this process, scenes loaded once) or dask (a "
+                   "LocalCluster of worker processes, or --scheduler; pip install 'draaw-mi[batch]')")
     a.add_argument("--workers", type=int, help="Dask LocalCluster worker processes (default: min(cores, 2))")
     a.add_argument("--scheduler", help="address of an existing Dask scheduler, tcp://HOST:PORT")
     a.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
@@ -166,6 +176,9 @@ def _cmd_render(args) -> int:
         if args.threads < 1:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")
         dr.set_thread_count(args.threads)
+    for flag, value, lo in (("--spp", args.spp, 1), ("--max-depth", args.max_depth, -1), ("--seed", args.seed, 0)):
+        if value is not None and value < lo:      # (was blamed on the scene file: "override.spp")
+            raise CliError(f"{flag} {value}: expected an integer >= {lo}")
     overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
                  "sampler": args.sampler}
     scene = draaw_mi.load_scene(args.scene, **{k: v for k, v in overrides.items() if v is not None})
@@ -499,12 +512,13 @@ def _cmd_batch(args) -> int:
         st = batch.status(args.manifest, out=args.out)
         for f in st["frames"]:
             if args.dry_run or f["status"] != "done":
-                print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<8} {f['output']}"
+                print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<10} {f['output']}"
                       + (f"  ({f['error']})" if f["error"] else ""))
         c = st["counts"]
         nopreview = f", {c['no-preview']} without their preview" if c["no-preview"] else ""
+        damaged = f", {c['damaged']} damaged (unreadable or cut short)" if c["damaged"] else ""
         print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
-              f"(other job settings){nopreview}, {c['failed']} failed; log {st['log']}")
+              f"(other job settings){damaged}{nopreview}, {c['failed']} failed; log {st['log']}")
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
                     scheduler=args.scheduler, progress=progress_mode(args.no_progress))
@@ -516,6 +530,9 @@ def _cmd_batch(args) -> int:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if not argv:                         # the commands, not "the following arguments are required"
+        _parser().print_help(sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         args = _parser().parse_args(argv)
         args.argv = list(argv)               # as typed: reports repeat the command that made them

@@ -33,8 +33,9 @@ Example (skipped when ``pyoidn`` is missing)::
 
 From a render with AOVs::
 
+    from draaw_mi.denoise import denoise_aovs
     img, info = draaw_mi.render(scene, spp=4, aovs=["albedo", "normal"], return_info=True)
-    clean = draaw_mi.denoise_aovs(img, info["channels"])       # colour denoised, AOVs kept
+    clean = denoise_aovs(img, info["channels"])                 # colour denoised, AOVs kept
 """
 from __future__ import annotations
 

@@ -8,8 +8,9 @@ its own (a script, a custom UI, the latency benchmark). Its phases, per frame:
    Dr.Jit arrays, so a slider move never recompiles a kernel; the seed is an opaque
    ``mi.UInt32`` for the same reason.
 2. **Render one sample per pixel**, through a ``dr.freeze``-recorded function (replays the
-   recorded kernels without re-tracing the Python integrator: measured 0.19 -> 0.13 s per
-   256² V4 frame on a shared 2-core machine, see ``benchmarks/results/preview_latency.md``;
+   recorded kernels without re-tracing the Python integrator: 1-spp 256² V4 frames in
+   0.66x the time of traced ones on a shared 2-core machine, 120 -> 80 ms and 322 -> 212 ms
+   in two runs, see ``benchmarks/results/preview_latency.md``;
    ``freeze=False`` turns it off). The first frame after a change can be rendered at a
    reduced ``interactive_scale`` (a second, private copy of the scene; its parameters are kept
    in step) and shown upscaled; it is never mixed into the mean.

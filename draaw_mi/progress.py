@@ -84,7 +84,9 @@ class LineProgress:
         if now - self.last >= self.every or (self.total and self.n >= self.total):
             self._write(now)
 
-    def set_postfix(self, **values):
+    def set_postfix(self, refresh: bool = True, **values):
+        """The ``key=value`` text of the next line (``refresh``: tqdm's argument, unused:
+        lines are written by :meth:`update`)."""
         self.postfix = " ".join(f"{k}={v}" for k, v in values.items())
 
     def set_postfix_str(self, text: str):

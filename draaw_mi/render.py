@@ -291,7 +291,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     seed = s["seed"] if seed is None else seed
     max_depth = s["max_depth"] if max_depth is None else max_depth
     _check_int("spp", spp, 1)
-    _check_int("seed", seed, 0)
+    _check_int("seed", seed, 0, 2 ** 32 - 1)          # (a UInt32: 2**40 was a raw Dr.Jit error)
     _check_int("max_depth", max_depth, -1)
     if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
         raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
@@ -471,9 +471,10 @@ def _denoised(image, names, extra_aovs):
     return out, names
 
 
-def _check_int(name, value, lo):
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
-        raise RenderError(f"render: {name}={value!r}; expected an integer >= {lo}")
+def _check_int(name, value, lo, hi=None):
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise RenderError(f"render: {name}={value!r}; expected an integer {rng}")
 
 
 def _apply_post(image, chain):

@@ -169,3 +169,21 @@ def test_console_script_exit_status(tmp_path):
     r = subprocess.run([exe, "render", str(tmp_path / "none.toml"), "-o", str(tmp_path / "o.exr")],
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "does not exist" in r.stderr
+
+
+@pytest.mark.parametrize("flag, value, lo", [("--spp", "0", 1), ("--max-depth", "-2", -1), ("--seed", "-1", 0)])
+def test_a_bad_render_flag_is_named_as_a_flag(flag, value, lo, tmp_path, capsys):
+    """``--spp 0`` was blamed on the scene file ("cornell.toml: override.spp: 0 is out of range")."""
+    assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(tmp_path / "x.exr"), flag, value]) == 2
+    assert capsys.readouterr().err.strip() == f"draaw-mi: error: {flag} {value}: expected an integer >= {lo}"
+
+
+def test_no_command_lists_the_commands(capsys):
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    assert all(c in err for c in ("render", "info", "fit", "bench", "post", "batch")), err
+
+
+def test_dry_run_and_status_are_one_or_the_other(tmp_path, capsys):
+    assert main(["batch", str(tmp_path / "m.toml"), "--dry-run", "--status"]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err

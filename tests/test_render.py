@@ -77,6 +77,7 @@ def test_differentiable_render_through_api(tiny_scene):
     ({"spp": 0}, "spp=0"), ({"spp": 2.5}, "spp=2.5"), ({"seed": -1}, "seed=-1"),
     ({"version": "v9"}, "v9"), ({"time_budget": -1}, "time_budget"), ({"max_depth": -2}, "max_depth"),
     ({"resolution": "0x5"}, "out of range"),
+    ({"seed": 2 ** 32}, r"seed=4294967296; expected an integer in \[0, 4294967295\]"),   # (a raw Dr.Jit error)
 ])
 def test_bad_render_arguments(tiny_scene, kwargs, msg):
     with pytest.raises(draaw_mi.DraawError, match=msg):

@@ -25,7 +25,7 @@ plan → lock the output folders (a second run on them → :class:`~draaw_mi.err
 >>> import draaw_mi.batch as batch                             # doctest: +SKIP
 >>> res = batch.run("scenes/batch_example.toml", out="out")    # doctest: +SKIP
 >>> res.complete, res.summary()                                # doctest: +SKIP
-(True, 'batch: 48 frames: 48 rendered, 0 already done, 0 failed; all 48 frames present ...')
+(True, 'batch: 36 frames: 36 rendered, 0 already done, 0 failed; all 36 frames present ...')
 """
 from __future__ import annotations
 
@@ -88,14 +88,20 @@ def load(manifest, out: str | None = None, cache=None):
     return m, plan(m, cache), cache
 
 
-def log_path(m: Manifest, specs) -> str:
+def log_path(m: Manifest, specs=None) -> str:
+    """The manifest's log: its ``log`` key, else ``<manifest>.batch.jsonl`` in the folder the
+    output patterns share before their first field (``out/`` for ``out/{job}/{frame}.exr``).
+    It depends on the patterns, not on the jobs: with the folder the frames shared, adding a
+    job moved the log, and ``--status`` lost the errors recorded before."""
     if m.log:
         return m.log
-    root = os.path.commonpath([os.path.dirname(s["output"]) for s in specs])
+    from .manifest import fixed_folder
+    folders = [fixed_folder(job.output) for job in m.jobs]
+    root = os.path.commonpath(folders)
     if os.path.dirname(root) == root:
         # outputs in unrelated trees (/data/..., /scratch/...): not a log (and a lock) at the
-        # file system's root, but beside the first job's frames
-        root = os.path.dirname(specs[0]["output"])
+        # file system's root, but in the first job's folder
+        root = folders[0]
     if m.path.startswith("<"):
         return os.path.join(root, "batch.jsonl")
     return os.path.join(root, os.path.splitext(os.path.basename(m.path))[0] + ".batch.jsonl")
@@ -151,17 +157,22 @@ def remove_temp_files(specs) -> list[str]:
 
 
 def status(manifest, out: str | None = None) -> dict:
-    """Per frame ``done`` / ``missing`` / ``stale`` (present, other job), plus the last error
-    the log recorded for frames not done. Returns ``{"frames": [...], "counts": {...}}``."""
+    """Per frame ``done`` / ``missing`` / ``stale`` (present, other job) / ``damaged``
+    (unreadable or cut short) / ``no-preview``, or ``failed`` with the last error the log
+    recorded for the frame's present settings. Reads only: read-only outputs are fine.
+    Returns ``{"frames": [...], "counts": {...}, "log": path}``."""
     m, specs, _ = load(manifest, out)
     errors = {}
     for rec in read_log(log_path(m, specs)):
         if rec.get("event") == "frame":
-            errors[(rec.get("job"), rec.get("frame"))] = rec.get("error")
-    frames, counts = [], {"done": 0, "missing": 0, "stale": 0, "no-preview": 0, "failed": 0}
+            errors[(rec.get("job"), rec.get("frame"))] = (rec.get("hash"), rec.get("error"))
+    frames = []
+    counts = {"done": 0, "missing": 0, "stale": 0, "damaged": 0, "no-preview": 0, "failed": 0}
     for s in specs:
         st = frame_status(s)
-        err = errors.get((s["job"], s["frame"])) if st != "done" else None
+        seen, err = errors.get((s["job"], s["frame"]), (None, None))
+        if st == "done" or (seen is not None and seen != s["hash"]):
+            err = None          # (an error of other settings for this frame, since edited)
         if err:
             st = "failed"
         counts[st] += 1
@@ -189,17 +200,29 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     states = [frame_status(s) for s in specs]
     todo = [s for s, st in zip(specs, states) if st != "done"]
     res = BatchResult(total=len(specs), skipped=len(specs) - len(todo), log=log_path(m, specs))
+    from ..errors import SceneError
+    from .lock import output_locks
+    from .plan import check_writable, prepare_outputs
+    log_dir = os.path.dirname(res.log)
+    if todo:        # (permission bits, with their own messages; the run then writes a probe)
+        check_writable(sorted({os.path.dirname(s["output"]) for s in todo} | {log_dir}), m.path)
     if dry_run:
         res.missing = len(todo)
         return res
-    from .lock import output_locks
-    from .plan import prepare_outputs
-    log_dir = os.path.dirname(res.log)
-    prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {log_dir}), m.path)
-    # every folder a frame of the manifest lives in: those of finished frames exist, the rest
-    # prepare_outputs just created
-    folders = {os.path.dirname(s["output"]) for s in specs} | {log_dir}
-    with output_locks([f for f in folders if os.path.isdir(f)], m.path):
+    try:
+        prepare_outputs(sorted({os.path.dirname(s["output"]) for s in todo} | {log_dir}), m.path)
+    except SceneError:
+        if todo:
+            raise
+        # every frame is done in folders that cannot be written (an archive on a read-only
+        # share): complete, nothing to write (this was exit 2)
+        res.seconds = time.perf_counter() - t0
+        return res
+    # every folder a frame of the manifest lives in: those of finished frames exist (and may
+    # be read-only), the rest prepare_outputs just created
+    folders = {os.path.dirname(s["output"]) for s in todo} | {log_dir}
+    done_folders = {os.path.dirname(s["output"]) for s in specs} - folders
+    with output_locks(folders, m.path, optional=[f for f in done_folders if os.path.isdir(f)]):
         # read again under the lock: a run that held it may have finished frames since
         # planning, and a finished frame is never rendered twice
         states = [frame_status(s) for s in todo]
@@ -229,9 +252,10 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
         except DraawError as e:
             r = {"job": s["job"], "frame": s["frame"], "output": s["output"], "error": str(e)}
             res.failed.append(r)
-            log.write(event="frame", **r)
+            log.write(event="frame", hash=s["hash"], **r)
     bar = progress_bar(len(todo), "batch", "frames", progress if todo else False, where="batch.run")
     first_kernels: dict = {}
+    hashes = {s["output"]: s["hash"] for s in specs}     # logged: --status shows current errors only
 
     def handle(r):
         res.results.append(r)
@@ -248,10 +272,12 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
                 r["new_kernels"] = len(new)
                 res.new_kernels[r["job"]] += len(new)
                 first_kernels[r["job"]] |= new
-        log.write(event="frame", **{k: v for k, v in r.items() if k != "kernels"})
+        log.write(event="frame", hash=hashes.get(r["output"]), **{k: v for k, v in r.items() if k != "kernels"})
         if bar is not None:
-            bar.set_postfix(done=res.rendered, failed=len(res.failed))   # (before the step: a line
-            bar.update(1)                                                 # is written on update)
+            # the counts first, without a redraw (tqdm drew done=5 beside 4/6); the step
+            # draws both, and writes a LineProgress line
+            bar.set_postfix(done=res.rendered, failed=len(res.failed), refresh=False)
+            bar.update(1)
         if on_result is not None:
             on_result(r)
 

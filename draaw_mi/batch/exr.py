@@ -11,10 +11,15 @@ with ``exrheader`` or ``OpenEXR.File(path, header_only=True).header()``)::
     Mitsuba plugin: draaw_v4, draaw_v2, path), draaw:spp, draaw:seed, draaw:max_depth
     draaw:render_seconds, draaw:rendered_at (UTC ISO time)
     draaw:draaw_mi, draaw:mitsuba, draaw:drjit, draaw:variant
+    draaw:params  the frame's overrides (JSON: {parameter key: value}), if any
+    draaw:camera  the frame's camera (JSON: origin, target, up, fov), if the job moves it
+    draaw:post    the post chain applied to its colour (JSON), if any
 
-A frame is *finished* when its file exists, its header is readable and its ``draaw:frame_hash``
-equals the planned hash (:func:`frame_status`). Because the file is renamed into place only
-after it is completely written, a present file is never a partial one. A job with previews
+A frame is *finished* when its file exists, its header is readable, its ``draaw:frame_hash``
+equals the planned hash and its pixel data is all there (:func:`frame_status`,
+:func:`exr_complete`). The file is renamed into place only after it is completely written, so
+draaw-mi never leaves a partial one; the last check catches a file cut short later (a copy
+that ran out of disk, a partial rsync), whose header still reads. A job with previews
 also wants the frame's PNG, which carries the same hash as a text chunk and is written before
 the EXR: a finished EXR whose PNG is missing or another frame's (a run killed between the two
 writes, previews turned on later) gets its PNG from the EXR, not a new render
@@ -22,7 +27,9 @@ writes, previews turned on later) gets its PNG from the EXR, not a new render
 """
 from __future__ import annotations
 
+import json
 import os
+import struct
 import time
 
 import numpy as np
@@ -44,6 +51,9 @@ def metadata(spec: dict, seconds: float) -> dict:
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if spec.get("files_hash"):
         meta["draaw:files_sha256"] = spec["files_hash"]
+    for key in ("params", "camera", "post"):     # what the frame shows, readable from its file
+        if spec.get(key):
+            meta[f"draaw:{key}"] = json.dumps(spec[key])
     meta.update({f"draaw:{k}": str(v) for k, v in spec["versions"].items()})
     return meta
 
@@ -65,8 +75,6 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
         meta["draaw:scene_sha256"] = file_hash(scene_file)
     meta["draaw:sampler"] = str(scene.settings.get("sampler") or "independent")
     if post:
-        import json
-
         from ..post import load_chain
         meta["draaw:post"] = json.dumps(load_chain(post).to_list())
     meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})
@@ -97,14 +105,111 @@ def read_header(path: str) -> dict | None:
         return None
 
 
+# scanlines per chunk of each OpenEXR compression (the ``compression`` attribute's value):
+# NO, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA, DWAB
+_LINES_PER_CHUNK = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256}
+_MAGIC = b"\x76\x2f\x31\x01"
+_HEADER_READ = 1 << 18
+
+
+def exr_complete(path: str) -> bool:
+    """Whether the EXR at ``path`` holds all of its pixel data: every chunk its offset table
+    lists lies inside the file, the last one to its end. A file cut short keeps a readable
+    header, so :func:`read_header` alone took it for finished. Reads the header and the
+    offset table only (a few KiB whatever the image size); files that are not single-part
+    scanline images (tiled, deep, multi-part, newer compressions) are read in full instead.
+
+    >>> import tempfile, numpy as np
+    >>> from draaw_mi.io import write_exr
+    >>> p = tempfile.mkdtemp() + "/f.exr"
+    >>> write_exr(p, np.ones((8, 8, 3), np.float32))
+    >>> exr_complete(p)
+    True
+    >>> with open(p, "r+b") as fh:
+    ...     _ = fh.truncate(os.path.getsize(p) - 1)
+    >>> exr_complete(p)
+    False
+    """
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as fh:
+            head = fh.read(_HEADER_READ)
+            layout = _scanline_layout(head)
+            if layout is None:
+                return _reads_in_full(path)
+            table_at, chunks = layout
+            if table_at + 8 * chunks > size:
+                return False
+            fh.seek(table_at)
+            offsets = struct.unpack(f"<{chunks}Q", fh.read(8 * chunks))
+            data_at = table_at + 8 * chunks
+            if min(offsets) < data_at or max(offsets) + 8 > size:
+                return False
+            fh.seek(max(offsets))
+            _, length = struct.unpack("<ii", fh.read(8))
+            return length >= 0 and max(offsets) + 8 + length <= size
+    except (OSError, struct.error, ValueError):
+        return False
+
+
+def _scanline_layout(head: bytes):
+    """``(offset table position, chunk count)`` of a single-part scanline EXR from the
+    file's first bytes, or ``None`` when the file is of another kind (or its header is longer
+    than what was read)."""
+    if head[:4] != _MAGIC:
+        raise ValueError("not an EXR file")
+    flags = int.from_bytes(head[4:8], "little")
+    if flags & (0x200 | 0x800 | 0x1000):            # tiled, deep ("non-image"), multi-part
+        return None
+    pos, window, compression, count = 8, None, None, None
+    while True:
+        end = head.index(b"\0", pos)                  # (ValueError: header longer than read)
+        name = head[pos:end]
+        if not name:
+            pos = end + 1
+            break
+        tend = head.index(b"\0", end + 1)
+        (length,) = struct.unpack_from("<i", head, tend + 1)
+        value = head[tend + 5:tend + 5 + length]
+        if len(value) != length:
+            return None
+        if name == b"dataWindow":
+            window = struct.unpack("<iiii", value)
+        elif name == b"compression":
+            compression = value[0]
+        elif name == b"chunkCount":
+            (count,) = struct.unpack("<i", value)
+        pos = tend + 5 + length
+    if count is None:
+        lines = _LINES_PER_CHUNK.get(compression)
+        if window is None or lines is None:
+            return None
+        count = -(-(window[3] - window[1] + 1) // lines)
+    return (pos, count) if count > 0 else None
+
+
+def _reads_in_full(path: str) -> bool:
+    import OpenEXR
+    try:
+        with OpenEXR.File(path) as f:
+            for channel in f.channels().values():
+                channel.pixels                          # noqa: B018 - decoding is the check
+        return True
+    except Exception:  # noqa: BLE001 - any failure to decode is an incomplete file
+        return False
+
+
 def frame_status(spec: dict) -> str:
-    """``"done"`` (present, hash matches), ``"stale"`` (present, other job), ``"missing"``, or
+    """``"done"`` (present, hash matches, pixel data complete), ``"stale"`` (present, another
+    job's settings), ``"damaged"`` (present but unreadable or cut short), ``"missing"``, or
     ``"no-preview"`` (the EXR is done, the preview the job asks for is missing or stale)."""
     header = read_header(spec["output"])
     if header is None:
-        return "stale" if os.path.exists(spec["output"]) else "missing"
+        return "damaged" if os.path.exists(spec["output"]) else "missing"
     if header.get(HASH_ATTR) != spec["hash"]:
         return "stale"
+    if not exr_complete(spec["output"]):
+        return "damaged"
     if spec.get("preview"):
         tag = _png_hash(preview_path(spec))
         # a PNG without a hash was written by draaw-mi before previews carried one, after its

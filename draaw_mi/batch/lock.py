@@ -42,17 +42,20 @@ def _holder(fd: int) -> str:
 
 
 @contextlib.contextmanager
-def output_locks(folders, where: str):
+def output_locks(folders, where: str, optional=()):
     """Hold an exclusive lock on every folder in ``folders`` for the duration of the block.
 
     Raises :class:`~draaw_mi.errors.BusyError` (nothing locked, nothing written) if another
     process holds one of them (another user's lock file is locked through a read-only
-    descriptor), or a lock file cannot be opened at all. ``where``: the manifest, for the
-    message. The folders must exist.
+    descriptor), or a lock file cannot be opened at all. ``optional``: folders this run only
+    reads (its frames there are done) and would clean of a killed run's temporary files;
+    where no lock file can be made (a read-only archive), they are skipped, since no run can
+    write there either. ``where``: the manifest, for the message. The folders must exist.
     """
     held = []
+    optional = set(optional) - set(folders)
     try:
-        for folder in sorted(set(folders)):
+        for folder in sorted(set(folders) | optional):
             if fcntl is None:
                 break
             path = os.path.join(folder, LOCK_NAME)
@@ -65,9 +68,13 @@ def output_locks(folders, where: str):
                 try:
                     fd = os.open(path, os.O_RDONLY)
                 except OSError as e:
+                    if folder in optional:
+                        continue
                     raise BusyError(f"{where}: output folder {folder!r} cannot be locked: "
                                     f"{path!r} ({e.strerror or e})") from None
             except OSError as e:
+                if folder in optional:
+                    continue
                 raise BusyError(f"{where}: output folder {folder!r} cannot be locked: {path!r} "
                                 f"({e.strerror or e})") from None
             try:

@@ -9,7 +9,9 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     half = false                             # float16 EXR channels instead of float32
     previews = false                         # also an sRGB PNG beside every EXR
     contact_sheet = false                    # one PNG with every frame of a job, per job
-    log = "render-log.jsonl"                 # like output; default <outputs>/<manifest>.batch.jsonl
+    log = "render-log.jsonl"                 # a file (no fields), relative like output; default:
+                                             # <manifest>.batch.jsonl in the output pattern's
+                                             # fixed folder (out/ here)
     # a job's freeze = false re-traces every frame instead of replaying a dr.freeze recording
 
     [defaults]                               # any job key, applied where a job does not set it
@@ -119,7 +121,11 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
     sheet = boolean(doc.get("contact_sheet", False), where / "contact_sheet")
     log = doc.get("log")
     if log is not None:
-        log = os.path.join(out_base, string(log, where / "log"))
+        log = string(log, where / "log")
+        if "{" in log or "}" in log or not log.strip() or log.endswith(("/", os.sep)):
+            raise (where / "log").error(f"{log!r} must name one file (no {{fields}}: one log serves "
+                                        "every job)")
+        log = os.path.join(out_base, log)
     defaults = doc.get("defaults", {})
     check_keys(defaults, [k for k in JOB_KEYS if k != "name"], where / "defaults")
     jobs_doc = doc["jobs"]
@@ -330,18 +336,33 @@ def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
         if base_name not in PATTERN_FIELDS:
             from ..errors import suggest
             raise where.error(f"{pattern!r} uses unknown field {{{f}}}{suggest(base_name, PATTERN_FIELDS)}")
-    if job.frames > 1 and "frame" not in [f.split(".")[0].split("[")[0] for f in fields]:
+        if f != base_name:      # {job.upper} gave a folder named after a method's address
+            raise where.error(f"{pattern!r}: field {{{f}}} must be a bare name ({{{base_name}}}, "
+                              "with an optional format such as {frame:04d})")
+    if job.frames > 1 and "frame" not in fields:
         raise where.error(f"{pattern!r} has no {{frame}} field, so {job.frames} frames would overwrite "
                           "one file")
-    try:
-        format_output(pattern, job, 0)
+    try:         # (the effective version and spp come with planning; stand-ins of their types)
+        format_output(pattern, job, 0, version=job.version or "v4", spp=job.spp or 1)
     except (ValueError, KeyError, IndexError, TypeError) as e:
         raise where.error(f"{pattern!r} cannot be formatted ({e})") from None
     return pattern if os.path.isabs(pattern) else os.path.join(out_base, pattern)
 
 
-def format_output(pattern: str, job: Job, frame: int) -> str:
-    """The output file of ``frame`` of ``job`` (pattern fields: job scene version spp frame)."""
+def format_output(pattern: str, job: Job, frame: int, version: str, spp: int) -> str:
+    """The output file of ``frame`` of ``job`` (pattern fields: job scene version spp frame);
+    ``version`` and ``spp``: the frame's effective ones (the scene's own where the job sets
+    none)."""
     return os.path.normpath(pattern.format(
         job=job.name, scene=os.path.splitext(os.path.basename(job.scene))[0],
-        version=job.version or "default", spp=job.spp if job.spp is not None else "default", frame=frame))
+        version=version, spp=int(spp), frame=frame))
+
+
+def fixed_folder(pattern: str) -> str:
+    """The folder of an (absolute) output pattern before its first field: where the frames of
+    every job with that pattern live, whatever the jobs are called.
+
+    >>> fixed_folder("/r/out/{job}/{frame:04d}.exr"), fixed_folder("/r/out/shot_{job}.exr")
+    ('/r/out', '/r/out')
+    """
+    return os.path.normpath(os.path.dirname(pattern.split("{", 1)[0]))

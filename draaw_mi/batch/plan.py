@@ -62,13 +62,27 @@ def files_hash(paths) -> str | None:
     return h.hexdigest()
 
 
+def canonical_version(version: str) -> str:
+    """One name per integrator for the frame hash (``V4``, ``draaw_v4``, ``optimised`` ->
+    ``v4``): the pixels depend on the integrator, not on how the manifest spells it.
+
+    >>> canonical_version("V4"), canonical_version("V2M"), canonical_version("path")
+    ('v4', 'v3', 'path')
+    """
+    from ..integrators import resolve_version
+    plugin = resolve_version(version)
+    return plugin.removeprefix("draaw_")
+
+
 def frame_hash(spec: dict) -> str:
     """Hash of everything that determines a frame's pixels (not its output path or time)."""
     keys = ("scene_hash", "resolution", "version", "spp", "sampler", "seed", "max_depth", "aovs", "post",
             "camera", "params", "half", "versions")
     if spec.get("files_hash"):     # (only then: frames of scenes that read no file keep their hash)
         keys += ("files_hash",)
-    text = json.dumps({k: spec.get(k) for k in keys}, sort_keys=True, separators=(",", ":"))
+    values = {k: spec.get(k) for k in keys}
+    values["version"] = canonical_version(values["version"])
+    text = json.dumps(values, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
@@ -189,7 +203,15 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 keys[name] = scene.key(name)
             except DraawError as e:
                 raise SceneError(f"{loc}: params: {e}") from None
-            _check_shape(loc, name, job.params[name], scene.all_params[keys[name]])
+            same = [n for n in keys if n != name and keys[n] == keys[name]]
+            if same:      # (the last one won, silently)
+                raise SceneError(f"{loc}: params: {name!r} and {same[0]!r} are the same parameter "
+                                 f"{keys[name]!r}; keep one")
+            if job.camera is not None and keys[name] in (entry.fov_key, entry.camera_key):
+                # (the camera table's view replaced the override, silently)
+                raise SceneError(f"{loc}: params.{name}: the job's camera table sets the view and "
+                                 "field of view; give camera.fov, or drop the camera table")
+            _check_shape(loc, name, job.params[name], scene.all_params[keys[name]], keys[name])
         _check_values(loc, keys, job.params, job.frames, scene)
         cams = None
         if job.camera is not None:
@@ -197,14 +219,22 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 raise SceneError(f"{loc}: camera: the scene's sensor has no to_world parameter")
             try:
                 cams = camera_frames(job.camera, job.frames, entry.fov)
+                from ..scene.description import check_camera_outside_smoke
+                from ..scene.schema import Where
+                for f, c in enumerate(cams):
+                    check_camera_outside_smoke(c["origin"], scene.info.get("volumes", []), Where(f"frame {f}"))
             except DraawError as e:
                 raise SceneError(f"{loc}: camera: {e}") from None
         for f in range(job.frames):
-            out = format_output(job.output, job, f)
-            if out in seen:
-                raise SceneError(f"{where}: output pattern gives the same file {out!r} for "
-                                 f"{seen[out]} and job {job.name!r} frame {f}")
-            seen[out] = f"job {job.name!r} frame {f}"
+            out = format_output(job.output, job, f, version, spp)
+            # a frame's files (its EXR, and its PNG with previews), told apart without case:
+            # x/0001.exr and x/0001.EXR share a preview, and are one file on macOS or Windows
+            files = [out] + ([os.path.splitext(out)[0] + ".png"] if job.previews else [])
+            for path in files:
+                if path.casefold() in seen:
+                    raise SceneError(f"{where}: output pattern gives the same file {path!r} for "
+                                     f"{seen[path.casefold()]} and job {job.name!r} frame {f}")
+                seen[path.casefold()] = f"job {job.name!r} frame {f}"
             spec = {
                 "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
                 "scene": job.scene, "scene_hash": entry.hash, "files_hash": entry.files_hash,
@@ -220,7 +250,6 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             }
             spec["hash"] = frame_hash(spec)
             specs.append(spec)
-    check_writable(sorted({os.path.dirname(s["output"]) for s in specs}), where)
     return specs
 
 
@@ -232,10 +261,20 @@ def components(value) -> int:
     return 1
 
 
-def _check_shape(loc, name, spec, current):
-    if "Transform" in type(current).__name__:
+def _check_shape(loc, name, spec, current, key):
+    """An override's values fit the parameter: not a transform, not integers, as many
+    components, convertible to its type (else the frames failed one by one at render time)."""
+    import drjit as dr
+
+    from ..scene import value_like
+    kind_name = type(current).__name__
+    if "Transform" in kind_name:
         raise SceneError(f"{loc}: params.{name}: transforms cannot be overridden; use [camera] for the "
                          "sensor")
+    if dr.is_integral_v(current) or dr.is_mask_v(current):
+        hint = "; a job's resolution sets the film size" if key.endswith(("film.size", "crop_size")) else ""
+        raise SceneError(f"{loc}: params.{name}: {key} holds integers ({kind_name}); batch overrides "
+                         f"set number parameters{hint}")
     kind, data = spec
     samples = data if kind in ("values", "linear") else [data]
     want = components(current)
@@ -244,6 +283,10 @@ def _check_shape(loc, name, spec, current):
         if size != want and size != 1:
             raise SceneError(f"{loc}: params.{name}: value {v!r} has {size} components; the parameter "
                              f"has {want}")
+        try:
+            value_like(current, v, key)
+        except DraawError as e:
+            raise SceneError(f"{loc}: params.{name}: {e}") from None
 
 
 def _check_values(loc, keys: dict, specs: dict, frames: int, scene) -> None:

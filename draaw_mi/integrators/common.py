@@ -337,7 +337,10 @@ def phong_material(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Boo
         ks_d = dr.lerp(mi.Color3f(0.08 * spec), base, metal)
         kd_d = base * (1.0 - metal) * (1.0 - dr.max(ks_d))
         alpha2 = dr.square(dr.square(rough)) + 1e-6          # alpha^2, alpha = sqrt(r^4 + 1e-6)
-        n_d = dr.clip(2.0 / alpha2 - 2.0, 0.0, PHONG_MAX_EXPONENT)
+        # the floor at 0 only absorbs the 1e-6 (-2e-6 at roughness 1): straight through, or
+        # roughness 1 had no gradient (an optimiser at the bound stayed there); the cap on
+        # sharp lobes stays a plain clip, where the image does not change either
+        n_d = dr.minimum(clamp_st(2.0 / alpha2 - 2.0, 0.0, None), PHONG_MAX_EXPONENT)
         kd = dr.select(is_draaw, kd_d, kd)
         ks = dr.select(is_draaw, ks_d, ks)
         n = dr.select(is_draaw, n_d, n)

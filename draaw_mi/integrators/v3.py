@@ -78,7 +78,9 @@ class DraawV3Integrator(DraawIntegrator):
     ignores a ``draaw`` normal map.
 
     Differentiable by path replay (primal, forward and backward modes) with respect to BSDF
-    and emitter parameters; no geometry / visibility gradients, no participating media.
+    and emitter parameters; no geometry / visibility gradients. Scenes with participating
+    media are traced by :mod:`draaw_mi.integrators.volume` (density, albedo and ``g``
+    gradients too).
 
     Deviations from GO-Draaw's V2M (``go-draaw-spec.md`` §3.3): GO-Draaw follows the light's
     mirror direction for "reflections" and bounces (view-independent), gathers neighbour

@@ -137,8 +137,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     near-mirror surfaces (the thesis glass scene) render uniformly: a small pilot misses them
     (:func:`~draaw_mi.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
     stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
-    2-10x off the variance of ``path`` and V4 alike, and adaptive sampling on top measured
-    1.25-1.48x the variance x time of uniform V4 with the same sampler. See
+    2-10x off the variance of ``path`` (and of V4 on most suite scenes), and adaptive sampling
+    on top measured 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
     ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with

@@ -118,7 +118,11 @@ class SDFHook:
         """Whether an SDF blocks the shadow ray from ``si`` to the emitter sample ``ds``."""
         with dr.suspend_grad():
             ray = si.spawn_ray(dr.detach(ds.d))
-            tmax = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - 1e-4), dr.inf)
+            # an environment or a sun is at infinity, not at the finite ds.dist Mitsuba gives
+            # it (twice the radius of the mesh scene's bounds, which leave out the SDF objects:
+            # a closed SDF sphere of radius 100 let the sky in)
+            far = ~dr.isfinite(ds.dist) | mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+            tmax = dr.select(far, dr.inf, ds.dist * (1.0 - 1e-4))
             _, hit, _ = march(self.sdf, ray.o, ray.d, tmax, mi.Bool(active), self.opts)
         return hit
 

@@ -175,3 +175,47 @@ def test_an_sdf_override_out_of_range_names_the_frame(tmp_path, capsys):
         d["jobs"][0].update(scene=str(path), params={"sdf.block.radius": {"from": 0.1, "to": 0.4}})
     _bad(tmp_path, capsys, mutate, ["job 'orbit'", "frame 2", "params.sdf.block.radius",
                                     "radius=0.4", "min(size)/2 = 0.3"])
+
+
+@pytest.mark.parametrize("pattern, expect", [
+    # {job.upper} named a folder after a method's address, new on every run; {job.foo} was a
+    # traceback
+    ("out/{job.upper}/{frame:04d}.exr", ["{job.upper}", "must be a bare name"]),
+    ("out/{job.foo}/{frame:04d}.exr", ["{job.foo}", "must be a bare name"]),
+    ("out/{job[0]}/{frame:04d}.exr", ["{job[0]}", "must be a bare name"]),
+])
+def test_pattern_fields_are_bare_names(tmp_path, capsys, pattern, expect):
+    _bad(tmp_path, capsys, lambda d, t: d.update(output=str(t / pattern)), expect)
+
+
+def test_a_log_name_with_fields_is_refused(tmp_path, capsys):
+    """``log = "{job}.jsonl"`` made a file literally named so: one log serves every job."""
+    _bad(tmp_path, capsys, lambda d, t: d.update(log=str(t / "out" / "{job}.jsonl")),
+         ["log", "must name one file"])
+
+
+def test_an_override_the_camera_table_would_replace_is_refused(tmp_path, capsys):
+    """The orbit's field of view overwrote the job's x_fov override in every frame, silently."""
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0]["params"].update({"sensor.x_fov": {"from": 20, "to": 90}}),
+         ["params.sensor.x_fov", "camera table sets the view", "camera.fov"])
+
+
+def test_two_names_of_one_parameter_are_refused(tmp_path, capsys):
+    """``ball.roughness`` and ``ball.roughness.value`` are one parameter: the last one won."""
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0]["params"].update({"ball.roughness.value": 0.5}),
+         ["'ball.roughness' and 'ball.roughness.value' are the same parameter", "keep one"])
+
+
+def test_an_integer_parameter_is_refused_before_rendering(tmp_path, capsys):
+    """The film size took floats and failed every frame at render time (exit 1)."""
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0]["params"].update({"sensor.film.size": [8, 8]}),
+         ["params.sensor.film.size", "holds integers", "resolution sets the film size"])
+
+
+def test_outputs_that_differ_in_case_only_are_refused(tmp_path, capsys):
+    """out/a/0000.exr and out/a/0000.EXR shared one preview PNG (and are one file on macOS or
+    Windows): the run said "2 rendered ... 1 of 2 frames missing" on every run."""
+    def two_jobs(d, t):
+        d["previews"] = True
+        d["jobs"].append(dict(d["jobs"][0], name="other", output=str(t / "out" / "orbit" / "{frame:04d}.EXR")))
+    _bad(tmp_path, capsys, two_jobs, ["same file", "0000.EXR", "job 'orbit' frame 0"])

@@ -109,9 +109,17 @@ def test_resume_renders_only_missing_corrupt_and_stale_frames(tmp_path):
     os.unlink(specs[1]["output"])
     with open(specs[3]["output"], "r+b") as fh:           # a truncated (corrupt) file
         fh.truncate(100)
+    # cut short past its header (a copy that ran out of disk): the header still reads, with
+    # this job's hash, and the frame counted as done for ever
+    with open(specs[4]["output"], "r+b") as fh:
+        fh.truncate(int(0.6 * os.path.getsize(specs[4]["output"])))
+    assert batch.read_header(specs[4]["output"])["draaw:frame_hash"] == specs[4]["hash"]
+    assert [f["status"] for f in batch.status(doc)["frames"]] == ["done", "missing", "done", "damaged",
+                                                                 "damaged"]
+    mtimes[4] = None
     res = batch.run(doc, progress=False)
-    assert sorted(r["frame"] for r in res.results) == [1, 3] and res.skipped == 3 and res.complete
-    for f in (0, 2, 4):
+    assert sorted(r["frame"] for r in res.results) == [1, 3, 4] and res.skipped == 2 and res.complete
+    for f in (0, 2):
         assert os.stat(specs[f]["output"]).st_mtime_ns == mtimes[f]
     assert_bit_identical(before, frames_of(tmp_path / "out"))
     # other settings for the same files: every frame is stale and re-rendered
@@ -137,7 +145,7 @@ def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
     assert [r["event"] for r in log] == ["start", "frame", "frame", "frame", "end"]
     assert sum("error" in r for r in log) == 1
     st = batch.status(doc)
-    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "no-preview": 0, "failed": 1}
+    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "damaged": 0, "no-preview": 0, "failed": 1}
     from draaw_mi.cli import main
     path = write_manifest(tmp_path, doc)
     assert main(["batch", path, "--no-progress"]) == 1        # exit status: not all frames exist
@@ -226,8 +234,8 @@ def test_previews_and_contact_sheet(tmp_path):
     batch.run(doc, progress=False)
     out = tmp_path / "out" / "orbit"
     assert sorted(p.name for p in out.iterdir()) == ["0000.exr", "0000.png", "0001.exr", "0001.png",
-                                                    "0002.exr", "0002.png", "batch.jsonl",
-                                                    "orbit_contact.png"]
+                                                    "0002.exr", "0002.png", "orbit_contact.png"]
+    assert sorted(p.name for p in out.parent.iterdir()) == ["batch.jsonl", "orbit"]
 
 
 def test_dry_run_and_status_render_nothing(tmp_path, capsys):
@@ -354,7 +362,7 @@ def test_a_second_run_on_busy_folders_stops_before_touching_them(tmp_path, capsy
     folder.mkdir(parents=True)
     in_flight = folder / ".draaw-0000-in-flight.exr"          # the other run's temporary file
     in_flight.write_bytes(b"partial")
-    with output_locks([str(folder), str(tmp_path / "out")], "other run"):
+    with output_locks([str(folder)], "other run"):
         with pytest.raises(BusyError, match="is in use by another draaw-mi batch run"):
             batch.run(doc, progress=False)
         assert main(["batch", path, "--no-progress"]) == 2
@@ -455,10 +463,10 @@ def test_frames_another_run_finished_before_the_lock_are_not_rendered_again(tmp_
     real = lock_mod.output_locks
 
     @contextlib.contextmanager
-    def first_run_finishes_meanwhile(folders, where):
+    def first_run_finishes_meanwhile(folders, where, optional=()):
         monkeypatch.setattr(lock_mod, "output_locks", real)
         assert batch.run(doc, progress=False).rendered == 2     # the other run
-        with real(folders, where):
+        with real(folders, where, optional):
             yield
     monkeypatch.setattr(lock_mod, "output_locks", first_run_finishes_meanwhile)
     res = batch.run(doc, progress=False)
@@ -530,7 +538,7 @@ def test_previews_of_a_chain_that_ends_in_srgb_are_not_encoded_twice(tmp_path):
 
 def test_outputs_in_unrelated_trees_log_beside_the_first_job(tmp_path):
     """Jobs writing under two unrelated roots: the log went to their common ancestor, the
-    file system's root."""
+    file system's root. It goes to the first job's folder (its pattern's before {job})."""
     import tempfile
     other = tempfile.mkdtemp(dir="/var/tmp" if not str(tmp_path).startswith("/var/tmp") else "/dev/shm")
     try:
@@ -538,7 +546,7 @@ def test_outputs_in_unrelated_trees_log_beside_the_first_job(tmp_path):
         second = dict(doc["jobs"][0], name="elsewhere", output=os.path.join(other, "{frame:04d}.exr"))
         doc["jobs"].append(second)
         res = batch.run(doc, dry_run=True, progress=False)
-        assert os.path.dirname(res.log) == str(tmp_path / "out" / "orbit")
+        assert os.path.dirname(res.log) == str(tmp_path / "out")
     finally:
         import shutil
         shutil.rmtree(other, ignore_errors=True)
@@ -595,3 +603,118 @@ def test_another_users_lock_file_locks_read_only(tmp_path, monkeypatch):
     res = batch.run(doc, progress=False)
     assert res.complete and res.rendered == 2 and not os.path.exists(lock_file)
 
+
+
+def test_finished_frames_in_read_only_folders_are_complete(tmp_path, monkeypatch, capsys):
+    """An archive on a read-only share: ``--status``, ``--dry-run`` and a run with nothing to
+    render exited 2 ("output folder ... is not writable"). The folders are made read-only as
+    the planner sees them (root writes anywhere, so permission bits cannot do it here)."""
+    import importlib
+    from draaw_mi.batch import lock as lock_mod
+    from draaw_mi.cli import main
+    plan_mod = importlib.import_module("draaw_mi.batch.plan")
+    from draaw_mi.errors import SceneError
+    doc = manifest(tmp_path, frames=2)
+    path = write_manifest(tmp_path, doc)
+    assert main(["batch", path, "--no-progress"]) == 0
+    capsys.readouterr()
+    out = str(tmp_path / "out")
+
+    def read_only(folders, where):
+        for f in folders:
+            if f.startswith(out):
+                raise SceneError(f"{where}: output folder {f!r} is not writable")
+    real_lock = lock_mod.output_locks
+
+    def no_lock_files(folders, where, optional=()):
+        assert not folders, folders            # only folders it may skip
+        return real_lock([], where, ())
+    monkeypatch.setattr(plan_mod, "check_writable", read_only)
+    monkeypatch.setattr(plan_mod, "prepare_outputs", read_only)
+    monkeypatch.setattr(lock_mod, "output_locks", no_lock_files)
+    assert main(["batch", path, "--status"]) == 0
+    assert main(["batch", path, "--dry-run"]) == 0
+    assert main(["batch", path, "--no-progress"]) == 0
+    assert "all 2 frames present" in capsys.readouterr().out
+    os.unlink(os.path.join(out, "orbit", "0001.exr"))          # now there is work: the error
+    assert main(["batch", path, "--no-progress"]) == 2
+    assert "is not writable" in capsys.readouterr().err
+
+
+def test_the_log_stays_put_when_a_job_is_added_and_old_errors_are_not_shown(tmp_path, capsys):
+    """The default log sat in the folder the frames shared, so adding a job moved it and
+    --status lost the failures; and it showed errors of settings edited away since."""
+    from draaw_mi.cli import main
+    doc = manifest(tmp_path, frames=2)
+    doc["jobs"][0]["params"] = {"constant_light1.radiance": {"values": [[1.0, 1.0, 1.0], [3.4e38] * 3]}}
+    path = write_manifest(tmp_path, doc)
+    res = batch.run(path, progress=False)
+    assert [r["frame"] for r in res.failed] == [1]
+    assert main(["batch", path, "--status"]) == 1 and "non-finite" in capsys.readouterr().out
+    two = copy.deepcopy(doc)
+    two["jobs"].append(dict(copy.deepcopy(doc["jobs"][0]), name="second", params={}))
+    write_manifest(tmp_path, two)                         # the same file, one job more
+    st = batch.status(path)
+    assert st["log"] == res.log and st["frames"][1]["status"] == "failed", st
+    assert "non-finite" in st["frames"][1]["error"]
+    fixed = copy.deepcopy(doc)            # frame 1's radiance edited: its old error is not its
+    fixed["jobs"][0]["params"]["constant_light1.radiance"]["values"][1] = [2.0, 2.0, 2.0]
+    write_manifest(tmp_path, fixed)
+    st = batch.status(path)
+    assert st["frames"][1]["status"] == "missing" and st["frames"][1]["error"] is None
+
+
+def test_pattern_fields_version_and_spp_are_the_frames_own(tmp_path):
+    """A job without version/spp wrote into ``default_default_0000.exr`` (and ``{spp:03d}``
+    failed): the fields take the scene's settings, as the frame renders them."""
+    doc = manifest(tmp_path, frames=1)
+    del doc["jobs"][0]["spp"]
+    doc["output"] = str(tmp_path / "out" / "{version}_{spp:03d}_{frame:04d}.exr")
+    _, specs, _ = batch.load(doc)
+    scene = draaw_mi.load_scene(doc["jobs"][0]["scene"])
+    want = f"{scene.settings['version']}_{scene.settings['spp']:03d}_0000.exr"
+    assert os.path.basename(specs[0]["output"]) == want and specs[0]["spp"] == scene.settings["spp"]
+
+
+def test_another_spelling_of_the_version_keeps_the_frames(tmp_path):
+    """``V4`` or ``draaw_v4`` for ``v4`` made every finished frame stale and rendered it again
+    with the same integrator."""
+    doc = manifest(tmp_path, frames=2, version="v4")
+    batch.run(doc, progress=False)
+    for name in ("V4", "draaw_v4", "optimised"):
+        assert batch.status(dict(doc, jobs=[dict(doc["jobs"][0], version=name)]))["counts"]["done"] == 2
+    assert batch.status(dict(doc, jobs=[dict(doc["jobs"][0], version="v3")]))["counts"]["stale"] == 2
+
+
+def test_a_frames_header_says_what_it_shows(tmp_path):
+    """Its overrides, camera and post chain, readable from the file (a frame's roughness could
+    not be read back)."""
+    chain = [{"type": "contrast", "amount": 0.5}]
+    doc = manifest(tmp_path, frames=2, post=chain)
+    batch.run(doc, progress=False)
+    _, specs, _ = batch.load(doc)
+    h = batch.read_header(specs[1]["output"])
+    assert json.loads(h["draaw:params"]) == {"ball.roughness.value": 0.9}
+    cam = json.loads(h["draaw:camera"])
+    assert np.allclose(cam["origin"], specs[1]["camera"]["origin"]) and cam["fov"] == specs[1]["camera"]["fov"]
+    assert json.loads(h["draaw:post"]) == specs[1]["post"] and specs[1]["post"][0]["type"] == "contrast"
+
+
+def test_the_bar_counts_agree_with_its_position(tmp_path, monkeypatch, capsys):
+    """On a terminal the bar drew ``4/6 ... done=5``: the counts were set (and drawn) before the
+    step."""
+    import re
+    from tqdm import tqdm
+    monkeypatch.setattr(tqdm, "__init__", _no_rate_limit(tqdm.__init__))
+    batch.run(manifest(tmp_path, frames=4), progress=True)
+    err = capsys.readouterr().err
+    states = re.findall(r"(\d)/4 \[[^\]]*done=(\d)", err)
+    assert len(states) >= 4, err
+    assert all(a == b for a, b in states), states
+
+
+def _no_rate_limit(init):
+    def wrapped(self, *a, **k):
+        k.update(mininterval=0, miniters=1)
+        init(self, *a, **k)
+    return wrapped

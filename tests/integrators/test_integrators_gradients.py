@@ -164,13 +164,17 @@ def test_memory_measurement_sees_per_sample_state():
 
 
 @pytest.mark.parametrize("kind", ["draaw_v1", "draaw_v2"])
-def test_legacy_metallic_gradient_at_the_lower_bound(kind):
+@pytest.mark.parametrize("name, bound", [("metallic", 0.0), ("roughness", 1.0)])
+def test_legacy_gradient_at_a_bound(kind, name, bound):
     """At metallic 0 (its default) V1/V2 clamped with a plain clip and gave a zero gradient,
     so a fit never left the bound; the clamp now passes the gradient through, as the draaw
-    BSDF's does. AD equals the one-sided slope at 0: forward differences at h and h/2 with
+    BSDF's does. So at roughness 1, where the Phong exponent 2/alpha^2 - 2 dips to -2e-6
+    (alpha^2 = 1 + 1e-6) and its floor at 0 gave exactly 0 (AD 0 against a slope of 0.05).
+    AD equals the one-sided slope at the bound: differences at h and h/2 into the range with
     common random numbers, extrapolated (2 FD(h/2) - FD(h)) to remove their curvature."""
     from integrators_helpers import loss_of
-    key = "plane.bsdf.metallic.value"
+    key = f"plane.bsdf.{name}.value"
+    inward = 1.0 if bound == 0.0 else -1.0
     scene = mi.load_dict(rs.gradient_plane(res=16, spp=16))
     params = mi.traverse(scene)
     # a grey base colour: at metallic 0 every channel of ks ties, and the legacy model's
@@ -182,10 +186,10 @@ def test_legacy_metallic_gradient_at_the_lower_bound(kind):
         params[key] = mi.Float(v)
         params.update()
         return float(np.array(loss_of(mi.render(scene, integrator=integ, spp=1024, seed=seed), None)).ravel()[0])
-    h, n = 0.04, 6
-    fd = np.array([(lambda f0: 2 * (loss(h / 2, 10 + s) - f0) / (h / 2) - (loss(h, 10 + s) - f0) / h)(loss(0.0, 10 + s))
-                   for s in range(n)])
-    params[key] = mi.Float(0.0)
+    h, n = 0.04 * inward, 6
+    fd = np.array([(lambda f0: 2 * (loss(bound + h / 2, 10 + s) - f0) / (h / 2) - (loss(bound + h, 10 + s) - f0) / h)(
+        loss(bound, 10 + s)) for s in range(n)])
+    params[key] = mi.Float(bound)
     params.update()
     ad = np.array([ad_gradient(scene, integ, key, 256, s) for s in range(n)])
     assert_connected(ad, fd, key)

@@ -193,3 +193,32 @@ def test_medium_values_set_after_loading_are_checked_as_in_scene_files(tmp_path,
         batch.load(doc)
     doc["jobs"][0]["params"][key]["values"] = [good, good]
     batch.load(doc)
+
+
+def test_a_camera_inside_a_smoke_box_is_refused():
+    """It rendered as if the smoke were absent (density 1e6 gave the no-smoke image: the
+    sensor's medium was not set). A camera outside, even on the box's face plane, loads."""
+    desc = base_desc(density_scale=1e6)
+    desc["camera"] = {"origin": [0, 0, 0.5], "target": [0, 0, -3]}
+    with pytest.raises(SceneError, match=r"camera: the camera at \[0\.0, 0\.0, 0\.5\] is inside smoke "
+                                         r"volume 'v'.*move it outside") as e:
+        draaw_mi.load_scene(desc)
+    assert "\n" not in str(e.value)
+    desc["camera"] = {"origin": [0, 0, 1.0], "target": [0, 0, -3]}
+    assert draaw_mi.load_scene(desc).info["volumes"][0]["name"] == "v"
+
+
+def test_a_batch_camera_path_through_a_smoke_box_is_a_bad_manifest(tmp_path, capsys):
+    import tomli_w
+    from draaw_mi.cli import main
+    scene = tmp_path / "smoke.toml"
+    scene.write_bytes(tomli_w.dumps(base_desc()).encode())
+    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+           "jobs": [{"scene": str(scene), "frames": 3, "camera": {"look_at": [
+               {"origin": [0, 0, 4], "target": [0, 0, 0]}, {"origin": [0, 0, 0.2], "target": [0, 0, -3]}]}}]}
+    path = tmp_path / "m.toml"
+    path.write_bytes(tomli_w.dumps(doc).encode())
+    assert main(["batch", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "frame 2" in err and "inside smoke volume 'v'" in err, err
+    assert not (tmp_path / "out").exists()

@@ -93,3 +93,17 @@ def test_finite_gradients(name, image):
     dr.backward(dr.sum(y.array) * 1e-6)
     g = dr.grad(x).numpy()
     assert np.all(np.isfinite(g)), f"{name} on {image}: non-finite gradient"
+
+
+@pytest.mark.parametrize("scale", [1e19, 1e27, 1e36])
+def test_edges_of_very_bright_pixels_do_not_overflow(scale):
+    """Sobel magnitudes squared their gradients: a uniform 1e27 image came out all Inf (it has
+    no edges) and random pixels times 1e19 had Inf edges. Lights may be as bright as float32
+    allows, and so may pixels. Against the float64 reference."""
+    import reference
+    flat = np.full((6, 7, 3), scale, np.float32)
+    assert np.allclose(_finite(post.edge_detection(flat)), flat, rtol=1e-6, atol=0)   # (float32 taps)
+    img = (np.random.default_rng(5).random((6, 7, 3)) * scale / 100).astype(np.float32)
+    out = _finite(post.edge_detection(img))
+    want = reference.edge_detection(img.astype(np.float64))
+    assert np.allclose(out, want, rtol=1e-5, atol=0), np.abs(out / want - 1).max()

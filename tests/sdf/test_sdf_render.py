@@ -13,7 +13,7 @@ from draaw_mi.sdf import Box, Sphere
 from draaw_mi.sdf.scene import SDFScene
 from draaw_mi.sdf.tracer import TracerOptions, march
 
-from sdf_helpers import check_same_expectation, kernel_ops, seed_stack, twin_scenes
+from sdf_helpers import base_description, check_same_expectation, kernel_ops, render_np, seed_stack, twin_scenes
 
 RNG = np.random.default_rng(7)
 
@@ -213,3 +213,18 @@ def test_far_ray_entering_a_tight_box_hits_the_front_face():
     t, hit, _ = _march_np(Box((0, 0, 0), (1, 1, 1)), o, d, hit_epsilon=5e-5)
     assert hit.all()
     np.testing.assert_allclose(t, o[:, 2] - 0.5, atol=1e-3)
+
+
+@pytest.mark.parametrize("version", ["v1", "v2", "v3"])
+def test_a_closed_sdf_sphere_keeps_the_sky_out(version):
+    """Camera and floor inside a closed SDF sphere (radius 20), lit only by a constant sky:
+    no light gets in. Shadow rays to the sky stopped at Mitsuba's finite ``ds.dist`` (twice
+    the mesh scene's radius, about 9 here), short of the sphere: image mean 0.22."""
+    desc = base_description(res=(16, 12))
+    desc["shapes"] = desc["shapes"][:1]
+    desc["lights"] = [{"type": "constant", "intensity": 1.0}]
+    desc["sdf"] = [{"type": "sphere", "name": "shell", "material": "blocker", "center": [0.0, 0.5, 0.0],
+                    "radius": 20.0}]
+    img = render_np(draaw_mi.load_scene(desc), version, 4, 0)
+    assert np.isfinite(img).all()
+    assert img.mean() < 5e-3, img.mean()     # (residue: rays that exhaust their steps at the shell)
