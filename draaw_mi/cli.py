@@ -176,9 +176,11 @@ def _cmd_render(args) -> int:
         if args.threads < 1:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")
         dr.set_thread_count(args.threads)
-    for flag, value, lo in (("--spp", args.spp, 1), ("--max-depth", args.max_depth, -1), ("--seed", args.seed, 0)):
-        if value is not None and value < lo:      # (was blamed on the scene file: "override.spp")
-            raise CliError(f"{flag} {value}: expected an integer >= {lo}")
+    from draaw_mi.scene import OVERRIDE_MINIMA
+    for key, lo in OVERRIDE_MINIMA.items():      # (was blamed on the scene file: "override.spp")
+        value = getattr(args, key)
+        if value is not None and value < lo:
+            raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer >= {lo}")
     overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
                  "sampler": args.sampler}
     scene = draaw_mi.load_scene(args.scene, **{k: v for k, v in overrides.items() if v is not None})

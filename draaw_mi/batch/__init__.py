@@ -88,7 +88,7 @@ def load(manifest, out: str | None = None, cache=None):
     return m, plan(m, cache), cache
 
 
-def log_path(m: Manifest, specs=None) -> str:
+def log_path(m: Manifest) -> str:
     """The manifest's log: its ``log`` key, else ``<manifest>.batch.jsonl`` in the folder the
     output patterns share before their first field (``out/`` for ``out/{job}/{frame}.exr``).
     It depends on the patterns, not on the jobs: with the folder the frames shared, adding a
@@ -163,7 +163,7 @@ def status(manifest, out: str | None = None) -> dict:
     Returns ``{"frames": [...], "counts": {...}, "log": path}``."""
     m, specs, _ = load(manifest, out)
     errors = {}
-    for rec in read_log(log_path(m, specs)):
+    for rec in read_log(log_path(m)):
         if rec.get("event") == "frame":
             errors[(rec.get("job"), rec.get("frame"))] = (rec.get("hash"), rec.get("error"))
     frames = []
@@ -177,7 +177,7 @@ def status(manifest, out: str | None = None) -> dict:
             st = "failed"
         counts[st] += 1
         frames.append({"job": s["job"], "frame": s["frame"], "output": s["output"], "status": st, "error": err})
-    return {"frames": frames, "counts": counts, "log": log_path(m, specs)}
+    return {"frames": frames, "counts": counts, "log": log_path(m)}
 
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
@@ -199,7 +199,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     m, specs, cache = load(manifest, out)
     states = [frame_status(s) for s in specs]
     todo = [s for s, st in zip(specs, states) if st != "done"]
-    res = BatchResult(total=len(specs), skipped=len(specs) - len(todo), log=log_path(m, specs))
+    res = BatchResult(total=len(specs), skipped=len(specs) - len(todo), log=log_path(m))
     from ..errors import SceneError
     from .lock import output_locks
     from .plan import check_writable, prepare_outputs

@@ -219,7 +219,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 raise SceneError(f"{loc}: camera: the scene's sensor has no to_world parameter")
             try:
                 cams = camera_frames(job.camera, job.frames, entry.fov)
-                from ..scene.description import check_camera_outside_smoke
+                from ..media.scene_volumes import check_camera_outside_smoke
                 from ..scene.schema import Where
                 for f, c in enumerate(cams):
                     check_camera_outside_smoke(c["origin"], scene.info.get("volumes", []), Where(f"frame {f}"))

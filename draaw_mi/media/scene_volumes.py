@@ -190,3 +190,16 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
         raise where.error(str(e)) from None
     except DraawError:
         raise
+
+
+def check_camera_outside_smoke(origin, volume_info: list, where) -> None:
+    """A camera inside a ``[[volumes]]`` smoke box rendered as if the smoke were not around
+    it (the sensor's medium is not set, so every version, and volpath, started each camera
+    ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported."""
+    o = np.asarray(origin, float)
+    for v in volume_info:
+        lo, hi = (np.asarray(b, float) for b in v["bounds"])
+        if v["mode"] == "smoke" and np.all(o > lo) and np.all(o < hi):
+            raise (where / "camera").error(
+                f"the camera at {o.tolist()} is inside smoke volume {v['name']!r} (bounds {lo.tolist()} - "
+                f"{hi.tolist()}); a camera inside a [[volumes]] box is not supported: move it outside")

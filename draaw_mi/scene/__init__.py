@@ -444,13 +444,18 @@ def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -
     return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
 
 
+#: the smallest value of each integer override of :func:`load_scene` (the CLI names its flags
+#: with them)
+OVERRIDE_MINIMA = {"spp": 1, "max_depth": -1, "seed": 0}
+
+
 def _checked(overrides: dict, source: str) -> dict:
     from .schema import number, resolution, string
     where = Where(source) / "override"
     out = dict(overrides)
     if out.get("resolution") is not None:
         out["resolution"] = resolution(out["resolution"], where / "resolution")
-    for key, lo in (("spp", 1), ("max_depth", -1), ("seed", 0)):
+    for key, lo in OVERRIDE_MINIMA.items():
         if out.get(key) is not None:
             out[key] = number(out[key], where / key, lo=lo, integer=True)
     if out.get("sampler") is not None:

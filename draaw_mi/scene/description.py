@@ -435,19 +435,6 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
 
 
 # --------------------------------------------------------------------------- whole scene
-def check_camera_outside_smoke(origin, volume_info: list, where: Where) -> None:
-    """A camera inside a ``[[volumes]]`` smoke box rendered as if the smoke were not around
-    it (the sensor's medium is not set, so every version, and volpath, started each camera
-    ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported."""
-    o = np.asarray(origin, float)
-    for v in volume_info:
-        lo, hi = (np.asarray(b, float) for b in v["bounds"])
-        if v["mode"] == "smoke" and np.all(o > lo) and np.all(o < hi):
-            raise (where / "camera").error(
-                f"the camera at {o.tolist()} is inside smoke volume {v['name']!r} (bounds {lo.tolist()} - "
-                f"{hi.tolist()}); a camera inside a [[volumes]] box is not supported: move it outside")
-
-
 def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, overrides: dict | None = None):
     """Validate ``desc`` and return (mitsuba_dict, settings, info) where ``info`` lists names."""
     where = Where(source)
@@ -512,7 +499,9 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if camera_table is None:
         camera_table = cam.auto_camera(*_scene_bounds(shape_entries))
     look_at = cam.camera_to_look_at(camera_table, where / "camera")
-    check_camera_outside_smoke(look_at[0], volume_info, where)
+    if volume_info:
+        from ..media.scene_volumes import check_camera_outside_smoke
+        check_camera_outside_smoke(look_at[0], volume_info, where)
 
     lights = desc.get("lights", [])
     if not isinstance(lights, list):
