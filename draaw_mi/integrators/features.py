@@ -21,6 +21,8 @@ Keys (always present, in this order):
 ``draaw_materials``     some shape uses the ``draaw`` BSDF
 ``other_materials``     some shape uses another BSDF
 ``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...)
+``other_glossy``        some BSDF other than ``draaw`` has a glossy lobe (``roughconductor``,
+                        ``principled``, ``roughdielectric``, ...)
 ``media``               a shape or sensor references a participating medium
 ``aovs``                the scene's integrator outputs AOVs
 ``sdf``                 the scene has SDF objects (``[[sdf]]``; ``draaw_mi.sdf``)
@@ -41,8 +43,8 @@ import mitsuba as mi
 FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
-    "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "media", "aovs",
-    "sdf",
+    "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "other_glossy",
+    "media", "aovs", "sdf",
 )
 
 _EMITTER_CLASSES = {
@@ -74,6 +76,8 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
             f["textures"] = True
         return
     f["other_materials"] = True
+    if mi.has_flag(flags, mi.BSDFFlags.Glossy):
+        f["other_glossy"] = True
     if bsdf.class_name() in _NORMALMAP_CLASSES:
         f["normal_maps"] = True
     for key in mi.traverse(bsdf).keys():

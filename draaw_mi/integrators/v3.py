@@ -36,8 +36,10 @@ class DraawV3Integrator(DraawIntegrator):
        - Near-specular threshold: at a ``draaw`` vertex whose GGX alpha is below it, light
          from area / environment emitters reflected by the *glossy lobe* is found by BSDF
          sampling instead of emitter sampling (the diffuse lobe and delta lights still use
-         emitter sampling). 0 gives the textbook NEE-only estimator. (Default: 0.25, i.e.
-         roughness < 0.5)
+         emitter sampling). At a vertex of another BSDF, the same holds for the whole BSDF
+         where its pdf in the mirror direction exceeds that of a GGX lobe of this alpha
+         (:func:`near_specular`). 0 gives the textbook NEE-only estimator. (Default: 0.25,
+         i.e. roughness < 0.5)
 
      * - hide_emitters
        - |bool|
@@ -58,7 +60,11 @@ class DraawV3Integrator(DraawIntegrator):
       and, at near-specular ``draaw`` vertices (``glossy_alpha``), for the glossy lobe, whose
       light emitter sampling would find only with vanishing probability (with NEE alone a
       roughness-0.05 metal reflecting a sky stays black at any practical spp: unbiased, but
-      heavy-tailed). The emission found by a BSDF sample is evaluated in the same loop
+      heavy-tailed). Other BSDFs (Mitsuba's ``roughconductor``, ``principled``, ... in XML
+      scenes) have no lobe V3 can split off: at their near-specular vertices (pdf in the
+      mirror direction above a GGX lobe of alpha ``glossy_alpha``; a property of the vertex,
+      not of the sample, so the choice keeps the estimator unbiased) all of their light from
+      area / environment emitters is found by BSDF sampling. The emission found by a BSDF sample is evaluated in the same loop
       iteration (one-step look-ahead), so the path-replay adjoint can weight it by the glossy
       lobe alone;
     - BSDF sampling of ``draaw`` materials done by the integrator: a mixture of cosine
@@ -159,6 +165,8 @@ class DraawV3Integrator(DraawIntegrator):
         draaw_on = feats["draaw_materials"]
         other_on = feats["other_materials"]
         split = draaw_on and hit_em and self.glossy_alpha > 0
+        # other BSDFs' near-specular vertices: BSDF sampling finds their light (near_specular)
+        split_other = other_on and feats["other_glossy"] and hit_em and self.glossy_alpha > 0
         ctx = mi.BSDFContext()
 
         # --------------------- Configure loop state ----------------------
@@ -208,12 +216,18 @@ class DraawV3Integrator(DraawIntegrator):
                 if dr.hint(split, mode="scalar"):
                     glossy_split = is_draaw & (dr.detach(params.alpha) < self.glossy_alpha)
 
+            sharp_other = mi.Bool(False)     # another BSDF, near-specular here: no NEE
+            if dr.hint(split_other, mode="scalar"):
+                sharp_other = near_specular(bsdf, si, self.glossy_alpha, active & ~is_draaw)
+
             # ------------------ Emitter sampling (no MIS) -------------------
             Lr_dir = mi.Spectrum(0.0)
             if dr.hint(has_nee, mode="scalar"):
                 active_em = mi.Bool(active)
                 if dr.hint(delta_bsdf, mode="scalar"):
                     active_em &= mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                if dr.hint(split_other and not feats["delta_lights"], mode="scalar"):
+                    active_em &= ~sharp_other          # (no light that NEE alone finds)
                 with dr.resume_grad(when=not primal):
                     si_em = si
                     if dr.hint(sdf is not None and not primal, mode="scalar"):
@@ -223,6 +237,8 @@ class DraawV3Integrator(DraawIntegrator):
                     f_em, f_em_glossy = self._eval(bsdf, si_em, si_em.to_local(ds.d), active_em,
                                                    is_draaw, params, sign, feats, split)
                     Lr_dir = β * dr.select(glossy_split & ~ds.delta, f_em - f_em_glossy, f_em) * em_w
+                    if dr.hint(split_other, mode="scalar"):
+                        Lr_dir = dr.select(sharp_other & ~ds.delta, 0.0, Lr_dir)
 
             # ------------------ Detached BSDF sampling ----------------------
             s1 = sampler.next_1d()
@@ -271,11 +287,12 @@ class DraawV3Integrator(DraawIntegrator):
             if dr.hint(sdf is not None, mode="scalar"):
                 si_next = sdf.intersect(ray_next, si_next, sampler, active_next)
 
-            # ---- Emitters found by BSDF sampling: after delta lobes, and by the
-            # ---- glossy lobe of near-specular draaw vertices (not sampled by NEE)
+            # ---- Emitters found by BSDF sampling: after delta lobes, by the glossy
+            # ---- lobe of near-specular draaw vertices and by near-specular other BSDFs
+            # ---- (not sampled by NEE)
             Le_next = mi.Spectrum(0.0)
-            if dr.hint(hit_em and (delta_bsdf or split), mode="scalar"):
-                w_em = dr.select(delta, weight,
+            if dr.hint(hit_em and (delta_bsdf or split or split_other), mode="scalar"):
+                w_em = dr.select(delta | sharp_other, weight,
                                  dr.select(glossy_split, safe_div(f_glossy, pdf, pdf > 0), 0.0))
                 em_act = active_next & (dr.max(w_em) != 0)
                 with dr.resume_grad(when=not primal):
@@ -292,7 +309,8 @@ class DraawV3Integrator(DraawIntegrator):
                     f_ad, f_ad_glossy = self._eval(bsdf, si_f, wo_f, active_next, is_draaw, params,
                                                    sign, feats, split)
                     Lo = Lr_dir + L * relative(f_ad)
-                    if dr.hint(hit_em and split, mode="scalar"):
+                    if dr.hint(hit_em and (split or split_other), mode="scalar"):
+                        # (relative(f) is 1 where f is 0: after a delta lobe)
                         Lo += Le_next * relative(dr.select(glossy_split, f_ad_glossy, f_ad))
                     elif dr.hint(hit_em and delta_bsdf, mode="scalar"):
                         Lo += Le_next
@@ -319,6 +337,32 @@ class DraawV3Integrator(DraawIntegrator):
                         δL += dr.forward_to(Le)
 
         return (L if primal else δL), valid, aovs, L
+
+
+def near_specular(bsdf, si, glossy_alpha: float, active) -> mi.Bool:
+    """Whether ``bsdf`` is near-specular at ``si`` for the incident direction ``si.wi``: its
+    sampling pdf in the mirror direction exceeds that of a GGX lobe of alpha ``glossy_alpha``
+    there, ``D(n) / (4 cos_i) = 1 / (4 pi alpha^2 cos_i)`` (times ``G1`` ~ 1 with visible
+    normals). A roughconductor of alpha 0.01 has about 600 times that bound, one of alpha 0.5
+    a quarter of it. It depends on the vertex alone (not on a sample), so choosing BSDF
+    sampling over emitter sampling by it keeps V3 unbiased. Detached: the choice has no
+    gradient.
+
+    >>> import mitsuba as mi
+    >>> mi.set_variant("llvm_ad_rgb")
+    >>> si = dr.zeros(mi.SurfaceInteraction3f)
+    >>> si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    >>> si.wi = mi.Vector3f(0.6, 0.0, 0.8)
+    >>> [bool(near_specular(mi.load_dict({"type": "roughconductor", "alpha": a}), si, 0.25,
+    ...                     True)[0]) for a in (0.01, 0.2, 0.5)]
+    [True, True, False]
+    """
+    with dr.suspend_grad():
+        wi = si.wi
+        mirror = mi.Vector3f(-wi.x, -wi.y, wi.z)
+        pdf = bsdf.pdf(mi.BSDFContext(), si, mirror, active)
+        bound = 1.0 / (4.0 * dr.pi * glossy_alpha * glossy_alpha)
+        return active & (dr.abs(wi.z) * pdf > bound)
 
 
 _CTX_DIFFUSE = mi.BSDFContext(mi.TransportMode.Radiance, mi.BSDFFlags.Diffuse)

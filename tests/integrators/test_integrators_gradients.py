@@ -61,6 +61,18 @@ def test_gradient_matches_finite_differences(grad_scene, kind, key, h):
     assert abs(ad - fd) <= 3 * se + 1e-7, (kind, key, ad, fd, se)
 
 
+def test_v3_gradient_through_a_near_mirror_other_bsdf():
+    """The light a near-mirror Mitsuba BSDF reflects, which V3 finds by BSDF sampling
+    (``v3.near_specular``), carries that BSDF's gradient: a metal ``principled`` floor
+    (roughness 0.14, alpha 0.02) mirroring the area light, no draaw material in the scene."""
+    d = rs.gradient_plane(res=16, spp=16)
+    d["plane"]["bsdf"] = {"type": "principled", "roughness": 0.14, "metallic": 1.0,
+                          "base_color": {"type": "rgb", "value": [0.8, 0.6, 0.4]}}
+    d["wall"]["bsdf"] = {"type": "diffuse"}
+    ad, fd, se = compare(mi.load_dict(d), "draaw_v3", "plane.bsdf.base_color.value", 0.05)
+    assert abs(ad - fd) <= 3 * se + 1e-7, (ad, fd, se)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["draaw_v1", "draaw_v2"])
 @pytest.mark.parametrize("key,h", LEGACY_KEYS, ids=["reflection", "direct_to_scatter"])

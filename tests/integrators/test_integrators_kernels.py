@@ -79,3 +79,18 @@ def test_other_versions_gate_aovs_and_environment(kind):
     base = ops_of(rs.feature_scene(res=8, spp=4), kind)
     assert base < ops_of(rs.feature_scene(res=8, spp=4), kind, aovs="all")
     assert base < ops_of(rs.feature_scene(res=8, spp=4, envmap=True), kind)
+
+
+def test_v3_near_specular_code_only_for_glossy_other_bsdfs():
+    """V3's near-specular test of other BSDFs (``near_specular``) enters the kernel only when
+    some non-draaw BSDF has a glossy lobe: with diffuse ones only, ``glossy_alpha`` changes
+    nothing; with a roughconductor it adds that code."""
+    def scene(metal: bool) -> dict:
+        d = rs.feature_scene(res=8, spp=4, conductor=metal)
+        for k in ("floor", "ball", "box"):
+            d[k]["bsdf"] = {"type": "diffuse"}
+        return d
+    diffuse = [ops_of(scene(False), "draaw_v3", glossy_alpha=a) for a in (0.0, 0.25)]
+    assert diffuse[0] == diffuse[1], diffuse
+    metal = [ops_of(scene(True), "draaw_v3", glossy_alpha=a) for a in (0.0, 0.25)]
+    assert metal[0] < metal[1], metal

@@ -92,7 +92,8 @@ def test_detect_features_cornell():
     assert all(isinstance(v, bool) for v in f.values())
     assert f["area_lights"] and f["hittable_lights"] and f["draaw_materials"]
     for k in ("point_lights", "spot_lights", "envmap", "constant_env", "environment",
-              "delta_lights", "textures", "normal_maps", "delta_bsdfs", "media", "aovs"):
+              "delta_lights", "textures", "normal_maps", "delta_bsdfs", "other_glossy", "media",
+              "aovs"):
         assert not f[k], k
 
 
@@ -108,6 +109,8 @@ def test_detect_features_emitters_and_materials():
         sun={"type": "directional", "direction": [0, -1, 0]},
         sky={"type": "envmap", "bitmap": env},
         glass={"type": "sphere", "radius": 0.1, "bsdf": {"type": "dielectric"}},
+        metal={"type": "sphere", "radius": 0.1, "center": [0, -0.5, 0],
+               "bsdf": {"type": "roughconductor", "alpha": 0.1}},
         tex={"type": "sphere", "radius": 0.1, "center": [0.5, 0, 0],
              "bsdf": {"type": "diffuse", "reflectance": {"type": "bitmap", "data": tex()}}},
         nm={"type": "sphere", "radius": 0.1, "center": [-0.5, 0, 0],
@@ -128,3 +131,16 @@ def test_detect_features_constant_env_only():
     f = detect_features(mi.load_dict(d))
     assert f["constant_env"] and f["environment"] and f["hittable_lights"]
     assert f["other_materials"] and not f["draaw_materials"] and not f["area_lights"]
+
+
+@pytest.mark.parametrize("bsdf, glossy", [
+    ({"type": "roughconductor", "alpha": 0.1}, True),
+    ({"type": "principled", "roughness": 0.3}, True),
+    ({"type": "twosided", "bsdf": {"type": "roughplastic"}}, True),
+    ({"type": "conductor"}, False),                   # a delta lobe: delta_bsdfs
+    ({"type": "diffuse"}, False),
+    ({"type": "draaw", "roughness": 0.1}, False),     # draaw lobes are V3's own business
+])
+def test_detect_other_glossy(bsdf, glossy):
+    f = detect_features(mi.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": bsdf}}))
+    assert f["other_glossy"] is glossy
