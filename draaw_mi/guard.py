@@ -33,7 +33,42 @@ frozen call waits for while it holds the guard -- tried, the two threads deadloc
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 
 #: see the module docstring
 RENDER_GUARD = threading.RLock()
+
+#: fewest Dr.Jit threads with which Mitsuba 3.9.1 reads an EXR file (see exr_reading_threads)
+EXR_READ_THREADS = 2
+
+
+@contextlib.contextmanager
+def exr_reading_threads():
+    """At least :data:`EXR_READ_THREADS` Dr.Jit threads within the block, the count as it was
+    after it; taken around Mitsuba's scene loads and image reads. Mitsuba 3.9.1 decodes EXR
+    files on Dr.Jit's thread pool (``Bitmap::read_exr``: OpenEXR's tasks through nanothread)
+    and with 0 or 1 threads waits for ever on an OpenEXR semaphore: ``draaw-mi render
+    --threads 1`` of a scene with an EXR texture or environment map hung, so did a batch's
+    Dask workers on two cores (one thread each) and a ``dr.set_thread_count(1)`` notebook.
+    Holds :data:`RENDER_GUARD` when it changes the count (no render runs meanwhile).
+
+    >>> import drjit as dr
+    >>> n = dr.thread_count(); dr.set_thread_count(1)
+    >>> with exr_reading_threads():
+    ...     dr.thread_count()
+    2
+    >>> dr.thread_count(); dr.set_thread_count(n)
+    1
+    """
+    import drjit as dr
+    if dr.thread_count() >= EXR_READ_THREADS:
+        yield
+        return
+    with RENDER_GUARD:
+        before = dr.thread_count()
+        dr.set_thread_count(EXR_READ_THREADS)
+        try:
+            yield
+        finally:
+            dr.set_thread_count(before)

@@ -279,8 +279,10 @@ def load_mitsuba_dict(d: dict):
     materials that start alike could not be tuned, fitted or animated apart). Such scenes load
     without it too."""
     import mitsuba as mi
+    from ..guard import exr_reading_threads
     optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
-    return mi.load_dict(d, optimize=optimize)
+    with exr_reading_threads():
+        return mi.load_dict(d, optimize=optimize)
 
 
 def _xml_shape_bsdfs(path: str) -> set:
@@ -301,10 +303,12 @@ def load_mitsuba_file(path: str):
     its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
     materials, shows only once it is loaded, so such files are parsed twice."""
     import mitsuba as mi
-    scene = mi.load_file(path)
-    merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
-    if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
-        scene = mi.load_file(path, optimize=False)
+    from ..guard import exr_reading_threads
+    with exr_reading_threads():
+        scene = mi.load_file(path)
+        merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
+        if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
+            scene = mi.load_file(path, optimize=False)
     return scene
 
 

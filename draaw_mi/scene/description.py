@@ -175,8 +175,10 @@ def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: 
     +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
     naming the first bad pixel. Alpha and other layers are not looked at."""
     import mitsuba as mi
+    from ..guard import exr_reading_threads
     try:
-        arr = np.asarray(mi.Bitmap(path))
+        with exr_reading_threads():
+            arr = np.asarray(mi.Bitmap(path))
     except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
         raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
     if np.issubdtype(arr.dtype, np.integer):
