@@ -119,27 +119,42 @@ def unclipped_mask(ref: np.ndarray) -> np.ndarray:
     return (ref < SATURATED).astype(np.float32)
 
 
-def load_reference(ref) -> np.ndarray:
-    """An (H, W, 3) linear float32 reference from an EXR/PNG path or an array/tensor."""
-    from .io import read_exr, to_numpy
+def load_reference(ref, encoded: bool = False) -> np.ndarray:
+    """An (H, W, 3) float32 reference from an EXR/PNG path or an (H, W[, 1 | 3 | 4]) float
+    array/tensor. A PNG/JPEG is decoded from sRGB to linear, unless ``encoded`` (the fit's
+    post chain ends in ``srgb``, :func:`draaw_mi.post.display_encoded`: its renders are
+    compared display-encoded, as ``draaw-mi render --post ... --png`` stored them). An EXR's
+    colour is its R, G, B channels, a grey Y, or the R, G, B of its one layer
+    (``ViewLayer.Combined.R``, ...).
+
+    >>> load_reference(np.zeros((2, 3), np.float32)).shape
+    (2, 3, 3)
+    >>> load_reference(np.zeros((2, 3, 3), np.uint8))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: reference array of dtype uint8; expected float values (linear): divide 8-bit values by 255 and decode sRGB, or pass the PNG file
+    """
+    from .io import read_exr
     if isinstance(ref, os.PathLike):
         ref = os.fspath(ref)
     if isinstance(ref, str):
         if ref.lower().endswith(".exr"):
-            arr = read_exr(ref)
+            arr = _exr_colour(ref, *read_exr(ref, with_names=True))
         elif ref.lower().endswith(DISPLAY_SUFFIXES):
             import matplotlib.image
             try:
-                arr = matplotlib.image.imread(ref).astype(np.float32)
+                arr = matplotlib.image.imread(ref)
             except Exception as e:  # noqa: BLE001
                 raise DraawError(f"fit: cannot read reference {ref!r}: {e}") from None
-            if arr.dtype != np.float32 or arr.max() > 1.0:
-                arr = arr / 255.0
-            arr = np.where(arr <= 0.04045, arr / 12.92, ((arr + 0.055) / 1.055) ** 2.4)  # sRGB -> linear
+            arr = arr.astype(np.float32) / (255.0 if np.issubdtype(arr.dtype, np.integer) else 1.0)
+            if arr.ndim == 3 and arr.shape[2] in (2, 4):
+                arr = arr[..., :-1]                    # (grey or colour) + alpha
+            if not encoded:
+                arr = np.where(arr <= 0.04045, arr / 12.92, ((arr + 0.055) / 1.055) ** 2.4)  # sRGB -> linear
         else:
             raise DraawError(f"fit: reference {ref!r} must be an .exr or .png file")
     else:
-        arr = to_numpy(ref)
+        arr = _array_reference(ref)
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.shape[2] == 1:
@@ -148,6 +163,63 @@ def load_reference(ref) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise DraawError("fit: a reference image contains NaN or Inf")
     return arr
+
+
+def _exr_colour(path: str, arr: np.ndarray, names: list) -> np.ndarray:
+    """The colour of an EXR reference (see :func:`load_reference`), or an error that lists
+    its channels (a layered EXR was read as its channels in name order: A, B, G)."""
+    index = {n: i for i, n in enumerate(names)}
+    if all(c in index for c in "RGB"):
+        return arr[..., [index["R"], index["G"], index["B"]]]
+    if "Y" in index and not {"X", "Z", "RY", "BY"} & set(index):    # (not CIE XYZ, chroma)
+        return arr[..., [index["Y"]]]
+    layers = sorted({n[:-2] for n in names if n.endswith(".R")
+                     and all(n[:-2] + "." + c in index for c in "GB")})
+    if len(layers) == 1:
+        return arr[..., [index[f"{layers[0]}.{c}"] for c in "RGB"]]
+    found = ", ".join(sorted(names)[:12]) + (", ..." if len(names) > 12 else "")
+    which = f"; it has the layers {', '.join(layers)}: keep one" if layers else ""
+    raise ParameterError(f"fit: reference {path!r} has the channels {found}; expected R, G, B, "
+                         f"a grey Y, or the R, G, B of one layer{which}")
+
+
+def _array_reference(ref) -> np.ndarray:
+    """An array/tensor reference as (H, W[, 1 | 3 | 4]) float32 values, or an error (an 8-bit
+    array was taken as linear values of 0-255, a channel-first one rendered a 3-pixel-high
+    image)."""
+    from .io import to_numpy
+    raw = np.asarray(ref) if not isinstance(ref, (mi.TensorXf, mi.Bitmap)) else None
+    if raw is not None and not np.issubdtype(raw.dtype, np.floating):
+        raise ParameterError(f"fit: reference array of dtype {raw.dtype}; expected float values "
+                             "(linear): divide 8-bit values by 255 and decode sRGB, or pass the PNG file")
+    arr = to_numpy(ref)
+    if arr.shape[2] not in (1, 3, 4):
+        raise ParameterError(f"fit: reference of shape {arr.shape}; expected (H, W), (H, W, 1), "
+                             "(H, W, 3) or (H, W, 4) (channels last)")
+    return arr
+
+
+def _display_encoded(post) -> bool:
+    """Whether the ``post`` chain (a list of filter tables or a ``Chain``) ends display-encoded;
+    a function of the user's own cannot say: its PNG references are decoded."""
+    from .post import display_encoded
+    from .post.chain import Chain
+    return (isinstance(post, Chain) or not callable(post)) and display_encoded(post)
+
+
+def _check_reference_size(scene: DraawScene, w: int, h: int, reference) -> None:
+    """A reference of another size than the scene's film is fitted at its own size when it
+    has the same aspect ratio (a smaller reference makes a faster fit); another aspect ratio
+    would stretch the image (a 48x24 reference of a 24x24 scene was fitted without a word)."""
+    sw, sh = scene.resolution
+    what = reference if isinstance(reference, (str, os.PathLike)) else "the reference"
+    if abs(w * sh - h * sw) > 0.02 * max(w * sh, h * sw):
+        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}: another aspect "
+                         "ratio; render the reference with the scene's camera and film")
+    if scene.mi_dict is None:
+        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}; a scene loaded "
+                         "from XML or given as mi.Scene keeps its film's size: give a reference "
+                         "of that size")
 
 
 def _views(scene: DraawScene, views):
@@ -293,7 +365,9 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     ----------
     scene: a DraawScene, scene file or description dict. On return the scene holds the
         fitted values.
-    references: one reference per view: an EXR/PNG path, an (H, W, 3) array or tensor (linear).
+    references: one reference per view: an EXR/PNG path, an (H, W, 3) float array or tensor
+        (linear; see :func:`load_reference`). Of the scene's size, or of another size with
+        its aspect ratio: the fit then renders at the references' size.
         A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
         saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
         pixels above 1 fitted roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
@@ -333,8 +407,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
                             ("spp_grad", spp if spp_grad is None else spp_grad, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ParameterError(f"fit: {name}={value!r}; expected an integer >= {lo}")
-    if not (isinstance(lr, (int, float)) and lr > 0):
-        raise ParameterError(f"fit: lr={lr!r}; expected a positive number")
+    if isinstance(lr, bool) or not (isinstance(lr, (int, float)) and 0 < lr < float("inf")):
+        raise ParameterError(f"fit: lr={lr!r}; expected a positive finite number")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= 0xFFFFFFFF:
+        raise ParameterError(f"fit: seed={seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
     if not (isinstance(average_last, (int, float)) and 0 < average_last <= 1):
         raise ParameterError(f"fit: average_last={average_last!r}; expected a fraction in (0, 1]")
     if isinstance(params, str):
@@ -343,16 +419,23 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
+    chain = None
+    if post:
+        from . import post as post_mod
+        chain = post_mod.load_chain(post) if not callable(post) else post
+    encoded = chain is not None and _display_encoded(post)
     given = references if isinstance(references, (list, tuple)) else [references]
-    refs = [load_reference(r) for r in given]
+    refs = [load_reference(r, encoded) for r in given]
     masks = [mi.TensorXf(unclipped_mask(r)) if is_display_reference(g) else None
              for g, r in zip(given, refs)]
     h, w = refs[0].shape[:2]
     if any(r.shape != refs[0].shape for r in refs):
         raise DraawError(f"fit: references differ in shape: {[r.shape for r in refs]}")
+    callers_scene = scene
     if resolution is not None or scene.resolution != (w, h):
         if resolution is not None and tuple(resolution) != (w, h):
             raise DraawError(f"fit: resolution {tuple(resolution)} differs from the references' {w}x{h}")
+        _check_reference_size(scene, w, h, given[0])
         scene = scene.with_resolution(w, h)
     sensors = _views(scene, views)
     spp = _sampler_spp(scene, spp, "spp")
@@ -364,10 +447,6 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
         raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
-    chain = None
-    if post:
-        from . import post as post_mod
-        chain = post_mod.load_chain(post) if hasattr(post_mod, "load_chain") and not callable(post) else post
 
     p = scene.all_params                 # mi.traverse plus the SDF objects' "sdf.NODE.PARAM"
     keys = [scene.key(name) for name in params]
@@ -379,6 +458,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         if unknown:
             raise ParameterError(f"fit: init names {unknown}, which are not in params {list(params)}")
     ref_t = [mi.TensorXf(r) for r in refs]
+    start = {k: type(p[k])(p[k]) for k in keys}        # (a diverged fit puts these back)
     opt = mi.ad.Adam(lr=lr, beta_2=beta_2)
     prm: dict[str, _Param] = {}
     for k in keys:
@@ -495,9 +575,20 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
 
     n_avg = max(1, int(round(iterations * average_last)))
     fitted = {}
+    averaged = {k: prm[k].project_value(np.array([h["values"][names[k]] for h in history[-n_avg:]],
+                                                 dtype=float).mean(axis=0)) for k in keys}
+    bad = [names[k] for k in keys if not np.all(np.isfinite(averaged[k]))]
+    if bad:
+        with RENDER_GUARD:
+            for k in keys:
+                p[k] = start[k]
+            p.update()
+            scene_changed(scene.mi_scene)
+        raise DraawError(f"fit: {', '.join(bad)} diverged to NaN/Inf (last loss "
+                         f"{history[-1]['loss']:.3g}); the scene keeps its starting values: "
+                         f"try a smaller lr (now {lr:g})")
     for k in keys:
-        vals = np.array([h["values"][names[k]] for h in history[-n_avg:]], dtype=float)
-        mean = prm[k].project_value(vals.mean(axis=0))
+        mean = averaged[k]
         if prm[k].shape is not None:         # a texture: back in its own shape (a flat list
             fitted[names[k]] = mean.astype(np.float32).reshape(prm[k].shape)   # failed the
             p[k] = prm[k].type(fitted[names[k]])                               # update)
@@ -506,12 +597,20 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
             p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
     with RENDER_GUARD:
         p.update()
-        final = mi.render(scene.mi_scene, sensor=sensors[0], integrator=integrator, seed=seed + 12345, spp=spp)
+        final = mi.render(scene.mi_scene, sensor=sensors[0], integrator=integrator,
+                          seed=(seed + 12345) & 0xFFFFFFFF, spp=spp)
         dr.eval(final)
     final = final[:, :, :3] if final.shape[2] > 3 else final
     if chain is not None:
         final = _apply_chain(final, chain)
     final = np.array(final)
+    if callers_scene is not scene:          # (fitted at the references' size: a copy)
+        with RENDER_GUARD:
+            q = callers_scene.all_params
+            for k in keys:
+                q[k] = type(p[k])(p[k])
+            q.update()
+            scene_changed(callers_scene.mi_scene)
     converged = settled(history, tol)
     return FitResult(values=fitted, history=history, image=final[..., :3], converged=converged,
                      iterations=iterations, seconds=time.perf_counter() - t0, kernel_compiles=compiles,

@@ -196,8 +196,8 @@ def test_cli_fit_accepts_a_png_reference(tmp_path, monkeypatch):
     fit_mod = sys.modules["draaw_mi.fit"]
     real = fit_mod.load_reference
 
-    def spy(ref):
-        seen.setdefault("arrays", []).append(real(ref))
+    def spy(ref, encoded=False):
+        seen.setdefault("arrays", []).append(real(ref, encoded))
         return seen["arrays"][-1]
     monkeypatch.setattr(fit_mod, "load_reference", spy)
     assert main(["fit", scene_file, "--reference", str(tmp_path / "ref.png"), "--param", "target.metallic",
