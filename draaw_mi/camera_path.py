@@ -28,7 +28,15 @@ GO_DRAAW_BENCHMARK_PATH = [
 
 
 def as_keyframes(keys) -> np.ndarray:
-    """(n, 5) float array from tuples or GO-Draaw dicts."""
+    """(n, 5) float array from tuples or GO-Draaw dicts.
+
+    >>> as_keyframes([{"x": 0, "y": 1, "z": 2, "cameraX": 0, "cameraY": "up"}])
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: camera path: keyframe 0 = (0, 1, 2, 0, 'up'); expected 5 finite numbers (x, y, z, theta, phi)
+    """
+    if isinstance(keys, (dict, str, bytes)) or not hasattr(keys, "__iter__"):
+        raise ParameterError(f"camera path: expected a list of keyframes, got {type(keys).__name__}")
     rows = []
     for i, k in enumerate(keys):
         if isinstance(k, dict):
@@ -37,7 +45,10 @@ def as_keyframes(keys) -> np.ndarray:
             except KeyError as e:
                 raise ParameterError(f"camera path: keyframe {i} lacks {e.args[0]!r}; expected x, y, z, "
                                      "cameraX, cameraY") from None
-        arr = np.asarray(k, dtype=float)
+        try:
+            arr = np.asarray(k, dtype=float)
+        except (TypeError, ValueError):
+            arr = np.full(0, np.nan)                   # (reported below)
         if arr.shape != (5,) or not np.all(np.isfinite(arr)):
             raise ParameterError(f"camera path: keyframe {i} = {k!r}; expected 5 finite numbers "
                                  "(x, y, z, theta, phi)")
@@ -53,7 +64,7 @@ def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = Fa
     n = len(p)
     if n < 2:
         return p
-    if not duration > 0:
+    if not 0 < duration < float("inf"):
         raise ParameterError(f"camera path: duration={duration!r}; expected a positive number of seconds")
     total = int(duration * fps)
     if total < 2:

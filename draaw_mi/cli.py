@@ -378,11 +378,21 @@ def _cmd_speed_suite(args) -> int:
             "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
     if args.scenes:
         argv += ["--scenes", ",".join(args.scenes)]
+    for name, value in (("--repeats", args.repeats), ("--gt-spp", args.gt_spp)):
+        if value < 1:
+            raise CliError(f"bench --suite speed: {name} {value}; expected an integer >= 1")
     if args.spp:
-        argv += ["--spp", args.spp.split(",")[0]]
+        spps = _int_list(args.spp, "--spp")
+        if len(spps) != 1 or spps[0] < 1:
+            raise CliError(f"bench --suite speed: --spp {args.spp!r}; expected one integer >= 1 "
+                           "(the spp of the reference error each version is timed to)")
+        argv += ["--spp", str(spps[0])]
     if args.resolution:
-        sizes = {int(x) for x in args.resolution.lower().split("x") if x}
-        if len(sizes) != 1:
+        try:
+            sizes = {int(x) for x in args.resolution.lower().split("x") if x}
+        except ValueError:
+            sizes = set()
+        if len(sizes) != 1 or min(sizes) < 1:
             raise CliError(f"bench --suite speed: --resolution {args.resolution!r}; the suite's "
                            "images are square (give N or NxN)")
         argv += ["--res", str(sizes.pop())]
@@ -434,6 +444,11 @@ def _cmd_bench(args) -> int:
         raise CliError(f"bench: --adaptive {args.adaptive}; expected a power of two >= 2 (block size "
                        "in pixels) or 0 (none)")
     keys = _read_json(args.camera_path, "--camera-path") if args.camera_path else None
+    if keys is not None:              # checked before the study, which runs for minutes
+        from draaw_mi.camera_path import as_keyframes
+        as_keyframes(keys)
+        if args.frames < 2:
+            raise CliError(f"bench: --frames {args.frames}; a camera path needs at least 2 frames")
     progress = progress_mode(args.no_progress)
     scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
     if not scenes:

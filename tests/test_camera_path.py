@@ -66,3 +66,24 @@ def test_faithful_mode_is_go_draaws_loop():
             ref = keys[i] + (keys[i + 1] - keys[i]) * (3 * t ** 3 - 2 * t ** 4)
             np.testing.assert_allclose(f[i * 4 + fr], ref, rtol=0, atol=1e-12, err_msg=f"frame {i * 4 + fr}")
     np.testing.assert_allclose(f[8], keys[2], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("keys, match", [
+    ({"x": 0}, "expected a list of keyframes, got dict"),
+    ([{"x": 0, "y": 1, "z": 2, "cameraX": 0, "cameraY": "abc"}], "keyframe 0 = .*'abc'.*5 finite numbers"),
+    ([[0, 1, 2, 3, [4]]], "keyframe 0 = .*5 finite numbers"),
+    ([[0, 1, 2, 3]], "keyframe 0 = .*5 finite numbers"),
+    ([], "no keyframes"),
+])
+def test_malformed_keyframes_name_the_keyframe(keys, match):
+    """A string value or a JSON object instead of a list raised a bare ValueError."""
+    from draaw_mi.camera_path import as_keyframes
+    from draaw_mi.errors import ParameterError
+    with pytest.raises(ParameterError, match=match):
+        as_keyframes(keys)
+
+
+def test_an_infinite_duration_is_refused():
+    from draaw_mi.errors import ParameterError
+    with pytest.raises(ParameterError, match="duration=inf"):
+        interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], duration=float("inf"))

@@ -111,6 +111,36 @@ def test_bench_quick_with_a_camera_path(tmp_path, tiny_file, capsys):
     assert "frame_times.json" in printed and "4 settings" in printed
 
 
+@pytest.mark.parametrize("keys, frames, message", [
+    ([{"x": 0, "y": 1, "z": 5, "cameraX": 0}], "3", "keyframe 0 lacks 'cameraY'"),
+    ({"x": 0}, "3", "expected a list of keyframes"),
+    ([[0.0, 1.0, 5.0, 0.0, 0.0], [1.0, 1.2, 4.0, 0.2, 0.1]], "1", "--frames 1; a camera path needs at least 2"),
+])
+def test_bench_checks_its_camera_path_before_the_study(tmp_path, tiny_file, capsys, monkeypatch,
+                                                       keys, frames, message):
+    """Bad keyframes or --frames failed after the whole accuracy study (minutes at the
+    defaults), or with a traceback."""
+    from draaw_mi import bench
+    monkeypatch.setattr(bench, "run_study", lambda *a, **k: pytest.fail("the study ran"))
+    (tmp_path / "keys.json").write_text(json.dumps(keys))
+    rc = main(["bench", tiny_file, "--quick", "--out", str(tmp_path / "b"), "--frames", frames,
+               "--camera-path", str(tmp_path / "keys.json"), "--no-progress"])
+    assert rc == 2 and message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--resolution", "abc"], "--resolution 'abc'"),
+    (["--resolution", "0"], "--resolution '0'"),
+    (["--spp", "0"], "--spp '0'; expected one integer >= 1"),
+    (["--spp", "abc"], "--spp 'abc': expected comma-separated integers"),
+    (["--repeats", "0"], "--repeats 0"),
+])
+def test_bench_suite_speed_checks_its_flags(tmp_path, capsys, flags, message):
+    rc = main(["bench", "--suite", "speed", "metal_018", "--out", str(tmp_path / "s")] + flags)
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and "Traceback" not in err, err
+
+
 def test_fit_passes_views_post_and_loss_through(tmp_path, chain_file, monkeypatch, capsys):
     """--views (one camera table per --reference), --post and --loss reach fit() unchanged,
     and the run completes with a scene written."""
