@@ -55,7 +55,7 @@ from .errors import DraawError, ParameterError, suggest
 from .integrators import is_draaw
 from .guard import RENDER_GUARD
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
-from .scene import value_like
+from .scene import check_like, value_like
 
 GUIDES = ("albedo", "normal")
 
@@ -236,6 +236,14 @@ class Preview:
         named = {name: (self.key(name), v) for name, v in values.items()}
         self.scene.check_values("Preview.update", named)       # (SDF values with each other)
         checked = {key: v for key, v in named.values()}
+        # a value the scene cannot take is refused now, not at the next frame on the worker
+        # thread; no Dr.Jit value is made here, so this does not wait for the frame in flight
+        p = self.scene.all_params
+        for name, (key, v) in named.items():
+            try:
+                check_like(p[key], v, key)
+            except DraawError as e:
+                raise ParameterError(f"Preview.update: {name}: {e}") from None
         with self._lock:
             self._pending.update(checked)
             return self._bump()
@@ -262,9 +270,18 @@ class Preview:
         with _scene_lock(self.scene), RENDER_GUARD:       # (draaw_mi.guard: updates too)
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
-                for key, v in pending.items():
-                    p[key] = value_like(p[key], v, key)
-                p.update()
+                old = {key: dr.copy(p[key]) for key in pending}    # (assigned in place)
+                try:
+                    for key, v in pending.items():
+                        p[key] = value_like(p[key], v, key)
+                    p.update()
+                except Exception:
+                    # put the old values back: a value params.update() refused stayed queued
+                    # in the parameters, and every later change failed with it
+                    for key, v in old.items():
+                        p[key] = v
+                    p.update()
+                    raise
                 scene_changed(sc.mi_scene)          # e.g. V4's light powers
 
     def _lo_scene(self):

@@ -14,6 +14,7 @@ import ipywidgets as W
 import numpy as np
 
 from . import tuning
+from .limits import FOV_RANGE
 from .errors import DraawError
 
 
@@ -31,7 +32,7 @@ class CameraPanel:
         fov = float(np.array(self.scene.params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self.scene.params \
             else 40.0
         # the range scene files allow (5..120 clamped a 150-degree camera, and saving wrote 120)
-        self.fov = slider("FOV (x)", fov, min(1.0, fov), 179.5, 0.5)
+        self.fov = slider("FOV (x)", fov, min(1.0, fov), FOV_RANGE[1], 0.5)
         self.yaw = slider("orbit yaw °", 0.0, -180.0, 180.0, 1.0)
         self.pitch = slider("orbit pitch °", 0.0, -85.0, 85.0, 1.0)
         self.distance = slider("distance ×", 1.0, 0.2, 3.0, 0.01)

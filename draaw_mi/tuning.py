@@ -65,14 +65,17 @@ def parse_rgb(text: str, where: str) -> list[float]:
 
 
 def hex_to_linear(value: str) -> list[float]:
-    """A colour picker's sRGB ``#rrggbb`` -> linear RGB in [0, 1]."""
-    v = value.lstrip("#")
-    if len(v) == 3:
-        v = "".join(c * 2 for c in v)
+    """A colour picker's sRGB ``#rrggbb`` (or ``#rgb``, or a CSS name such as ``"blue"``, which
+    ipywidgets' picker also takes) -> linear RGB in [0, 1].
+
+    >>> hex_to_linear("blue"), hex_to_linear("#00f")
+    ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0])
+    """
+    from matplotlib.colors import to_rgb
     try:
-        c = [int(v[i:i + 2], 16) / 255.0 for i in (0, 2, 4)]
-    except ValueError:
-        raise ParameterError(f"colour {value!r}; expected #rrggbb") from None
+        c = list(to_rgb(value.strip()))
+    except (ValueError, AttributeError):
+        raise ParameterError(f"colour {value!r}; expected #rrggbb or a CSS colour name") from None
     return [x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4 for x in c]
 
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from ..errors import ParameterError
-from ..limits import FLOAT32_MAX
+from ..limits import FLOAT32_MAX, FOV_RANGE
 
 _REGISTERED = False
 
@@ -39,10 +39,12 @@ def check_value(who: str, name: str, key: str, v) -> None:
     """
     from .draaw_bsdf import SCALAR_PARAMS
     nums = None
-    if isinstance(v, bool):
+    if isinstance(v, (bool, np.bool_, str, bytes)) or v is None:
         raise ParameterError(f"{who}: {name}={v!r}; expected a number")
-    if isinstance(v, (int, float)):
-        nums = [float(v)]
+    if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
+        nums = [float(v)]                    # (numpy scalars too: np.float32(7) passed unchecked)
+    elif isinstance(v, np.ndarray) and v.ndim > 1:
+        return                               # a texture's texels: value_like checks their shape
     elif isinstance(v, (list, tuple, np.ndarray)):
         try:
             nums = [float(x) for x in v]
@@ -55,6 +57,11 @@ def check_value(who: str, name: str, key: str, v) -> None:
     if not all(math.isfinite(x) and abs(x) <= FLOAT32_MAX for x in nums):   # (stored as float32)
         raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers (in float32, |x| <= 3.4e38)")
     parts = key.split(".")
+    if parts[-1] == "x_fov":
+        if not all(FOV_RANGE[0] <= x <= FOV_RANGE[1] for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected a field of view in "
+                                 f"[{FOV_RANGE[0]}, {FOV_RANGE[1]}] degrees")
+        return
     if any(p.endswith("medium") for p in parts[:-1]):
         _check_medium_value(who, name, parts, v, nums)
         return

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from ..limits import FOV_RANGE
 from .schema import Where, check_keys, number, string, vector
 
 CAMERA_KEYS = ("origin", "target", "up", "position", "angles", "fov", "fov_axis", "near_clip",
@@ -53,7 +54,7 @@ def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
 def camera_to_look_at(cam: dict, where: Where):
     """Validate a ``[camera]`` table; return (origin, target, up, fov_deg, fov_axis, near, far)."""
     check_keys(cam, CAMERA_KEYS, where)
-    fov = number(cam.get("fov", 40.0), where / "fov", lo=0.1, hi=179.0)
+    fov = number(cam.get("fov", 40.0), where / "fov", lo=FOV_RANGE[0], hi=FOV_RANGE[1])
     fov_axis = string(cam.get("fov_axis", "x"), where / "fov_axis", ["x", "y", "smaller", "larger", "diagonal"])
     near = number(cam.get("near_clip", 1e-2), where / "near_clip", lo=0.0, lo_open=True)
     far = number(cam.get("far_clip", 1e4), where / "far_clip", lo=near, lo_open=True)
