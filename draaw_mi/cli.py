@@ -388,14 +388,17 @@ def _cmd_speed_suite(args) -> int:
                            "(the spp of the reference error each version is timed to)")
         argv += ["--spp", str(spps[0])]
     if args.resolution:
-        try:
-            sizes = {int(x) for x in args.resolution.lower().split("x") if x}
-        except ValueError:
-            sizes = set()
-        if len(sizes) != 1 or min(sizes) < 1:
+        from draaw_mi.errors import DraawError
+        from draaw_mi.scene.schema import Where, resolution as parse_res
+        text = args.resolution.strip()
+        try:                              # (N is N x N here)
+            w, h = parse_res(int(text) if text.isdigit() else text, Where("--resolution"))
+        except DraawError:
+            w, h = 0, 1
+        if w != h:
             raise CliError(f"bench --suite speed: --resolution {args.resolution!r}; the suite's "
-                           "images are square (give N or NxN)")
-        argv += ["--res", str(sizes.pop())]
+                           "images are square (give N or NxN, sides in 1..16384)")
+        argv += ["--res", str(w)]
     import shlex                            # the user's command, quoted so it runs when pasted
     if not any(speed_suite.build(n, 8) is not None for n in (args.scenes or speed_suite.SCENES)):
         raise CliError("bench --suite speed: every requested scene was skipped (the GO-Draaw data "

@@ -184,6 +184,16 @@ def read_exr(path: str, with_names: bool = False):
     return (arr, order) if with_names else arr
 
 
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB values in [0, 1] -> linear (the inverse of :func:`srgb_encode`).
+
+    >>> float(srgb_decode(np.array([0.5]))[0])  # doctest: +ELLIPSIS
+    0.2140...
+    """
+    x = np.asarray(encoded)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 sRGB transfer function on linear values clipped to [0, 1].
 

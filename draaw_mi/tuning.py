@@ -76,7 +76,8 @@ def hex_to_linear(value: str) -> list[float]:
         c = list(to_rgb(value.strip()))
     except (ValueError, AttributeError):
         raise ParameterError(f"colour {value!r}; expected #rrggbb or a CSS colour name") from None
-    return [x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4 for x in c]
+    from .io import srgb_decode
+    return [float(x) for x in srgb_decode(np.array(c))]
 
 
 def linear_to_hex(rgb) -> str:

@@ -228,8 +228,8 @@ class MaterialTuner(CameraPanel):
 
     @staticmethod
     def _load_reference(ref):
-        from .fit import load_reference
-        return np.asarray(load_reference(ref), np.float32)[..., :3]
+        from .fit_reference import load_reference
+        return np.asarray(load_reference(ref, who="MaterialTuner"), np.float32)[..., :3]
 
     # ------------------------------------------------------------------ panels
     def _build(self, save_path, frame_channel):

@@ -10,7 +10,7 @@ import pytest
 
 import draaw_mi
 from draaw_mi.errors import DraawError, ParameterError
-from draaw_mi.fit import _display_encoded, load_reference
+from draaw_mi.fit_reference import display_encoded_post, load_reference
 from draaw_mi.post import load_chain
 
 from conftest import SCENES
@@ -54,10 +54,10 @@ def test_a_png_of_an_srgb_chain_is_compared_as_stored(tmp_path):
     assert abs(res.values["target.metallic"] - 0.8) < 0.1, res.values
 
 
-def test_which_post_chains_end_display_encoded():
-    assert _display_encoded([{"type": "srgb"}]) and _display_encoded(load_chain([{"type": "srgb"}]))
-    assert not _display_encoded([{"type": "srgb"}, {"type": "srgb", "inverse": True}])
-    assert not _display_encoded(lambda img: img)          # a function cannot say: decoded
+def test_which_post_chains_enddisplay_encoded_post():
+    assert display_encoded_post([{"type": "srgb"}]) and display_encoded_post(load_chain([{"type": "srgb"}]))
+    assert not display_encoded_post([{"type": "srgb"}, {"type": "srgb", "inverse": True}])
+    assert not display_encoded_post(lambda img: img)          # a function cannot say: decoded
 
 
 # ---------------------------------------------------------------- EXR channels, arrays

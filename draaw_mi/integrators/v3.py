@@ -64,9 +64,9 @@ class DraawV3Integrator(DraawIntegrator):
       scenes) have no lobe V3 can split off: at their near-specular vertices (pdf in the
       mirror direction above a GGX lobe of alpha ``glossy_alpha``; a property of the vertex,
       not of the sample, so the choice keeps the estimator unbiased) all of their light from
-      area / environment emitters is found by BSDF sampling. The emission found by a BSDF sample is evaluated in the same loop
-      iteration (one-step look-ahead), so the path-replay adjoint can weight it by the glossy
-      lobe alone;
+      area / environment emitters is found by BSDF sampling. The emission found by a BSDF
+      sample is evaluated in the same loop iteration (one-step look-ahead), so the path-replay
+      adjoint can weight it by the glossy lobe alone;
     - BSDF sampling of ``draaw`` materials done by the integrator: a mixture of cosine
       hemisphere sampling and *plain* NDF sampling (``D(m) cos(theta_m)``, not the visible
       NDF), with the same lobe-selection probability as the BSDF; any other Mitsuba BSDF

@@ -62,7 +62,6 @@ def _array(value, where, key):
 
 #: voxels per axis at most (4800 per axis asked for 885 GB of float64 and killed the process)
 MAX_GRID_RESOLUTION = 1024
-#: the largest float32, where Mitsuba's sigma_t = density_scale * density must stay
 
 
 def _grid_resolution(value, where):

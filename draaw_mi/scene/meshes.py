@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..io import srgb_decode
+
 
 GO_DRAAW_GREY = 178.0 / 255.0
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
@@ -30,10 +32,6 @@ class MeshPart:
     material: dict = field(default_factory=dict)   # draaw parameters read from the file
 
 
-def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
 def _material_of(geom) -> tuple[str | None, dict]:
     visual = getattr(geom, "visual", None)
     mat = getattr(visual, "material", None)
@@ -41,7 +39,7 @@ def _material_of(geom) -> tuple[str | None, dict]:
         colors = getattr(visual, "face_colors", None) if visual is not None and visual.kind == "face" else None
         if colors is not None and len(colors):
             rgb = np.asarray(colors, float)[:, :3].mean(axis=0) / 255.0
-            return None, {"base_color": _srgb_to_linear(rgb).tolist()}
+            return None, {"base_color": srgb_decode(rgb).tolist()}
         return None, {}
     out: dict = {}
     name = getattr(mat, "name", None)
@@ -60,7 +58,7 @@ def _material_of(geom) -> tuple[str | None, dict]:
         image = getattr(mat, "image", None)
     if image is not None:
         arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
-        out["base_color"] = _srgb_to_linear(arr).astype(np.float32)
+        out["base_color"] = srgb_decode(arr).astype(np.float32)
     return name, out
 
 
