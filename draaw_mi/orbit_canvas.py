@@ -89,11 +89,18 @@ class OrbitCanvas(RemoteFrameBuffer):
 
     def __init__(self, size, *, on_orbit: Callable | None = None, on_drag_start: Callable | None = None,
                  on_zoom: Callable | None = None, on_reset: Callable | None = None, quality: int = 80):
-        w, h = (int(v) for v in size)
         problem = None
+        try:
+            w, h = (int(v) for v in size)
+        except (TypeError, ValueError):          # ('x', a 3-tuple, None: the message names it)
+            w = h = 0
+        try:
+            q = int(quality)
+        except (TypeError, ValueError):
+            q = 0
         if w < 1 or h < 1:
-            problem = f"OrbitCanvas: size={tuple(size)!r}; expected (width, height) >= 1"
-        elif not 1 <= int(quality) <= 99:
+            problem = f"OrbitCanvas: size={size!r}; expected (width, height), two integers >= 1"
+        elif isinstance(quality, bool) or not 1 <= q <= 99:
             problem = (f"OrbitCanvas: quality={quality!r}; expected 1..99 (lossless frames are asked "
                        "for with push(..., lossless=True))")
         # the widget is made before the check can fail: a half-made one breaks in __del__;
@@ -105,12 +112,12 @@ class OrbitCanvas(RemoteFrameBuffer):
         with quiet:
             super().__init__(css_width=f"{max(w, 1) * k}px", css_height=f"{max(h, 1) * k}px",
                              resizable=True, cursor="grab" if on_orbit else "default",
-                             quality=min(max(int(quality), 1), 99))
+                             quality=min(max(q, 1), 99))
         if problem:
             self.close()
             raise ParameterError(problem)
         self.size = (w, h)
-        self.jpeg_quality = int(quality)
+        self.jpeg_quality = q
         self.on_orbit, self.on_drag_start, self.on_zoom, self.on_reset = on_orbit, on_drag_start, on_zoom, on_reset
         self.frames_pushed = 0
         self._lock = threading.Lock()

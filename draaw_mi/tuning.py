@@ -95,14 +95,38 @@ def linear_to_hex(rgb) -> str:
 
 
 # --------------------------------------------------------------------------- lights
+def _emitter_keys(scene, suffix: str) -> list[str]:
+    """Traverse keys ending in ``suffix`` whose object is an emitter (named or not: an XML
+    scene's unnamed environment map is ``object_<address>.scale``)."""
+    import mitsuba as mi
+    props = scene.params.properties
+    return [k for k in props if k.endswith(suffix) and isinstance(props[k][2], mi.Emitter)]
+
+
 def light_values(scene) -> dict:
-    """``{traverse key: base RGB value}`` of every emitter's radiance / intensity."""
+    """``{traverse key: base value}`` of every emitter's radiance / intensity (RGB, flat), an
+    environment map's ``scale`` (one number) and its texels ``data`` ((H, W, 3): its tint).
+
+    >>> import draaw_mi
+    >>> sorted(light_values(draaw_mi.load_scene({"shapes": [{"type": "sphere"}],
+    ...        "lights": [{"type": "point", "position": [0, 0, 5]}]})))
+    ['point_light0.intensity.value']
+    """
     params = scene.params
     out = {}
     for key in params.keys():
         if key.endswith(LIGHT_SUFFIXES) and not key.endswith(".bsdf.reflectance.value"):
             out[key] = np.array(params[key], dtype=np.float64).ravel()
+    for key in _emitter_keys(scene, ".scale"):
+        out[key] = np.array(params[key], dtype=np.float64).ravel()
+    for key in _emitter_keys(scene, ".data"):
+        out[key] = np.array(params[key], dtype=np.float32)
     return out
+
+
+def light_positions(scene) -> dict:
+    """``{traverse key: position}`` of every point-like light (what "snap to the camera" moves)."""
+    return {k: np.array(scene.params[k], dtype=np.float64).ravel() for k in _emitter_keys(scene, ".position")}
 
 
 # --------------------------------------------------------------------------- camera
@@ -204,7 +228,7 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
         for light in desc.get("lights", []):
             if "intensity" in light:
                 light["intensity"] = float(light["intensity"]) * float(light_scale)
-            elif light.get("type") in ("point", "spot", "area", "constant", "directional", "sun"):
+            elif light.get("type") in ("point", "spot", "area", "constant", "envmap", "directional", "sun"):
                 light["intensity"] = float(light_scale)
             if col != [1.0, 1.0, 1.0]:
                 base = light.get("color", [1.0, 1.0, 1.0])
@@ -245,6 +269,6 @@ def snippet(source: str, materials: dict, settings: dict | None = None, resoluti
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["material_values", "parse_rgb", "hex_to_linear", "linear_to_hex", "light_values", "orbit",
+__all__ = ["material_values", "parse_rgb", "hex_to_linear", "linear_to_hex", "light_values", "light_positions", "orbit",
            "look_at", "to_uint8", "encode", "errors", "error_image", "document", "save_toml", "snippet",
            "SCALAR_PARAMS"]

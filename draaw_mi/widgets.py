@@ -102,6 +102,8 @@ class MaterialTuner(CameraPanel):
         self.scene = self.base_scene
         self.materials = tuning.material_values(self.scene)
         self._light_base = tuning.light_values(self.scene)
+        self._light_positions = tuning.light_positions(self.scene)
+        self._lights_now = {"tint": (1.0, 1.0, 1.0), "snapped": False}     # as the preview has them
         cam = self.scene.info.get("camera")
         self.camera = {k: list(map(float, cam[k])) for k in ("origin", "target", "up")} if cam else None
         if cam:
@@ -156,6 +158,11 @@ class MaterialTuner(CameraPanel):
                 fn(*args)
             except (DraawError, ValueError, OSError, KeyError, TypeError) as e:
                 self.message.value = _error_html(f"error: {e}")
+                self._syncing = True
+                try:
+                    _revert(args)
+                finally:
+                    self._syncing = False
         return run
 
     def _changed(self, values: dict):
@@ -363,7 +370,9 @@ class MaterialTuner(CameraPanel):
             "version": W.Dropdown(options=VERSIONS if o["version"] in VERSIONS else VERSIONS + (o["version"],),
                                   value=o["version"],
                                   description="version"),
-            "max_depth": W.IntSlider(value=self.preview.max_depth, min=1, max=16, description="max depth"),
+            # -1: unbounded (Mitsuba's convention), 0: nothing is seen; a scene's 40 stays 40
+            "max_depth": W.IntSlider(value=self.preview.max_depth, min=-1, max=max(16, self.preview.max_depth),
+                                     description="max depth", tooltip="-1: no limit"),
             "max_spp": W.BoundedIntText(value=o["max_spp"], min=1, max=1 << 16, description="spp budget"),
             "scale": W.FloatSlider(value=1.0, min=0.25, max=1.0, step=0.25, description="resolution",
                                    continuous_update=False),
@@ -392,15 +401,21 @@ class MaterialTuner(CameraPanel):
     def _set_lights(self):
         col = np.array(tuning.hex_to_linear(self.light_color.value))
         s = float(self.light_scale.value)
+        tint = tuple(float(c) for c in col)
         vals = {}
         for k, base in self._light_base.items():
-            v = base * s * (col if base.size == 3 else col.mean())
+            if k.endswith(".data"):         # an environment map's texels: its tint (rewriting
+                if tint != self._lights_now["tint"]:        # them rebuilds its sampling
+                    vals[k] = base * col.astype(np.float32)       # distribution: only on a change)
+                continue
+            v = base * s * (col if base.size == 3 else 1.0 if k.endswith(".scale") else col.mean())
             vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
-        if self.snap_light.value and self.camera is not None:
-            for k in self.scene.params.keys():
-                if k.endswith(".position") and k.split(".")[0] in self.scene.info.get("lights", []):
-                    vals[k] = self._camera_now()[0].tolist()
+        snapped = bool(self.snap_light.value and self.camera is not None)
+        if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
+            for k, pos in self._light_positions.items():
+                vals[k] = (self._camera_now()[0] if snapped else pos).tolist()
         self._changed(vals)
+        self._lights_now = {"tint": tint, "snapped": snapped}
 
     def _post_panel(self):
         from . import post
@@ -514,6 +529,17 @@ class MaterialTuner(CameraPanel):
 #: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing
 #: (contrast 1.0) or something neither linear nor encoded (half an sRGB encoding)
 _POST_START = {"contrast": {"contrast": 2.0}, "srgb": {"amount": 1.0}}
+
+
+def _revert(args) -> None:
+    """Put a refused change's control back to the value it had (a dropdown set to a version
+    the scene cannot render showed that version while the preview kept the old one). Text
+    fields keep what was typed, to be corrected."""
+    change = args[0] if len(args) == 1 and isinstance(args[0], dict) else None
+    owner = change.get("owner") if change else None
+    if owner is None or "old" not in change or isinstance(owner, (W.Text, W.Textarea)):
+        return
+    owner.value = change["old"]        # (the tuner's _syncing is set: nothing is applied again)
 
 
 def _html(text: str) -> str:

@@ -76,7 +76,8 @@ raw = np.array(draaw_mi.render(tuner.scene, spp=4, seed=3))
 images = [("4 spp", raw)]
 if denoiser_available():                     # pip install 'draaw-mi[denoise]' 
     images.append(("4 spp + OIDN (biased)", np.array(draaw_mi.render(tuner.scene, spp=4, seed=3, denoise=True))))
-images.append(("64 spp", np.array(draaw_mi.render(tuner.scene, spp=16 if SMALL else 64, seed=4))))
+REF_SPP = 16 if SMALL else 64
+images.append((f"{REF_SPP} spp", np.array(draaw_mi.render(tuner.scene, spp=REF_SPP, seed=4))))
 fig, axes = plt.subplots(1, len(images), figsize=(4 * len(images), 4))
 for ax, (title, img) in zip(axes, images):
     ax.imshow(np.clip(img[..., :3], 0, 1) ** (1 / 2.2), interpolation="nearest")

@@ -271,3 +271,23 @@ def test_rfb_channel_without_jupyter_rfb_is_one_clear_error(monkeypatch):
         assert t.canvas is None and t.image is not None                 # "auto" falls back
     finally:
         t.close()
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"size": (4, 4), "quality": "x"}, r"quality='x'; expected 1..99"),
+    ({"size": (4, 4), "quality": True}, r"quality=True; expected 1..99"),
+    ({"size": (4, 4, 4)}, r"size=\(4, 4, 4\); expected \(width, height\)"),
+    ({"size": ("a", 4)}, r"size=\('a', 4\); expected \(width, height\)"),
+    ({"size": None}, r"size=None; expected \(width, height\)"),
+])
+def test_unparsable_arguments_are_one_clear_error_and_leave_no_broken_widget(monkeypatch, kw, match):
+    """'x' and a 3-tuple raised a bare ValueError before the widget was made, and the
+    half-made widget then failed in ``__del__`` ("Exception ignored ... NoneType & int")."""
+    import gc
+    import sys
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    with pytest.raises(draaw_mi.DraawError, match=match):
+        OrbitCanvas(**kw)
+    gc.collect()
+    assert unraisable == []

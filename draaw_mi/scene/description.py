@@ -192,6 +192,18 @@ def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: 
                           + (" >= 0" if nonneg else ""))
 
 
+def _tinted_image(path: str, color) -> "mi.Bitmap":
+    """The image at ``path`` as linear float RGB, each channel times ``color`` (an
+    environment map's tint)."""
+    import mitsuba as mi
+    from ..guard import exr_reading_threads
+    with exr_reading_threads():
+        bitmap = mi.Bitmap(path)
+    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    rgb = np.array(linear, dtype=np.float32).reshape(linear.height(), linear.width(), 3)
+    return mi.Bitmap(rgb * np.asarray(color, np.float32))
+
+
 def _texture_value(value, name: str, ctx: BuildContext, where: Where):
     """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts."""
     import mitsuba as mi
@@ -408,7 +420,11 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         if not os.path.isfile(path):
             raise (where / "file").error(f"environment map {light['file']!r} does not exist")
         _check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
-        return {name: {"type": "envmap", "filename": path, "scale": intensity}}
+        if list(color) == [1.0, 1.0, 1.0]:
+            return {name: {"type": "envmap", "filename": path, "scale": intensity}}
+        # Mitsuba's envmap has a scale but no tint: the image is tinted here (its 'color' was
+        # accepted and then dropped, so the tuner's light colour vanished on reload)
+        return {name: {"type": "envmap", "bitmap": _tinted_image(path, color), "scale": intensity}}
     if kind == "directional":
         d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")
         if np.linalg.norm(d) == 0:
