@@ -98,7 +98,8 @@ def _parser() -> argparse.ArgumentParser:
                         "sdf.NODE.PARAM (e.g. sdf.ball.radius); repeatable")
     f.add_argument("-o", "--output", help="write the fitted scene (.toml/.json) or the values (.json)")
     f.add_argument("--plot", help="write a PNG plot of loss and parameters over iterations")
-    f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference")
+    f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference (without 'fov': "
+                   "the scene camera's)")
     f.add_argument("--version", default="v4", help="differentiable integrator (default v4)")
     f.add_argument("--spp", type=int, default=16, help="samples per pixel per iteration (default 16)")
     f.add_argument("--iterations", type=int, default=100, help="Adam iterations (default 100)")

@@ -108,11 +108,17 @@ def _views(scene: DraawScene, views):
     if not isinstance(views, (list, tuple)) or not views:
         raise DraawError("fit: views must be a non-empty list of camera tables or mi.Sensor objects")
     w, h = scene.resolution
+    # a view without a field of view has the scene camera's (it had [camera]'s default, 40
+    # degrees, whatever the scene's was: its references were fitted through another lens)
+    own = mi.traverse(scene.mi_scene.sensors()[0])
+    x_fov = float(np.array(own["x_fov"]).ravel()[0]) if "x_fov" in own else 40.0
     out = []
     for i, v in enumerate(views):
         if isinstance(v, mi.Sensor):
             out.append(v)
             continue
+        if isinstance(v, dict) and "fov" not in v and "fov_axis" not in v:
+            v = {**v, "fov": x_fov, "fov_axis": "x"}
         look = camera_to_look_at(v, Where("fit") / "views" / i)
         out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"],
                                             scene.settings.get("sampler", "independent"))))
@@ -256,7 +262,8 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         ``lr`` is a relative change, see :class:`_Param`).
     spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
     loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
-    views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference.
+    views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
+        (a table without ``fov`` has the scene camera's).
     post: a post-processing chain (list of dicts) applied to each render inside the loss.
     exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
     init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the

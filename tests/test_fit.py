@@ -567,3 +567,22 @@ def test_plots_written_to_files_leave_the_session_backend_alone(tmp_path):
         assert (tmp_path / "fit.png").stat().st_size > 1000 and fig.axes[1].get_ylabel() == "value"
     finally:
         matplotlib.use(before)
+
+
+def test_a_view_without_fov_has_the_scene_cameras():
+    """A ``views`` table without ``fov`` took [camera]'s default (40 degrees) whatever the
+    scene's was; the scene's own camera written as a view now renders the scene's image."""
+    from conftest import tiny_description
+    from draaw_mi.fit import _views
+    desc = tiny_description()
+    desc["camera"]["fov"] = 25.0
+    scene = draaw_mi.load_scene(desc)
+    view = {k: desc["camera"][k] for k in ("origin", "target")}
+    (sensor,) = _views(scene, [view])
+    assert float(np.array(mi.traverse(sensor)["x_fov"]).ravel()[0]) == pytest.approx(25.0)
+    integ = mi.load_dict({"type": "path", "max_depth": 3})
+    own, as_view = (np.array(mi.render(scene.mi_scene, sensor=s, integrator=integ, spp=4, seed=1))
+                    for s in (scene.mi_scene.sensors()[0], sensor))
+    np.testing.assert_allclose(as_view, own, atol=1e-5)
+    (wide,) = _views(scene, [dict(view, fov=60.0)])                  # a given fov is kept
+    assert float(np.array(mi.traverse(wide)["x_fov"]).ravel()[0]) == pytest.approx(60.0)

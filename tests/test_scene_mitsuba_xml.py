@@ -95,3 +95,24 @@ def test_a_name_found_in_two_folders_lists_both(tmp_path):
         'name="reflectance"><string name="filename" value="t.png"/></texture></bsdf></scene>')
     files, _ = xml_references(str(tmp_path / "s.xml"))
     assert sorted(os.path.relpath(f, tmp_path) for f in files) == ["sub/t.png", "t.png"]
+
+
+@pytest.mark.parametrize("rfilter, name", [("", "gaussian"), ('<rfilter type="box"/>', "box"),
+                                           ('<rfilter type="lanczos"/>', "lanczos")])
+def test_an_xml_scenes_filter_is_its_films(tmp_path, rfilter, name):
+    """The settings said 'box' for any XML scene ('info' showed it; fit's extra views were
+    made with a box filter while the scene's film had Mitsuba's default gaussian)."""
+    xml = tmp_path / "s.xml"
+    xml.write_text(f"""<scene version="3.0.0"><shape type="sphere"/><emitter type="constant"/>
+  <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>
+    <integer name="height" value="8"/>{rfilter}</film></sensor></scene>""")
+    scene = draaw_mi.load_scene(str(xml))
+    assert scene.settings["filter"] == name
+    assert draaw_mi.load_scene(str(xml), filter=name).settings["filter"] == name
+    other = "tent"
+    with pytest.raises(draaw_mi.DraawError, match=f"filter='tent' cannot override the filter of a Mitsuba "
+                                                  f"scene \\('{name}'\\)"):
+        draaw_mi.load_scene(str(xml), filter=other)
+    from draaw_mi.fit import _views
+    (view,) = _views(scene, [{"origin": [0, 0, 4], "target": [0, 0, 0]}])
+    assert str(view.film().rfilter()).split("[")[0] == str(scene.mi_scene.sensors()[0].film().rfilter()).split("[")[0]

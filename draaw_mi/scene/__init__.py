@@ -23,7 +23,7 @@ from typing import Any
 
 
 from ..errors import DraawError, ParameterError, SceneError, suggest
-from .camera import sampler_plugin
+from .camera import filter_plugin, sampler_plugin
 from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
 from .schema import Where
@@ -185,10 +185,15 @@ class DraawScene:
                 except ValueError as e:
                     raise SceneError(f"{self.source}: cannot write {name!r} back: {e}") from None
                 continue
+            from .light_values import write_light
+            if write_light(desc, name, value):        # a light's intensity and colour
+                continue
             mat, _, param = name.partition(".")
             param = param.removesuffix(".value").removesuffix(".data")
             if mat not in mats or not param or "." in param:
-                raise SceneError(f"{self.source}: cannot write {name!r} back: no material {mat!r} in the file")
+                raise SceneError(f"{self.source}: cannot write {name!r} back: no material or light "
+                                 f"{mat!r} in the file (parameters of [materials], [[lights]], emitting "
+                                 "[[shapes]] and [[sdf]] can be written)")
             mats[mat][param] = value
         return desc
 
@@ -487,6 +492,9 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     settings["resolution"] = (int(size[0]), int(size[1]))
     settings["spp"] = int(sensors[0].sampler().sample_count())
     settings["sampler"] = sampler_plugin(sensors[0].sampler())
+    # (the film's own: 'info' said box for an XML film with Mitsuba's default gaussian, and
+    # fit's extra views were made with a box filter)
+    settings["filter"] = filter_plugin(sensors[0].film().rfilter())
     integ = scene.integrator()
     if integ is not None:      # C++ integrators expose max_depth only through to_string()
         m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
@@ -507,6 +515,9 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     if checked.get("sampler") not in (None, settings["sampler"]):
         raise SceneError(f"{source}: sampler={checked['sampler']!r} cannot override the sampler of a "
                          f"Mitsuba scene ({settings['sampler']!r}); set it in the scene itself")
+    if checked.get("filter") not in (None, settings["filter"]):
+        raise SceneError(f"{source}: filter={checked['filter']!r} cannot override the filter of a "
+                         f"Mitsuba scene ({settings['filter']!r}); set it in the scene's film")
     settings.update({k: v for k, v in checked.items() if v is not None})
     d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
     # (the checked value: the command line's "32x32" went in as a string, and a traceback out)

@@ -103,6 +103,17 @@ _SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "
                     "OrthogonalSampler": "orthogonal"}
 
 
+_FILTER_PLUGINS = {"BoxFilter": "box", "GaussianFilter": "gaussian", "TentFilter": "tent",
+                   "LanczosSincFilter": "lanczos", "MitchellNetravaliFilter": "mitchell",
+                   "CatmullRomFilter": "catmullrom"}
+
+
+def filter_plugin(rfilter) -> str:
+    """Plugin name of a Mitsuba reconstruction filter (``"gaussian"``: a film's default)."""
+    name = str(rfilter).split("[")[0].strip()
+    return _FILTER_PLUGINS.get(name, name)
+
+
 def sampler_plugin(sampler) -> str:
     """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
     name = str(sampler).split("[")[0].strip()
