@@ -38,8 +38,12 @@ def suggest(name: str, valid: Iterable[str]) -> str:
 
     >>> suggest('roughnes', ['roughness', 'metallic'])
     "; did you mean 'roughness'?"
+    >>> suggest('x', [])
+    ' (there are none)'
     """
     valid = sorted(set(valid))
+    if not valid:              # ("; valid: " with nothing after it: a scene with no materials)
+        return " (there are none)"
     close = difflib.get_close_matches(name, valid, n=1, cutoff=0.6)
     if close:
         return f"; did you mean {close[0]!r}?"

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from typing import Sequence
 
@@ -91,9 +92,13 @@ def atomic_path(path: str, suffix: str):
     os.close(fd)
     try:
         yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)        # mkstemp makes 0600 files; give the usual mode
+        try:                                 # a file replaced keeps its mode (as sed -i does:
+            mode = stat.S_IMODE(os.stat(path).st_mode)      # a read-only or group-readable
+        except OSError:                                     # output was reset to 0644)
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask            # mkstemp makes 0600 files; give the usual mode
+        os.chmod(tmp, mode)
         _fsync(tmp)
         os.replace(tmp, path)
         _fsync(folder, folder=True)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import stat
 
 import numpy as np
 import pytest
@@ -135,3 +136,21 @@ def test_png_exposure_scales_by_two_to_the_stops(tmp_path):
         back = np.asarray(Image.open(path).convert("RGB"), dtype=float)
         assert back.shape == (2, 3, 3)
         assert np.all(np.abs(back - round(srgb(linear) * 255)) <= 0.51), (stops, back[0, 0], srgb(linear) * 255)
+
+
+@pytest.mark.parametrize("mode", [0o640, 0o444, 0o600])
+def test_a_replaced_file_keeps_its_mode_and_a_new_one_gets_the_usual(tmp_path, mode):
+    """A read-only or group-only output came back 0644 after an atomic rewrite."""
+    from draaw_mi.io import write_text
+    old = tmp_path / "report.md"
+    old.write_text("old")
+    os.chmod(old, mode)
+    write_text(str(old), "new")
+    assert old.read_text() == "new" and stat.S_IMODE(os.stat(old).st_mode) == mode
+    new = tmp_path / "fresh.md"
+    umask = os.umask(0o022)
+    try:
+        write_text(str(new), "x")
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(os.stat(new).st_mode) == 0o644
