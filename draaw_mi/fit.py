@@ -117,7 +117,10 @@ def _views(scene: DraawScene, views):
         if isinstance(v, mi.Sensor):
             out.append(v)
             continue
-        if isinstance(v, dict) and "fov" not in v and "fov_axis" not in v:
+        if isinstance(v, dict) and "fov" not in v:
+            if "fov_axis" in v:
+                raise DraawError(f"fit: views[{i}] has fov_axis but no fov; give both, or neither "
+                                 "for the scene camera's")
             v = {**v, "fov": x_fov, "fov_axis": "x"}
         look = camera_to_look_at(v, Where("fit") / "views" / i)
         out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"],
@@ -263,7 +266,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
     loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
     views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
-        (a table without ``fov`` has the scene camera's).
+        (a table without ``fov`` has the scene camera's field of view).
     post: a post-processing chain (list of dicts) applied to each render inside the loss.
     exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
     init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the

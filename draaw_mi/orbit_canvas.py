@@ -90,13 +90,13 @@ class OrbitCanvas(RemoteFrameBuffer):
     def __init__(self, size, *, on_orbit: Callable | None = None, on_drag_start: Callable | None = None,
                  on_zoom: Callable | None = None, on_reset: Callable | None = None, quality: int = 80):
         problem = None
-        try:
-            w, h = (int(v) for v in size)
-        except (TypeError, ValueError):          # ('x', a 3-tuple, None: the message names it)
+        try:                                     # ('x', a 3-tuple, None, inf, "12": named below)
+            w, h = (0, 0) if isinstance(size, (str, bytes)) else (int(v) for v in size)
+        except (TypeError, ValueError, OverflowError):
             w = h = 0
         try:
             q = int(quality)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             q = 0
         if w < 1 or h < 1:
             problem = f"OrbitCanvas: size={size!r}; expected (width, height), two integers >= 1"

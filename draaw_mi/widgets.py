@@ -508,9 +508,10 @@ class MaterialTuner(CameraPanel):
         w, h = self.base_scene.resolution
         doc["render"]["resolution"] = [w, h]
         if self.snap_light.value and cam is not None:     # point lights where _set_lights put them
-            for light in doc.get("lights", []):
-                if light.get("type") == "point":
-                    light["position"] = [float(x) for x in cam["origin"]]
+            for light in doc.get("lights", []):          # (a snap_to_camera light follows the
+                if light.get("type") == "point" and not light.get("snap_to_camera"):   # saved camera
+                    light["position"] = [float(x) for x in cam["origin"]]       # already; a position
+                                                                                # beside it is refused)
         return doc
 
     def save(self, path: str) -> str:

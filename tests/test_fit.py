@@ -575,14 +575,18 @@ def test_a_view_without_fov_has_the_scene_cameras():
     from conftest import tiny_description
     from draaw_mi.fit import _views
     desc = tiny_description()
-    desc["camera"]["fov"] = 25.0
+    desc["camera"].update(fov=25.0, fov_axis="y")          # (a 32x24 film: x_fov is 32.9)
     scene = draaw_mi.load_scene(desc)
+    x_fov = float(np.array(scene.params["sensor.x_fov"]).ravel()[0])
+    assert x_fov == pytest.approx(2 * np.degrees(np.arctan(32 / 24 * np.tan(np.radians(12.5)))), rel=1e-5)
     view = {k: desc["camera"][k] for k in ("origin", "target")}
     (sensor,) = _views(scene, [view])
-    assert float(np.array(mi.traverse(sensor)["x_fov"]).ravel()[0]) == pytest.approx(25.0)
+    assert float(np.array(mi.traverse(sensor)["x_fov"]).ravel()[0]) == pytest.approx(x_fov, rel=1e-5)
     integ = mi.load_dict({"type": "path", "max_depth": 3})
     own, as_view = (np.array(mi.render(scene.mi_scene, sensor=s, integrator=integ, spp=4, seed=1))
                     for s in (scene.mi_scene.sensors()[0], sensor))
     np.testing.assert_allclose(as_view, own, atol=1e-5)
     (wide,) = _views(scene, [dict(view, fov=60.0)])                  # a given fov is kept
     assert float(np.array(mi.traverse(wide)["x_fov"]).ravel()[0]) == pytest.approx(60.0)
+    with pytest.raises(draaw_mi.DraawError, match=r"views\[0\] has fov_axis but no fov"):
+        _views(scene, [dict(view, fov_axis="y")])

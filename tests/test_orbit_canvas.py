@@ -279,6 +279,9 @@ def test_rfb_channel_without_jupyter_rfb_is_one_clear_error(monkeypatch):
     ({"size": (4, 4, 4)}, r"size=\(4, 4, 4\); expected \(width, height\)"),
     ({"size": ("a", 4)}, r"size=\('a', 4\); expected \(width, height\)"),
     ({"size": None}, r"size=None; expected \(width, height\)"),
+    ({"size": "12"}, r"size='12'; expected \(width, height\)"),
+    ({"size": (float("inf"), 4)}, r"size=\(inf, 4\); expected \(width, height\)"),
+    ({"size": (4, 4), "quality": float("inf")}, r"quality=inf; expected 1..99"),
 ])
 def test_unparsable_arguments_are_one_clear_error_and_leave_no_broken_widget(monkeypatch, kw, match):
     """'x' and a 3-tuple raised a bare ValueError before the widget was made, and the

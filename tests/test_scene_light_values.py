@@ -55,3 +55,6 @@ def test_a_parameter_of_neither_a_material_nor_a_light_names_what_can_be_written
     with pytest.raises(draaw_mi.DraawError, match=r"cannot write 'ball.to_world' back: no material or "
                                                   r"light 'ball' in the file \(parameters of \[materials\]"):
         scene.updated_description({"ball.to_world": 0.0})
+    with pytest.raises(draaw_mi.DraawError, match=r"cannot write 'point_light0.position' back: of a light, only "
+                                                  r"emitter.radiance, radiance, intensity, irradiance, scale"):
+        scene.updated_description({"point_light0.position": [0.0, 0.0, 1.0]})

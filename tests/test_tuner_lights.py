@@ -162,3 +162,20 @@ def test_the_max_depth_slider_shows_the_scenes_depth(depth):
         assert t.preview.max_depth == -1
     finally:
         t.close()
+
+
+def test_a_saved_snap_to_camera_light_loads_again(tmp_path):
+    """A scene light with ``snap_to_camera = true`` got a ``position`` beside it when saved
+    with the snap box ticked, and the scene file refuses the two together."""
+    desc = tiny_description()
+    desc["lights"][0] = {"type": "point", "snap_to_camera": True, "intensity": 40.0}
+    t = _tuner(draaw_mi.load_scene(desc))
+    try:
+        t.snap_light.value = True
+        t.yaw.value = 25.0
+        t.refresh()
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        np.testing.assert_allclose(np.array(saved.params["point_light0.position"]).ravel(),
+                                   np.array(t.scene.params["point_light0.position"]).ravel(), atol=1e-5)
+    finally:
+        t.close()

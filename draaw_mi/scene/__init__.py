@@ -164,7 +164,8 @@ class DraawScene:
 
     def updated_description(self, values: dict, dest: str | None = None) -> dict:
         """The scene description with ``{"material.parameter": value}`` written into its
-        ``[materials]`` tables and ``{"sdf.NODE.PARAM": value}`` into its ``[[sdf]]`` tables
+        ``[materials]`` tables, a light's radiance into its ``[[lights]]`` table
+        (:mod:`~draaw_mi.scene.light_values`) and ``{"sdf.NODE.PARAM": value}`` into its ``[[sdf]]`` tables
         (for saving fitted scenes). ``dest``: the file it will be
         written to; file names relative to the scene's folder are rewritten relative to
         ``dest``'s folder (written elsewhere, the scene lost its meshes and textures)."""
@@ -185,10 +186,13 @@ class DraawScene:
                 except ValueError as e:
                     raise SceneError(f"{self.source}: cannot write {name!r} back: {e}") from None
                 continue
-            from .light_values import write_light
+            from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
             if write_light(desc, name, value):        # a light's intensity and colour
                 continue
             mat, _, param = name.partition(".")
+            if mat in light_names(desc):
+                raise SceneError(f"{self.source}: cannot write {name!r} back: of a light, only "
+                                 f"{', '.join(RGB_PARAMS + SCALAR_PARAMS)} can be written")
             param = param.removesuffix(".value").removesuffix(".data")
             if mat not in mats or not param or "." in param:
                 raise SceneError(f"{self.source}: cannot write {name!r} back: no material or light "

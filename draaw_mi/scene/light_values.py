@@ -35,6 +35,11 @@ def _named(tables, default: str):
     return out
 
 
+def light_names(desc: dict) -> list[str]:
+    """The names of the description's ``[[lights]]`` (as the scene builder gives them)."""
+    return list(_named(desc.get("lights"), "{kind}_light{i}"))
+
+
 def is_light_key(desc: dict, key: str) -> bool:
     """Whether ``key`` is a light value :func:`write_light` can write into ``desc``."""
     name, param = _split(key)
@@ -67,4 +72,4 @@ def write_light(desc: dict, key: str, value) -> bool:
     return True
 
 
-__all__ = ["write_light", "is_light_key"]
+__all__ = ["write_light", "is_light_key", "light_names"]
