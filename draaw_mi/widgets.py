@@ -412,8 +412,9 @@ class MaterialTuner(CameraPanel):
             vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
         snapped = bool(self.snap_light.value and self.camera is not None)
         if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
+            eye = self._camera_now()[0] if snapped else None
             for k, pos in self._light_positions.items():
-                vals[k] = (self._camera_now()[0] if snapped else pos).tolist()
+                vals[k] = (eye if snapped else pos).tolist()
         self._changed(vals)
         self._lights_now = {"tint": tint, "snapped": snapped}
 

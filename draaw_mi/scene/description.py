@@ -169,20 +169,22 @@ def _matrix_of(t) -> np.ndarray:
 NEGATIVE_SLACK = 1e-2
 
 
-def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> None:
+def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
     """Refuse an image file with a non-finite value in its colour channels, or, with
     ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
     +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
-    naming the first bad pixel. Alpha and other layers are not looked at."""
+    naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
+    read (an environment map's tint uses it: the file is read once)."""
     import mitsuba as mi
     from ..guard import exr_reading_threads
     try:
         with exr_reading_threads():
-            arr = np.asarray(mi.Bitmap(path))
+            bitmap = mi.Bitmap(path)
     except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
         raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
+    arr = np.asarray(bitmap)
     if np.issubdtype(arr.dtype, np.integer):
-        return                                    # 8/16-bit: finite and >= 0 by construction
+        return bitmap                             # 8/16-bit: finite and >= 0 by construction
     arr = arr.reshape(arr.shape[0], arr.shape[1], -1)[..., :3]
     bad = ~np.isfinite(arr) | (arr < -NEGATIVE_SLACK) if nonneg else ~np.isfinite(arr)
     if bad.any():
@@ -190,15 +192,13 @@ def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: 
         raise where.error(f"{what} {label!r} has the value {float(arr[y, x, c]):g} at pixel "
                           f"(x={x}, y={y}), channel {c}; expected finite values"
                           + (" >= 0" if nonneg else ""))
+    return bitmap
 
 
-def _tinted_image(path: str, color) -> "mi.Bitmap":
-    """The image at ``path`` as linear float RGB, each channel times ``color`` (an
-    environment map's tint)."""
+def _tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
+    """``bitmap`` as linear float RGB, each channel times ``color`` (an environment map's
+    tint)."""
     import mitsuba as mi
-    from ..guard import exr_reading_threads
-    with exr_reading_threads():
-        bitmap = mi.Bitmap(path)
     linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
     rgb = np.array(linear, dtype=np.float32).reshape(linear.height(), linear.width(), 3)
     return mi.Bitmap(rgb * np.asarray(color, np.float32))
@@ -419,12 +419,12 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         path = ctx.path(string(light["file"], where / "file"))
         if not os.path.isfile(path):
             raise (where / "file").error(f"environment map {light['file']!r} does not exist")
-        _check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
+        image = _check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
         if list(color) == [1.0, 1.0, 1.0]:
             return {name: {"type": "envmap", "filename": path, "scale": intensity}}
         # Mitsuba's envmap has a scale but no tint: the image is tinted here (its 'color' was
         # accepted and then dropped, so the tuner's light colour vanished on reload)
-        return {name: {"type": "envmap", "bitmap": _tinted_image(path, color), "scale": intensity}}
+        return {name: {"type": "envmap", "bitmap": _tinted_image(image, color), "scale": intensity}}
     if kind == "directional":
         d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")
         if np.linalg.norm(d) == 0:
