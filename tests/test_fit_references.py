@@ -54,7 +54,7 @@ def test_a_png_of_an_srgb_chain_is_compared_as_stored(tmp_path):
     assert abs(res.values["target.metallic"] - 0.8) < 0.1, res.values
 
 
-def test_which_post_chains_enddisplay_encoded_post():
+def test_which_post_chains_end_display_encoded():
     assert display_encoded_post([{"type": "srgb"}]) and display_encoded_post(load_chain([{"type": "srgb"}]))
     assert not display_encoded_post([{"type": "srgb"}, {"type": "srgb", "inverse": True}])
     assert not display_encoded_post(lambda img: img)          # a function cannot say: decoded
