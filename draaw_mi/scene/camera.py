@@ -108,16 +108,20 @@ _FILTER_PLUGINS = {"BoxFilter": "box", "GaussianFilter": "gaussian", "TentFilter
                    "CatmullRomFilter": "catmullrom"}
 
 
+def _plugin_name(obj, names: dict) -> str:
+    """A Mitsuba object's plugin name from its class name (what ``str(obj)`` starts with)."""
+    name = str(obj).split("[")[0].strip()
+    return names.get(name, name)
+
+
 def filter_plugin(rfilter) -> str:
     """Plugin name of a Mitsuba reconstruction filter (``"gaussian"``: a film's default)."""
-    name = str(rfilter).split("[")[0].strip()
-    return _FILTER_PLUGINS.get(name, name)
+    return _plugin_name(rfilter, _FILTER_PLUGINS)
 
 
 def sampler_plugin(sampler) -> str:
     """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
-    name = str(sampler).split("[")[0].strip()
-    return _SAMPLER_PLUGINS.get(name, name)
+    return _plugin_name(sampler, _SAMPLER_PLUGINS)
 
 
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,

@@ -55,6 +55,10 @@ LIGHT_KEYS = {
     "directional": ("direction",),
 }
 COMMON_LIGHT_KEYS = ("type", "name", "intensity", "color")
+#: the names of [[shapes]] and [[lights]] entries without a 'name' (their traverse keys start
+#: with them; scene.light_values finds a light's table by it)
+SHAPE_NAME = "{kind}{i}"
+LIGHT_NAME = "{kind}_light{i}"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".bmp", ".tga", ".pfm", ".ppm")
 
 DEFAULT_SETTINGS = {"resolution": (256, 256), "spp": 64, "max_depth": 6, "version": "v4", "seed": 0,
@@ -312,7 +316,7 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         raise where.error(f"expected a shape table, got {shape!r}")
     kind = kind_of(shape, where, SHAPE_KEYS, default="mesh" if "file" in shape else None)
     check_keys(shape, COMMON_SHAPE_KEYS + SHAPE_KEYS[kind], where)
-    name = string(shape.get("name", f"{kind}{index}"), where / "name")
+    name = string(shape.get("name", SHAPE_NAME.format(kind=kind, i=index)), where / "name")
     if safe_id(name) != name or not name:
         raise (where / "name").error(f"{name!r} may only contain letters, digits, '_' and '-'")
     mat_ref = shape.get("material")
@@ -380,7 +384,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         raise where.error(f"expected a light table, got {light!r}")
     kind = kind_of(light, where, LIGHT_KEYS)
     check_keys(light, COMMON_LIGHT_KEYS + LIGHT_KEYS[kind], where)
-    name = string(light.get("name", f"{kind}_light{index}"), where / "name")
+    name = string(light.get("name", LIGHT_NAME.format(kind=kind, i=index)), where / "name")
     if safe_id(name) != name or not name:
         raise (where / "name").error(f"{name!r} may only contain letters, digits, '_' and '-'")
     intensity = number(light.get("intensity", 1.0), where / "intensity", lo=0.0)

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .description import LIGHT_NAME, SHAPE_NAME
+
 #: what follows a light's name in its traverse keys, by the value it holds
 RGB_PARAMS = ("emitter.radiance", "radiance", "intensity", "irradiance")
 SCALAR_PARAMS = ("scale",)
@@ -37,15 +39,15 @@ def _named(tables, default: str):
 
 def light_names(desc: dict) -> list[str]:
     """The names of the description's ``[[lights]]`` (as the scene builder gives them)."""
-    return list(_named(desc.get("lights"), "{kind}_light{i}"))
+    return list(_named(desc.get("lights"), LIGHT_NAME))
 
 
 def is_light_key(desc: dict, key: str) -> bool:
     """Whether ``key`` is a light value :func:`write_light` can write into ``desc``."""
     name, param = _split(key)
-    if param in RGB_PARAMS + SCALAR_PARAMS and name in _named(desc.get("lights"), "{kind}_light{i}"):
+    if param in RGB_PARAMS + SCALAR_PARAMS and name in _named(desc.get("lights"), LIGHT_NAME):
         return True
-    shape = _named(desc.get("shapes"), "{kind}{i}").get(name)
+    shape = _named(desc.get("shapes"), SHAPE_NAME).get(name)
     return param == "emitter.radiance" and shape is not None and "emission" in shape
 
 
@@ -56,9 +58,9 @@ def write_light(desc: dict, key: str, value) -> bool:
         return False
     name = _split(key)[0]
     v = np.asarray(value, dtype=np.float64).ravel()
-    light = _named(desc.get("lights"), "{kind}_light{i}").get(name)
+    light = _named(desc.get("lights"), LIGHT_NAME).get(name)
     if light is None:                                   # an emitting shape
-        shape = _named(desc.get("shapes"), "{kind}{i}")[name]
+        shape = _named(desc.get("shapes"), SHAPE_NAME)[name]
         shape["emission"] = [float(x) for x in np.broadcast_to(v, 3)]
         shape.pop("emission_color", None)
         return True
