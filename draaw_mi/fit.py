@@ -112,6 +112,9 @@ def _views(scene: DraawScene, views):
     # degrees, whatever the scene's was: its references were fitted through another lens)
     own = mi.traverse(scene.mi_scene.sensors()[0])
     x_fov = float(np.array(own["x_fov"]).ravel()[0]) if "x_fov" in own else 40.0
+    # the film's own filter object, not its name: a gaussian's stddev or a lanczos' lobes that
+    # an XML scene sets reach the other views too
+    rfilter = scene.mi_scene.sensors()[0].film().rfilter()
     out = []
     for i, v in enumerate(views):
         if isinstance(v, mi.Sensor):
@@ -123,7 +126,7 @@ def _views(scene: DraawScene, views):
                                  "for the scene camera's")
             v = {**v, "fov": x_fov, "fov_axis": "x"}
         look = camera_to_look_at(v, Where("fit") / "views" / i)
-        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], scene.settings["filter"],
+        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], rfilter,
                                             scene.settings.get("sampler", "independent"))))
     return out
 

@@ -116,3 +116,27 @@ def test_an_xml_scenes_filter_is_its_films(tmp_path, rfilter, name):
     from draaw_mi.fit import _views
     (view,) = _views(scene, [{"origin": [0, 0, 4], "target": [0, 0, 0]}])
     assert str(view.film().rfilter()).split("[")[0] == str(scene.mi_scene.sensors()[0].film().rfilter()).split("[")[0]
+
+
+@pytest.mark.parametrize("rfilter", ['<rfilter type="gaussian"><float name="stddev" value="0.25"/></rfilter>',
+                                     '<rfilter type="lanczos"><integer name="lobes" value="2"/></rfilter>',
+                                     '<rfilter type="tent"><float name="radius" value="1.5"/></rfilter>'])
+def test_fit_views_keep_the_films_filter_parameters(tmp_path, rfilter):
+    """fit's extra views had the film's filter by name only: an XML film's gaussian of stddev
+    0.25 became one of 0.5 (radius 2, not 1), and a view equal to the scene's camera rendered
+    another image than the scene's."""
+    xml = tmp_path / "s.xml"
+    xml.write_text(f"""<scene version="3.0.0"><shape type="sphere"/><emitter type="constant"/>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="12"/>
+    {rfilter}</film></sensor></scene>""")
+    import mitsuba as mi
+    scene = draaw_mi.load_scene(str(xml))
+    from draaw_mi.fit import _views
+    (view,) = _views(scene, [{"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 40.0}])
+    own = scene.mi_scene.sensors()[0]
+    assert view.film().rfilter().radius() == own.film().rfilter().radius()
+    integ = mi.load_dict({"type": "path", "max_depth": 2})
+    a, b = (np.array(mi.render(scene.mi_scene, sensor=s, integrator=integ, spp=4, seed=3)) for s in (own, view))
+    np.testing.assert_allclose(b, a, atol=1e-5)

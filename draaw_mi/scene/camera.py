@@ -124,10 +124,11 @@ def sampler_plugin(sampler) -> str:
     return _plugin_name(sampler, _SAMPLER_PLUGINS)
 
 
-def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,
+def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
                 sampler: str = "independent") -> dict:
     """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with
-    ``spp`` samples, an RGB ``hdrfilm`` with the ``rfilter`` reconstruction filter."""
+    ``spp`` samples, an RGB ``hdrfilm`` with the ``rfilter`` reconstruction filter: a plugin
+    name, or a filter object (another film's, with its parameters: a gaussian's ``stddev``)."""
     import mitsuba as mi
 
     origin, target, up, fov, fov_axis, near, far = look_at
@@ -142,7 +143,7 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter: str,
                                                    up=[float(v) for v in up]),
         "sampler": {"type": sampler, "sample_count": spp},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
-                 "rfilter": {"type": rfilter}},
+                 "rfilter": {"type": rfilter} if isinstance(rfilter, str) else rfilter},
     }
 
 
