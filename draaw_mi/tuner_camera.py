@@ -3,7 +3,7 @@ the target (sliders, or the mouse on an :class:`~draaw_mi.orbit_canvas.OrbitCanv
 camera as JSON, and GO-Draaw camera paths stepped or played.
 
 A mixin: it reads and writes the tuner's ``scene``, ``camera`` (origin, target, up, fov as
-loaded), ``snap_light``, ``_guard``, ``_changed`` and ``_set_lights``; the orbit is always
+loaded), ``snap_light``, ``_camera_lights``, ``_guard``, ``_changed`` and ``_set_lights``; the orbit is always
 relative to ``camera``, so the sliders and a drag describe the same camera.
 """
 from __future__ import annotations
@@ -97,7 +97,7 @@ class CameraPanel:
             raise DraawError("this scene has no [camera] table to orbit")
         o, t, up = self._camera_now()
         values = {"sensor.to_world": tuning.look_at(o, t, up)}
-        if self.snap_light.value:
+        if self.snap_light.value or self._camera_lights:
             self._set_lights()
         self._changed(values)
 

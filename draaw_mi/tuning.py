@@ -129,6 +129,16 @@ def light_positions(scene) -> dict:
     return {k: np.array(scene.params[k], dtype=np.float64).ravel() for k in _emitter_keys(scene, ".position")}
 
 
+def camera_lights(scene) -> frozenset:
+    """The ``position`` keys of the lights that the scene file puts at the camera
+    (``snap_to_camera = true``): they follow the camera wherever it goes, as a render of the
+    saved scene has them."""
+    desc = getattr(scene, "description", None) or {}
+    from .scene.light_values import light_names
+    return frozenset(f"{name}.position" for name, light in zip(light_names(desc), desc.get("lights") or [])
+                     if isinstance(light, dict) and light.get("snap_to_camera") is True)
+
+
 # --------------------------------------------------------------------------- camera
 def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 1.0):
     """Rotate the camera ``origin`` about ``target``: ``yaw`` degrees about ``up``, ``pitch``

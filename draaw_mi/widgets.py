@@ -103,7 +103,10 @@ class MaterialTuner(CameraPanel):
         self.materials = tuning.material_values(self.scene)
         self._light_base = tuning.light_values(self.scene)
         self._light_positions = tuning.light_positions(self.scene)
-        self._lights_now = {"tint": (1.0, 1.0, 1.0), "snapped": False}     # as the preview has them
+        # lights at the camera in the preview: snap_to_camera ones always, the others while the
+        # snap box is ticked
+        self._camera_lights = tuning.camera_lights(self.scene) & set(self._light_positions)
+        self._lights_now = {"tint": (1.0, 1.0, 1.0), "snapped": frozenset()}    # as the preview has them
         cam = self.scene.info.get("camera")
         self.camera = {k: list(map(float, cam[k])) for k in ("origin", "target", "up")} if cam else None
         if cam:
@@ -410,11 +413,12 @@ class MaterialTuner(CameraPanel):
                 continue
             v = base * s * (col if base.size == 3 else 1.0 if k.endswith(".scale") else col.mean())
             vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
-        snapped = bool(self.snap_light.value and self.camera is not None)
+        snapped = frozenset() if self.camera is None else (
+            frozenset(self._light_positions) if self.snap_light.value else self._camera_lights)
         if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
             eye = self._camera_now()[0] if snapped else None
             for k, pos in self._light_positions.items():
-                vals[k] = (eye if snapped else pos).tolist()
+                vals[k] = (eye if k in snapped else pos).tolist()
         self._changed(vals)
         self._lights_now = {"tint": tint, "snapped": snapped}
 

@@ -179,3 +179,34 @@ def test_a_saved_snap_to_camera_light_loads_again(tmp_path):
                                    np.array(t.scene.params["point_light0.position"]).ravel(), atol=1e-5)
     finally:
         t.close()
+
+
+def test_a_snap_to_camera_light_follows_the_orbit_with_the_box_unticked(tmp_path):
+    """A scene light with ``snap_to_camera = true`` stayed where the loaded camera was while
+    the box was unticked, so the preview lit the scene from elsewhere than a render of the
+    saved scene (whose light follows the saved camera). Now it follows the camera; a light
+    with a position stays put until the box is ticked."""
+    desc = tiny_description()
+    fixed = dict(desc["lights"][0])
+    desc["lights"] = [{"type": "point", "snap_to_camera": True, "intensity": 40.0, "name": "head"},
+                      dict(fixed, name="lamp")]
+    t = _tuner(draaw_mi.load_scene(desc))
+    try:
+        lamp = np.array(t.scene.params["lamp.position"]).ravel().copy()
+        assert not t.snap_light.value
+        t.yaw.value = 40.0
+        t.refresh()
+        head = np.array(t.scene.params["head.position"]).ravel()
+        np.testing.assert_allclose(head, t._camera_now()[0], atol=1e-5)
+        assert np.abs(head - np.asarray(desc["camera"]["origin"], float)).max() > 0.5
+        np.testing.assert_allclose(np.array(t.scene.params["lamp.position"]).ravel(), lamp, atol=1e-6)
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        for key in ("head.position", "lamp.position"):       # the preview's lights are the file's
+            np.testing.assert_allclose(np.array(saved.params[key]).ravel(),
+                                       np.array(t.scene.params[key]).ravel(), atol=1e-5)
+        t.snap_light.value = True                            # ticked: both at the camera,
+        t.snap_light.value = False                           # unticked: the lamp back, the head stays
+        np.testing.assert_allclose(np.array(t.scene.params["lamp.position"]).ravel(), lamp, atol=1e-6)
+        np.testing.assert_allclose(np.array(t.scene.params["head.position"]).ravel(), head, atol=1e-5)
+    finally:
+        t.close()
