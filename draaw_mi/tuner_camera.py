@@ -98,7 +98,7 @@ class CameraPanel:
         o, t, up = self._camera_now()
         values = {"sensor.to_world": tuning.look_at(o, t, up)}
         if self.snap_light.value or self._camera_lights:
-            self._set_lights()
+            self._set_lights(positions_only=True)
         self._changed(values)
 
     # the mouse on the canvas: a drag is relative to the orbit where the button went down

@@ -129,14 +129,30 @@ def light_positions(scene) -> dict:
     return {k: np.array(scene.params[k], dtype=np.float64).ravel() for k in _emitter_keys(scene, ".position")}
 
 
-def camera_lights(scene) -> frozenset:
-    """The ``position`` keys of the lights that the scene file puts at the camera
-    (``snap_to_camera = true``): they follow the camera wherever it goes, as a render of the
-    saved scene has them."""
+def camera_lights(scene) -> dict:
+    """The lights that the scene file puts at the camera (``snap_to_camera = true``), which
+    follow the camera wherever it goes, as a render of the saved scene has them:
+    ``{"name.position": None}`` for a point light, ``{"name.to_world": target}`` for a spot
+    light (its ``target``; None: the camera's)."""
     desc = getattr(scene, "description", None) or {}
     from .scene.light_values import light_names
-    return frozenset(f"{name}.position" for name, light in zip(light_names(desc), desc.get("lights") or [])
-                     if isinstance(light, dict) and light.get("snap_to_camera") is True)
+    out = {}
+    for name, light in zip(light_names(desc), desc.get("lights") or []):
+        if isinstance(light, dict) and light.get("snap_to_camera") is True:
+            if light.get("type") == "spot":
+                out[f"{name}.to_world"] = light.get("target")
+            else:
+                out[f"{name}.position"] = None
+    return {k: v for k, v in out.items() if k in scene.params.keys()}
+
+
+def spot_at(eye, target):
+    """A spot light's ``to_world`` at ``eye`` shining at ``target`` (as the scene builder
+    makes it); None where the two coincide (no direction: the light stays where it was)."""
+    from .scene.description import spot_up
+    if np.allclose(eye, target):
+        return None
+    return look_at(eye, target, spot_up(eye, target))
 
 
 # --------------------------------------------------------------------------- camera

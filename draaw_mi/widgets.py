@@ -105,7 +105,7 @@ class MaterialTuner(CameraPanel):
         self._light_positions = tuning.light_positions(self.scene)
         # lights at the camera in the preview: snap_to_camera ones always, the others while the
         # snap box is ticked
-        self._camera_lights = tuning.camera_lights(self.scene) & set(self._light_positions)
+        self._camera_lights = tuning.camera_lights(self.scene)
         self._lights_now = {"tint": (1.0, 1.0, 1.0), "snapped": frozenset()}    # as the preview has them
         cam = self.scene.info.get("camera")
         self.camera = {k: list(map(float, cam[k])) for k in ("origin", "target", "up")} if cam else None
@@ -401,24 +401,30 @@ class MaterialTuner(CameraPanel):
             w.observe(self._guard(lambda ch: self._set_lights()), "value")
         return W.VBox([self.light_scale, self.light_color, self.snap_light])
 
-    def _set_lights(self):
+    def _set_lights(self, positions_only: bool = False):
+        """Push the lights' values; ``positions_only``: only where they are (a camera move)."""
         col = np.array(tuning.hex_to_linear(self.light_color.value))
         s = float(self.light_scale.value)
-        tint = tuple(float(c) for c in col)
+        tint = self._lights_now["tint"] if positions_only else tuple(float(c) for c in col)
         vals = {}
-        for k, base in self._light_base.items():
+        for k, base in ({} if positions_only else self._light_base).items():
             if k.endswith(".data"):         # an environment map's texels: its tint (rewriting
                 if tint != self._lights_now["tint"]:        # them rebuilds its sampling
                     vals[k] = base * col.astype(np.float32)       # distribution: only on a change)
                 continue
             v = base * s * (col if base.size == 3 else 1.0 if k.endswith(".scale") else col.mean())
             vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
-        snapped = frozenset() if self.camera is None else (
-            frozenset(self._light_positions) if self.snap_light.value else self._camera_lights)
+        snapped = frozenset() if self.camera is None else frozenset(self._camera_lights).union(
+            self._light_positions if self.snap_light.value else ())
         if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
-            eye = self._camera_now()[0] if snapped else None
+            eye, target, _ = self._camera_now() if snapped else (None, None, None)
             for k, pos in self._light_positions.items():
                 vals[k] = (eye if k in snapped else pos).tolist()
+            for k, aim in self._camera_lights.items():
+                if k.endswith(".to_world") and k in snapped:
+                    frame = tuning.spot_at(eye, target if aim is None else aim)
+                    if frame is not None:
+                        vals[k] = frame
         self._changed(vals)
         self._lights_now = {"tint": tint, "snapped": snapped}
 

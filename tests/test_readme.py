@@ -19,9 +19,8 @@ def _readme_block(title: str) -> str:
 def test_the_python_in_ten_lines_runs(tmp_path):
     """The block is what users copy first: it renders, writes both files and prints a finite,
     non-zero gradient (it fails when ``render`` drops ``params=``: no gradient reaches the
-    roughness). The gradient is read from the variable handed to ``params``, which works for
-    every parameter: read back from ``params`` it is 0 for those a plugin replaces on
-    ``update()``, such as an environment map's data."""
+    roughness). Its roughness would give the same gradient read back from ``params``; the
+    next test covers the parameters for which that read gives 0."""
     code = _readme_block("Python in ten lines")
     os.symlink(os.path.join(ROOT, "scenes"), tmp_path / "scenes")
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -34,3 +33,31 @@ def test_the_python_in_ten_lines_runs(tmp_path):
     # a brighter sphere when rougher or darker: either sign, but a real derivative of the
     # mean over 128x128 pixels, not 0 (as read from params after update) nor NaN
     assert np.isfinite(grad) and grad != 0.0, r.stdout
+
+
+
+def _envmap_gradient(own_variable: bool):
+    import drjit as dr
+    import mitsuba as mi
+    import draaw_mi  # noqa: F401  (variant)
+    from draaw_mi.integrators.reference_scenes import feature_scene
+    scene = mi.load_dict(feature_scene(8, 4, integrator={"type": "draaw_v4", "max_depth": 3},
+                                       area=False, envmap=True))
+    params = mi.traverse(scene)
+    x = dr.detach(params["sky.data"]) if own_variable else params["sky.data"]
+    dr.enable_grad(x)
+    params["sky.data"] = x
+    params.update()
+    dr.backward(dr.mean(mi.render(scene, params, seed=1, spp=4), axis=None))
+    return float(np.abs(np.array(dr.grad(x))).sum()), float(np.abs(np.array(dr.grad(params["sky.data"]))).sum())
+
+
+def test_the_readmes_gradient_lines_work_where_params_own_variable_gets_none():
+    """Why the README takes ``x = dr.detach(params[key])``: an environment map's ``update()``
+    replaces the variable ``params`` holds, so the gradient read back from ``params`` is 0,
+    and so is that of ``params``' own variable made differentiable in place; a variable of
+    its own, as the README makes, gets the gradient."""
+    own, back = _envmap_gradient(own_variable=True)
+    assert own > 0 and back == 0
+    in_place, _ = _envmap_gradient(own_variable=False)
+    assert in_place == 0

@@ -210,3 +210,32 @@ def test_a_snap_to_camera_light_follows_the_orbit_with_the_box_unticked(tmp_path
         np.testing.assert_allclose(np.array(t.scene.params["head.position"]).ravel(), head, atol=1e-5)
     finally:
         t.close()
+
+
+@pytest.mark.parametrize("target", [None, [0.3, 0.0, -0.2]])
+def test_a_snap_to_camera_spot_light_follows_the_orbit(tmp_path, target):
+    """The same for a spot light (its frame, ``to_world``): at the camera, aimed at its own
+    target or, without one, at the camera's; what the preview has is what is saved."""
+    desc = tiny_description()
+    spot = {"type": "spot", "snap_to_camera": True, "intensity": 60.0, "cutoff_angle": 30.0, "name": "torch"}
+    if target is not None:
+        spot["target"] = target
+    desc["lights"] = [spot, {"type": "constant", "intensity": 0.1}]
+    t = _tuner(draaw_mi.load_scene(desc))
+    try:
+        def frame(scene):
+            return np.array(scene.params["torch.to_world"].matrix, dtype=np.float64).reshape(4, 4)
+        start = frame(t.scene)
+        t.yaw.value = -35.0
+        t.pitch.value = 10.0
+        t.refresh()
+        now = frame(t.scene)
+        eye, cam_target, _ = t._camera_now()
+        np.testing.assert_allclose(now[:3, 3], eye, atol=1e-5)             # at the camera
+        aim = np.asarray(cam_target if target is None else target, float) - eye
+        np.testing.assert_allclose(now[:3, 2], aim / np.linalg.norm(aim), atol=1e-5)   # shining there
+        assert np.abs(now - start).max() > 0.3
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        np.testing.assert_allclose(frame(saved), now, atol=1e-5)
+    finally:
+        t.close()

@@ -377,6 +377,12 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
 
 
 # --------------------------------------------------------------------------- lights
+def spot_up(position, target) -> list[float]:
+    """The up vector of a spot light's frame: +y, unless it shines (nearly) along y."""
+    d = np.subtract(target, position)
+    return [0.0, 1.0, 0.0] if abs(d[1]) < 0.999 * np.linalg.norm(d) else [1.0, 0.0, 0.0]
+
+
 def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Where) -> dict:
     import mitsuba as mi
 
@@ -411,10 +417,9 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
             raise (where / "target").error("equals the light's position")
         cutoff = number(light.get("cutoff_angle", 20.0), where / "cutoff_angle", lo=0.0, hi=90.0, lo_open=True)
         beam = number(light.get("beam_width", cutoff * 0.75), where / "beam_width", lo=0.0, hi=cutoff, lo_open=True)
-        up = [0.0, 1.0, 0.0] if abs(np.dot(np.subtract(target, pos), [0, 1, 0])) < 0.999 * np.linalg.norm(
-            np.subtract(target, pos)) else [1.0, 0.0, 0.0]
         return {name: {"type": "spot", "intensity": rgb, "cutoff_angle": cutoff, "beam_width": beam,
-                       "to_world": mi.ScalarTransform4f().look_at(origin=pos, target=target, up=up)}}
+                       "to_world": mi.ScalarTransform4f().look_at(origin=pos, target=target,
+                                                                  up=spot_up(pos, target))}}
     if kind == "constant":
         return {name: {"type": "constant", "radiance": rgb}}
     if kind == "envmap":
