@@ -3,8 +3,9 @@ the target (sliders, or the mouse on an :class:`~draaw_mi.orbit_canvas.OrbitCanv
 camera as JSON, and GO-Draaw camera paths stepped or played.
 
 A mixin: it reads and writes the tuner's ``scene``, ``camera`` (origin, target, up, fov as
-loaded), ``snap_light``, ``_camera_lights``, ``_guard``, ``_changed`` and ``_set_lights``; the orbit is always
-relative to ``camera``, so the sliders and a drag describe the same camera.
+loaded), ``snap_light``, ``_camera_lights``, ``_guard``, ``_changed`` and ``_set_lights``;
+the orbit is always relative to ``camera``, so the sliders and a drag describe the same
+camera.
 """
 from __future__ import annotations
 

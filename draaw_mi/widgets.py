@@ -402,20 +402,38 @@ class MaterialTuner(CameraPanel):
         return W.VBox([self.light_scale, self.light_color, self.snap_light])
 
     def _set_lights(self, positions_only: bool = False):
-        """Push the lights' values; ``positions_only``: only where they are (a camera move)."""
+        """Push the lights' intensities and places; ``positions_only``: only their places (a
+        camera move)."""
+        vals, now = self._light_places()
+        if not positions_only:
+            more, tint = self._light_intensities()
+            vals.update(more)
+            now["tint"] = tint
+        self._changed(vals)
+        self._lights_now.update(now)        # once the preview has them
+
+    def _light_intensities(self) -> tuple[dict, tuple]:
+        """The lights' values under the intensity and colour controls, and the tint."""
         col = np.array(tuning.hex_to_linear(self.light_color.value))
         s = float(self.light_scale.value)
-        tint = self._lights_now["tint"] if positions_only else tuple(float(c) for c in col)
+        tint = tuple(float(c) for c in col)
         vals = {}
-        for k, base in ({} if positions_only else self._light_base).items():
+        for k, base in self._light_base.items():
             if k.endswith(".data"):         # an environment map's texels: its tint (rewriting
                 if tint != self._lights_now["tint"]:        # them rebuilds its sampling
                     vals[k] = base * col.astype(np.float32)       # distribution: only on a change)
                 continue
             v = base * s * (col if base.size == 3 else 1.0 if k.endswith(".scale") else col.mean())
             vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
+        return vals, tint
+
+    def _light_places(self) -> tuple[dict, dict]:
+        """Where the point-like lights go: at the camera if they snap (snap_to_camera ones
+        always, the others while the box is ticked), else where the scene had them; and
+        which ones snap."""
         snapped = frozenset() if self.camera is None else frozenset(self._camera_lights).union(
             self._light_positions if self.snap_light.value else ())
+        vals = {}
         if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
             eye, target, _ = self._camera_now() if snapped else (None, None, None)
             for k, pos in self._light_positions.items():
@@ -425,8 +443,7 @@ class MaterialTuner(CameraPanel):
                     frame = tuning.spot_at(eye, target if aim is None else aim)
                     if frame is not None:
                         vals[k] = frame
-        self._changed(vals)
-        self._lights_now = {"tint": tint, "snapped": snapped}
+        return vals, {"snapped": snapped}
 
     def _post_panel(self):
         from . import post

@@ -36,7 +36,9 @@ def test_the_python_in_ten_lines_runs(tmp_path):
 
 
 
-def _envmap_gradient(own_variable: bool):
+def _envmap_gradient(readme_lines: bool):
+    """(gradient of x, gradient read back from params) for an environment map's data made
+    differentiable by the README's own line (``readme_lines``) or in place."""
     import drjit as dr
     import mitsuba as mi
     import draaw_mi  # noqa: F401  (variant)
@@ -44,10 +46,16 @@ def _envmap_gradient(own_variable: bool):
     scene = mi.load_dict(feature_scene(8, 4, integrator={"type": "draaw_v4", "max_depth": 3},
                                        area=False, envmap=True))
     params = mi.traverse(scene)
-    x = dr.detach(params["sky.data"]) if own_variable else params["sky.data"]
-    dr.enable_grad(x)
-    params["sky.data"] = x
-    params.update()
+    if readme_lines:            # the README's line that makes x, run as written
+        line = next(s for s in _readme_block("Python in ten lines").splitlines() if "enable_grad" in s)
+        ns = {"dr": dr, "params": params, "key": "sky.data"}
+        exec(line, ns)
+        x = ns["x"]
+    else:
+        x = params["sky.data"]
+        dr.enable_grad(x)
+        params["sky.data"] = x
+        params.update()
     dr.backward(dr.mean(mi.render(scene, params, seed=1, spp=4), axis=None))
     return float(np.abs(np.array(dr.grad(x))).sum()), float(np.abs(np.array(dr.grad(params["sky.data"]))).sum())
 
@@ -56,8 +64,9 @@ def test_the_readmes_gradient_lines_work_where_params_own_variable_gets_none():
     """Why the README takes ``x = dr.detach(params[key])``: an environment map's ``update()``
     replaces the variable ``params`` holds, so the gradient read back from ``params`` is 0,
     and so is that of ``params``' own variable made differentiable in place; a variable of
-    its own, as the README makes, gets the gradient."""
-    own, back = _envmap_gradient(own_variable=True)
+    its own, made by the README's line run as written, gets the gradient (the test fails if
+    the README goes back to ``x = params[key]``)."""
+    own, back = _envmap_gradient(readme_lines=True)
     assert own > 0 and back == 0
-    in_place, _ = _envmap_gradient(own_variable=False)
+    in_place, _ = _envmap_gradient(readme_lines=False)
     assert in_place == 0
