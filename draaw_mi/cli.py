@@ -495,6 +495,10 @@ def _cmd_post(args) -> int:
     n_color = 4 if names[:4] == ["R", "G", "B", "A"] else 3 if names[:3] == ["R", "G", "B"] else 0
     if n_color == 0:
         raise CliError(f"{args.input}: no R, G, B channels to post-process (channels: {', '.join(names)})")
+    bad = int(np.count_nonzero(~np.isfinite(arr[..., :3])))
+    if bad:
+        print(f"draaw-mi: warning: {args.input}: {bad} non-finite colour values (NaN/inf) "
+              "read as 0", file=sys.stderr)
     color = np.array(post.apply(arr[..., :n_color], chain))
     result = np.concatenate([color, arr[..., n_color:]], axis=2)
     if args.output.lower().endswith(".png"):

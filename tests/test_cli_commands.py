@@ -68,6 +68,25 @@ def test_post_applies_the_chain_to_colour_and_keeps_other_channels(tmp_path, cha
     assert "wrote" in capsys.readouterr().out
 
 
+def test_post_reads_non_finite_colour_as_zero_and_says_so(tmp_path, chain_file, capsys):
+    img = np.random.default_rng(3).random((6, 8, 4)).astype(np.float32)
+    img[1, 2, 0] = img[4, 4, 1] = np.nan
+    img[5, 7, 2] = np.inf
+    img[0, 0, 3] = np.nan                                  # an AOV's NaN is its own business
+    src = str(tmp_path / "in.exr")
+    draaw_mi.write_exr(src, img, channels=["R", "G", "B", "depth"])
+    assert main(["post", src, "-o", str(tmp_path / "out.exr"), "--chain", chain_file]) == 0
+    err = capsys.readouterr().err
+    assert "3 non-finite colour values" in err and "in.exr" in err
+    out = draaw_mi.read_exr(str(tmp_path / "out.exr"))
+    clean = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
+    assert np.allclose(out[..., :3], _contrast(clean), atol=1e-6)
+    assert np.isnan(out[0, 0, 3]) and np.array_equal(out[1:, :, 3], img[1:, :, 3])
+    # a finite image: no warning
+    assert main(["post", str(tmp_path / "out.exr"), "-o", str(tmp_path / "b.exr"), "--chain", chain_file]) == 0
+    assert "non-finite" not in capsys.readouterr().err
+
+
 def test_render_post_is_the_chain_applied_to_the_plain_render(tmp_path, tiny_file, chain_file):
     base = ["render", tiny_file, "--spp", "4", "--seed", "7", "--version", "path"]
     assert main(base + ["-o", str(tmp_path / "plain.exr")]) == 0

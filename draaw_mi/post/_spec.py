@@ -18,7 +18,7 @@ from typing import Any, Callable, Mapping, Sequence
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from ._util import as_image, join_alpha, split_alpha
+from ._util import as_image, finite_rgb, join_alpha, split_alpha
 
 #: Boundary modes of the neighbourhood filters, named as in ``scipy.ndimage`` / ``dr.convolve``.
 BOUNDARIES = ("reflect", "nearest", "mirror", "wrap", "zero")
@@ -246,7 +246,7 @@ class FilterSpec:
                         ) -> mi.TensorXf:
         t = as_image(image, where)
         rgb, alpha = split_alpha(t)
-        return join_alpha(self.run_rgb(rgb, params), alpha)
+        return join_alpha(self.run_rgb(finite_rgb(rgb), params), alpha)
 
 
 class Filter:

@@ -54,6 +54,20 @@ def as_image(image: Any, where: str) -> mi.TensorXf:
     return t
 
 
+def finite_rgb(rgb: mi.TensorXf) -> mi.TensorXf:
+    """``rgb`` with its non-finite values (NaN, ±inf) read as 0, as :func:`draaw_mi.denoise`
+    does: one bad pixel of a user's image otherwise spread through every blur (a NaN pixel
+    became a 13 × 13 NaN square under the default bloom). Finite values pass bit-identical
+    with gradient 1; the replaced ones get gradient 0.
+
+    >>> import mitsuba as mi
+    >>> t = mi.TensorXf([float("nan"), float("inf"), -2.0], (1, 1, 3))
+    >>> [float(v) for v in finite_rgb(t).array]
+    [0.0, 0.0, -2.0]
+    """
+    return mi.TensorXf(dr.select(dr.isfinite(rgb.array), rgb.array, 0.0), rgb.shape)
+
+
 def split_alpha(t: mi.TensorXf) -> tuple[mi.TensorXf, mi.TensorXf | None]:
     """(H, W, 4) → RGB (H, W, 3) and alpha (H, W, 1); (H, W, 3) → (t, None)."""
     if t.shape[2] == 3:

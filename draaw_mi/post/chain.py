@@ -17,7 +17,7 @@ import mitsuba as mi
 
 from ..errors import IOFailure, ParameterError
 from ._spec import Filter, norm_name, unknown_name_message
-from ._util import as_image, join_alpha, split_alpha
+from ._util import as_image, finite_rgb, join_alpha, split_alpha
 from .aberration import ChromaticAberration
 from .blur import Bloom, BloomV2, Sharpen
 from .color import ColorMapping, Contrast, Lighten, Tint
@@ -92,6 +92,7 @@ class Chain:
 
     def __call__(self, image: Any) -> mi.TensorXf:
         rgb, alpha = split_alpha(as_image(image, "apply()"))
+        rgb = finite_rgb(rgb)               # (NaN/inf read as 0: a blur spread them)
         for f in self.filters:
             rgb = f.spec.run_rgb(rgb, f.params)
         return join_alpha(rgb, alpha)
@@ -190,7 +191,8 @@ def apply(image: Any, chain: Iterable[Any] | Chain | str | os.PathLike[str]) -> 
             :func:`load_chain`). The whole chain is validated before anything runs.
 
     Returns:
-        ``mi.TensorXf`` of the input's shape; alpha passes through. Differentiable.
+        ``mi.TensorXf`` of the input's shape; alpha passes through. Differentiable. Non-finite
+        colour values (NaN, ±inf) are read as 0, so none spreads through a blur.
 
     Shape:
         (H, W, C) → (H, W, C), C ∈ {3, 4}.

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import draaw_mi.post as post
-from post_helpers import FILTER_NAMES, hdr_image
+from post_helpers import CASES, FILTER_NAMES, hdr_image
 
 BOUNDARY_FILTERS = ["bloom", "bloom_v2", "sharpen", "chromatic_aberration", "edge_detection",
                     "crt"]
@@ -107,3 +107,42 @@ def test_edges_of_very_bright_pixels_do_not_overflow(scale):
     out = _finite(post.edge_detection(img))
     want = reference.edge_detection(img.astype(np.float64))
     assert np.allclose(out, want, rtol=1e-5, atol=0), np.abs(out / want - 1).max()
+
+
+def _with_bad_pixels(channels=3):
+    img = hdr_image(seed=35, shape=(13, 17), channels=channels)
+    img[6, 8, 0] = np.nan
+    img[2, 3, 1] = np.inf
+    img[11, 15, 2] = -np.inf
+    return img
+
+
+@pytest.mark.parametrize("name", FILTER_NAMES)
+def test_non_finite_input_values_read_as_zero(name):
+    """A user's image with NaN/inf pixels: every filter (function, class and chain) gives
+    what it gives on the image with those values set to 0 (numpy's nan_to_num, the
+    reference), so nothing non-finite spreads; without the guard a bloom spread one NaN over
+    13 x 13 pixels."""
+    img = _with_bad_pixels(channels=4)
+    img[0, 0, 3] = np.nan                                  # alpha passes through as it is
+    clean = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
+    want = getattr(post, name)(clean).numpy()
+    params = CASES[name][-1]
+    got = getattr(post, name)(img).numpy()
+    np.testing.assert_array_equal(got[..., :3], want)
+    np.testing.assert_array_equal(got[..., 3], img[..., 3])
+    chain = post.apply(img, [{"type": name, **params}]).numpy()
+    np.testing.assert_array_equal(chain[..., :3], getattr(post, name)(clean, **params).numpy())
+    assert np.all(np.isfinite(chain[..., :3]))
+
+
+def test_non_finite_input_values_get_zero_gradient():
+    x = mi.TensorXf(_with_bad_pixels())
+    dr.enable_grad(x)
+    y = post.apply(x, [{"type": "bloom", "clamp": False}, {"type": "sharpen"},
+                       {"type": "crt", "clamp": False}])
+    dr.backward(dr.sum(y.array))
+    g = dr.grad(x).numpy()
+    assert np.all(np.isfinite(g))
+    assert g[6, 8, 0] == 0 and g[2, 3, 1] == 0 and g[11, 15, 2] == 0
+    assert np.count_nonzero(g) > 0.9 * g.size
