@@ -199,7 +199,8 @@ def _cmd_render(args) -> int:
     if args.png:
         from draaw_mi.post import display_encoded
         draaw_mi.write_png(args.png, arr[..., :3], encoded=display_encoded(chain))
-    finite = bool(np.isfinite(arr).all())
+    # (the render's own count: a post chain and denoising read NaN/inf as 0)
+    finite = bool(np.isfinite(arr).all()) and not info.get("non_finite")
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
           f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
           f"{info['seconds']:.2f} s"

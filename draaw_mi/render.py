@@ -347,12 +347,16 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     names = ["R", "G", "B"] + list(integrator.aov_names())
     chain = s.get("post", []) if post is None else post
     image = acc
-    if n_passes > 1 or denoise or chain:
-        with RENDER_GUARD:            # the mean, denoising, post: their kernels and reads back
-            if n_passes > 1:
-                image = acc / done
-                dr.eval(image)
-                dr.sync_thread()
+    if n_passes > 1:
+        with RENDER_GUARD:
+            image = acc / done
+            dr.eval(image)
+            dr.sync_thread()
+    # (counted before denoising and the post chain, which read NaN/inf as 0 and would hide
+    # them from the caller's NaN guard: a batch frame or the CLI's warning)
+    bad = non_finite_count(image) if return_info else 0
+    if denoise or chain:
+        with RENDER_GUARD:            # denoising, post: their kernels and reads back
             if denoise:
                 image, names = _denoised(image, names, extra_aovs)
             if chain:
@@ -360,8 +364,15 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if return_info:
         return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version),
-                       "denoised": bool(denoise)}
+                       "denoised": bool(denoise), "non_finite": bad}
     return image
+
+
+def non_finite_count(image) -> int:
+    """How many values of ``image`` (a tensor) are NaN or ±inf."""
+    with RENDER_GUARD:
+        n = int(dr.count(~dr.isfinite(image.array))[0])
+    return n
 
 
 # ------------------------------------------------------------------ frozen small renders
@@ -430,10 +441,11 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
         image, stats = render_adaptive(scene, block=block, spp=spp, seed=seed, version=version,
                                        max_depth=max_depth)
     chain = scene.settings.get("post", []) if post is None else post
+    bad = non_finite_count(image) if return_info else 0      # (before the chain: see render)
     if chain:
         image = _apply_post(image, chain)
     if return_info:
-        return image, {"spp": spp, "passes": 1, "seconds": time.perf_counter() - t0,
+        return image, {"non_finite": bad, "spp": spp, "passes": 1, "seconds": time.perf_counter() - t0,
                        "channels": ["R", "G", "B"], "version": version,
                        "integrator": resolve_version(version), "adaptive": stats}
     return image

@@ -87,6 +87,22 @@ def test_post_reads_non_finite_colour_as_zero_and_says_so(tmp_path, chain_file, 
     assert "non-finite" not in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("extra", [["--post", "CHAIN"], []])
+def test_render_warns_of_non_finite_pixels_even_behind_a_post_chain(tmp_path, chain_file, capsys, extra):
+    """The post chain reads NaN/inf as 0: the warning comes from the render's own count."""
+    desc = tiny_description(resolution=[8, 6])
+    desc["lights"][1]["intensity"] = 3.4e38              # fits float32; four samples do not
+    path = tmp_path / "inf.json"
+    path.write_text(json.dumps(desc))
+    argv = ["render", str(path), "-o", str(tmp_path / "o.exr"), "--no-progress"]
+    assert main(argv + [chain_file if a == "CHAIN" else a for a in extra]) == 0
+    assert "WARNING: non-finite pixels" in capsys.readouterr().out
+    desc["lights"][1]["intensity"] = 0.2
+    path.write_text(json.dumps(desc))
+    assert main(argv + [chain_file if a == "CHAIN" else a for a in extra]) == 0
+    assert "non-finite" not in capsys.readouterr().out
+
+
 def test_render_post_is_the_chain_applied_to_the_plain_render(tmp_path, tiny_file, chain_file):
     base = ["render", tiny_file, "--spp", "4", "--seed", "7", "--version", "path"]
     assert main(base + ["-o", str(tmp_path / "plain.exr")]) == 0

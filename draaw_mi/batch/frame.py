@@ -51,11 +51,13 @@ class CachedScene:
         pass, so frames after the first replay the recorded kernels instead of re-tracing the
         integrator (the trace costs more than the kernel at low spp); otherwise through
         :func:`draaw_mi.render`. Same bits either way: the frozen call is render()'s one-pass
-        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, channel names)``."""
+        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, channel
+        names, non-finite values before the post chain)``."""
         import drjit as dr
         import mitsuba as mi
 
         from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
+                              non_finite_count,
                               render, sample_passes)
 
         s = self.scene.settings
@@ -68,7 +70,7 @@ class CachedScene:
             image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                                  max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                                  return_info=True)
-            return image, info["channels"]
+            return image, info["channels"], info["non_finite"]
         key = (id(integrator), spp)
         fn = self.frozen.get(key)
         if fn is None:
@@ -79,9 +81,10 @@ class CachedScene:
         dr.eval(image)                                                          # holds the guard)
         dr.sync_thread()
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
+        bad = non_finite_count(image)         # (before the chain, which reads NaN/inf as 0)
         if chain:
             image = _apply_post(image, chain)
-        return image, ["R", "G", "B"] + list(integrator.aov_names())
+        return image, ["R", "G", "B"] + list(integrator.aov_names()), bad
 
     def _prepare(self, integrator, spec: dict) -> None:
         """Let ``integrator`` learn what it learns from the scene (V4's light pilot) with the
@@ -199,13 +202,13 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history
-        image, channels = entry.render(spec)
+        image, channels, bad = entry.render(spec)
         arr = np.array(image, dtype=np.float32)
         kernels = []
         if track_kernels:
             kernels = sorted({kernel_signature(k) for k in dr.kernel_history()
                               if k["type"] == dr.KernelType.JIT})
-    bad = int(np.count_nonzero(~np.isfinite(arr)))
+    bad = max(bad, int(np.count_nonzero(~np.isfinite(arr))))
     if bad:
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")

@@ -67,6 +67,20 @@ def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
     assert "failed: orbit frame 1" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("freeze", [True, False])
+def test_the_nan_guard_sees_the_render_before_its_post_chain(tmp_path, freeze):
+    """A post chain reads NaN/inf as 0 (draaw_mi.post): the guard must look before it, or a
+    frame of inf pixels was written as done, mostly black."""
+    doc = manifest(tmp_path, frames=2)
+    doc["jobs"][0]["params"] = {"constant_light1.radiance": {"values": [0.2, 3.4e38]}}
+    doc["jobs"][0]["post"] = [{"type": "contrast", "amount": 0.0}]
+    doc["jobs"][0]["freeze"] = freeze
+    _, specs, _ = batch.load(doc)
+    res = batch.run(doc, progress=False)
+    assert [r["frame"] for r in res.failed] == [1] and "non-finite" in res.failed[0]["error"]
+    assert not os.path.exists(specs[1]["output"]) and os.path.exists(specs[0]["output"])
+
+
 def test_dry_run_and_status_render_nothing(tmp_path, capsys):
     from draaw_mi.cli import main
     path = write_manifest(tmp_path, manifest(tmp_path, frames=3))
