@@ -119,15 +119,19 @@ def denoise(image, albedo=None, normal=None, *, hdr: bool = True, quality: str =
 def aux_channels(channels) -> dict:
     """Indices of the albedo and normal AOV channels in a render's channel list.
 
+    Channels are found by name, in R, G, B (X, Y, Z) order whatever order the list has
+    (``read_exr`` lists an EXR's other channels sorted: ``albedo.B`` before ``albedo.R``).
+
     >>> aux_channels(["R", "G", "B", "N.X", "N.Y", "N.Z", "albedo.R", "albedo.G", "albedo.B"])
     {'albedo': [6, 7, 8], 'normal': [3, 4, 5]}
+    >>> aux_channels(["R", "G", "B", "albedo.B", "albedo.G", "albedo.R"])
+    {'albedo': [5, 4, 3]}
     """
     names = list(channels)
     out = {}
-    for key, prefix in (("albedo", "albedo."), ("normal", "N.")):
-        idx = [i for i, n in enumerate(names) if n.startswith(prefix)]
-        if len(idx) == 3:
-            out[key] = idx
+    for key, wanted in (("albedo", ("albedo.R", "albedo.G", "albedo.B")), ("normal", ("N.X", "N.Y", "N.Z"))):
+        if all(n in names for n in wanted):
+            out[key] = [names.index(n) for n in wanted]
     return out
 
 

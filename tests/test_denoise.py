@@ -159,7 +159,7 @@ def test_every_option_reaches_oidn(cornell, quality, hdr, clean_aux):
         assert np.abs(changed - ref).max() > 1e-3, other
 
 
-def test_render_denoise_renders_and_uses_the_guides(cornell):
+def test_render_denoise_renders_and_uses_the_guides(cornell, tmp_path):
     """render(denoise=True) with a draaw version renders the albedo and normal AOVs and hands
     them to OIDN: it equals OIDN called directly on the same render with those AOVs (HDR,
     quality "high"), not the colour-only denoising."""
@@ -173,6 +173,12 @@ def test_render_denoise_renders_and_uses_the_guides(cornell):
                          hdr=True, quality="high")
     np.testing.assert_allclose(img, np.asarray(ref), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(denoise_aovs(raw, info["channels"])[..., :3], img, rtol=1e-5, atol=1e-6)
+    # the same frame through an EXR file (read_exr sorts the AOV channels: albedo.B first)
+    path = str(tmp_path / "frame.exr")
+    draaw_mi.write_exr(path, raw, channels=info["channels"])
+    back, names = draaw_mi.read_exr(path, with_names=True)
+    assert names.index("albedo.B") < names.index("albedo.R")
+    np.testing.assert_allclose(denoise_aovs(back, names)[..., :3], img, rtol=1e-5, atol=1e-6)
     colour_only = np.asarray(pyoidn.denoise(np.ascontiguousarray(np.maximum(raw[..., :3], 0)), hdr=True,
                                             quality="high"))
     assert np.abs(colour_only - img).max() > 1e-3
