@@ -428,15 +428,19 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
     from .render import render
     from .scene.camera import go_draaw_look_at
 
-    path = interpolate(keyframes, duration=frames / 60.0, faithful=faithful)
-    fov = fov if fov is not None else float(scene.info.get("camera", {}).get("fov", 45.0))
+    # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncated 123 * 60 / 60 to 122)
+    path = interpolate(keyframes, duration=frames, fps=1, faithful=faithful)
+    cam = scene.info.get("camera", {})
+    fov = fov if fov is not None else float(cam.get("fov", 45.0))
     params = scene.params
     key = next((k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
     if key is None:
         raise DraawError("frame_times: the scene's sensor has no to_world parameter")
     x_fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
-    if x_fov_key:
-        params[x_fov_key] = fov
+    if x_fov_key:    # (along the scene's fov_axis, as its own fov is: see scene.camera.x_fov)
+        from .scene.camera import x_fov
+        w, h = scene.settings["resolution"]
+        params[x_fov_key] = x_fov(fov, cam.get("fov_axis", "x") if cam.get("fov") else "x", w, h)
 
     def set_camera(p):
         o, t, u = go_draaw_look_at(p[:3], p[3], p[4], fov)

@@ -269,6 +269,31 @@ def test_frame_times_along_a_path(tmp_path, monkeypatch):
         assert np.isfinite(r["rmse"]) and np.isfinite(r["ciede2000"])
 
 
+def test_frame_times_keeps_every_frame_and_the_scenes_fov_axis(monkeypatch):
+    """123 frames are 123 (123 / 60 s at 60 fps truncated to 122), and a scene whose fov is
+    along y keeps its horizontal field of view (the fov went into x_fov as it was)."""
+    from draaw_mi.scene.camera import x_fov
+    desc = {"render": {"resolution": [8, 4], "spp": 1, "max_depth": 2},
+            "camera": {"position": list(GO_DRAAW_BENCHMARK_PATH[0][:3]),
+                       "angles": list(GO_DRAAW_BENCHMARK_PATH[0][3:]), "fov": 30, "fov_axis": "y"},
+            "shapes": [{"type": "sphere", "radius": 75}],
+            "lights": [{"type": "constant", "intensity": 1.0}]}
+    scene = draaw_mi.load_scene(desc)
+    loaded = float(scene.params["sensor.x_fov"][0])
+    assert loaded == pytest.approx(x_fov(30, "y", 8, 4)) and loaded > 50
+    render_mod = sys.modules["draaw_mi.render"]
+    real_render, fovs = render_mod.render, []
+
+    def spy(sc, *a, **kw):
+        fovs.append(float(sc.params["sensor.x_fov"][0]))
+        return real_render(sc, *a, **kw)
+    monkeypatch.setattr(render_mod, "render", spy)
+    rows = bench.frame_times(scene, GO_DRAAW_BENCHMARK_PATH, versions=("v1",), frames=123,
+                             error_frames=1, gt_spp=1, progress=False)
+    assert rows[0]["frames"] == 123
+    assert fovs and all(f == pytest.approx(loaded) for f in fovs)
+
+
 def test_versions_at_one_spp_are_timed_round_robin(monkeypatch):
     """A drifting machine must not favour whichever version ran first: after one warm-up each,
     the timed renders of the versions at one spp alternate, and every row gets its own

@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import DraawError, RenderError
 from .exr import metadata, write_frame, write_preview
 from ..scene import value_like
+from ..scene.camera import x_fov
 
 
 class CachedScene:
@@ -33,8 +34,11 @@ class CachedScene:
         self.camera_key = "sensor.to_world" if "sensor.to_world" in params.keys() else next(
             (k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
         self.fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
-        self.fov = float(scene.info.get("camera", {}).get("fov", 0.0)) or (
-            float(params[self.fov_key][0]) if self.fov_key else 45.0)
+        # a camera table's fov is measured as the scene's is, along its fov_axis (an XML
+        # scene's: its sensor's x_fov); a y-axis fov written into x_fov zoomed in 1.9x
+        cam = scene.info.get("camera", {})
+        self.fov = float(cam.get("fov", 0.0)) or (float(params[self.fov_key][0]) if self.fov_key else 45.0)
+        self.fov_axis = cam.get("fov_axis", "x") if cam.get("fov") else "x"
         # copies: params[key] is the scene's own value, which the next update changes in place
         self.originals: dict = {}
         if self.camera_key:
@@ -120,7 +124,8 @@ class CachedScene:
             wanted[self.camera_key] = mi.ScalarTransform4f().look_at(
                 origin=cam["origin"], target=cam["target"], up=cam["up"])
             if self.fov_key:
-                wanted[self.fov_key] = type(self.originals[self.fov_key])(cam["fov"])
+                w, h = self.scene.settings["resolution"]
+                wanted[self.fov_key] = type(self.originals[self.fov_key])(x_fov(cam["fov"], self.fov_axis, w, h))
         for key, original in self.originals.items():
             params[key] = wanted.get(key, original)
         params.update()

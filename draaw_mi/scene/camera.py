@@ -33,6 +33,23 @@ def spherical(theta: float, phi: float) -> np.ndarray:
     return np.array([math.sin(phi) * math.cos(theta), math.sin(phi) * math.sin(theta), math.cos(phi)])
 
 
+def x_fov(fov: float, fov_axis: str, width: int, height: int) -> float:
+    """The horizontal field of view (Mitsuba's ``x_fov`` parameter, degrees) of a camera whose
+    ``fov`` is measured along ``fov_axis`` on a ``width`` x ``height`` film, as Mitsuba's
+    perspective sensor converts it (``mi.parse_fov``).
+
+    >>> round(x_fov(30.0, "y", 32, 16), 4), x_fov(30.0, "x", 32, 16)
+    (56.3736, 30.0)
+    """
+    import mitsuba as mi
+    if fov_axis == "x":
+        return float(fov)
+    props = mi.Properties()
+    props["fov"] = float(fov)
+    props["fov_axis"] = str(fov_axis)
+    return float(mi.parse_fov(props, width / height))
+
+
 def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
     """Convert GO-Draaw's (position, θ, φ, FOV) into (origin, target, up) for a pinhole camera."""
     f = math.radians(fov_deg)

@@ -410,3 +410,24 @@ def test_a_frames_header_says_what_it_shows(tmp_path):
     cam = json.loads(h["draaw:camera"])
     assert np.allclose(cam["origin"], specs[1]["camera"]["origin"]) and cam["fov"] == specs[1]["camera"]["fov"]
     assert json.loads(h["draaw:post"]) == specs[1]["post"] and specs[1]["post"][0]["type"] == "contrast"
+
+
+@pytest.mark.parametrize("axis", ["y", "smaller", "diagonal"])
+def test_a_camera_tables_fov_is_measured_as_the_scenes(tmp_path, axis):
+    """A scene whose fov is along y (or another axis): a job whose camera table is the scene's
+    own view renders the frame the scene renders without a camera table (the fov went into
+    Mitsuba's x_fov as it was: 30 degrees along y on a 2:1 film is 56.4 along x)."""
+    desc = tiny_description(resolution=[16, 8])
+    desc["camera"]["fov_axis"] = axis
+    scene = tmp_path / "fy.toml"
+    scene.write_bytes(tomli_w.dumps(desc).encode())
+    view = {k: desc["camera"][k] for k in ("origin", "target")}
+    doc = {"output": str(tmp_path / "out" / "{job}" / "{frame:04d}.exr"), "jobs": [
+        {"name": "plain", "scene": str(scene), "frames": 1, "spp": 4},
+        {"name": "table", "scene": str(scene), "frames": 1, "spp": 4,
+         "camera": {"look_at": [dict(view, up=[0.0, 1.0, 0.0])]}}]}
+    res = batch.run(doc, progress=False)
+    assert res.complete and not res.failed
+    frames = frames_of(tmp_path / "out")
+    plain, table = frames[os.path.join("plain", "0000.exr")], frames[os.path.join("table", "0000.exr")]
+    assert np.array_equal(plain, table)
