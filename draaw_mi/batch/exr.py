@@ -40,8 +40,9 @@ from ..integrators import resolve_version
 HASH_ATTR = "draaw:frame_hash"
 
 
-def metadata(spec: dict, seconds: float) -> dict:
-    """The header attributes of a rendered frame."""
+def metadata(spec: dict, seconds: float, post: list | None = None) -> dict:
+    """The header attributes of a rendered frame; ``post``: the chain applied (the job's, or
+    its scene's own when the job gives none), recorded as ``draaw:post``."""
     meta = {HASH_ATTR: spec["hash"], "draaw:scene": spec["scene"], "draaw:scene_sha256": spec["scene_hash"],
             "draaw:job": spec["job"], "draaw:frame": int(spec["frame"]), "draaw:version": spec["version"],
             "draaw:integrator": resolve_version(spec["version"]),
@@ -51,9 +52,11 @@ def metadata(spec: dict, seconds: float) -> dict:
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if spec.get("files_hash"):
         meta["draaw:files_sha256"] = spec["files_hash"]
-    for key in ("params", "camera", "post"):     # what the frame shows, readable from its file
-        if spec.get(key):
-            meta[f"draaw:{key}"] = json.dumps(spec[key])
+    shown = {"params": spec.get("params"), "camera": spec.get("camera"),
+             "post": spec.get("post") if post is None else post}
+    for key, value in shown.items():        # what the frame shows, readable from its file
+        if value:
+            meta[f"draaw:{key}"] = json.dumps(value)
     meta.update({f"draaw:{k}": str(v) for k, v in spec["versions"].items()})
     return meta
 

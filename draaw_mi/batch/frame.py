@@ -220,7 +220,8 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     seconds = time.perf_counter() - t0
     if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
         write_preview(spec, arr)
-    write_frame(spec["output"], arr, channels, metadata(spec, seconds), half=spec["half"])
+    chain = entry.scene.settings.get("post", []) if spec["post"] is None else spec["post"]
+    write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=chain), half=spec["half"])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 

@@ -69,7 +69,7 @@ class Job:
     output: str                   # absolute pattern
     version: str | None = None
     spp: int | None = None
-    seed: int = 0
+    seed: int | None = None       # None: the scene's render.seed
     max_depth: int | None = None
     resolution: tuple | None = None
     aovs: list | None = None

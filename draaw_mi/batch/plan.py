@@ -240,7 +240,9 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "scene": job.scene, "scene_hash": entry.hash, "files_hash": entry.files_hash,
                 "resolution": list(scene.resolution),
                 "version": version, "spp": int(spp), "sampler": s.get("sampler"),
-                "seed": frame_seed(job.seed, f),
+                # (a job without a seed takes its scene's, as render() does: two scenes
+                # that differed only in render.seed gave bit-identical frames)
+                "seed": frame_seed(int(s.get("seed", 0)) if job.seed is None else job.seed, f),
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
                 "camera": cams[f] if cams else None,
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},

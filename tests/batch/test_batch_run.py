@@ -431,3 +431,25 @@ def test_a_camera_tables_fov_is_measured_as_the_scenes(tmp_path, axis):
     frames = frames_of(tmp_path / "out")
     plain, table = frames[os.path.join("plain", "0000.exr")], frames[os.path.join("table", "0000.exr")]
     assert np.array_equal(plain, table)
+
+
+def test_a_job_without_a_seed_or_chain_takes_its_scenes(tmp_path):
+    """Two scenes that differ only in render.seed give different frames, each the frame's seed
+    drawn from its scene's; a scene's own post chain is what the header records."""
+    chain = [{"type": "contrast", "contrast": 1.5}]
+    jobs = []
+    for seed in (1, 99):
+        desc = tiny_description(resolution=[8, 6], seed=seed)
+        desc["post"] = chain
+        path = tmp_path / f"s{seed}.toml"
+        path.write_bytes(tomli_w.dumps(desc).encode())
+        jobs.append({"name": f"s{seed}", "scene": str(path), "frames": 1, "spp": 4})
+    doc = {"output": str(tmp_path / "out" / "{job}" / "{frame:04d}.exr"), "jobs": jobs}
+    assert batch.run(doc, progress=False).complete
+    _, specs, _ = batch.load(doc)
+    assert [s["seed"] for s in specs] == [frame_seed(1, 0), frame_seed(99, 0)]
+    a, b = (draaw_mi.read_exr(s["output"]) for s in specs)
+    assert not np.array_equal(a, b)
+    ref = draaw_mi.render(draaw_mi.load_scene(jobs[1]["scene"]), spp=4, seed=frame_seed(99, 0))
+    assert np.array_equal(b, np.array(ref))
+    assert json.loads(batch.read_header(specs[0]["output"])["draaw:post"]) == chain
