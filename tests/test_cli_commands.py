@@ -103,6 +103,22 @@ def test_render_warns_of_non_finite_pixels_even_behind_a_post_chain(tmp_path, ch
     assert "non-finite" not in capsys.readouterr().out
 
 
+def test_render_gives_one_image_with_a_bar_or_without(tmp_path, monkeypatch):
+    """Passes of 16 samples either way: a bar made 16-spp passes, a pipe one of 48, and
+    their seeds other samples (the same command gave two images)."""
+    import draaw_mi.cli as cli
+    desc = tiny_description(resolution=[8, 6], spp=48)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(desc))
+    images = []
+    for mode in ("bar", False):
+        monkeypatch.setattr(cli, "progress_mode", lambda no_progress, m=mode: m)
+        out = str(tmp_path / f"{mode}.exr")
+        assert main(["render", str(path), "-o", out]) == 0
+        images.append(draaw_mi.read_exr(out))
+    assert np.array_equal(images[0], images[1])
+
+
 def test_render_post_is_the_chain_applied_to_the_plain_render(tmp_path, tiny_file, chain_file):
     base = ["render", tiny_file, "--spp", "4", "--seed", "7", "--version", "path"]
     assert main(base + ["-o", str(tmp_path / "plain.exr")]) == 0

@@ -244,7 +244,9 @@ def _primitive(entry: dict, kind: str, name: str, where) -> SDFNode:
             kw[key] = vector(v, where / key)
         else:
             lo = None if key == "offset" else 0.0
-            kw[key] = number(v, where / key, lo=lo, lo_open=key not in ("offset",))
+            # (a round box's radius may be 0, a sharp box, as RoundBox itself allows)
+            closed = key == "offset" or (kind == "round_box" and key == "radius")
+            kw[key] = number(v, where / key, lo=lo, lo_open=not closed)
     if "size" in kw and any(x <= 0 for x in kw["size"]):
         raise (where / "size").error(f"{entry['size']!r} has a side <= 0; expected positive edge lengths")
     try:

@@ -47,6 +47,18 @@ def test_load_scene_dict_with_sdf_tree():
     assert abs(float(s.sdf.distance(p)[0]) - (0.0 - 0.15)) < 1e-5
 
 
+def test_a_round_box_of_radius_0_is_the_box():
+    """RoundBox allows radius 0 (a sharp box); the scene file refused it ("expected > 0")."""
+    box = {"type": "box", "name": "b", "center": [0, 0.4, 0], "size": [0.6, 0.8, 1.0]}
+    rb = dict(box, type="round_box", radius=0.0)
+    pts = mi.Point3f([0.0, 0.5, 0.2, -1.0], [0.4, 1.1, 0.0, 0.3], [0.0, 0.3, 0.9, 0.0])
+    sharp = draaw_mi.load_scene(_desc([box])).sdf.distance(pts)
+    round0 = draaw_mi.load_scene(_desc([rb])).sdf.distance(pts)
+    np.testing.assert_allclose(np.array(round0), np.array(sharp), atol=1e-6)
+    with pytest.raises(SceneError, match="radius"):
+        draaw_mi.load_scene(_desc([dict(rb, radius=-0.1)]))
+
+
 def test_sphere_moves_from_shapes_to_sdf_by_renaming():
     entry = {"type": "sphere", "name": "b", "material": "ball", "center": [0, 0.5, 0], "radius": 0.5,
              "translate": [0.2, 0, 0]}
