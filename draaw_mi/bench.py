@@ -430,17 +430,16 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
 
     # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncated 123 * 60 / 60 to 122)
     path = interpolate(keyframes, duration=frames, fps=1, faithful=faithful)
-    cam = scene.info.get("camera", {})
-    fov = fov if fov is not None else float(cam.get("fov", 45.0))
+    from .scene.camera import scene_fov, x_fov
+    own_fov, fov_axis = scene_fov(scene)
+    fov = own_fov if fov is None else fov
     params = scene.params
     key = next((k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
     if key is None:
         raise DraawError("frame_times: the scene's sensor has no to_world parameter")
     x_fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
-    if x_fov_key:    # (along the scene's fov_axis, as its own fov is: see scene.camera.x_fov)
-        from .scene.camera import x_fov
-        w, h = scene.settings["resolution"]
-        params[x_fov_key] = x_fov(fov, cam.get("fov_axis", "x") if cam.get("fov") else "x", w, h)
+    if x_fov_key:    # (along the scene's fov_axis, as its own fov is)
+        params[x_fov_key] = x_fov(fov, fov_axis, *scene.settings["resolution"])
 
     def set_camera(p):
         o, t, u = go_draaw_look_at(p[:3], p[3], p[4], fov)

@@ -196,7 +196,7 @@ def _cmd_render(args) -> int:
                                   denoise=args.denoise)
     arr = np.array(image)
     from draaw_mi.batch.exr import render_metadata
-    chain = scene.settings.get("post", []) if post is None else post     # what render() applied
+    chain = info["post"]                                                 # what render() applied
     draaw_mi.write_exr(args.output, arr, channels=info["channels"],
                        metadata=render_metadata(args.scene, scene, info, post=chain))
     if args.png:

@@ -262,7 +262,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         (draaw versions only; default the scene's ``render.aovs``).
     integrator_options: further properties of the integrator plugin, e.g. ``{"rr_depth": 8}``
         or V4's ``{"light_selection": "power"}`` (see each integrator's docstring).
-    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``.
+    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``,
+        ``post`` (the chain applied) and ``non_finite`` (NaN/inf values of the render before
+        denoising and the chain, which read them as 0).
     adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
         interpolation (see :mod:`draaw_mi.adaptive`; biased, not differentiable, no AOVs).
     denoise: denoise the colour with Intel OIDN (:func:`draaw_mi.denoise`, needs ``pyoidn``),
@@ -364,7 +366,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if return_info:
         return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version),
-                       "denoised": bool(denoise), "non_finite": bad}
+                       "denoised": bool(denoise), "non_finite": bad, "post": chain}
     return image
 
 
@@ -447,7 +449,7 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
     if return_info:
         return image, {"non_finite": bad, "spp": spp, "passes": 1, "seconds": time.perf_counter() - t0,
                        "channels": ["R", "G", "B"], "version": version,
-                       "integrator": resolve_version(version), "adaptive": stats}
+                       "integrator": resolve_version(version), "adaptive": stats, "post": chain}
     return image
 
 

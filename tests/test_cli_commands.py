@@ -119,6 +119,17 @@ def test_render_gives_one_image_with_a_bar_or_without(tmp_path, monkeypatch):
     assert np.array_equal(images[0], images[1])
 
 
+def test_render_records_the_scenes_own_chain(tmp_path):
+    """Without --post the scene's chain is applied: the header says so (render's info["post"])."""
+    from draaw_mi.batch.exr import read_header
+    desc = dict(tiny_description(resolution=[8, 6]), post=CHAIN)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(desc))
+    assert main(["render", str(path), "-o", str(tmp_path / "o.exr"), "--no-progress"]) == 0
+    (entry,) = json.loads(read_header(str(tmp_path / "o.exr"))["draaw:post"])
+    assert {k: entry[k] for k in CHAIN[0]} == CHAIN[0]            # (with its defaults spelled out)
+
+
 def test_render_post_is_the_chain_applied_to_the_plain_render(tmp_path, tiny_file, chain_file):
     base = ["render", tiny_file, "--spp", "4", "--seed", "7", "--version", "path"]
     assert main(base + ["-o", str(tmp_path / "plain.exr")]) == 0

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import DraawError, RenderError
 from .exr import metadata, write_frame, write_preview
 from ..scene import value_like
-from ..scene.camera import x_fov
+from ..scene.camera import scene_fov, x_fov
 
 
 class CachedScene:
@@ -36,9 +36,7 @@ class CachedScene:
         self.fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
         # a camera table's fov is measured as the scene's is, along its fov_axis (an XML
         # scene's: its sensor's x_fov); a y-axis fov written into x_fov zoomed in 1.9x
-        cam = scene.info.get("camera", {})
-        self.fov = float(cam.get("fov", 0.0)) or (float(params[self.fov_key][0]) if self.fov_key else 45.0)
-        self.fov_axis = cam.get("fov_axis", "x") if cam.get("fov") else "x"
+        self.fov, self.fov_axis = scene_fov(scene)
         # copies: params[key] is the scene's own value, which the next update changes in place
         self.originals: dict = {}
         if self.camera_key:
@@ -55,8 +53,8 @@ class CachedScene:
         pass, so frames after the first replay the recorded kernels instead of re-tracing the
         integrator (the trace costs more than the kernel at low spp); otherwise through
         :func:`draaw_mi.render`. Same bits either way: the frozen call is render()'s one-pass
-        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, channel
-        names, non-finite values before the post chain)``."""
+        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, info)``,
+        ``info`` with render()'s ``channels``, ``non_finite`` and ``post``."""
         import drjit as dr
         import mitsuba as mi
 
@@ -74,7 +72,7 @@ class CachedScene:
             image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                                  max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                                  return_info=True)
-            return image, info["channels"], info["non_finite"]
+            return image, info
         key = (id(integrator), spp)
         fn = self.frozen.get(key)
         if fn is None:
@@ -85,10 +83,12 @@ class CachedScene:
         dr.eval(image)                                                          # holds the guard)
         dr.sync_thread()
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
-        bad = non_finite_count(image)         # (before the chain, which reads NaN/inf as 0)
-        if chain:
+        bad = 0
+        if chain:                             # (counted before it: it reads NaN/inf as 0)
+            bad = non_finite_count(image)
             image = _apply_post(image, chain)
-        return image, ["R", "G", "B"] + list(integrator.aov_names()), bad
+        return image, {"channels": ["R", "G", "B"] + list(integrator.aov_names()), "non_finite": bad,
+                       "post": chain}
 
     def _prepare(self, integrator, spec: dict) -> None:
         """Let ``integrator`` learn what it learns from the scene (V4's light pilot) with the
@@ -207,21 +207,21 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history
-        image, channels, bad = entry.render(spec)
+        image, info = entry.render(spec)
+        channels = info["channels"]
         arr = np.array(image, dtype=np.float32)
         kernels = []
         if track_kernels:
             kernels = sorted({kernel_signature(k) for k in dr.kernel_history()
                               if k["type"] == dr.KernelType.JIT})
-    bad = max(bad, int(np.count_nonzero(~np.isfinite(arr))))
+    bad = max(info["non_finite"], int(np.count_nonzero(~np.isfinite(arr))))
     if bad:
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")
     seconds = time.perf_counter() - t0
     if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
         write_preview(spec, arr)
-    chain = entry.scene.settings.get("post", []) if spec["post"] is None else spec["post"]
-    write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=chain), half=spec["half"])
+    write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=info["post"]), half=spec["half"])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 

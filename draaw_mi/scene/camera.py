@@ -50,6 +50,17 @@ def x_fov(fov: float, fov_axis: str, width: int, height: int) -> float:
     return float(mi.parse_fov(props, width / height))
 
 
+def scene_fov(scene) -> tuple[float, str]:
+    """``(fov, fov_axis)`` of a :class:`~draaw_mi.scene.DraawScene`'s camera, the way its
+    file gives them; a scene without (a Mitsuba XML scene) gives its sensor's ``x_fov``
+    along ``"x"`` (45 degrees without one). Convert with :func:`x_fov`."""
+    cam = scene.info.get("camera", {})
+    if cam.get("fov"):
+        return float(cam["fov"]), cam.get("fov_axis", "x")
+    key = next((k for k in scene.params.keys() if k.endswith("x_fov")), None)
+    return (float(scene.params[key][0]) if key else 45.0), "x"
+
+
 def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
     """Convert GO-Draaw's (position, θ, φ, FOV) into (origin, target, up) for a pinhole camera."""
     f = math.radians(fov_deg)

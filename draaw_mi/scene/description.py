@@ -560,8 +560,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     settings["post"] = post or []
     info = {"materials": list(materials), "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),
-                       "up": list(map(float, look_at[2])), "fov": look_at[3],
-                       "fov_axis": look_at[4]}}
+                       "up": list(map(float, look_at[2])), "fov": look_at[3], "fov_axis": look_at[4]}}
     if sdf_scene is not None:
         info["sdf"] = sdf_scene
         info["shapes"] = [k for k in info["shapes"] if k not in sdf_scene.proxy_ids]
