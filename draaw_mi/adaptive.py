@@ -115,8 +115,9 @@ def _grid(n_pixels: int, step: int) -> np.ndarray:
 
 
 def render_adaptive(scene, block: int = 8, spp: int = 1, seed: int = 0, version: str = "v4",
-                    max_depth: int | None = None):
+                    max_depth: int | None = None, integrator=None):
     """Render ``scene`` with adaptive subsampling; returns ((H, W, 3) mi.TensorXf, stats dict).
+    ``integrator``: a made one (e.g. hiding emitters) instead of ``version`` / ``max_depth``.
 
     ``stats``: ``traced`` (pixels traced), ``traced_fraction``, ``levels``, ``cells_interpolated``.
     """
@@ -125,7 +126,8 @@ def render_adaptive(scene, block: int = 8, spp: int = 1, seed: int = 0, version:
     if isinstance(block, bool) or not isinstance(block, int) or block < 2 or block & (block - 1):
         raise RenderError(f"render: adaptive={block!r}; expected a power of two >= 2 (block size in pixels)")
     w, h = scene.resolution
-    integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
+    if integrator is None:
+        integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
     traced = np.zeros((h, w), bool)
     sig = np.zeros((h, w), np.int64)
     agree_maps = []                                   # per level: (step, agree mask of cells)

@@ -288,20 +288,8 @@ class Preview:
         if self._lo is None:
             w, h = self.scene.resolution
             s = self.interactive_scale
+            # (with_resolution carries every current value over)
             self._lo = self.scene.with_resolution(max(1, round(w * s)), max(1, round(h * s)))
-            p = self._lo.all_params              # copy every current value over
-            src = self.scene.all_params
-            for key in p.keys():
-                if key.endswith((".faces", ".vertex_positions", ".vertex_normals", ".vertex_texcoords")):
-                    continue
-                if key.startswith("sensor.film"):
-                    continue
-                try:
-                    p[key] = src[key]
-                except Exception:  # noqa: BLE001 - a non-writable entry: keep the loaded value
-                    pass
-            with RENDER_GUARD:
-                p.update()
         return self._lo
 
     def _render_fn(self):

@@ -280,6 +280,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         ((24, 32, 4), ['R', 'G', 'B', 'depth.Z'])
     """
     check_mode(progress, "render")
+    if adaptive is not None and (time_budget is not None or pass_spp is not None):
+        raise RenderError("render: adaptive= renders every sample in one launch; drop "
+                          f"time_budget={time_budget!r} / pass_spp={pass_spp!r}, or adaptive=")
     from .scene import DraawScene, load_scene
 
     if not isinstance(scene, DraawScene):
@@ -287,7 +290,13 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     s = scene.settings
     if resolution is not None:
         from .scene.schema import Where, resolution as parse_res
-        scene = scene.with_resolution(*parse_res(resolution, Where("render") / "resolution"))
+        size = tuple(parse_res(resolution, Where("render") / "resolution"))
+        if params is not None and size != scene.resolution:
+            # (the reloaded copy has its own parameters: gradients would not reach `params`)
+            raise RenderError(f"render: resolution={resolution!r} with params= renders a reloaded "
+                              "copy of the scene that `params` do not belong to; render "
+                              "`scene.with_resolution(w, h)` and traverse that instead")
+        scene = scene.with_resolution(*size)
     version = s["version"] if version is None else version
     spp = s["spp"] if spp is None else spp
     seed = s["seed"] if seed is None else seed
@@ -313,8 +322,10 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image
         aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs, version)
     if adaptive is not None:
-        return _render_adaptive(scene, adaptive, version, spp, seed, max_depth, params, aovs, post,
-                                return_info)
+        with RENDER_GUARD:
+            integrator = make_integrator(version, max_depth, hide, (), **(integrator_options or {}))
+        return _render_adaptive(scene, adaptive, integrator, version, spp, seed, params, aovs, post,
+                                return_info, progress)
     with RENDER_GUARD:    # (both may make plugins: the integrator, a sampler probed for its counts)
         integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
         counts = _scene_passes(scene, spp, pass_spp)
@@ -425,7 +436,7 @@ def frozen_render(integrator, spp: int, scene=None):
     return fn
 
 
-def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, post, return_info):
+def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs, post, return_info, progress):
     from .adaptive import render_adaptive
     if params is not None:
         raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
@@ -439,9 +450,12 @@ def _render_adaptive(scene, block, version, spp, seed, max_depth, params, aovs, 
         what = "[[sdf]] objects" if holds["sdf"] else "participating media"
         raise RenderError(f"render: adaptive subsampling cannot see {what} ({scene.source}); drop adaptive=")
     t0 = time.perf_counter()
+    bar = progress_bar(spp, f"render {version} adaptive", "spp", progress, leave=False, where="render")
     with _scene_lock(scene), RENDER_GUARD:
-        image, stats = render_adaptive(scene, block=block, spp=spp, seed=seed, version=version,
-                                       max_depth=max_depth)
+        image, stats = render_adaptive(scene, block=block, spp=spp, seed=seed, integrator=integrator)
+    if bar is not None:                  # (one launch: the bar fills at once)
+        bar.update(spp)
+        bar.close()
     chain = scene.settings.get("post", []) if post is None else post
     bad = non_finite_count(image) if return_info else 0      # (before the chain: see render)
     if chain:

@@ -138,3 +138,21 @@ def test_render_option_and_errors(tiny_scene):
         draaw_mi.render(tiny_scene, adaptive=6)
     with pytest.raises(draaw_mi.DraawError, match="not differentiable"):
         draaw_mi.render(tiny_scene, adaptive=8, params=tiny_scene.params)
+
+
+def test_render_passes_its_options_to_adaptive(tiny_scene, capsys):
+    """``render(adaptive=...)`` honours hide_emitters and integrator_options like any render
+    (they were dropped: the sky stayed in the picture), shows its progress bar, and refuses
+    the pass options it has no passes for."""
+    top = lambda img: np.array(img)[0]                       # noqa: E731 - the sky row
+    shown = draaw_mi.render(tiny_scene, version="v2", spp=4, adaptive=4, hide_emitters=False)
+    hidden = draaw_mi.render(tiny_scene, version="v2", spp=4, adaptive=4, hide_emitters=True)
+    np.testing.assert_allclose(top(shown), 0.2, atol=1e-5)   # the constant sky's radiance
+    assert np.all(top(hidden) == 0.0)
+    with pytest.raises(draaw_mi.RenderError, match="no option 'bogus'"):
+        draaw_mi.render(tiny_scene, version="v2", adaptive=4, integrator_options={"bogus": 1})
+    for option in ({"time_budget": 1.0}, {"pass_spp": 2}):
+        with pytest.raises(draaw_mi.RenderError, match="one launch"):
+            draaw_mi.render(tiny_scene, version="v2", adaptive=4, **option)
+    draaw_mi.render(tiny_scene, version="v2", spp=2, adaptive=4, progress="lines")
+    assert "2/2" in capsys.readouterr().err

@@ -129,6 +129,53 @@ def test_with_resolution_rebuilds_film(tiny_scene):
     assert np.array(draaw_mi.render(s2, version="path")).shape == (8, 16, 3)
 
 
+def test_with_resolution_keeps_parameter_edits(tiny_scene):
+    """A material and a camera edited through ``params`` stay in the resized copy (the reload
+    alone gives the file's values): the render equals one of a scene loaded at that size with
+    the same edits made."""
+    edits = {"ball.base_color.value": mi.Color3f(0.1, 0.7, 0.9), "ball.roughness.value": mi.Float(0.05),
+             "sensor.to_world": mi.ScalarTransform4f().look_at(origin=[1.0, 1.5, 4.0], target=[0, 0.6, 0],
+                                                                up=[0, 1, 0])}
+    p = tiny_scene.params
+    for k, v in edits.items():
+        p[k] = v
+    p.update()
+    img = np.array(draaw_mi.render(tiny_scene, version="path", resolution=(16, 12)))
+    ref_scene = draaw_mi.load_scene(tiny_description(resolution=[16, 12]))
+    q = ref_scene.params
+    for k, v in edits.items():
+        q[k] = v
+    q.update()
+    ref = np.array(draaw_mi.render(ref_scene, version="path"))
+    plain = np.array(draaw_mi.render(draaw_mi.load_scene(tiny_description(resolution=[16, 12])), version="path"))
+    assert np.abs(ref - plain).mean() > 0.02                 # the edits show
+    np.testing.assert_allclose(img, ref, atol=1e-6)          # same seed, same scene: the same image
+
+
+@pytest.mark.parametrize("axis", ["y", "diagonal", "smaller"])
+def test_with_resolution_keeps_the_fov_axis_angle(axis):
+    """On a camera whose fov is along y (or the diagonal, the smaller side) a new aspect ratio
+    changes Mitsuba's ``x_fov``: the resized copy has the ``x_fov`` Mitsuba itself derives when
+    the file is loaded at that size."""
+    desc = tiny_description(resolution=[32, 16])
+    desc["camera"]["fov_axis"] = axis
+    resized = draaw_mi.load_scene(desc).with_resolution(12, 20)
+    desc["render"]["resolution"] = [12, 20]
+    ref = draaw_mi.load_scene(desc)
+    assert resized.params["sensor.x_fov"][0] == pytest.approx(ref.params["sensor.x_fov"][0], rel=1e-5)
+    assert ref.params["sensor.x_fov"][0] != pytest.approx(draaw_mi.load_scene(
+        tiny_description(resolution=[32, 16]) | {"camera": desc["camera"]}).params["sensor.x_fov"][0], rel=1e-3)
+
+
+def test_render_resolution_with_params_is_refused(tiny_scene):
+    """``params`` belong to the scene given; a resized render is of a reloaded copy, so its
+    gradients would never reach them: refused, naming the way out."""
+    with pytest.raises(draaw_mi.RenderError, match="with_resolution"):
+        draaw_mi.render(tiny_scene, version="v2", resolution=(16, 12), params=tiny_scene.params)
+    # the scene's own size is no resize: allowed
+    draaw_mi.render(tiny_scene, version="v2", spp=1, resolution=tiny_scene.resolution, params=tiny_scene.params)
+
+
 def test_mesh_with_mtl_materials(tmp_path):
     (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl blue\nKd 0.1 0.1 0.8\n")
     (tmp_path / "m.obj").write_text(

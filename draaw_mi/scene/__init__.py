@@ -147,7 +147,9 @@ class DraawScene:
         raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
 
     def with_resolution(self, width: int, height: int) -> "DraawScene":
-        """The same scene with another film size (reloads the Mitsuba scene)."""
+        """The same scene with another film size. It reloads the Mitsuba scene and carries the
+        current parameter values over (:func:`~draaw_mi.scene.carry.carry_values`): edits
+        made through :attr:`params` stay; the copy has its own ``mi.traverse``."""
         if (width, height) == self.resolution:
             return self
         if self.mi_dict is None:
@@ -159,8 +161,11 @@ class DraawScene:
         sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
         d["sensor"] = sensor
         settings = dict(self.settings, resolution=(int(width), int(height)))
-        return DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp,
+        scaled = DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
+        from .carry import carry_values
+        carry_values(self, scaled)
+        return scaled
 
     def updated_description(self, values: dict, dest: str | None = None) -> dict:
         """The scene description with ``{"material.parameter": value}`` written into its
