@@ -188,10 +188,9 @@ def _cmd_render(args) -> int:
     post = None
     if args.post:
         post = _load_chain(args.post)
-    # 16-spp passes whether a bar shows or not: the passes' seeds make the samples, and the
-    # same command gave another image in a terminal (bar) than in a pipe
+    # (render's pass layout does not follow the progress mode: the same image in a terminal
+    # as in a pipe)
     image, info = draaw_mi.render(scene, version=args.version, time_budget=args.time_budget, post=post,
-                                  pass_spp=16,
                                   progress=progress_mode(args.no_progress), return_info=True,
                                   denoise=args.denoise)
     arr = np.array(image)

@@ -253,7 +253,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         (for logs, :mod:`draaw_mi.progress`).
     time_budget: seconds; stop after the pass that reaches it (at least one pass runs); the
         image is the mean of the passes done (``return_info`` tells how many samples).
-    pass_spp: samples per pass (default: all at once up to 256, 16 with a progress bar/budget).
+    pass_spp: samples per pass (default: all at once up to 256, 16 with a time budget). The
+        bar advances per pass: give e.g. 16 for a finer one (another layout of passes draws
+        other samples: another image of the same expectation).
     post: a post-processing chain (list of dicts) to apply; default the scene's ``post``;
         ``[]`` disables it.
     hide_emitters: hide directly seen lights (default: the scene's ``render.hide_emitters``).
@@ -307,7 +309,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
         raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
     if pass_spp is None:
-        pass_spp = min(spp, 16 if (progress in (True, "bar") or time_budget) else MAX_PASS_SPP)
+        # Not after the progress mode: the passes' seeds make the samples (a bar gave another
+        # image than none), and V4 samples adaptively only in passes of 64 spp or more.
+        pass_spp = min(spp, 16 if time_budget else MAX_PASS_SPP)
     _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     if aovs is None:

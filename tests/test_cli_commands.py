@@ -104,7 +104,7 @@ def test_render_warns_of_non_finite_pixels_even_behind_a_post_chain(tmp_path, ch
 
 
 def test_render_gives_one_image_with_a_bar_or_without(tmp_path, monkeypatch):
-    """Passes of 16 samples either way: a bar made 16-spp passes, a pipe one of 48, and
+    """One pass layout either way: a bar made 16-spp passes, a pipe one of 48, and
     their seeds other samples (the same command gave two images)."""
     import draaw_mi.cli as cli
     desc = tiny_description(resolution=[8, 6], spp=48)
