@@ -239,12 +239,20 @@ def write_preview(spec: dict, image: np.ndarray | None = None) -> None:
 
 
 def _png_hash(path: str) -> str | None:
-    """The frame hash a preview carries, ``""`` for a PNG without one, ``None`` for a missing
-    or unreadable file."""
+    """The frame hash a preview carries, ``""`` for a PNG without one, ``None`` for a missing,
+    unreadable or cut-short file (its hash, written ahead of the pixels, survives a cut: the
+    file must end in the IEND chunk)."""
     from PIL import Image
 
     try:
+        with open(path, "rb") as f:
+            f.seek(-len(_PNG_END), os.SEEK_END)
+            if f.read() != _PNG_END:
+                return None
         with Image.open(path) as im:          # reads the chunks before the pixels only
             return str(im.info.get(HASH_ATTR, ""))
     except (OSError, ValueError):
         return None
+
+
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"     # the IEND chunk: length 0, type, CRC

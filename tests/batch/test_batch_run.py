@@ -453,3 +453,19 @@ def test_a_job_without_a_seed_or_chain_takes_its_scenes(tmp_path):
     ref = draaw_mi.render(draaw_mi.load_scene(jobs[1]["scene"]), spp=4, seed=frame_seed(99, 0))
     assert np.array_equal(b, np.array(ref))
     assert json.loads(batch.read_header(specs[0]["output"])["draaw:post"]) == chain
+
+
+def test_a_cut_short_preview_is_written_again(tmp_path):
+    """A PNG cut short (a full disk, a copy stopped) still carries its frame's hash, which comes
+    ahead of the pixels: it counted as this frame's finished preview and was never mended."""
+    from PIL import Image
+    doc = manifest(tmp_path, frames=1, previews=True)
+    assert batch.run(doc, progress=False).rendered == 1
+    png = tmp_path / "out" / "orbit" / "0000.png"
+    whole = png.read_bytes()
+    png.write_bytes(whole[:len(whole) - 20])                     # the IEND chunk and a bit more
+    res = batch.run(doc, progress=False)
+    assert res.rendered == 0 and res.previews == 1 and res.complete
+    assert png.read_bytes() == whole
+    with Image.open(png) as im:
+        im.load()                                                # reads to the end: whole
