@@ -81,8 +81,15 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
     sources = [k for k in ("file", "procedural", "density", "occupied") if k in entry]
     if not sources:
         raise where.error("needs a grid: one of 'file', 'procedural', 'density' or 'occupied'")
-    if "file" in sources and len(sources) > 1:
-        raise where.error(f"give either 'file' or inline arrays / 'procedural', not {' and '.join(sources)}")
+    if ("file" in sources or "procedural" in sources) and len(sources) > 1:
+        raise where.error(f"give one of 'file', 'procedural' or inline arrays, not {' and '.join(sources)}")
+    voxelised = "file" in entry and str(entry["file"]).lower().endswith(MESH_SUFFIXES)
+    for key in ("resolution", "fill"):
+        if key in entry and not voxelised:
+            # (they were taken and ignored: a grid that is not a voxelised mesh has its own size)
+            hint = "; a procedural grid's size is procedural.resolution" if "procedural" in entry else ""
+            raise (where / key).error(f"'{key}' sets how a mesh 'file' is voxelised; this volume has "
+                                      f"no mesh file{hint}")
     seed = int(number(entry.get("seed", 0), where / "seed", lo=0, integer=True))
     bounds = _bounds(entry["bounds"], where) if "bounds" in entry else None
     kw = {} if bounds is None else {"bbox_min": bounds[0], "bbox_max": bounds[1]}

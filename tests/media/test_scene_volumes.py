@@ -94,6 +94,12 @@ def base_desc(**vol):
      r"procedural\.resolution\[0\]: 8\.5 is not an integer"),
     ({"density": None, "procedural": {"type": "plume", "resolution": [8, 8]}}, r"list of 3 integers"),
     ({"density": None, "procedural": {"type": "plume", "resolution": 4800}}, r"4800 is out of range"),
+    # keys that were taken and ignored: a second grid beside a procedural one, a mesh's
+    # voxelisation settings on a grid that is no mesh
+    ({"procedural": {"type": "plume"}}, r"one of 'file', 'procedural' or inline arrays, not procedural and density"),
+    ({"resolution": 32}, r"volumes\[0\]\.resolution: 'resolution' sets how a mesh 'file' is voxelised"),
+    ({"density": None, "procedural": {"type": "plume"}, "fill": "solid"},
+     r"\.fill: .*no mesh file; a procedural grid's size is procedural\.resolution"),
 ])
 def test_bad_volume_entries_are_one_scene_error(vol, match):
     desc = base_desc(**vol)
