@@ -244,9 +244,25 @@ class Preview:
                 check_like(p[key], v, key)
             except DraawError as e:
                 raise ParameterError(f"Preview.update: {name}: {e}") from None
+            if key == "sensor.to_world":
+                self._check_camera_outside_smoke(name, v)
         with self._lock:
             self._pending.update(checked)
             return self._bump()
+
+    def _check_camera_outside_smoke(self, name: str, to_world) -> None:
+        """Refuse a camera moved into a ``[[volumes]]`` smoke box, as a scene file's or a
+        batch path's camera is (the smoke would be missing around it)."""
+        volumes = self.scene.info.get("volumes", [])
+        if not volumes:
+            return
+        from .media.scene_volumes import check_camera_outside_smoke
+        from .scene.schema import Where
+        m = np.asarray(getattr(to_world, "matrix", to_world), float).reshape(4, 4, -1)[:, :, 0]
+        try:
+            check_camera_outside_smoke(m[:3, 3], volumes, Where("Preview.update"))
+        except DraawError as e:
+            raise ParameterError(f"{e} ({name})") from None
 
     def _bump(self) -> int:
         self._generation += 1

@@ -98,6 +98,8 @@ class CameraPanel:
             raise DraawError("this scene has no [camera] table to orbit")
         o, t, up = self._camera_now()
         values = {"sensor.to_world": tuning.look_at(o, t, up)}
+        # (refused before the lights follow: a camera moved into smoke moved them regardless)
+        self.preview._check_camera_outside_smoke("camera", values["sensor.to_world"])
         if self.snap_light.value or self._camera_lights:
             self._set_lights(positions_only=True)
         self._changed(values)

@@ -239,3 +239,27 @@ def test_a_snap_to_camera_spot_light_follows_the_orbit(tmp_path, target):
         np.testing.assert_allclose(frame(saved), now, atol=1e-5)
     finally:
         t.close()
+
+
+def test_an_orbit_into_a_smoke_box_is_refused_before_the_lights_follow():
+    """Zooming the camera into a [[volumes]] smoke box: refused with the scene file's message,
+    the slider goes back, and snapped point lights stay where the camera still is (they moved
+    to the refused camera)."""
+    desc = tiny_description()
+    desc["volumes"] = [{"name": "fog", "mode": "smoke", "density": [[[1.0]]],
+                        "bounds": [[-1.5, -0.5, -1.5], [1.5, 2.5, 1.5]]}]
+    t = _tuner(draaw_mi.load_scene(desc))
+    try:
+        key = "point_light0.position"
+        t.snap_light.value = True
+        t.refresh()
+        placed = np.array(t.scene.params[key]).ravel().copy()
+        to_world = np.array(t.scene.params["sensor.to_world"].matrix).copy()
+        t.distance.value = 0.1                     # 0.5 units from the target: inside the box
+        assert "inside smoke volume 'fog'" in t.message.value
+        assert t.distance.value == 1.0
+        t.refresh()
+        np.testing.assert_array_equal(np.array(t.scene.params["sensor.to_world"].matrix), to_world)
+        np.testing.assert_array_equal(np.array(t.scene.params[key]).ravel(), placed)
+    finally:
+        t.close()

@@ -177,10 +177,11 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         opaque = hit & ~null
         # emission of what the ray finally sees (surface or environment)
         seen = (live & ~si.is_valid()) | opaque
-        Le = si.emitter(scene).eval(si, seen)
-        if dr.hint(integ.hide_emitters, mode="scalar"):
-            Le = dr.select(n == 0, 0.0, Le)
-        L[seen] = L + T * Le
+        # (the march never turns: every segment is the camera ray, so what it ends on is seen
+        # directly, through any number of smoke boundaries; hiding only segment 0 showed the
+        # sky through a smoke box)
+        if dr.hint(not integ.hide_emitters, mode="scalar"):
+            L[seen] = L + T * si.emitter(scene).eval(si, seen)
         # direct light at the surface
         m2 = dr.select(si.is_medium_transition(), si.target_medium(si.to_world(si.wi)), medium)
         ds, Lw = _light(scene, sampler, si, m2, steps, opaque, sdf)

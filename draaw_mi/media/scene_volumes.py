@@ -207,5 +207,5 @@ def check_camera_outside_smoke(origin, volume_info: list, where) -> None:
         lo, hi = (np.asarray(b, float) for b in v["bounds"])
         if v["mode"] == "smoke" and np.all(o > lo) and np.all(o < hi):
             raise (where / "camera").error(
-                f"the camera at {o.tolist()} is inside smoke volume {v['name']!r} (bounds {lo.tolist()} - "
+                f"the camera at {[float(f'{x:.6g}') for x in o]} is inside smoke volume {v['name']!r} (bounds {lo.tolist()} - "
                 f"{hi.tolist()}); a camera inside a [[volumes]] box is not supported: move it outside")

@@ -228,3 +228,21 @@ def test_a_batch_camera_path_through_a_smoke_box_is_a_bad_manifest(tmp_path, cap
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "frame 2" in err and "inside smoke volume 'v'" in err, err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("as_jit", [False, True])
+def test_a_preview_camera_moved_into_a_smoke_box_is_refused(as_jit):
+    """The scene file's camera is checked at load and a batch path's per frame; a preview's
+    (the tuner's orbit) was not, and rendered the smoke as absent around it."""
+    import mitsuba as mi
+    from draaw_mi.errors import ParameterError
+    from draaw_mi.preview import Preview
+    pv = Preview(draaw_mi.load_scene(base_desc()), version="v2", freeze=False, seed=1)
+    inside = mi.ScalarTransform4f().look_at(origin=[0.2, 0.0, 0.5], target=[0, 0, -3], up=[0, 1, 0])
+    outside = mi.ScalarTransform4f().look_at(origin=[0.2, 0.0, 2.5], target=[0, 0, -3], up=[0, 1, 0])
+    wrap = mi.Transform4f if as_jit else (lambda t: t)
+    with pytest.raises(ParameterError, match=r"the camera at \[0\.2, 0\.0, 0\.5\] is inside smoke "
+                                             r"volume 'v'.*\(sensor\.to_world\)"):
+        pv.update({"sensor.to_world": wrap(inside)})
+    pv.update({"sensor.to_world": wrap(outside)})
+    assert pv.step() is not None and pv.error is None
