@@ -524,7 +524,8 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     # ---- end [[volumes]] ------------------------------------------------------------------
 
     if camera_table is None:
-        camera_table = cam.auto_camera(*_scene_bounds(shape_entries))
+        from .framing import scene_bounds
+        camera_table = cam.auto_camera(*scene_bounds(shape_entries, sdf_scene))
     look_at = cam.camera_to_look_at(camera_table, where / "camera")
     if volume_info:
         from ..media.scene_volumes import check_camera_outside_smoke
@@ -569,25 +570,6 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     info["files"] = [f for f in ctx.files if os.path.isfile(f)]
     info["relative_files"] = dict(ctx.relative)
     return scene, settings, info
-
-
-def _scene_bounds(shape_entries: dict):
-    """Approximate world bounds of the shapes (for automatic cameras)."""
-    import mitsuba as mi
-
-    los, his = [], []
-    for d in shape_entries.values():
-        try:
-            shape = d if not isinstance(d, dict) else \
-                mi.load_dict({k: v for k, v in d.items() if k not in ("bsdf", "emitter", "interior")})
-        except Exception:  # noqa: BLE001 - bounds are best effort
-            continue
-        bb = shape.bbox()
-        los.append(np.array(bb.min))
-        his.append(np.array(bb.max))
-    if not los:
-        return np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0])
-    return np.min(los, axis=0), np.max(his, axis=0)
 
 
 def auto_light(bbox_min, bbox_max, origin) -> list[dict]:

@@ -35,12 +35,26 @@ OPEN_MARGIN = 1e-4
 
 def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
     try:
-        v = tuple(float(x) for x in value)
+        if dr.is_array_v(value):     # a Dr.Jit array (mi.Vector3f: float() refused its entries)
+            v = tuple(float(x) for x in np.array(dr.detach(value), dtype=np.float64).reshape(-1))
+        else:
+            v = tuple(float(x) for x in value)
     except TypeError:
         raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise ParameterError(f"{where}: {name}={value!r}; expected 3 finite numbers")
     return v
+
+
+def _as_point3(value):
+    """A JIT 3-vector of another type (``mi.Vector3f``, ``mi.Normal3f``, ``mi.Color3f``) as
+    the ``mi.Point3f`` a node stores (width 1), its AD edges kept; anything else unchanged (they were
+    refused as "expected 3 numbers")."""
+    if (dr.is_array_v(value) and dr.is_jit_v(value) and not isinstance(value, mi.Point3f)
+            and dr.depth_v(value) == 2 and dr.size_v(value) == 3 and dr.type_v(value) == dr.VarType.Float32
+            and dr.backend_v(value) == dr.backend_v(mi.Float) and dr.width(value) == 1):
+        return mi.Point3f(value)
+    return value
 
 
 def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool = False) -> float:
@@ -181,6 +195,7 @@ class SDFNode:
                                  f"{suggest(key, self._params)}")
         old = self._params[key]
         lo = getattr(self, "_lower_bounds", {}).get(key)
+        value = _as_point3(value) if isinstance(old, mi.Point3f) else value
         if dr.is_array_v(value) and type(value) is type(old):
             if lo is not None:
                 # an optimiser's step can leave the range (a negative radius made the object

@@ -53,7 +53,7 @@ class TracerOptions:
                                  "(0, 5e-5] (relative to the objects' size plus the distance; Mitsuba offsets rays "
                                  "by ~9e-5)")
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
-            raise ParameterError(f"sdf tracer: max_steps={max_steps!r}; expected an integer >= 1")
+            raise ParameterError(f"sdf tracer: max_steps={max_steps!r}; expected a whole number >= 1")
         if not (isinstance(relaxation, (int, float)) and 1.0 <= relaxation < 2.0):
             raise ParameterError(f"sdf tracer: relaxation={relaxation!r}; expected a number in [1, 2)")
         self.hit_epsilon = float(hit_epsilon)
@@ -63,13 +63,13 @@ class TracerOptions:
     @classmethod
     def from_props(cls, props, plugin: str) -> "TracerOptions":
         kw = {}
-        for prop, key, conv in (("sdf_epsilon", "hit_epsilon", float), ("sdf_max_steps", "max_steps", int),
+        for prop, key, conv in (("sdf_epsilon", "hit_epsilon", float), ("sdf_max_steps", "max_steps", _whole),
                                 ("sdf_relaxation", "relaxation", float)):
             if prop in props:
                 v = props[prop]
                 try:
                     kw[key] = conv(v) if not isinstance(v, bool) else v
-                except (TypeError, ValueError):
+                except (TypeError, ValueError, OverflowError):
                     raise ParameterError(f"{plugin}: {prop}={v!r} is not a number") from None
         try:
             return cls(**kw)
@@ -83,6 +83,16 @@ class TracerOptions:
     def __repr__(self) -> str:
         return (f"TracerOptions(hit_epsilon={self.hit_epsilon:g}, max_steps={self.max_steps}, "
                 f"relaxation={self.relaxation:g})")
+
+
+def _whole(v):
+    """``int`` of a whole number (64, 64.0, "64"); anything else as it is, for the constructor
+    to refuse by name (``int`` truncated 64.7 to 64 without a word)."""
+    if isinstance(v, str):
+        v = float(v)
+    if isinstance(v, float) and v.is_integer():
+        return int(v)
+    return v
 
 
 def _max_abs(p) -> mi.Float:

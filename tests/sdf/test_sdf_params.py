@@ -87,6 +87,42 @@ def test_check_value_refuses_without_changing_anything(key, value, match):
     sc.check_value("demo", key, key, [0.0, 1.0, 0.0] if key.endswith("center") else 0.25)
 
 
+@pytest.mark.parametrize("make", [mi.Vector3f, mi.Point3f, mi.ScalarVector3f, mi.Normal3f])
+def test_a_mitsuba_3_vector_sets_a_centre_as_a_list_does(make):
+    """``mi.Vector3f(1, 2, 3)`` was refused with "expected 3 numbers" (only ``mi.Point3f``,
+    the type the node stores, and scalar vectors were taken)."""
+    sc, _ = _scene()
+    target = [0.2, 0.7, 0.1]
+    sc.all_params["sdf.ball.center"] = target
+    sc.all_params.update()
+    ref = np.array(draaw_mi.render(sc, version="v2", spp=2, seed=3, post=[]))
+    sc.all_params["sdf.ball.center"] = [0.0, 0.8, 0.0]
+    sc.check_value("demo", "sdf.ball.center", "sdf.ball.center", make(*target))
+    sc.all_params["sdf.ball.center"] = make(*target)
+    sc.all_params.update()
+    assert np.allclose([c[0] for c in (sc.sdf.nodes["ball"].center.x, sc.sdf.nodes["ball"].center.y,
+                                       sc.sdf.nodes["ball"].center.z)], target)
+    img = np.array(draaw_mi.render(sc, version="v2", spp=2, seed=3, post=[]))
+    assert np.array_equal(img, ref)
+    with pytest.raises(ParameterError, match="expected 3 finite numbers"):     # two vectors
+        sc.all_params["sdf.ball.center"] = mi.Vector3f([0, 1], [1, 1], [0, 0])
+
+
+def test_a_mitsuba_vector_centre_keeps_its_gradient():
+    sc, _ = _scene()
+    grads = []
+    for make in (mi.Point3f, mi.Vector3f):
+        v = make(0.0, 0.8, 0.0)
+        dr.enable_grad(v)
+        sc.all_params["sdf.ball.center"] = v
+        sc.all_params.update()
+        img = draaw_mi.render(sc, version="v4", spp=2, seed=1, params=sc.all_params, post=[])
+        dr.backward(dr.sum(img[..., :3], axis=None))
+        grads.append(np.array(dr.grad(v)).ravel())
+    assert np.all(np.isfinite(grads[0])) and np.abs(grads[0]).max() > 0, grads
+    assert np.allclose(grads[0], grads[1], rtol=1e-4, atol=1e-6), grads
+
+
 def test_ranges_an_optimiser_projects_onto():
     from draaw_mi.fit import _range_for
     from draaw_mi.sdf.node import OPEN_MARGIN

@@ -185,6 +185,19 @@ def test_tracer_options_validated():
     assert integ.sdf_tracer.max_steps == 64
 
 
+@pytest.mark.parametrize("value", [64.7, 0.5, float("inf")])
+def test_a_fractional_max_steps_is_refused_by_name(value):
+    """``int()`` truncated sdf_max_steps = 64.7 to 64 without a word (inf: an OverflowError)."""
+    d = base_description((8, 8))
+    d["sdf"] = [{"type": "sphere", "name": "ball", "material": "ball", "center": [0, 0.8, 0], "radius": 0.8}]
+    scene = draaw_mi.load_scene(d)
+    with pytest.raises(draaw_mi.RenderError,
+                       match=rf"draaw_v2: sdf_max_steps={value!r}; expected a whole number >= 1"):
+        draaw_mi.render(scene, version="v2", spp=1, integrator_options={"sdf_max_steps": value})
+    integ = mi.load_dict({"type": "draaw_v2", "sdf_max_steps": 64.0})      # a whole float is taken
+    assert integ.sdf_tracer.max_steps == 64 and type(integ.sdf_tracer.max_steps) is int
+
+
 _ = dr
 
 

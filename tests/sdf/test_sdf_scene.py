@@ -192,3 +192,32 @@ def test_a_list_of_rotations_turns_meshes_and_sdf_objects_alike():
     assert np.allclose(m[:3, :3] @ [0, 0, 1], [0, -1, 0], atol=1e-6)
     node = _transform_of(table, Where("t"), Sphere(radius=0.5))
     assert np.allclose(node.rotation @ [0, 0, 1], [0, -1, 0], atol=1e-6)
+
+
+def _bare(kind, entries):
+    """No [camera], no floor: only ``entries`` as [[shapes]] or [[sdf]], under a sky."""
+    return {"render": {"resolution": [32, 32], "spp": 1, "max_depth": 2, "filter": "box"},
+            "materials": {"m": {"base_color": [0.8, 0.3, 0.2]}},
+            "lights": [{"type": "constant", "intensity": 1.0}],
+            kind: [dict(e, material="m") for e in entries]}
+
+
+def test_the_automatic_camera_frames_sdf_objects_as_it_frames_shapes():
+    """The automatic camera saw the SDF objects only through their proxy (a point at the
+    centre of their boxes): it looked at the right place from too close, and two objects 8
+    apart both left the picture. Their boxes count now; a Mitsuba sphere with the same centre
+    and radius (the same box) is the reference."""
+    one = [{"type": "sphere", "name": "obj", "center": [5.0, 0.0, 0.0], "radius": 1.0}]
+    cam = draaw_mi.load_scene(_bare("sdf", one)).info["camera"]
+    ref = draaw_mi.load_scene(_bare("shapes", one)).info["camera"]
+    assert np.allclose(cam["target"], [5.0, 0.0, 0.0]) and np.allclose(cam["target"], ref["target"])
+    assert np.allclose(cam["origin"], ref["origin"], atol=1e-5), (cam, ref)
+    two = [{"type": "sphere", "name": "a", "center": [4.0, 0.0, 0.0], "radius": 1.5},
+           {"type": "sphere", "name": "b", "center": [-4.0, 0.0, 0.0], "radius": 1.5}]
+    s = draaw_mi.load_scene(_bare("sdf", two))
+    ref2 = draaw_mi.load_scene(_bare("shapes", two)).info["camera"]
+    assert np.allclose(s.info["camera"]["origin"], ref2["origin"], atol=1e-5)
+    img = np.array(draaw_mi.render(s, version="v2", spp=1, seed=0, post=[]))[..., :3]
+    sky = np.all(np.abs(img - 1.0) < 1e-3, axis=2)       # a constant sky of 1 seen directly
+    assert sky.mean() > 0.3                               # framed, not filling the picture
+    assert (~sky[:, :16]).sum() >= 10 and (~sky[:, 16:]).sum() >= 10, sky.astype(int)
