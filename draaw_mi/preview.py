@@ -245,14 +245,16 @@ class Preview:
             except DraawError as e:
                 raise ParameterError(f"Preview.update: {name}: {e}") from None
             if key == "sensor.to_world":
-                self._check_camera_outside_smoke(name, v)
+                self.check_camera_outside_smoke(name, v)
         with self._lock:
             self._pending.update(checked)
             return self._bump()
 
-    def _check_camera_outside_smoke(self, name: str, to_world) -> None:
-        """Refuse a camera moved into a ``[[volumes]]`` smoke box, as a scene file's or a
-        batch path's camera is (the smoke would be missing around it)."""
+    def check_camera_outside_smoke(self, name: str, to_world) -> None:
+        """Raise :class:`~draaw_mi.errors.ParameterError` if ``to_world`` (a camera transform,
+        ``name`` in the message) puts the camera inside a ``[[volumes]]`` smoke box, as a scene
+        file's or a batch path's camera is refused (the smoke would be missing around it).
+        :meth:`update` checks ``sensor.to_world``; the tuner checks before its lights follow."""
         volumes = self.scene.info.get("volumes", [])
         if not volumes:
             return

@@ -283,8 +283,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     """
     check_mode(progress, "render")
     if adaptive is not None and (time_budget is not None or pass_spp is not None):
-        raise RenderError("render: adaptive= renders every sample in one launch; drop "
-                          f"time_budget={time_budget!r} / pass_spp={pass_spp!r}, or adaptive=")
+        given = "time_budget" if time_budget is not None else "pass_spp"
+        raise RenderError(f"render: adaptive= renders every sample in one launch, without passes; "
+                          f"drop {given}= or adaptive=")
     from .scene import DraawScene, load_scene
 
     if not isinstance(scene, DraawScene):

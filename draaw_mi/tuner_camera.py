@@ -99,7 +99,7 @@ class CameraPanel:
         o, t, up = self._camera_now()
         values = {"sensor.to_world": tuning.look_at(o, t, up)}
         # (refused before the lights follow: a camera moved into smoke moved them regardless)
-        self.preview._check_camera_outside_smoke("camera", values["sensor.to_world"])
+        self.preview.check_camera_outside_smoke("camera", values["sensor.to_world"])
         if self.snap_light.value or self._camera_lights:
             self._set_lights(positions_only=True)
         self._changed(values)

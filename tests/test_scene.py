@@ -152,6 +152,20 @@ def test_with_resolution_keeps_parameter_edits(tiny_scene):
     np.testing.assert_allclose(img, ref, atol=1e-6)          # same seed, same scene: the same image
 
 
+def test_with_resolution_keeps_edited_vertices_and_only_those():
+    """Mesh buffers are written over only where edited (each write rebuilds the BVH): a
+    moved box arrives moved, the untouched one as loaded."""
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=(16, 16))
+    p = scene.params
+    moved = np.array(p["small_box.vertex_positions"]) + 0.1
+    p["small_box.vertex_positions"] = mi.Float(moved.astype(np.float32))
+    p.update()
+    resized = scene.with_resolution(8, 8)
+    np.testing.assert_allclose(np.array(resized.params["small_box.vertex_positions"]), moved, atol=1e-6)
+    np.testing.assert_array_equal(np.array(resized.params["tall_box.vertex_positions"]),
+                                  np.array(p["tall_box.vertex_positions"]))
+
+
 @pytest.mark.parametrize("axis", ["y", "diagonal", "smaller"])
 def test_with_resolution_keeps_the_fov_axis_angle(axis):
     """On a camera whose fov is along y (or the diagonal, the smaller side) a new aspect ratio

@@ -14,6 +14,8 @@ from .camera import x_fov
 
 #: traverse keys not carried besides the films (what changes): faces cannot be edited
 _SKIP_SUFFIXES = (".faces",)
+#: written only when edited: writing a mesh buffer rebuilds the mesh's BVH
+_GEOMETRY_SUFFIXES = (".vertex_positions", ".vertex_normals", ".vertex_texcoords")
 
 
 def fov_for_aspect(old_x_fov: float, fov_axis: str, old_size, new_size) -> float:
@@ -44,6 +46,7 @@ def carry_values(src, dst) -> None:
     unnamed objects) are skipped; the sensor's ``x_fov`` is converted so that the file's
     ``fov_axis`` keeps its angle (:func:`fov_for_aspect`)."""
     import mitsuba as mi
+    import numpy as np
     from ..guard import RENDER_GUARD
     from .camera import scene_fov
     sp, dp = src.params, dst.params
@@ -53,6 +56,8 @@ def carry_values(src, dst) -> None:
         if ".film." in key or key.endswith(_SKIP_SUFFIXES) or key not in sp:
             continue
         value = sp[key]
+        if key.endswith(_GEOMETRY_SUFFIXES) and np.array_equal(np.asarray(value), np.asarray(dp[key])):
+            continue
         if key.endswith("x_fov"):
             value = mi.Float(fov_for_aspect(float(value[0]), axis, src.resolution, dst.resolution))
         dp[key] = value
