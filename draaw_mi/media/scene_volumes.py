@@ -20,7 +20,8 @@ One entry is one voxel grid, rendered as solid voxels or as smoke::
     material = "clay"                    # a [materials] entry of type draaw (colours from voxels)
     color = [0.8, 0.2, 0.1]              # one colour for every voxel (default: the grid's)
 
-Errors are :class:`SceneError` naming ``file: volumes[i].key``.
+Errors are :class:`SceneError` naming ``file: volumes[i].key``. Smoke boxes may touch but not
+overlap (:func:`check_smoke_boxes_disjoint`).
 """
 from __future__ import annotations
 
@@ -196,6 +197,25 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
         raise where.error(str(e)) from None
     except DraawError:
         raise
+
+
+def check_smoke_boxes_disjoint(volume_info: list, where) -> None:
+    """Two ``[[volumes]]`` smoke boxes that overlap are refused: each box is a null cube with
+    its medium inside, so where they overlap a ray carries one medium, not the sum, and on
+    leaving the inner box it carries none while still inside the outer one (volpath and
+    every version render light leaking through the overlap). Boxes may touch: a ray crossing
+    a shared face leaves one medium for the other."""
+    smoke = [(i, v, *(np.asarray(b, float) for b in v["bounds"]))
+             for i, v in enumerate(volume_info) if v["mode"] == "smoke"]
+    for a in range(len(smoke)):
+        for b in range(a):
+            i, v, lo, hi = smoke[a]
+            _, u, lo2, hi2 = smoke[b]
+            if np.all(np.minimum(hi, hi2) > np.maximum(lo, lo2)):
+                raise (where / "volumes" / i / "bounds").error(
+                    f"smoke volume {v['name']!r} (bounds {lo.tolist()} - {hi.tolist()}) overlaps smoke "
+                    f"volume {u['name']!r} (bounds {lo2.tolist()} - {hi2.tolist()}); overlapping smoke "
+                    "boxes do not add up: merge them into one grid, or move them apart (they may touch)")
 
 
 def check_camera_outside_smoke(origin, volume_info: list, where) -> None:

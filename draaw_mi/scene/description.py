@@ -521,6 +521,8 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
                     raise (where / "volumes" / i / "name").error(f"duplicate name {key!r}")
                 shape_entries[key] = d
             volume_info.append(vinfo)
+        from ..media.scene_volumes import check_smoke_boxes_disjoint
+        check_smoke_boxes_disjoint(volume_info, where)
     # ---- end [[volumes]] ------------------------------------------------------------------
 
     if camera_table is None:
