@@ -211,7 +211,8 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
               encoded: bool = False) -> None:
-    """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically.
+    """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically: 1 (grey), 2 (grey,
+    alpha), 3 (RGB) or 4 (RGBA) channels; of more (AOVs), the first 3. Alpha is stored linear.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
@@ -231,8 +232,8 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
         raise IOFailure(f"write_png({path!r}): exposure={exposure!r} needs a linear image; "
                         "this one is display-encoded (encoded=True)")
     out = np.clip(np.nan_to_num(rgb), 0.0, 1.0) if encoded else srgb_encode(rgb * (2.0 ** exposure))
-    if c == 4:
-        out = np.concatenate([out, np.clip(arr[..., 3:4], 0, 1)], axis=2)
+    if c in (2, 4):                  # (grey, alpha) kept its alpha too
+        out = np.concatenate([out, np.clip(np.nan_to_num(arr[..., c - 1:c]), 0, 1)], axis=2)
     u8 = np.round(out * 255.0).astype(np.uint8)
     with atomic_path(path, ".png") as tmp:
         try:

@@ -107,6 +107,25 @@ def test_png_is_srgb_encoded(tmp_path):
     assert os.listdir(tmp_path) == ["p.png"]
 
 
+@pytest.mark.parametrize("channels", [2, 4])
+def test_png_keeps_the_alpha_of_grey_and_colour_images(tmp_path, channels):
+    """(grey, alpha) and RGBA images keep their last channel as a linear alpha (a grey image's
+    alpha was dropped); a NaN alpha is stored as 0, by choice rather than by numpy's cast of
+    NaN to uint8 (undefined; it warns). Read back with Pillow."""
+    import warnings
+    from PIL import Image
+    img = np.zeros((2, 3, channels), np.float32)
+    img[..., 0] = 0.18
+    img[..., -1] = [[0.0, 0.25, 1.0], [0.5, np.nan, 2.0]]
+    path = str(tmp_path / "a.png")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        draaw_mi.write_png(path, img)
+    back = np.asarray(Image.open(path).convert("RGBA"))
+    np.testing.assert_array_equal(back[..., 3], [[0, 64, 255], [128, 0, 255]])
+    assert np.all(back[..., 0] == round((1.055 * 0.18 ** (1 / 2.4) - 0.055) * 255))
+
+
 def test_png_and_exr_names_are_not_swapped(tmp_path):
     """write_png wrote an 8-bit PNG under an .exr name (write_exr refused the mirror case)."""
     from draaw_mi.errors import IOFailure

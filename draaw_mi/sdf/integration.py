@@ -72,7 +72,8 @@ class SDFHook:
         """``si`` (mesh hit of ``ray``) with closer SDF hits substituted (detached)."""
         with dr.suspend_grad():
             d = dr.detach(ray.d)
-            tmax = dr.select(si.is_valid(), si.t, dr.inf)
+            # no further than the mesh hit, or than the ray's maxt (a camera's far clip)
+            tmax = dr.select(si.is_valid(), si.t, ray.maxt)
             t, hit, _ = march(self.sdf, ray.o, d, tmax, mi.Bool(active), self.opts)
             p = dr.fma(d, t, ray.o)
             n = normal(self.sdf, mi.Point3f(p), -d)

@@ -197,15 +197,23 @@ class SDFNode:
         lo = getattr(self, "_lower_bounds", {}).get(key)
         value = _as_point3(value) if isinstance(old, mi.Point3f) else value
         if dr.is_array_v(value) and type(value) is type(old):
+            vals = np.array(dr.detach(value), dtype=np.float64)
+            # (a wide array gave one object per lane of the kernel's rays; NaN, no object)
+            if dr.width(value) != 1:
+                raise ParameterError(f"sdf.{self.kind} {self.name!r}: {key} is an array of width "
+                                     f"{dr.width(value)}; expected one value (width 1)")
             if lo is not None:
                 # an optimiser's step can leave the range (a negative radius made the object
                 # vanish with a zero gradient; a zero cone height gave NaN distances)
-                low = float(np.min(np.array(dr.detach(value))))
+                low = float(np.min(vals))
                 if not low > lo:
                     raise ParameterError(
                         f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number > {lo} "
                         f"(clamp an optimiser's value before the update, e.g. "
                         f"opt[k] = dr.maximum(opt[k], 1e-3))")
+            if not np.all(np.isfinite(vals)):
+                raise ParameterError(f"sdf.{self.kind} {self.name!r}: {key}={vals.ravel().tolist()!r}; "
+                                     "expected finite values")
             # made opaque in place (the caller's array, AD edges kept): a literal such as
             # mi.Float(0.6) was baked into the kernel, which then compiled anew for every value
             dr.make_opaque(value)
@@ -252,14 +260,19 @@ class SDFNode:
     def bbox(self) -> mi.ScalarBoundingBox3f:
         raise NotImplementedError
 
+    def fixed_values(self) -> dict:
+        """Shape values that are Python constants, not parameters (shown by :meth:`describe`)."""
+        return {}
+
     def describe(self) -> str:
-        """One line for ``draaw-mi info``."""
+        """One line for ``draaw-mi info``: the parameters, then the fixed values."""
         vals = []
         for k, v in self._params.items():
             if isinstance(v, mi.Point3f):
                 vals.append(f"{k}=({', '.join(f'{c:g}' for c in vec_of(v))})")
             else:
                 vals.append(f"{k}={scalar_of(v):g}")
+        vals += [f"{k}={v}" for k, v in self.fixed_values().items()]
         mat = f" material={self.material}" if self.material else ""
         return f"{self.name}: {self.kind}({', '.join(vals)}){mat}"
 

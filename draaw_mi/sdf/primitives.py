@@ -231,6 +231,9 @@ class Cone(SDFNode):
         sgn = dr.maximum(-(wx * qy - wy * qx), -(wy - qy))
         return dr.sqrt(dr.maximum(d2, 1e-30)) * dr.select(sgn < 0, -1.0, 1.0)
 
+    def fixed_values(self) -> dict:
+        return {"angle": f"{self.angle:g}"}
+
     def bbox(self):
         c, h = vec_of(self.center), scalar_of(self.height)
         r = h * math.tan(math.radians(self.angle))
@@ -254,6 +257,9 @@ class Plane(SDFNode):
 
     def distance(self, p):
         return dr.dot(mi.Vector3f(p), mi.Vector3f(self.normal)) - self.offset
+
+    def fixed_values(self) -> dict:
+        return {"normal": f"({', '.join(f'{c:g}' for c in self.normal)})"}
 
     def bbox(self):
         return infinite_box()

@@ -66,6 +66,20 @@ class Transform(SDFNode):
     def children(self):
         return (self.child,)
 
+    def fixed_values(self) -> dict:
+        if self._identity_rot:
+            return {}
+        # the rotation as an angle about the axis R leaves fixed (its eigenvector of value 1)
+        w, v = np.linalg.eig(self.rotation)
+        axis = np.real(v[:, np.argmin(np.abs(w - 1.0))])
+        angle = math.degrees(math.atan2(0.5 * float(np.dot(axis, [self.rotation[2, 1] - self.rotation[1, 2],
+                                                                  self.rotation[0, 2] - self.rotation[2, 0],
+                                                                  self.rotation[1, 0] - self.rotation[0, 1]])),
+                                        0.5 * (float(np.trace(self.rotation)) - 1.0)))
+        if angle < 0:
+            axis, angle = -axis, -angle
+        return {"rotate": f"{angle:g} deg about ({', '.join(f'{c:.4g}' for c in axis)})"}
+
     def to_local(self, p):
         q = mi.Vector3f(p - self.translate)
         if not self._identity_rot:

@@ -75,6 +75,10 @@ def test_all_params_resolves_sdf_keys_and_shares_the_scene_table():
     ("sdf.blend.k", -1.0, r"k=-1.0; expected >= 0"),
     ("sdf.ball.center", [1.0, 2.0], r"expected 3 finite numbers"),
     ("sdf.ball.radius", float("nan"), r"finite"),
+    # Dr.Jit arrays of the stored type: one value, finite (a wide one was taken as it was)
+    ("sdf.ball.center", mi.Point3f([0.0, 1.0], [0.0, 0.0], [0.0, 0.0]), r"center is an array of width 2; expected one value"),
+    ("sdf.ball.radius", mi.Float([0.3, 0.4]), r"radius is an array of width 2"),
+    ("sdf.ball.center", mi.Point3f(0.0, float("nan"), 0.0), r"center=\[0.0, nan, 0.0\]; expected finite values"),
 ])
 def test_check_value_refuses_without_changing_anything(key, value, match):
     sc, _ = _scene()

@@ -241,3 +241,22 @@ def test_a_closed_sdf_sphere_keeps_the_sky_out(version):
     img = render_np(draaw_mi.load_scene(desc), version, 4, 0)
     assert np.isfinite(img).all()
     assert img.mean() < 5e-3, img.mean()     # (residue: rays that exhaust their steps at the shell)
+
+
+@pytest.mark.parametrize("version", ["v1", "v2", "v3", "v4"])
+def test_sdf_objects_beyond_the_far_clip_are_not_drawn(version):
+    """A ball 4.2 from the camera under a white sky and nothing else: with ``far_clip = 3``
+    every pixel is the sky, as for a Mitsuba sphere (the march ignored the camera ray's
+    ``maxt`` and drew it); with ``far_clip = 6`` it is drawn."""
+    def image(far_clip, sdf=True):
+        desc = base_description(res=(12, 9))
+        desc["shapes"] = []
+        desc["lights"] = [{"type": "constant", "intensity": 1.0}]
+        desc["camera"]["far_clip"] = far_clip
+        ball = {"type": "sphere", "name": "obj", "material": "ball", "center": [0.0, 0.8, 0.0], "radius": 0.8}
+        desc["sdf" if sdf else "shapes"] = [ball]
+        return render_np(draaw_mi.load_scene(desc), version, 4, 0)
+
+    assert np.all(image(3.0, sdf=False) == 1.0)                 # Mitsuba's own sphere
+    assert np.all(image(3.0) == 1.0)
+    assert (image(6.0) < 0.99).mean() > 0.2

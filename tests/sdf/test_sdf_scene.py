@@ -221,3 +221,26 @@ def test_the_automatic_camera_frames_sdf_objects_as_it_frames_shapes():
     sky = np.all(np.abs(img - 1.0) < 1e-3, axis=2)       # a constant sky of 1 seen directly
     assert sky.mean() > 0.3                               # framed, not filling the picture
     assert (~sky[:, :16]).sum() >= 10 and (~sky[:, 16:]).sum() >= 10, sky.astype(int)
+
+
+def test_cli_info_shows_the_fixed_shape_values(tmp_path, capsys):
+    """A cone's angle, a plane's (unit) normal and a transform's rotation are Python constants,
+    not parameters: ``info`` listed neither. The rotation is read back as an angle about an
+    axis and checked against the scene's own ``rotate`` (scipy builds the reference)."""
+    import re
+    from scipy.spatial.transform import Rotation
+    sdf = [{"type": "cone", "name": "tip", "center": [0, 0, 0], "angle": 25, "height": 0.5},
+           {"type": "plane", "name": "ground", "normal": [0, 2, 0], "offset": -0.1},
+           {"type": "box", "name": "tilted", "size": [0.3, 0.3, 0.3], "translate": [1, 0, 0],
+            "rotate": {"axis": [1, 2, -2], "angle": 40}}]
+    p = tmp_path / "shapes.json"
+    p.write_text(json.dumps(_desc(sdf)))
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"tip: cone\(.*angle=25\b", out), out
+    assert "ground: plane(offset=-0.1, normal=(0, 1, 0))" in out, out
+    m = re.search(r"rotate=([-\d.e]+) deg about \(([^)]*)\)", out)
+    assert m, out
+    got = Rotation.from_rotvec(np.radians(float(m.group(1))) * np.array([float(v) for v in m.group(2).split(",")]))
+    want = Rotation.from_rotvec(np.radians(40) * np.array([1, 2, -2]) / 3.0)
+    assert np.allclose(got.as_matrix(), want.as_matrix(), atol=1e-3), (m.group(0), out)
