@@ -84,10 +84,10 @@ def pool_between_centres(data: np.ndarray, k) -> np.ndarray:
     voxel coordinate ``0.5 - k`` (voxel ``i`` spans ``[i, i + 1)``, its centre ``i + 0.5``).
 
         >>> import numpy as np
-        >>> pool_between_centres(np.array([0., 0., 5., 0.])[:, None, None], (1, 1, 1))[:, 0, 0]
-        array([0., 0., 5., 5., 0.])
-        >>> pool_between_centres(np.array([0., 0., 5., 0.])[:, None, None], (2, 1, 1))[:, 0, 0]
-        array([0., 5., 5.])
+        >>> pool_between_centres(np.array([0., 0., 5., 0.])[:, None, None], (1, 1, 1))[:, 0, 0].tolist()
+        [0.0, 0.0, 5.0, 5.0, 0.0]
+        >>> pool_between_centres(np.array([0., 0., 5., 0.])[:, None, None], (2, 1, 1))[:, 0, 0].tolist()
+        [0.0, 5.0, 5.0]
     """
     out = data
     for a in range(3):
