@@ -83,8 +83,9 @@ CASES = {
 
 
 def use(scheme):
+    """Majorant tables built from now on use ``scheme`` (a scene keeps the table of its first
+    render: ``volume._TABLES`` is keyed by scene)."""
     majorant.choose_level = SCHEMES[scheme]
-    volume._TABLES.clear()
 
 
 def timed(scene, spp, seed):
@@ -117,14 +118,11 @@ def main(argv=None) -> int:
         for s in SCHEMES:
             use(s)
             scenes[s] = make("draaw_v4", a.res)
+            timed(scenes[s], a.spp, 0)                       # (builds its table, compiles)
             cells[s] = volume.media_table(scenes[s]).describe()[0].split(": ", 1)[1]
-            timed(scenes[s], a.spp, 0)
             times[s] = []
         for r in range(a.repeats):
             for s in SCHEMES:
-                use(s)
-                volume._TABLES.clear()
-                volume.media_table(scenes[s])               # (built outside the timing)
                 times[s].append(timed(scenes[s], a.spp, r + 1)[0])
         for s in SCHEMES:
             use(s)
