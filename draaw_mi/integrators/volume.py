@@ -76,7 +76,7 @@ class MediaTable:
                     inside.append(np.array(sensor.world_transform().translation(), float).ravel())
                 self.sensor_media[k] = m
         self.media = media
-        self.majorants = [build_majorant(m, inside=p) for m, p in zip(media, inside)]
+        self.majorants = [build_majorant(m, inside=p, factor=factor) for m, p in zip(media, inside)]
         for m in media:
             self._check_grey(m)
         kinds = [mj.kind for mj in self.majorants]

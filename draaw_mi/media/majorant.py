@@ -16,9 +16,10 @@ integrators walk it with a DDA and track within each coarse cell against its own
   down to one voxel, keeping the level of least expected work per ray -- ``chord * (sum_a
   1 / (2 k h_a) + mean(majorant))``: DDA steps plus tentative collisions over a box's mean
   chord -- among the levels whose densest cell is at most ``MAX_CELL_DEPTH`` optical depths
-  across, else the finest level. A flight through a thin part of such a cell takes up to
-  that many null steps, so one flight can cross two of them within the trackers'
-  ``MAX_TRACKING_STEPS`` (4096), past which it counts as absorbed.
+  across (in differentiated renders, whose bounds are scaled, after the scaling), else the
+  finest level. A flight through a thin part of such a cell takes up to that many null
+  steps; the trackers' ``MAX_TRACKING_STEPS`` (65536), past which a flight counts as
+  absorbed, is far above what a few such cells need.
 * The grid's placement is not exposed by ``gridvolume``; it is recovered from the medium's
   ``intersect_aabb`` and then *verified* by evaluating ``sigma_t`` at sampled voxel centres
   against ``scale * data``. If that check fails (a rotated or mirrored ``to_world``, a
@@ -43,7 +44,7 @@ import numpy as np
 
 GLOBAL_BOX = 1e6        # half-size of the box of a global (1x1x1) majorant
 UNIFORM_GAIN = 1.3      # local grid kept only if max > 1.3 x mean of the local bounds
-MAX_CELL_DEPTH = 2048.0  # densest cell's majorant x diagonal (half the trackers' 4096-step cap)
+MAX_CELL_DEPTH = 2048.0  # densest cell's majorant x diagonal, where a level can keep it
 MAX_CELLS = 1 << 21     # finest level allowed (~128^3 cells, 8 MB of float32)
 
 
@@ -131,9 +132,10 @@ def coarsen(values: np.ndarray, n, k_fine, k_coarse) -> np.ndarray:
     return out
 
 
-def choose_level(data: np.ndarray, lo, hi, resolution: int = 16):
+def choose_level(data: np.ndarray, lo, hi, resolution: int = 16, factor: float = 1.0):
     """``(values, grid_lo, grid_hi, k)``: the pooled level :func:`build_majorant` uses (see the
-    module doc); ``data`` is ``scale * sigma_t`` [ix, iy, iz] on the box ``lo .. hi``."""
+    module doc); ``data`` is ``scale * sigma_t`` [ix, iy, iz] on the box ``lo .. hi``; the
+    tracker will use ``factor * values`` (differentiated renders scale their bounds)."""
     n = np.asarray(data.shape)
     h = (np.asarray(hi, float) - np.asarray(lo, float)) / n
     ext = n * h
@@ -152,18 +154,19 @@ def choose_level(data: np.ndarray, lo, hi, resolution: int = 16):
         k = ks[i]
         if i < len(ks) - 1:
             values = coarsen(values, n, ks[i + 1], k)
-        cost = chord * (float(np.sum(1.0 / (2.0 * k * h))) + float(values.mean()))
-        depth = float(values.max()) * float(np.linalg.norm(k * h))
-        levels.append((cost, depth, values, k))
+        cost = chord * (float(np.sum(1.0 / (2.0 * k * h))) + factor * float(values.mean()))
+        depth = factor * float(values.max()) * float(np.linalg.norm(k * h))
+        levels.append((cost, depth, values, k))                   # finest first
     within = [lv for lv in levels if lv[1] <= MAX_CELL_DEPTH]
-    _, _, values, k = min(within, key=lambda lv: lv[0]) if within else levels[-1]
+    _, _, values, k = min(within, key=lambda lv: lv[0]) if within else levels[0]
     grid_lo = np.asarray(lo, float) + (0.5 - k) * h
     return values, grid_lo, grid_lo + np.asarray(values.shape) * k * h, k
 
 
-def build_majorant(medium, resolution: int = 16, inside=None) -> Majorant:
+def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.0) -> Majorant:
     """Majorant of a Mitsuba medium (see module doc). ``inside``: a point inside the medium's
-    box used to locate it (default: its centre as reported for a probe from the origin)."""
+    box used to locate it (default: its centre as reported for a probe from the origin);
+    ``factor``: the tracker multiplies the bounds by it (the level is chosen for that)."""
     import drjit as dr
     import mitsuba as mi
     mei = dr.zeros(mi.MediumInteraction3f)
@@ -191,12 +194,31 @@ def build_majorant(medium, resolution: int = 16, inside=None) -> Majorant:
         fallback.note = "could not locate the grid's box"
         return fallback
     lo, hi = box
-    # verify the placement: sigma_t at sampled voxel centres equals scale * data
+    # verify the placement: sigma_t at sampled voxel centres equals scale * data, and a
+    # quarter voxel inside each face equals the face's voxels (clamped lookups; a 'repeat'
+    # wrap blends the opposite face's voxels in there, which no cell bounds)
     n = np.asarray(data.shape)
     rng = np.random.default_rng(0)
     idx = rng.integers(0, n, size=(min(2048, int(n.prod())), 3))
     idx = np.concatenate([idx, np.argwhere(data == data.max())[:64]])
-    centres = lo + (idx + 0.5) * (hi - lo) / n
+    u = idx + 0.5
+    face_idx, face_u = [], []
+    for a in range(3):
+        others = [b for b in range(3) if b != a]
+        for face, opposite, ua in ((0, n[a] - 1, 0.25), (n[a] - 1, 0, n[a] - 0.25)):
+            slab = np.take(data, opposite, axis=a)            # the opposite face's voxels
+            top = np.argsort(slab, axis=None)[::-1][:16]
+            jk = np.concatenate([np.stack(np.unravel_index(top, slab.shape), 1),
+                                 rng.integers(0, n[others], size=(32, 2))])
+            f = np.empty((len(jk), 3), int)
+            f[:, a], f[:, others[0]], f[:, others[1]] = face, jk[:, 0], jk[:, 1]
+            fu = f + 0.5
+            fu[:, a] = ua
+            face_idx.append(f)
+            face_u.append(fu)
+    idx = np.concatenate([idx] + face_idx)
+    u = np.concatenate([u] + face_u)
+    centres = lo + u * (hi - lo) / n
     m = dr.zeros(mi.MediumInteraction3f, len(idx))
     m.p = mi.Point3f(*[mi.Float(centres[:, k].astype(np.float32)) for k in range(3)])
     m.medium = mi.MediumPtr(medium)
@@ -206,11 +228,16 @@ def build_majorant(medium, resolution: int = 16, inside=None) -> Majorant:
     # Mitsuba's float32 lookup puts a centre off by ~1.5 n 2^-23 voxels (n voxels per axis:
     # measured 1.4e-7 n to 1.8e-7 n for n = 64..512), so a trilinear lookup there blends that
     # much of a neighbour's value; a misplaced grid is off by whole voxel values
-    leak = max(1e-5, 8.0 * float(n.max()) * 2.0 ** -24)
+    # much of a neighbour's value; a box far from the origin adds its float32 position error
+    # (|x| 2^-23 over a voxel); a misplaced grid is off by whole voxel values
+    h = (hi - lo) / n
+    far = float(np.max(np.abs(np.concatenate([lo, hi]))))
+    leak = max(1e-5, 8.0 * float(n.max()) * 2.0 ** -24 + 8.0 * far * 2.0 ** -24 / float(h.min()))
     if not np.allclose(got, want, rtol=1e-4, atol=leak * max(1.0, float(data.max()))):
-        fallback.note = "grid placement not axis-aligned (rotated or mirrored to_world)"
+        fallback.note = ("sigma_t at voxel centres or box faces does not match the grid data (a rotated "
+                         "or mirrored to_world, or a wrap mode other than clamp)")
         return fallback
-    local, grid_lo, grid_hi, k = choose_level(data, lo, hi, resolution)
+    local, grid_lo, grid_hi, k = choose_level(data, lo, hi, resolution, factor)
     # A nearly uniform grid gains nothing from local bounds but pays a DDA step per coarse
     # cell crossed: bound it with a single cell over its box instead.
     if float(local.max()) <= UNIFORM_GAIN * float(local.mean()):

@@ -211,7 +211,9 @@ def check_smoke_boxes_disjoint(volume_info: list, where) -> None:
         for b in range(a):
             i, v, lo, hi = smoke[a]
             _, u, lo2, hi2 = smoke[b]
-            if np.all(np.minimum(hi, hi2) > np.maximum(lo, lo2)):
+            # (overlaps thinner than 1e-6 of the boxes are rounding: 0.1 + 0.2 against 0.3)
+            tol = 1e-6 * float(np.max(np.concatenate([hi - lo, hi2 - lo2])))
+            if np.all(np.minimum(hi, hi2) - np.maximum(lo, lo2) > tol):
                 raise (where / "volumes" / i / "bounds").error(
                     f"smoke volume {v['name']!r} (bounds {lo.tolist()} - {hi.tolist()}) overlaps smoke "
                     f"volume {u['name']!r} (bounds {lo2.tolist()} - {hi2.tolist()}); overlapping smoke "

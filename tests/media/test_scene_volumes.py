@@ -276,6 +276,13 @@ def test_overlapping_smoke_boxes_are_refused():
     draaw_mi.load_scene(desc)
 
 
+def test_smoke_boxes_that_touch_up_to_rounding_are_accepted():
+    """A face at 0.1 + 0.2 = 0.30000000000000004 against one at 0.3: touching, not overlapping."""
+    desc = two_smoke_slabs(0.3)
+    desc["volumes"][0]["bounds"][1][2] = 0.1 + 0.2
+    draaw_mi.load_scene(desc)
+
+
 @pytest.mark.parametrize("version", ["v1", "v2", "v3", "v4"])
 def test_smoke_boxes_that_touch_add_up(version):
     """Slabs sharing the face z = 0: a ray leaves one medium for the other, so the sky shows
