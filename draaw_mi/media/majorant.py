@@ -21,9 +21,10 @@ integrators walk it with a DDA and track within each coarse cell against its own
   steps; the trackers' ``MAX_TRACKING_STEPS`` (65536), past which a flight counts as
   absorbed, is far above what a few such cells need.
 * The grid's placement is not exposed by ``gridvolume``; it is recovered from the medium's
-  ``intersect_aabb`` and then *verified* by evaluating ``sigma_t`` at sampled voxel centres
-  against ``scale * data``. If that check fails (a rotated or mirrored ``to_world``, a
-  Python medium, spectral data) the medium falls back to one global majorant (Mitsuba's own
+  ``intersect_aabb`` and then *verified* by evaluating ``sigma_t`` at sampled voxel centres,
+  and a quarter voxel inside each face, against ``scale * data``. If that check fails (a
+  rotated or mirrored ``to_world``, a wrap mode other than ``clamp``, a Python medium,
+  spectral data) the medium falls back to one global majorant (Mitsuba's own
   bound: always correct, only slower).
 * Values are plain numbers: the majorant is *detached* from any gradient (guide §3.4).
 
@@ -125,7 +126,7 @@ def coarsen(values: np.ndarray, n, k_fine, k_coarse) -> np.ndarray:
         cells = -(-int(n[a]) // int(k_coarse[a])) + 1
         pad = [(0, 0)] * 3
         pad[a] = (1, max(0, 2 * cells - 1 - out.shape[a]))         # fine cell -1 and beyond: none
-        paired = np.take(np.pad(out, pad), np.arange(2 * cells), axis=a)
+        paired = np.pad(out, pad)[(slice(None),) * a + (slice(0, 2 * cells),)]
         shape = list(paired.shape)
         shape[a:a + 1] = [cells, 2]
         out = paired.reshape(shape).max(axis=a + 1)
@@ -207,7 +208,7 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
         others = [b for b in range(3) if b != a]
         for face, opposite, ua in ((0, n[a] - 1, 0.25), (n[a] - 1, 0, n[a] - 0.25)):
             slab = np.take(data, opposite, axis=a)            # the opposite face's voxels
-            top = np.argsort(slab, axis=None)[::-1][:16]
+            top = np.argpartition(slab, -min(16, slab.size), axis=None)[-16:]
             jk = np.concatenate([np.stack(np.unravel_index(top, slab.shape), 1),
                                  rng.integers(0, n[others], size=(32, 2))])
             f = np.empty((len(jk), 3), int)
@@ -227,7 +228,6 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     want = data[idx[:, 0], idx[:, 1], idx[:, 2]]
     # Mitsuba's float32 lookup puts a centre off by ~1.5 n 2^-23 voxels (n voxels per axis:
     # measured 1.4e-7 n to 1.8e-7 n for n = 64..512), so a trilinear lookup there blends that
-    # much of a neighbour's value; a misplaced grid is off by whole voxel values
     # much of a neighbour's value; a box far from the origin adds its float32 position error
     # (|x| 2^-23 over a voxel); a misplaced grid is off by whole voxel values
     h = (hi - lo) / n

@@ -78,6 +78,7 @@ class Transform(SDFNode):
                                         0.5 * (float(np.trace(self.rotation)) - 1.0)))
         if angle < 0:
             axis, angle = -axis, -angle
+        axis = np.where(np.abs(axis) < 1e-9, 0.0, axis)     # (no -6.1e-17 in the listing)
         return {"rotate": f"{angle:g} deg about ({', '.join(f'{c:.4g}' for c in axis)})"}
 
     def to_local(self, p):
