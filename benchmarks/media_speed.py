@@ -135,7 +135,7 @@ def main(argv=None) -> int:
              f"`python benchmarks/media_speed.py{' --quick' if a.quick else ''}` — {a.res}x{a.res}, "
              f"{a.spp} spp, median of {a.repeats} interleaved repeats after a warm-up; reference "
              f"{a.ref_spp} spp of volpath. Machine: {platform.machine()}, {os.cpu_count()} cores, "
-             f"{dr.thread_count()} Dr.Jit threads, {load_note()} (ratios are taken within "
+             f"{dr.thread_count()} Dr.Jit threads, LOAD_NOTE (ratios are taken within "
              "one run).", ""]
 
     # 1. one dense voxel vs empty
@@ -169,7 +169,7 @@ def main(argv=None) -> int:
         lines.append("")
     lines += ["Time to a given error ∝ time x MSE (Monte Carlo MSE ∝ 1/spp); MSE includes the reference's own "
               "noise (small at the reference spp)."]
-    text = "\n".join(lines) + "\n"
+    text = ("\n".join(lines) + "\n").replace("LOAD_NOTE", load_note(), 1)   # measured at the end
     from draaw_mi.io import write_text
     write_text(a.out, text)
     print(text)
