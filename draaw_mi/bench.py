@@ -430,14 +430,13 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
 
     # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncated 123 * 60 / 60 to 122)
     path = interpolate(keyframes, duration=frames, fps=1, faithful=faithful)
-    from .scene.camera import scene_fov, x_fov
+    from .scene.camera import scene_fov, sensor_keys, x_fov
     own_fov, fov_axis = scene_fov(scene)
     fov = own_fov if fov is None else fov
     params = scene.params
-    key = next((k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
+    key, x_fov_key = sensor_keys(scene)
     if key is None:
         raise DraawError("frame_times: the scene's sensor has no to_world parameter")
-    x_fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
     if x_fov_key:    # (along the scene's fov_axis, as its own fov is)
         params[x_fov_key] = x_fov(fov, fov_axis, *scene.settings["resolution"])
 

@@ -156,6 +156,9 @@ def _batch_parser(sub) -> None:
     mode = a.add_mutually_exclusive_group()
     mode.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
     mode.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
+    a.add_argument("--overwrite", action="store_true",
+                   help="replace frames that another manifest file rendered to the same outputs "
+                   "(without it such a run is refused)")
     a.add_argument("--executor", default="inprocess", choices=["inprocess", "dask"],
                    help="inprocess (default: this process, scenes loaded once) or dask (a "
                    "LocalCluster of worker processes, or --scheduler; pip install 'draaw-mi[batch]')")
@@ -545,11 +548,13 @@ def _cmd_batch(args) -> int:
         c = st["counts"]
         nopreview = f", {c['no-preview']} without their preview" if c["no-preview"] else ""
         damaged = f", {c['damaged']} damaged (unreadable or cut short)" if c["damaged"] else ""
+        damaged += f", {c['foreign']} made by another manifest" if c["foreign"] else ""
         print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
               f"(other job settings){damaged}{nopreview}, {c['failed']} failed; log {st['log']}")
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
-                    scheduler=args.scheduler, progress=progress_mode(args.no_progress))
+                    scheduler=args.scheduler, progress=progress_mode(args.no_progress),
+                    overwrite=args.overwrite)
     for r in res.failed:
         print(f"failed: {r['job']} frame {r['frame']}: {r['error']}", file=sys.stderr)
     print(res.summary())

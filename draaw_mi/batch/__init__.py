@@ -14,6 +14,7 @@ Parameter          Meaning
 ``workers``        Dask LocalCluster worker processes (default: 2 or the core count)
 ``scheduler``      ``tcp://host:port`` of an existing Dask scheduler (instead of a LocalCluster)
 ``dry_run``        plan and report, render nothing
+``overwrite``      replace frames that another manifest file made (default: refuse the run)
 ``progress``       tqdm bar with frames done / failed and ETA; ``"lines"``: a line every 10 s (logs)
 ``on_result``      callback called with every frame's result record (tests, UIs)
 =================  ================================================================
@@ -55,6 +56,7 @@ class BatchResult:
     rendered: int = 0
     previews: int = 0                                 # PNGs written from finished EXRs
     sheet_error: str = ""                             # why the contact sheets were not written
+    log_error: str = ""                               # why the log stopped (a full disk)
     failed: list = field(default_factory=list)        # result records with "error"
     seconds: float = 0.0
     log: str = ""
@@ -75,6 +77,8 @@ class BatchResult:
         previews = f" ({self.previews} previews from their EXRs)" if self.previews else ""
         if self.sheet_error:
             extra += f"; contact sheets not written: {self.sheet_error}"
+        if self.log_error:
+            extra += f"; WARNING: {self.log_error}"
         return (f"batch: {self.total} frames: {self.rendered} rendered, {self.skipped} already done"
                 f"{previews}, {len(self.failed)} failed; {state} ({self.seconds:.1f} s{rate}); "
                 f"log {self.log}{extra}")
@@ -85,7 +89,25 @@ def load(manifest, out: str | None = None, cache=None):
     from .frame import SceneCache
     m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out)
     cache = cache if cache is not None else SceneCache()
-    return m, plan(m, cache), cache
+    specs = plan(m, cache)
+    _check_log(m, specs)
+    return m, specs, cache
+
+
+def _check_log(m: Manifest, specs: list) -> None:
+    """The log must be a file of its own: a ``log`` key naming a frame's EXR appended JSON to
+    the finished frame (and ``--status`` then failed to decode it); one naming a folder
+    raised IsADirectoryError from the run."""
+    from ..errors import SceneError
+    path = log_path(m)
+    for s in specs:
+        files = [s["output"]] + ([os.path.splitext(s["output"])[0] + ".png"] if s["preview"] else [])
+        if any(os.path.normcase(os.path.abspath(f)).casefold() == os.path.normcase(path).casefold()
+               for f in files):
+            raise SceneError(f"{m.path}: log {path!r} is an output of job {s['job']!r} frame "
+                             f"{s['frame']}; give the log a name of its own")
+    if os.path.isdir(path):
+        raise SceneError(f"{m.path}: log {path!r} is a folder; expected a file name")
 
 
 def log_path(m: Manifest) -> str:
@@ -112,31 +134,49 @@ class _Log:
     line being written (readers skip a torn last line)."""
 
     def __init__(self, path: str):
-        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-        self.path = path
-        self.fh = open(path, "a", encoding="utf-8")
+        from ..errors import SceneError
+        self.path, self.error = path, None
+        try:
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            self.fh = open(path, "a", encoding="utf-8")
+        except OSError as e:
+            raise SceneError(f"batch: cannot open the log {path!r}: {e.strerror or e}") from None
 
     def write(self, **record):
+        """Append one record. A write that fails (a full disk) turns the log off and keeps
+        the reason in ``error``: the frames are what the run is for, and a log write in the
+        run's ``finally`` must not replace the summary with a traceback."""
+        if self.error is not None:
+            return
         record = {"time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **record}
-        self.fh.write(json.dumps(record, default=str) + "\n")
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
+        try:
+            self.fh.write(json.dumps(record, default=str) + "\n")
+            self.fh.flush()
+            os.fsync(self.fh.fileno())
+        except OSError as e:
+            self.error = f"log {self.path!r} not written from here on: {e.strerror or e}"
 
     def close(self):
-        self.fh.close()
+        try:
+            self.fh.close()
+        except OSError as e:             # (the buffered rest of a failed write)
+            self.error = self.error or f"log {self.path!r}: {e.strerror or e}"
 
 
 def read_log(path: str) -> list[dict]:
-    """The records of a batch log (a torn last line from a killed run is skipped)."""
+    """The records of a batch log: lines that are not JSON objects (a torn last line from a
+    killed run, bytes that are not UTF-8, a stray ``[1, 2]``) are skipped."""
     out = []
     if not os.path.isfile(path):
         return out
-    with open(path, encoding="utf-8") as fh:
+    with open(path, encoding="utf-8", errors="replace") as fh:
         for line in fh:
             try:
-                out.append(json.loads(line))
+                rec = json.loads(line)
             except json.JSONDecodeError:
                 continue
+            if isinstance(rec, dict):
+                out.append(rec)
     return out
 
 
@@ -157,7 +197,8 @@ def remove_temp_files(specs) -> list[str]:
 
 
 def status(manifest, out: str | None = None) -> dict:
-    """Per frame ``done`` / ``missing`` / ``stale`` (present, other job) / ``damaged``
+    """Per frame ``done`` / ``missing`` / ``stale`` (present, other job) / ``foreign``
+    (present, made by another manifest file) / ``damaged``
     (unreadable or cut short) / ``no-preview``, or ``failed`` with the last error the log
     recorded for the frame's present settings. Reads only: read-only outputs are fine.
     Returns ``{"frames": [...], "counts": {...}, "log": path}``."""
@@ -167,7 +208,7 @@ def status(manifest, out: str | None = None) -> dict:
         if rec.get("event") == "frame":
             errors[(rec.get("job"), rec.get("frame"))] = (rec.get("hash"), rec.get("error"))
     frames = []
-    counts = {"done": 0, "missing": 0, "stale": 0, "damaged": 0, "no-preview": 0, "failed": 0}
+    counts = {"done": 0, "missing": 0, "stale": 0, "foreign": 0, "damaged": 0, "no-preview": 0, "failed": 0}
     for s in specs:
         st = frame_status(s)
         seen, err = errors.get((s["job"], s["frame"]), (None, None))
@@ -182,7 +223,7 @@ def status(manifest, out: str | None = None) -> dict:
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
         scheduler: str | None = None, progress: bool | str = True, on_result=None, dry_run: bool = False,
-        client=None) -> BatchResult:
+        client=None, overwrite: bool = False) -> BatchResult:
     """Render every unfinished frame of ``manifest``; see the module docstring."""
     check_mode(progress, "batch.run")
     from .executors import EXECUTORS
@@ -198,6 +239,8 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     t0 = time.perf_counter()
     m, specs, cache = load(manifest, out)
     states = [frame_status(s) for s in specs]
+    if not overwrite:
+        _refuse_foreign(m, [s for s, st in zip(specs, states) if st == "foreign"])
     todo = [s for s, st in zip(specs, states) if st != "done"]
     res = BatchResult(total=len(specs), skipped=len(specs) - len(todo), log=log_path(m))
     from ..errors import SceneError
@@ -227,10 +270,26 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         # planning, and a finished frame is never rendered twice
         states = [frame_status(s) for s in todo]
         previews = [s for s, st in zip(todo, states) if st == "no-preview"]
-        todo = [s for s, st in zip(todo, states) if st not in ("done", "no-preview")]
+        kept = ("done", "no-preview") + (() if overwrite else ("foreign",))   # (written meanwhile)
+        todo = [s for s, st in zip(todo, states) if st not in kept]
         res.skipped = len(specs) - len(todo)
         return _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client,
                        progress, on_result, t0)
+
+
+def _refuse_foreign(m: Manifest, foreign: list) -> None:
+    """Refuse a run that would replace frames another manifest file made: two manifests
+    whose jobs share names (``job0`` by default) and an output folder overwrote each other's
+    finished frames without a word."""
+    if not foreign:
+        return
+    from ..errors import SceneError
+    from .exr import MANIFEST_ATTR
+    first = foreign[0]["output"]
+    other = (read_header(first) or {}).get(MANIFEST_ATTR, "another manifest")
+    raise SceneError(f"batch.run: {len(foreign)} frame(s) of {m.path} would replace frames made by "
+                     f"{other} (first: {first}); give the jobs other names or another output "
+                     "folder, or pass overwrite=True (draaw-mi batch --overwrite) to replace them")
 
 
 def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client, progress,
@@ -296,6 +355,7 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
         log.write(event="end", rendered=res.rendered, failed=len(res.failed), missing=res.missing,
                   seconds=round(res.seconds, 3))
         log.close()
+        res.log_error = log.error or ""
     if m.contact_sheet:
         from ..errors import DraawError
         from .sheet import contact_sheets

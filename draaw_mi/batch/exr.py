@@ -38,6 +38,7 @@ from ..errors import IOFailure
 from ..integrators import resolve_version
 
 HASH_ATTR = "draaw:frame_hash"
+MANIFEST_ATTR = "draaw:manifest"       # the absolute path of the manifest file that made a frame
 
 
 def metadata(spec: dict, seconds: float, post: list | None = None) -> dict:
@@ -52,6 +53,8 @@ def metadata(spec: dict, seconds: float, post: list | None = None) -> dict:
             "draaw:rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if spec.get("files_hash"):
         meta["draaw:files_sha256"] = spec["files_hash"]
+    if spec.get("manifest"):
+        meta[MANIFEST_ATTR] = spec["manifest"]
     shown = {"params": spec.get("params"), "camera": spec.get("camera"),
              "post": spec.get("post") if post is None else post}
     for key, value in shown.items():        # what the frame shows, readable from its file
@@ -166,13 +169,18 @@ def _scanline_layout(head: bytes):
         return None
     pos, window, compression, count = 8, None, None, None
     while True:
-        end = head.index(b"\0", pos)                  # (ValueError: header longer than read)
-        name = head[pos:end]
-        if not name:
-            pos = end + 1
-            break
-        tend = head.index(b"\0", end + 1)
-        (length,) = struct.unpack_from("<i", head, tend + 1)
+        try:
+            end = head.index(b"\0", pos)
+            name = head[pos:end]
+            if not name:
+                pos = end + 1
+                break
+            tend = head.index(b"\0", end + 1)
+            (length,) = struct.unpack_from("<i", head, tend + 1)
+        except (ValueError, struct.error):
+            # the header goes on past the bytes read (a large draaw:params): decode in full
+            # (a complete frame was 'damaged' and rendered again on every run)
+            return None
         value = head[tend + 5:tend + 5 + length]
         if len(value) != length:
             return None
@@ -204,13 +212,15 @@ def _reads_in_full(path: str) -> bool:
 
 def frame_status(spec: dict) -> str:
     """``"done"`` (present, hash matches, pixel data complete), ``"stale"`` (present, another
-    job's settings), ``"damaged"`` (present but unreadable or cut short), ``"missing"``, or
+    job's settings), ``"foreign"`` (present, other settings, and made by another manifest
+    file: :func:`draaw_mi.batch.run` does not replace it unless told to), ``"damaged"`` (present but unreadable or cut short), ``"missing"``, or
     ``"no-preview"`` (the EXR is done, the preview the job asks for is missing or stale)."""
     header = read_header(spec["output"])
     if header is None:
         return "damaged" if os.path.exists(spec["output"]) else "missing"
     if header.get(HASH_ATTR) != spec["hash"]:
-        return "stale"
+        other, mine = header.get(MANIFEST_ATTR), spec.get("manifest")
+        return "foreign" if other and mine and other != mine else "stale"
     if not exr_complete(spec["output"]):
         return "damaged"
     if spec.get("preview"):

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import DraawError, RenderError
 from .exr import metadata, write_frame, write_preview
 from ..scene import value_like
-from ..scene.camera import scene_fov, x_fov
+from ..scene.camera import scene_fov, sensor_keys, x_fov
 
 
 class CachedScene:
@@ -31,9 +31,7 @@ class CachedScene:
         self.scene, self.hash = scene, digest
         self.files_hash = files_hash(scene.info.get("files"))
         params = scene.params
-        self.camera_key = "sensor.to_world" if "sensor.to_world" in params.keys() else next(
-            (k for k in params.keys() if k.endswith("to_world") and "sensor" in k), None)
-        self.fov_key = next((k for k in params.keys() if k.endswith("x_fov")), None)
+        self.camera_key, self.fov_key = sensor_keys(scene)
         # a camera table's fov is measured as the scene's is, along its fov_axis (an XML
         # scene's: its sensor's x_fov); a y-axis fov written into x_fov zoomed in 1.9x
         self.fov, self.fov_axis = scene_fov(scene)

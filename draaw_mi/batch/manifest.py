@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import string as _string
 from dataclasses import dataclass, field
@@ -238,6 +239,9 @@ def _camera(cam, where: Where, base: str) -> dict:
                         "degrees": number(o.get("degrees", 360.0), wo / "degrees"),
                         "start": number(o.get("start", 0.0), wo / "start"),
                         "up": vector(o.get("up", [0, 1, 0]), wo / "up")}
+        if math.hypot(*out["orbit"]["up"]) < 1e-9:      # (every frame came out black, exit 0)
+            raise (wo / "up").error(f"{out['orbit']['up']} has no direction; expected the orbit's axis, "
+                                    "such as [0, 1, 0]")
     elif kind == "look_at":
         keys = cam["look_at"]
         if not isinstance(keys, list) or not keys:
@@ -346,7 +350,11 @@ def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
         format_output(pattern, job, 0, version=job.version or "v4", spp=job.spp or 1)
     except (ValueError, KeyError, IndexError, TypeError) as e:
         raise where.error(f"{pattern!r} cannot be formatted ({e})") from None
-    return pattern if os.path.isabs(pattern) else os.path.join(out_base, pattern)
+    if os.path.isabs(pattern):
+        return pattern
+    # the folder as it is written: braces in it are text, not fields (an --out of 'out{x}'
+    # raised KeyError, and '{job}dir' put every job in a folder of its own)
+    return os.path.join(out_base.replace("{", "{{").replace("}", "}}"), pattern)
 
 
 def format_output(pattern: str, job: Job, frame: int, version: str, spp: int) -> str:
@@ -364,5 +372,12 @@ def fixed_folder(pattern: str) -> str:
 
     >>> fixed_folder("/r/out/{job}/{frame:04d}.exr"), fixed_folder("/r/out/shot_{job}.exr")
     ('/r/out', '/r/out')
+    >>> fixed_folder("/r/out{{v2}}/{job}/{frame}.exr")       # braces written as text
+    '/r/out{v2}'
     """
-    return os.path.normpath(os.path.dirname(pattern.split("{", 1)[0]))
+    literal = []
+    for text, field_name, _, _ in _string.Formatter().parse(pattern):
+        literal.append(text)                 # ('{{' comes back as '{')
+        if field_name is not None:
+            break
+    return os.path.normpath(os.path.dirname("".join(literal)))

@@ -249,6 +249,9 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "half": job.half, "preview": job.previews, "output": out, "versions": vers,
                 "encoded": encoded,
                 "freeze": job.freeze,
+                # (not in the hash: a moved manifest's frames stay done; in the header, so
+                # that another manifest's run does not silently replace them)
+                "manifest": None if where.startswith("<") else os.path.abspath(where),
             }
             spec["hash"] = frame_hash(spec)
             specs.append(spec)

@@ -50,6 +50,30 @@ def x_fov(fov: float, fov_axis: str, width: int, height: int) -> float:
     return float(mi.parse_fov(props, width / height))
 
 
+def sensor_keys(scene) -> tuple[str | None, str | None]:
+    """The ``mi.traverse`` keys of the ``to_world`` and ``x_fov`` of the sensor that renders
+    ``scene`` (a :class:`~draaw_mi.scene.DraawScene`): its first; ``None`` for what it lacks.
+    Found by the object, not by the name: a Mitsuba XML sensor is called after its ``id``
+    (``Camera.to_world``) or, without one, ``object_<address>.to_world``, and a key chosen by
+    "sensor" in its name refused camera tables for such scenes.
+
+    >>> import mitsuba as mi
+    >>> from draaw_mi.scene import load_scene
+    >>> sensor_keys(load_scene(mi.load_dict({"type": "scene", "Camera": {"type": "perspective"}})))
+    ('Camera.to_world', 'Camera.x_fov')
+    """
+    sensors = scene.mi_scene.sensors()
+    if not sensors:
+        return None, None
+    params, first, found = scene.params, sensors[0], {}
+    for key in params.keys():
+        if params.properties[key][2] is first:
+            for leaf in ("to_world", "x_fov"):
+                if key.endswith("." + leaf):
+                    found.setdefault(leaf, key)
+    return found.get("to_world"), found.get("x_fov")
+
+
 def scene_fov(scene) -> tuple[float, str]:
     """``(fov, fov_axis)`` of a :class:`~draaw_mi.scene.DraawScene`'s camera, the way its
     file gives them; a scene without (a Mitsuba XML scene) gives its sensor's ``x_fov``
@@ -57,7 +81,7 @@ def scene_fov(scene) -> tuple[float, str]:
     cam = scene.info.get("camera", {})
     if cam.get("fov"):
         return float(cam["fov"]), cam.get("fov_axis", "x")
-    key = next((k for k in scene.params.keys() if k.endswith("x_fov")), None)
+    key = sensor_keys(scene)[1]
     return (float(scene.params[key][0]) if key else 45.0), "x"
 
 

@@ -60,7 +60,8 @@ def test_failed_frame_is_logged_and_the_rest_go_on(tmp_path, capsys):
     assert [r["event"] for r in log] == ["start", "frame", "frame", "frame", "end"]
     assert sum("error" in r for r in log) == 1
     st = batch.status(doc)
-    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "damaged": 0, "no-preview": 0, "failed": 1}
+    assert st["counts"] == {"done": 2, "missing": 0, "stale": 0, "foreign": 0, "damaged": 0, "no-preview": 0,
+                            "failed": 1}
     from draaw_mi.cli import main
     path = write_manifest(tmp_path, doc)
     assert main(["batch", path, "--no-progress"]) == 1        # exit status: not all frames exist
