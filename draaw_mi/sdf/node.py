@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 
 import drjit as dr
 import numpy as np
@@ -34,6 +35,8 @@ OPEN_MARGIN = 1e-4
 
 
 def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
+    if isinstance(value, (str, bytes)):         # ("123" was (1, 2, 3); "abc" a bare ValueError)
+        raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers")
     try:
         if dr.is_array_v(value):     # a Dr.Jit array (mi.Vector3f: float() refused its entries)
             v = tuple(float(x) for x in np.array(dr.detach(value), dtype=np.float64).reshape(-1))
@@ -58,10 +61,12 @@ def _as_point3(value):
 
 
 def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
+        value = float(value)               # numpy scalars too (np.float32(0.5) was refused)
+    elif not isinstance(value, (str, bytes, bool, np.bool_)):
         try:
             value = float(value[0]) if len(value) == 1 else value   # 1-element Dr.Jit array
-        except TypeError:
+        except (TypeError, ValueError):
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ParameterError(f"{where}: {name}={value!r}; expected a finite number")
@@ -111,7 +116,6 @@ class SDFNode:
     """
 
     kind = "node"
-    exact = True            # distance is exact (False: a documented lower bound)
 
     def __init__(self, name: str | None = None, material: str | None = None):
         self.name = name or self.kind

@@ -1,4 +1,5 @@
-"""SDF primitives (Inigo Quilez's distance functions, re-derived; all exact).
+"""SDF primitives (Inigo Quilez's distance functions, re-derived; exact, except inside a
+spindle torus).
 
 =============================================  ==================================================
 ``Sphere(center, radius)``                     ``|p - c| - r``
@@ -115,8 +116,13 @@ class RoundBox(Box):
                                  f"in [0, min(size)/2 = {0.5 * min(vec_of(self.size)):g}]")
 
     def param_range(self, key):
+        """The radius up to half the smallest side; every side at least twice the radius (a
+        fit of ``size`` alone stepped below it and stopped with an error at the update).
+        Each bound holds the other parameter at its present value."""
         if key == "radius":
             return (0.0, 0.5 * min(vec_of(self.size)))
+        if key == "size":
+            return (2.0 * scalar_of(self.radius) + OPEN_MARGIN, None)
         return super().param_range(key)
 
     def distance(self, p):
@@ -125,7 +131,8 @@ class RoundBox(Box):
 
 class Torus(SDFNode):
     """Torus around the y axis through ``center``: ring radius ``major`` > 0, tube radius
-    ``minor`` > 0 (exact; ``minor > major`` gives a self-intersecting spindle torus)."""
+    ``minor`` > 0 (exact, except inside a spindle torus, ``minor > major``, where it is a
+    bound: in the self-intersecting core it underestimates the distance)."""
 
     kind = "torus"
     _lower_bounds = {"major": 0.0, "minor": 0.0}

@@ -24,12 +24,32 @@ from ..errors import ParameterError
 from .node import SDFNode, _scalar, _vec3, box, is_infinite, scalar_of, vec_of
 
 
+def _rotation(value, name: str) -> np.ndarray:
+    """``value`` as a 3x3 rotation matrix: orthonormal with determinant +1 (to float32
+    rounding). Anything else changes distances (``diag(2, 1, 1)`` doubled a sphere's, so the
+    march stepped through it) and has no angle and axis for ``describe`` or export."""
+    try:
+        R = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        R = None
+    if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        shown = value.tolist() if isinstance(value, np.ndarray) else value
+        raise ParameterError(f"sdf {name!r}: rotation={shown!r}; expected a 3x3 rotation matrix")
+    if not (np.allclose(R @ R.T, np.eye(3), atol=1e-5) and np.linalg.det(R) > 0):
+        raise ParameterError(f"sdf {name!r}: rotation={R.tolist()!r} is not a rotation (R R^T = I, "
+                             "det R = +1); scale with scale=, mirror by other means")
+    return R
+
+
 def rotation_matrix(axis, angle_deg: float) -> np.ndarray:
     """3x3 rotation by ``angle_deg`` degrees about ``axis`` (Rodrigues)."""
-    a = np.asarray(axis, dtype=float)
+    try:
+        a = np.asarray(axis, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ParameterError(f"sdf rotate: axis={axis!r}; expected 3 numbers") from None
     n = np.linalg.norm(a)
-    if n == 0 or not np.all(np.isfinite(a)):
-        raise ParameterError(f"sdf rotate: axis={list(axis)!r}; expected a non-zero finite vector")
+    if a.shape != (3,) or n == 0 or not np.all(np.isfinite(a)):
+        raise ParameterError(f"sdf rotate: axis={axis!r}; expected a non-zero finite 3-vector")
     x, y, z = a / n
     t = math.radians(angle_deg)
     c, s = math.cos(t), math.sin(t)
@@ -47,6 +67,9 @@ class Transform(SDFNode):
 
     def __init__(self, child: SDFNode, translate=(0.0, 0.0, 0.0), rotation=None, scale=1.0,
                  name=None, material=None):
+        if not isinstance(child, SDFNode):      # ('str' object has no attribute 'name')
+            raise ParameterError(f"sdf.transform: child={child!r}; expected an SDF node "
+                                 "(Sphere, Box, union(...), ...)")
         super().__init__(name or f"{child.name}_xf", material)
         self.child = child
         self.translate = self._vec_param("translate", translate)
@@ -59,7 +82,7 @@ class Transform(SDFNode):
             s = v[0]
         self.scale = self._scalar_param("scale", s, lo=0.0, lo_open=True)
         self._lower_bounds = {"scale": 0.0}
-        R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
+        R = np.eye(3) if rotation is None else _rotation(rotation, self.name)
         self.rotation = R
         self._identity_rot = bool(np.allclose(R, np.eye(3)))
 

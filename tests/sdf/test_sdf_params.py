@@ -136,7 +136,7 @@ def test_ranges_an_optimiser_projects_onto():
     assert _range_for("sdf.blend.k", sc) == (0.0, None)
     assert _range_for("sdf.ball.center", sc) == (None, None)
     assert _range_for("sdf.block_xf.scale", sc) == (OPEN_MARGIN, None)
-    assert _range_for("sdf.block.size", sc) == (OPEN_MARGIN, None)     # each side
+    assert _range_for("sdf.block.size", sc) == (pytest.approx(0.2 + OPEN_MARGIN), None)  # each side >= 2 r
     with pytest.raises(ParameterError, match="no parameter 'radus'; did you mean 'radius'"):
         sc.sdf.param_range("ball.radus")
     from draaw_mi.fit import _space_for
