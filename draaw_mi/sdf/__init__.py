@@ -16,7 +16,8 @@ are placed into the render by ``draaw_mi.load_scene`` (see :mod:`draaw_mi.sdf.sc
 from __future__ import annotations
 
 from .node import SDFNode
-from .operators import (OPERATORS, addition, intersection, lse_intersection, smooth_addition,
+from .operators import (OPERATORS, addition, cubic_smooth_intersection, cubic_smooth_subtraction,
+                        cubic_smooth_union, intersection, lse_intersection, smooth_addition,
                         smooth_intersection, smooth_lse_intersection, smooth_subtraction,
                         smooth_union, subtraction, union)
 from .params import SDFParameters, parameters
@@ -27,7 +28,8 @@ __all__ = [
     "SDFNode", "Sphere", "Box", "RoundBox", "Torus", "Cylinder", "Capsule", "Cone", "Plane",
     "Transform", "translate", "rotate", "scale",
     "union", "intersection", "subtraction", "smooth_union", "smooth_intersection",
-    "smooth_subtraction", "lse_intersection", "smooth_lse_intersection", "addition",
+    "smooth_subtraction", "cubic_smooth_union", "cubic_smooth_intersection",
+    "cubic_smooth_subtraction", "lse_intersection", "smooth_lse_intersection", "addition",
     "smooth_addition", "PRIMITIVES", "OPERATORS", "parameters", "SDFParameters",
 ]
 

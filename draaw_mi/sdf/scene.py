@@ -383,7 +383,10 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
     3 intersection, 4 smoothIntersection, 5 subtraction, 6 smoothSubtraction, 7 addition,
     8 smoothAddition, 9 smoothUnionNoColorMix; names accepted too), ``k = amount * scale``; the
     result is the union of the contributions, as GO-Draaw's march takes their minimum.
-    GO-Draaw's bugs are fixed (go-draaw-spec.md §5.2): smoothUnion blends the two colours
+    The smooth ones keep GO-Draaw's cubic blend (``min - h^3 k / 6``,
+    :func:`~draaw_mi.sdf.operators.cubic_smooth_union`: the polynomial smooth union shrank
+    touching spheres by k/4 instead of k/6 and bridged a gap GO-Draaw leaves open). GO-Draaw's
+    bugs are fixed (go-draaw-spec.md §5.2): smoothUnion blends the two colours
     (type 9 keeps sphere i's), smoothIntersection uses ``k - |a - b|``, both subtractions
     remove sphere ``i`` from sphere ``j`` (GO-Draaw's ``subtraction`` order), addition /
     smoothAddition are the log-sum-exp soft intersections. As in GO-Draaw, a sphere whose
@@ -392,9 +395,9 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
     """
     from ..errors import SceneError
     from ..scene.schema import Where, number
-    from .operators import (intersection, lse_intersection, smooth_intersection,
-                            smooth_lse_intersection, smooth_subtraction, smooth_union,
-                            subtraction, union)
+    from .operators import (cubic_smooth_intersection, cubic_smooth_subtraction, cubic_smooth_union,
+                            intersection, lse_intersection, smooth_lse_intersection, subtraction,
+                            union)
     from .primitives import Sphere
     where = where or Where("go_draaw_spheres")
     if not isinstance(spheres, list) or not spheres:
@@ -432,12 +435,12 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
             continue                                   # GO-Draaw skips these
         o = prims[j]
         nm = f"{prefix}op{i}"
-        node = {1: lambda: union(sp, o, name=nm), 2: lambda: smooth_union(sp, o, k, name=nm),
-                9: lambda: smooth_union(sp, o, k, name=nm, material=sp.material),
+        node = {1: lambda: union(sp, o, name=nm), 2: lambda: cubic_smooth_union(sp, o, k, name=nm),
+                9: lambda: cubic_smooth_union(sp, o, k, name=nm, material=sp.material),
                 3: lambda: intersection(sp, o, name=nm),
-                4: lambda: smooth_intersection(sp, o, k, name=nm),
+                4: lambda: cubic_smooth_intersection(sp, o, k, name=nm),
                 5: lambda: subtraction(o, sp, name=nm),
-                6: lambda: smooth_subtraction(o, sp, k, name=nm),
+                6: lambda: cubic_smooth_subtraction(o, sp, k, name=nm),
                 7: lambda: lse_intersection(sp, o, name=nm),
                 8: lambda: smooth_lse_intersection(sp, o, k, name=nm)}[t]()
         if t == 9:

@@ -17,7 +17,8 @@ from scipy.spatial import cKDTree
 
 import draaw_mi  # noqa: F401
 from draaw_mi.errors import ParameterError
-from draaw_mi.sdf import (Box, Capsule, Cone, Cylinder, Plane, RoundBox, Sphere, Torus, intersection,
+from draaw_mi.sdf import (Box, Capsule, Cone, Cylinder, Plane, RoundBox, Sphere, Torus,
+                          cubic_smooth_intersection, cubic_smooth_subtraction, cubic_smooth_union, intersection,
                           lse_intersection, rotate, scale, smooth_intersection, smooth_lse_intersection,
                           smooth_subtraction, smooth_union, subtraction, translate, union)
 
@@ -315,3 +316,63 @@ def test_params_and_gradient_of_distance():
     d = s.distance(mi.Point3f(3, 0, 0))
     dr.backward(d)
     assert dr.grad(r)[0] == pytest.approx(-1.0)
+
+
+# ----------------------------------------------------------------------------- cubic (GO-Draaw)
+def _cubic(a, b, k, sign=1.0):
+    """go-draaw-spec.md §5.2: h = max(k - |a - b|, 0) / k; min(a, b) - h^3 k / 6 (and the
+    intersection with its sign fixed: max(a, b) + h^3 k / 6)."""
+    h = np.maximum(k - np.abs(a - b), 0) / k
+    sharp = np.minimum(a, b) if sign > 0 else np.maximum(a, b)
+    return sharp - sign * h ** 3 * k / 6
+
+
+@pytest.mark.parametrize("op,ref", [
+    (lambda: cubic_smooth_union(A, B, 0.3), lambda a, b: _cubic(a, b, 0.3)),
+    (lambda: cubic_smooth_intersection(A, B, 0.3), lambda a, b: _cubic(a, b, 0.3, -1.0)),
+    (lambda: cubic_smooth_subtraction(A, B, 0.3), lambda a, b: _cubic(a, -b, 0.3, -1.0)),
+], ids=["union", "intersection", "subtraction"])
+def test_cubic_operator_formulas_and_bounds(op, ref):
+    pts = rand_points()
+    a, b = _ab(pts)
+    node = op()
+    np.testing.assert_allclose(dist(node, pts), ref(a, b), atol=3e-6, rtol=1e-5)
+    q = pts + RNG.normal(size=pts.shape) * RNG.uniform(1e-3, 0.5, size=(len(pts), 1))
+    ratio = np.abs(dist(node, pts) - dist(node, q)) / np.linalg.norm(pts - q, axis=1)
+    assert ratio.max() <= 1.0 + 2e-3                                    # a bound: 1-Lipschitz
+    bb = node.bbox()
+    near = rand_points(20000, -1.2, 1.2)
+    inside = near[dist(node, near) <= 0]
+    assert len(inside) > 20
+    assert np.all(inside >= np.array(list(bb.min)) - 1e-5) and np.all(inside <= np.array(list(bb.max)) + 1e-5)
+
+
+def test_cubic_blend_weights_sum_to_one_and_follow_the_nearer_operand():
+    a, b = Sphere((-0.5, 0, 0), 0.5), Sphere((0.5, 0, 0), 0.5)
+    a.slot, b.slot = 0, 1
+    pts = rand_points(500, -1, 1)
+    p = mi.Point3f(*(pts[:, i].astype(np.float32) for i in range(3)))
+    _, w = cubic_smooth_union(a, b, 0.4).eval(p, 2)
+    w = np.stack([np.array(x) for x in w])
+    da, db = dist(a, pts), dist(b, pts)
+    h3 = (np.maximum(0.4 - np.abs(da - db), 0) / 0.4) ** 3
+    np.testing.assert_allclose(w[0], np.where(da <= db, 1 - h3 / 2, h3 / 2), atol=1e-6)
+    np.testing.assert_allclose(w.sum(0), 1.0, atol=1e-6)
+
+
+def test_cubic_union_of_coincident_spheres_grows_by_k_over_6_inside_its_box():
+    # a = b everywhere: the surface moves out by k/6, beyond both operands' boxes
+    u = cubic_smooth_union(Sphere((0, 0, 0), 0.5), Sphere((0, 0, 0), 0.5), 0.6)
+    assert float(u.distance(mi.Point3f(0.59, 0, 0))[0]) == pytest.approx(-0.01, abs=1e-6)
+    assert float(u.bbox().max.x) >= 0.6 - 1e-6
+
+
+def test_cubic_subtraction_gives_the_cut_face_the_cut_materials_weight():
+    a, b = Sphere((0, 0, 0), 0.6), Sphere((0.5, 0, 0), 0.4)
+    a.slot, b.slot = 0, 1
+    pts = rand_points(500, -1, 1)
+    p = mi.Point3f(*(pts[:, i].astype(np.float32) for i in range(3)))
+    _, w = cubic_smooth_subtraction(a, b, 0.3).eval(p, 2)
+    da, nb = dist(a, pts), -dist(b, pts)
+    h3 = (np.maximum(0.3 - np.abs(da - nb), 0) / 0.3) ** 3
+    np.testing.assert_allclose(np.array(w[0]), np.where(da >= nb, 1 - h3 / 2, h3 / 2), atol=1e-6)

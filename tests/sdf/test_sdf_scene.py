@@ -136,11 +136,19 @@ def test_go_draaw_sphere_list_semantics():
     k = 8.0
     for p in ([10, 0, 0], [0, 17, 0], [30, 5, 0], [0, 40, 0], [3, 40, 0], [-9, 40, 0]):
         d0, d1 = d([0, 0, 0], 16, p), d([20, 0, 0], 16, p)
-        h = np.clip(0.5 + 0.5 * (d1 - d0) / k, 0, 1)
-        su = d1 + (d0 - d1) * h - k * h * (1 - h)           # sphere 0 smooth-unioned with 1
+        h = max(k - abs(d0 - d1), 0) / k                    # go-draaw-spec.md §5.2: cubic
+        su = min(d0, d1) - h ** 3 * k / 6                   # sphere 0 smooth-unioned with 1
         sub = max(d([5, 40, 0], 8, p), -d([0, 40, 0], 10, p))   # type 5: other (3) minus this (2)
         ref = min(su, d1, sub)                              # sphere 3's union: skipped (bad index)
         assert _d(root, p) == pytest.approx(ref, abs=1e-4)
+
+
+def test_go_draaw_smooth_union_leaves_a_gap_open_as_go_draaw_does():
+    # two spheres 3 apart with amount 8: GO-Draaw's cubic blend lowers the gap's middle by
+    # h^3 k / 6 = 1/6 and leaves it open (+1/6); the polynomial one bridged it (-0.5)
+    recs = [{"centerX": -17.5, "radius": 16, "indexOfOtherSphere": 1, "sdfType": 2, "amount": 8},
+            {"centerX": 17.5, "radius": 16, "indexOfOtherSphere": 0, "sdfType": 0}]
+    assert _d(go_draaw_spheres(recs), [0, 0, 0]) == pytest.approx(1.5 - 8 / 6, abs=1e-5)
 
 
 def test_go_draaw_entry_in_scene_blends_colours():
