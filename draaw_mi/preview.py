@@ -276,6 +276,7 @@ class Preview:
     def reset(self) -> int:
         """Restart the accumulation (e.g. after changing the scene from outside)."""
         with self._lock:
+            self._lo = None              # (its low-resolution copy showed the old values first)
             return self._bump()
 
     # ------------------------------------------------------------------ one frame

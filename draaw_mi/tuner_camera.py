@@ -29,15 +29,22 @@ def slider(desc, value, lo, hi, step=0.01):
 class CameraPanel:
     """Camera controls for the tuner (see the module docstring)."""
 
+    def _fov_key(self):
+        """The sensor's ``x_fov`` key (``cam.x_fov`` for an XML sensor called ``cam``: the
+        slider showed 40 and every move failed on ``sensor.x_fov``)."""
+        from .scene.camera import sensor_keys
+        return sensor_keys(self.scene)[1]
+
     def _camera_panel(self):
-        fov = float(np.array(self.scene.params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self.scene.params \
-            else 40.0
+        key = self._fov_key()
+        fov = float(np.array(self.scene.params[key]).ravel()[0]) if key else 40.0
         # the range scene files allow (5..120 clamped a 150-degree camera, and saving wrote 120)
         self.fov = slider("FOV (x)", fov, min(1.0, fov), FOV_RANGE[1], 0.5)
+        self.fov.disabled = key is None
         self.yaw = slider("orbit yaw °", 0.0, -180.0, 180.0, 1.0)
         self.pitch = slider("orbit pitch °", 0.0, -85.0, 85.0, 1.0)
         self.distance = slider("distance ×", 1.0, 0.2, 3.0, 0.01)
-        self.fov.observe(self._guard(lambda ch: self._changed({"sensor.x_fov": float(ch["new"])})), "value")
+        self.fov.observe(self._guard(lambda ch: self._changed({self._fov_key(): float(ch["new"])})), "value")
         for w in (self.yaw, self.pitch, self.distance):
             w.observe(self._guard(lambda ch: self._set_camera()), "value")
         get = W.Button(description="get camera")
@@ -86,9 +93,11 @@ class CameraPanel:
             o, t, up = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
         except ValueError as e:
             raise DraawError(f"camera path frame {i}: {e}") from None
+        before = self.camera
         self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
                        "up": list(map(float, up)), "fov": float(self.fov.value)}
-        self._orbit_to(0.0, 0.0, 1.0)        # the orbit is relative to the path's camera
+        # the orbit is relative to the path's camera (a refused frame keeps the one before)
+        self._orbit_to(0.0, 0.0, 1.0, undo=lambda: setattr(self, "camera", before))
 
     def _camera_now(self):
         return tuning.orbit(self.camera, self.yaw.value, self.pitch.value, self.distance.value)
@@ -115,18 +124,34 @@ class CameraPanel:
     def _zoom(self, factor):
         self._orbit_to(distance=float(self.distance.value) * factor)
 
-    def _orbit_to(self, yaw=None, pitch=None, distance=None):
-        """Set the orbit sliders (clamped to their ranges) and move the camera once."""
+    def _orbit_to(self, yaw=None, pitch=None, distance=None, undo=None):
+        """Set the orbit sliders (clamped to their ranges) and move the camera once. A move
+        the scene refuses (into smoke) puts the sliders back, and calls ``undo``: they stayed
+        at the refused camera, which save() then wrote (a file that does not load)."""
         if self.camera is None:
             return
-        self._syncing = True                 # one camera update, not one per slider
-        try:
-            for w, v in ((self.yaw, yaw), (self.pitch, pitch), (self.distance, distance)):
-                if v is not None:
-                    w.value = min(max(float(v), w.min), w.max)
-        finally:
-            self._syncing = False
-        self._guard(self._set_camera)()
+        sliders = (self.yaw, self.pitch, self.distance)
+        old = [w.value for w in sliders]
+
+        def put(values):
+            self._syncing = True                 # one camera update, not one per slider
+            try:
+                for w, v in zip(sliders, values):
+                    if v is not None:
+                        w.value = min(max(float(v), w.min), w.max)
+            finally:
+                self._syncing = False
+
+        def move():
+            try:
+                self._set_camera()
+            except Exception:
+                put(old)
+                if undo is not None:
+                    undo()
+                raise
+        put((yaw, pitch, distance))
+        self._guard(move)()
 
     def _get_camera(self):
         o, t, up = self._camera_now()

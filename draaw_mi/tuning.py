@@ -233,10 +233,15 @@ def error_image(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- saving
 def document(scene, materials: dict, *, camera: dict | None = None, render: dict | None = None,
              post=None, light_scale: float = 1.0, light_color=(1.0, 1.0, 1.0),
-             dest: str | None = None) -> dict:
+             dest: str | None = None, values: dict | None = None) -> dict:
     """The scene description with the tuned values written in (for ``tomli_w``); ``dest``:
-    the file it goes to (relative file names follow, see ``DraawScene.updated_description``)."""
+    the file it goes to (relative file names follow, see ``DraawScene.updated_description``);
+    ``values``: more ``{traverse or sdf key: value}`` to write (a light's, before the
+    intensity and colour controls scale it)."""
     flat = {f"{m}.{p}": v for m, vals in materials.items() for p, v in vals.items()}
+    for key, v in (values or {}).items():
+        arr = np.asarray(v, np.float64).ravel()
+        flat[key] = [float(x) for x in arr] if arr.size > 1 else float(arr[0])
     desc = scene.updated_description(flat, dest)
     if camera is not None:
         cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles")}

@@ -117,11 +117,18 @@ class MaterialTuner(CameraPanel):
         if self.reference is not None and self.reference.shape[:2] != (h, w):
             raise DraawError(f"MaterialTuner: reference of {self.reference.shape[1]}x{self.reference.shape[0]} "
                              f"pixels; expected the scene's {w}x{h} (the error line compares pixels)")
-        from .preview import _budget
+        from .preview import _budget, _scale
         max_spp = _budget(max_spp, "MaterialTuner")
+        for name, flag in (("denoise", denoise), ("freeze", freeze), ("autostart", autostart)):
+            if not isinstance(flag, (bool, np.bool_)):     # ("no" turned denoising on)
+                raise DraawError(f"MaterialTuner: {name}={flag!r}; expected True or False")
+        if isinstance(rest_after, bool) or not isinstance(rest_after, (int, float)) or not rest_after >= 0:
+            raise DraawError(f"MaterialTuner: rest_after={rest_after!r}; expected seconds >= 0")
         self.rest_after = float(rest_after)
         self._options = dict(version=version or self.scene.settings["version"], max_spp=int(max_spp),
-                             denoise=bool(denoise), interactive_scale=float(interactive_scale), freeze=freeze)
+                             denoise=bool(denoise), interactive_scale=_scale(interactive_scale, "MaterialTuner"),
+                             freeze=bool(freeze))
+        self._file_values = None                     # (see _outside_edits)
         self._last_change = time.perf_counter()
         self._syncing = False
         self._textures: dict = {}
@@ -351,8 +358,7 @@ class MaterialTuner(CameraPanel):
             doc["materials"][m].update(files)
         base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
         scale = self.controls_render["scale"].value if scale is None else scale
-        w, h = self.base_scene.resolution
-        doc["render"]["resolution"] = [max(8, round(w * scale)), max(8, round(h * scale))]
+        doc["render"]["resolution"] = list(scaled_resolution(self.base_scene.resolution, scale))
         scene = _from_description(doc, self.scene.source, base, {})
         for m, files in self._textures.items():
             if "base_color" in files:                   # a texture now: no single colour
@@ -527,10 +533,14 @@ class MaterialTuner(CameraPanel):
             o, t, up = self._camera_now()
             cam = {"origin": o, "target": t, "up": up, "fov": float(self.fov.value)}
         render = {"version": self.preview.version, "max_depth": int(self.preview.max_depth)}
+        for key in ("filter", "sampler"):     # (load_scene(..., filter=) went back to the file's)
+            if self.base_scene.settings.get(key) is not None:
+                render[key] = self.base_scene.settings[key]
         # from the loaded scene's description: a reloaded scene's holds scaled lights already
         doc = tuning.document(self.base_scene, self.materials, camera=cam, render=render, post=self.post,
                               light_scale=float(self.light_scale.value),
-                              light_color=tuning.hex_to_linear(self.light_color.value), dest=dest)
+                              light_color=tuning.hex_to_linear(self.light_color.value), dest=dest,
+                              values=self._outside_edits())
         for m, files in self._textures.items():
             doc["materials"][m].update(files)
         w, h = self.base_scene.resolution
@@ -541,6 +551,26 @@ class MaterialTuner(CameraPanel):
                     light["position"] = [float(x) for x in cam["origin"]]       # already; a position
                                                                                 # beside it is refused)
         return doc
+
+    def _outside_edits(self) -> dict:
+        """``{key: value}`` of the lights and ``[[sdf]]`` parameters the scene had apart from
+        its file (set through ``scene.params`` before the panel was made, or through
+        ``tuner.preview.update``): written into :meth:`document`, so that the resolution
+        slider's reload and :meth:`save` keep them (they went back to the file's values: a
+        light 8x off what the preview showed). Lights as the panel found them (its intensity
+        and colour controls scale them), SDF values as the scene has them now."""
+        if self.base_scene.description is None:
+            return {}
+        if self._file_values is None:                 # the file's own values, loaded once
+            import copy
+            from .scene import _from_description
+            src = self.base_scene.source
+            base = os.path.dirname(os.path.abspath(src)) if os.path.isfile(src) else os.getcwd()
+            fresh = _from_description(copy.deepcopy(self.base_scene.description), src, base, {})
+            self._file_values = _editable_values(fresh, tuning.light_values(fresh))
+        now = _editable_values(self.scene, self._light_base)
+        return {k: v for k, v in now.items()
+                if k in self._file_values and not np.allclose(v, self._file_values[k], rtol=1e-6, atol=0)}
 
     def save(self, path: str) -> str:
         """Write the tuned scene to a TOML file (atomically) and return its path."""
@@ -558,6 +588,35 @@ class MaterialTuner(CameraPanel):
 #: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing
 #: (contrast 1.0) or something neither linear nor encoded (half an sRGB encoding)
 _POST_START = {"contrast": {"contrast": 2.0}, "srgb": {"amount": 1.0}}
+
+
+def scaled_resolution(size, scale: float) -> tuple[int, int]:
+    """The film for the resolution slider: ``size`` (W, H) itself at scale 1, else one factor
+    on both axes, at least 8 pixels on the shorter one (8 per axis turned 32x24 at 0.25 into
+    8x8, and a 6x6 scene at 1.0 into 8x8).
+
+    >>> scaled_resolution((32, 24), 0.25), scaled_resolution((6, 6), 1.0), scaled_resolution((640, 480), 0.5)
+    ((11, 8), (6, 6), (320, 240))
+    """
+    w, h = int(size[0]), int(size[1])
+    s = min(1.0, max(float(scale), 8.0 / min(w, h)))
+    if s >= 1.0:
+        return w, h
+    return max(1, round(w * s)), max(1, round(h * s))
+
+
+def _editable_values(scene, lights: dict) -> dict:
+    """The light intensities in ``lights`` (radiance / intensity: what a scene file can say;
+    not an environment map's texels or scale) and ``scene``'s ``[[sdf]]`` parameters, as
+    flat float arrays."""
+    out = {k: np.asarray(v, np.float64).ravel() for k, v in lights.items()
+           if k.endswith(tuning.LIGHT_SUFFIXES) and not k.endswith((".data", ".scale"))}
+    if scene.sdf is not None:
+        p = scene.all_params
+        for k in p.keys():
+            if k.startswith("sdf."):
+                out[k] = np.asarray(p[k], np.float64).ravel()
+    return out
 
 
 def _revert(args) -> None:

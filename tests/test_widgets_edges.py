@@ -1,0 +1,146 @@
+"""MaterialTuner edge cases from a review: edits made outside the panel survive the resolution
+slider and Save; load settings are kept; a refused orbit puts its sliders back; XML cameras;
+the resolution slider's aspect ratio; Preview.reset shows new values at once; bad arguments."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import draaw_mi
+
+W = pytest.importorskip("ipywidgets")
+from draaw_mi.widgets import MaterialTuner  # noqa: E402
+
+from conftest import tiny_description  # noqa: E402
+
+LIGHT = "point_light0.intensity.value"
+
+
+def _tuner(scene, **kw):
+    opts = dict(autostart=False, freeze=False, interactive_scale=1.0, max_spp=4, frame_channel="image")
+    opts.update(kw)
+    return MaterialTuner(scene, **opts)
+
+
+def test_a_light_set_outside_the_panel_survives_reload_and_save(tmp_path):
+    sc = draaw_mi.load_scene(tiny_description())
+    sc.params[LIGHT] = draaw_mi.scene.value_like(sc.params[LIGHT], [5.0, 5.0, 5.0], LIGHT)
+    sc.params.update()
+    t = _tuner(sc)
+    try:
+        t.controls_render["scale"].value = 0.5           # a reload from the document
+        assert np.allclose(np.array(t.scene.params[LIGHT]).ravel(), 5.0)     # (was the file's 40)
+        t.light_scale.value = 2.0
+        t.refresh(1)
+        assert np.allclose(np.array(t.scene.params[LIGHT]).ravel(), 10.0)
+        light = t.document()["lights"][0]          # (intensity 80: the file's 40 times 2)
+        assert np.allclose(light["intensity"] * np.asarray(light.get("color", 1.0)), 10.0), light
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        assert np.allclose(np.array(saved.params[LIGHT]).ravel(), 10.0)
+    finally:
+        t.close()
+
+
+def test_an_sdf_value_set_through_the_preview_survives_reload_and_save(tmp_path):
+    d = tiny_description()
+    d["sdf"] = [{"type": "sphere", "name": "blob", "material": "ball", "center": [1.2, 0.5, 0.0], "radius": 0.3}]
+    t = _tuner(draaw_mi.load_scene(d))
+    try:
+        t.preview.update({"sdf.blob.radius": 0.2})
+        t.refresh(1)
+        t.controls_render["scale"].value = 0.5
+        assert float(np.array(t.scene.all_params["sdf.blob.radius"]).ravel()[0]) == pytest.approx(0.2)
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        assert float(np.array(saved.all_params["sdf.blob.radius"]).ravel()[0]) == pytest.approx(0.2)
+        # what the file says already is not written again (no churn in a saved file)
+        assert t._outside_edits().keys() == {"sdf.blob.radius"}
+    finally:
+        t.close()
+
+
+def test_load_settings_are_kept_by_the_resolution_slider_and_save(tmp_path):
+    sc = draaw_mi.load_scene(tiny_description(), filter="gaussian", sampler="stratified")
+    t = _tuner(sc)
+    try:
+        t.controls_render["scale"].value = 0.5
+        assert (t.scene.settings["filter"], t.scene.settings["sampler"]) == ("gaussian", "stratified")
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        assert (saved.settings["filter"], saved.settings["sampler"]) == ("gaussian", "stratified")
+    finally:
+        t.close()
+
+
+def test_a_refused_orbit_puts_the_sliders_back():
+    d = tiny_description()
+    d["volumes"] = [{"name": "fog", "mode": "smoke", "bounds": [[-0.5, 1.4, -0.5], [0.5, 2.4, 0.5]],
+                     "procedural": {"type": "plume", "seed": 3, "resolution": [8, 8, 8]}}]
+    d["camera"] = {"origin": [0.0, 5.0, 0.01], "target": [0.0, 0.0, 0.0], "fov": 40}
+    t = _tuner(draaw_mi.load_scene(d))
+    try:
+        before = t._camera_now()[0]
+        t._zoom(0.35)                                   # origin (0, 1.75, ~0): inside the smoke
+        assert "smoke" in t.message.value
+        assert t.distance.value == 1.0                  # (stayed at 0.35)
+        assert np.allclose(t.document()["camera"]["origin"], before)
+        t._zoom(0.9)                                    # a move that is allowed still moves
+        assert t.distance.value == pytest.approx(0.9)
+    finally:
+        t.close()
+
+
+XML = """<scene version="3.0.0">
+  <sensor type="perspective"{sid}><float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="12"/>
+      <rfilter type="box"/></film></sensor>
+  <shape type="sphere"><bsdf type="diffuse"/></shape>
+  <emitter type="constant"/>
+</scene>
+"""
+
+
+@pytest.mark.parametrize("sid", [' id="cam"', ""])
+def test_the_fov_slider_finds_an_xml_sensor(tmp_path, sid):
+    path = tmp_path / "s.xml"
+    path.write_text(XML.format(sid=sid))
+    t = _tuner(str(path), version="path")
+    try:
+        assert t.fov.value == pytest.approx(60.0)        # (40, the default)
+        t.fov.value = 30.0                               # ("no parameter 'sensor.x_fov'")
+        t.refresh(1)
+        assert t.message.value == ""
+        from draaw_mi.scene.camera import sensor_keys
+        assert float(np.array(t.scene.params[sensor_keys(t.scene)[1]]).ravel()[0]) == pytest.approx(30.0)
+    finally:
+        t.close()
+
+
+def test_the_resolution_slider_keeps_the_aspect_ratio():
+    from draaw_mi.widgets import scaled_resolution
+    assert scaled_resolution((32, 24), 0.25) == (11, 8)          # (8x8)
+    assert scaled_resolution((6, 6), 1.0) == (6, 6)              # (8x8 at scale 1)
+    assert scaled_resolution((640, 480), 0.5) == (320, 240)
+    assert scaled_resolution((32, 8), 0.25) == (32, 8)           # the short side is 8 already
+
+
+def test_preview_reset_shows_an_outside_change_in_its_first_frame():
+    from draaw_mi.preview import Preview
+    sc = draaw_mi.load_scene(tiny_description())
+    pv = Preview(sc, version="v4", max_spp=4, freeze=False, interactive_scale=0.5)
+    key = sc.key("ball.base_color")
+    pv.step()
+    sc.params[key] = draaw_mi.scene.value_like(sc.params[key], [0.0, 0.0, 1.0], key)
+    sc.params.update()
+    pv.reset()
+    first = pv.step()                                  # the low-resolution first frame
+    assert first.interactive
+    r, g, b = first.image.reshape(-1, 3).mean(0)
+    assert b > r, (r, g, b)                            # (the old red ball: r 0.25 > b 0.20)
+
+
+@pytest.mark.parametrize("kw,match", [({"interactive_scale": "half"}, "interactive_scale"),
+                                      ({"rest_after": "x"}, "rest_after"), ({"denoise": "no"}, "denoise"),
+                                      ({"freeze": "no"}, "freeze")])
+def test_bad_arguments_are_named(kw, match):
+    with pytest.raises(draaw_mi.errors.DraawError, match=match):
+        _tuner(tiny_description(), **kw)
