@@ -100,14 +100,16 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--plot", help="write a PNG plot of loss and parameters over iterations")
     f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference (without 'fov': "
                    "the scene camera's)")
-    f.add_argument("--version", default="v4", help="differentiable integrator (default v4)")
+    f.add_argument("--version", help="differentiable integrator (default: the scene's render.version "
+                   "where it is one of v1..v4 or prb, else v4)")
     f.add_argument("--spp", type=int, default=16, help="samples per pixel per iteration (default 16)")
     f.add_argument("--iterations", type=int, default=100, help="Adam iterations (default 100)")
     f.add_argument("--lr", type=float, default=0.05, help="learning rate (default 0.05)")
     f.add_argument("--loss", default="l2", choices=["l2", "l1", "relative_l2"])
     f.add_argument("--exposure", default="fixed", choices=["fixed", "fit"],
                    help="'fit' makes the loss insensitive to a global exposure difference")
-    f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss")
+    f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss (default: the "
+                   "scene's [[post]], as `draaw-mi render` applies it)")
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 

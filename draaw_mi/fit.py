@@ -118,6 +118,10 @@ def _views(scene: DraawScene, views):
     out = []
     for i, v in enumerate(views):
         if isinstance(v, mi.Sensor):
+            size = tuple(int(c) for c in v.film().crop_size())
+            if size != (w, h):     # (a raw Dr.Jit size error, or pixels compared scrambled)
+                raise DraawError(f"fit: views[{i}] is a sensor of {size[0]}x{size[1]} pixels; "
+                                 f"expected the references' {w}x{h}")
             out.append(v)
             continue
         if isinstance(v, dict) and "fov" not in v:
@@ -243,7 +247,7 @@ def _alpha_min(scene: DraawScene, key: str) -> float:
     return DEFAULT_ALPHA_MIN
 
 
-def fit(scene, references, params, version: str = "v4", spp: int = 16, iterations: int = 100,
+def fit(scene, references, params, version: str | None = None, spp: int = 16, iterations: int = 100,
         lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
         seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,
         average_last: float = 0.25, tol: float = 5e-3, resolution=None, lr_final: float = 0.1,
@@ -262,7 +266,8 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         pixels above 1 fitted roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
         when they counted).
     params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
-    version: integrator (``v1``..``v4``, ``prb``); must be differentiable.
+    version: integrator (``v1``..``v4``, ``prb``); must be differentiable. Default the
+        scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
     spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
         Adam iterations and learning rate (in the parameter's space: a roughness step of
         ``lr`` is a relative change, see :class:`_Param`).
@@ -270,7 +275,10 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
     views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
         (a table without ``fov`` has the scene camera's field of view).
-    post: a post-processing chain (list of dicts) applied to each render inside the loss.
+    post: a post-processing chain (list of dicts) applied to each render inside the loss;
+        default the scene's ``post``, as :func:`draaw_mi.render` applies it (``[]``: none).
+        The scene's ``hide_emitters`` holds too: a reference rendered from the scene file
+        is then one the fit can render.
     exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
     init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the
         scene's current values.
@@ -303,19 +311,37 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
         raise ParameterError(f"fit: seed={seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
     if not (isinstance(average_last, (int, float)) and 0 < average_last <= 1):
         raise ParameterError(f"fit: average_last={average_last!r}; expected a fraction in (0, 1]")
+    # (a negative lr_final climbed the loss in the averaged iterations; NaN read as divergence)
+    for name, value, hi_open in (("lr_final", lr_final, False), ("beta_2", beta_2, True)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                0 <= value < 1 if hi_open else 0 <= value <= 1):
+            raise ParameterError(f"fit: {name}={value!r}; expected a number in [0, 1{')' if hi_open else ']'}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol >= 0:
+        raise ParameterError(f"fit: tol={tol!r}; expected a number >= 0")
+    if smooth is not None and not isinstance(smooth, (bool, np.bool_)):
+        raise ParameterError(f"fit: smooth={smooth!r}; expected True, False or None")
     if isinstance(params, str):
         params = [params]
     if not params:
         raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
+    if version is None:                 # the scene's, where it can be differentiated
+        version = scene.settings.get("version") or "v4"
+        if not isinstance(make_integrator(version, 1), mi.ad.integrators.common.ADIntegrator):
+            version = "v4"
+    if post is None:                    # the scene's chain, as render() applies it
+        post = list(scene.settings.get("post", []))
     chain = None
     if post:
         from . import post as post_mod
         chain = post_mod.load_chain(post) if not callable(post) else post
     encoded = chain is not None and display_encoded_post(post)
     given = references if isinstance(references, (list, tuple)) else [references]
-    refs = [load_reference(r, encoded) for r in given]
+    if not given:
+        raise ParameterError("fit: references is empty; give one reference image per view")
+    refs = [load_reference(r, encoded, who=f"fit: references[{i}]" if len(given) > 1 else "fit")
+            for i, r in enumerate(given)]
     masks = [mi.TensorXf(unclipped_mask(r)) if is_display_reference(g) else None
              for g, r in zip(given, refs)]
     h, w = refs[0].shape[:2]
@@ -334,7 +360,8 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     if len(sensors) != len(refs):
         raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
     check_version_sees(scene, version)   # (prb fitted a smoke scene as if it had no smoke)
-    integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
+    integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth,
+                                 scene.settings.get("hide_emitters", False))
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
         raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
 
@@ -505,7 +532,7 @@ def fit(scene, references, params, version: str = "v4", spp: int = 16, iteration
     return FitResult(values=fitted, history=history, image=final[..., :3], converged=converged,
                      iterations=iterations, seconds=time.perf_counter() - t0, kernel_compiles=compiles,
                      exposure_stops=float(np.mean([h["exposure_stops"] for h in history[-n_avg:]]))
-                     if exposure == "fit" else 0.0)
+                     if exposure == "fit" else 0.0, version=version)
 
 
 def _apply_chain(img, chain):

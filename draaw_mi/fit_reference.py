@@ -84,7 +84,10 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
         arr = np.repeat(arr, 3, axis=2)
     arr = arr[..., :3].astype(np.float32)
     if not np.all(np.isfinite(arr)):
-        raise DraawError(f"{who}: a reference image contains NaN or Inf")
+        bad = int(np.count_nonzero(~np.all(np.isfinite(arr), axis=2)))
+        y, x = np.argwhere(~np.all(np.isfinite(arr), axis=2))[0]
+        what = f"reference {ref!r}" if isinstance(ref, str) else "a reference image"
+        raise DraawError(f"{who}: {what} has {bad} pixel(s) with NaN or Inf (first at x={x}, y={y})")
     return arr
 
 
@@ -111,6 +114,12 @@ def _array_reference(ref, who: str) -> np.ndarray:
     array was taken as linear values of 0-255, a channel-first one rendered a 3-pixel-high
     image)."""
     from .io import to_numpy
+    if isinstance(ref, mi.Bitmap) and ref.component_format() not in (mi.Struct.Type.Float16, mi.Struct.Type.Float32,
+                                                                      mi.Struct.Type.Float64):
+        # (an 8-bit PNG's bitmap was taken as linear values of 0-255: a loss of 12455, no word)
+        raise ParameterError(f"{who}: reference mi.Bitmap of component format {ref.component_format()}; "
+                             "expected float values (linear): pass the PNG file, or "
+                             "bitmap.convert(component_format=mi.Struct.Type.Float32, srgb_gamma=False)")
     raw = np.asarray(ref) if not isinstance(ref, (mi.TensorXf, mi.Bitmap)) else None
     if raw is not None and not np.issubdtype(raw.dtype, np.floating):
         raise ParameterError(f"{who}: reference array of dtype {raw.dtype}; expected float values "

@@ -18,7 +18,8 @@ class FitResult:
     optimiser's coordinates ``latent``); ``image``: the final render of the
     first view (numpy, post chain applied); ``converged``: whether the parameters settled
     (their averaged iterates moved less than ``tol``, and not steadily in one direction: see
-    :func:`settled`); ``exposure_stops``: the fitted exposure (0 unless ``exposure="fit"``).
+    :func:`settled`); ``exposure_stops``: the fitted exposure (0 unless ``exposure="fit"``);
+    ``version``: the integrator it rendered with.
     """
 
     values: dict
@@ -29,6 +30,7 @@ class FitResult:
     seconds: float = 0.0
     kernel_compiles: int = 0          # JIT kernels compiled after the first iteration (0 = none)
     exposure_stops: float = 0.0
+    version: str = ""                 # the integrator the fit used (the scene's, or v4)
 
     @property
     def losses(self) -> np.ndarray:

@@ -265,6 +265,18 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
                 base = light.get("color", [1.0, 1.0, 1.0])
                 base = base if isinstance(base, list) else [float(base)] * 3
                 light["color"] = [float(b) * c for b, c in zip(base, col)]
+        # emitting shapes too: the preview scales their radiance with the lights' (a saved
+        # panel stayed at 5 where the preview showed 10)
+        for shape in desc.get("shapes", []):
+            if "emission" not in shape:
+                continue
+            e = shape["emission"]
+            shape["emission"] = ([float(x) * float(light_scale) for x in e] if isinstance(e, list)
+                                 else float(e) * float(light_scale))
+            if col != [1.0, 1.0, 1.0]:
+                base = shape.get("emission_color", [1.0, 1.0, 1.0])
+                base = base if isinstance(base, list) else [float(base)] * 3
+                shape["emission_color"] = [float(b) * c for b, c in zip(base, col)]
     return desc
 
 

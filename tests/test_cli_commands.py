@@ -288,8 +288,8 @@ def test_cli_fit_accepts_a_png_reference(tmp_path, monkeypatch):
     fit_mod = sys.modules["draaw_mi.fit"]
     real = fit_mod.load_reference
 
-    def spy(ref, encoded=False):
-        seen.setdefault("arrays", []).append(real(ref, encoded))
+    def spy(ref, encoded=False, who="fit"):
+        seen.setdefault("arrays", []).append(real(ref, encoded, who))
         return seen["arrays"][-1]
     monkeypatch.setattr(fit_mod, "load_reference", spy)
     assert main(["fit", scene_file, "--reference", str(tmp_path / "ref.png"), "--param", "target.metallic",

@@ -144,3 +144,21 @@ def test_preview_reset_shows_an_outside_change_in_its_first_frame():
 def test_bad_arguments_are_named(kw, match):
     with pytest.raises(draaw_mi.errors.DraawError, match=match):
         _tuner(tiny_description(), **kw)
+
+
+def test_the_light_controls_scale_emitting_shapes_in_the_saved_file_as_in_the_preview(tmp_path):
+    d = tiny_description()
+    d["shapes"].append({"type": "rectangle", "name": "panel", "emission": 5.0, "translate": [0, 3, 0],
+                        "rotate": {"axis": [1, 0, 0], "angle": 90}})
+    t = _tuner(draaw_mi.load_scene(d))
+    try:
+        t.light_scale.value = 2.0
+        t.light_color.value = "#ff0000"
+        t.refresh(1)
+        key = "panel.emitter.radiance.value"
+        shown = np.array(t.scene.params[key]).ravel()
+        assert np.allclose(shown, [10.0, 0.0, 0.0]), shown
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        assert np.allclose(np.array(saved.params[key]).ravel(), shown, atol=1e-5)   # (5, 5, 5)
+    finally:
+        t.close()

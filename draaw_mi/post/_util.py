@@ -124,7 +124,9 @@ def safe_norm2(gx: Any, gy: Any) -> Any:
     >>> round(float(safe_norm2(mi.Float(3e30), mi.Float(4e30))[0]) / 1e30, 5)
     5.0
     """
-    m = dr.maximum(dr.abs(gx), dr.abs(gy))
+    # m detached: the value is m's either way, and the derivative through rcp(m) (-1/m^2)
+    # underflowed past 1e19 (NaN gradients of bright edges); d/dgx = gx / |g| as it should
+    m = dr.detach(dr.maximum(dr.abs(gx), dr.abs(gy)))
     pos = m > 0
     inv = dr.select(pos, dr.rcp(dr.select(pos, m, 1.0)), 0.0)
     return dr.select(pos, m * dr.sqrt(dr.square(gx * inv) + dr.square(gy * inv)), 0.0)

@@ -11,6 +11,7 @@ HDR; then large values or repeated passes can overflow float32 to inf).
 """
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 from typing import Any
 
@@ -29,8 +30,13 @@ def _positive_power(x: mi.Float, e: float) -> mi.Float:
 # -- linear (GO-Draaw "Linear") ---------------------------------------------------------------
 def _linear(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     e = 1.0 / (3.0 * p.gamma)
-    # (s·c)^e / s = c^e · s^(e-1): the constant is exact in double precision
-    out = _positive_power(rgb.array, e) * p.scale ** (e - 1.0)
+    # (s·c)^e / s = 2^(e log2 c + (e - 1) log2 s), in one exponent: as a product, s^(e-1)
+    # overflowed float32 below gamma 0.0196 (0 * inf: NaN on black pixels) and a Python float
+    # below 0.0026 (OverflowError), where the result is a finite step
+    x = rgb.array
+    pos = x > 0.0
+    lx = dr.log2(dr.select(pos, x, 1.0))
+    out = dr.select(pos, dr.exp2(e * lx + (e - 1.0) * math.log2(float(p.scale))), 0.0)
     return mi.TensorXf(dr.minimum(out, 1.0) if p.clamp else out, rgb.shape)
 
 
