@@ -179,6 +179,7 @@ class Preview:
         self._callbacks = []
         self._error_callbacks = []
         self.frame: PreviewFrame | None = None
+        self._delivered: PreviewFrame | None = None     # the last frame its callbacks have had
         self.error: Exception | None = None
         self._integrator = self._make_integrator()
 
@@ -362,10 +363,12 @@ class Preview:
             self.frame = frame
             self._last_publish = frame.t_ready
             self._shown_generation = generation
-            self._wake.notify_all()
             callbacks = list(self._callbacks)
         for cb in callbacks:
             cb(frame)
+        with self._lock:        # wait() returns once the callbacks have shown it (a script read
+            self._delivered = frame      # the panel's previous image, status and error line)
+            self._wake.notify_all()
         return frame
 
     def _upscale(self, arr):
@@ -481,12 +484,13 @@ class Preview:
 
     def wait(self, generation: int | None = None, spp: int = 0, timeout: float = 30.0) -> PreviewFrame | None:
         """Block until a frame of ``generation`` (default: the latest) with at least ``spp``
-        samples (0: any frame, interactive included) is published; ``None`` on timeout."""
+        samples (0: any frame, interactive included) is published and its :meth:`on_frame`
+        callbacks have run (a panel shows it); ``None`` on timeout."""
         deadline = time.perf_counter() + timeout
         with self._lock:
             g = self._generation if generation is None else generation
             while True:
-                f = self.frame
+                f = self._delivered
                 if f is not None and f.generation >= g and f.spp >= spp:
                     return f
                 if self.error is not None and self._shown_generation >= g:

@@ -175,7 +175,10 @@ def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 
     e1 = h / np.linalg.norm(h)
     e2 = np.cross(up, e1)
     el0 = math.asin(max(-1.0, min(1.0, float(np.dot(d, up)) / r)))
-    el = max(-math.radians(89), min(math.radians(89), el0 + math.radians(pitch)))
+    # short of the pole, or where the camera is already (a camera 0.6 degrees from overhead
+    # moved 2.5 cm on Save without the orbit being touched)
+    lim = max(math.radians(89), abs(el0))
+    el = max(-lim, min(lim, el0 + math.radians(pitch)))
     az = math.radians(yaw)
     direction = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up
     return t + direction * r * distance, t, up

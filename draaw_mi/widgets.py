@@ -30,7 +30,9 @@ from __future__ import annotations
 import collections
 import json
 import os
+import threading
 import time
+import weakref
 
 import numpy as np
 
@@ -140,9 +142,26 @@ class MaterialTuner(CameraPanel):
         self.preview = self._new_preview(self.scene)
         self._build(save_path, frame_channel)
         if autostart:
+            self._take_over_file()
             self.preview.start()
 
     # ------------------------------------------------------------------ plumbing
+    def _take_over_file(self):
+        """Stop the running panel of the same scene file: a notebook cell run again with a
+        file name made a second panel on a second scene, and the old one went on rendering
+        (a sixth of the new one's frame rate) with nothing left to close it. Panels on one
+        :class:`~draaw_mi.scene.DraawScene` are handled by :meth:`Preview.start`."""
+        src = self.base_scene.source
+        if not os.path.isfile(src):
+            return
+        key = os.path.realpath(src)
+        with _PANELS_GUARD:
+            ref = _PANELS.get(key)
+            _PANELS[key] = weakref.ref(self)
+        old = None if ref is None else ref()
+        if old is not None and old is not self and old.preview.running:
+            old.preview._supersede()
+
     def _new_preview(self, scene) -> Preview:
         o = self._options
         pv = Preview(scene, version=o["version"], max_spp=o["max_spp"], denoise=o["denoise"], post=self.post,
@@ -584,6 +603,10 @@ class MaterialTuner(CameraPanel):
                               {"version": self.preview.version, "max_depth": int(self.preview.max_depth)},
                               resolution=self.base_scene.resolution)
 
+
+#: the newest running panel of each scene file (MaterialTuner._take_over_file)
+_PANELS: dict = {}
+_PANELS_GUARD = threading.Lock()
 
 #: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing
 #: (contrast 1.0) or something neither linear nor encoded (half an sRGB encoding)

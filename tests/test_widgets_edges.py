@@ -162,3 +162,57 @@ def test_the_light_controls_scale_emitting_shapes_in_the_saved_file_as_in_the_pr
         assert np.allclose(np.array(saved.params[key]).ravel(), shown, atol=1e-5)   # (5, 5, 5)
     finally:
         t.close()
+
+
+def test_a_panel_made_again_on_the_same_file_stops_the_old_one(tmp_path):
+    import tomli_w
+    from draaw_mi.preview import PreviewSuperseded
+    path = tmp_path / "tiny.toml"
+    path.write_text(tomli_w.dumps(tiny_description()))
+    first = _tuner(str(path), autostart=True, max_spp=100000)
+    second = None
+    try:
+        assert first.preview.running
+        second = _tuner(str(path), autostart=True, max_spp=100000)     # the cell run again
+        assert second.preview.running
+        assert not first.preview.running                                # (it went on rendering)
+        assert isinstance(first.preview.error, PreviewSuperseded)
+        other = tmp_path / "other.toml"
+        other.write_text(tomli_w.dumps(tiny_description()))
+        third = _tuner(str(other), autostart=True, max_spp=100000)    # another file: both run
+        try:
+            assert second.preview.running and third.preview.running
+        finally:
+            third.close()
+    finally:
+        first.close()
+        if second is not None:
+            second.close()
+
+
+def test_wait_returns_once_the_panel_shows_the_frame():
+    t = _tuner(tiny_description(), autostart=True, max_spp=4, interactive_scale=0.5)
+    try:
+        for value in (0.2, 0.6, 0.3):
+            t.controls["ball"]["roughness"].value = value
+            f = t.preview.wait(t.preview.generation, spp=4)
+            assert f is not None and f.spp == 4
+            assert t.last_frame is f, (t.last_frame.spp, f.spp)      # (8 of 8 read the frame before)
+    finally:
+        t.close()
+
+
+def test_a_camera_near_the_pole_stays_where_it_is(tmp_path):
+    from draaw_mi import tuning
+    cam = {"origin": [0.0, 6.0, 0.06], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]}
+    o, _, _ = tuning.orbit(cam, 0.0, 0.0, 1.0)
+    np.testing.assert_allclose(o, cam["origin"], atol=1e-12)          # ((0, 5.9994, 0.1047))
+    o, _, _ = tuning.orbit(cam, 30.0, 0.0, 1.0)                       # a yaw keeps its elevation
+    assert o[1] == pytest.approx(6.0, abs=1e-6) and np.hypot(o[0], o[2]) == pytest.approx(0.06, abs=1e-6)
+    d = tiny_description()
+    d["camera"] = {"origin": [0.0, 6.0, 0.06], "target": [0.0, 0.0, 0.0], "fov": 60}
+    t = _tuner(d)
+    try:
+        np.testing.assert_allclose(t.document()["camera"]["origin"], [0.0, 6.0, 0.06], atol=1e-9)
+    finally:
+        t.close()
