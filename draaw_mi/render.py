@@ -326,7 +326,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     check_version_sees(scene, version)
     if post is not None and not callable(post):
         from . import post as post_mod
-        post = post_mod.load_chain(post)     # checked now, not after the render (an unknown filter)
+        post_mod.load_chain(post)     # checked now, not after the render (an unknown filter); kept
+        # as given: the info (and a batch frame's header) records the chain as the user wrote it
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image
         aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs, version)
     if adaptive is not None:
