@@ -263,7 +263,8 @@ class Preview:
         from .scene.schema import Where
         m = np.asarray(getattr(to_world, "matrix", to_world), float).reshape(4, 4, -1)[:, :, 0]
         try:
-            check_camera_outside_smoke(m[:3, 3], volumes, Where("Preview.update"))
+            from .scene.camera import sensor_reach
+            check_camera_outside_smoke(m[:3, 3], volumes, Where("Preview.update"), sensor_reach(self.scene))
         except DraawError as e:
             raise ParameterError(f"{e} ({name})") from None
 

@@ -220,9 +220,11 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             try:
                 cams = camera_frames(job.camera, job.frames, entry.fov)
                 from ..media.scene_volumes import check_camera_outside_smoke
+                from ..scene.camera import sensor_reach
                 from ..scene.schema import Where
                 for f, c in enumerate(cams):
-                    check_camera_outside_smoke(c["origin"], scene.info.get("volumes", []), Where(f"frame {f}"))
+                    check_camera_outside_smoke(c["origin"], scene.info.get("volumes", []), Where(f"frame {f}"),
+                                               sensor_reach(scene))
             except DraawError as e:
                 raise SceneError(f"{loc}: camera: {e}") from None
         for f in range(job.frames):

@@ -82,6 +82,7 @@ class MediaTable:
         kinds = [mj.kind for mj in self.majorants]
         self.has_homogeneous = "homogeneous" in kinds
         self.has_tracked = any(k != "homogeneous" for k in kinds)
+        self.partly_null = vt.partly_null(scene)        # masks (see volume_tracking.partly_null)
         # flat arrays for the tracked media
         offs, vals = [], []
         total = 0
@@ -133,24 +134,27 @@ def media_table(scene: mi.Scene) -> MediaTable:
     key = id(scene)
     stamp = []
     diff = False
-    for shape in scene.shapes():
-        for m in (shape.interior_medium(), shape.exterior_medium()):
-            # the media by identity: the table holds them alive, so a new scene at a reused
-            # address cannot match unless it has these very media (the scene itself is not
-            # held: a held scene keeps its Python BSDFs alive, which enlarge every BSDF call)
-            stamp.append(id(m))
-            if m is not None:
-                p = mi.traverse(m)
+    # the sensors' media too: a medium only the camera sits in was neither stamped (an edited
+    # density kept the old majorant) nor seen as differentiated (a density gradient of the
+    # wrong sign: no null collisions under a tight bound)
+    media = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
+    media += [s.get_medium() for s in scene.sensors()]
+    for m in media:
+        # the media by identity: the table holds them alive, so a new scene at a reused
+        # address cannot match unless it has these very media (the scene itself is not
+        # held: a held scene keeps its Python BSDFs alive, which enlarge every BSDF call)
+        stamp.append(id(m))
+        if m is not None:
+            p = mi.traverse(m)
+            for k in p.keys():
+                if k.endswith("sigma_t.data") or k == "scale" or k.startswith("sigma_t."):
+                    v = p[k]
+                    # a JIT variable's index changes whenever the parameter is replaced
+                    arr = getattr(v, "array", v)
+                    stamp.append((k, getattr(arr, "index", None), v if isinstance(v, float) else None))
+            with dr.resume_grad():            # sample() runs with AD suspended
                 for k in p.keys():
-                    if k.endswith("sigma_t.data") or k == "scale" or k.startswith("sigma_t."):
-                        v = p[k]
-                        # a JIT variable's index changes whenever the parameter is replaced
-                        arr = getattr(v, "array", v)
-                        stamp.append((k, getattr(arr, "index", None), v if isinstance(v, float) else None))
-                with dr.resume_grad():            # sample() runs with AD suspended
-                    for k in p.keys():
-                        diff |= not isinstance(p[k], (float, int)) and dr.grad_enabled(p[k])
-    stamp += [id(s.get_medium()) for s in scene.sensors()]
+                    diff |= not isinstance(p[k], (float, int)) and dr.grad_enabled(p[k])
     stamp.append(("differentiated", diff))
     hit = _TABLES.get(key)
     if hit is not None and hit[0] == stamp:
@@ -318,6 +322,8 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         at_surf = active & ~scattered
         bsdf = si.bsdf(ray)
         null = at_surf & si.is_valid() & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
+        if dr.hint(table.partly_null, mode="scalar"):
+            null &= ~vt.scatters(bsdf.flags())    # a mask is a surface: its sample may pass it
         real = at_surf & ~null
         # emission (camera rays, after delta bounces); escaped rays see the environment
         with dr.resume_grad(when=not primal):
@@ -369,14 +375,19 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
         η[surf] *= bs.eta
         wo_world = si.to_world(bs.wo)
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-        count_emission = dr.select(surf, delta, count_emission)
-        prev_it[surf] = dr.detach(si)
-        prev_pdf[surf] = bs.pdf
+        bounce = mi.Bool(surf)
+        if dr.hint(table.partly_null, mode="scalar"):
+            # a mask's sample that passes it (1 - opacity) is no vertex: the MIS state of the
+            # last real one stays, as its shadow rays pass masks with weight 1 - opacity
+            bounce &= ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+        count_emission = dr.select(bounce, delta, count_emission)
+        prev_it[bounce] = dr.detach(si)
+        prev_pdf[bounce] = bs.pdf
         ray[surf] = si.spawn_ray(wo_world)
         ray[null] = si.spawn_ray(ray.d)
         trans = (surf | null) & si.is_medium_transition()
         medium[trans] = si.target_medium(dr.select(null, ray.d, wo_world))
-        depth[surf] += 1
+        depth[bounce] += 1
         active &= med_active | surf | null
 
         # ------------------------ Russian roulette ---------------------

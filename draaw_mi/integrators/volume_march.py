@@ -34,7 +34,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import RenderError
-from .volume_tracking import coefficients, medium_interaction
+from .volume_tracking import coefficients, medium_interaction, partly_null
+from .volume_tracking import scatters as vt_scatters
 
 MAX_SEGMENTS = 16
 
@@ -83,9 +84,11 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
     med = dr.select(active, medium, dr.zeros(mi.MediumPtr))
     live = mi.Bool(active)
     n = mi.UInt32(0)
+    partial = partly_null(scene)
+    flags = mi.RayFlags.All if partial else mi.RayFlags.Minimal
     while live:
         r.maxt = rem
-        si = scene.ray_intersect(r, mi.RayFlags.Minimal, False, live)
+        si = scene.ray_intersect(r, flags, False, live)
         seg = dr.minimum(si.t, rem)
         in_med = live & (med != None)  # noqa: E711
         ok, mint, maxt = med.intersect_aabb(r)
@@ -103,6 +106,8 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
         hit = live & si.is_valid() & (si.t < rem)
         null = hit & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
         T[hit & ~null] = 0.0
+        if dr.hint(partial, mode="scalar"):      # a mask passes 1 - opacity
+            T[null] = T * si.bsdf().eval_null_transmission(si, null).x
         med[null & si.is_medium_transition()] = si.target_medium(r.d)
         rem[null] = rem - si.t
         r[null] = si.spawn_ray(r.d)
@@ -131,6 +136,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         raise RenderError(f"{integ.PLUGIN}: scenes with participating media are rendered primal-only "
                           "by V1/V2 (single-scattering march); differentiate with draaw_v3 / draaw_v4")
     steps = int(getattr(integ, "medium_steps", 12))
+    partial = partly_null(scene)
     # SDF objects (feature 'sdf'): the march stops at the nearer of the mesh / SDF hit
     feats = integ.features(scene)
     sdf = integ.sdf_hook(scene, feats)
@@ -166,7 +172,8 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
             ph, _ = phase.eval_pdf(mi.PhaseFunctionContext(sampler), mei, ds.d, march)
             # this step's own attenuation up to the sample, then through it
             T_half = T * dr.exp(-s_t * (u * dt))
-            L[march] = L + T_half * s_s * ph * Lw * dt
+            # (an infinite sigma: T_half 0 times sigma_s inf was NaN)
+            L[march & (dr.max(T_half) > 0)] = L + T_half * s_s * ph * Lw * dt
             T[march] = T * dr.exp(-s_t * dt)
             k += 1
         T[march] = T * _tail(medium, ray, t1, unbounded, march)
@@ -175,6 +182,9 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         hit = live & si.is_valid()
         null = hit & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
         opaque = hit & ~null
+        shaded = opaque                  # lit here: opaque surfaces, and masks in part
+        if dr.hint(partial, mode="scalar"):
+            shaded = hit & (~null | vt_scatters(bsdf.flags()))
         # emission of what the ray finally sees (surface or environment)
         seen = (live & ~si.is_valid()) | opaque
         # (the march never turns: every segment is the camera ray, so what it ends on is seen
@@ -184,9 +194,11 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
             L[seen] = L + T * si.emitter(scene).eval(si, seen)
         # direct light at the surface
         m2 = dr.select(si.is_medium_transition(), si.target_medium(si.to_world(si.wi)), medium)
-        ds, Lw = _light(scene, sampler, si, m2, steps, opaque, sdf)
-        f = bsdf.eval(ctx, si, si.to_local(ds.d), opaque)
-        L[opaque] = L + T * f * Lw
+        ds, Lw = _light(scene, sampler, si, m2, steps, shaded, sdf)
+        f = bsdf.eval(ctx, si, si.to_local(ds.d), shaded)     # (a mask's: opacity times its BSDF's)
+        L[shaded] = L + T * f * Lw
+        if dr.hint(partial, mode="scalar"):      # then on through it with 1 - opacity
+            T[null] = T * bsdf.eval_null_transmission(si, null)
         medium[null & si.is_medium_transition()] = si.target_medium(ray.d)
         ray[null] = si.spawn_ray(ray.d)
         n += 1

@@ -23,6 +23,30 @@ import mitsuba as mi
 MAX_TRACKING_STEPS = 1 << 16
 RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
 
+# the lobes that scatter light (a BSDF with Null and any of these lets light through in part)
+_LOBES = int(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DeltaReflection
+             | mi.BSDFFlags.DiffuseTransmission | mi.BSDFFlags.GlossyTransmission
+             | mi.BSDFFlags.DeltaTransmission)
+
+
+def partly_null(scene: mi.Scene) -> bool:
+    """Whether a shape's BSDF lets light through in part (``mask``: the ``Null`` flag and
+    other lobes). Such surfaces were crossed as if absent in smoke scenes (an opaque masked
+    card disappeared); where none is, their handling adds no kernel code."""
+    null = int(mi.BSDFFlags.Null)
+    for shape in scene.shapes():
+        bsdf = shape.bsdf()
+        if bsdf is not None:
+            flags = int(bsdf.flags())
+            if flags & null and flags & _LOBES:
+                return True
+    return False
+
+
+def scatters(flags) -> mi.Bool:
+    """Per lane: the BSDF ``flags`` include a lobe other than ``Null``."""
+    return (flags & _LOBES) != 0
+
 
 def _bw(x) -> None:
     """Back-propagate ``x`` when it depends on a differentiated parameter (else nothing)."""
@@ -243,9 +267,11 @@ def transmittance(table, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Float, medium:
     r = mi.Ray3f(ray)
     live = mi.Bool(active)
     n = mi.UInt32(0)
+    partial = table.partly_null
+    flags = mi.RayFlags.All if partial else mi.RayFlags.Minimal     # (a mask's opacity texture: uv)
     while live:
         r.maxt = remaining
-        si = scene.ray_intersect(r, mi.RayFlags.Minimal, False, live)
+        si = scene.ray_intersect(r, flags, False, live)
         seg = dr.minimum(si.t, remaining)
         in_med = live & (med != None)  # noqa: E711
         if dr.hint(table.has_tracked, mode="scalar"):
@@ -272,6 +298,8 @@ def transmittance(table, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Float, medium:
         bsdf = si.bsdf()
         null = hit & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
         T[hit & ~null] = 0.0
+        if dr.hint(partial, mode="scalar"):      # a mask passes 1 - opacity (volpath's weight)
+            T[null] = T * bsdf.eval_null_transmission(si, null).x
         med[null & si.is_medium_transition()] = si.target_medium(r.d)
         remaining[null] = remaining - si.t
         r[null] = si.spawn_ray(r.d)

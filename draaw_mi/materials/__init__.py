@@ -44,6 +44,8 @@ def check_value(who: str, name: str, key: str, v) -> None:
     if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
         nums = [float(v)]                    # (numpy scalars too: np.float32(7) passed unchecked)
     elif isinstance(v, np.ndarray) and v.ndim > 1:
+        if any(p.endswith("medium") for p in key.split(".")[:-1]):
+            _check_medium_grid(who, name, key, v)    # (NaN or negative densities rendered NaN)
         return                               # a texture's texels: value_like checks their shape
     elif isinstance(v, (list, tuple, np.ndarray)):
         try:
@@ -72,6 +74,21 @@ def check_value(who: str, name: str, key: str, v) -> None:
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
     elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
         raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
+
+
+def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:
+    """A medium's grid (``*.sigma_t.data``, ``*.albedo.data``): finite values >= 0 that
+    float32 holds, albedos at most 1."""
+    a = np.asarray(grid, np.float64)
+    albedo = ".albedo." in f".{key}."
+    hi = 1.0 if albedo else FLOAT32_MAX
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(a) | (a < 0) | (a > hi)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ParameterError(f"{who}: {name}: {int(bad.sum())} value(s) outside [0, {hi:g}] (the first, "
+                             f"{a[first]!r}, at {list(first)}); expected {'albedos' if albedo else 'densities'} "
+                             f"in [0, {hi:g}]")
 
 
 def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None:

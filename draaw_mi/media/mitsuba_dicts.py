@@ -22,10 +22,12 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
 from ..errors import ParameterError
+from ..limits import FLOAT32_MAX
 
 FILTERS = ("nearest", "trilinear")
 
@@ -40,8 +42,10 @@ def unit_cube_to_box(bbox_min, bbox_max):
 
 def check_g(g_phase, where: str = "smoke") -> float:
     """The Henyey-Greenstein g, which must be finite with |g| < 1."""
-    if isinstance(g_phase, bool) or not isinstance(g_phase, (int, float)) or not math.isfinite(g_phase) \
-            or abs(g_phase) >= 1.0:
+    # numpy scalars are numbers (np.float32(0.5) was refused); |g| < 1 in float32, as Mitsuba
+    # stores it (0.99999999 is 1 there, and the hg plugin failed to load)
+    if isinstance(g_phase, (bool, np.bool_)) or not isinstance(g_phase, numbers.Real) \
+            or not math.isfinite(g_phase) or abs(float(np.float32(g_phase))) >= 1.0:
         raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
     return float(g_phase)
 
@@ -52,11 +56,17 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
     (or a constant RGB ``albedo``)."""
     import mitsuba as mi
     g_phase = check_g(g_phase, "smoke_medium")
-    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale >= 0):
-        raise ParameterError(f"smoke_medium: scale={scale!r}; expected a finite value >= 0")
+    if isinstance(scale, (bool, np.bool_)) or not (isinstance(scale, numbers.Real) and math.isfinite(scale)
+                                                   and 0 <= scale <= FLOAT32_MAX):
+        raise ParameterError(f"smoke_medium: scale={scale!r}; expected a finite value >= 0 (float32: <= 3.4e38)")
+    scale = float(scale)
     if filter_type not in FILTERS:
         raise ParameterError(f"smoke_medium: filter={filter_type!r}; expected one of {', '.join(FILTERS)}")
     grid.validate("smoke_medium")
+    peak = float(np.max(grid.density)) * scale if grid.density.size else 0.0
+    if peak > FLOAT32_MAX:                 # (stored as inf: V4 black, V1/V2 NaN)
+        raise ParameterError(f"smoke_medium: scale={scale!r} times the densest voxel "
+                             f"({float(np.max(grid.density))!r}) is {peak:.3g}, beyond float32 (3.4e38)")
     to_world = unit_cube_to_box(grid.bbox_min, grid.bbox_max)
     dens = np.ascontiguousarray(grid.density.transpose(2, 1, 0)[..., None], dtype=np.float32)
     if albedo is None:
@@ -64,7 +74,10 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
         albedo_d = {"type": "gridvolume", "data": mi.TensorXf(alb), "to_world": to_world,
                     "filter_type": filter_type}
     else:
-        a = [float(v) for v in np.broadcast_to(np.asarray(albedo, float), (3,))]
+        try:
+            a = [float(v) for v in np.broadcast_to(np.asarray(albedo, float), (3,))]
+        except (TypeError, ValueError):
+            raise ParameterError(f"smoke_medium: albedo={albedo!r}; expected one number or 3 (RGB)") from None
         if not all(0 <= v <= 1 for v in a):
             raise ParameterError(f"smoke_medium: albedo={albedo!r}; expected values in [0, 1]")
         albedo_d = {"type": "rgb", "value": a}

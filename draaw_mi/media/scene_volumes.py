@@ -220,14 +220,19 @@ def check_smoke_boxes_disjoint(volume_info: list, where) -> None:
                     "boxes do not add up: merge them into one grid, or move them apart (they may touch)")
 
 
-def check_camera_outside_smoke(origin, volume_info: list, where) -> None:
+def check_camera_outside_smoke(origin, volume_info: list, where, reach: float = 0.0) -> None:
     """A camera inside a ``[[volumes]]`` smoke box rendered as if the smoke were not around
     it (the sensor's medium is not set, so every version, and volpath, started each camera
-    ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported."""
+    ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported.
+    ``reach``: how far from the origin the camera's rays start (its near clip along the
+    corner rays, :func:`draaw_mi.scene.camera.near_reach`): a camera on a box's face, or
+    closer to it than that, started its rays inside the smoke without crossing the face and
+    rendered it absent as well."""
     o = np.asarray(origin, float)
     for v in volume_info:
         lo, hi = (np.asarray(b, float) for b in v["bounds"])
-        if v["mode"] == "smoke" and np.all(o > lo) and np.all(o < hi):
+        if v["mode"] == "smoke" and np.all(o >= lo - reach) and np.all(o <= hi + reach):
+            near = "" if np.all(o > lo) and np.all(o < hi) else f" or within its near clip ({reach:.3g}) of it"
             raise (where / "camera").error(
-                f"the camera at {[float(f'{x:.6g}') for x in o]} is inside smoke volume {v['name']!r} (bounds {lo.tolist()} - "
-                f"{hi.tolist()}); a camera inside a [[volumes]] box is not supported: move it outside")
+                f"the camera at {[float(f'{x:.6g}') for x in o]} is inside smoke volume {v['name']!r}{near} (bounds "
+                f"{lo.tolist()} - {hi.tolist()}); a camera inside a [[volumes]] box is not supported: move it outside")

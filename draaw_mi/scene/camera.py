@@ -74,6 +74,30 @@ def sensor_keys(scene) -> tuple[str | None, str | None]:
     return found.get("to_world"), found.get("x_fov")
 
 
+def near_reach(near: float, x_fov_deg: float, width: int, height: int) -> float:
+    """How far from a pinhole camera its rays start at most: the near clip plane's distance
+    along the corner rays, ``near * sqrt(1 + tan^2(x/2) + tan^2(y/2))``.
+
+    >>> round(near_reach(0.01, 90.0, 100, 100), 6)
+    0.017321
+    """
+    tx = math.tan(math.radians(float(x_fov_deg)) / 2.0)
+    ty = tx * float(height) / float(width)
+    return float(near) * math.sqrt(1.0 + tx * tx + ty * ty)
+
+
+def sensor_reach(scene) -> float:
+    """:func:`near_reach` of the first sensor of a :class:`~draaw_mi.scene.DraawScene`
+    (0 for a sensor without a near clip)."""
+    sensor = scene.mi_scene.sensors()[0]
+    near = getattr(sensor, "near_clip", None)
+    if near is None:
+        return 0.0
+    key = sensor_keys(scene)[1]
+    fov = float(scene.params[key][0]) if key else 45.0
+    return near_reach(float(near()), fov, *scene.resolution)
+
+
 def scene_fov(scene) -> tuple[float, str]:
     """``(fov, fov_axis)`` of a :class:`~draaw_mi.scene.DraawScene`'s camera, the way its
     file gives them; a scene without (a Mitsuba XML scene) gives its sensor's ``x_fov``

@@ -531,7 +531,9 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     look_at = cam.camera_to_look_at(camera_table, where / "camera")
     if volume_info:
         from ..media.scene_volumes import check_camera_outside_smoke
-        check_camera_outside_smoke(look_at[0], volume_info, where)
+        w_px, h_px = settings["resolution"]
+        reach = cam.near_reach(look_at[5], cam.x_fov(look_at[3], look_at[4], w_px, h_px), w_px, h_px)
+        check_camera_outside_smoke(look_at[0], volume_info, where, reach)
 
     lights = desc.get("lights", [])
     if not isinstance(lights, list):

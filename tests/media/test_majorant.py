@@ -315,3 +315,31 @@ def test_flights_beside_a_dense_voxel_finish_their_cells(factor):
     assert 0.3 < want < 0.9
     se = np.sqrt(want * (1 - want) / n)
     assert abs(T.mean() - want) < 4 * se and abs(escaped.mean() - want) < 4 * se, (T.mean(), escaped.mean(), want)
+
+
+def test_a_medium_only_the_camera_is_in_is_stamped_and_seen_differentiated():
+    """The sensor's medium goes into the table's stamp (an edited density kept the old
+    majorant: 0.1247 where a fresh scene gave 0.0001) and its gradients double the bounds
+    (else a uniform grid has no null collisions, and the density gradient had the wrong
+    sign: +0.067 against finite differences' -0.076)."""
+    import drjit as dr
+    import media_scenes as ms
+    from draaw_mi.integrators.volume import DIFF_MAJORANT_FACTOR, media_table
+    from draaw_mi.media.mitsuba_dicts import smoke_medium
+    g = ms.grid("uniform", 4)
+    d = ms.base({"type": "draaw_v4"}, 8, sensor_medium=smoke_medium(g), origin=(0.1, 0.2, 0.6))
+    scene = mi.load_dict(d)
+    p = mi.traverse(scene)
+    key = next(k for k in p.keys() if k.endswith("sigma_t.data"))
+    first = media_table(scene)
+    top = float(np.max(np.array(first.values)))
+    p[key] = p[key] * 10.0
+    p.update()
+    edited = media_table(scene)
+    assert edited is not first and float(np.max(np.array(edited.values))) == pytest.approx(10 * top, rel=1e-5)
+    dr.enable_grad(p[key])
+    try:
+        diff = media_table(scene)
+        assert float(np.max(np.array(diff.values))) == pytest.approx(DIFF_MAJORANT_FACTOR * 10 * top, rel=1e-5)
+    finally:
+        dr.disable_grad(p[key])

@@ -203,15 +203,23 @@ def test_medium_values_set_after_loading_are_checked_as_in_scene_files(tmp_path,
 
 def test_a_camera_inside_a_smoke_box_is_refused():
     """It rendered as if the smoke were absent (density 1e6 gave the no-smoke image: the
-    sensor's medium was not set). A camera outside, even on the box's face plane, loads."""
+    sensor's medium was not set). So did one on the box's face, or closer to it than its near
+    clip (its rays started inside without crossing the face); one just beyond loads."""
     desc = base_desc(density_scale=1e6)
     desc["camera"] = {"origin": [0, 0, 0.5], "target": [0, 0, -3]}
     with pytest.raises(SceneError, match=r"camera: the camera at \[0\.0, 0\.0, 0\.5\] is inside smoke "
                                          r"volume 'v'.*move it outside") as e:
         draaw_mi.load_scene(desc)
     assert "\n" not in str(e.value)
-    desc["camera"] = {"origin": [0, 0, 1.0], "target": [0, 0, -3]}
-    assert draaw_mi.load_scene(desc).info["volumes"][0]["name"] == "v"
+    for z in (1.0, 1.005):                       # the face, and within the near clip (0.01)
+        desc["camera"] = {"origin": [0, 0, z], "target": [0, 0, -3]}
+        with pytest.raises(SceneError, match=r"within its near clip \(0\.011\d*\) of it"):
+            draaw_mi.load_scene(desc)
+    desc["camera"] = {"origin": [0, 0, 1.02], "target": [0, 0, -3]}
+    sc = draaw_mi.load_scene(desc)
+    assert sc.info["volumes"][0]["name"] == "v"
+    # and it sees the smoke: density 1e6 in front of the sky
+    assert float(np.array(draaw_mi.render(sc, version="v4", spp=1)).max()) < 1e-3
 
 
 def test_a_batch_camera_path_through_a_smoke_box_is_a_bad_manifest(tmp_path, capsys):

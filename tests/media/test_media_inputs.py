@@ -1,0 +1,53 @@
+"""Media inputs from a review: numpy scalars are numbers; values float32 cannot hold, NaN or
+negative densities and albedos above 1 are refused by name, before they render NaN; V1/V2
+stay finite under an infinite density that reaches them anyway."""
+from __future__ import annotations
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+import media_scenes as ms
+from draaw_mi.errors import ParameterError
+from draaw_mi.media.mitsuba_dicts import check_g, smoke_medium
+
+SMOKE = "scenes/smoke.toml"
+
+
+def test_numpy_scalars_are_numbers():
+    assert check_g(np.float32(0.5)) == 0.5                   # (refused)
+    assert smoke_medium(ms.grid("uniform", 4), scale=np.float32(2.0))["scale"] == 2.0
+
+
+@pytest.mark.parametrize("kw,match", [
+    ({"g_phase": 0.99999999}, r"g=0\.99999999"),            # 1 in float32: the hg plugin failed
+    ({"scale": 1e39}, r"scale=1e\+39"),
+    ({"scale": 2e38}, r"scale=2e\+38 times the densest voxel.*beyond float32"),   # x density 2: inf
+    ({"albedo": [0.5, 0.5]}, r"albedo=\[0\.5, 0\.5\]"),       # (a numpy broadcast error)
+])
+def test_smoke_medium_refuses_what_float32_or_mitsuba_cannot_take(kw, match):
+    with pytest.raises(ParameterError, match="smoke_medium: " + match):
+        smoke_medium(ms.grid("uniform", 4), **kw)
+
+
+@pytest.mark.parametrize("change,match", [(lambda a: np.where(a == a.max(), np.nan, a), "nan"),
+                                          (lambda a: a - 0.5, r"-0\.5"),
+                                          (lambda a: a * 0 + 1e39, "inf|1e\\+39")])
+def test_a_medium_grid_set_through_the_preview_is_checked(change, match):
+    scene = draaw_mi.load_scene(SMOKE, resolution=(8, 6))
+    key = next(k for k in scene.params.keys() if k.endswith("interior_medium.sigma_t.data"))
+    grid = np.array(scene.params[key], np.float64)
+    scene.check_value("Preview.update", key, key, grid)       # as it is: fine
+    with pytest.raises(ParameterError, match=rf"Preview\.update: {key}: \d+ value\(s\) outside.*({match})"):
+        scene.check_value("Preview.update", key, key, change(grid))
+
+
+@pytest.mark.parametrize("version", ["draaw_v1", "draaw_v2"])
+def test_the_march_stays_finite_under_an_infinite_density(version):
+    d = ms.base({"type": version}, 8)
+    shape = ms.smoke_shape(ms.grid("uniform", 4))
+    shape["interior"]["scale"] = 1e39                          # past the checks: inf in float32
+    d["smoke"] = shape
+    img = np.array(mi.render(mi.load_dict(d), spp=4))
+    assert np.all(np.isfinite(img)), int(np.sum(~np.isfinite(img)))   # (402 of 768 NaN)
