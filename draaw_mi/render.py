@@ -304,16 +304,16 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     spp = s["spp"] if spp is None else spp
     seed = s["seed"] if seed is None else seed
     max_depth = s["max_depth"] if max_depth is None else max_depth
-    _check_int("spp", spp, 1)
-    _check_int("seed", seed, 0, 2 ** 32 - 1)          # (a UInt32: 2**40 was a raw Dr.Jit error)
-    _check_int("max_depth", max_depth, -1)
+    spp = _check_int("spp", spp, 1)
+    seed = _check_int("seed", seed, 0, 2 ** 32 - 1)          # (a UInt32: 2**40 was a raw Dr.Jit error)
+    max_depth = _check_int("max_depth", max_depth, -1)
     if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
         raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
     if pass_spp is None:
         # Not after the progress mode: the passes' seeds make the samples (a bar gave another
         # image than none), and V4 samples adaptively only in passes of 64 spp or more.
         pass_spp = min(spp, 16 if time_budget else MAX_PASS_SPP)
-    _check_int("pass_spp", pass_spp, 1)
+    pass_spp = _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
     if aovs is None:
         aovs = s.get("aovs", [])
@@ -508,10 +508,16 @@ def _denoised(image, names, extra_aovs):
     return out, names
 
 
-def _check_int(name, value, lo, hi=None):
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
+def _check_int(name, value, lo, hi=None) -> int:
+    """``value`` as a Python int, numpy integers too (``2 ** np.arange(k)`` in a notebook)."""
+    import numbers
+
+    import numpy as np
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < lo \
+            or (hi is not None and value > hi):
         rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
         raise RenderError(f"render: {name}={value!r}; expected an integer {rng}")
+    return int(value)
 
 
 def _apply_post(image, chain):

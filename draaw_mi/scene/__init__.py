@@ -510,6 +510,8 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         if m:
             depth = int(m.group(1))
             settings["max_depth"] = depth - 2 ** 32 if depth >= 2 ** 31 else depth   # -1 prints unsigned
+        # (the file's hide_emitters was dropped: the sky it hides rendered, mean 0.95 for 0.05)
+        settings["hide_emitters"] = bool(getattr(integ, "hide_emitters", False))
         if named_integrator:
             kind = str(integ).split("[", 1)[0].strip()
             if kind in _INTEGRATOR_VERSIONS:

@@ -244,9 +244,10 @@ def _nested_array(value, where: Where) -> np.ndarray:
     except (TypeError, ValueError):
         raise where.error(f"{shown(value)} is not a rectangular array of numbers (a texture: rows "
                           "of values, or rows of RGB triples)") from None
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)):
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)) or arr.size == 0:
+        # (an empty one, [[]], loaded and then aborted the process at the render)
         raise where.error(f"an array of shape {arr.shape}; a texture is rows of values (H, W) or "
-                          "rows of RGB triples (H, W, 3)")
+                          "rows of RGB triples (H, W, 3), at least one of them")
     return arr
 
 
@@ -288,8 +289,17 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
     out = {"type": kind}
     for key, value in table.items():
         if key != "type":
-            out[key] = _texture_value(value, key, ctx, where / key)
             nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
+            if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
+                out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
+                continue              # distribution = "beckmann" (each was "no texture file")
+            if nonneg and isinstance(value, (int, float)) and not isinstance(value, bool):
+                out[key] = number(value, where / key, lo=0.0)     # (-0.5 rendered negative pixels)
+                continue
+            if nonneg and isinstance(value, (list, tuple)) and not _is_nested(value):
+                out[key] = {"type": "rgb", "value": vector(value, where / key, lo=0.0)}
+                continue
+            out[key] = _texture_value(value, key, ctx, where / key)
             if isinstance(value, str) and out[key].get("type") == "bitmap":
                 _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
             elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
@@ -453,6 +463,8 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     fwd = np.subtract(target, pos)
     up = vector(light.get("up", [0.0, 0.0, 1.0] if abs(fwd[1]) > 0.9 * np.linalg.norm(fwd) else [0.0, 1.0, 0.0]),
                 where / "up")
+    # (an up along the facing, or zero, gave a NaN transform: a light that silently lit nothing)
+    cam.check_look_at(pos, target, up, where)
     size = light.get("size", [1.0, 1.0])
     sx, sy = vector(size, where / "size", n=2, lo=0.0) if isinstance(size, list) else [number(size, where / "size", lo=0.0)] * 2
     if sx == 0 or sy == 0:

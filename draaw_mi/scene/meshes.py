@@ -32,9 +32,23 @@ class MeshPart:
     material: dict = field(default_factory=dict)   # draaw parameters read from the file
 
 
+def _invented(mat) -> bool:
+    """Whether ``mat`` is the stand-in trimesh makes for a mesh with texture coordinates but
+    no material (``empty_material``: no name of its own, a 2x2 image of one colour). GO-Draaw
+    shades such meshes grey (go-draaw-spec 2.2); read as a texture, monkey.obj came out at
+    albedo 0.127 instead of 0.698."""
+    image = getattr(mat, "image", None)
+    if hasattr(mat, "_name") or image is None or getattr(image, "size", None) != (2, 2):
+        return False
+    px = np.asarray(image).reshape(4, -1)
+    return bool(np.all(px == px[0]))
+
+
 def _material_of(geom) -> tuple[str | None, dict]:
     visual = getattr(geom, "visual", None)
     mat = getattr(visual, "material", None)
+    if mat is not None and _invented(mat):
+        mat = None
     if mat is None:
         colors = getattr(visual, "face_colors", None) if visual is not None and visual.kind == "face" else None
         if colors is not None and len(colors):

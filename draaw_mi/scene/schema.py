@@ -6,6 +6,7 @@ Every error is a :class:`SceneError` whose message starts with the location
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, Iterable
 
 from ..errors import SceneError, suggest
@@ -61,9 +62,11 @@ def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iter
 
 def number(value: Any, where: Where, lo: float | None = None, hi: float | None = None,
            integer: bool = False, lo_open: bool = False) -> float:
-    """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``); numpy
+    numbers too (np.int64(8) was "not a number")."""
+    if isinstance(value, bool) or type(value).__name__ == "bool_" or not isinstance(value, numbers.Real):
         raise where.error(f"{shown(value)} is not a number")
+    value = int(value) if isinstance(value, numbers.Integral) else float(value)
     if not math.isfinite(value):
         raise where.error(f"{shown(value)} is not finite")
     if abs(value) > FLOAT32_MAX:        # (Mitsuba stores it as float32: inf, then NaN pixels)
@@ -138,7 +141,7 @@ def resolution(value: Any, where: Where) -> tuple[int, int]:
             value = [int(p) for p in parts]
         except ValueError:
             raise where.error(f"{shown(value)} is not a resolution; expected 'WxH' such as '256x256'") from None
-    if isinstance(value, int) and not isinstance(value, bool):
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
         value = [value, value]
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise where.error(f"{shown(value)} is not a resolution; expected [width, height] or 'WxH'")
