@@ -205,7 +205,11 @@ def _cmd_render(args) -> int:
                        metadata=render_metadata(args.scene, scene, info, post=chain))
     if args.png:
         from draaw_mi.post import display_encoded
-        draaw_mi.write_png(args.png, arr[..., :3], encoded=display_encoded(chain))
+        # the film's colour channels (R, G, B[, A] or Y[, A] of an XML film's pixel_format), not
+        # the first three: a luminance film's depth AOV would be the PNG's alpha
+        n_color = next((i for i, n in enumerate(info["channels"]) if n not in ("R", "G", "B", "A", "Y")),
+                       len(info["channels"]))
+        draaw_mi.write_png(args.png, arr[..., :n_color], encoded=display_encoded(chain))
     # (the render's own count: a post chain and denoising read NaN/inf as 0)
     finite = bool(np.isfinite(arr).all()) and not info.get("non_finite")
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
