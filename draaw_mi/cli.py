@@ -205,7 +205,11 @@ def _cmd_render(args) -> int:
                        metadata=render_metadata(args.scene, scene, info, post=chain))
     if args.png:
         from draaw_mi.post import display_encoded
-        draaw_mi.write_png(args.png, arr[..., :3], encoded=display_encoded(chain))
+        # the film's colour channels (R, G, B[, A] or Y[, A] of an XML film's pixel_format), not
+        # the first three: a luminance film's depth AOV would be the PNG's alpha
+        n_color = next((i for i, n in enumerate(info["channels"]) if n not in ("R", "G", "B", "A", "Y")),
+                       len(info["channels"]))
+        draaw_mi.write_png(args.png, arr[..., :n_color], encoded=display_encoded(chain))
     # (the render's own count: a post chain and denoising read NaN/inf as 0)
     finite = bool(np.isfinite(arr).all()) and not info.get("non_finite")
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
@@ -496,6 +500,7 @@ def _cmd_post(args) -> int:
 
     import draaw_mi
     from draaw_mi import post
+    from draaw_mi.errors import DraawError
 
     _writable(args.output, (".exr", ".png"), "output")
     chain = _load_chain(args.chain)
@@ -509,26 +514,45 @@ def _cmd_post(args) -> int:
               "read as 0", file=sys.stderr)
     color = np.array(post.apply(arr[..., :n_color], chain))
     result = np.concatenate([color, arr[..., n_color:]], axis=2)
+    # the chain the image has been through: the one render applied (its header's draaw:post),
+    # then this one
+    from draaw_mi.batch.exr import read_header
+    header = read_header(args.input) or {}
+    before = _recorded_chain(header)
+    with open(args.chain, encoding="utf-8") as fh:              # (valid: load_chain read it)
+        chain_doc = json.load(fh)
+    after = chain_doc["chain"] if isinstance(chain_doc, dict) else chain_doc     # ({"chain": [...]})
     if args.output.lower().endswith(".png"):
-        draaw_mi.write_png(args.output, result[..., :3], encoded=post.display_encoded(chain))
+        # encoded by either chain (an input rendered with a chain ending in srgb): stored as
+        # it is (the new chain's alone was looked at, and such an input was encoded twice)
+        try:
+            encoded = post.display_encoded(before + after)
+        except DraawError as e:
+            # (a filter of another version): whether it encoded cannot be told; read as linear
+            print(f"draaw-mi: warning: {args.input}: its draaw:post chain does not load ({e}); "
+                  "its colour is read as linear", file=sys.stderr)
+            encoded = post.display_encoded(after)
+        draaw_mi.write_png(args.output, result[..., :3], encoded=encoded)
     else:
         # the input's draaw:* attributes go along (what rendered it), with the chain applied
-        from draaw_mi.batch.exr import read_header
-        header = read_header(args.input) or {}
+        # (the render's was overwritten, though the README says post keeps it)
         meta = {k: v for k, v in header.items() if k.startswith("draaw:") and isinstance(v, (str, int, float))}
-        with open(args.chain, encoding="utf-8") as fh:          # (valid: load_chain read it)
-            chain_doc = json.load(fh)
-        # the chain the image has been through: the one render applied, then this one (the
-        # render's was overwritten, though the README says post keeps it)
-        try:
-            before = json.loads(header.get("draaw:post", "[]"))
-        except (TypeError, ValueError):
-            before = []
-        after = chain_doc["chain"] if isinstance(chain_doc, dict) else chain_doc     # ({"chain": [...]})
-        meta["draaw:post"] = json.dumps((before if isinstance(before, list) else []) + after)
+        meta["draaw:post"] = json.dumps(before + after)
         draaw_mi.write_exr(args.output, result, channels=names, metadata=meta)
     print(f"wrote {args.output}")
     return 0
+
+
+def _recorded_chain(header: dict) -> list:
+    """The post chain an EXR's ``draaw:post`` header attribute says its colour has been
+    through, as recorded (``[]``: none, or not a JSON list)."""
+    try:
+        before = json.loads(header.get("draaw:post", "[]"))
+    except (TypeError, ValueError):
+        return []
+    if isinstance(before, dict):                               # ({"chain": [...]})
+        before = before.get("chain", [])
+    return before if isinstance(before, list) else []
 
 
 def _cmd_batch(args) -> int:

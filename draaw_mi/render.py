@@ -237,7 +237,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
            integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
-    """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = 3 + AOV channels).
+    """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = the film's colour channels,
+    R, G, B, or an XML film's R, G, B, A / Y / Y, A, + AOV channels).
 
     Parameters
     ----------
@@ -264,7 +265,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         (draaw versions only; default the scene's ``render.aovs``).
     integrator_options: further properties of the integrator plugin, e.g. ``{"rr_depth": 8}``
         or V4's ``{"light_selection": "power"}`` (see each integrator's docstring).
-    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels``,
+    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels`` (names),
         ``post`` (the chain applied) and ``non_finite`` (NaN/inf values of the render before
         denoising and the chain, which read them as 0).
     adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
@@ -328,6 +329,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         from . import post as post_mod
         post_mod.load_chain(post)     # checked now, not after the render (an unknown filter); kept
         # as given: the info (and a batch frame's header) records the chain as the user wrote it
+    chain = s.get("post", []) if post is None else post
+    if (chain or denoise) and adaptive is None:
+        _check_film_colour(scene, "a post chain" if chain else "denoising")
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image
         aovs, extra_aovs = _denoise_aovs(params, adaptive, aovs, version)
     if adaptive is not None:
@@ -366,8 +370,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 break
     if bar is not None:
         bar.close()
-    names = ["R", "G", "B"] + list(integrator.aov_names())
-    chain = s.get("post", []) if post is None else post
+    # the film's colour channels, then the AOVs: an XML film's pixel_format may store R, G, B, A
+    # or Y (always R, G, B were named, and write_exr refused the image)
+    names = _channel_names(acc, integrator.aov_names())
     image = acc
     if n_passes > 1:
         with RENDER_GUARD:
@@ -506,6 +511,34 @@ def _denoised(image, names, extra_aovs):
         out = mi.TensorXf(np.ascontiguousarray(np.asarray(out)[..., keep]))
         names = [names[i] for i in keep]
     return out, names
+
+
+_FILM_COLOUR = {1: "luminance", 2: "luminance_alpha", 3: "rgb", 4: "rgba"}
+
+
+def _channel_names(image, aov_names) -> list[str]:
+    """The channel names of a render: its film's colour (R, G, B; R, G, B, A; Y or Y, A by
+    their count, io.DEFAULT_NAMES) then the AOVs' (always R, G, B was named: an rgba or
+    luminance film's image did not match its names)."""
+    from .io import channel_names
+    aov_names = list(aov_names)
+    n_color = image.shape[2] - len(aov_names)
+    if n_color not in _FILM_COLOUR:
+        raise RenderError(f"render: an image of {image.shape[2]} channels with {len(aov_names)} AOV "
+                          f"channels ({', '.join(aov_names)}) leaves {n_color} colour channels; "
+                          "expected 1 to 4 (the film's pixel_format)")
+    return channel_names(image.shape[2], aov_names)
+
+
+def _check_film_colour(scene, what: str) -> None:
+    """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance
+    (an XML scene's pixel_format) is refused before the render, not after it (a post chain
+    failed with a shape error; the denoiser read Y and two AOV channels as colour)."""
+    n = int(scene.mi_scene.sensors()[0].film().base_channels_count())
+    if n not in (3, 4):
+        raise RenderError(f"render: the film of {scene.source} stores {n} colour channel(s) "
+                          f"(pixel_format {_FILM_COLOUR.get(n, '?')!r}); {what} needs rgb or rgba: "
+                          "set the film's pixel_format to rgb, or drop post/denoise")
 
 
 def _check_int(name, value, lo, hi=None) -> int:

@@ -334,3 +334,26 @@ def test_bench_suite_speed(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert f"looked for {tmp_path / 'nowhere'}/monkey.obj" in err and "every requested scene was skipped" in err
     assert not (out / "m").exists()
+
+
+def test_post_png_of_an_image_rendered_with_srgb_is_not_encoded_twice(tmp_path, capsys):
+    """(defect: the PNG's encoding looked at the new chain only, not the input's draaw:post
+    header: an image rendered with a chain ending in srgb came out washed out, 188 for 223)"""
+    desc = dict(tiny_description(resolution=[12, 10]), post=[{"type": "srgb"}])
+    (tmp_path / "s.json").write_text(json.dumps(desc))
+    (tmp_path / "noop.json").write_text(json.dumps([{"type": "contrast", "amount": 0.0}]))
+    assert main(["render", str(tmp_path / "s.json"), "-o", str(tmp_path / "s.exr"),
+                 "--png", str(tmp_path / "a.png"), "--no-progress"]) == 0
+    assert main(["post", str(tmp_path / "s.exr"), "-o", str(tmp_path / "b.png"),
+                 "--chain", str(tmp_path / "noop.json")]) == 0
+    a, b = (matplotlib.image.imread(str(tmp_path / n)) for n in ("a.png", "b.png"))
+    assert a[..., :3].mean() > 0.2 and np.array_equal(a, b)
+    # a recorded chain that does not load (another version's filter): read as linear, and said
+    img = np.full((4, 5, 3), 0.25, np.float32)
+    draaw_mi.write_exr(str(tmp_path / "old.exr"), img, metadata={"draaw:post": '[{"type": "nosuch"}]'})
+    capsys.readouterr()
+    assert main(["post", str(tmp_path / "old.exr"), "-o", str(tmp_path / "old.png"),
+                 "--chain", str(tmp_path / "noop.json")]) == 0
+    assert "draaw:post chain does not load" in capsys.readouterr().err
+    enc = 1.055 * 0.25 ** (1 / 2.4) - 0.055
+    assert np.abs(matplotlib.image.imread(str(tmp_path / "old.png"))[..., :3] - enc).max() <= 0.5 / 255 + 1e-6

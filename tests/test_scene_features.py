@@ -210,3 +210,39 @@ def test_mtl_map_kd_texture_is_srgb_decoded(tmp_path):
     scene = draaw_mi.load_scene(str(tmp_path / "m.obj"), resolution=(8, 8), spp=4)
     mesh = next(i for i, s in enumerate(scene.mi_scene.shapes()) if s.is_mesh() and s.emitter() is None)
     assert np.allclose(_attribute(scene, mesh), _decode([200, 100, 50]), atol=2e-3)
+
+
+def _tinted_quad(path, factor, rgb8):
+    """A uv-mapped quad .glb whose PBR material has ``baseColorFactor`` ``factor`` and a 4x4
+    ``baseColorTexture`` of the 8-bit sRGB colour ``rgb8``."""
+    trimesh = pytest.importorskip("trimesh")
+    from PIL import Image
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+    image = Image.fromarray(np.broadcast_to(np.array(rgb8, np.uint8), (4, 4, 3)).copy())
+    quad = trimesh.Trimesh([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], [[0, 3, 2], [0, 2, 1]],
+                           visual=TextureVisuals(uv=[[0, 0], [1, 0], [1, 1], [0, 1]],
+                                                 material=PBRMaterial(baseColorFactor=factor,
+                                                                      baseColorTexture=image)),
+                           process=False)
+    quad.export(str(path))
+    return str(path)
+
+
+def test_gltf_base_colour_is_the_factor_times_the_decoded_texture(tmp_path):
+    """(defect: the baseColorFactor was dropped when a baseColorTexture was present: a white
+    texture tinted (0.2, 1, 1) came out white). The factor is linear: it scales the sRGB-decoded
+    texture, not the 8-bit values."""
+    from draaw_mi.scene.meshes import load_mesh_parts
+    from draaw_mi.scene.schema import Where
+    white = _tinted_quad(tmp_path / "tint.glb", [0.2, 1, 1, 1], [255, 255, 255])
+    (part,) = load_mesh_parts(white, Where("x"))
+    assert np.allclose(part.material["base_color"].mean((0, 1)), [0.2, 1, 1], atol=1e-3)
+    grey = _tinted_quad(tmp_path / "grey.glb", [0.2, 1, 0.5, 1], [128, 128, 128])
+    (part,) = load_mesh_parts(grey, Where("x"))
+    want = np.array([0.2, 1, 0.5]) * _decode(128)
+    assert np.allclose(part.material["base_color"].mean((0, 1)), want, atol=2e-3)
+    # and in the scene's BSDF (the texture stays a bitmap: the uvs map it)
+    scene = draaw_mi.load_scene(grey, resolution=(8, 8), spp=4)
+    mesh = next(i for i, s in enumerate(scene.mi_scene.shapes()) if s.is_mesh() and s.emitter() is None)
+    assert np.allclose(_attribute(scene, mesh), want, atol=2e-3)

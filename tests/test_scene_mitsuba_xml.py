@@ -140,3 +140,46 @@ def test_fit_views_keep_the_films_filter_parameters(tmp_path, rfilter):
     integ = mi.load_dict({"type": "path", "max_depth": 2})
     a, b = (np.array(mi.render(scene.mi_scene, sensor=s, integrator=integ, spp=4, seed=3)) for s in (own, view))
     np.testing.assert_allclose(b, a, atol=1e-5)
+
+
+def _film_scene(tmp_path, pixel_format):
+    """A 16x16 diffuse sphere under a constant sky whose film stores ``pixel_format``."""
+    path = tmp_path / f"{pixel_format}.xml"
+    path.write_text(
+        '<scene version="3.0.0"><shape type="sphere"><bsdf type="diffuse"/></shape>'
+        '<emitter type="constant"><rgb name="radiance" value="1"/></emitter>'
+        + SENSOR.replace('<rfilter type="box"/>', f'<string name="pixel_format" value="{pixel_format}"/>'
+                         '<rfilter type="box"/>') + '</scene>')
+    return str(path)
+
+
+@pytest.mark.parametrize("pixel_format, colour", [("rgba", ["R", "G", "B", "A"]), ("luminance", ["Y"]),
+                                                  ("luminance_alpha", ["Y", "A"]), ("rgb", ["R", "G", "B"])])
+def test_an_xml_films_pixel_format_names_the_colour_channels(tmp_path, pixel_format, colour):
+    """(defect: info["channels"] was R, G, B then the AOVs whatever the film stored, and
+    `draaw-mi render x.xml` of an rgba or luminance film rendered, then failed in write_exr:
+    "3 channel names for an image with 4 channels")"""
+    from draaw_mi.cli import main
+    path = _film_scene(tmp_path, pixel_format)
+    scene = draaw_mi.load_scene(path)
+    for aovs, extra in (([], []), (["depth"], ["depth.Z"])):
+        img, info = draaw_mi.render(scene, version="v4", spp=4, aovs=aovs, return_info=True)
+        assert info["channels"] == colour + extra and img.shape == (16, 16, len(colour) + len(extra))
+    assert main(["render", path, "-o", str(tmp_path / "o.exr"), "--png", str(tmp_path / "o.png"),
+                 "--no-progress"]) == 0
+    arr, names = draaw_mi.read_exr(str(tmp_path / "o.exr"), with_names=True)
+    assert names == colour and arr.shape == (16, 16, len(colour))
+    if "A" in colour:                                     # the sphere and the sky: all covered
+        assert np.allclose(arr[..., -1], 1.0)
+
+
+def test_a_luminance_film_is_refused_by_a_post_chain_before_the_render(tmp_path):
+    """A post chain and the denoiser read R, G, B: a luminance film is named before rendering
+    (the chain failed after it with a shape error, the denoiser read AOVs as colour)."""
+    scene = draaw_mi.load_scene(_film_scene(tmp_path, "luminance"))
+    with pytest.raises(draaw_mi.DraawError, match="stores 1 colour channel.*'luminance'.*a post chain needs rgb"):
+        draaw_mi.render(scene, spp=1, post=[{"type": "srgb"}])
+    with pytest.raises(draaw_mi.DraawError, match="denoising needs rgb or rgba"):
+        draaw_mi.render(scene, spp=1, denoise=True)
+    img = np.array(draaw_mi.render(_film_scene(tmp_path, "rgba"), spp=4, post=[{"type": "srgb"}]))
+    assert img.shape == (16, 16, 4) and np.allclose(img[..., 3], 1.0)     # alpha passes through

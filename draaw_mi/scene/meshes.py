@@ -2,7 +2,8 @@
 
 Each part carries its MTL/PBR colour and colour texture, mapped to ``draaw`` parameters:
 ``Kd`` (or a glTF base colour) -> ``base_color``, ``map_Kd`` -> a ``base_color`` bitmap (sRGB
-decoded), glTF metallic/roughness factors -> ``metallic``/``roughness``. Faces without a
+decoded; a glTF base colour texture times its linear ``baseColorFactor``), glTF
+metallic/roughness factors -> ``metallic``/``roughness``. Faces without a
 material get GO-Draaw's grey (178/255). Parts are handed to Mitsuba as temporary binary PLY
 files so that materials can be referenced by name (keys ``<material>.<param>`` in
 ``mi.traverse``).
@@ -45,6 +46,8 @@ def _invented(mat) -> bool:
 
 
 def _material_of(geom) -> tuple[str | None, dict]:
+    """(material name, draaw parameters) of a trimesh geometry; a glTF base colour is its factor
+    times its decoded texture (the factor was dropped when a texture was present)."""
     visual = getattr(geom, "visual", None)
     mat = getattr(visual, "material", None)
     if mat is not None and _invented(mat):
@@ -57,9 +60,12 @@ def _material_of(geom) -> tuple[str | None, dict]:
         return None, {}
     out: dict = {}
     name = getattr(mat, "name", None)
+    factor = None                              # glTF: base colour = factor x texture
     if hasattr(mat, "baseColorFactor"):        # glTF PBR material
         if mat.baseColorFactor is not None:
-            out["base_color"] = (np.asarray(mat.baseColorFactor, float)[:3] / (255.0 if np.asarray(mat.baseColorFactor).dtype == np.uint8 else 1.0)).tolist()
+            raw = np.asarray(mat.baseColorFactor)       # (trimesh keeps it as uint8 0-255)
+            factor = raw[:3].astype(float) / (255.0 if raw.dtype == np.uint8 else 1.0)
+            out["base_color"] = factor.tolist()
         if getattr(mat, "metallicFactor", None) is not None:
             out["metallic"] = float(np.clip(mat.metallicFactor, 0, 1))
         if getattr(mat, "roughnessFactor", None) is not None:
@@ -73,6 +79,10 @@ def _material_of(geom) -> tuple[str | None, dict]:
     if image is not None:
         arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
         out["base_color"] = srgb_decode(arr).astype(np.float32)
+        if factor is not None:
+            # the factor is linear: it scales the decoded texture (it was dropped, and a white
+            # texture tinted by (0.2, 1, 1) rendered white)
+            out["base_color"] = (out["base_color"] * factor.astype(np.float32)).astype(np.float32)
     return name, out
 
 
