@@ -51,7 +51,7 @@ def _material_of(geom) -> tuple[str | None, dict]:
     visual = getattr(geom, "visual", None)
     mat = getattr(visual, "material", None)
     if mat is not None and _invented(mat):
-        mat = None
+        return mat.name, {}                   # (its name kept: the material ids stay as they were)
     if mat is None:
         colors = getattr(visual, "face_colors", None) if visual is not None and visual.kind == "face" else None
         if colors is not None and len(colors):
