@@ -325,6 +325,10 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     elif isinstance(aovs, str):
         aovs = [aovs]                    # "depth" or "all", not its characters
     check_version_sees(scene, version)
+    from .post.chain import Chain
+    if callable(post) and not isinstance(post, Chain):     # (it failed after the whole render)
+        raise RenderError(f"render: post={post!r}; expected a chain (a list of filter tables, a Chain "
+                          "or a JSON file): apply a function of your own to the returned image")
     if post is not None and not callable(post):
         from . import post as post_mod
         post_mod.load_chain(post)     # checked now, not after the render (an unknown filter); kept

@@ -133,3 +133,17 @@ def test_render_checks_its_post_chain_before_rendering(monkeypatch):
     with pytest.raises(ParameterError, match="blom"):
         draaw_mi.render(scene, spp=1, post=[{"type": "blom"}])
     assert calls == []                                # (the error came after the whole render)
+
+
+def test_render_refuses_a_function_as_post_chain_before_rendering(monkeypatch):
+    from draaw_mi.errors import RenderError
+    scene = draaw_mi.load_scene(_scene())
+    calls = []
+    real = mi.render
+    monkeypatch.setattr(mi, "render", lambda *a, **k: calls.append(1) or real(*a, **k))
+    with pytest.raises(RenderError, match="render: post=<function.*expected a chain"):
+        draaw_mi.render(scene, spp=1, post=lambda img: img)
+    assert calls == []                                # (a TypeError after the render)
+    from draaw_mi import post
+    chain = post.load_chain([{"type": "contrast", "amount": 0.0}])      # a Chain is a chain
+    assert np.isfinite(np.array(draaw_mi.render(scene, spp=1, post=chain))).all()

@@ -83,6 +83,12 @@ def _mesh(name: str, v: np.ndarray, f: np.ndarray, bsdf, face_color: np.ndarray 
     return mesh
 
 
+#: the colour parameter of the BSDFs solid voxels can be coloured with (group_by="color")
+_COLOUR_KEYS = {"draaw": "base_color", "principled": "base_color", "diffuse": "reflectance",
+                "plastic": "diffuse_reflectance", "roughplastic": "diffuse_reflectance",
+                "conductor": "specular_reflectance", "roughconductor": "specular_reflectance"}
+
+
 def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group_by: str | None = None) -> dict:
     """Mitsuba meshes (``{id: mi.Mesh}``) of ``grid``'s solid voxels (exterior faces only).
 
@@ -113,7 +119,10 @@ def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group
         sel = np.nonzero(inv == k)[0]
         vk = v.reshape(-1, 4, 3)[sel].reshape(-1, 3)
         fk = f[: 2 * sel.size]                                 # local indices restart at 0
-        key = "reflectance" if mat["type"] == "diffuse" else "base_color"
+        key = _COLOUR_KEYS.get(mat["type"])
+        if key is None:             # (Mitsuba's 'unreferenced property "base_color"')
+            raise ParameterError(f"solid_meshes: material type {mat['type']!r} has no colour parameter "
+                                 f"draaw-mi knows; expected one of {', '.join(sorted(_COLOUR_KEYS))}")
         bsdf = mi.load_dict(dict(mat, **{key: {"type": "rgb", "value": col.tolist()}}))
         out[f"{name}_{k}"] = _mesh(f"{name}_{k}", vk, fk, bsdf, None)
     return out

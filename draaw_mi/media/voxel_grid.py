@@ -86,7 +86,11 @@ class VoxelGrid:
         shape = None
         for name, a in (("occupied", occupied), ("density", density)):
             if a is not None:
-                s = np.shape(a)
+                try:
+                    s = np.shape(a)
+                except ValueError:              # (numpy's 'inhomogeneous shape', unnamed)
+                    raise ParameterError(f"VoxelGrid.from_arrays: {name} is a ragged nested list; "
+                                         "expected an (nx, ny, nz) array") from None
                 if len(s) != 3:
                     raise ParameterError(f"VoxelGrid.from_arrays: {name} has shape {s}; expected (nx, ny, nz)")
                 if shape is not None and s != shape:
@@ -226,7 +230,8 @@ class VoxelGrid:
         """Cell containing world point ``p`` (the max face belongs to the last cell), or None."""
         p = np.asarray(p, float)
         rel = (p - self.bbox_min) / self.cell_size
-        if np.any(rel < 0) or np.any(p > self.bbox_max):
+        # (a NaN coordinate passed both tests: index -9223372036854775808)
+        if not np.all(np.isfinite(p)) or np.any(rel < 0) or np.any(p > self.bbox_max):
             return None
         i = np.minimum(np.floor(rel).astype(int), np.asarray(self.shape) - 1)
         return int(i[0]), int(i[1]), int(i[2])

@@ -51,3 +51,23 @@ def test_the_march_stays_finite_under_an_infinite_density(version):
     d["smoke"] = shape
     img = np.array(mi.render(mi.load_dict(d), spp=4))
     assert np.all(np.isfinite(img)), int(np.sum(~np.isfinite(img)))   # (402 of 768 NaN)
+
+
+def test_voxel_grid_inputs_are_named():
+    from draaw_mi.media import VoxelGrid
+    with pytest.raises(ParameterError, match="from_arrays: density is a ragged nested list"):
+        VoxelGrid.from_arrays(density=[[[1, 2], [3]]])          # (numpy's 'inhomogeneous shape')
+    g = ms.grid("uniform", 4)
+    assert g.index_of((np.nan, 0, 0)) is None                  # (-9223372036854775808, 1, 1)
+    assert g.index_of((0.1, 0.1, 0.1)) == (2, 2, 2)
+
+
+def test_solid_voxels_take_the_colour_parameter_of_their_bsdf():
+    from draaw_mi.media import VoxelGrid
+    from draaw_mi.media.faces import solid_meshes
+    g = VoxelGrid.from_arrays(occupied=np.ones((2, 1, 1), bool), color=[0.8, 0.2, 0.1])
+    for kind in ("plastic", "roughplastic", "diffuse", "conductor"):       # (plastic: 'unreferenced')
+        meshes = solid_meshes(g, {"type": kind}, group_by="color")
+        assert len(meshes) == 1, kind
+    with pytest.raises(ParameterError, match="material type 'dielectric' has no colour parameter"):
+        solid_meshes(g, {"type": "dielectric"}, group_by="color")
