@@ -1,0 +1,150 @@
+"""``draaw-mi bench``: the accuracy/time study (:mod:`draaw_mi.bench`), its SDF tracer study,
+GO-Draaw's camera-path frame times and the speed suite (``--suite speed``)."""
+from __future__ import annotations
+
+import json
+import os
+
+from .cli_common import CliError, int_list, progress_mode, read_json
+
+
+def _bench_sdf_scenes(args, scenes, res, progress):
+    """Run the SDF tracer-knob study (draaw_mi.sdf.study) on the scenes with [[sdf]] entries
+    (Mitsuba's path, the main study's ground truth, cannot see SDFs); return the others."""
+    import draaw_mi
+    from draaw_mi.sdf.study import has_sdf, run_sdf_study
+    rest = []
+    for sc in scenes:
+        if not has_sdf(sc):
+            rest.append(sc)
+            continue
+        scene = draaw_mi.load_scene(sc, **({"resolution": res} if res else {}))
+        r = run_sdf_study(scene, args.out, spp=4 if args.quick else 16,
+                          repeats=min(args.repeats, 2) if args.quick else args.repeats,
+                          progress=progress, quick=args.quick)
+        print(f"wrote {args.out}/sdf_study_{r['scene']}.json/.csv/.md and "
+              f"sdf_error_vs_time_{r['scene']}.png ({len(r['rows'])} tracer settings)")
+    return rest
+
+
+def _cmd_speed_suite(args) -> int:
+    """``draaw-mi bench --suite speed``: the speed suite (draaw_mi.speed_bench) with bench's options."""
+    from draaw_mi import speed_bench, speed_suite
+    from draaw_mi.errors import suggest
+    from draaw_mi.integrators import resolve_version
+
+    for name in args.scenes:
+        if name not in speed_suite.SCENES:
+            raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))} "
+                           f"(the suite's scenes: {', '.join(speed_suite.SCENES)})")
+    versions = args.versions.split(",") if args.versions else ["v4"]
+    plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
+    argv = ["--integrators", ";".join(plugins), "--repeats", str(args.repeats),
+            # bench's --gt-spp default (4096) is the study's; the suite's reference default is 1024
+            "--ref-spp", str(args.gt_spp if args.gt_spp != 4096 else 1024),
+            "--out", os.path.join(args.out, "speed_suite.md"),
+            "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
+    if args.scenes:
+        argv += ["--scenes", ",".join(args.scenes)]
+    for name, value in (("--repeats", args.repeats), ("--gt-spp", args.gt_spp)):
+        if value < 1:
+            raise CliError(f"bench --suite speed: {name} {value}; expected an integer >= 1")
+    if args.spp:
+        spps = int_list(args.spp, "--spp")
+        if len(spps) != 1 or spps[0] < 1:
+            raise CliError(f"bench --suite speed: --spp {args.spp!r}; expected one integer >= 1 "
+                           "(the spp of the reference error each version is timed to)")
+        argv += ["--spp", str(spps[0])]
+    if args.resolution:
+        from draaw_mi.errors import DraawError
+        from draaw_mi.scene.schema import Where, resolution as parse_res
+        text = args.resolution.strip()
+        try:                              # (N is N x N here)
+            w, h = parse_res(int(text) if text.isdigit() else text, Where("--resolution"))
+        except DraawError:
+            w, h = 0, 1
+        if w != h:
+            raise CliError(f"bench --suite speed: --resolution {args.resolution!r}; the suite's "
+                           "images are square (give N or NxN, sides in 1..16384)")
+        argv += ["--res", str(w)]
+    import shlex                            # the user's command, quoted so it runs when pasted
+    if not any(speed_suite.build(n, 8) is not None for n in (args.scenes or speed_suite.SCENES)):
+        raise CliError("bench --suite speed: every requested scene was skipped (the GO-Draaw data "
+                       f"is absent: looked for {speed_suite.GO_DRAAW}/monkey.obj); nothing to measure")
+    os.makedirs(args.out, exist_ok=True)
+    return speed_bench.main(argv, command="draaw-mi " + shlex.join(args.argv))
+
+
+def cmd_bench(args) -> int:
+    import draaw_mi
+    from draaw_mi import bench
+    if args.suite == "speed":
+        return _cmd_speed_suite(args)
+    from draaw_mi.scene.schema import Where, resolution as parse_res
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(draaw_mi.__file__)))
+    scenes = args.scenes or [os.path.join(root, "scenes", f) for f in ("cornell.toml", "material_spheres.toml",
+                                                                         "sdf_csg.toml")]
+    versions = args.versions.split(",") if args.versions else list(bench.DEFAULT_VERSIONS)
+    from draaw_mi.integrators import resolve_version
+    for v in versions:
+        resolve_version(v)
+    if args.repeats < 1:
+        raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
+    res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None
+    if args.quick:
+        spps = int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
+        res = res or (64, 64)
+        gt_spp = min(args.gt_spp, 1024)
+        # (3, not 2: a small render's dr.freeze recording is made again once while the other
+        # versions' recordings settle, and the median of two was half that render: the first
+        # scene's 1-spp times came out 5-10x high)
+        repeats = min(args.repeats, 3)
+    else:
+        spps = int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
+        gt_spp, repeats = args.gt_spp, args.repeats
+    depths = int_list(args.max_depth, "--max-depth") if args.max_depth else None
+    # every number checked before the ground truth renders (minutes at the defaults)
+    for name, values, lo in (("--spp", spps, 1), ("--gt-spp", [gt_spp], 1), ("--max-depth", depths or [], -1),
+                             ("--frames", [args.frames], 1)):
+        bad = [v for v in values if v < lo]
+        if bad:
+            raise CliError(f"bench: {name} {bad[0]}; expected an integer >= {lo}"
+                           + (" (-1: unbounded)" if name == "--max-depth" else ""))
+    if args.adaptive and (args.adaptive < 2 or args.adaptive & (args.adaptive - 1)):
+        raise CliError(f"bench: --adaptive {args.adaptive}; expected a power of two >= 2 (block size "
+                       "in pixels) or 0 (none)")
+    keys = read_json(args.camera_path, "--camera-path") if args.camera_path else None
+    if keys is not None:              # checked before the study, which runs for minutes
+        from draaw_mi.camera_path import as_keyframes
+        as_keyframes(keys)
+        if args.frames < 2:
+            raise CliError(f"bench: --frames {args.frames}; a camera path needs at least 2 frames")
+    progress = progress_mode(args.no_progress)
+    scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
+    if not scenes:
+        return 0
+    result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
+                             adaptive=(None, args.adaptive) if args.adaptive else (None,),
+                             repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress,
+                             **_bench_denoise(args))
+    print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
+    if keys is not None:
+        scene = draaw_mi.load_scene(scenes[0], **({"resolution": res} if res else {}))
+        rows = bench.frame_times(scene, keys, versions=versions, frames=args.frames, progress=progress)
+        from draaw_mi.io import write_text
+        path = os.path.join(args.out, "frame_times.json")
+        write_text(path, json.dumps(rows, indent=1))
+        for r in rows:
+            print(f"{r['version']:>6}: mean {r['mean_s'] * 1e3:.1f} ms, median {r['median_s'] * 1e3:.1f} ms, "
+                  f"p90 {r['p90_s'] * 1e3:.1f} ms")
+        print(f"wrote {path}")
+    return 0
+
+
+def _bench_denoise(args) -> dict:
+    if not args.denoise:
+        return {}
+    from draaw_mi.denoise import _pyoidn
+    _pyoidn()                                     # the install hint before the study starts
+    return {"denoise_spp": int_list(args.denoise, "--denoise")}
