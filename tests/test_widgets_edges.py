@@ -84,6 +84,15 @@ def test_a_refused_orbit_puts_the_sliders_back():
         assert np.allclose(t.document()["camera"]["origin"], before)
         t._zoom(0.9)                                    # a move that is allowed still moves
         assert t.distance.value == pytest.approx(0.9)
+        # a camera path whose last frame is inside the smoke: that frame is refused and the
+        # camera stays the frame before's (it took the refused one, which Save then wrote)
+        t.load_camera_path([(0.0, 4.0, 3.0, 0.0, -1.9), (0.0, 1.9, 0.0, 0.0, -1.9)], frames=4)
+        assert t.message.value == ""
+        before = dict(t.camera)
+        t.path_frame.value = t.path_frame.max
+        assert "smoke" in t.message.value
+        assert t.camera == before
+        np.testing.assert_allclose(t.document()["camera"]["origin"], before["origin"])
     finally:
         t.close()
 

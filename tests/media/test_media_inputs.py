@@ -66,8 +66,11 @@ def test_solid_voxels_take_the_colour_parameter_of_their_bsdf():
     from draaw_mi.media import VoxelGrid
     from draaw_mi.media.faces import solid_meshes
     g = VoxelGrid.from_arrays(occupied=np.ones((2, 1, 1), bool), color=[0.8, 0.2, 0.1])
-    for kind in ("plastic", "roughplastic", "diffuse", "conductor"):       # (plastic: 'unreferenced')
+    for kind, key in (("plastic", "diffuse_reflectance"), ("roughplastic", "diffuse_reflectance"),
+                      ("diffuse", "reflectance"), ("conductor", "specular_reflectance")):  # (plastic: 'unreferenced')
         meshes = solid_meshes(g, {"type": kind}, group_by="color")
         assert len(meshes) == 1, kind
+        p = mi.traverse(next(iter(meshes.values())).bsdf())
+        np.testing.assert_allclose(np.array(p[f"{key}.value"]).ravel(), [0.8, 0.2, 0.1], rtol=1e-6, err_msg=kind)
     with pytest.raises(ParameterError, match="material type 'dielectric' has no colour parameter"):
         solid_meshes(g, {"type": "dielectric"}, group_by="color")
