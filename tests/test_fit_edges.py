@@ -125,25 +125,28 @@ def test_edge_norm_gradient_is_right_for_bright_edges():
         np.testing.assert_allclose(g, [2 / 5 ** 0.5, 1 / 5 ** 0.5], rtol=1e-5, err_msg=str(scale))
 
 
-def test_render_checks_its_post_chain_before_rendering(monkeypatch):
-    scene = draaw_mi.load_scene(_scene())
+@pytest.fixture
+def render_calls(monkeypatch):
+    """The calls of ``mi.render`` while a test runs (a list that grows by one per call)."""
     calls = []
     real = mi.render
     monkeypatch.setattr(mi, "render", lambda *a, **k: calls.append(1) or real(*a, **k))
+    return calls
+
+
+def test_render_checks_its_post_chain_before_rendering(render_calls):
+    scene = draaw_mi.load_scene(_scene())
     with pytest.raises(ParameterError, match="blom"):
         draaw_mi.render(scene, spp=1, post=[{"type": "blom"}])
-    assert calls == []                                # (the error came after the whole render)
+    assert render_calls == []                         # (the error came after the whole render)
 
 
-def test_render_refuses_a_function_as_post_chain_before_rendering(monkeypatch):
+def test_render_refuses_a_function_as_post_chain_before_rendering(render_calls):
     from draaw_mi.errors import RenderError
     scene = draaw_mi.load_scene(_scene())
-    calls = []
-    real = mi.render
-    monkeypatch.setattr(mi, "render", lambda *a, **k: calls.append(1) or real(*a, **k))
     with pytest.raises(RenderError, match="render: post=<function.*expected a chain"):
         draaw_mi.render(scene, spp=1, post=lambda img: img)
-    assert calls == []                                # (a TypeError after the render)
+    assert render_calls == []                         # (a TypeError after the render)
     from draaw_mi import post
     chain = post.load_chain([{"type": "contrast", "amount": 0.0}])      # a Chain is a chain
     assert np.isfinite(np.array(draaw_mi.render(scene, spp=1, post=chain))).all()
