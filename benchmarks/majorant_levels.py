@@ -40,7 +40,7 @@ import media_speed  # noqa: E402
 
 import draaw_mi.integrators.volume as volume  # noqa: E402
 import draaw_mi.media.majorant as majorant  # noqa: E402
-from draaw_mi.bench import load_note  # noqa: E402
+from draaw_mi.bench import with_load_note  # noqa: E402
 from draaw_mi.media import VoxelGrid  # noqa: E402
 from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 
@@ -140,8 +140,9 @@ def main(argv=None) -> int:
     lines += ["", "The means' own noise: each is the mean of its seeds' image means; the draaw_v4 means carry a "
               "standard error like volpath's (same spp)."]
     from draaw_mi.io import write_text
-    write_text(a.out, ("\n".join(lines) + "\n").replace("LOAD_NOTE", load_note(), 1))   # measured at the end
-    print("\n".join(lines))
+    text = with_load_note("\n".join(lines) + "\n")      # the load measured at the end
+    write_text(a.out, text)
+    print(text)
     return 0
 
 

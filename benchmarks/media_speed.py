@@ -39,7 +39,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "media"))
 import media_scenes as ms  # noqa: E402
 
-from draaw_mi.bench import load_note  # noqa: E402
+from draaw_mi.bench import with_load_note  # noqa: E402
 from draaw_mi.media import VoxelGrid  # noqa: E402
 from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 
@@ -169,7 +169,7 @@ def main(argv=None) -> int:
         lines.append("")
     lines += ["Time to a given error ∝ time x MSE (Monte Carlo MSE ∝ 1/spp); MSE includes the reference's own "
               "noise (small at the reference spp)."]
-    text = ("\n".join(lines) + "\n").replace("LOAD_NOTE", load_note(), 1)   # measured at the end
+    text = with_load_note("\n".join(lines) + "\n")      # the load measured at the end
     from draaw_mi.io import write_text
     write_text(a.out, text)
     print(text)

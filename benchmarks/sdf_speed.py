@@ -24,7 +24,7 @@ sys.path.insert(0, ROOT)
 
 import draaw_mi  # noqa: E402
 import drjit as dr  # noqa: E402
-from draaw_mi.bench import load_note  # noqa: E402
+from draaw_mi.bench import with_load_note  # noqa: E402
 from draaw_mi.io import atomic_path  # noqa: E402
 from draaw_mi.sdf.study import camera_march  # noqa: E402
 
@@ -118,7 +118,7 @@ def main(argv=None):
         lines.append(f"| {relax:g} | {np.median(t[f'relax {relax:g}']):.3f} | {s.mean():.2f} | "
                      f"{s[h].mean():.2f} | {h.sum()} |")
     lines.append("")
-    text = ("\n".join(lines) + "\n").replace("LOAD_NOTE", load_note(), 1)   # measured at the end
+    text = with_load_note("\n".join(lines) + "\n")      # the load measured at the end
     with atomic_path(args.out, ".tmp") as tmp:
         with open(tmp, "w") as f:
             f.write(text)

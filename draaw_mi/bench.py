@@ -64,6 +64,16 @@ def load_note() -> str:
     return f"load average {load:.1f} at the end, this job included, on {cores} cores ({state})"
 
 
+def with_load_note(text: str) -> str:
+    """``text`` with its ``LOAD_NOTE`` placeholder replaced by :func:`load_note`, read now: a
+    benchmark's header is written before its runs, the load is measured after them.
+
+    >>> with_load_note("Machine: LOAD_NOTE.").startswith("Machine: load average ")
+    True
+    """
+    return text.replace("LOAD_NOTE", load_note(), 1)
+
+
 # --------------------------------------------------------------------------- error metrics
 def rmse(img: np.ndarray, gt: np.ndarray) -> float:
     return float(np.sqrt(np.mean((img - gt) ** 2)))

@@ -341,8 +341,8 @@ def _cmd_post(args) -> int:
     from draaw_mi.batch.exr import read_header
     header = read_header(args.input) or {}
     before = _recorded_chain(header)
-    with open(args.chain, encoding="utf-8") as fh:              # (valid: load_chain read it)
-        chain_doc = json.load(fh)
+    # the chain as the user wrote it (chain.to_list() would record every default too)
+    chain_doc = read_json(args.chain, "--chain")                 # (valid: load_chain read it)
     after = chain_doc["chain"] if isinstance(chain_doc, dict) else chain_doc     # ({"chain": [...]})
     if args.output.lower().endswith(".png"):
         # encoded by either chain (an input rendered with a chain ending in srgb): stored as

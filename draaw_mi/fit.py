@@ -326,10 +326,10 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
-    if version is None:                 # the scene's, where it can be differentiated
-        version = scene.settings.get("version") or "v4"
-        if not isinstance(make_integrator(version, 1), mi.ad.integrators.common.ADIntegrator):
-            version = "v4"
+    if version is None:                 # the scene's where it can be differentiated, else v4
+        from .integrators import is_draaw, resolve_version
+        own = scene.settings.get("version") or "v4"
+        version = own if is_draaw(own) or resolve_version(own) in ("prb", "prbvolpath") else "v4"
     if post is None:                    # the scene's chain, as render() applies it
         post = list(scene.settings.get("post", []))
     chain = None

@@ -83,9 +83,10 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
     if arr.shape[2] == 1:
         arr = np.repeat(arr, 3, axis=2)
     arr = arr[..., :3].astype(np.float32)
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.count_nonzero(~np.all(np.isfinite(arr), axis=2)))
-        y, x = np.argwhere(~np.all(np.isfinite(arr), axis=2))[0]
+    bad_px = ~np.all(np.isfinite(arr), axis=2)
+    if bad_px.any():
+        bad = int(np.count_nonzero(bad_px))
+        y, x = np.argwhere(bad_px)[0]
         what = f"reference {ref!r}" if isinstance(ref, str) else "a reference image"
         raise DraawError(f"{who}: {what} has {bad} pixel(s) with NaN or Inf (first at x={x}, y={y})")
     return arr

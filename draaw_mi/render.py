@@ -14,6 +14,7 @@ a true mean rather than its exponential moving average). Same arguments and seed
 """
 from __future__ import annotations
 
+import numbers
 import re
 import threading
 import time
@@ -329,11 +330,11 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if callable(post) and not isinstance(post, Chain):     # (it failed after the whole render)
         raise RenderError(f"render: post={post!r}; expected a chain (a list of filter tables, a Chain "
                           "or a JSON file): apply a function of your own to the returned image")
-    if post is not None and not callable(post):
-        from . import post as post_mod
-        post_mod.load_chain(post)     # checked now, not after the render (an unknown filter); kept
-        # as given: the info (and a batch frame's header) records the chain as the user wrote it
     chain = s.get("post", []) if post is None else post
+    # read and checked once, now, not after the render (an unknown filter); ``chain`` stays as
+    # given: the info (and a batch frame's header) records it as the user wrote it
+    from . import post as post_mod
+    loaded = post_mod.load_chain(chain) if chain else None
     if (chain or denoise) and adaptive is None:
         _check_film_colour(scene, "a post chain" if chain else "denoising")
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image
@@ -341,8 +342,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if adaptive is not None:
         with RENDER_GUARD:
             integrator = make_integrator(version, max_depth, hide, (), **(integrator_options or {}))
-        return _render_adaptive(scene, adaptive, integrator, version, spp, seed, params, aovs, post,
-                                return_info, progress)
+        return _render_adaptive(scene, adaptive, integrator, version, spp, seed, params, aovs, chain,
+                                loaded, return_info, progress)
     with RENDER_GUARD:    # (both may make plugins: the integrator, a sampler probed for its counts)
         integrator = make_integrator(version, max_depth, hide, aovs, **(integrator_options or {}))
         counts = _scene_passes(scene, spp, pass_spp)
@@ -376,7 +377,10 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         bar.close()
     # the film's colour channels, then the AOVs: an XML film's pixel_format may store R, G, B, A
     # or Y (always R, G, B were named, and write_exr refused the image)
-    names = _channel_names(acc, integrator.aov_names())
+    # the film's colour by its count (R, G, B[, A], Y[, A]: an rgba or luminance XML film was
+    # named R, G, B), then the AOVs'
+    from .io import channel_names
+    names = channel_names(acc.shape[2], integrator.aov_names())
     image = acc
     if n_passes > 1:
         with RENDER_GUARD:
@@ -391,7 +395,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             if denoise:
                 image, names = _denoised(image, names, extra_aovs)
             if chain:
-                image = _apply_post(image, chain)
+                image = _apply_post(image, loaded)
     if return_info:
         return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": version, "integrator": resolve_version(version),
@@ -454,7 +458,8 @@ def frozen_render(integrator, spp: int, scene=None):
     return fn
 
 
-def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs, post, return_info, progress):
+def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs, chain, loaded, return_info,
+                     progress):
     from .adaptive import render_adaptive
     if params is not None:
         raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
@@ -474,10 +479,9 @@ def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs,
     if bar is not None:                  # (one launch: the bar fills at once)
         bar.update(spp)
         bar.close()
-    chain = scene.settings.get("post", []) if post is None else post
     bad = non_finite_count(image) if return_info else 0      # (before the chain: see render)
     if chain:
-        image = _apply_post(image, chain)
+        image = _apply_post(image, loaded)
     if return_info:
         return image, {"non_finite": bad, "spp": spp, "passes": 1, "seconds": time.perf_counter() - t0,
                        "channels": ["R", "G", "B"], "version": version,
@@ -520,20 +524,6 @@ def _denoised(image, names, extra_aovs):
 _FILM_COLOUR = {1: "luminance", 2: "luminance_alpha", 3: "rgb", 4: "rgba"}
 
 
-def _channel_names(image, aov_names) -> list[str]:
-    """The channel names of a render: its film's colour (R, G, B; R, G, B, A; Y or Y, A by
-    their count, io.DEFAULT_NAMES) then the AOVs' (always R, G, B was named: an rgba or
-    luminance film's image did not match its names)."""
-    from .io import channel_names
-    aov_names = list(aov_names)
-    n_color = image.shape[2] - len(aov_names)
-    if n_color not in _FILM_COLOUR:
-        raise RenderError(f"render: an image of {image.shape[2]} channels with {len(aov_names)} AOV "
-                          f"channels ({', '.join(aov_names)}) leaves {n_color} colour channels; "
-                          "expected 1 to 4 (the film's pixel_format)")
-    return channel_names(image.shape[2], aov_names)
-
-
 def _check_film_colour(scene, what: str) -> None:
     """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance
     (an XML scene's pixel_format) is refused before the render, not after it (a post chain
@@ -547,10 +537,7 @@ def _check_film_colour(scene, what: str) -> None:
 
 def _check_int(name, value, lo, hi=None) -> int:
     """``value`` as a Python int, numpy integers too (``2 ** np.arange(k)`` in a notebook)."""
-    import numbers
-
-    import numpy as np
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < lo \
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo \
             or (hi is not None and value > hi):
         rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
         raise RenderError(f"render: {name}={value!r}; expected an integer {rng}")

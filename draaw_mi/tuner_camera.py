@@ -44,7 +44,8 @@ class CameraPanel:
         self.yaw = slider("orbit yaw °", 0.0, -180.0, 180.0, 1.0)
         self.pitch = slider("orbit pitch °", 0.0, -85.0, 85.0, 1.0)
         self.distance = slider("distance ×", 1.0, 0.2, 3.0, 0.01)
-        self.fov.observe(self._guard(lambda ch: self._changed({self._fov_key(): float(ch["new"])})), "value")
+        # (the key as the panel found it: a reload keeps the scene's names)
+        self.fov.observe(self._guard(lambda ch: self._changed({key: float(ch["new"])})), "value")
         for w in (self.yaw, self.pitch, self.distance):
             w.observe(self._guard(lambda ch: self._set_camera()), "value")
         get = W.Button(description="get camera")

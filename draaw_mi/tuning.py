@@ -265,9 +265,7 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
             elif light.get("type") in ("point", "spot", "area", "constant", "envmap", "directional", "sun"):
                 light["intensity"] = float(light_scale)
             if col != [1.0, 1.0, 1.0]:
-                base = light.get("color", [1.0, 1.0, 1.0])
-                base = base if isinstance(base, list) else [float(base)] * 3
-                light["color"] = [float(b) * c for b, c in zip(base, col)]
+                light["color"] = _tinted(light.get("color", 1.0), col)
         # emitting shapes too: the preview scales their radiance with the lights' (a saved
         # panel stayed at 5 where the preview showed 10)
         for shape in desc.get("shapes", []):
@@ -277,10 +275,14 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
             shape["emission"] = ([float(x) * float(light_scale) for x in e] if isinstance(e, list)
                                  else float(e) * float(light_scale))
             if col != [1.0, 1.0, 1.0]:
-                base = shape.get("emission_color", [1.0, 1.0, 1.0])
-                base = base if isinstance(base, list) else [float(base)] * 3
-                shape["emission_color"] = [float(b) * c for b, c in zip(base, col)]
+                shape["emission_color"] = _tinted(shape.get("emission_color", 1.0), col)
     return desc
+
+
+def _tinted(base, col) -> list[float]:
+    """A scene file's colour (one number or RGB) times the tint ``col``."""
+    base = base if isinstance(base, list) else [float(base)] * 3
+    return [float(b) * c for b, c in zip(base, col)]
 
 
 def save_toml(path: str, doc: dict) -> None:

@@ -99,11 +99,14 @@ def _check_log(m: Manifest, specs: list) -> None:
     the finished frame (and ``--status`` then failed to decode it); one naming a folder
     raised IsADirectoryError from the run."""
     from ..errors import SceneError
+    from .exr import preview_path
     path = log_path(m)
+
+    def same(p):                 # one file, told apart as plan() tells the outputs apart
+        return os.path.normcase(os.path.abspath(p)).casefold()
+    log = same(path)
     for s in specs:
-        files = [s["output"]] + ([os.path.splitext(s["output"])[0] + ".png"] if s["preview"] else [])
-        if any(os.path.normcase(os.path.abspath(f)).casefold() == os.path.normcase(path).casefold()
-               for f in files):
+        if any(same(f) == log for f in [s["output"]] + ([preview_path(s)] if s["preview"] else [])):
             raise SceneError(f"{m.path}: log {path!r} is an output of job {s['job']!r} frame "
                              f"{s['frame']}; give the log a name of its own")
     if os.path.isdir(path):

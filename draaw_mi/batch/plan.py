@@ -219,12 +219,15 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 raise SceneError(f"{loc}: camera: the scene's sensor has no to_world parameter")
             try:
                 cams = camera_frames(job.camera, job.frames, entry.fov)
-                from ..media.scene_volumes import check_camera_outside_smoke
-                from ..scene.camera import sensor_reach
-                from ..scene.schema import Where
-                for f, c in enumerate(cams):
-                    check_camera_outside_smoke(c["origin"], scene.info.get("volumes", []), Where(f"frame {f}"),
-                                               sensor_reach(scene))
+                volumes = scene.info.get("volumes", [])
+                if volumes:
+                    from ..media.scene_volumes import check_camera_outside_smoke
+                    from ..scene.camera import sensor_reach, x_fov
+                    from ..scene.schema import Where
+                    w, h = scene.resolution
+                    for f, c in enumerate(cams):     # (at the frame's own field of view)
+                        reach = sensor_reach(scene, x_fov(c["fov"], entry.fov_axis, w, h))
+                        check_camera_outside_smoke(c["origin"], volumes, Where(f"frame {f}"), reach)
             except DraawError as e:
                 raise SceneError(f"{loc}: camera: {e}") from None
         for f in range(job.frames):

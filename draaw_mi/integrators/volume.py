@@ -139,22 +139,24 @@ def media_table(scene: mi.Scene) -> MediaTable:
     # wrong sign: no null collisions under a tight bound)
     media = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
     media += [s.get_medium() for s in scene.sensors()]
+    traversed = set()
     for m in media:
         # the media by identity: the table holds them alive, so a new scene at a reused
         # address cannot match unless it has these very media (the scene itself is not
         # held: a held scene keeps its Python BSDFs alive, which enlarge every BSDF call)
         stamp.append(id(m))
-        if m is not None:
-            p = mi.traverse(m)
+        if m is None or id(m) in traversed:       # (a fog shared by shapes: once)
+            continue
+        traversed.add(id(m))
+        p = mi.traverse(m)
+        with dr.resume_grad():            # sample() runs with AD suspended
             for k in p.keys():
+                v = p[k]
                 if k.endswith("sigma_t.data") or k == "scale" or k.startswith("sigma_t."):
-                    v = p[k]
                     # a JIT variable's index changes whenever the parameter is replaced
                     arr = getattr(v, "array", v)
                     stamp.append((k, getattr(arr, "index", None), v if isinstance(v, float) else None))
-            with dr.resume_grad():            # sample() runs with AD suspended
-                for k in p.keys():
-                    diff |= not isinstance(p[k], (float, int)) and dr.grad_enabled(p[k])
+                diff |= not isinstance(v, (float, int)) and dr.grad_enabled(v)
     stamp.append(("differentiated", diff))
     hit = _TABLES.get(key)
     if hit is not None and hit[0] == stamp:

@@ -75,7 +75,8 @@ def _coeffs(medium, ray, t, active):
 
 
 @dr.syntax
-def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.Float, active):
+def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.Float, active,
+                          partial: bool = False):
     """``exp(-integral sigma_t)`` along ``ray`` up to ``dist`` by ``steps`` samples per medium
     segment (offset ``u``), through null surfaces; 0 if an opaque surface blocks."""
     T = mi.Float(1.0)
@@ -84,8 +85,7 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
     med = dr.select(active, medium, dr.zeros(mi.MediumPtr))
     live = mi.Bool(active)
     n = mi.UInt32(0)
-    partial = partly_null(scene)
-    flags = mi.RayFlags.All if partial else mi.RayFlags.Minimal
+    flags = mi.RayFlags.All if partial else mi.RayFlags.Minimal     # partial: partly_null(scene)
     while live:
         r.maxt = rem
         si = scene.ray_intersect(r, flags, False, live)
@@ -104,10 +104,11 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
             k += 1
         T[march] = T * dr.exp(-tau) * _tail(med, r, t1, unbounded, march)
         hit = live & si.is_valid() & (si.t < rem)
-        null = hit & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.Null)
+        bsdf = si.bsdf()
+        null = hit & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
         T[hit & ~null] = 0.0
         if dr.hint(partial, mode="scalar"):      # a mask passes 1 - opacity
-            T[null] = T * si.bsdf().eval_null_transmission(si, null).x
+            T[null] = T * bsdf.eval_null_transmission(si, null).x
         med[null & si.is_medium_transition()] = si.target_medium(r.d)
         rem[null] = rem - si.t
         r[null] = si.spawn_ray(r.d)
@@ -116,7 +117,7 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
     return T
 
 
-def _light(scene, sampler, it, medium, steps, active, sdf=None):
+def _light(scene, sampler, it, medium, steps, active, sdf=None, partial=False):
     """One emitter sample from ``it``: ``(ds, Le / pdf * T_light)``; ``sdf``: the scene's SDF
     hook (SDF occluders block the sample before its transmittance is marched)."""
     ds, em_w = scene.sample_emitter_direction(it, sampler.next_2d(active), False, active)
@@ -125,7 +126,7 @@ def _light(scene, sampler, it, medium, steps, active, sdf=None):
         active &= ~sdf.occluded(it, ds, active)
     r = it.spawn_ray(ds.d)
     dist = dr.select(dr.isfinite(ds.dist), ds.dist * (1.0 - mi.math.ShadowEpsilon), dr.inf)
-    T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active)
+    T = marched_transmittance(scene, r, dist, medium, steps, sampler.next_1d(active), active, partial)
     return ds, dr.select(active, em_w * T, 0.0)
 
 
@@ -167,7 +168,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         k = mi.UInt32(0)
         while march & (k < steps):
             mei, s_s, s_t = _coeffs(medium, ray, t0 + (mi.Float(k) + u) * dt, march)
-            ds, Lw = _light(scene, sampler, mei, medium, steps, march, sdf)
+            ds, Lw = _light(scene, sampler, mei, medium, steps, march, sdf, partial)
             phase = medium.phase_function()
             ph, _ = phase.eval_pdf(mi.PhaseFunctionContext(sampler), mei, ds.d, march)
             # this step's own attenuation up to the sample, then through it
@@ -194,7 +195,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
             L[seen] = L + T * si.emitter(scene).eval(si, seen)
         # direct light at the surface
         m2 = dr.select(si.is_medium_transition(), si.target_medium(si.to_world(si.wi)), medium)
-        ds, Lw = _light(scene, sampler, si, m2, steps, shaded, sdf)
+        ds, Lw = _light(scene, sampler, si, m2, steps, shaded, sdf, partial)
         f = bsdf.eval(ctx, si, si.to_local(ds.d), shaded)     # (a mask's: opacity times its BSDF's)
         L[shaded] = L + T * f * Lw
         if dr.hint(partial, mode="scalar"):      # then on through it with 1 - opacity

@@ -112,6 +112,10 @@ def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group
                                  "use group_by='color' for other BSDFs")
         bsdf = mi.load_dict(dict(mat, base_color={"type": "mesh_attribute", "name": "face_color"}))
         return {name: _mesh(name, v, f, bsdf, colors)}
+    key = _COLOUR_KEYS.get(mat["type"])
+    if key is None:             # (Mitsuba's 'unreferenced property "base_color"')
+        raise ParameterError(f"solid_meshes: material type {mat['type']!r} has no colour parameter "
+                             f"draaw-mi knows; expected one of {', '.join(sorted(_COLOUR_KEYS))}")
     out = {}
     uniq, inv = np.unique(colors, axis=0, return_inverse=True)
     inv = inv.ravel()
@@ -119,10 +123,6 @@ def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group
         sel = np.nonzero(inv == k)[0]
         vk = v.reshape(-1, 4, 3)[sel].reshape(-1, 3)
         fk = f[: 2 * sel.size]                                 # local indices restart at 0
-        key = _COLOUR_KEYS.get(mat["type"])
-        if key is None:             # (Mitsuba's 'unreferenced property "base_color"')
-            raise ParameterError(f"solid_meshes: material type {mat['type']!r} has no colour parameter "
-                                 f"draaw-mi knows; expected one of {', '.join(sorted(_COLOUR_KEYS))}")
         bsdf = mi.load_dict(dict(mat, **{key: {"type": "rgb", "value": col.tolist()}}))
         out[f"{name}_{k}"] = _mesh(f"{name}_{k}", vk, fk, bsdf, None)
     return out

@@ -44,7 +44,7 @@ def check_g(g_phase, where: str = "smoke") -> float:
     """The Henyey-Greenstein g, which must be finite with |g| < 1."""
     # numpy scalars are numbers (np.float32(0.5) was refused); |g| < 1 in float32, as Mitsuba
     # stores it (0.99999999 is 1 there, and the hg plugin failed to load)
-    if isinstance(g_phase, (bool, np.bool_)) or not isinstance(g_phase, numbers.Real) \
+    if isinstance(g_phase, bool) or not isinstance(g_phase, numbers.Real) \
             or not math.isfinite(g_phase) or abs(float(np.float32(g_phase))) >= 1.0:
         raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
     return float(g_phase)
@@ -56,7 +56,7 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
     (or a constant RGB ``albedo``)."""
     import mitsuba as mi
     g_phase = check_g(g_phase, "smoke_medium")
-    if isinstance(scale, (bool, np.bool_)) or not (isinstance(scale, numbers.Real) and math.isfinite(scale)
+    if isinstance(scale, bool) or not (isinstance(scale, numbers.Real) and math.isfinite(scale)
                                                    and 0 <= scale <= FLOAT32_MAX):
         raise ParameterError(f"smoke_medium: scale={scale!r}; expected a finite value >= 0 (float32: <= 3.4e38)")
     scale = float(scale)

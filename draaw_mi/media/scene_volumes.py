@@ -220,7 +220,7 @@ def check_smoke_boxes_disjoint(volume_info: list, where) -> None:
                     "boxes do not add up: merge them into one grid, or move them apart (they may touch)")
 
 
-def check_camera_outside_smoke(origin, volume_info: list, where, reach: float = 0.0) -> None:
+def check_camera_outside_smoke(origin, volume_info: list, where, reach: float) -> None:
     """A camera inside a ``[[volumes]]`` smoke box rendered as if the smoke were not around
     it (the sensor's medium is not set, so every version, and volpath, started each camera
     ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported.

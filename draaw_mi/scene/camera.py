@@ -86,16 +86,18 @@ def near_reach(near: float, x_fov_deg: float, width: int, height: int) -> float:
     return float(near) * math.sqrt(1.0 + tx * tx + ty * ty)
 
 
-def sensor_reach(scene) -> float:
-    """:func:`near_reach` of the first sensor of a :class:`~draaw_mi.scene.DraawScene`
-    (0 for a sensor without a near clip)."""
+def sensor_reach(scene, x_fov_deg: float | None = None) -> float:
+    """:func:`near_reach` of the first sensor of a :class:`~draaw_mi.scene.DraawScene`, at
+    its own ``x_fov`` or ``x_fov_deg`` (a batch camera table's); 0 for a sensor without a
+    near clip."""
     sensor = scene.mi_scene.sensors()[0]
     near = getattr(sensor, "near_clip", None)
     if near is None:
         return 0.0
-    key = sensor_keys(scene)[1]
-    fov = float(scene.params[key][0]) if key else 45.0
-    return near_reach(float(near()), fov, *scene.resolution)
+    if x_fov_deg is None:
+        key = sensor_keys(scene)[1]
+        x_fov_deg = float(scene.params[key][0]) if key else 45.0
+    return near_reach(float(near()), x_fov_deg, *scene.resolution)
 
 
 def scene_fov(scene) -> tuple[float, str]:

@@ -208,8 +208,9 @@ def _tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
     return mi.Bitmap(rgb * np.asarray(color, np.float32))
 
 
-def _texture_value(value, name: str, ctx: BuildContext, where: Where):
-    """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts."""
+def _texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None):
+    """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts; ``lo``: the
+    least a plain number or RGB triple may be (a reflectance's 0)."""
     import mitsuba as mi
 
     if isinstance(value, str):
@@ -228,7 +229,9 @@ def _texture_value(value, name: str, ctx: BuildContext, where: Where):
             arr = arr[..., None]
         return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True}
     if isinstance(value, (list, tuple)):
-        return {"type": "rgb", "value": vector(value, where)}
+        return {"type": "rgb", "value": vector(value, where, lo=lo)}
+    if lo is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return number(value, where, lo=lo)            # (-0.5 rendered negative pixels)
     return value
 
 
@@ -293,13 +296,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
                 out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
                 continue              # distribution = "beckmann" (each was "no texture file")
-            if nonneg and isinstance(value, (int, float)) and not isinstance(value, bool):
-                out[key] = number(value, where / key, lo=0.0)     # (-0.5 rendered negative pixels)
-                continue
-            if nonneg and isinstance(value, (list, tuple)) and not _is_nested(value):
-                out[key] = {"type": "rgb", "value": vector(value, where / key, lo=0.0)}
-                continue
-            out[key] = _texture_value(value, key, ctx, where / key)
+            out[key] = _texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
             if isinstance(value, str) and out[key].get("type") == "bitmap":
                 _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
             elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)

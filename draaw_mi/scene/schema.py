@@ -64,7 +64,7 @@ def number(value: Any, where: Where, lo: float | None = None, hi: float | None =
            integer: bool = False, lo_open: bool = False) -> float:
     """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``); numpy
     numbers too (np.int64(8) was "not a number")."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_" or not isinstance(value, numbers.Real):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):      # (numpy's bool is neither)
         raise where.error(f"{shown(value)} is not a number")
     value = int(value) if isinstance(value, numbers.Integral) else float(value)
     if not math.isfinite(value):

@@ -14,8 +14,6 @@ wrap (nested transforms are composed). Nodes with the same name get ``_1``, ``_2
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -23,7 +21,7 @@ import numpy as np
 from ..errors import ParameterError
 from .node import SDFNode, scalar_of, vec_of
 from .operators import Operator
-from .transforms import Transform
+from .transforms import Transform, axis_angle
 
 
 def _f(x) -> float:
@@ -39,17 +37,6 @@ def _value(v):
     if dr.is_array_v(v):
         return _f(scalar_of(v))
     return _f(v)
-
-
-def _axis_angle(R: np.ndarray) -> tuple[list[float], float]:
-    """Rotation matrix -> (unit axis, degrees): the axis is the eigenvector of eigenvalue 1,
-    the angle's sign comes from the skew part (robust at 0 and 180 degrees)."""
-    w, v = np.linalg.eig(R)
-    axis = np.real(v[:, np.argmin(np.abs(w - 1.0))])
-    axis = axis / max(np.linalg.norm(axis), 1e-30)
-    skew = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    angle = math.degrees(math.atan2(0.5 * float(axis @ skew), 0.5 * (np.trace(R) - 1.0)))
-    return axis.tolist(), angle
 
 
 def to_entries(*roots: SDFNode) -> list[dict]:
@@ -98,7 +85,7 @@ def to_entries(*roots: SDFNode) -> list[dict]:
         if np.any(t != 0):
             e["translate"] = t.tolist()
         if not np.allclose(R, np.eye(3)):
-            axis, angle = _axis_angle(R)
+            axis, angle = axis_angle(R)
             e["rotate"] = {"axis": axis, "angle": angle}
         if s != 1.0:
             e["scale"] = s

@@ -24,6 +24,17 @@ from ..errors import ParameterError
 from .node import SDFNode, _scalar, _vec3, box, is_infinite, scalar_of, vec_of
 
 
+def axis_angle(R: np.ndarray) -> tuple[list[float], float]:
+    """Rotation matrix -> (unit axis, degrees): the axis is the eigenvector of eigenvalue 1,
+    the angle's sign comes from the skew part (robust at 0 and 180 degrees)."""
+    w, v = np.linalg.eig(R)
+    axis = np.real(v[:, np.argmin(np.abs(w - 1.0))])
+    axis = axis / max(np.linalg.norm(axis), 1e-30)
+    skew = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    angle = math.degrees(math.atan2(0.5 * float(axis @ skew), 0.5 * (np.trace(R) - 1.0)))
+    return axis.tolist(), angle
+
+
 def _rotation(value, name: str) -> np.ndarray:
     """``value`` as a 3x3 rotation matrix: orthonormal with determinant +1 (to float32
     rounding). Anything else changes distances (``diag(2, 1, 1)`` doubled a sphere's, so the
@@ -92,13 +103,8 @@ class Transform(SDFNode):
     def fixed_values(self) -> dict:
         if self._identity_rot:
             return {}
-        # the rotation as an angle about the axis R leaves fixed (its eigenvector of value 1)
-        w, v = np.linalg.eig(self.rotation)
-        axis = np.real(v[:, np.argmin(np.abs(w - 1.0))])
-        angle = math.degrees(math.atan2(0.5 * float(np.dot(axis, [self.rotation[2, 1] - self.rotation[1, 2],
-                                                                  self.rotation[0, 2] - self.rotation[2, 0],
-                                                                  self.rotation[1, 0] - self.rotation[0, 1]])),
-                                        0.5 * (float(np.trace(self.rotation)) - 1.0)))
+        axis, angle = axis_angle(self.rotation)
+        axis = np.asarray(axis)
         if angle < 0:
             axis, angle = -axis, -angle
         axis = np.where(np.abs(axis) < 1e-9, 0.0, axis)     # (no -6.1e-17 in the listing)

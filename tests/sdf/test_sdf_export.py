@@ -9,7 +9,8 @@ import pytest
 import draaw_mi
 import mitsuba as mi
 from draaw_mi.sdf import Box, Sphere, Torus, scale, smooth_union, subtraction, translate
-from draaw_mi.sdf.export import _axis_angle, to_entries
+from draaw_mi.sdf.export import to_entries
+from draaw_mi.sdf.transforms import axis_angle as _axis_angle
 from draaw_mi.sdf.transforms import Transform, rotation_matrix
 
 from sdf_helpers import base_description
