@@ -381,8 +381,11 @@ def _cmd_batch(args) -> int:
     """Exit 0 when every frame of the manifest exists (done), 1 when some are missing."""
     from draaw_mi import batch
 
-    if args.workers is not None and args.workers < 1:
-        raise CliError(f"--workers {args.workers}: expected an integer >= 1")
+    cores = os.cpu_count() or 1
+    if args.workers is not None and not 1 <= args.workers <= cores:
+        raise CliError(f"--workers {args.workers}: expected an integer from 1 to this machine's {cores} cores")
+    if args.workers and args.scheduler:
+        raise CliError("--workers sizes a new LocalCluster; the --scheduler's cluster has its own workers")
     if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
         raise CliError(f"--scheduler {args.scheduler!r}: expected an address such as tcp://HOST:8786")
     if (args.workers or args.scheduler) and args.executor != "dask":

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import glob
 import json
+import numbers
 import os
 import time
 from dataclasses import dataclass, field
@@ -234,6 +235,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
 
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
+    _check_workers(workers, scheduler, client, executor)
     if executor == "dask" and client is None:
         import importlib.util
         if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line
@@ -278,6 +280,26 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         res.skipped = len(specs) - len(todo)
         return _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client,
                        progress, on_result, t0)
+
+
+def _check_workers(workers, scheduler, client, executor) -> None:
+    """``workers`` sizes a new LocalCluster of this machine: 1 to the core count (more workers
+    than cores oversubscribe them, workers x threads = cores cannot hold, and each worker holds
+    its own scenes and kernels in memory), and meaningless with a cluster given."""
+    from ..errors import ParameterError
+    if workers is None:
+        if (scheduler or client is not None) and executor != "dask":
+            raise ParameterError("batch.run: scheduler and client need executor='dask'")
+        return
+    cores = os.cpu_count() or 1
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= cores:
+        raise ParameterError(f"batch.run: workers={workers!r}: expected an integer from 1 to this "
+                             f"machine's {cores} cores")
+    if executor != "dask":
+        raise ParameterError(f"batch.run: workers={workers} needs executor='dask'")
+    if scheduler or client is not None:
+        raise ParameterError(f"batch.run: workers={workers} sizes a new LocalCluster; the cluster "
+                             "behind scheduler/client has its own workers")
 
 
 def _refuse_foreign(m: Manifest, foreign: list) -> None:

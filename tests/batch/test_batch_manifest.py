@@ -8,7 +8,7 @@ from batch_helpers import manifest, write_manifest
 
 from draaw_mi import batch
 from draaw_mi.cli import main
-from draaw_mi.errors import SceneError
+from draaw_mi.errors import ParameterError, SceneError
 
 
 def _bad(tmp_path, capsys, mutate, expect):
@@ -152,6 +152,27 @@ def test_cli_flag_combinations(tmp_path, capsys):
     assert "need --executor dask" in capsys.readouterr().err
     assert main(["batch", path, "--executor", "dask", "--scheduler", "localhost:1"]) == 2
     assert "tcp://" in capsys.readouterr().err
+
+
+def test_worker_counts_beyond_the_cores_or_beside_a_cluster_are_refused(tmp_path, capsys, monkeypatch):
+    """More LocalCluster workers than cores oversubscribe them (workers x threads = cores cannot
+    hold); workers=0 used to mean the default, and workers beside a scheduler were ignored."""
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    path = write_manifest(tmp_path, manifest(tmp_path))
+    assert main(["batch", path, "--executor", "dask", "--workers", "3"]) == 2
+    assert "--workers 3: expected an integer from 1 to this machine's 2 cores" in capsys.readouterr().err
+    assert main(["batch", path, "--executor", "dask", "--workers", "1", "--scheduler", "tcp://h:1"]) == 2
+    assert "has its own workers" in capsys.readouterr().err
+    for bad in (0, 3, 1.5, True):
+        with pytest.raises(ParameterError, match=f"workers={bad!r}: expected an integer from 1 to"):
+            batch.run(path, executor="dask", workers=bad)
+    with pytest.raises(ParameterError, match="workers=1 needs executor='dask'"):
+        batch.run(path, workers=1)
+    with pytest.raises(ParameterError, match="workers=1 sizes a new LocalCluster"):
+        batch.run(path, executor="dask", workers=1, scheduler="tcp://h:1")
+    with pytest.raises(ParameterError, match="scheduler and client need executor='dask'"):
+        batch.run(path, scheduler="tcp://h:1")
+    assert not list(tmp_path.glob("**/*.exr"))                       # refused before rendering
 
 
 def test_api_raises_scene_error(tmp_path):
