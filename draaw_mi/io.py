@@ -170,7 +170,8 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
 def read_exr(path: str, with_names: bool = False):
     """Read an EXR into an (H, W, C) float32 array, channels in a stable order.
 
-    Colour channels come first (R, G, B, A or Y), then the rest sorted by name. With
+    Colour channels come first (R, G, B[, A], X, Y, Z[, A] or Y[, A]), then the rest sorted by
+    name. With
     ``with_names=True`` returns ``(array, names)``.
     """
     import OpenEXR
@@ -183,7 +184,7 @@ def read_exr(path: str, with_names: bool = False):
             chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}
     except Exception as e:  # noqa: BLE001
         raise IOFailure(f"read_exr({path!r}): not a readable EXR file ({e})") from None
-    order = [n for n in ("R", "G", "B", "Y", "A") if n in chans]
+    order = [n for n in ("R", "G", "B", "X", "Y", "Z", "A") if n in chans]
     order += sorted(n for n in chans if n not in order)
     arr = np.stack([chans[n] for n in order], axis=-1)
     return (arr, order) if with_names else arr

@@ -239,7 +239,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
            integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
     """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = the film's colour channels,
-    R, G, B, or an XML film's R, G, B, A / Y / Y, A, + AOV channels).
+    R, G, B, or an XML film's R, G, B, A / X, Y, Z[, A] / Y[, A], + AOV channels).
 
     Parameters
     ----------
@@ -375,12 +375,14 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 break
     if bar is not None:
         bar.close()
-    # the film's colour channels, then the AOVs: an XML film's pixel_format may store R, G, B, A
-    # or Y (always R, G, B were named, and write_exr refused the image)
-    # the film's colour by its count (R, G, B[, A], Y[, A]: an rgba or luminance XML film was
-    # named R, G, B), then the AOVs'
+    # the film's colour channels as its pixel_format stores them (R, G, B[, A], X, Y, Z[, A],
+    # Y[, A]: an rgba or luminance XML film was named R, G, B and refused by write_exr; an xyz
+    # film's X, Y, Z were written as R, G, B), then the AOVs'
     from .io import channel_names
-    names = channel_names(acc.shape[2], integrator.aov_names())
+    aov_names = integrator.aov_names()
+    colour = film_colour_names(scene.mi_scene.sensors()[0].film())
+    names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
+             else channel_names(acc.shape[2], aov_names))
     image = acc
     if n_passes > 1:
         with RENDER_GUARD:
@@ -521,17 +523,32 @@ def _denoised(image, names, extra_aovs):
     return out, names
 
 
-_FILM_COLOUR = {1: "luminance", 2: "luminance_alpha", 3: "rgb", 4: "rgba"}
+def film_colour_names(film) -> list[str]:
+    """The colour channels a Mitsuba film stores, from its ``pixel_format`` (``rgb``, ``rgba``,
+    ``xyz``, ``xyza``, ``y``, ``ya``; Mitsuba exposes it only in the film's description), by
+    their count where the description names none.
+
+    >>> import mitsuba as mi
+    >>> film_colour_names(mi.load_dict({"type": "hdrfilm", "pixel_format": "xyza"}))
+    ['X', 'Y', 'Z', 'A']
+    """
+    from .io import DEFAULT_NAMES
+    n = int(film.base_channels_count())
+    fmt = re.search(r"pixel_format = (\w+)", str(film))
+    names = [c.upper() for c in fmt.group(1)] if fmt else []
+    return names if len(names) == n else list(DEFAULT_NAMES[n])
 
 
 def _check_film_colour(scene, what: str) -> None:
-    """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance
-    (an XML scene's pixel_format) is refused before the render, not after it (a post chain
-    failed with a shape error; the denoiser read Y and two AOV channels as colour)."""
-    n = int(scene.mi_scene.sensors()[0].film().base_channels_count())
-    if n not in (3, 4):
-        raise RenderError(f"render: the film of {scene.source} stores {n} colour channel(s) "
-                          f"(pixel_format {_FILM_COLOUR.get(n, '?')!r}); {what} needs rgb or rgba: "
+    """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
+    XYZ (an XML scene's pixel_format) is refused before the render, not after it (a post chain
+    failed with a shape error; the denoiser read Y and two AOV channels as colour; both read
+    X, Y, Z as R, G, B)."""
+    names = film_colour_names(scene.mi_scene.sensors()[0].film())
+    if names[:3] != ["R", "G", "B"]:
+        fmt = "".join(names).lower()
+        raise RenderError(f"render: the film of {scene.source} stores {', '.join(names)} colour "
+                          f"(pixel_format {fmt!r}); {what} needs rgb or rgba: "
                           "set the film's pixel_format to rgb, or drop post/denoise")
 
 

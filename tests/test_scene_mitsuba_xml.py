@@ -154,7 +154,8 @@ def _film_scene(tmp_path, pixel_format):
 
 
 @pytest.mark.parametrize("pixel_format, colour", [("rgba", ["R", "G", "B", "A"]), ("luminance", ["Y"]),
-                                                  ("luminance_alpha", ["Y", "A"]), ("rgb", ["R", "G", "B"])])
+                                                  ("luminance_alpha", ["Y", "A"]), ("rgb", ["R", "G", "B"]),
+                                                  ("xyz", ["X", "Y", "Z"]), ("xyza", ["X", "Y", "Z", "A"])])
 def test_an_xml_films_pixel_format_names_the_colour_channels(tmp_path, pixel_format, colour):
     """(defect: info["channels"] was R, G, B then the AOVs whatever the film stored, and
     `draaw-mi render x.xml` of an rgba or luminance film rendered, then failed in write_exr:
@@ -171,15 +172,24 @@ def test_an_xml_films_pixel_format_names_the_colour_channels(tmp_path, pixel_for
     assert names == colour and arr.shape == (16, 16, len(colour))
     if "A" in colour:                                     # the sphere and the sky: all covered
         assert np.allclose(arr[..., -1], 1.0)
+    # a white sphere under a white sky is grey in the PNG: an xyz film's X, Y, Z (ratios
+    # 0.9505 : 1 : 1.089 for D65 white) were shown as R, G, B, a pink-grey
+    import matplotlib.image
+    png = matplotlib.image.imread(str(tmp_path / "o.png"))
+    if len(colour) >= 3:
+        assert np.abs(png[..., 0] - png[..., 2]).max() <= 1 / 255 and png[..., 1].std() > 0.01
 
 
 def test_a_luminance_film_is_refused_by_a_post_chain_before_the_render(tmp_path):
     """A post chain and the denoiser read R, G, B: a luminance film is named before rendering
     (the chain failed after it with a shape error, the denoiser read AOVs as colour)."""
     scene = draaw_mi.load_scene(_film_scene(tmp_path, "luminance"))
-    with pytest.raises(draaw_mi.DraawError, match="stores 1 colour channel.*'luminance'.*a post chain needs rgb"):
+    with pytest.raises(draaw_mi.DraawError, match="stores Y colour.*'y'.*a post chain needs rgb"):
         draaw_mi.render(scene, spp=1, post=[{"type": "srgb"}])
     with pytest.raises(draaw_mi.DraawError, match="denoising needs rgb or rgba"):
         draaw_mi.render(scene, spp=1, denoise=True)
+    xyz = draaw_mi.load_scene(_film_scene(tmp_path, "xyz"))       # (read as R, G, B before)
+    with pytest.raises(draaw_mi.DraawError, match="stores X, Y, Z colour.*'xyz'.*a post chain needs rgb"):
+        draaw_mi.render(xyz, spp=1, post=[{"type": "srgb"}])
     img = np.array(draaw_mi.render(_film_scene(tmp_path, "rgba"), spp=4, post=[{"type": "srgb"}]))
     assert img.shape == (16, 16, 4) and np.allclose(img[..., 3], 1.0)     # alpha passes through
