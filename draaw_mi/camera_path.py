@@ -15,6 +15,8 @@ frame over the segments.
 """
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from .errors import ParameterError
@@ -64,9 +66,12 @@ def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = Fa
     n = len(p)
     if n < 2:
         return p
-    if not 0 < duration < float("inf"):
-        raise ParameterError(f"camera path: duration={duration!r}; expected a positive number of seconds")
-    total = int(duration * fps)
+    for name, value, unit in (("duration", duration, "seconds"), ("fps", fps, "frames per second")):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < float("inf"):
+            raise ParameterError(f"camera path: {name}={value!r}; expected a positive number of {unit}")
+    # GO-Draaw truncates D * 60 (Go's int()); otherwise rounded: 2.05 s at 60 fps is 123
+    # frames, and the float product 122.99999999999999 truncated to 122
+    total = int(duration * fps) if faithful else int(round(duration * fps))
     if total < 2:
         raise ParameterError(f"camera path: {duration} s at {fps} fps gives {total} frame(s); need at least 2")
     if faithful:

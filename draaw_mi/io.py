@@ -28,13 +28,15 @@ from .errors import IOFailure
 DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}
 
 
-def to_numpy(image) -> np.ndarray:
-    """An (H, W, C) float32 numpy copy of a TensorXf, Bitmap or array (2-D gets C = 1)."""
+def to_numpy(image, where: str = "to_numpy") -> np.ndarray:
+    """An (H, W, C) float32 numpy copy of a TensorXf, Bitmap or array (2-D gets C = 1);
+    ``where`` names the caller in the error."""
     arr = np.array(image, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim != 3 or arr.shape[0] < 1 or arr.shape[1] < 1 or arr.shape[2] < 1:
-        raise IOFailure(f"image of shape {arr.shape}; expected (H, W) or (H, W, C) with H, W, C >= 1")
+        raise IOFailure(f"{where}: image of shape {arr.shape}; expected (H, W) or (H, W, C) with "
+                        "H, W, C >= 1")
     return arr
 
 
@@ -137,15 +139,20 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
 
     ``channels`` names every channel (default ``R, G, B[, A]`` then error); values that overflow
     float32 become ``inf`` as in any EXR writer — they are not clipped silently. ``metadata``:
-    extra header attributes (str, int or float values), e.g. draaw-mi's ``draaw:*`` keys.
+    extra header attributes (str, int or float values), e.g. draaw-mi's ``draaw:*`` keys. An
+    EXR attribute holds a 32-bit int or float: an int outside int32 is stored as its decimal
+    string (a seed of 3000000000 was read back as -1294967296), a float is rounded to float32.
     """
     import OpenEXR
 
     if os.fspath(path).lower().endswith(OTHER_IMAGE_SUFFIXES):
         raise IOFailure(f"write_exr({path!r}): the name says another image format; expected a "
                         "'.exr' name (write_png writes PNGs)")
-    arr = to_numpy(image)
-    names = list(channels) if channels is not None else channel_names(arr.shape[2])
+    arr = to_numpy(image, f"write_exr({path!r})")
+    try:
+        names = list(channels) if channels is not None else channel_names(arr.shape[2])
+    except IOFailure as e:
+        raise IOFailure(f"write_exr({path!r}): {e}") from None
     if len(names) != arr.shape[2]:
         raise IOFailure(f"write_exr({path!r}): {len(names)} channel names for an image with "
                         f"{arr.shape[2]} channels")
@@ -158,6 +165,8 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
         if key in header or not isinstance(value, (str, int, float)) or isinstance(value, bool):
             raise IOFailure(f"write_exr({path!r}): metadata {key!r} = {value!r}; expected a new "
                             "attribute name and a str, int or float value")
+        if isinstance(value, int) and not -2 ** 31 <= value < 2 ** 31:
+            value = str(value)      # (an EXR int is 32-bit: 3000000000 came back -1294967296)
         header[key] = value
     with atomic_path(path, ".exr") as tmp:
         try:
@@ -213,7 +222,9 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
               encoded: bool = False) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically: 1 (grey), 2 (grey,
-    alpha), 3 (RGB) or 4 (RGBA) channels; of more (AOVs), the first 3. Alpha is stored linear.
+    alpha), 3 (RGB) or 4 (RGBA) channels; of more (AOVs), the first 3. Alpha is stored linear,
+    and a linear image's colour, premultiplied by alpha as films hold it, is stored straight
+    (divided by alpha where alpha > 0), as PNG's alpha is.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
@@ -226,9 +237,15 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     if not os.fspath(path).lower().endswith(".png"):
         # (an 8-bit PNG was written under an .exr name; write_exr refuses the mirror case)
         raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
-    arr = to_numpy(image)
+    arr = to_numpy(image, f"write_png({path!r})")
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
+    if c in (2, 4) and not encoded:
+        # a film's colour is premultiplied by its alpha (what EXR stores), a PNG's is not:
+        # stored as it came, partly covered pixels were dark fringes (as in Mitsuba's own
+        # film.write); alpha-0 pixels keep their colour (a visible sky)
+        a = np.clip(np.nan_to_num(arr[..., c - 1:c]), 0.0, 1.0)      # (as stored below)
+        rgb = np.where(a > 0, rgb / np.where(a > 0, a, 1.0), rgb)
     if encoded and exposure:
         raise IOFailure(f"write_png({path!r}): exposure={exposure!r} needs a linear image; "
                         "this one is display-encoded (encoded=True)")

@@ -309,7 +309,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     spp = _check_int("spp", spp, 1)
     seed = _check_int("seed", seed, 0, 2 ** 32 - 1)          # (a UInt32: 2**40 was a raw Dr.Jit error)
     max_depth = _check_int("max_depth", max_depth, -1)
-    if time_budget is not None and not (isinstance(time_budget, (int, float)) and time_budget > 0):
+    if time_budget is not None and (isinstance(time_budget, bool) or not (
+            isinstance(time_budget, numbers.Real) and 0 < time_budget < float("inf"))):
         raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
     if pass_spp is None:
         # Not after the progress mode: the passes' seeds make the samples (a bar gave another
@@ -317,6 +318,14 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         pass_spp = min(spp, 16 if time_budget else MAX_PASS_SPP)
     pass_spp = _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
+    import numpy as np
+    if not isinstance(hide, (bool, np.bool_)):
+        # (any truthy value hid the lights: the string "false" too)
+        raise RenderError(f"render: hide_emitters={hide!r}; expected True or False")
+    hide = bool(hide)
+    if integrator_options is not None and not isinstance(integrator_options, dict):
+        raise RenderError(f"render: integrator_options={integrator_options!r}; expected a dict of "
+                          "integrator plugin properties, e.g. {'rr_depth': 8}")
     if aovs is None:
         aovs = s.get("aovs", [])
         if aovs and not is_draaw(version):
@@ -349,7 +358,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         counts = _scene_passes(scene, spp, pass_spp)
     n_passes = len(counts)
     seeds = pass_seeds(int(seed), n_passes)
-    bar = progress_bar(spp, f"render {version}", "spp", progress, leave=False, where="render")
+    # (the samples taken: a sampler rounds spp up to its pattern, 5 -> 8 of ldsampler, and
+    # the bar read 8/5 spp)
+    bar = progress_bar(sum(counts), f"render {version}", "spp", progress, leave=False, where="render")
     acc, done, passes, t0 = None, 0, 0, time.perf_counter()
     with _scene_lock(scene):
         for count, pseed in zip(counts, seeds):
@@ -467,6 +478,10 @@ def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs,
         raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
     if aovs:
         raise RenderError("render: adaptive subsampling renders colour only; drop aovs or adaptive=")
+    colour = film_colour_names(scene.mi_scene.sensors()[0].film())
+    if colour != ["R", "G", "B"]:       # (an rgba film's alpha was dropped without a word)
+        raise RenderError(f"render: adaptive subsampling renders R, G, B; the film of {scene.source} "
+                          f"stores {', '.join(colour)}: set its pixel_format to rgb, or drop adaptive=")
     holds = scene_holds(scene)
     if holds["sdf"] or holds["media"]:
         # its corner signatures (camera, shadow and mirror rays) see meshes only: SDF objects

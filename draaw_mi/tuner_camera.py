@@ -77,7 +77,7 @@ class CameraPanel:
                     keys = json.load(fh)
             except (OSError, json.JSONDecodeError) as e:
                 raise DraawError(f"camera path {keys!r}: {e}") from None
-        path = interpolate(keys, duration=frames / 60.0, fps=60)
+        path = interpolate(keys, duration=frames, fps=1)         # (frames / 60 at 60 fps lost one)
         self._path = path
         for w in (self.path_frame, self.path_play):
             w.max = len(path) - 1

@@ -87,3 +87,21 @@ def test_an_infinite_duration_is_refused():
     from draaw_mi.errors import ParameterError
     with pytest.raises(ParameterError, match="duration=inf"):
         interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], duration=float("inf"))
+
+
+@pytest.mark.parametrize("duration, fps, frames", [(2.05, 60, 123), (4.1, 30, 123), (123 / 60.0, 60, 123)])
+def test_frame_counts_are_rounded_not_cut_by_float_error(duration, fps, frames):
+    """2.05 s at 60 fps is 123 frames: the product 122.99999999999999 was truncated to 122
+    (and the panel's load_camera_path(frames=123) gave 122). Faithful mode keeps GO-Draaw's
+    truncation (Go's int(D * 60))."""
+    keys = [[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]]
+    assert len(interpolate(keys, duration=duration, fps=fps)) == frames
+    assert len(interpolate(keys, duration=duration, fps=fps, faithful=True)) == int(duration * fps)
+
+
+@pytest.mark.parametrize("kwargs, match", [({"fps": float("nan")}, "fps=nan"), ({"duration": "2"}, "duration='2'"),
+                                           ({"fps": True}, "fps=True"), ({"fps": 0}, "fps=0")])
+def test_bad_durations_and_rates_are_named(kwargs, match):
+    from draaw_mi.errors import ParameterError
+    with pytest.raises(ParameterError, match=f"camera path: {match}; expected a positive number"):
+        interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], **kwargs)

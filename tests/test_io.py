@@ -111,12 +111,16 @@ def test_png_is_srgb_encoded(tmp_path):
 def test_png_keeps_the_alpha_of_grey_and_colour_images(tmp_path, channels):
     """(grey, alpha) and RGBA images keep their last channel as a linear alpha (a grey image's
     alpha was dropped); a NaN alpha is stored as 0, by choice rather than by numpy's cast of
-    NaN to uint8 (undefined; it warns). Read back with Pillow."""
+    NaN to uint8 (undefined; it warns). Read back with Pillow. The colour comes premultiplied
+    by alpha, as a film (and the EXR) holds it, and the PNG stores it straight: 0.18 x alpha
+    is 0.18 in every pixel (it was stored premultiplied: dark fringes along edges); where
+    alpha is 0 the colour is kept as it is."""
     import warnings
     from PIL import Image
     img = np.zeros((2, 3, channels), np.float32)
-    img[..., 0] = 0.18
-    img[..., -1] = [[0.0, 0.25, 1.0], [0.5, np.nan, 2.0]]
+    alpha = np.array([[0.0, 0.25, 1.0], [0.5, np.nan, 2.0]])
+    img[..., 0] = 0.18 * np.where(np.isfinite(alpha) & (alpha > 0), np.clip(alpha, 0, 1), 1.0)
+    img[..., -1] = alpha
     path = str(tmp_path / "a.png")
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
@@ -173,3 +177,47 @@ def test_a_replaced_file_keeps_its_mode_and_a_new_one_gets_the_usual(tmp_path, m
     finally:
         os.umask(umask)
     assert stat.S_IMODE(os.stat(new).st_mode) == 0o644
+
+
+def test_a_rendered_rgba_films_edge_shows_its_surface_colour_in_the_png(tmp_path):
+    """An rgba film's edge pixel holds colour x coverage (Mitsuba's premultiplied alpha); its
+    PNG colour is the surface's, colour / alpha (PNG's alpha is straight): Mitsuba's Bitmap
+    conversion to 8-bit sRGB RGBA with its Unpremultiply transform is the reference, within
+    one 8-bit step. (Mitsuba's own film.write keeps the premultiplied colour in a PNG.)"""
+    import mitsuba as mi
+    from PIL import Image
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "path", "hide_emitters": True},
+                          "s": {"type": "sphere", "radius": 0.8, "bsdf": {"type": "diffuse"}},
+                          "e": {"type": "constant"},
+                          "sensor": {"type": "perspective", "fov": 40, "to_world": mi.ScalarTransform4f().look_at(
+                              origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]), "film": {
+                              "type": "hdrfilm", "width": 16, "height": 16, "pixel_format": "rgba",
+                              "rfilter": {"type": "box"}}}})
+    img = np.array(mi.render(scene, spp=16, seed=1))
+    edge = (img[..., 3] > 0.1) & (img[..., 3] < 0.9)
+    assert edge.sum() >= 4                                   # a real edge to look at
+    path = str(tmp_path / "e.png")
+    draaw_mi.write_png(path, img)
+    bmp = mi.Bitmap(img, mi.Bitmap.PixelFormat.RGBA)
+    ref = np.array(bmp.convert(mi.Bitmap.PixelFormat.RGBA, mi.Struct.Type.UInt8, srgb_gamma=True,
+                               alpha_transform=mi.Bitmap.AlphaTransform.Unpremultiply))
+    back = np.asarray(Image.open(path).convert("RGBA")).astype(int)
+    assert np.abs(back[edge] - ref[edge].astype(int)).max() <= 1
+
+
+def test_exr_header_ints_beyond_int32_come_back_whole(tmp_path):
+    """An EXR int attribute is 32-bit: a seed of 3000000000 (render takes 0 .. 2**32 - 1) was
+    read back as -1294967296; it is stored as its decimal string."""
+    from draaw_mi.batch import read_header
+    path = str(tmp_path / "m.exr")
+    draaw_mi.write_exr(path, np.ones((2, 2, 3)), metadata={"draaw:seed": 3_000_000_000, "n": 7,
+                                                           "neg": -2 ** 31})
+    h = read_header(path)
+    assert (h["draaw:seed"], h["n"], h["neg"]) == ("3000000000", 7, -2 ** 31)
+
+
+@pytest.mark.parametrize("image, match", [(np.ones(5), r"write_exr\('.*x.exr'\): image of shape \(5,\)"),
+                                          (np.ones((2, 2, 5)), r"write_exr\('.*x.exr'\): 5 channels with 0 AOV")])
+def test_write_exr_errors_name_the_call(tmp_path, image, match):
+    with pytest.raises(IOFailure, match=match):
+        draaw_mi.write_exr(str(tmp_path / "x.exr"), image)

@@ -111,6 +111,23 @@ def test_integrator_options_reach_the_integrator(tiny_scene):
         draaw_mi.render(tiny_scene, version="v2", integrator_options={"scatter": -1})
 
 
+@pytest.mark.parametrize("kwargs, match", [
+    ({"hide_emitters": "false"}, "hide_emitters='false'; expected True or False"),
+    ({"hide_emitters": 0}, "hide_emitters=0; expected True or False"),
+    ({"time_budget": True}, "time_budget=True; expected a positive number"),
+    ({"time_budget": float("nan")}, "time_budget=nan; expected a positive number"),
+    ({"integrator_options": [("rr_depth", 3)]}, r"integrator_options=\[\('rr_depth', 3\)\]; expected a dict")])
+def test_option_types_are_checked_before_rendering(tiny_scene, kwargs, match):
+    """The string "false" hid the lights (any truthy value did), time_budget=True rendered for
+    one second, a list of options raised Python's "argument after ** must be a mapping"."""
+    with pytest.raises(draaw_mi.RenderError, match=match):
+        draaw_mi.render(tiny_scene, version="v4", spp=1, **kwargs)
+    assert np.array_equal(np.array(draaw_mi.render(tiny_scene, version="v4", spp=2, seed=1,
+                                                   hide_emitters=np.bool_(True))),
+                          np.array(draaw_mi.render(tiny_scene, version="v4", spp=2, seed=1,
+                                                   hide_emitters=True)))
+
+
 def test_misspelt_integrator_options_and_aovs_name_the_fix(tiny_scene):
     """An option the integrator does not take, AOVs asked of Mitsuba's ``path``: one line that
     says what to do (Mitsuba's text was ``- float "sdf_epsilonn": 0.01`` and ``- string

@@ -97,3 +97,12 @@ def test_pass_plans_remembered_per_scene_equal_fresh_ones(monkeypatch):
     _, info = draaw_mi.render(scene, version="path", spp=32, pass_spp=16, seed=1, post=[],
                               return_info=True)
     assert not asked and info["passes"] == 2 and info["spp"] == 32     # from the memo: [16, 16]
+
+
+def test_the_progress_lines_count_the_samples_taken(capsys):
+    """ldsampler takes 8 samples for 5: the progress read "8/5 spp (160 %)" (its total was the
+    request, not the samples the passes take)."""
+    scene = draaw_mi.load_scene(tiny_description(sampler="ldsampler"))
+    _, info = draaw_mi.render(scene, version="path", spp=5, progress="lines", return_info=True)
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert info["spp"] == 8 and last.startswith("render path: 8/8 spp (100 %)"), last

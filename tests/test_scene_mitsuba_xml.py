@@ -193,3 +193,14 @@ def test_a_luminance_film_is_refused_by_a_post_chain_before_the_render(tmp_path)
         draaw_mi.render(xyz, spp=1, post=[{"type": "srgb"}])
     img = np.array(draaw_mi.render(_film_scene(tmp_path, "rgba"), spp=4, post=[{"type": "srgb"}]))
     assert img.shape == (16, 16, 4) and np.allclose(img[..., 3], 1.0)     # alpha passes through
+
+
+def test_adaptive_subsampling_refuses_a_film_that_is_not_rgb(tmp_path):
+    """Adaptive subsampling renders R, G, B: an rgba film's alpha was dropped without a word
+    (the plain render gave 4 channels, the adaptive one 3, named R, G, B)."""
+    for fmt, stored in (("rgba", "R, G, B, A"), ("luminance", "Y")):
+        scene = draaw_mi.load_scene(_film_scene(tmp_path, fmt))
+        with pytest.raises(draaw_mi.RenderError, match=f"adaptive subsampling renders R, G, B; the film .* stores {stored}:"):
+            draaw_mi.render(scene, version="path", spp=4, adaptive=8)
+    img = draaw_mi.render(draaw_mi.load_scene(_film_scene(tmp_path, "rgb")), version="path", spp=4, adaptive=8)
+    assert np.array(img).shape == (16, 16, 3)

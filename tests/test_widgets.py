@@ -337,6 +337,8 @@ def test_camera_path_moves_the_camera_to_each_keyframe(tuner):
         m = np.array(tuner.scene.params["sensor.to_world"].matrix).reshape(4, 4)
         np.testing.assert_allclose(m, _go_draaw_camera_to_world((x, y, z), theta, phi, fov), rtol=0, atol=1e-5,
                                    err_msg=f"path frame {j}")
+    # (frames / 60 s at 60 fps: 123 frames came out 122)
+    assert len(tuner.load_camera_path([tuple(k) for k in keys], frames=123)) == 123 == tuner.path_frame.max + 1
     tuner._guard(lambda: tuner.load_camera_path("no/such/path.json"))()
     assert "camera path" in tuner.message.value
 
