@@ -41,6 +41,28 @@ def test_numpy_scalars_are_range_checked(value):
         _preview().update({"ball.roughness": value})
 
 
+@pytest.mark.parametrize("key, value, match", [
+    ("ball.roughness", [0.1, 0.2, 0.3], r"ball.roughness=\[0.1, 0.2, 0.3\]; expected a number in \[0.0, 1.0\]"),
+    ("ball.roughness", np.full((4, 4, 1), np.nan), r"ball.roughness: 16 texel value\(s\) outside \[0, 1\]"),
+    ("ball.base_color", np.full((4, 4, 3), -1.0), r"ball.base_color: 48 texel value\(s\) outside \[0, ")])
+def test_a_scalar_gets_one_number_and_texels_are_range_checked(key, value, match):
+    """Three numbers for a scalar parameter were accepted (the next frame failed on the worker
+    thread: a 3-wide Float), one number in a list was refused as "expected 3 numbers"; a
+    texture's texels went unchecked (NaN roughness texels were zeroed without a word: the
+    same values in a scene file are refused)."""
+    textured = np.asarray(value).ndim > 1
+    pv = _preview(textured=textured)
+    if textured and "roughness" in key:        # (the tiny scene's roughness is a constant)
+        desc = tiny_description(resolution=[8, 6])
+        desc["materials"]["ball"]["roughness"] = np.full((4, 4), 0.3, np.float32)
+        pv = Preview(draaw_mi.load_scene(desc), version="v4", max_depth=3, freeze=False, seed=1)
+    with pytest.raises(ParameterError, match="Preview.update: " + match):
+        pv.update({key: value})
+    pv.update({"ball.roughness": [0.25]} if not textured else {key: np.full(np.shape(value), 0.25)})
+    f = pv.step()
+    assert pv.error is None and f is not None and np.isfinite(f.raw).all()
+
+
 def test_a_batch_with_a_bad_value_changes_nothing():
     """A string was refused later, on the worker thread, and the batch's valid roughness still
     reached the scene."""

@@ -38,27 +38,37 @@ def check_value(who: str, name: str, key: str, v) -> None:
     draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
     """
     from .draaw_bsdf import SCALAR_PARAMS
+    parts = key.split(".")
+    # the material parameter a ``<shape>.<param>.value`` / ``.data`` key sets (None otherwise)
+    param = parts[-2] if len(parts) >= 3 and parts[-1] in ("value", "data") else None
     nums = None
     if isinstance(v, (bool, np.bool_, str, bytes)) or v is None:
         raise ParameterError(f"{who}: {name}={v!r}; expected a number")
     if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
         nums = [float(v)]                    # (numpy scalars too: np.float32(7) passed unchecked)
     elif isinstance(v, np.ndarray) and v.ndim > 1:
-        if any(p.endswith("medium") for p in key.split(".")[:-1]):
+        if any(p.endswith("medium") for p in parts[:-1]):
             _check_medium_grid(who, name, key, v)    # (NaN or negative densities rendered NaN)
-        return                               # a texture's texels: value_like checks their shape
+        elif param in SCALAR_PARAMS or param == "base_color":
+            # a material texture's texels (NaN texels were zeroed without a word; the same
+            # values in a scene file are refused); value_like checks their shape
+            lo, hi = SCALAR_PARAMS[param][1:] if param in SCALAR_PARAMS else (0.0, FLOAT32_MAX)
+            _check_texels(who, name, v, lo, hi)
+        return
     elif isinstance(v, (list, tuple, np.ndarray)):
         try:
             nums = [float(x) for x in v]
         except (TypeError, ValueError):
             raise ParameterError(f"{who}: {name}={v!r}; expected numbers") from None
-        if len(nums) != 3:
+        if param in SCALAR_PARAMS and len(nums) != 1:     # (3 numbers made a 3-wide Float)
+            lo, hi = SCALAR_PARAMS[param][1:]
+            raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
+        if param not in SCALAR_PARAMS and len(nums) != 3:
             raise ParameterError(f"{who}: {name}={v!r}; expected 3 numbers (an RGB colour)")
     if nums is None:
         return                                   # a Mitsuba value (transform, colour): as is
     if not all(math.isfinite(x) and abs(x) <= FLOAT32_MAX for x in nums):   # (stored as float32)
         raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers (in float32, |x| <= 3.4e38)")
-    parts = key.split(".")
     if parts[-1] == "x_fov":
         if not all(FOV_RANGE[0] <= x <= FOV_RANGE[1] for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a field of view in "
@@ -67,13 +77,24 @@ def check_value(who: str, name: str, key: str, v) -> None:
     if any(p.endswith("medium") for p in parts[:-1]):
         _check_medium_value(who, name, parts, v, nums)
         return
-    param = parts[-2] if len(parts) >= 3 and parts[-1] == "value" else None
     if param in SCALAR_PARAMS:
         lo, hi = SCALAR_PARAMS[param][1:]
         if not all(lo <= x <= hi for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
     elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
         raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
+
+
+def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
+    """A material texture's texels: finite, in ``[lo, hi]``."""
+    a = np.asarray(texels, np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(a) | (a < lo) | (a > hi)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside [{lo:g}, {hi:g}] "
+                             f"(the first, {a[first]!r}, at {list(first)}); expected finite values in "
+                             f"[{lo:g}, {hi:g}]")
 
 
 def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:

@@ -61,9 +61,12 @@ def constant_texture(value, color: bool) -> mi.Texture:
 def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     """A bitmap texture from a file name or an (H, W[, C]) array (values as given, linear)."""
     if isinstance(source, str):
-        if not os.path.isfile(source):
+        # found as Mitsuba finds a bitmap's file: an XML scene's folder is on the resolver's
+        # path (only the working directory was searched)
+        path = str(mi.file_resolver().resolve(source))
+        if not os.path.isfile(path):
             raise ParameterError(f"draaw BSDF: {name}={source!r}: texture file does not exist")
-        return mi.load_dict({"type": "bitmap", "filename": source, "raw": raw}, parallel=False)
+        return mi.load_dict({"type": "bitmap", "filename": path, "raw": raw}, parallel=False)
     arr = np.asarray(source, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
@@ -106,7 +109,10 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
         _check_range(name, lo, hi, [value], "value")
         return constant_texture([value] * 3 if color else value, color)
     if isinstance(value, str):
-        return bitmap_texture(value, raw=(name in RAW_BY_DEFAULT), name=name)
+        # checked as a texture table's bitmap is (a file of NaN roughness rendered NaN)
+        tex = bitmap_texture(value, raw=(name in RAW_BY_DEFAULT), name=name)
+        _check_range(name, lo, hi, texture_values(tex), "texture values")
+        return tex
     try:
         arr = np.array(value, dtype=np.float64)
     except Exception:  # noqa: BLE001 - anything not numeric is a user error

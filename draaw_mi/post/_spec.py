@@ -16,6 +16,7 @@ from types import SimpleNamespace
 from typing import Any, Callable, Mapping, Sequence
 
 import mitsuba as mi
+import numpy as np
 
 from ..errors import ParameterError, suggest
 from ._util import as_image, finite_rgb, join_alpha, split_alpha
@@ -106,8 +107,8 @@ class Param:
         if k == "int":
             return self._number(where, value, value, True)
         if k == "bool":
-            if isinstance(value, bool):
-                return value
+            if isinstance(value, (bool, np.bool_)):          # (numpy's from a widget or array)
+                return bool(value)
             if isinstance(value, numbers.Integral) and value in (0, 1):
                 return bool(value)
             if isinstance(value, str) and value.lower() in ("true", "false", "yes", "no"):

@@ -244,3 +244,23 @@ def test_values_outside_reflectance_range_are_accepted_where_allowed():
         b = draaw(**kw)
         v = color_np(b.eval(CTX, make_si(wi), vec3(wo)))
         assert np.all(np.isfinite(v)) and v.max() > 0, kw
+
+
+def test_a_texture_file_name_is_checked_and_found_beside_an_xml_scene(tmp_path, monkeypatch):
+    """A file name was not range-checked (a NaN roughness file rendered NaN; the same file in a
+    nested bitmap table is refused) and was looked up in the working directory only, not in
+    the XML scene's folder where Mitsuba's own bitmap finds it."""
+    bad = np.full((4, 4, 3), 0.5, np.float32)
+    bad[0, 0] = np.nan
+    mi.Bitmap(bad).write(str(tmp_path / "bad.exr"))
+    monkeypatch.chdir(tmp_path)
+    for name in ("roughness", "base_color", "metallic"):
+        with pytest.raises(RuntimeError, match=rf"ParameterError: .*{name}=nan \(texture values\) is not finite"):
+            mi.load_dict({"type": "draaw", name: "bad.exr"})
+    (tmp_path / "xd").mkdir()
+    mi.Bitmap(np.full((4, 4, 1), 0.3, np.float32)).write(str(tmp_path / "xd" / "rough.exr"))
+    (tmp_path / "xd" / "s.xml").write_text('<scene version="3.0.0"><bsdf type="draaw" id="b">'
+                                          '<string name="roughness" value="rough.exr"/></bsdf></scene>')
+    monkeypatch.chdir("/")
+    params = mi.traverse(mi.load_file(str(tmp_path / "xd" / "s.xml")))
+    np.testing.assert_allclose(np.array(params["b.roughness.data"]).ravel(), 0.3)

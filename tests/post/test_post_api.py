@@ -163,3 +163,12 @@ def test_doctests(module):
     mod = importlib.import_module(f"draaw_mi.post.{module}")
     result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_numpy_booleans_are_booleans():
+    """np.False_ (a checkbox's value through numpy, a mask's element) was refused: "parameter
+    'clamp' must be true or false, got np.False_"; it means what False means."""
+    img = hdr_image(6)
+    for flag in (False, True):
+        np.testing.assert_array_equal(np.array(post.bloom(img, clamp=np.bool_(flag))),
+                                      np.array(post.bloom(img, clamp=flag)))
