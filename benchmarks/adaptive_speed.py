@@ -17,6 +17,7 @@ import numpy as np
 
 import draaw_mi
 from draaw_mi.bench import errors
+from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = ["cornell", "material_spheres", "thesis"]
@@ -74,8 +75,7 @@ def main():
     lines += ["", "At 256x256 one 1-spp frame costs tens of milliseconds and adaptive's fixed costs "
               "(a Python trace of the integrator and of the signature kernel per level, numpy bookkeeping) "
               "are of the same size, so it gains little; at 1024x1024 the traced fraction decides."]
-    with open(args.out, "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}")
 
 

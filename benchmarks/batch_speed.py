@@ -34,6 +34,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 from draaw_mi.bench import load_note  # noqa: E402
+from draaw_mi.io import write_text  # noqa: E402
 BIN = os.path.dirname(sys.executable)
 FRAMES, RES = 24, 256
 
@@ -240,9 +241,7 @@ def main() -> int:
         for k, v in r["all"].items():
             lines.append(f"* spp {spp}, {k}: " + ", ".join(f"{x:.3f}" for x in v))
     lines += ["", f"Command: `{' '.join(['python', 'benchmarks/batch_speed.py'] + sys.argv[1:])}`", ""]
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    with open(args.out, "w") as fh:
-        fh.write("\n".join(lines))
+    write_text(args.out, "\n".join(lines))
     print("\n".join(lines))
     return 0
 

@@ -40,6 +40,8 @@ import draaw_mi
 import drjit as dr
 import mitsuba as mi
 
+from draaw_mi.io import write_text
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "bsdf_speed.md")
 DRAAW_KEYS = ("base_color", "roughness", "metallic", "specular")
@@ -211,8 +213,7 @@ def main(argv=None):
     text = report(r, a.res, a.spp, a.repeats)
     print(text)
     if a.out:
-        with open(a.out, "w") as f:
-            f.write(text)
+        write_text(a.out, text)
 
 
 if __name__ == "__main__":

@@ -139,8 +139,8 @@ def write_report(path, rows, args, res, cmd, mi, dr):
         "informational.",
         "",
     ]
-    with open(path, "w") as fh:
-        fh.write("\n".join(lines))
+    from draaw_mi.io import write_text
+    write_text(path, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -193,8 +193,8 @@ def write_report(path, rows, args, res, cmd, mi, dr):
         "'no render averaging' row shows the bias without it.",
         "",
     ]
-    with open(path, "w") as fh:
-        fh.write("\n".join(lines))
+    from draaw_mi.io import write_text
+    write_text(path, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ import platform
 import draaw_mi
 from draaw_mi.bench import frame_times
 from draaw_mi.camera_path import GO_DRAAW_BENCHMARK_PATH
+from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
@@ -51,8 +52,7 @@ def main():
         lines.append(f"| {r['version']} | {1e3 * r['mean_s']:.1f} | {1e3 * r['std_s']:.1f} | {1e3 * r['min_s']:.1f} | "
                      f"{1e3 * r['p10_s']:.1f} | {1e3 * r['median_s']:.1f} | {1e3 * r['p90_s']:.1f} | "
                      f"{1e3 * r['max_s']:.1f} | {r.get('rmse', float('nan')):.4f} | {r.get('ciede2000', float('nan')):.2f} |")
-    with open(args.out, "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_text(args.out, "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -23,6 +23,8 @@ import draaw_mi
 import drjit as dr
 import mitsuba as mi
 
+from draaw_mi.io import write_text
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 KINDS = ("path", "draaw_v4", "draaw_v3", "draaw_v2", "draaw_v1")
 
@@ -86,9 +88,7 @@ def main(argv=None) -> int:
     text = "\n".join(out) + "\n"
     print(text)
     if args.out:
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as fh:
-            fh.write(text)
+        write_text(args.out, text)
     return 0
 
 

@@ -21,6 +21,7 @@ import mitsuba as mi
 
 from draaw_mi.integrators import reference_scenes as rs
 from draaw_mi.integrators.features import describe, detect_features
+from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 KINDS = ("path", "prb", "draaw_v4", "draaw_v3", "draaw_v2", "draaw_v1")
@@ -92,9 +93,7 @@ def main(argv=None) -> int:
     text = "\n".join(out) + "\n"
     print(text)
     if args.out:
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as fh:
-            fh.write(text)
+        write_text(args.out, text)
     return 0
 
 

@@ -42,6 +42,7 @@ import drjit as dr
 import mitsuba as mi
 
 from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = {"cornell": "scenes/cornell.toml", "material_spheres": "scenes/material_spheres.toml"}
@@ -208,9 +209,7 @@ def main(argv=None) -> int:
     text = report(results, args)
     print(text)
     if args.out:
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as f:
-            f.write(text)
+        write_text(args.out, text)
     return 0
 
 

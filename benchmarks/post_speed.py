@@ -30,6 +30,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 import draaw_mi.post as post  # noqa: E402
+from draaw_mi.io import write_text  # noqa: E402
 from post_helpers import ref  # noqa: E402  (tests/post/reference.py)
 
 GO_DRAAW_TEN = ["contrast", "tint", "bloom", "bloom_v2", "sharpen", "color_mapping",
@@ -153,8 +154,7 @@ def main(argv=None):
     text = "\n".join(lines)
     print()
     print(text)
-    with open(args.out, "w", encoding="utf-8") as fh:
-        fh.write(text)
+    write_text(args.out, text)
     print(f"wrote {args.out}")
     return rows
 

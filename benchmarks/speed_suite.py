@@ -5,6 +5,9 @@ see its docstring for the method. Usage::
 
     .venv/bin/python benchmarks/speed_suite.py                      # 128 and 256, all scenes
     .venv/bin/python benchmarks/speed_suite.py --res 128 --scenes cornell,metal_018 --out ''
+
+The report goes to ``benchmarks/results/speed_suite_latest.md`` unless ``--out`` says otherwise
+(``''``: printed only); ``benchmarks/results/speed_suite.md`` is the hand-curated record.
 """
 import sys
 

@@ -107,6 +107,9 @@ def ciede2000(img: np.ndarray, gt: np.ndarray) -> float:
 
 
 def errors(img: np.ndarray, gt: np.ndarray) -> dict:
+    """RMSE, relative MSE and CIEDE2000 of ``img`` against ``gt``; NaN and inf pixels are taken
+    as 0 (one bad pixel would make every metric NaN): :func:`measure_group`'s ``finite``
+    column says whether there were any."""
     img = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
     return {"rmse": rmse(img, gt), "relmse": relmse(img, gt), "ciede2000": ciede2000(img, gt)}
 
@@ -178,11 +181,13 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
             _timed_render(scene, s, seed + 1001)
     times, errs, imgs = ([[] for _ in settings] for _ in range(3))
     sq = [[] for _ in settings]                # each repeat's mean squared error
+    finite = [True for _ in settings]          # of the raw renders (imgs are nan_to_num'd)
     for r in range(repeats):
         for i, s in enumerate(settings):
             img, t = _timed_render(scene, s, seed + r)
             times[i].append(t)
             errs[i].append(errors(img, gt))
+            finite[i] = finite[i] and bool(np.isfinite(img[..., :3]).all())
             imgs[i].append(np.nan_to_num(img[..., :3]))
             sq[i].append(float(np.mean((imgs[i][-1] - gt) ** 2)))
     out = []
@@ -195,7 +200,7 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
         row = asdict(s)
         row.update({"label": s.label, "time_s": median, "time_min_s": float(np.min(times[i])),
                     "compile_s": max(0.0, first[i] - median), "repeats": repeats,
-                    "finite": bool(np.isfinite(imgs[i][-1]).all()), "mse": mse, "variance": var,
+                    "finite": finite[i], "mse": mse, "variance": var,
                     # standard error of the mse: the spread of the repeats' errors (a firefly
                     # in one repeat shows here)
                     "mse_se": float(np.std(sq[i], ddof=1) / np.sqrt(repeats)) if repeats > 1 else float("nan")})
@@ -371,12 +376,13 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
                             for spp in adaptive_spp:
                                 plan.append((s, Setting(v, spp, d, a)))
     bar = progress_bar(len(plan) + len(loaded), "bench", "setting", progress, where="bench.run_study")
-    rows, images, gts = [], {}, {}
+    rows, images, gts, gt_depths = [], {}, {}, {}
     for s in loaded:
         name = os.path.splitext(os.path.basename(s.source))[0]
+        gt_depths[name] = d = ground_truth_depth(max_depths or [s.settings["max_depth"]])
         if bar is not None:
-            bar.set_postfix_str(f"{name}: ground truth ({gt_spp} spp)")
-        gts[name] = ground_truth(s, gt_spp, cache_dir=cache_dir)
+            bar.set_postfix_str(f"{name}: ground truth ({gt_spp} spp, max_depth {d})")
+        gts[name] = ground_truth(s, gt_spp, max_depth=d, cache_dir=cache_dir)
         if bar is not None:
             bar.update(1)
     # the versions at one (scene, spp, depth, adaptive, denoise) are timed round-robin; the
@@ -406,10 +412,21 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
     bias = estimate_bias(rows, gt_spp, refs)
     for r in rows:
         r["bias_rmse"], r["bias_resolved"] = bias.get((r["scene"], r["label"], r["max_depth"]), (None, None))
-    result = {"rows": rows, "ground_truth_spp": gt_spp, "repeats": repeats,
+    result = {"rows": rows, "ground_truth_spp": gt_spp, "ground_truth_depth": gt_depths, "repeats": repeats,
               "machine": _machine(), "load": load_note()}
     write_report(result, images, gts, out_dir)
     return result
+
+
+def ground_truth_depth(depths) -> int:
+    """The ground truth's ``max_depth`` for a study of ``depths``: unbounded (-1) if they hold
+    it, else the deepest (a shallower one showed the depth gap as every deeper setting's
+    error and bias; at a lower depth it is that depth's bias, which the study is to show).
+
+    >>> ground_truth_depth([3, 12]), ground_truth_depth([6, -1, 2]), ground_truth_depth([6])
+    (12, -1, 6)
+    """
+    return -1 if -1 in depths else max(depths)
 
 
 def _machine() -> dict:

@@ -8,7 +8,7 @@ import os
 
 import numpy as np
 
-from .io import atomic_path, write_text
+from .io import write_text
 
 COLUMNS = ["scene", "label", "version", "adaptive", "max_depth", "spp", "time_s", "time_min_s", "compile_s",
            "rmse", "relmse", "ciede2000", "bias_rmse", "bias_resolved", "finite", "resolution", "denoise"]
@@ -126,7 +126,8 @@ def summary_markdown(result: dict) -> str:
     rows = result["rows"]
     lines = ["# draaw-mi benchmark: what accuracy costs in time", "",
              f"Ground truth: Mitsuba `path` (`volpath` for scenes with media, V4 for scenes with "
-             f"SDF objects), {result['ground_truth_spp']} spp, same materials. "
+             f"SDF objects), {result['ground_truth_spp']} spp, same materials, at the deepest "
+             "max_depth studied (-1: unbounded). "
              f"Times: median of {result['repeats']} renders after warm-up (compile time separate). "
              f"Machine: {result['machine']}" + (f"; {result['load']}." if result.get("load") else "."), "",
              "*Bias*: the RMSE that does not fall with spp, pooled over the highest spp levels, "

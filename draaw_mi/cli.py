@@ -106,20 +106,23 @@ def _parser() -> argparse.ArgumentParser:
                    "--suite speed: suite scene names (default: all ten)")
     b.add_argument("--suite", choices=["speed"], help="speed: V4 (or --versions) against path on "
                    "the speed suite's scenes, time to reach path's error (draaw_mi.speed_bench); "
-                   "--spp's first value is the spp (default 64), --gt-spp the reference spp, "
-                   "--resolution N or NxN the sizes (default 128 and 256)")
+                   "--spp's first value is the spp (default 64), --gt-spp the reference spp "
+                   "(default 1024; a multiple of 64, at least 128), --resolution N or NxN the sizes "
+                   "(default 128 and 256); --max-depth, --adaptive, --quick, --denoise, "
+                   "--camera-path and --frames do not apply")
     b.add_argument("--quick", action="store_true", help="small grid, finishes in about a minute (55 s measured on 2 cores)")
     b.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
     b.add_argument("--versions", help="comma-separated, default v1,v2,v3,v4,path")
     b.add_argument("--spp", help="comma-separated spp list, default 1,2,4,...,1024")
     b.add_argument("--max-depth", help="comma-separated max_depth list (default: the scene's)")
-    b.add_argument("--adaptive", type=int, default=8, help="adaptive block size to include (0: none)")
+    b.add_argument("--adaptive", type=int, help="adaptive block size to include (default 8; 0: none)")
     b.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
     b.add_argument("--resolution", help="WxH for every scene (default: the scene's)")
-    b.add_argument("--gt-spp", type=int, default=4096, help="ground-truth spp (Mitsuba path)")
+    b.add_argument("--gt-spp", type=int, help="ground-truth spp (Mitsuba path; default 4096, 1024 "
+                   "with --quick; --suite speed: the reference's, default 1024)")
     b.add_argument("--camera-path", help="JSON keyframes (GO-Draaw camera_positions.json form): "
                    "also measure frame-time statistics along this path")
-    b.add_argument("--frames", type=int, default=60, help="frames along --camera-path")
+    b.add_argument("--frames", type=int, help="frames along --camera-path (default 60)")
     b.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
     b.add_argument("--denoise", help="comma-separated spp list: also measure OIDN-denoised renders "
                    "at these spp (biased points; needs pyoidn)")

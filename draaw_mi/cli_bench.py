@@ -8,23 +8,53 @@ import os
 from .cli_common import CliError, int_list, progress_mode, read_json
 
 
+# the options of the accuracy study that the SDF tracer study and the speed suite do not use:
+# (attribute, flag); given when not None (their defaults are resolved in cmd_bench)
+_STUDY_ONLY = (("spp", "--spp"), ("versions", "--versions"), ("gt_spp", "--gt-spp"),
+               ("max_depth", "--max-depth"), ("adaptive", "--adaptive"), ("denoise", "--denoise"),
+               ("camera_path", "--camera-path"), ("frames", "--frames"))
+_SDF_STUDY_OPTIONS = "--quick, --repeats, --resolution, --out, --no-progress"
+
+
+def _given(args, names) -> list[str]:
+    """The flags among ``names`` (attributes of _STUDY_ONLY, or "quick") given on the command line."""
+    flags = dict(_STUDY_ONLY, quick="--quick")
+    return [flags[a] for a in names if (getattr(args, a) if a == "quick" else getattr(args, a) is not None)]
+
+
+def _split_sdf_scenes(args, scenes) -> tuple[list, list]:
+    """(scenes with [[sdf]] entries, the others); refuses the accuracy study's options when
+    every scene goes to the SDF tracer study (they were ignored, exit 0), and names them on
+    stderr when some do (they apply to the other scenes only)."""
+    import sys
+    from draaw_mi.sdf.study import has_sdf
+    sdf = [sc for sc in scenes if has_sdf(sc)]
+    rest = [sc for sc in scenes if sc not in sdf]
+    ignored = _given(args, [a for a, _ in _STUDY_ONLY])
+    if sdf and ignored:
+        names = ", ".join(os.path.basename(str(sc)) for sc in sdf)
+        why = (f"{names} {'has' if len(sdf) == 1 else 'have'} [[sdf]] objects: the SDF tracer study "
+               f"measures {'it' if len(sdf) == 1 else 'them'}, which does not use {', '.join(ignored)}")
+        if not rest:
+            raise CliError(f"bench: {why} (its options: {_SDF_STUDY_OPTIONS}); leave "
+                           f"{'it' if len(ignored) == 1 else 'them'} out")
+        print(f"draaw-mi: note: {why} ({'it applies' if len(ignored) == 1 else 'they apply'} to the "
+              "other scenes only)", file=sys.stderr)
+    return sdf, rest
+
+
 def _bench_sdf_scenes(args, scenes, res, progress):
     """Run the SDF tracer-knob study (draaw_mi.sdf.study) on the scenes with [[sdf]] entries
-    (Mitsuba's path, the main study's ground truth, cannot see SDFs); return the others."""
+    (Mitsuba's path, the main study's ground truth, cannot see SDFs)."""
     import draaw_mi
-    from draaw_mi.sdf.study import has_sdf, run_sdf_study
-    rest = []
+    from draaw_mi.sdf.study import run_sdf_study
     for sc in scenes:
-        if not has_sdf(sc):
-            rest.append(sc)
-            continue
         scene = draaw_mi.load_scene(sc, **({"resolution": res} if res else {}))
         r = run_sdf_study(scene, args.out, spp=4 if args.quick else 16,
                           repeats=min(args.repeats, 2) if args.quick else args.repeats,
                           progress=progress, quick=args.quick)
         print(f"wrote {args.out}/sdf_study_{r['scene']}.json/.csv/.md and "
               f"sdf_error_vs_time_{r['scene']}.png ({len(r['rows'])} tracer settings)")
-    return rest
 
 
 def _cmd_speed_suite(args) -> int:
@@ -37,18 +67,26 @@ def _cmd_speed_suite(args) -> int:
         if name not in speed_suite.SCENES:
             raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))} "
                            f"(the suite's scenes: {', '.join(speed_suite.SCENES)})")
+    ignored = _given(args, ["max_depth", "adaptive", "quick", "denoise", "camera_path", "frames"])
+    if ignored:                                     # (they were dropped silently)
+        raise CliError(f"bench --suite speed: {', '.join(ignored)} {'does' if len(ignored) == 1 else 'do'} "
+                       "not apply to the speed suite (each scene has its own max_depth; its options: "
+                       "--versions, --spp, --gt-spp, --repeats, --resolution, --out); leave "
+                       f"{'it' if len(ignored) == 1 else 'them'} out")
     versions = args.versions.split(",") if args.versions else ["v4"]
     plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
+    ref_spp = 1024 if args.gt_spp is None else args.gt_spp        # (the suite's own default)
     argv = ["--integrators", ";".join(plugins), "--repeats", str(args.repeats),
-            # bench's --gt-spp default (4096) is the study's; the suite's reference default is 1024
-            "--ref-spp", str(args.gt_spp if args.gt_spp != 4096 else 1024),
+            "--ref-spp", str(ref_spp),
             "--out", os.path.join(args.out, "speed_suite.md"),
             "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
     if args.scenes:
         argv += ["--scenes", ",".join(args.scenes)]
-    for name, value in (("--repeats", args.repeats), ("--gt-spp", args.gt_spp)):
-        if value < 1:
-            raise CliError(f"bench --suite speed: {name} {value}; expected an integer >= 1")
+    if args.repeats < 1:
+        raise CliError(f"bench --suite speed: --repeats {args.repeats}; expected an integer >= 1")
+    why = speed_bench.check_ref_spp(ref_spp)
+    if why:
+        raise CliError(f"bench --suite speed: --gt-spp {ref_spp} (the reference's spp); {why}")
     if args.spp:
         spps = int_list(args.spp, "--spp")
         if len(spps) != 1 or spps[0] < 1:
@@ -95,43 +133,48 @@ def cmd_bench(args) -> int:
     if args.quick:
         spps = int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
         res = res or (64, 64)
-        gt_spp = min(args.gt_spp, 1024)
+        gt_spp = 1024 if args.gt_spp is None else args.gt_spp     # (an explicit 4096 became 1024)
         # (3, not 2: a small render's dr.freeze recording is made again once while the other
         # versions' recordings settle, and the median of two was half that render: the first
         # scene's 1-spp times came out 5-10x high)
         repeats = min(args.repeats, 3)
     else:
         spps = int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
-        gt_spp, repeats = args.gt_spp, args.repeats
+        gt_spp = 4096 if args.gt_spp is None else args.gt_spp
+        repeats = args.repeats
     depths = int_list(args.max_depth, "--max-depth") if args.max_depth else None
+    denoise_spp = int_list(args.denoise, "--denoise") if args.denoise else []
+    frames = 60 if args.frames is None else args.frames
+    adaptive = 8 if args.adaptive is None else args.adaptive
     # every number checked before the ground truth renders (minutes at the defaults)
     for name, values, lo in (("--spp", spps, 1), ("--gt-spp", [gt_spp], 1), ("--max-depth", depths or [], -1),
-                             ("--frames", [args.frames], 1)):
+                             ("--frames", [frames], 1), ("--denoise", denoise_spp, 1)):
         bad = [v for v in values if v < lo]
         if bad:
             raise CliError(f"bench: {name} {bad[0]}; expected an integer >= {lo}"
                            + (" (-1: unbounded)" if name == "--max-depth" else ""))
-    if args.adaptive and (args.adaptive < 2 or args.adaptive & (args.adaptive - 1)):
-        raise CliError(f"bench: --adaptive {args.adaptive}; expected a power of two >= 2 (block size "
+    if adaptive and (adaptive < 2 or adaptive & (adaptive - 1)):
+        raise CliError(f"bench: --adaptive {adaptive}; expected a power of two >= 2 (block size "
                        "in pixels) or 0 (none)")
     keys = read_json(args.camera_path, "--camera-path") if args.camera_path else None
     if keys is not None:              # checked before the study, which runs for minutes
         from draaw_mi.camera_path import as_keyframes
         as_keyframes(keys)
-        if args.frames < 2:
-            raise CliError(f"bench: --frames {args.frames}; a camera path needs at least 2 frames")
+        if frames < 2:
+            raise CliError(f"bench: --frames {frames}; a camera path needs at least 2 frames")
+    sdf_scenes, scenes = _split_sdf_scenes(args, scenes)
     progress = progress_mode(args.no_progress)
-    scenes = _bench_sdf_scenes(args, scenes, res, progress)     # SDF scenes: tracer study
+    _bench_sdf_scenes(args, sdf_scenes, res, progress)          # SDF scenes: tracer study
     if not scenes:
         return 0
     result = bench.run_study(scenes, versions=versions, spps=spps, max_depths=depths,
-                             adaptive=(None, args.adaptive) if args.adaptive else (None,),
+                             adaptive=(None, adaptive) if adaptive else (None,),
                              repeats=repeats, resolution=res, gt_spp=gt_spp, out_dir=args.out, progress=progress,
-                             **_bench_denoise(args))
+                             **_bench_denoise(denoise_spp))
     print(f"wrote {args.out}/results.json, results.csv, summary.md and plots ({len(result['rows'])} settings)")
     if keys is not None:
         scene = draaw_mi.load_scene(scenes[0], **({"resolution": res} if res else {}))
-        rows = bench.frame_times(scene, keys, versions=versions, frames=args.frames, progress=progress)
+        rows = bench.frame_times(scene, keys, versions=versions, frames=frames, progress=progress)
         from draaw_mi.io import write_text
         path = os.path.join(args.out, "frame_times.json")
         write_text(path, json.dumps(rows, indent=1))
@@ -142,9 +185,9 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def _bench_denoise(args) -> dict:
-    if not args.denoise:
+def _bench_denoise(denoise_spp: list) -> dict:
+    if not denoise_spp:
         return {}
     from draaw_mi.denoise import _pyoidn
     _pyoidn()                                     # the install hint before the study starts
-    return {"denoise_spp": int_list(args.denoise, "--denoise")}
+    return {"denoise_spp": denoise_spp}

@@ -4,8 +4,10 @@ are in :mod:`draaw_mi.speed_suite`). Run it as ``draaw-mi bench --suite speed`` 
 
 For each resolution and scene:
 
-1. a reference: ``path`` at ``--ref-spp`` in 256-spp passes with distinct seeds, cached as EXR
-   (mean and the per-pixel variance of the mean, estimated from the passes) in ``--cache``;
+1. a reference: ``path`` at ``--ref-spp`` (a multiple of 64, at least 128) in 64-spp passes
+   with distinct seeds, cached as EXR (mean and the per-pixel variance of the mean, estimated
+   from the passes) in ``--cache``, under a name that holds a hash of the scene's content (an
+   edited scene gets a new reference);
 2. every integrator is compiled (a warm-up render), then ``--repeats`` cycles render each
    integrator back to back (A B A B ...) at ``--spp`` with a fresh seed per render; each render
    gives one time and one squared error;
@@ -23,6 +25,10 @@ Usage::
 
     .venv/bin/python benchmarks/speed_suite.py                      # 128 and 256, all scenes
     .venv/bin/python benchmarks/speed_suite.py --res 128 --scenes cornell,metal_018 --out ''
+
+The report is printed and written to ``--out`` (default
+``benchmarks/results/speed_suite_latest.md``; ``''``: printed only). The curated record,
+``benchmarks/results/speed_suite.md``, is edited by hand from such reports.
 
 The machine is usually shared: times are medians of back-to-back ratios, never single runs.
 """
@@ -47,6 +53,22 @@ from .scene import load_mitsuba_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CACHE = os.path.join(os.path.expanduser("~"), ".cache", "draaw-mi", "speed_refs")
+REF_PASS_SPP = 64         # the reference renders in passes of this many spp, at least two
+DEFAULT_OUT = os.path.join(ROOT, "benchmarks", "results", "speed_suite_latest.md")
+
+
+def check_ref_spp(spp) -> str | None:
+    """Why ``spp`` cannot be a reference's spp, or ``None``: it renders in
+    :data:`REF_PASS_SPP`-spp passes, at least two (the reference's noise, subtracted from every
+    MSE, is estimated from their spread).
+
+    >>> check_ref_spp(1024) is None, check_ref_spp(100)
+    (True, 'expected a multiple of 64 that is at least 128 (64-spp passes, two or more for the noise estimate)')
+    """
+    if isinstance(spp, int) and spp >= 2 * REF_PASS_SPP and spp % REF_PASS_SPP == 0:
+        return None
+    return (f"expected a multiple of {REF_PASS_SPP} that is at least {2 * REF_PASS_SPP} "
+            f"({REF_PASS_SPP}-spp passes, two or more for the noise estimate)")
 
 
 def parse_integrator(spec: str, depth: int) -> dict:
@@ -81,15 +103,20 @@ def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
     return img[..., :3], dt
 
 
-def reference(name: str, res: int, scene, depth: int, spp: int, cache: str):
-    """(mean, per-pixel variance of the mean) of ``path`` at ``spp``; cached as EXR."""
+def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, digest: str = ""):
+    """(mean, per-pixel variance of the mean, seconds) of ``path`` at ``spp`` (see
+    :func:`check_ref_spp`); cached as EXR in ``cache`` under a name with ``digest``, the scene's
+    content hash (:func:`draaw_mi.speed_suite.digest`)."""
     from .io import read_exr, write_exr
-    path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}.exr")
+    why = check_ref_spp(spp)
+    if why:
+        raise ValueError(f"speed_bench.reference: spp {spp!r}; {why}")
+    path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}{'_' + digest if digest else ''}.exr")
     if cache and os.path.exists(path):
         arr = read_exr(path).astype(np.float64)
         return arr[..., :3], arr[..., 3:6], 0.0
     integ = mi.load_dict({"type": "path", "max_depth": depth})
-    chunk = min(spp, 64)
+    chunk = REF_PASS_SPP
     n = spp // chunk
     t0 = time.perf_counter()
     s1 = s2 = 0.0
@@ -110,8 +137,10 @@ def bench(name: str, res: int, args) -> dict | None:
         return None
     scene = load_mitsuba_dict(d)                   # a fixed emitter order
     depth = ss.max_depth(name)
-    ref_scene = scene if args.sampler == "independent" else ss.load(name, res)
-    ref, ref_var, t_ref = reference(name, res, ref_scene, depth, args.ref_spp, args.cache)
+    ref_dict = d if args.sampler == "independent" else ss.build(name, res)
+    ref_scene = scene if args.sampler == "independent" else load_mitsuba_dict(ref_dict)
+    ref, ref_var, t_ref = reference(name, res, ref_scene, depth, args.ref_spp, args.cache,
+                                    ss.digest(ref_dict))
     noise = float(ref_var.mean())
     specs = args.integrators.split(";")
     integs = [mi.load_dict(parse_integrator(s, depth)) for s in specs]
@@ -199,8 +228,22 @@ def main(argv=None, command: str | None = None) -> int:
     ap.add_argument("--sampler", default="independent")
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--cache", default=CACHE)
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "speed_suite.md"))
+    ap.add_argument("--out", default=DEFAULT_OUT,
+                    help="report file (default benchmarks/results/speed_suite_latest.md; '': print "
+                    "only); benchmarks/results/speed_suite.md is the hand-curated record")
     args = ap.parse_args(argv)
+    for opt, value in (("--spp", args.spp), ("--repeats", args.repeats)):
+        if value < 1:          # (--spp 0 rendered at the sampler's 64 spp and reported 0)
+            ap.error(f"{opt} {value}; expected an integer >= 1")
+    why = check_ref_spp(args.ref_spp)
+    if why:
+        ap.error(f"--ref-spp {args.ref_spp}; {why}")
+    try:
+        resolutions = [int(x) for x in args.res.split(",")]
+    except ValueError:
+        resolutions = [0]
+    if not resolutions or min(resolutions) < 1:
+        ap.error(f"--res {args.res!r}; expected comma-separated integers >= 1")
     args.command = command or ("python benchmarks/speed_suite.py " + " ".join(sys.argv[1:] if argv is None else argv))
     unknown = [n for n in args.scenes.split(",") if n not in ss.SCENES]
     if unknown:
@@ -210,7 +253,7 @@ def main(argv=None, command: str | None = None) -> int:
     if args.threads:
         dr.set_thread_count(args.threads)
     results = []
-    for res in (int(x) for x in args.res.split(",")):
+    for res in resolutions:
         for name in args.scenes.split(","):
             r = bench(name, res, args)
             if r is not None:

@@ -182,6 +182,46 @@ def build(name: str, res: int, sampler: str = "independent", spp: int = 64) -> d
     return d
 
 
+def digest(d: dict) -> str:
+    """A short hash of a scene dict's content, for cache names: values, arrays, bitmaps and
+    transforms by value, files named in it (a mesh, a temporary file of a loaded TOML scene) by
+    their bytes rather than their path, so an edited builder or ``scenes/thesis.toml`` gets a
+    new reference while a rebuilt, unchanged scene keeps its own.
+
+    >>> digest({"a": [1, 2.5]}) == digest({"a": [1, 2.5]}) != digest({"a": [1, 2.25]})
+    True
+    """
+    import hashlib
+    h = hashlib.sha256()
+
+    def feed(o):
+        if isinstance(o, dict):
+            h.update(b"{")
+            for k in sorted(o, key=str):
+                h.update(repr(str(k)).encode() + b":")
+                feed(o[k])
+            h.update(b"}")
+        elif isinstance(o, (list, tuple)):
+            h.update(b"[")
+            for v in o:
+                feed(v)
+            h.update(b"]")
+        elif isinstance(o, str) and os.path.isfile(o):
+            with open(o, "rb") as f:
+                h.update(b"file:" + hashlib.sha256(f.read()).digest())
+        elif isinstance(o, (str, int, float, bool)) or o is None:
+            h.update(repr(o).encode())
+        else:                       # arrays, bitmaps, transforms: by value
+            if hasattr(o, "matrix"):
+                o = o.matrix
+            a = np.asarray(o)
+            h.update(type(o).__name__.encode() + str(a.dtype).encode() + repr(a.shape).encode())
+            # (an object array's bytes are addresses: another run would miss its cache)
+            h.update(repr(o).encode() if a.dtype == object else np.ascontiguousarray(a).tobytes())
+    feed(d)
+    return h.hexdigest()[:12]
+
+
 def load(name: str, res: int, sampler: str = "independent") -> mi.Scene | None:
     d = build(name, res, sampler)
     return None if d is None else load_mitsuba_dict(d)    # a fixed emitter order

@@ -336,3 +336,43 @@ def test_an_sdf_scene_is_measured_against_v4_without_mitsubas_integrators(tmp_pa
     smoke = draaw_mi.load_scene(os.path.join(SCENES, "smoke.toml"), resolution=(12, 8))
     assert reference_version(smoke) == "volpath" and scene_versions(smoke, ["path", "v4"]) == ["volpath", "v4"]
     assert reference_version(draaw_mi.load_scene(tiny_description())) == "path"
+
+
+def test_finite_is_read_from_the_raw_renders(monkeypatch):
+    """A render with a NaN pixel (or one repeat with an inf) is not finite: the column was
+    computed from the images after nan_to_num, so it was always True."""
+    nan = np.where(np.arange(48).reshape(4, 4, 3) == 0, np.nan, 0.5)
+    monkeypatch.setattr(bench, "_timed_render", lambda sc, s, seed: (nan, 0.01))
+    row, img = bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5))
+    assert row["finite"] is False and np.isfinite(img).all()
+    # an inf in the first repeat only (the last image, the one returned, is finite)
+    inf = np.where(np.arange(48).reshape(4, 4, 3) == 5, np.inf, 0.5)
+    monkeypatch.setattr(bench, "_timed_render",
+                        lambda sc, s, seed: (inf if seed == 1 else np.full((4, 4, 3), 0.5), 0.01))
+    row, _ = bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5), repeats=3)
+    assert row["finite"] is False
+    monkeypatch.setattr(bench, "_timed_render", lambda sc, s, seed: (np.full((4, 4, 3), 0.5), 0.01))
+    assert bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5))[0]["finite"] is True
+
+
+@pytest.mark.parametrize("depths, expect", [(None, 4), ([2, 12], 12), ([3, -1], -1)])
+def test_the_ground_truth_is_rendered_at_the_studys_deepest_max_depth(tmp_path, monkeypatch, depths, expect):
+    """With --max-depth 12 the ground truth was rendered at the scene's own depth: the depth
+    gap showed as error and bias of every deeper setting."""
+    seen = []
+
+    def fake_gt(scene, spp=4096, max_depth=None, cache_dir=None, progress=False):
+        seen.append(max_depth)
+        return np.zeros((2, 2, 3))
+    monkeypatch.setattr(bench, "ground_truth", fake_gt)
+    monkeypatch.setattr(bench, "measure_group", lambda scene, settings, gt, repeats, seed: [
+        ({"label": s.label, "spp": s.spp, "max_depth": s.max_depth, "mse": 0.0, "variance": float("nan")},
+         np.zeros((2, 2, 3))) for s in settings])
+    import draaw_mi.bench_report
+    written = {}
+    monkeypatch.setattr(draaw_mi.bench_report, "write_report", lambda result, *a: written.update(result))
+    scene_file = tmp_path / "tiny.json"
+    scene_file.write_text(json.dumps(tiny_description(resolution=[4, 4])))
+    bench.run_study([str(scene_file)], versions=("path",), spps=(1,), max_depths=depths, adaptive=(None,),
+                    repeats=1, gt_spp=8, out_dir=str(tmp_path / "o"), progress=False)
+    assert seen == [expect] and written["ground_truth_depth"] == {"tiny": expect}

@@ -78,10 +78,14 @@ def test_render_records_the_post_chain_it_applied(tmp_path):
     (["--adaptive", "3"], "--adaptive 3; expected a power of two"),
     (["--frames", "0", "--camera-path", "x.json"], "--frames 0"),
     (["--camera-path", "BINARY"], "--camera-path"),
+    # (-4 was refused by render() after hours of measuring the other settings)
+    (["--denoise", "4,-4"], "bench: --denoise -4; expected an integer >= 1"),
 ])
-def test_bench_refuses_bad_numbers_before_the_ground_truth(tmp_path, capsys, argv, expect):
+def test_bench_refuses_bad_numbers_before_the_ground_truth(tmp_path, capsys, monkeypatch, argv, expect):
     """Checked before any rendering: the ground truth (minutes at the defaults) was rendered
     and cached first, and the camera path read after the whole study."""
+    from draaw_mi import bench
+    monkeypatch.setattr(bench, "run_study", lambda *a, **k: pytest.fail("the study ran"))
     binary = tmp_path / "b.json"
     binary.write_bytes(bytes(range(256)))
     argv = [str(binary) if a == "BINARY" else a for a in argv]

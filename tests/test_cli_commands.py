@@ -203,6 +203,53 @@ def test_bench_suite_speed_checks_its_flags(tmp_path, capsys, flags, message):
     assert rc == 2 and message in err and "Traceback" not in err, err
 
 
+def test_bench_suite_speed_passes_gt_spp_and_refuses_the_options_it_does_not_use(tmp_path, capsys, monkeypatch):
+    """An explicit --gt-spp 4096 became 1024 (taken for the study's default), and --max-depth,
+    --adaptive, --quick and --denoise were dropped silently."""
+    from draaw_mi import speed_bench
+    seen = []
+    monkeypatch.setattr(speed_bench, "main", lambda argv, command=None: seen.append(argv) or 0)
+    base = ["bench", "--suite", "speed", "metal_018", "--out", str(tmp_path / "s")]
+    for gt, ref in (["--gt-spp", "4096"], "4096"), ([], "1024"), (["--gt-spp", "256"], "256"):
+        assert main(base + gt) == 0
+        assert seen[-1][seen[-1].index("--ref-spp") + 1] == ref
+    for flags, named in ((["--max-depth", "12"], "--max-depth does"), (["--adaptive", "0"], "--adaptive does"),
+                         (["--quick"], "--quick does"), (["--denoise", "4"], "--denoise does"),
+                         (["--max-depth", "3", "--quick", "--frames", "9"], "--max-depth, --quick, --frames do"),
+                         (["--gt-spp", "100"], "--gt-spp 100 (the reference's spp); expected a multiple of 64")):
+        capsys.readouterr()
+        assert main(base + flags) == 2
+        err = capsys.readouterr().err
+        assert named in err and "Traceback" not in err, err
+    assert len(seen) == 3
+
+
+def test_bench_refuses_study_options_for_sdf_scenes_it_would_ignore(tmp_path, capsys, monkeypatch):
+    """Scenes with [[sdf]] objects run the SDF tracer study, which uses none of --spp,
+    --versions, --gt-spp, --max-depth, --camera-path: they were ignored with exit 0."""
+    from draaw_mi import bench
+    from draaw_mi.sdf import study
+    ran = []
+    monkeypatch.setattr(study, "run_sdf_study", lambda scene, out, **kw: ran.append("sdf") or
+                        {"scene": "sdf_csg", "rows": []})
+    monkeypatch.setattr(bench, "run_study", lambda scenes, **kw: ran.append(len(scenes)) or {"rows": []})
+    sdf = os.path.join(SCENES, "sdf_csg.toml")
+    out = str(tmp_path / "b")
+    assert main(["bench", sdf, "--spp", "1,2", "--versions", "v4", "--max-depth", "3", "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert ("sdf_csg.toml has [[sdf]] objects" in err and "does not use --spp, --versions, --max-depth" in err
+            and "leave them out" in err), err
+    assert main(["bench", sdf, "--gt-spp", "64", "--out", out]) == 2
+    assert "does not use --gt-spp" in capsys.readouterr().err and ran == []
+    # its own options are fine; beside another scene the study options apply to that one (said)
+    assert main(["bench", sdf, "--quick", "--repeats", "1", "--out", out, "--no-progress"]) == 0
+    assert ran == ["sdf"]
+    assert main(["bench", sdf, os.path.join(SCENES, "cornell.toml"), "--spp", "1", "--out", out,
+                 "--no-progress"]) == 0
+    assert ran == ["sdf", "sdf", 1]
+    assert "does not use --spp (it applies to the other scenes only)" in capsys.readouterr().err
+
+
 def test_fit_passes_views_post_and_loss_through(tmp_path, chain_file, monkeypatch, capsys):
     """--views (one camera table per --reference), --post and --loss reach fit() unchanged,
     and the run completes with a scene written."""
@@ -303,7 +350,7 @@ def test_bench_suite_speed(tmp_path, capsys, monkeypatch):
     import re
     out = tmp_path / "suite"
     argv = ["bench", "--suite", "speed", "metal_018", "--versions", "v4,v2", "--resolution", "16",
-            "--repeats", "2", "--spp", "8", "--gt-spp", "64", "--out", str(out)]
+            "--repeats", "2", "--spp", "8", "--gt-spp", "128", "--out", str(out)]
     assert main(argv) == 0
     text = (out / "speed_suite.md").read_text()
     assert "`draaw_v4` | `draaw_v2`" in text
@@ -321,7 +368,7 @@ def test_bench_suite_speed(tmp_path, capsys, monkeypatch):
     import doctest
     import draaw_mi.speed_bench as sb
     assert doctest.testmod(sb).failed == 0            # the cells' number format
-    ref = out / "refs" / "metal_018_16_d5_64.exr"
+    (ref,) = (out / "refs").glob("metal_018_16_d5_128_*.exr")       # (+ the scene's content hash)
     stamp = ref.stat().st_mtime_ns
     assert main(argv) == 0 and ref.stat().st_mtime_ns == stamp          # reused, not re-rendered
     assert main(["bench", "--suite", "speed", "metal018", "--out", str(out)]) == 2
