@@ -449,11 +449,10 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
     ``path`` ground truth on ``error_frames`` evenly spaced frames.
     """
     check_mode(progress, "bench.frame_times")
-    import mitsuba as mi
 
     from .camera_path import interpolate
     from .render import render
-    from .scene.camera import go_draaw_look_at
+    from .scene.camera import go_draaw_look_at, look_at_transform
 
     # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncated 123 * 60 / 60 to 122)
     path = interpolate(keyframes, duration=frames, fps=1, faithful=faithful)
@@ -468,8 +467,7 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
         params[x_fov_key] = x_fov(fov, fov_axis, *scene.settings["resolution"])
 
     def set_camera(p):
-        o, t, u = go_draaw_look_at(p[:3], p[3], p[4], fov)
-        params[key] = mi.ScalarTransform4f().look_at(origin=o.tolist(), target=t.tolist(), up=u.tolist())
+        params[key] = look_at_transform(*go_draaw_look_at(p[:3], p[3], p[4], fov))
         params.update()
 
     check = set(np.linspace(0, len(path) - 1, error_frames).astype(int).tolist()) if error_frames else set()

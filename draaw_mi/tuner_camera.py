@@ -91,12 +91,12 @@ class CameraPanel:
         from .scene.camera import go_draaw_look_at
         x, y, z, theta, phi = self._path[min(i, len(self._path) - 1)]
         try:
-            o, t, up = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
+            o, t, up, mirror = go_draaw_look_at((x, y, z), theta, phi, float(self.fov.value))
         except ValueError as e:
             raise DraawError(f"camera path frame {i}: {e}") from None
         before = self.camera
         self.camera = {"origin": list(map(float, o)), "target": list(map(float, t)),
-                       "up": list(map(float, up)), "fov": float(self.fov.value)}
+                       "up": list(map(float, up)), "fov": float(self.fov.value), "mirror": mirror}
         # the orbit is relative to the path's camera (a refused frame keeps the one before)
         self._orbit_to(0.0, 0.0, 1.0, undo=lambda: setattr(self, "camera", before))
 
@@ -106,8 +106,9 @@ class CameraPanel:
     def _set_camera(self):
         if self.camera is None:
             raise DraawError("this scene has no [camera] table to orbit")
+        from .scene.camera import look_at_transform
         o, t, up = self._camera_now()
-        values = {"sensor.to_world": tuning.look_at(o, t, up)}
+        values = {"sensor.to_world": look_at_transform(o, t, up, self.camera.get("mirror", False))}
         # (refused before the lights follow: a camera moved into smoke moved them regardless)
         self.preview.check_camera_outside_smoke("camera", values["sensor.to_world"])
         if self.snap_light.value or self._camera_lights:
@@ -120,6 +121,8 @@ class CameraPanel:
 
     def _drag_orbit(self, yaw, pitch):
         yaw0, pitch0 = getattr(self, "_orbit_at_press", (0.0, 0.0))
+        if self.camera and self.camera.get("mirror"):     # its image is mirrored: the scene
+            yaw = -yaw                                    # still turns the way the pointer goes
         self._orbit_to(yaw=(yaw0 + yaw + 180.0) % 360.0 - 180.0, pitch=pitch0 + pitch)
 
     def _zoom(self, factor):
@@ -157,6 +160,6 @@ class CameraPanel:
     def _get_camera(self):
         o, t, up = self._camera_now()
         cam = {"origin": o.round(5).tolist(), "target": t.round(5).tolist(), "up": up.round(5).tolist(),
-               "fov": round(float(self.fov.value), 4)}
+               "fov": round(float(self.fov.value), 4), **({"mirror": True} if self.camera.get("mirror") else {})}
         self.camera_text.value = json.dumps(cam)
         return cam

@@ -35,7 +35,8 @@ class DocumentPanel:
         cam = None
         if self.camera is not None:
             o, t, up = self._camera_now()
-            cam = {"origin": o, "target": t, "up": up, "fov": float(self.fov.value)}
+            cam = {"origin": o, "target": t, "up": up, "fov": float(self.fov.value),
+                   "mirror": bool(self.camera.get("mirror", False))}
         render = {"version": self.preview.version, "max_depth": int(self.preview.max_depth)}
         for key in ("filter", "sampler"):     # (load_scene(..., filter=) went back to the file's)
             if self.base_scene.settings.get(key) is not None:

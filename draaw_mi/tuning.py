@@ -247,8 +247,10 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
         flat[key] = [float(x) for x in arr] if arr.size > 1 else float(arr[0])
     desc = scene.updated_description(flat, dest)
     if camera is not None:
-        cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles")}
+        cam = {k: v for k, v in desc.get("camera", {}).items() if k not in ("position", "angles", "mirror")}
         cam.update({k: [float(x) for x in camera[k]] for k in ("origin", "target", "up")})
+        if camera.get("mirror"):        # a GO-Draaw camera's mirrored view, as a look-at table
+            cam["mirror"] = True
         if "fov" in camera:             # the horizontal FOV (Mitsuba's x_fov)
             cam["fov"] = float(camera["fov"])
             cam["fov_axis"] = "x"       # (a "y" kept beside it made 56.4 degrees 94 on reload)

@@ -114,6 +114,7 @@ class MaterialTuner(CameraPanel, DocumentPanel):
         self.camera = {k: list(map(float, cam[k])) for k in ("origin", "target", "up")} if cam else None
         if cam:
             self.camera["fov"] = float(cam.get("fov", 40.0))
+            self.camera["mirror"] = bool(cam.get("mirror", False))     # (a GO-Draaw camera's)
         self.post = list(self.scene.settings.get("post", []))
         self.reference = None if reference is None else self._load_reference(reference)
         w, h = self.scene.resolution

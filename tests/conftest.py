@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 import draaw_mi  # noqa: F401  (sets the variant, registers plugins)
@@ -33,6 +34,48 @@ def tiny_description(**render):
             {"type": "constant", "intensity": 0.2},
         ],
     }
+
+
+def go_draaw_patch_uv(position, theta, phi, fov_deg, point):
+    """``(u, v)``, 0..1 from the left and the top, where GO-Draaw's image patch sees ``point``,
+    written from go-draaw-spec.md §2.8 and independent of draaw-mi: the primary ray of patch
+    point (u, v) is ``TL + u (TR - TL) + v (BL - TL)`` with ``S(θ, φ) = (sin φ cos θ,
+    sin φ sin θ, cos φ)``, ``TL = S(θ, φ)``, ``TR = S(θ + F, φ)``, ``BL = S(θ, φ + F)``."""
+    def s(th, ph):
+        return np.array([np.sin(ph) * np.cos(th), np.sin(ph) * np.sin(th), np.cos(ph)])
+    f = np.radians(fov_deg)
+    tl = s(theta, phi)
+    dx, dy = s(theta + f, phi) - tl, s(theta, phi + f) - tl
+    # a (point - position) = TL + u dx + v dy
+    _, u, v = np.linalg.solve(np.stack([np.subtract(point, position), -dx, -dy], axis=1), tl)
+    return float(u), float(v)
+
+
+def go_draaw_patch_point(position, theta, phi, fov_deg, u, v, distance):
+    """The point ``distance`` from ``position`` along GO-Draaw's ray of patch point (u, v)
+    (see :func:`go_draaw_patch_uv`)."""
+    def s(th, ph):
+        return np.array([np.sin(ph) * np.cos(th), np.sin(ph) * np.sin(th), np.cos(ph)])
+    f = np.radians(fov_deg)
+    tl = s(theta, phi)
+    d = tl + u * (s(theta + f, phi) - tl) + v * (s(theta, phi + f) - tl)
+    return np.asarray(position, float) + distance * d / np.linalg.norm(d)
+
+
+def glowing_ball(camera: dict, centre, radius: float = 0.15, resolution=(32, 32)) -> dict:
+    """A scene of one emitting ball on black, seen by ``camera`` (a ``[camera]`` table)."""
+    return {"render": {"resolution": list(resolution), "spp": 4, "max_depth": 2, "filter": "box"},
+            "camera": camera,
+            "materials": {"ball": {"base_color": [0.0, 0.0, 0.0]}},
+            "shapes": [{"type": "sphere", "name": "ball_shape", "material": "ball",
+                        "center": [float(c) for c in centre], "radius": radius, "emission": [5.0, 5.0, 5.0]}]}
+
+
+def bright_column(image) -> float:
+    """The brightness-weighted mean column of ``image`` (H, W, C), in pixel units from the left
+    edge (the patch's ``u`` times the width)."""
+    w = np.asarray(image, float)[..., :3].sum(axis=(0, 2))
+    return float((w * (np.arange(len(w)) + 0.5)).sum() / w.sum())
 
 
 @pytest.fixture

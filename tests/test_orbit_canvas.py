@@ -294,3 +294,47 @@ def test_unparsable_arguments_are_one_clear_error_and_leave_no_broken_widget(mon
         OrbitCanvas(**kw)
     gc.collect()
     assert unraisable == []
+
+
+def test_a_mirrored_go_draaw_camera_stays_mirrored_through_zoom_drag_and_save(tmp_path):
+    """A GO-Draaw camera at sin φ > 0 shows the mirror image of any look-at camera's view (a
+    to_world of determinant -1): the wheel keeps it (the glowing ball stays at the left, where
+    GO-Draaw's patch has it; unmirrored it jumps to column ~25 of 32), a drag to the right
+    still turns the scene under the pointer (the camera moves to the image's left: the first
+    column of the mirrored to_world, as for a look-at camera), and Save writes a look-at camera
+    with mirror = true that loads as the same sensor."""
+    from conftest import bright_column, glowing_ball, go_draaw_patch_point
+    theta, phi, fov = 0.3, 1.2, 45.0
+    ball = go_draaw_patch_point([0, 0, 0], theta, phi, fov, 0.2, 0.5, 3.0)
+    scene = draaw_mi.load_scene(glowing_ball({"position": [0.0, 0.0, 0.0], "angles": [theta, phi], "fov": fov},
+                                             ball))
+    t = MaterialTuner(scene, autostart=False, freeze=False, interactive_scale=1.0, frame_channel="rfb")
+
+    def to_world():
+        t.refresh()
+        return np.array(t.scene.params["sensor.to_world"].matrix).reshape(4, 4)
+    try:
+        m0 = to_world()
+        assert np.linalg.det(m0[:3, :3]) == pytest.approx(-1.0, abs=1e-5)
+        t.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": 200.0, "x": 5, "y": 5, "buttons": (),
+                               "modifiers": ()})
+        assert t.distance.value > 1.0 and t.message.value == ""
+        m1 = to_world()
+        assert np.linalg.det(m1[:3, :3]) == pytest.approx(-1.0, abs=1e-5)
+        assert bright_column(draaw_mi.render(t.scene, version="path")) < 12      # (u = 0.2: 6.4)
+        w = t.canvas._view_width
+        t.canvas.handle_event(_press(0, 0))
+        t.canvas.handle_event(_move(w / 16, 0))
+        t.canvas.handle_event(_release(w / 16, 0))
+        assert t.message.value == ""
+        m2 = to_world()
+        assert np.linalg.det(m2[:3, :3]) == pytest.approx(-1.0, abs=1e-5)
+        moved = m2[:3, 3] - m1[:3, 3]
+        assert np.dot(moved, m1[:3, 0]) > 0.5 * np.linalg.norm(moved)          # to the image's left
+        doc = t.document()
+        assert doc["camera"]["mirror"] is True and "angles" not in doc["camera"]
+        saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+        np.testing.assert_allclose(np.array(saved.params["sensor.to_world"].matrix).reshape(4, 4), m2,
+                                   atol=1e-4)
+    finally:
+        t.close()

@@ -14,7 +14,8 @@ import draaw_mi
 from draaw_mi import SceneError
 from draaw_mi.scene.camera import go_draaw_look_at, spherical
 
-from conftest import SCENES, tiny_description
+from conftest import SCENES, bright_column, glowing_ball, go_draaw_patch_point, go_draaw_patch_uv, \
+    tiny_description
 
 
 @pytest.mark.parametrize("name", ["cornell", "material_spheres", "thesis"])
@@ -74,7 +75,7 @@ def _to_toml(desc):
 
 def test_go_draaw_camera_looks_through_the_patch_centre():
     theta, phi, fov = 0.335, -1.715, 45.0
-    origin, target, up = go_draaw_look_at([1.0, 2.0, 3.0], theta, phi, fov)
+    origin, target, up, mirror = go_draaw_look_at([1.0, 2.0, 3.0], theta, phi, fov)
     f = math.radians(fov)
     centre = 0.5 * (spherical(theta + f, phi) + spherical(theta, phi + f))
     d = (target - origin)
@@ -82,6 +83,24 @@ def test_go_draaw_camera_looks_through_the_patch_centre():
     assert abs(np.dot(up, d)) < 1e-9                    # orthonormal
     tl_minus_bl = spherical(theta, phi) - spherical(theta, phi + f)
     assert np.dot(up, tl_minus_bl) > 0                  # image-up is decreasing phi
+    assert not mirror                                   # (sin phi < 0: image-right is view x up)
+
+
+@pytest.mark.parametrize("theta, phi", [(0.3, 1.2), (2.0, 0.9), (0.3, -2.08), (-1.0, -1.7)])
+def test_go_draaw_camera_shows_go_draaws_view_not_its_mirror_image(theta, phi):
+    """A glowing ball a fifth of the way across GO-Draaw's image patch (the spec's formula in
+    numpy, conftest.go_draaw_patch_uv) is there in the render, for sin φ > 0 too, where the
+    look-at camera alone shows the left-right mirror image (the ball at column ~25 of 32, not
+    ~6). Within 3 columns: the pinhole camera is not the patch's bilinear distortion."""
+    position, fov = np.array([0.5, -1.0, 2.0]), 45.0
+    ball = go_draaw_patch_point(position, theta, phi, fov, 0.2, 0.5, 3.0)
+    u, v = go_draaw_patch_uv(position, theta, phi, fov, ball)
+    assert (u, v) == pytest.approx((0.2, 0.5))
+    scene = draaw_mi.load_scene(glowing_ball({"position": position.tolist(), "angles": [theta, phi], "fov": fov},
+                                             ball))
+    col = bright_column(draaw_mi.render(scene, version="path"))
+    assert col == pytest.approx(u * 32, abs=3.0), (col, u * 32)
+    assert scene.info["camera"]["mirror"] == (math.sin(phi) > 0)
 
 
 def test_snap_light_to_camera(tiny_desc):

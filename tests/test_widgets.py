@@ -304,7 +304,9 @@ def _go_draaw_camera_to_world(position, theta, phi, fov_deg):
     """Camera-to-world matrix for a GO-Draaw camera, written from go-draaw-spec.md §2.8 and
     Mitsuba's look_at convention (columns: left = up x forward, up, forward, origin).
     GO-Draaw's image is the bilinear patch TL, TR = S(θ+F, φ), BL = S(θ, φ+F): its centre ray
-    is (TR + BL) / 2 and its image-up direction TL - BL (made orthogonal to the centre ray)."""
+    is (TR + BL) / 2, its image-up direction TL - BL (made orthogonal to the centre ray) and its
+    image-right the side of TR - TL; Mitsuba's film runs along minus the first column, so that
+    column is fwd x up where TR - TL points to up x fwd (sin φ > 0: a mirrored camera)."""
     def S(th, ph):
         return np.array([np.sin(ph) * np.cos(th), np.sin(ph) * np.sin(th), np.cos(ph)])
     F = np.radians(fov_deg)
@@ -313,6 +315,8 @@ def _go_draaw_camera_to_world(position, theta, phi, fov_deg):
     up = (tl - bl) - fwd * np.dot(tl - bl, fwd)
     up /= np.linalg.norm(up)
     left = np.cross(up, fwd)
+    if np.dot(tr - tl, left) > 0:
+        left = -left
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, up, fwd, position
     return m

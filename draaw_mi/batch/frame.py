@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import DraawError, RenderError
 from .exr import metadata, write_frame, write_preview
 from ..scene import value_like
-from ..scene.camera import scene_fov, sensor_keys, x_fov
+from ..scene.camera import look_at_transform, scene_fov, sensor_keys, x_fov
 
 
 class CachedScene:
@@ -109,8 +109,6 @@ class CachedScene:
 
     def apply(self, spec: dict) -> None:
         """Set this frame's camera and overrides; restore everything else a frame changed."""
-        import mitsuba as mi
-
         params = self.scene.all_params          # (SDF objects' parameters too)
         wanted = {}
         for key, value in spec["params"].items():
@@ -119,8 +117,8 @@ class CachedScene:
             wanted[key] = value_like(self.originals[key], value, key)
         cam = spec.get("camera")
         if cam is not None:
-            wanted[self.camera_key] = mi.ScalarTransform4f().look_at(
-                origin=cam["origin"], target=cam["target"], up=cam["up"])
+            wanted[self.camera_key] = look_at_transform(cam["origin"], cam["target"], cam["up"],
+                                                        cam.get("mirror", False))
             if self.fov_key:
                 w, h = self.scene.settings["resolution"]
                 wanted[self.fov_key] = type(self.originals[self.fov_key])(x_fov(cam["fov"], self.fov_axis, w, h))

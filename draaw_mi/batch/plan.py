@@ -101,7 +101,10 @@ def _ease(rows: np.ndarray, frames: int) -> np.ndarray:
 
 
 def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
-    """One ``{origin, target, up, fov}`` per frame for a validated camera table."""
+    """One ``{origin, target, up, fov}`` per frame for a validated camera table, with
+    ``mirror: true`` where a GO-Draaw keyframe's view is mirrored (``sin φ > 0``, see
+    :func:`~draaw_mi.scene.camera.go_draaw_look_at`; only there: the other frames keep
+    their hashes)."""
     from ..camera_path import interpolate
     from ..scene.camera import go_draaw_look_at
 
@@ -122,13 +125,13 @@ def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
         for i in range(frames):
             a = math.radians(o["start"] + o["degrees"] * i / steps)
             origin = target + up * o["height"] + o["radius"] * (math.cos(a) * e1 + math.sin(a) * e2)
-            out.append((origin, target, up))
+            out.append((origin, target, up, False))
     elif cam["kind"] == "look_at":
         from ..scene.camera import check_look_at
         from ..scene.schema import Where
         rows = _ease(np.asarray(cam["look_at"], float), frames)
-        out = [(r[0:3], r[3:6], r[6:9]) for r in rows]
-        for i, (o, t, u) in enumerate(out):          # (the keys are checked; eased frames too)
+        out = [(r[0:3], r[3:6], r[6:9], False) for r in rows]
+        for i, (o, t, u, _) in enumerate(out):          # (the keys are checked; eased frames too)
             check_look_at(o, t, u, Where(f"camera look_at frame {i}"))
     else:
         keys = cam["keyframes"]
@@ -142,7 +145,7 @@ def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
             except ValueError:
                 raise SceneError(f"camera keyframe {p.tolist()} gives a degenerate view") from None
     return [{"origin": [float(v) for v in o], "target": [float(v) for v in t], "up": [float(v) for v in u],
-             "fov": fov} for o, t, u in out]
+             "fov": fov, **({"mirror": True} if m else {})} for o, t, u, m in out]
 
 
 def param_value(kind: str, data, frame: int, frames: int):

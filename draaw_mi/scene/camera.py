@@ -4,8 +4,12 @@ GO-Draaw (go-draaw-spec.md §2.8) spans the image as a bilinear patch between th
 the unit sphere, ``S(θ, φ) = (sin φ cos θ, sin φ sin θ, cos φ)``: top-left ``S(θ, φ)``,
 top-right ``S(θ + F, φ)``, bottom-left ``S(θ, φ + F)``. draaw-mi replaces that patch with a
 proper pinhole camera looking through the patch's centre ``(TR + BL) / 2``, with image-up
-along ``TL − BL`` and the horizontal field of view F: the same view, without the patch's
-non-uniform distortion (documented deviation).
+along ``TL − BL`` and the horizontal field of view F, without the patch's non-uniform
+distortion (documented deviation). The patch's image-right, ``TR − TL``, lies along
+``sin φ · e_θ``; a Mitsuba look-at camera's is ``view × up``, the opposite way where
+``sin φ > 0``. There GO-Draaw's view is the mirror image of any look-at camera's (no
+rotation gives it), and the camera is mirrored left-right (:func:`go_draaw_look_at`'s
+``mirror``, :func:`look_at_transform`): GO-Draaw's view, with its handedness, at every φ.
 """
 from __future__ import annotations
 
@@ -14,9 +18,9 @@ import math
 import numpy as np
 
 from ..limits import FOV_RANGE
-from .schema import Where, check_keys, number, string, vector
+from .schema import Where, boolean, check_keys, number, string, vector
 
-CAMERA_KEYS = ("origin", "target", "up", "position", "angles", "fov", "fov_axis", "near_clip",
+CAMERA_KEYS = ("origin", "target", "up", "mirror", "position", "angles", "fov", "fov_axis", "near_clip",
                "far_clip")
 
 # target - origin must exceed this fraction of their distance from the world origin (float32
@@ -112,7 +116,13 @@ def scene_fov(scene) -> tuple[float, str]:
 
 
 def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
-    """Convert GO-Draaw's (position, θ, φ, FOV) into (origin, target, up) for a pinhole camera."""
+    """Convert GO-Draaw's (position, θ, φ, FOV) into ``(origin, target, up, mirror)`` for a
+    pinhole camera: ``mirror`` where the patch's image-right ``TR − TL`` is the look-at
+    camera's left (``sin φ > 0``); build the transform with :func:`look_at_transform`.
+
+    >>> [go_draaw_look_at([0, 0, 0], 0.3, phi, 45.0)[3] for phi in (1.2, -2.08)]
+    [True, False]
+    """
     f = math.radians(fov_deg)
     tl, tr, bl = spherical(theta, phi), spherical(theta + f, phi), spherical(theta, phi + f)
     centre = 0.5 * (tr + bl)
@@ -125,19 +135,40 @@ def go_draaw_look_at(position, theta: float, phi: float, fov_deg: float):
     up = up - d * float(np.dot(up, d))           # orthogonalise
     if np.linalg.norm(up) < 1e-9:
         raise ValueError("degenerate GO-Draaw camera angles")
+    up = up / np.linalg.norm(up)
+    # Mitsuba's perspective sensor puts the film's +x (image-right) along view x up
+    mirror = bool(np.dot(tr - tl, np.cross(d, up)) < 0.0)
     origin = np.asarray(position, dtype=float)
-    return origin, origin + d, up / np.linalg.norm(up)
+    return origin, origin + d, up, mirror
+
+
+def look_at_transform(origin, target, up, mirror: bool = False):
+    """A camera's ``to_world``: Mitsuba's look-at transform, mirrored left-right (camera-space
+    x negated, determinant -1) for ``mirror`` (a GO-Draaw camera's, :func:`go_draaw_look_at`).
+    Mitsuba's perspective sensor takes it as it is: rays, ray differentials and the projection
+    of points (``sample_direction``) are the look-at camera's, columns reversed.
+
+    >>> m = look_at_transform([0, 0, 5], [0, 0, 0], [0, 1, 0], mirror=True)
+    >>> round(float(np.linalg.det(np.array(m.matrix))), 4)
+    -1.0
+    """
+    import mitsuba as mi
+    t = mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin], target=[float(v) for v in target],
+                                       up=[float(v) for v in up])
+    return t @ mi.ScalarTransform4f().scale([-1.0, 1.0, 1.0]) if mirror else t
 
 
 def camera_to_look_at(cam: dict, where: Where):
-    """Validate a ``[camera]`` table; return (origin, target, up, fov_deg, fov_axis, near, far)."""
+    """Validate a ``[camera]`` table; return (origin, target, up, fov_deg, fov_axis, near, far,
+    mirror). ``mirror``: GO-Draaw's angles decide it (:func:`go_draaw_look_at`); a look-at
+    table may say ``mirror = true`` (a mirrored GO-Draaw camera the tuner orbited and saved)."""
     check_keys(cam, CAMERA_KEYS, where)
     fov = number(cam.get("fov", 40.0), where / "fov", lo=FOV_RANGE[0], hi=FOV_RANGE[1])
     fov_axis = string(cam.get("fov_axis", "x"), where / "fov_axis", ["x", "y", "smaller", "larger", "diagonal"])
     near = number(cam.get("near_clip", 1e-2), where / "near_clip", lo=0.0, lo_open=True)
     far = number(cam.get("far_clip", 1e4), where / "far_clip", lo=near, lo_open=True)
     if "angles" in cam or "position" in cam:
-        for k in ("origin", "target", "up"):
+        for k in ("origin", "target", "up", "mirror"):
             if k in cam:
                 raise (where / k).error("cannot be combined with GO-Draaw's 'position' + 'angles'")
         if "position" not in cam or "angles" not in cam:
@@ -145,7 +176,7 @@ def camera_to_look_at(cam: dict, where: Where):
         pos = vector(cam["position"], where / "position")
         theta, phi = vector(cam["angles"], where / "angles", n=2)
         try:
-            origin, target, up = go_draaw_look_at(pos, theta, phi, fov)
+            origin, target, up, mirror = go_draaw_look_at(pos, theta, phi, fov)
         except ValueError:
             raise (where / "angles").error(f"{[theta, phi]} gives a degenerate view "
                                            "(phi = 0 or pi makes every column identical)") from None
@@ -154,7 +185,8 @@ def camera_to_look_at(cam: dict, where: Where):
         target = np.array(vector(cam.get("target", [0.0, 0.0, 0.0]), where / "target"))
         up = np.array(vector(cam.get("up", [0.0, 1.0, 0.0]), where / "up"))
         check_look_at(origin, target, up, where)
-    return origin, target, up, fov, fov_axis, near, far
+        mirror = boolean(cam.get("mirror", False), where / "mirror")
+    return origin, target, up, fov, fov_axis, near, far, mirror
 
 
 def check_look_at(origin, target, up, where) -> None:
@@ -207,18 +239,14 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
     """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with
     ``spp`` samples, an RGB ``hdrfilm`` with the ``rfilter`` reconstruction filter: a plugin
     name, or a filter object (another film's, with its parameters: a gaussian's ``stddev``)."""
-    import mitsuba as mi
-
-    origin, target, up, fov, fov_axis, near, far = look_at
+    origin, target, up, fov, fov_axis, near, far, mirror = look_at
     return {
         "type": "perspective",
         "fov": fov,
         "fov_axis": fov_axis,
         "near_clip": near,
         "far_clip": far,
-        "to_world": mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
-                                                   target=[float(v) for v in target],
-                                                   up=[float(v) for v in up]),
+        "to_world": look_at_transform(origin, target, up, mirror),
         "sampler": {"type": sampler, "sample_count": spp},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
                  "rfilter": {"type": rfilter} if isinstance(rfilter, str) else rfilter},

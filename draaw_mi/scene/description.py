@@ -4,7 +4,7 @@ The description has these top-level tables (all optional but ``shapes``)::
 
     [render]     resolution = [W, H], spp, max_depth, version, seed, filter, sampler, hide_emitters,
                  aovs
-    [camera]     origin/target/up or GO-Draaw position + angles = [theta, phi]; fov, fov_axis
+    [camera]     origin/target/up (mirror) or GO-Draaw position + angles = [theta, phi]; fov, fov_axis
     [materials.NAME]   type = "draaw" (default) or any Mitsuba BSDF, with its parameters
     [[shapes]]   type = mesh | sphere | rectangle | disk | cube | cylinder, material, emission, ...
     [[lights]]   type = point | spot | area | constant | envmap | directional, intensity, color
@@ -574,7 +574,8 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     settings["post"] = post or []
     info = {"materials": list(materials), "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),
-                       "up": list(map(float, look_at[2])), "fov": look_at[3], "fov_axis": look_at[4]}}
+                       "up": list(map(float, look_at[2])), "fov": look_at[3], "fov_axis": look_at[4],
+                       "mirror": look_at[7]}}
     if sdf_scene is not None:
         info["sdf"] = sdf_scene
         info["shapes"] = [k for k in info["shapes"] if k not in sdf_scene.proxy_ids]

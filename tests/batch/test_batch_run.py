@@ -95,8 +95,38 @@ def test_go_draaw_keyframes_follow_camera_path(tmp_path, go_draaw_dir):
         keys = json.load(fh)
     path = interpolate(keys, duration=1.0, fps=6)
     for s, p in zip(specs, path):
-        o, t, u = go_draaw_look_at(p[:3], p[3], p[4], 50.0)
+        o, t, u, mirror = go_draaw_look_at(p[:3], p[3], p[4], 50.0)
         assert np.allclose(s["camera"]["origin"], o) and np.allclose(s["camera"]["target"], t)
+        assert s["camera"].get("mirror", False) == mirror
+
+
+def test_go_draaw_keyframe_frames_show_go_draaws_view(tmp_path):
+    """A GO-Draaw keyframe path through sin φ > 0 and sin φ < 0: each frame shows a glowing
+    ball where GO-Draaw's image patch (numpy, from the spec) has it, a fifth of the way
+    across (the φ > 0 frame was the left-right mirror image, the ball at column ~25 of 32);
+    the frame's camera says ``mirror`` only there, and its hash is the same at every load."""
+    from conftest import bright_column, glowing_ball, go_draaw_patch_point, go_draaw_patch_uv
+    ball, fov = np.array([0.0, 0.5, 0.0]), 45.0
+    keys = []
+    for theta, phi in ((0.3, 1.2), (0.3, -2.08)):
+        # the camera 3 units back from the ball along the patch's ray at (u, v) = (0.2, 0.5)
+        position = ball - (go_draaw_patch_point([0, 0, 0], theta, phi, fov, 0.2, 0.5, 3.0))
+        keys.append([*position.tolist(), theta, phi])
+    scene = os.path.join(str(tmp_path), "ball.toml")
+    with open(scene, "wb") as fh:
+        tomli_w.dump(glowing_ball({"origin": [0, 0, 5], "target": [0, 0, 0]}, ball), fh)
+    doc = manifest(tmp_path, frames=2, scene=scene, version="path",
+                   camera={"keyframes": keys, "fov": fov})
+    del doc["jobs"][0]["params"]
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 2 and not res.failed
+    _, specs, _ = batch.load(doc)
+    for s, k in zip(specs, keys):
+        u, _ = go_draaw_patch_uv(k[:3], k[3], k[4], fov, ball)
+        col = bright_column(draaw_mi.read_exr(s["output"]))
+        assert col == pytest.approx(u * 32, abs=3.0), (k, col, u * 32)
+        assert s["camera"].get("mirror", False) == (math.sin(k[4]) > 0)
+    assert [s["hash"] for s in specs] == [s["hash"] for s in batch.load(doc)[1]]
 
 
 def test_exr_layers_metadata_and_half(tmp_path):
