@@ -94,8 +94,9 @@ def pilot_can_miss(scene: mi.Scene) -> bool:
     delta = any(mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in scene.emitters())
     if not delta:
         return False
+    from .integrators.features import scene_shapes
     seen = set()
-    for shape in scene.shapes():
+    for shape in scene_shapes(scene):
         b = shape.bsdf()
         if b is None or id(b) in seen:
             continue
@@ -115,9 +116,14 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
     """
     film = sensor.film()
     w, h = (int(v) for v in film.size())
-    counts = np.asarray(spp_map, dtype=np.int64).reshape(-1)
-    if counts.shape[0] != w * h or counts.min() < 1:
-        raise ValueError(f"render_spp_map: spp_map must be ({h}, {w}) counts >= 1")
+    m = np.asarray(spp_map)
+    # (a transposed (W, H) or flat map was taken in the wrong pixel order, 2.9 as 2 samples)
+    if m.shape != (h, w) or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all() \
+            or (m != np.round(m)).any() or m.min() < 1:
+        what = (f"shape {m.shape}" if m.shape != (h, w) else f"dtype {m.dtype}"
+                if not np.issubdtype(m.dtype, np.number) else f"values from {m.min()} to {m.max()}")
+        raise ValueError(f"render_spp_map: spp_map has {what}; expected ({h}, {w}) whole counts >= 1")
+    counts = m.astype(np.int64).reshape(-1)
     total = int(counts.sum())
     if total >= 2 ** 32:
         raise ValueError(f"render_spp_map: {total} samples exceed 2^32; render in passes")

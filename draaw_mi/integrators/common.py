@@ -97,6 +97,22 @@ def parse_int(props: mi.Properties, plugin: str, name: str, default: int, low: i
     return value
 
 
+def parse_bool(props: mi.Properties, plugin: str, name: str, default: bool) -> bool:
+    """Read a boolean property (the string "false" was read as True by ``bool()``)."""
+    value = props.get(name, default)
+    if not isinstance(value, bool):
+        raise ParameterError(f"{plugin}: {name}={value!r}; expected a boolean (true or false)")
+    return value
+
+
+def parse_float(props: mi.Properties, plugin: str, name: str, default: float) -> float:
+    """Read a number property (``True`` was read as 1.0, a string failed in ``float()``)."""
+    value = props.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{plugin}: {name}={value!r}; expected a number")
+    return float(value)
+
+
 def parse_aovs(plugin: str, spec) -> tuple[str, ...]:
     """``"depth, normal"`` / ``"all"`` / ``""`` -> tuple of AOV names (validated, ordered)."""
     if spec is None:
@@ -167,15 +183,17 @@ class DraawIntegrator(RBIntegrator):
         return mi.RayFlags.ShadingFrame
 
     def eval_aovs(self, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, active: mi.Bool,
-                  feats: dict[str, bool]) -> list[mi.Float]:
-        """AOV channel values at the camera ray's first hit ``si`` (primal only)."""
+                  feats: dict[str, bool], skipped=None) -> list[mi.Float]:
+        """AOV channel values at the camera ray's first hit ``si`` (primal only); ``skipped``:
+        the distance to a hidden emitter the ray was continued from (:meth:`trace_camera`)."""
         valid = active & si.is_valid()
+        t = si.t if skipped is None else si.t + skipped     # (from the camera, not the emitter)
         out: list[mi.Float] = []
         for name in self.aovs:
             if name == "depth":
-                out.append(dr.select(valid, si.t, 0.0))
+                out.append(dr.select(valid, t, 0.0))
             elif name == "depth_log":
-                out.append(dr.select(valid, dr.log(1.0 + dr.select(valid, si.t, 0.0)), 0.0))
+                out.append(dr.select(valid, dr.log(1.0 + dr.select(valid, t, 0.0)), 0.0))
             elif name == "normal":
                 n = si.sh_frame.n
                 out += [dr.select(valid, n.x, 0.0), dr.select(valid, n.y, 0.0),
@@ -193,13 +211,16 @@ class DraawIntegrator(RBIntegrator):
 
     def trace_camera(self, scene: mi.Scene, ray: mi.Ray3f, active: mi.Bool,
                      feats: dict[str, bool]):
-        """First intersection of the camera rays: ``(ray, pi, valid)``.
+        """First intersection of the camera rays: ``(ray, pi, valid, skipped)``.
 
         With ``hide_emitters``, area emitters are skipped (as Mitsuba's ``path`` / ``prb``
-        do): ``ray`` then starts on the skipped emitter. ``valid`` (the alpha channel) is
-        set where the ray hits a surface, or everywhere when a visible environment is shown.
+        do): ``ray`` then starts on the skipped emitter, ``skipped`` away from the camera
+        (0 elsewhere; None when nothing can be skipped), which depth AOVs add back (they
+        measured from the hidden emitter). ``valid`` (the alpha channel) is set where the
+        ray hits a surface, or everywhere when a visible environment is shown.
         """
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
+        skipped = None
         if self.hide_emitters and feats["area_lights"]:
             skip = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711
             si_skip = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, skip)
@@ -207,10 +228,11 @@ class DraawIntegrator(RBIntegrator):
             pi_after = self.skip_area_emitters(scene, ray_skip, True, skip)
             pi = dr.select(skip, pi_after, pi)
             ray = dr.select(skip, ray_skip, ray)
+            skipped = dr.select(skip, si_skip.t, 0.0)
         valid = active & pi.is_valid()
         if feats["environment"] and not self.hide_emitters:
             valid = mi.Bool(active)
-        return ray, pi, valid
+        return ray, pi, valid, skipped
 
     def zero_aovs(self) -> list[mi.Float]:
         return [mi.Float(0.0) for _ in self.aov_names()]
@@ -223,11 +245,11 @@ class DraawIntegrator(RBIntegrator):
         or albedo of its own). Nothing is traced when no AOV is asked for."""
         if not self.aovs:
             return []
-        ray, pi, _ = self.trace_camera(scene, mi.Ray3f(dr.detach(ray)), active, feats)
+        ray, pi, _, skipped = self.trace_camera(scene, mi.Ray3f(dr.detach(ray)), active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=self.ray_flags(feats), active=active)
         if sdf is not None:
             si = sdf.intersect(ray, si, None, active)      # (no random numbers: the largest weight)
-        return self.eval_aovs(si, si.bsdf(ray), active, feats)
+        return self.eval_aovs(si, si.bsdf(ray), active, feats, skipped)
 
 
 # ---------------------------------------------------------------------------------------

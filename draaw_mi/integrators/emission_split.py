@@ -54,7 +54,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from .common import DraawIntegrator
+from .common import DraawIntegrator, parse_int
 from .scene_view import SceneView, scene_view
 
 DEFAULT_RAYS = 16       # 4 x 4 cells per camera sample in edge pixels (see the V4 docstring)
@@ -279,7 +279,8 @@ class EmissionSplitting(DraawIntegrator):
     (:meth:`edge_map`); ``sample()`` asks :meth:`split_inputs` what to split."""
 
     def init_emission_split(self, props: mi.Properties) -> None:
-        self.emission_split = check_rays(int(props.get("emission_split", DEFAULT_RAYS)))
+        # (4.7 was cut to 4 and True read as 1 without a word)
+        self.emission_split = check_rays(parse_int(props, "draaw_v4", "emission_split", DEFAULT_RAYS, 1))
         self._primary = None           # PrimaryRays of the rays being rendered
         self._edge_maps = {}           # (scene, camera) key -> Held((emitter array, edge map | None))
         self._frozen_edges = None      # Held(edge map | None) while a recording runs

@@ -88,6 +88,28 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
             f["textures"] = True
 
 
+def scene_shapes(scene: mi.Scene) -> list:
+    """The shapes whose surfaces a ray can hit: ``scene.shapes()``, with an ``instance``'s
+    shape-group members in place of the instance (``scene.shapes()`` lists the instance only,
+    with a default diffuse BSDF: instanced glass or textures were not seen, and V3/V4
+    rendered such scenes 8 % dark). The members are found through Mitsuba's traversal, run
+    only when there is an instance.
+
+    >>> d = {"type": "scene", "g": {"type": "shapegroup", "s": {"type": "sphere", "bsdf": {"type": "dielectric"}}},
+    ...      "i": {"type": "instance", "shapegroup": {"type": "ref", "id": "g"}}}
+    >>> [s.bsdf().class_name() for s in scene_shapes(mi.load_dict(d))]
+    ['SmoothDielectric']
+    """
+    shapes = list(scene.shapes())
+    if not any(s.class_name() == "Instance" for s in shapes):
+        return shapes
+    nodes = mi.traverse(scene).hierarchy           # every object the scene reaches, once
+    members = [n for n in nodes if isinstance(n, mi.Shape)
+               and n.class_name() not in ("Instance", "ShapeGroupPlugin")]      # (a shapegroup)
+    return [s for s in shapes if s.class_name() != "Instance"] + \
+        [m for m in members if all(m is not s for s in shapes)]
+
+
 def detect_features(scene: mi.Scene) -> dict[str, bool]:
     """Return the feature flags of ``scene`` (see the module docstring for the keys).
 
@@ -114,7 +136,7 @@ def detect_features(scene: mi.Scene) -> dict[str, bool]:
     f["environment"] = scene.environment() is not None
 
     seen: set[int] = set()
-    for shape in scene.shapes():
+    for shape in scene_shapes(scene):
         if shape.interior_medium() is not None or shape.exterior_medium() is not None:
             f["media"] = True
         bsdf = shape.bsdf()

@@ -6,7 +6,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError, suggest
 from .common import (DraawIntegrator, draaw_spec_eval, draaw_ndf_sample, draaw_params, flip_z,
-                     relative, safe_div, sample_emitter, separate_adjoints, side_sign)
+                     parse_float, relative, safe_div, sample_emitter, separate_adjoints, side_sign)
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
 
@@ -116,7 +116,7 @@ class DraawV3Integrator(DraawIntegrator):
                                  f"{suggest(str(dist), DISTRIBUTIONS)}")
         self.distribution = dist
         self.mtype = DISTRIBUTIONS[dist]
-        self.glossy_alpha = float(props.get("glossy_alpha", 0.25))
+        self.glossy_alpha = parse_float(props, "draaw_v3", "glossy_alpha", 0.25)
         if not (0.0 <= self.glossy_alpha <= 1.0):
             raise ParameterError(f"draaw_v3: glossy_alpha={self.glossy_alpha}; expected a "
                                  "value in [0, 1]")
@@ -176,7 +176,7 @@ class DraawV3Integrator(DraawIntegrator):
         δL = mi.Spectrum(δL if δL is not None else 0) # Differential/adjoint radiance
         β = mi.Spectrum(1)                            # Path throughput weight
         active = mi.Bool(active)                      # Active SIMD lanes
-        ray, pi, valid = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
         sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
         if dr.hint(sdf is not None, mode="scalar"):
@@ -185,7 +185,7 @@ class DraawV3Integrator(DraawIntegrator):
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats)
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, skipped)
 
         # ------------- Emitters seen directly by the camera -------------
         # (differentiated after the loop: no AD graph may exist while it runs)

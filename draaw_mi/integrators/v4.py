@@ -8,7 +8,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import emission_split
-from .common import mis_weight, relative, sample_emitter, separate_adjoints
+from .common import mis_weight, parse_bool, parse_float, relative, sample_emitter, separate_adjoints
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
 
@@ -169,13 +169,13 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         if "rr_depth" not in props:
             props["rr_depth"] = 2
         super().__init__(props)
-        self.rr_min = float(props.get("rr_min", 0.05))
+        self.rr_min = parse_float(props, "draaw_v4", "rr_min", 0.05)
         if not (0.0 < self.rr_min <= 1.0):
             raise ParameterError(f"draaw_v4: rr_min={self.rr_min}; expected a value in (0, 1]")
-        self.rr_threshold = float(props.get("rr_threshold", RR_THRESHOLD))
+        self.rr_threshold = parse_float(props, "draaw_v4", "rr_threshold", RR_THRESHOLD)
         if not (self.rr_threshold > 0.0):
             raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
-        self.adaptive = bool(props.get("adaptive", True))
+        self.adaptive = parse_bool(props, "draaw_v4", "adaptive", True)
         self.light_selection = str(props.get("light_selection", LIGHT_SELECTION))
         if self.light_selection not in ("auto", "learned", "power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
@@ -183,7 +183,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self._light_sums = None        # per-emitter second-moment sums while a light pilot runs
         self._tables = {}              # selection key -> (emitter array, table | None, learned)
         self._frozen_selection = None  # (PowerSelection | None,) while a recording runs
-        self.skip_constant_nee = not bool(props.get("constant_env_nee", False))
+        self.skip_constant_nee = not parse_bool(props, "draaw_v4", "constant_env_nee", False)
         self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
         self.last_depth = None
         self.init_emission_split(props)
@@ -330,7 +330,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         β = mi.Spectrum(1)                            # Path throughput weight
         η = mi.Float(1)                               # Index of refraction
         active = mi.Bool(active)                      # Active SIMD lanes
-        ray, pi, valid = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
         if dr.hint(split, mode="scalar"):
             edge = emission_split.edges_of(primary, edges, active)
             L_vis, δL_vis = emission_split.visible_emission(
@@ -352,7 +352,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             si0 = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
             if dr.hint(sdf is not None, mode="scalar"):
                 si0 = sdf.intersect(ray, si0, None, active)
-            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats)
+            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats, skipped)
             del si0
 
         while dr.hint(active, max_iterations=self.max_depth,

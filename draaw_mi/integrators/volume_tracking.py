@@ -33,8 +33,9 @@ def partly_null(scene: mi.Scene) -> bool:
     """Whether a shape's BSDF lets light through in part (``mask``: the ``Null`` flag and
     other lobes). Such surfaces were crossed as if absent in smoke scenes (an opaque masked
     card disappeared); where none is, their handling adds no kernel code."""
+    from .features import scene_shapes
     null = int(mi.BSDFFlags.Null)
-    for shape in scene.shapes():
+    for shape in scene_shapes(scene):
         bsdf = shape.bsdf()
         if bsdf is not None:
             flags = int(bsdf.flags())

@@ -65,3 +65,24 @@ def test_aovs_in_film_bitmap_names(scene):
     text = str(scene.sensors()[0].film().bitmap().struct_())
     for c in ("depth.Z", "N.X", "N.Y", "N.Z"):
         assert f" {c};" in text
+
+
+@pytest.mark.parametrize("kind", VERSIONS)
+def test_depth_behind_a_hidden_emitter_is_measured_from_the_camera(kind):
+    """With hide_emitters the camera ray goes on through an area light: its depth was
+    measured from the light (short by the camera-to-light distance, 3 here). Reference:
+    Mitsuba's aov integrator on the scene without the light."""
+    T = mi.ScalarTransform4f
+    d = {"type": "scene", "wall": {"type": "rectangle", "to_world": T().translate([0, 0, -1]).scale(3),
+                                   "bsdf": {"type": "diffuse"}},
+         "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}}}}
+    ref = np.array(mi.render(mi.load_dict(d), integrator=mi.load_dict({"type": "aov", "aovs": "dd.y:depth"}),
+                             spp=1, seed=3))[..., 0]
+    d["light"] = {"type": "rectangle", "to_world": T().translate([0, 0, 1]).scale(0.5),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}
+    img = np.array(mi.render(mi.load_dict(d), integrator=integrator(kind, aovs="depth", hide_emitters=True),
+                             spp=1, seed=3))
+    behind = img[..., 0] == 0                       # the colour: the hidden light shows nothing
+    assert behind.sum() >= 4 and (ref > 0).all()
+    np.testing.assert_allclose(img[..., 3], ref, rtol=1e-4)

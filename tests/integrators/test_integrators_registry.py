@@ -66,6 +66,13 @@ def test_resolve_version_suggests():
     ("draaw_v1", {"scatter": -3}, "scatter=-3"),
     ("draaw_v1", {"aovs": "deph"}, "did you mean 'depth'"),
     ("draaw_v2", {"aovs": "depth, normals"}, "normals"),
+    # (bool("false") is True: adaptive sampling stayed on, constant-sky NEE went on)
+    ("draaw_v4", {"adaptive": "false"}, "adaptive='false'; expected a boolean"),
+    ("draaw_v4", {"constant_env_nee": "no"}, "constant_env_nee='no'; expected a boolean"),
+    ("draaw_v4", {"emission_split": 4.7}, "emission_split=4.7; expected an integer"),   # (cut to 4)
+    ("draaw_v4", {"emission_split": True}, "emission_split=True; expected an integer"),
+    ("draaw_v4", {"rr_min": "0.5"}, "rr_min='0.5'; expected a number"),
+    ("draaw_v3", {"glossy_alpha": True}, "glossy_alpha=True; expected a number"),
 ])
 def test_bad_parameters_raise(plugin, props, match):
     with pytest.raises((ParameterError, RuntimeError), match=match):
