@@ -478,10 +478,20 @@ def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs,
         raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
     if aovs:
         raise RenderError("render: adaptive subsampling renders colour only; drop aovs or adaptive=")
-    colour = film_colour_names(scene.mi_scene.sensors()[0].film())
+    sensor = scene.mi_scene.sensors()[0]
+    film = sensor.film()
+    colour = film_colour_names(film)
     if colour != ["R", "G", "B"]:       # (an rgba film's alpha was dropped without a word)
         raise RenderError(f"render: adaptive subsampling renders R, G, B; the film of {scene.source} "
                           f"stores {', '.join(colour)}: set its pixel_format to rgb, or drop adaptive=")
+    # its rays go through pixel centres of the whole film with the aperture's centre: a
+    # thin lens rendered pinhole-sharp, a crop window came back as the whole film
+    if sensor.needs_aperture_sample():
+        raise RenderError(f"render: adaptive subsampling traces pinhole rays; the camera of {scene.source} "
+                          "has an aperture (thinlens): drop adaptive=")
+    if tuple(film.crop_size()) != tuple(film.size()) or any(int(v) for v in film.crop_offset()):
+        raise RenderError(f"render: adaptive subsampling renders the whole film; the film of {scene.source} "
+                          "has a crop window: drop adaptive= or the crop")
     holds = scene_holds(scene)
     if holds["sdf"] or holds["media"]:
         # its corner signatures (camera, shadow and mirror rays) see meshes only: SDF objects

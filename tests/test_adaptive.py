@@ -97,11 +97,16 @@ def test_edges_and_shadows_are_refined_to_pixels(tiny_scene, monkeypatch):
     assert np.isfinite(np.array(img)).all() and (np.array(img).sum(axis=2) > 0).mean() > 0.95
 
 
-def test_traced_pixels_have_the_expectation_of_a_full_render(tiny_scene, monkeypatch):
+@pytest.mark.parametrize("sampler", ["independent", "multijitter"])
+def test_traced_pixels_have_the_expectation_of_a_full_render(sampler, monkeypatch):
     """The pixels that are traced (silhouettes and shadow edges, mostly) are the image's own
     pixels: over independent seeds their values have the expectation of Mitsuba's ``path``
     render of the whole image at the same pixels (box filter; per-pixel z-test with the
-    suite's bounds). A sample position off by one pixel puts the edge pixels at |z| >> 3."""
+    suite's bounds). A sample position off by one pixel puts the edge pixels at |z| >> 3.
+    With a stratifying scene sampler (multijitter), the traced pixels' samples are still
+    uniform: its clone gave every lane sample 0 of one pattern (a skewed jitter)."""
+    from conftest import tiny_description
+    tiny_scene = draaw_mi.load_scene(tiny_description(sampler=sampler))
     import os
     import sys
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), "integrators"))
@@ -156,3 +161,24 @@ def test_render_passes_its_options_to_adaptive(tiny_scene, capsys):
             draaw_mi.render(tiny_scene, version="v2", adaptive=4, **option)
     draaw_mi.render(tiny_scene, version="v2", spp=2, adaptive=4, progress="lines")
     assert "2/2" in capsys.readouterr().err
+
+
+def test_a_numpy_block_size_is_a_block_size(tiny_scene):
+    """render(adaptive=np.int64(8)) was refused as "expected a power of two >= 2"."""
+    a = np.array(draaw_mi.render(tiny_scene, version="path", spp=4, seed=2, adaptive=np.int64(8)))
+    b = np.array(draaw_mi.render(tiny_scene, version="path", spp=4, seed=2, adaptive=8))
+    assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"type": "thinlens", "aperture_radius": 0.3, "focus_distance": 1.0}, "has an aperture"),
+    ({"film": {"crop_width": 16}}, "has a crop window")])
+def test_cameras_adaptive_rays_cannot_follow_are_refused(change, match):
+    """Its rays start at the aperture's centre and cover the whole film: a thin lens rendered
+    pinhole-sharp (RMSE 0.98 against the plain render), a crop window came back whole."""
+    d = mi.cornell_box()
+    film = change.pop("film", {})
+    d["sensor"].update(change)
+    d["sensor"]["film"].update(width=32, height=32, rfilter={"type": "box"}, **film)
+    with pytest.raises(draaw_mi.RenderError, match=f"adaptive subsampling .*{match}"):
+        draaw_mi.render(draaw_mi.load_scene(d), version="path", spp=4, adaptive=2)

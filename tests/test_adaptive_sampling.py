@@ -190,3 +190,18 @@ def test_allocation_without_any_variance_is_uniform():
     spread evenly (this returned a bare number before, and the main pass raised)."""
     m = ads.allocate(np.zeros((4, 6)), budget=24 * 10 * 2.0, m_min=5, seed=0, cost=np.full((4, 6), 2.0))
     assert m.shape == (4, 6) and (m == 10).all()
+
+
+@pytest.mark.parametrize("spp_map, what", [(np.ones((8, 6), int), r"shape \(8, 6\)"), (np.ones(48), r"shape \(48,\)"),
+                                           (np.full((6, 8), 2.9), "values from 2.9 to 2.9"),
+                                           (np.full((6, 8), -1), "values from -1 to -1"),
+                                           (np.full((6, 8), np.nan), "values from nan")])
+def test_a_spp_map_of_another_shape_or_of_fractions_is_refused(spp_map, what):
+    """A transposed (W, H) or flat map was taken in the wrong pixel order, 2.9 as 2 samples;
+    the error named no value."""
+    d = rs.feature_scene(res=8, spp=4, constant=True)
+    d["sensor"]["film"].update(width=8, height=6)
+    scene = mi.load_dict(d)
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    with pytest.raises(ValueError, match=rf"render_spp_map: spp_map has {what}.*; expected \(6, 8\) whole counts"):
+        ads.render_spp_map(integ, scene, scene.sensors()[0], spp_map, 0)
