@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.draaw-mi-installed
 
-.PHONY: setup llvm demo test test-all bench clean
+.PHONY: setup llvm demo test test-all clean
 
 setup: llvm $(STAMP)
 

@@ -1,4 +1,4 @@
-"""The ``draaw-mi`` command line: render, info, post.
+"""The ``draaw-mi`` command line: render, info, post, fit, bench, batch.
 
 Bad input exits with status 2 and one line on stderr (``draaw-mi: error: ...``), no traceback.
 
@@ -106,7 +106,7 @@ def _parser() -> argparse.ArgumentParser:
                    "--suite speed: suite scene names (default: all ten)")
     b.add_argument("--suite", choices=["speed"], help="speed: V4 (or --versions) against path on "
                    "the speed suite's scenes, time to reach path's error (draaw_mi.speed_bench); "
-                   "--spp's first value is the spp (default 64), --gt-spp the reference spp "
+                   "--spp is one spp (default 64), --gt-spp the reference spp "
                    "(default 1024; a multiple of 64, at least 128), --resolution N or NxN the sizes "
                    "(default 128 and 256); --max-depth, --adaptive, --quick, --denoise, "
                    "--camera-path and --frames do not apply")

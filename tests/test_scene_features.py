@@ -246,3 +246,11 @@ def test_gltf_base_colour_is_the_factor_times_the_decoded_texture(tmp_path):
     scene = draaw_mi.load_scene(grey, resolution=(8, 8), spp=4)
     mesh = next(i for i, s in enumerate(scene.mi_scene.shapes()) if s.is_mesh() and s.emitter() is None)
     assert np.allclose(_attribute(scene, mesh), want, atol=2e-3)
+
+
+def test_info_reports_aovs_a_scene_asks_for():
+    """A scene whose [render] table asks for AOVs showed "aovs" among the features that are
+    off (`draaw-mi info`): the flag looked at the loaded scene's integrator only."""
+    from conftest import tiny_description
+    assert draaw_mi.load_scene(tiny_description(aovs=["depth"])).features()["aovs"] is True
+    assert draaw_mi.load_scene(tiny_description()).features()["aovs"] is False

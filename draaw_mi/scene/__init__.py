@@ -212,9 +212,13 @@ class DraawScene:
         return self.info.get("sdf")
 
     def features(self) -> dict:
-        """Which effects the scene calls for (emitter kinds, textures, ...)."""
+        """Which effects the scene calls for (emitter kinds, textures, ...); ``aovs`` also
+        where the scene's ``[render]`` table asks for them (render gives them to the
+        integrator: the loaded scene's own integrator has none, and info said "off")."""
         from ..integrators.features import detect_features
-        return detect_features(self.mi_scene)
+        f = detect_features(self.mi_scene)
+        f["aovs"] = f["aovs"] or bool(self.settings.get("aovs"))
+        return f
 
     def summary(self) -> dict:
         """Everything ``draaw-mi info SCENE`` prints."""

@@ -284,8 +284,8 @@ def build_nodes(entries: list, material_slot, where, resolve=None) -> tuple[list
             continue
         name = string(entry.get("name", f"sdf{i}"), w / "name")
         if not NAME_PATTERN.fullmatch(name):
-            raise (w / "name").error(f"{name!r}; expected letters, digits, '_' or '-', not starting "
-                                     "with a digit (a name is part of the keys sdf.NAME.PARAM)")
+            raise (w / "name").error(f"{name!r}; expected letters, digits, '_' or '-', starting with a "
+                                     "letter or '_' (a name is part of the keys sdf.NAME.PARAM)")
         if name in tables:
             raise (w / "name").error(f"duplicate SDF name {name!r}")
         tables[name] = (entry, w)
