@@ -119,6 +119,26 @@ def _grid(n_pixels: int, step: int) -> np.ndarray:
     return np.minimum(np.arange(n_cells + 1) * step, n_pixels - 1)
 
 
+def check_adaptive_camera(scene) -> None:
+    """Refuse what adaptive subsampling's rays cannot follow: a film that is not R, G, B,
+    a camera with an aperture, a crop window."""
+    from .film_colour import film_colour_names
+    sensor = scene.mi_scene.sensors()[0]
+    film = sensor.film()
+    colour = film_colour_names(film)
+    if colour != ["R", "G", "B"]:       # (an rgba film's alpha was dropped without a word)
+        raise RenderError(f"render_adaptive: adaptive subsampling renders R, G, B; the film of {scene.source} "
+                          f"stores {', '.join(colour)}: set its pixel_format to rgb, or drop adaptive=")
+    # its rays go through pixel centres of the whole film with the aperture's centre: a
+    # thin lens rendered pinhole-sharp, a crop window came back as the whole film
+    if sensor.needs_aperture_sample():
+        raise RenderError(f"render_adaptive: adaptive subsampling traces pinhole rays; the camera of {scene.source} "
+                          "has an aperture (thinlens): drop adaptive=")
+    if tuple(film.crop_size()) != tuple(film.size()) or any(int(v) for v in film.crop_offset()):
+        raise RenderError(f"render_adaptive: adaptive subsampling renders the whole film; the film of {scene.source} "
+                          "has a crop window: drop adaptive= or the crop")
+
+
 def render_adaptive(scene, block: int = 8, spp: int = 1, seed: int = 0, version: str = "v4",
                     max_depth: int | None = None, integrator=None):
     """Render ``scene`` with adaptive subsampling; returns ((H, W, 3) mi.TensorXf, stats dict).
@@ -131,6 +151,7 @@ def render_adaptive(scene, block: int = 8, spp: int = 1, seed: int = 0, version:
     if isinstance(block, bool) or not isinstance(block, numbers.Integral) or block < 2 or block & (block - 1):
         raise RenderError(f"render: adaptive={block!r}; expected a power of two >= 2 (block size in pixels)")
     block = int(block)                  # (numpy integers too, as render's other counts)
+    check_adaptive_camera(scene)
     w, h = scene.resolution
     if integrator is None:
         integrator = make_integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)

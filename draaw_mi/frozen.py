@@ -68,6 +68,8 @@ def freeze_supported(mi_scene) -> bool:
     for sh in mi_scene.shapes():
         if sh.id().startswith(PROXY_PREFIX):
             return False                               # SDF proxies
+        if sh.class_name() == "Instance":
+            return False        # (its group's shapes may hold media, which this walk cannot see)
         if sh.interior_medium() is not None or sh.exterior_medium() is not None:
             return False
     return all(s.get_medium() is None for s in mi_scene.sensors())

@@ -29,10 +29,11 @@ from .integrators import is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
 from .guard import RENDER_GUARD
+from .film_colour import check_film_colour as _check_film_colour, film_colour_names  # noqa: F401 (re-exported)
+from .passes import pass_seed, pass_seeds, sample_passes  # noqa: F401 (re-exported)
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
 _INTEGRATOR_KEYS: dict = {}       # make_integrator's arguments as given -> plugin properties
-_SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
 MAX_PASS_SPP = 256
 
 
@@ -150,72 +151,6 @@ def scene_changed(mi_scene) -> None:
 
 def _scene_lock(scene) -> threading.Lock:
     return scene_state(scene).lock
-
-
-def pass_seeds(seed: int, n: int) -> list[int]:
-    """Independent per-pass seeds; the first pass uses ``seed`` itself.
-
-    >>> pass_seeds(7, 3)[0]
-    7
-    """
-    return [pass_seed(seed, i) for i in range(n)]
-
-
-def pass_seed(seed: int, i: int) -> int:
-    """The ``i``-th of :func:`pass_seeds` (without building the list: a preview asks for its
-    ten-thousandth).
-
-    >>> pass_seed(7, 5) == pass_seeds(7, 6)[-1]
-    True
-    """
-    return seed if i == 0 else (seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF
-
-
-def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
-    """Samples per pass: at most ``pass_spp`` each, ``spp`` in all, each a count the scene's
-    sampler takes as it is. Stratifying samplers round other counts up (``multijitter``
-    renders 35 samples when asked for 32, ``ldsampler`` rounds to powers of four), which
-    would make a render take more samples than it says; 32 becomes 30 + 2 instead. Where a
-    sampler takes no count below some size (``ldsampler``: 4), the last pass is rounded up.
-
-    >>> import mitsuba as mi
-    >>> scene = mi.load_dict({"type": "scene", "sensor": {"type": "perspective",
-    ...     "sampler": {"type": "multijitter"}}})
-    >>> sample_passes(scene, 32, 256), sample_passes(scene, 40, 16)
-    ([30, 2], [16, 16, 8])
-    """
-    sampler = mi_scene.sensors()[0].sampler()
-    # Mitsuba's own samplers round by their kind alone: remember what each takes (probing
-    # costs a fork and two log-level switches, about 40 us a render). A Python sampler may
-    # round by its own options, so it is probed every time.
-    kind = sampler.class_name() if type(sampler) is mi.Sampler else None
-
-    def taken(k: int) -> int:
-        if kind is not None and (kind, k) in _SAMPLES_TAKEN:
-            return _SAMPLES_TAKEN[(kind, k)]
-        f = sampler.fork()
-        logger = mi.logger()
-        level = logger.log_level()
-        logger.set_log_level(mi.LogLevel.Error)       # the probe's "rounded up" warnings
-        try:
-            f.set_sample_count(k)
-        finally:
-            logger.set_log_level(level)
-        got = int(f.sample_count())
-        if kind is not None:
-            _SAMPLES_TAKEN[(kind, k)] = got
-        return got
-
-    out, left = [], int(spp)
-    while left > 0:
-        k = min(left, int(pass_spp))
-        got = taken(k)
-        while got != k and k > 1:
-            k -= 1
-            got = taken(k)
-        out.append(got)                     # k, or (k = 1) a sampler's smallest count
-        left -= got
-    return out
 
 
 def _scene_passes(scene, spp: int, pass_spp: int) -> list[int]:
@@ -478,20 +413,6 @@ def _render_adaptive(scene, block, integrator, version, spp, seed, params, aovs,
         raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
     if aovs:
         raise RenderError("render: adaptive subsampling renders colour only; drop aovs or adaptive=")
-    sensor = scene.mi_scene.sensors()[0]
-    film = sensor.film()
-    colour = film_colour_names(film)
-    if colour != ["R", "G", "B"]:       # (an rgba film's alpha was dropped without a word)
-        raise RenderError(f"render: adaptive subsampling renders R, G, B; the film of {scene.source} "
-                          f"stores {', '.join(colour)}: set its pixel_format to rgb, or drop adaptive=")
-    # its rays go through pixel centres of the whole film with the aperture's centre: a
-    # thin lens rendered pinhole-sharp, a crop window came back as the whole film
-    if sensor.needs_aperture_sample():
-        raise RenderError(f"render: adaptive subsampling traces pinhole rays; the camera of {scene.source} "
-                          "has an aperture (thinlens): drop adaptive=")
-    if tuple(film.crop_size()) != tuple(film.size()) or any(int(v) for v in film.crop_offset()):
-        raise RenderError(f"render: adaptive subsampling renders the whole film; the film of {scene.source} "
-                          "has a crop window: drop adaptive= or the crop")
     holds = scene_holds(scene)
     if holds["sdf"] or holds["media"]:
         # its corner signatures (camera, shadow and mirror rays) see meshes only: SDF objects
@@ -546,35 +467,6 @@ def _denoised(image, names, extra_aovs):
         out = mi.TensorXf(np.ascontiguousarray(np.asarray(out)[..., keep]))
         names = [names[i] for i in keep]
     return out, names
-
-
-def film_colour_names(film) -> list[str]:
-    """The colour channels a Mitsuba film stores, from its ``pixel_format`` (``rgb``, ``rgba``,
-    ``xyz``, ``xyza``, ``y``, ``ya``; Mitsuba exposes it only in the film's description), by
-    their count where the description names none.
-
-    >>> import mitsuba as mi
-    >>> film_colour_names(mi.load_dict({"type": "hdrfilm", "pixel_format": "xyza"}))
-    ['X', 'Y', 'Z', 'A']
-    """
-    from .io import DEFAULT_NAMES
-    n = int(film.base_channels_count())
-    fmt = re.search(r"pixel_format = (\w+)", str(film))
-    names = [c.upper() for c in fmt.group(1)] if fmt else []
-    return names if len(names) == n else list(DEFAULT_NAMES[n])
-
-
-def _check_film_colour(scene, what: str) -> None:
-    """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
-    XYZ (an XML scene's pixel_format) is refused before the render, not after it (a post chain
-    failed with a shape error; the denoiser read Y and two AOV channels as colour; both read
-    X, Y, Z as R, G, B)."""
-    names = film_colour_names(scene.mi_scene.sensors()[0].film())
-    if names[:3] != ["R", "G", "B"]:
-        fmt = "".join(names).lower()
-        raise RenderError(f"render: the film of {scene.source} stores {', '.join(names)} colour "
-                          f"(pixel_format {fmt!r}); {what} needs rgb or rgba: "
-                          "set the film's pixel_format to rgb, or drop post/denoise")
 
 
 def _check_int(name, value, lo, hi=None) -> int:

@@ -180,5 +180,8 @@ def test_cameras_adaptive_rays_cannot_follow_are_refused(change, match):
     film = change.pop("film", {})
     d["sensor"].update(change)
     d["sensor"]["film"].update(width=32, height=32, rfilter={"type": "box"}, **film)
+    scene = draaw_mi.load_scene(d)
     with pytest.raises(draaw_mi.RenderError, match=f"adaptive subsampling .*{match}"):
-        draaw_mi.render(draaw_mi.load_scene(d), version="path", spp=4, adaptive=2)
+        draaw_mi.render(scene, version="path", spp=4, adaptive=2)
+    with pytest.raises(draaw_mi.RenderError, match=f"render_adaptive: adaptive subsampling .*{match}"):
+        render_adaptive(scene, block=2, spp=4, version="path")      # (the public function too)

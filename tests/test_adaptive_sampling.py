@@ -195,7 +195,8 @@ def test_allocation_without_any_variance_is_uniform():
 @pytest.mark.parametrize("spp_map, what", [(np.ones((8, 6), int), r"shape \(8, 6\)"), (np.ones(48), r"shape \(48,\)"),
                                            (np.full((6, 8), 2.9), "values from 2.9 to 2.9"),
                                            (np.full((6, 8), -1), "values from -1 to -1"),
-                                           (np.full((6, 8), np.nan), "values from nan")])
+                                           (np.full((6, 8), np.nan), "values from nan"),
+                                           (np.full((6, 8), np.inf), "values from inf")])
 def test_a_spp_map_of_another_shape_or_of_fractions_is_refused(spp_map, what):
     """A transposed (W, H) or flat map was taken in the wrong pixel order, 2.9 as 2 samples;
     the error named no value."""

@@ -191,3 +191,22 @@ def test_no_command_lists_the_commands(capsys):
 def test_dry_run_and_status_are_one_or_the_other(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "m.toml"), "--dry-run", "--status"]) == 2
     assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_bench_quick_keeps_an_explicit_gt_spp(tmp_path, monkeypatch):
+    """--quick capped the reference at 1024 spp: an explicit --gt-spp 2048 became 1024."""
+    from draaw_mi import bench
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def study(*a, **k):
+        seen.update(k)
+        raise Stop
+    monkeypatch.setattr(bench, "run_study", study)
+    for argv, gt in (([], 1024), (["--gt-spp", "2048"], 2048)):
+        with pytest.raises(Stop):
+            main(["bench", os.path.join(SCENES, "cornell.toml"), "--quick", "--versions", "v4",
+                  "--out", str(tmp_path / "o"), "--no-progress"] + argv)
+        assert seen["gt_spp"] == gt

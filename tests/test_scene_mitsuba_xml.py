@@ -184,7 +184,7 @@ def test_a_luminance_film_is_refused_by_a_post_chain_before_the_render(tmp_path)
     """A post chain and the denoiser read R, G, B: a luminance film is named before rendering
     (the chain failed after it with a shape error, the denoiser read AOVs as colour)."""
     scene = draaw_mi.load_scene(_film_scene(tmp_path, "luminance"))
-    with pytest.raises(draaw_mi.DraawError, match="stores Y colour.*'y'.*a post chain needs rgb"):
+    with pytest.raises(draaw_mi.DraawError, match="stores Y colour.*'luminance'.*a post chain needs rgb"):
         draaw_mi.render(scene, spp=1, post=[{"type": "srgb"}])
     with pytest.raises(draaw_mi.DraawError, match="denoising needs rgb or rgba"):
         draaw_mi.render(scene, spp=1, denoise=True)
@@ -204,3 +204,23 @@ def test_adaptive_subsampling_refuses_a_film_that_is_not_rgb(tmp_path):
             draaw_mi.render(scene, version="path", spp=4, adaptive=8)
     img = draaw_mi.render(draaw_mi.load_scene(_film_scene(tmp_path, "rgb")), version="path", spp=4, adaptive=8)
     assert np.array(img).shape == (16, 16, 3)
+
+
+@pytest.mark.parametrize("pixel_format, colour", [("xyz", ["X", "Y", "Z"]), ("rgba", ["R", "G", "B", "A"])])
+def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_format, colour):
+    """The batch's frozen one-pass path named every frame's colour R, G, B: an xyz film's
+    frames were labelled R, G, B, an rgba film's failed after rendering ("3 channel names
+    for an image of shape (16, 16, 4)"); a post chain on an xyz film ran on X, Y, Z."""
+    path = _film_scene(tmp_path, pixel_format)
+    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+           "jobs": [{"name": "x", "scene": path, "frames": 1, "spp": 2}]}
+    assert batch.run(doc, progress=False).rendered == 1
+    arr, names = draaw_mi.read_exr(str(tmp_path / "out" / "0000.exr"), with_names=True)
+    assert names == colour
+    ref = np.array(draaw_mi.render(path, spp=2, seed=batch.load(doc)[1][0]["seed"]))
+    assert np.array_equal(arr, ref)                               # render()'s image, bit for bit
+    if pixel_format == "xyz":
+        doc["jobs"][0]["post"] = [{"type": "srgb"}]
+        doc["output"] = str(tmp_path / "post" / "{frame:04d}.exr")
+        res = batch.run(doc, progress=False)
+        assert res.rendered == 0 and "stores X, Y, Z colour" in res.failed[0]["error"]

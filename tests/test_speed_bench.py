@@ -78,6 +78,7 @@ def test_an_edited_scene_gets_its_own_cached_reference(monkeypatch, tmp_path):
     (["--ref-spp", "100"], "--ref-spp 100; expected a multiple of 64 that is at least 128"),
     (["--ref-spp", "0"], "--ref-spp 0; expected a multiple of 64"),
     (["--res", "0"], "--res '0'; expected comma-separated integers >= 1"),
+    (["--res", "x"], "--res 'x'; expected comma-separated integers >= 1"),
 ])
 def test_main_checks_its_numbers_before_rendering(monkeypatch, tmp_path, capsys, flags, message):
     """--spp 0 rendered at the sampler's 64 spp and reported 0; --repeats 0 raised

@@ -12,7 +12,8 @@ with ``exrheader`` or ``OpenEXR.File(path, header_only=True).header()``)::
     draaw:render_seconds, draaw:rendered_at (UTC ISO time)
     draaw:draaw_mi, draaw:mitsuba, draaw:drjit, draaw:variant
     draaw:params  the frame's overrides (JSON: {parameter key: value}), if any
-    draaw:camera  the frame's camera (JSON: origin, target, up, fov), if the job moves it
+    draaw:camera  the frame's camera (JSON: origin, target, up, fov, and mirror: true for a
+                  mirrored GO-Draaw view), if the job moves it
     draaw:post    the post chain applied to its colour (JSON), if any
 
 A frame is *finished* when its file exists, its header is readable, its ``draaw:frame_hash``

@@ -56,9 +56,9 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
+        from ..film_colour import check_film_colour, film_colour_names
         from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
-                              non_finite_count,
-                              render, sample_passes)
+                              non_finite_count, render, sample_passes)
 
         s = self.scene.settings
         spp = spec["spp"]
@@ -71,6 +71,12 @@ class CachedScene:
                                  max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                                  return_info=True)
             return image, info
+        # as render() names and checks the film's colour (an xyz film's frames were named
+        # R, G, B, an rgba film's failed after rendering, a post chain read X, Y, Z as R, G, B)
+        chain = s.get("post", []) if spec["post"] is None else spec["post"]
+        if chain:
+            check_film_colour(self.scene, "a post chain")
+        colour = film_colour_names(self.scene.mi_scene.sensors()[0].film())
         key = (id(integrator), spp)
         fn = self.frozen.get(key)
         if fn is None:
@@ -80,12 +86,11 @@ class CachedScene:
         image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)   # (render_frame
         dr.eval(image)                                                          # holds the guard)
         dr.sync_thread()
-        chain = s.get("post", []) if spec["post"] is None else spec["post"]
         bad = 0
         if chain:                             # (counted before it: it reads NaN/inf as 0)
             bad = non_finite_count(image)
             image = _apply_post(image, chain)
-        return image, {"channels": ["R", "G", "B"] + list(integrator.aov_names()), "non_finite": bad,
+        return image, {"channels": colour + list(integrator.aov_names()), "non_finite": bad,
                        "post": chain}
 
     def _prepare(self, integrator, spec: dict) -> None:

@@ -30,7 +30,8 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
 Camera tables (one of): ``orbit``; ``keyframes`` (GO-Draaw ``[x, y, z, theta, phi]`` rows,
 interpolated as in :mod:`draaw_mi.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
 ``file`` (a GO-Draaw ``camera_positions.json``); ``look_at`` (a list of
-``{origin, target, up}`` keyframes, eased like the GO-Draaw path). ``fov`` sets the field of
+``{origin, target, up}`` keyframes, eased like the GO-Draaw path; ``mirror = true`` in every
+keyframe for a mirrored view, as a scene's ``[camera]``). ``fov`` sets the field of
 view. Parameter values: a number or list (every frame), ``{from, to}`` (linear over the
 frames) or ``{values = [...]}`` (one per frame).
 
@@ -54,7 +55,7 @@ JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "r
             "post", "camera", "params", "output", "half", "previews", "freeze")
 CAMERA_KEYS = ("orbit", "keyframes", "file", "look_at", "faithful", "fov")
 ORBIT_KEYS = ("target", "radius", "height", "degrees", "start", "up")
-LOOK_AT_KEYS = ("origin", "target", "up")
+LOOK_AT_KEYS = ("origin", "target", "up", "mirror")
 PATTERN_FIELDS = ("job", "scene", "version", "spp", "frame")
 DEFAULT_OUTPUT = "{job}/{frame:04d}.exr"
 EXPANDING = ("scene", "version", "spp")
@@ -254,6 +255,13 @@ def _camera(cam, where: Where, base: str) -> dict:
                    + vector(k.get("up", [0, 1, 0]), wk / "up"))
             check_look_at(row[0:3], row[3:6], row[6:9], wk)   # (a camera at its target: a flat frame)
             rows.append(row)
+            # a scene file's look-at camera takes it (the tuner saves a mirrored GO-Draaw
+            # camera so); frames eased between a mirrored and a plain view are no camera
+            mirror = boolean(k.get("mirror", False), wk / "mirror")
+            if i and mirror != out["mirror"]:
+                raise (wk / "mirror").error(f"{mirror}, keyframe 0 says {out['mirror']}: a path's "
+                                            "keyframes are all mirrored or none")
+            out["mirror"] = mirror
         out["look_at"] = rows
     else:
         if kind == "file":

@@ -80,6 +80,10 @@ def frame_hash(spec: dict) -> str:
             "camera", "params", "half", "versions")
     if spec.get("files_hash"):     # (only then: frames of scenes that read no file keep their hash)
         keys += ("files_hash",)
+    if spec.get("scene_camera_mirror"):
+        # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored since
+        # session 35; its frames made before are stale, the others keep their hash)
+        keys += ("scene_camera_mirror",)
     values = {k: spec.get(k) for k in keys}
     values["version"] = canonical_version(values["version"])
     text = json.dumps(values, sort_keys=True, separators=(",", ":"))
@@ -130,7 +134,7 @@ def camera_frames(cam: dict, frames: int, scene_fov: float) -> list[dict]:
         from ..scene.camera import check_look_at
         from ..scene.schema import Where
         rows = _ease(np.asarray(cam["look_at"], float), frames)
-        out = [(r[0:3], r[3:6], r[6:9], False) for r in rows]
+        out = [(r[0:3], r[3:6], r[6:9], cam.get("mirror", False)) for r in rows]
         for i, (o, t, u, _) in enumerate(out):          # (the keys are checked; eased frames too)
             check_look_at(o, t, u, Where(f"camera look_at frame {i}"))
     else:
@@ -253,6 +257,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "seed": frame_seed(int(s.get("seed", 0)) if job.seed is None else job.seed, f),
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
                 "camera": cams[f] if cams else None,
+                "scene_camera_mirror": not cams and bool(scene.info.get("camera", {}).get("mirror")),
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},
                 "half": job.half, "preview": job.previews, "output": out, "versions": vers,
                 "encoded": encoded,

@@ -183,11 +183,13 @@ class DraawIntegrator(RBIntegrator):
         return mi.RayFlags.ShadingFrame
 
     def eval_aovs(self, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, active: mi.Bool,
-                  feats: dict[str, bool], skipped=None) -> list[mi.Float]:
-        """AOV channel values at the camera ray's first hit ``si`` (primal only); ``skipped``:
-        the distance to a hidden emitter the ray was continued from (:meth:`trace_camera`)."""
+                  feats: dict[str, bool], cam_origin=None) -> list[mi.Float]:
+        """AOV channel values at the camera ray's first hit ``si`` (primal only);
+        ``cam_origin``: where the camera ray started, when it may have been continued from a
+        hidden emitter (:meth:`trace_camera`): depth is measured from there, not from the
+        emitter (or, through a sphere light, from the emitter's far side)."""
         valid = active & si.is_valid()
-        t = si.t if skipped is None else si.t + skipped     # (from the camera, not the emitter)
+        t = si.t if cam_origin is None else dr.norm(si.p - cam_origin)
         out: list[mi.Float] = []
         for name in self.aovs:
             if name == "depth":
@@ -211,28 +213,28 @@ class DraawIntegrator(RBIntegrator):
 
     def trace_camera(self, scene: mi.Scene, ray: mi.Ray3f, active: mi.Bool,
                      feats: dict[str, bool]):
-        """First intersection of the camera rays: ``(ray, pi, valid, skipped)``.
+        """First intersection of the camera rays: ``(ray, pi, valid, cam_origin)``.
 
         With ``hide_emitters``, area emitters are skipped (as Mitsuba's ``path`` / ``prb``
-        do): ``ray`` then starts on the skipped emitter, ``skipped`` away from the camera
-        (0 elsewhere; None when nothing can be skipped), which depth AOVs add back (they
-        measured from the hidden emitter). ``valid`` (the alpha channel) is set where the
-        ray hits a surface, or everywhere when a visible environment is shown.
+        do): ``ray`` then starts on the last skipped emitter, and ``cam_origin`` is the camera
+        rays' own origin, for depth AOVs (None when nothing can be skipped). ``valid`` (the
+        alpha channel) is set where the ray hits a surface, or everywhere when a visible
+        environment is shown.
         """
         pi = scene.ray_intersect_preliminary(ray, coherent=True, active=active)
-        skipped = None
+        cam_origin = None
         if self.hide_emitters and feats["area_lights"]:
             skip = active & pi.is_valid() & (pi.shape.emitter() != None)  # noqa: E711
             si_skip = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal, skip)
             ray_skip = si_skip.spawn_ray(ray.d)
             pi_after = self.skip_area_emitters(scene, ray_skip, True, skip)
+            cam_origin = mi.Point3f(ray.o)
             pi = dr.select(skip, pi_after, pi)
             ray = dr.select(skip, ray_skip, ray)
-            skipped = dr.select(skip, si_skip.t, 0.0)
         valid = active & pi.is_valid()
         if feats["environment"] and not self.hide_emitters:
             valid = mi.Bool(active)
-        return ray, pi, valid, skipped
+        return ray, pi, valid, cam_origin
 
     def zero_aovs(self) -> list[mi.Float]:
         return [mi.Float(0.0) for _ in self.aov_names()]
@@ -245,11 +247,11 @@ class DraawIntegrator(RBIntegrator):
         or albedo of its own). Nothing is traced when no AOV is asked for."""
         if not self.aovs:
             return []
-        ray, pi, _, skipped = self.trace_camera(scene, mi.Ray3f(dr.detach(ray)), active, feats)
+        ray, pi, _, cam_origin = self.trace_camera(scene, mi.Ray3f(dr.detach(ray)), active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=self.ray_flags(feats), active=active)
         if sdf is not None:
             si = sdf.intersect(ray, si, None, active)      # (no random numbers: the largest weight)
-        return self.eval_aovs(si, si.bsdf(ray), active, feats, skipped)
+        return self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
 
 
 # ---------------------------------------------------------------------------------------

@@ -154,7 +154,7 @@ class DraawV1Integrator(DraawIntegrator):
         δL = mi.Spectrum(δL if δL is not None else 0) # Differential/adjoint radiance
         β = mi.Spectrum(1)                            # Mirror-chain throughput
         active = mi.Bool(active)
-        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
         sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
         if dr.hint(sdf is not None, mode="scalar"):
@@ -163,7 +163,7 @@ class DraawV1Integrator(DraawIntegrator):
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, skipped)
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
 
         while dr.hint(active, max_iterations=self.max_depth,
                       label=f"draaw_v1 ({mode.name})"):

@@ -212,13 +212,13 @@ class DraawV2Integrator(DraawIntegrator):
             return mi.Spectrum(0.0), mi.Bool(False), self.zero_aovs(), []
 
         # ---------------- first hit: emission, direct light, AOVs ----------------
-        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
         sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
         if sdf is not None:
             si = sdf.intersect(ray, si, sampler, active)
             valid |= active & si.is_valid()
-        aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, skipped) if primal else self.zero_aovs()
+        aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin) if primal else self.zero_aovs()
         zero = mi.UInt32(0)
         one = mi.Spectrum(1.0)
         active_next = active & si.is_valid() & (1 < self.max_depth)

@@ -176,7 +176,7 @@ class DraawV3Integrator(DraawIntegrator):
         δL = mi.Spectrum(δL if δL is not None else 0) # Differential/adjoint radiance
         β = mi.Spectrum(1)                            # Path throughput weight
         active = mi.Bool(active)                      # Active SIMD lanes
-        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
         si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
         sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
         if dr.hint(sdf is not None, mode="scalar"):
@@ -185,7 +185,7 @@ class DraawV3Integrator(DraawIntegrator):
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, skipped)
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
 
         # ------------- Emitters seen directly by the camera -------------
         # (differentiated after the loop: no AD graph may exist while it runs)

@@ -330,7 +330,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         β = mi.Spectrum(1)                            # Path throughput weight
         η = mi.Float(1)                               # Index of refraction
         active = mi.Bool(active)                      # Active SIMD lanes
-        ray, pi, valid, skipped = self.trace_camera(scene, ray, active, feats)
+        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
         if dr.hint(split, mode="scalar"):
             edge = emission_split.edges_of(primary, edges, active)
             L_vis, δL_vis = emission_split.visible_emission(
@@ -352,7 +352,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             si0 = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
             if dr.hint(sdf is not None, mode="scalar"):
                 si0 = sdf.intersect(ray, si0, None, active)
-            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats, skipped)
+            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats, cam_origin)
             del si0
 
         while dr.hint(active, max_iterations=self.max_depth,

@@ -38,7 +38,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, RenderError
 from ..media.majorant import build_majorant
 from . import volume_tracking as vt
 from .common import mis_weight
@@ -60,8 +60,16 @@ class MediaTable:
     """Every medium of a scene with its majorant, as Dr.Jit arrays indexed per lane."""
 
     def __init__(self, scene: mi.Scene, factor: float = 1.0):
+        from .features import scene_shapes
+        top = scene.shapes()
+        for shape in scene_shapes(scene):
+            if all(shape is not s for s in top) and (shape.interior_medium() or shape.exterior_medium()):
+                # (its medium was ignored: a smoke-filled instanced sphere rendered as empty)
+                raise RenderError(f"draaw integrators: a participating medium on a shape inside a "
+                                  f"shapegroup ({shape.id() or shape.class_name()}) is not supported; "
+                                  "move the shape out of the group, or render with volpath")
         media, inside = [], []
-        for shape in scene.shapes():
+        for shape in top:
             for m in (shape.interior_medium(), shape.exterior_medium()):
                 if m is not None and all(m is not x for x in media):
                     media.append(m)

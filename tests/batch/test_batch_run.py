@@ -11,7 +11,7 @@ import numpy as np
 import OpenEXR
 import pytest
 import tomli_w
-from batch_helpers import assert_bit_identical, frames_of, manifest, write_manifest, write_scene
+from batch_helpers import assert_bit_identical, frames_of, manifest, tiny_description, write_manifest, write_scene
 from conftest import tiny_description
 
 import draaw_mi
@@ -127,6 +127,45 @@ def test_go_draaw_keyframe_frames_show_go_draaws_view(tmp_path):
         assert col == pytest.approx(u * 32, abs=3.0), (k, col, u * 32)
         assert s["camera"].get("mirror", False) == (math.sin(k[4]) > 0)
     assert [s["hash"] for s in specs] == [s["hash"] for s in batch.load(doc)[1]]
+
+
+@pytest.mark.parametrize("phi, mirrored", [(1.2, True), (-2.08, False)])
+def test_frames_of_a_scenes_own_mirrored_go_draaw_camera_are_rehashed(tmp_path, phi, mirrored):
+    """A job without a camera renders the scene's own; a GO-Draaw [camera] with sin φ > 0
+    renders mirrored since the fix, and its frames made before stayed "done" (same hash).
+    They are re-hashed; every other frame keeps its hash (the key is absent there)."""
+    from draaw_mi.batch.plan import frame_hash
+    desc = tiny_description()
+    desc["camera"] = {"position": [0.0, 0.5, 5.0], "angles": [-1.3, phi], "fov": 40.0}
+    scene = os.path.join(str(tmp_path), "s.toml")
+    with open(scene, "wb") as fh:
+        tomli_w.dump(desc, fh)
+    doc = manifest(tmp_path, frames=1, scene=scene)
+    del doc["jobs"][0]["camera"]
+    spec = batch.load(doc)[1][0]
+    assert spec["scene_camera_mirror"] is mirrored
+    before = frame_hash({k: v for k, v in spec.items() if k != "scene_camera_mirror"})
+    assert (spec["hash"] != before) is mirrored
+
+
+def test_look_at_keyframes_take_mirror_as_a_scene_camera_does(tmp_path):
+    """The README says a look-at camera takes mirror = true (the tuner saves mirrored GO-Draaw
+    cameras so); a batch look_at keyframe refused it ("unknown key 'mirror'"). The mirrored
+    frame is the plain frame flipped left-right; mixed keyframes are refused."""
+    key = {"origin": [0.3, 1.0, 5.0], "target": [0.0, 0.5, 0.0]}
+    doc = manifest(tmp_path, frames=1, version="path", spp=256, camera={"look_at": [key]})
+    del doc["jobs"][0]["params"]
+    doc["jobs"].append(dict(doc["jobs"][0], name="m", camera={"look_at": [dict(key, mirror=True)]}))
+    res = batch.run(doc, progress=False)
+    assert res.complete and not res.failed
+    plain, mirrored = (draaw_mi.read_exr(s["output"]) for s in batch.load(doc)[1])
+    cols = lambda img: img.mean(axis=(0, 2))                       # noqa: E731 (column means)
+    flipped, same = (np.abs(cols(mirrored) - cols(p)).max() for p in (plain[:, ::-1], plain))
+    assert flipped < 0.3 * same, (flipped, same)
+    doc["jobs"][1]["camera"] = {"look_at": [dict(key, mirror=True), key]}
+    doc["jobs"][1]["frames"] = 2
+    with pytest.raises(draaw_mi.DraawError, match=r"look_at\[1\].mirror: False, keyframe 0 says True: .*all mirrored or none"):
+        batch.load(doc)
 
 
 def test_exr_layers_metadata_and_half(tmp_path):

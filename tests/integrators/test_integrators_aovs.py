@@ -67,11 +67,13 @@ def test_aovs_in_film_bitmap_names(scene):
         assert f" {c};" in text
 
 
+@pytest.mark.parametrize("light", ["rectangle", "sphere"])
 @pytest.mark.parametrize("kind", VERSIONS)
-def test_depth_behind_a_hidden_emitter_is_measured_from_the_camera(kind):
+def test_depth_behind_a_hidden_emitter_is_measured_from_the_camera(kind, light):
     """With hide_emitters the camera ray goes on through an area light: its depth was
-    measured from the light (short by the camera-to-light distance, 3 here). Reference:
-    Mitsuba's aov integrator on the scene without the light."""
+    measured from the light (short by the camera-to-light distance, 3 here), and through a
+    sphere light from its far side. Reference: Mitsuba's aov integrator on the scene
+    without the light."""
     T = mi.ScalarTransform4f
     d = {"type": "scene", "wall": {"type": "rectangle", "to_world": T().translate([0, 0, -1]).scale(3),
                                    "bsdf": {"type": "diffuse"}},
@@ -81,8 +83,12 @@ def test_depth_behind_a_hidden_emitter_is_measured_from_the_camera(kind):
                              spp=1, seed=3))[..., 0]
     d["light"] = {"type": "rectangle", "to_world": T().translate([0, 0, 1]).scale(0.5),
                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}
-    img = np.array(mi.render(mi.load_dict(d), integrator=integrator(kind, aovs="depth", hide_emitters=True),
+    if light == "sphere":
+        d["light"] = {"type": "sphere", "center": [0, 0, 1], "radius": 0.6, "emitter": d["light"]["emitter"]}
+    scene = mi.load_dict(d)
+    img = np.array(mi.render(scene, integrator=integrator(kind, aovs="depth", hide_emitters=True),
                              spp=1, seed=3))
-    behind = img[..., 0] == 0                       # the colour: the hidden light shows nothing
-    assert behind.sum() >= 4 and (ref > 0).all()
+    to_light = np.array(mi.render(scene, integrator=mi.load_dict({"type": "aov", "aovs": "dd.y:depth"}),
+                                  spp=1, seed=3))[..., 0]
+    assert (np.abs(to_light - ref) > 0.5).sum() >= 4 and (ref > 0).all()     # the light is in view
     np.testing.assert_allclose(img[..., 3], ref, rtol=1e-4)
