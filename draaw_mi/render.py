@@ -101,6 +101,18 @@ def _plugin_parameters(plugin: str) -> list[str]:
     return sorted(set(names))
 
 
+def scene_colour_names(scene) -> list[str]:
+    """:func:`film_colour_names` of the scene's first film, found once per scene (a film's
+    pixel format is fixed at loading; read after the kernels were launched, the lookup waited
+    for a core: 0.1 ms a small render)."""
+    memo = scene_state(scene).memo
+    key = ("draaw_mi.render.colour",)
+    names = memo.get(key)
+    if names is None:
+        names = memo[key] = film_colour_names(scene.mi_scene.sensors()[0].film())
+    return list(names)
+
+
 def scene_holds(scene) -> dict:
     """``{"sdf": bool, "media": bool}``: whether the :class:`DraawScene` has ``[[sdf]]``
     objects or participating media (found once per scene)."""
@@ -326,7 +338,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     # film's X, Y, Z were written as R, G, B), then the AOVs'
     from .io import channel_names
     aov_names = integrator.aov_names()
-    colour = film_colour_names(scene.mi_scene.sensors()[0].film())
+    colour = scene_colour_names(scene)
     names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
              else channel_names(acc.shape[2], aov_names))
     image = acc
