@@ -220,11 +220,16 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
-              encoded: bool = False) -> None:
+              encoded: bool = False, channels: Sequence[str] | None = None) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically: 1 (grey), 2 (grey,
     alpha), 3 (RGB) or 4 (RGBA) channels; of more (AOVs), the first 3. Alpha is stored linear,
     and a linear image's colour, premultiplied by alpha as films hold it, is stored straight
     (divided by alpha where alpha > 0), as PNG's alpha is.
+
+    ``channels``: the image's channel names (``render(..., return_info=True)``'s
+    ``info["channels"]``): then its colour channels are written (R, G, B or Y, with A as
+    alpha where there is one) and its AOVs left out. Without them an image of R, G, B and one
+    AOV (``aovs = ["depth"]``) would be taken for RGBA.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
@@ -238,6 +243,15 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
         # (an 8-bit PNG was written under an .exr name; write_exr refuses the mirror case)
         raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
     arr = to_numpy(image, f"write_png({path!r})")
+    if channels is not None:
+        names = list(channels)
+        if len(names) != arr.shape[2]:
+            raise IOFailure(f"write_png({path!r}): {len(names)} channel names for an image with "
+                            f"{arr.shape[2]} channels")
+        colour = [n for n in ("R", "G", "B") if n in names] or [n for n in ("Y",) if n in names]
+        if len(colour) not in (1, 3):
+            raise IOFailure(f"write_png({path!r}): channels {names}; expected R, G, B or Y among them")
+        arr = arr[..., [names.index(n) for n in colour + (["A"] if "A" in names else [])]]
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
     if c in (2, 4) and not encoded:

@@ -221,3 +221,20 @@ def test_exr_header_ints_beyond_int32_come_back_whole(tmp_path):
 def test_write_exr_errors_name_the_call(tmp_path, image, match):
     with pytest.raises(IOFailure, match=match):
         draaw_mi.write_exr(str(tmp_path / "x.exr"), image)
+
+
+def test_png_of_colour_and_an_aov_keeps_the_aov_out_given_the_names(tmp_path):
+    """R, G, B and a depth AOV are four channels: without names they are taken for RGBA (as
+    documented); with render's channel names the depth is left out, and an A channel is the
+    alpha wherever it is."""
+    from PIL import Image
+    img = np.zeros((2, 3, 5), np.float32)
+    img[..., :3], img[..., 3], img[..., 4] = 0.18, 0.5, 7.0          # R, G, B, A, depth.Z
+    draaw_mi.write_png(str(tmp_path / "a.png"), img, channels=["R", "G", "B", "A", "depth.Z"])
+    back = np.asarray(Image.open(str(tmp_path / "a.png")).convert("RGBA"))
+    assert np.all(back[..., 3] == 128) and np.all(back[..., 0] == round(float(srgb_encode(np.array([0.36]))[0]) * 255))
+    draaw_mi.write_png(str(tmp_path / "d.png"), img[..., [0, 1, 2, 4]], channels=["R", "G", "B", "depth.Z"])
+    back = np.asarray(Image.open(str(tmp_path / "d.png")).convert("RGBA"))
+    assert np.all(back[..., 3] == 255) and np.all(back[..., 0] == round(float(srgb_encode(np.array([0.18]))[0]) * 255))
+    with pytest.raises(IOFailure, match=r"write_png\('.*x.png'\): channels \['depth.Z'\]; expected R, G, B or Y"):
+        draaw_mi.write_png(str(tmp_path / "x.png"), img[..., 4:], channels=["depth.Z"])
