@@ -77,6 +77,7 @@ class LineProgress:
         self.postfix = ""
         self.start = self.last = clock()
         self.written_at = -1                     # self.n when the last line was written
+        self.closed = False
 
     def update(self, n: int = 1):
         self.n += n
@@ -93,6 +94,7 @@ class LineProgress:
         self.postfix = str(text)
 
     def close(self):
+        self.closed = True
         if self.written_at != self.n:
             self._write(self.clock())
 
@@ -102,7 +104,9 @@ class LineProgress:
         parts = [f"{self.desc}: {self.n}/{self.total} {self.unit}"
                  + (f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""),
                  f"{elapsed:.1f} s"]
-        if 0 < self.n < self.total:
+        if self.closed and self.n < self.total:
+            parts.append("stopped")        # (a time budget: no time is left to estimate)
+        elif 0 < self.n < self.total:
             parts.append(f"ETA {elapsed * (self.total - self.n) / self.n:.0f} s")
         if self.postfix:
             parts.append(self.postfix)

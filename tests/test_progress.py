@@ -49,7 +49,8 @@ def test_close_writes_the_last_state_once():
     bar.update(3)                 # stopped early (a time budget): no line yet
     bar.close()
     bar.close()
-    assert out.getvalue().splitlines() == ["render: 3/10 spp (30 %), 0.0 s, ETA 0 s"]
+    # (it said "ETA 0 s": no time was left to estimate)
+    assert out.getvalue().splitlines() == ["render: 3/10 spp (30 %), 0.0 s, stopped"]
 
 
 class Stream(io.StringIO):
@@ -78,3 +79,4 @@ def test_render_refuses_a_bad_mode_before_it_loads_anything():
     import draaw_mi
     with pytest.raises(ParameterError, match="render: progress=2"):
         draaw_mi.render("no-such-scene.toml", progress=2)
+
