@@ -105,3 +105,11 @@ def test_bad_durations_and_rates_are_named(kwargs, match):
     from draaw_mi.errors import ParameterError
     with pytest.raises(ParameterError, match=f"camera path: {match}; expected a positive number"):
         interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], **kwargs)
+
+
+def test_dict_keyframes_read_camerax_as_theta_and_cameray_as_phi():
+    """GO-Draaw's camera_positions.json records {x, y, z, cameraX (theta), cameraY (phi)}:
+    a swap would turn every path to look the wrong way."""
+    from draaw_mi.camera_path import as_keyframes
+    rows = as_keyframes([{"x": 0, "y": 1, "z": 2, "cameraX": 0.24, "cameraY": -2.08}])
+    assert rows.tolist() == [[0.0, 1.0, 2.0, 0.24, -2.08]]

@@ -590,3 +590,22 @@ def test_a_view_without_fov_has_the_scene_cameras():
     assert float(np.array(mi.traverse(wide)["x_fov"]).ravel()[0]) == pytest.approx(60.0)
     with pytest.raises(draaw_mi.DraawError, match=r"views\[0\] has fov_axis but no fov"):
         _views(scene, [dict(view, fov_axis="y")])
+
+
+def test_loss_formulas_and_the_masked_exposure_scale():
+    """Each loss against its formula in numpy, and the exposure scale from the unmasked pixels
+    only (a clipped pixel 4x too bright in the render must not pull the scale)."""
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.1, 1.0, (4, 5, 3))
+    img = ref * 0.5
+    img[0, 0] *= 4.0                                               # the clipped pixel
+    mask = np.ones_like(ref)
+    mask[0, 0] = 0.0
+    T = lambda a: mi.TensorXf(a.astype(np.float32))                # noqa: E731
+    lv, s = _loss(T(img), T(ref), "l2", "fit", mask=T(mask))
+    assert float(s[0]) == pytest.approx(2.0, rel=1e-5)             # <r, r> / <img, r> over the mask
+    assert float(lv[0]) == pytest.approx(np.mean(((img * 2.0 - ref) * mask) ** 2), abs=1e-7)
+    lv, _ = _loss(T(img), T(ref), "relative_l2", "none")
+    assert float(lv[0]) == pytest.approx(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2)), rel=1e-5)
+    lv, _ = _loss(T(img), T(ref), "l1", "none")
+    assert float(lv[0]) == pytest.approx(np.mean(np.abs(img - ref)), rel=1e-5)

@@ -148,6 +148,12 @@ def test_bare_mesh_files(tmp_path, suffix):
     assert np.allclose(np.array(bb.max), box.bounds[1], atol=1e-5)
     img = _render(scene, 4)
     assert np.isfinite(img).all() and (img.sum(axis=2) > 0).mean() > 0.05      # framed and lit
+    # the same box 100x larger is framed and lit alike: the light at the camera follows the
+    # size (intensity ~ distance^2), so the image is the same up to noise
+    box.apply_scale(100.0)
+    box.export(path)
+    big = _render(draaw_mi.load_scene(path, resolution=(16, 16), spp=4), 4)
+    assert big.mean() == pytest.approx(img.mean(), rel=0.1)
 
 
 def _png(path, rgb8):
@@ -254,3 +260,21 @@ def test_info_reports_aovs_a_scene_asks_for():
     from conftest import tiny_description
     assert draaw_mi.load_scene(tiny_description(aovs=["depth"])).features()["aovs"] is True
     assert draaw_mi.load_scene(tiny_description()).features()["aovs"] is False
+
+
+def test_light_defaults_follow_mitsuba_and_point_down():
+    """A spot light without beam_width takes Mitsuba's own default (3/4 of the cutoff: 15 of
+    20 degrees), and an area light without a target faces down (-y), lighting the floor below
+    it, not the ceiling."""
+    from conftest import tiny_description
+    d = tiny_description()
+    d["lights"] = [{"type": "spot", "name": "s", "position": [0, 3, 0], "target": [0, 0, 0], "cutoff_angle": 20.0},
+                   {"type": "area", "name": "a", "position": [0, 2, 0], "intensity": 5.0}]
+    scene = draaw_mi.load_scene(d)
+    spots = [e for e in scene.mi_scene.emitters() if e.class_name() == "SpotLight"]
+    mitsuba_default = mi.load_dict({"type": "spot", "cutoff_angle": 20.0})
+    beam = lambda e: str(e).split("beam_width = ")[1].split(",")[0]      # noqa: E731
+    assert len(spots) == 1 and beam(spots[0]) == beam(mitsuba_default) == "[15]"
+    (area,) = [s for s in scene.mi_scene.shapes() if s.emitter() is not None]
+    ps = area.sample_position(0.0, mi.Point2f(0.5, 0.5))
+    assert np.allclose(np.array(ps.n).ravel(), [0.0, -1.0, 0.0], atol=1e-6)

@@ -38,6 +38,10 @@ def test_resume_renders_only_missing_corrupt_and_stale_frames(tmp_path):
         assert os.stat(specs[f]["output"]).st_mtime_ns == mtimes[f]
     assert_bit_identical(before, frames_of(tmp_path / "out"))
     # other settings for the same files: every frame is stale and re-rendered
+    for key, value in (("post", [{"type": "srgb"}]), ("seed", 99), ("aovs", ["depth"]), ("half", True)):
+        other = copy.deepcopy(doc)                 # (each setting that changes the pixels)
+        other["jobs"][0][key] = value
+        assert batch.status(other)["counts"]["stale"] == 5, key
     doc2 = copy.deepcopy(doc)
     doc2["jobs"][0]["spp"] = 8
     assert batch.status(doc2)["counts"]["stale"] == 5

@@ -264,3 +264,15 @@ def test_a_texture_file_name_is_checked_and_found_beside_an_xml_scene(tmp_path, 
     monkeypatch.chdir("/")
     params = mi.traverse(mi.load_file(str(tmp_path / "xd" / "s.xml")))
     np.testing.assert_allclose(np.array(params["b.roughness.data"]).ravel(), 0.3)
+
+
+@pytest.mark.parametrize("texel", [[0.3, 0.2, -0.5], [0.0, 0.0, 0.0]])
+def test_a_normal_map_texel_below_the_surface_falls_back_to_the_normal(texel):
+    """A texel pointing below the surface (or of zero length) cannot be a shading normal: the
+    BSDF evaluates as without the map (it was black: every direction below that frame)."""
+    rng = np.random.default_rng(4)
+    wi, wo = uniform_hemisphere(64, rng), uniform_hemisphere(64, rng)
+    mapped = draaw(base_color=0.6, roughness=0.4, normalmap=texel, normalmap_encoding="signed")
+    plain = draaw(base_color=0.6, roughness=0.4)
+    a, b = (color_np(m.eval(CTX, make_si(wi), vec3(wo))) for m in (mapped, plain))
+    assert b.max() > 0 and np.allclose(a, b, rtol=1e-5, atol=1e-7)

@@ -364,3 +364,22 @@ def test_truncated_or_bad_vol_is_one_clear_error(tmp_path):
     p.write_bytes(b"XYZ" + raw[3:])
     with pytest.raises(ParameterError, match="magic"):
         read_vol(p)
+
+
+def test_a_smoke_colour_is_where_its_voxel_is():
+    """A red voxel at the x-max, y-min, z-min corner of a 4x4x4 grid: the medium's albedo
+    volume (Mitsuba's own gridvolume, evaluated at the voxel's centre with nearest lookup)
+    is red there and grey at the mirrored corner (the grid's (z, y, x) layout for Mitsuba
+    was applied to the density only: coloured smoke came out mirrored)."""
+    import mitsuba as mi
+    from draaw_mi.media.mitsuba_dicts import smoke_medium
+    col = np.full((4, 4, 4, 3), 0.5, np.float32)
+    col[3, 0, 0] = (1.0, 0.0, 0.0)
+    g = VoxelGrid.from_arrays(density=np.ones((4, 4, 4)), smoke_color=col, bbox_min=(0, 0, 0), bbox_max=(4, 4, 4))
+    vol = mi.load_dict(smoke_medium(g, filter_type="nearest")["albedo"])
+    it = mi.Interaction3f()
+    for centre, want in (((3.5, 0.5, 0.5), (1.0, 0.0, 0.0)), ((0.5, 0.5, 3.5), (0.5, 0.5, 0.5))):
+        it.p = mi.Point3f(*centre)
+        np.testing.assert_allclose(np.array(vol.eval(it)).ravel(), want, atol=1e-6)
+    assert g.index_of((4.0, 4.0, 4.0)) == (3, 3, 3)          # the max face belongs to the last cell
+    assert g.index_of((4.0, 2.5, 0.0)) == (3, 2, 0)

@@ -65,3 +65,9 @@ def test_chain_matches_reference():
     expected = ref.chain(img.astype(np.float64), entries)
     assert np.abs(out - expected).max() <= TOL
     assert np.array_equal(out[..., 3], img[..., 3])
+
+
+def test_crt_scan_lines_of_a_tall_image_match_the_reference():
+    """From 480 rows on, a scan line spans two or more rows (period H // 480 + 1): every other
+    test image is shorter, where the period is 1 and a wrong period formula still agrees."""
+    _compare("crt", {"radius": 2.0}, hdr_image(seed=5, shape=(480, 3)))

@@ -367,6 +367,14 @@ def test_cubic_union_of_coincident_spheres_grows_by_k_over_6_inside_its_box():
     assert float(u.bbox().max.x) >= 0.6 - 1e-6
 
 
+def test_polynomial_union_of_coincident_spheres_grows_by_k_over_4_inside_its_box():
+    # a = b: h = 1/2, the surface moves out by k/4; the box (which the tracer clips its march
+    # to) must reach it, or the shape is cut off
+    u = smooth_union(Sphere((0, 0, 0), 0.5), Sphere((0, 0, 0), 0.5), 0.6)
+    assert float(u.distance(mi.Point3f(0.64, 0, 0))[0]) == pytest.approx(-0.01, abs=1e-6)
+    assert float(u.bbox().max.x) >= 0.65 - 1e-6
+
+
 def test_cubic_subtraction_gives_the_cut_face_the_cut_materials_weight():
     a, b = Sphere((0, 0, 0), 0.6), Sphere((0.5, 0, 0), 0.4)
     a.slot, b.slot = 0, 1
