@@ -196,14 +196,10 @@ def _cmd_render(args) -> int:
                        metadata=render_metadata(args.scene, scene, info, post=chain))
     if args.png:
         from draaw_mi.post import display_encoded
-        # the film's colour channels (R, G, B[, A], X, Y, Z[, A] or Y[, A] of an XML film's
-        # pixel_format), not the first three: a luminance film's depth AOV would be the PNG's alpha
-        n_color = next((i for i, n in enumerate(info["channels"]) if n not in tuple("RGBAXYZ")),
-                       len(info["channels"]))
-        colour = arr[..., :n_color]
-        if info["channels"][:3] == ["X", "Y", "Z"]:      # (shown as R, G, B: a pink-grey image)
-            colour = _xyz_to_linear_srgb(colour)
-        draaw_mi.write_png(args.png, colour, encoded=display_encoded(chain))
+        # the film's colour channels by name (R, G, B[, A], X, Y, Z[, A] or Y[, A] of an XML
+        # film's pixel_format), not the first three: a luminance film's depth AOV would be the
+        # PNG's alpha, an xyz film's X, Y, Z its R, G, B
+        draaw_mi.write_png(args.png, arr, channels=info["channels"], encoded=display_encoded(chain))
     # (the render's own count: a post chain and denoising read NaN/inf as 0)
     finite = bool(np.isfinite(arr).all()) and not info.get("non_finite")
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
@@ -360,7 +356,7 @@ def _cmd_post(args) -> int:
             print(f"draaw-mi: warning: {args.input}: its draaw:post chain does not load ({e}); "
                   "its colour is read as linear", file=sys.stderr)
             encoded = post.display_encoded(after)
-        draaw_mi.write_png(args.output, result[..., :3], encoded=encoded)
+        draaw_mi.write_png(args.output, result, channels=names, encoded=encoded)
     else:
         # the input's draaw:* attributes go along (what rendered it), with the chain applied
         # (the render's was overwritten, though the README says post keeps it)
@@ -381,16 +377,6 @@ def _recorded_chain(header: dict) -> list:
     if isinstance(before, dict):                               # ({"chain": [...]})
         before = before.get("chain", [])
     return before if isinstance(before, list) else []
-
-
-def _xyz_to_linear_srgb(arr):
-    """An (H, W, 3 or 4) XYZ[A] image in linear sRGB, by Mitsuba's own conversion matrix."""
-    import mitsuba as mi
-    import numpy as np
-    m = np.array([np.array(mi.xyz_to_srgb(mi.Color3f(*map(float, e)))).ravel() for e in np.eye(3)]).T
-    out = arr.copy()
-    out[..., :3] = arr[..., :3] @ m.T
-    return out
 
 
 def _cmd_batch(args) -> int:

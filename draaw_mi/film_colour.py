@@ -23,12 +23,25 @@ def film_colour_names(film) -> list[str]:
     return names if len(names) == n else list(DEFAULT_NAMES[n])
 
 
+def scene_colour_names(scene) -> list[str]:
+    """:func:`film_colour_names` of the scene's first film, found once per scene (a film's
+    pixel format is fixed at loading; read after the kernels were launched, the lookup waited
+    for a core: 0.1 ms a small render)."""
+    from .frozen import scene_state
+    memo = scene_state(scene).memo
+    key = ("draaw_mi.render.colour",)
+    names = memo.get(key)
+    if names is None:
+        names = memo[key] = film_colour_names(scene.mi_scene.sensors()[0].film())
+    return list(names)
+
+
 def check_film_colour(scene, what: str) -> None:
     """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
     XYZ (an XML scene's pixel_format) is refused before the render, not after it (a post chain
     failed with a shape error; the denoiser read Y and two AOV channels as colour; both read
     X, Y, Z as R, G, B)."""
-    names = film_colour_names(scene.mi_scene.sensors()[0].film())
+    names = scene_colour_names(scene)
     if names[:3] != ["R", "G", "B"]:
         fmt = {"y": "luminance", "ya": "luminance_alpha"}.get("".join(names).lower(), "".join(names).lower())
         raise RenderError(f"render: the film of {scene.source} stores {', '.join(names)} colour "

@@ -62,14 +62,14 @@ def freeze_supported(mi_scene) -> bool:
     has SDF objects (the tracer reads node parameters while it is traced) or participating
     media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
     aborts the process). The preview and the batch executor ask this too."""
-    # flags and ids only (no mi.traverse, no JIT reads): a check between replays must not
-    # disturb the recording's inputs
+    # flags and ids only (no JIT reads): a check between replays must not disturb the
+    # recording's inputs; a shape group's members (with a medium) are found by a traversal,
+    # made only where the scene has an instance (features.scene_shapes)
+    from .integrators.features import scene_shapes
     from .sdf.scene import PROXY_PREFIX
-    for sh in mi_scene.shapes():
+    for sh in scene_shapes(mi_scene):
         if sh.id().startswith(PROXY_PREFIX):
             return False                               # SDF proxies
-        if sh.class_name() == "Instance":
-            return False        # (its group's shapes may hold media, which this walk cannot see)
         if sh.interior_medium() is not None or sh.exterior_medium() is not None:
             return False
     return all(s.get_medium() is None for s in mi_scene.sensors())

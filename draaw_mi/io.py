@@ -219,6 +219,12 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
+def xyz_to_srgb_matrix() -> np.ndarray:
+    """Mitsuba's XYZ -> linear sRGB matrix (3 x 3, applied as ``M @ xyz``)."""
+    import mitsuba as mi
+    return np.array([np.array(mi.xyz_to_srgb(mi.Color3f(*map(float, e)))).ravel() for e in np.eye(3)]).T
+
+
 def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
               encoded: bool = False, channels: Sequence[str] | None = None) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically: 1 (grey), 2 (grey,
@@ -227,9 +233,10 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     (divided by alpha where alpha > 0), as PNG's alpha is.
 
     ``channels``: the image's channel names (``render(..., return_info=True)``'s
-    ``info["channels"]``): then its colour channels are written (R, G, B or Y, with A as
-    alpha where there is one) and its AOVs left out. Without them an image of R, G, B and one
-    AOV (``aovs = ["depth"]``) would be taken for RGBA.
+    ``info["channels"]``): then its colour channels are written (R, G, B; X, Y, Z converted to
+    sRGB by Mitsuba's matrix; or Y), with A as alpha where there is one, and its AOVs left
+    out. Without them an image of R, G, B and one AOV (``aovs = ["depth"]``) would be taken
+    for RGBA, and X, Y, Z for R, G, B.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
@@ -248,10 +255,14 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
         if len(names) != arr.shape[2]:
             raise IOFailure(f"write_png({path!r}): {len(names)} channel names for an image with "
                             f"{arr.shape[2]} channels")
-        colour = [n for n in ("R", "G", "B") if n in names] or [n for n in ("Y",) if n in names]
-        if len(colour) not in (1, 3):
-            raise IOFailure(f"write_png({path!r}): channels {names}; expected R, G, B or Y among them")
+        colour = next((c for c in (["R", "G", "B"], ["X", "Y", "Z"], ["Y"]) if set(c) <= set(names)), None)
+        if colour is None:
+            raise IOFailure(f"write_png({path!r}): channels {names}; expected R, G, B or Y (or X, "
+                            "Y, Z) among them")
         arr = arr[..., [names.index(n) for n in colour + (["A"] if "A" in names else [])]]
+        if colour[0] == "X":
+            arr = arr.copy()
+            arr[..., :3] = arr[..., :3] @ xyz_to_srgb_matrix().T
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
     if c in (2, 4) and not encoded:

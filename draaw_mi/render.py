@@ -29,7 +29,7 @@ from .integrators import is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
 from .guard import RENDER_GUARD
-from .film_colour import check_film_colour as _check_film_colour, film_colour_names  # noqa: F401 (re-exported)
+from .film_colour import check_film_colour as _check_film_colour, film_colour_names, scene_colour_names  # noqa: F401
 from .passes import pass_seed, pass_seeds, sample_passes  # noqa: F401 (re-exported)
 
 _INTEGRATOR_CACHE: dict = {}      # plugin properties -> integrator
@@ -99,18 +99,6 @@ def _plugin_parameters(plugin: str) -> list[str]:
     if plugin in ("draaw_v1", "draaw_v2"):
         names.append("medium_steps")
     return sorted(set(names))
-
-
-def scene_colour_names(scene) -> list[str]:
-    """:func:`film_colour_names` of the scene's first film, found once per scene (a film's
-    pixel format is fixed at loading; read after the kernels were launched, the lookup waited
-    for a core: 0.1 ms a small render)."""
-    memo = scene_state(scene).memo
-    key = ("draaw_mi.render.colour",)
-    names = memo.get(key)
-    if names is None:
-        names = memo[key] = film_colour_names(scene.mi_scene.sensors()[0].film())
-    return list(names)
 
 
 def scene_holds(scene) -> dict:

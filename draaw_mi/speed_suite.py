@@ -207,8 +207,8 @@ def digest(d: dict) -> str:
                 feed(v)
             h.update(b"]")
         elif isinstance(o, str) and os.path.isfile(o):
-            with open(o, "rb") as f:
-                h.update(b"file:" + hashlib.sha256(f.read()).digest())
+            from .batch.plan import file_hash
+            h.update(b"file:" + file_hash(o).encode())
         elif isinstance(o, (str, int, float, bool)) or o is None:
             h.update(repr(o).encode())
         else:                       # arrays, bitmaps, transforms: by value

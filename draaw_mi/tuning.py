@@ -19,6 +19,7 @@ import numpy as np
 from .errors import ParameterError
 from .limits import FLOAT32_MAX
 from .materials.draaw_bsdf import ALL_PARAMS, COLOR_PARAMS, SCALAR_PARAMS
+from .scene.camera import look_at_transform as look_at  # (a camera's to_world; public here)
 
 LIGHT_SUFFIXES = (".emitter.radiance.value", ".radiance.value", ".intensity.value", ".irradiance.value")
 
@@ -182,12 +183,6 @@ def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 
     az = math.radians(yaw)
     direction = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up
     return t + direction * r * distance, t, up
-
-
-def look_at(origin, target, up):
-    import mitsuba as mi
-    return mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin], target=[float(v) for v in target],
-                                          up=[float(v) for v in up])
 
 
 # --------------------------------------------------------------------------- frames and errors

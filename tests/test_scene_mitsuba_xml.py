@@ -213,10 +213,15 @@ def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_forma
     for an image of shape (16, 16, 4)"); a post chain on an xyz film ran on X, Y, Z."""
     path = _film_scene(tmp_path, pixel_format)
     doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
-           "jobs": [{"name": "x", "scene": path, "frames": 1, "spp": 2}]}
+           "jobs": [{"name": "x", "scene": path, "frames": 1, "spp": 2, "previews": True}]}
     assert batch.run(doc, progress=False).rendered == 1
     arr, names = draaw_mi.read_exr(str(tmp_path / "out" / "0000.exr"), with_names=True)
     assert names == colour
+    # the preview by name too: a white sphere under a white sky is grey (X, Y, Z shown as
+    # R, G, B were pink-grey)
+    import matplotlib.image
+    png = matplotlib.image.imread(str(tmp_path / "out" / "0000.png"))
+    assert np.abs(png[..., 0] - png[..., 2]).max() <= 1 / 255
     ref = np.array(draaw_mi.render(path, spp=2, seed=batch.load(doc)[1][0]["seed"]))
     assert np.array_equal(arr, ref)                               # render()'s image, bit for bit
     if pixel_format == "xyz":

@@ -236,6 +236,9 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     _check_workers(workers, scheduler, client, executor)
+    if not isinstance(overwrite, bool) and type(overwrite).__name__ != "bool_":
+        # (the string "false" is true: another manifest's frames would be replaced)
+        raise ParameterError(f"batch.run: overwrite={overwrite!r}; expected True or False")
     if executor == "dask" and client is None:
         import importlib.util
         if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line

@@ -238,14 +238,15 @@ def preview_path(spec: dict) -> str:
     return os.path.splitext(spec["output"])[0] + ".png"
 
 
-def write_preview(spec: dict, image: np.ndarray | None = None) -> None:
-    """Write the frame's sRGB PNG preview, tagged with its hash; ``image``: the rendered
-    frame, or ``None`` to take it from the finished EXR."""
+def write_preview(spec: dict, image: np.ndarray | None = None, channels=None) -> None:
+    """Write the frame's sRGB PNG preview, tagged with its hash; ``image`` and its
+    ``channels``: the rendered frame, or ``None`` to take both from the finished EXR. The
+    colour is taken by name (a luminance frame's preview took Y and two AOVs as R, G, B)."""
     from ..io import read_exr, write_png
 
     if image is None:
-        image = read_exr(spec["output"])
-    write_png(preview_path(spec), image[..., :3], text={HASH_ATTR: spec["hash"]},
+        image, channels = read_exr(spec["output"], with_names=True)
+    write_png(preview_path(spec), image, channels=channels, text={HASH_ATTR: spec["hash"]},
               encoded=bool(spec.get("encoded")))
 
 

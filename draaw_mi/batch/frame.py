@@ -56,7 +56,7 @@ class CachedScene:
         import drjit as dr
         import mitsuba as mi
 
-        from ..film_colour import check_film_colour, film_colour_names
+        from ..film_colour import check_film_colour, scene_colour_names
         from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
                               non_finite_count, render, sample_passes)
 
@@ -76,7 +76,7 @@ class CachedScene:
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:
             check_film_colour(self.scene, "a post chain")
-        colour = film_colour_names(self.scene.mi_scene.sensors()[0].film())
+        colour = scene_colour_names(self.scene)
         key = (id(integrator), spp)
         fn = self.frozen.get(key)
         if fn is None:
@@ -221,7 +221,7 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
                           "(NaN guard); frame not written")
     seconds = time.perf_counter() - t0
     if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
-        write_preview(spec, arr)
+        write_preview(spec, arr, channels)
     write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=info["post"]), half=spec["half"])
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}

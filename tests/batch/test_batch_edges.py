@@ -112,6 +112,10 @@ def test_camera_tables_on_xml_scenes_find_the_sensor(tmp_path, sid):
     assert res.complete, res.failed
     f0, f1 = (frames_of(tmp_path / "o")[f"{i}.exr"] for i in (0, 1))
     assert np.abs(f0 - f1).max() > 0.05                   # the camera moved
+    doc["jobs"][0]["camera"]["fov"] = 40                   # the table's fov reaches the sensor
+    doc["output"] = str(tmp_path / "o40" / "{frame}.exr")
+    assert batch.run(doc, progress=False).complete
+    assert np.abs(frames_of(tmp_path / "o40")["0.exr"] - f0).max() > 0.05
 
 
 def test_a_full_disk_under_the_log_leaves_the_summary(tmp_path, monkeypatch):

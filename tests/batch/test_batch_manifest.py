@@ -172,6 +172,8 @@ def test_worker_counts_beyond_the_cores_or_beside_a_cluster_are_refused(tmp_path
         batch.run(path, executor="dask", workers=1, scheduler="tcp://h:1")
     with pytest.raises(ParameterError, match="scheduler and client need executor='dask'"):
         batch.run(path, scheduler="tcp://h:1")
+    with pytest.raises(ParameterError, match="overwrite='false'; expected True or False"):
+        batch.run(path, overwrite="false")          # (a true string: frames would be replaced)
     assert not list(tmp_path.glob("**/*.exr"))                       # refused before rendering
 
 

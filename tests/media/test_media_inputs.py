@@ -31,6 +31,23 @@ def test_smoke_medium_refuses_what_float32_or_mitsuba_cannot_take(kw, match):
         smoke_medium(ms.grid("uniform", 4), **kw)
 
 
+def test_a_scale_beyond_float32_is_refused_on_an_empty_grid_too():
+    """The scale's own bound: on an all-zero grid the densest-voxel product (0) cannot catch it."""
+    g = ms.grid("uniform", 4)
+    g.density[:] = 0.0
+    with pytest.raises(ParameterError, match=r"smoke_medium: scale=1e\+39; expected a finite value >= 0"):
+        smoke_medium(g, scale=1e39)
+
+
+def test_a_medium_albedo_grid_above_one_is_refused():
+    """An albedo grid (``*.albedo.data``) set through the preview: values above 1 are no albedo."""
+    from draaw_mi.materials import check_value
+    key = "smoke.interior_medium.albedo.data"
+    check_value("Preview.update", key, key, np.full((2, 2, 2, 3), 0.9))
+    with pytest.raises(ParameterError, match=r"albedo.data: 24 value\(s\) outside \[0, 1\]"):
+        check_value("Preview.update", key, key, np.full((2, 2, 2, 3), 1.2))
+
+
 @pytest.mark.parametrize("change,match", [(lambda a: np.where(a == a.max(), np.nan, a), "nan"),
                                           (lambda a: a - 0.5, r"-0\.5"),
                                           (lambda a: a * 0 + 1e39, "inf|1e\\+39")])
@@ -51,6 +68,7 @@ def test_the_march_stays_finite_under_an_infinite_density(version):
     d["smoke"] = shape
     img = np.array(mi.render(mi.load_dict(d), spp=4))
     assert np.all(np.isfinite(img)), int(np.sum(~np.isfinite(img)))   # (402 of 768 NaN)
+    # (black is right here: the box fills the view and volpath renders it black at 1e30 too)
 
 
 def test_voxel_grid_inputs_are_named():
@@ -92,6 +110,10 @@ def test_a_medium_inside_a_shapegroup_is_refused_by_v3_v4_and_seen_by_v1_v2():
     grouped = mi.load_dict(dict(base, grp={"type": "shapegroup", "s": sphere},
                                 inst={"type": "instance", "shapegroup": {"type": "ref", "id": "grp"}}))
     assert not freeze_supported(grouped)
+    solid = dict(sphere, bsdf={"type": "diffuse"})                  # an instance without media
+    del solid["interior"]
+    assert freeze_supported(mi.load_dict(dict(base, grp={"type": "shapegroup", "s": solid},
+                                              inst={"type": "instance", "shapegroup": {"type": "ref", "id": "grp"}})))
     for v in ("draaw_v3", "draaw_v4"):
         with pytest.raises(RuntimeError) as info:
             mi.render(grouped, integrator=mi.load_dict({"type": v}), spp=4)
