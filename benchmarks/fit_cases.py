@@ -74,7 +74,7 @@ def render_reference(scene, sensor, spp, seed, mi, draaw_mi):
 
 
 def run_case(case, res, args, mi, draaw_mi, index):
-    from draaw_mi.fit import _views
+    from draaw_mi.fit_views import view_sensors as _views
     name, path, params, truth, tol, opts, _ = case
     scene = draaw_mi.load_scene(path, resolution=(res, res))
     p = scene.params

@@ -56,7 +56,6 @@ Example::
 """
 from __future__ import annotations
 
-import os
 import time
 import warnings
 
@@ -67,185 +66,11 @@ import numpy as np
 from .errors import DraawError, ParameterError
 from .fit_reference import (check_reference_size, display_encoded_post, is_display_reference,
                             load_reference, unclipped_mask)
+from .fit_params import FitParam, range_for
 from .fit_result import FitResult, settled
+from .fit_views import LOSSES, sampler_spp, view_loss, view_sensors
 from .progress import check_mode, progress_bar
 from .scene import DraawScene, load_scene
-
-LOSSES = ("l2", "l1", "relative_l2")
-# parameter name suffix -> (low, high) projection range
-RANGES = {
-    "roughness": (0.0, 1.0), "metallic": (0.0, 1.0), "specular": (0.0, 1.0),
-    "reflection": (0.0, 1.0), "direct_to_scatter": (0.0, 1.0), "base_color": (0.0, 1.0),
-    "reflectance": (0.0, 1.0), "alpha": (1e-3, 1.0), "radiance": (0.0, None), "intensity": (0.0, None),
-}
-# parameter name suffix -> space Adam works in ("log": the optimiser moves log(value))
-SPACES = {"roughness": "log", "alpha": "log"}
-# Smallest roughness the log-space optimiser visits, as a multiple of sqrt(alpha_min): with
-# alpha = sqrt(roughness^4 + alpha_min^2) (draaw BSDF), roughness 0.6 * sqrt(alpha_min) gives
-# alpha = 1.06 * alpha_min, so every roughness below it renders the same (0.019 for the default
-# alpha_min = 1e-3; Mitsuba's principled clamps alpha at 1e-3 too).
-ROUGHNESS_FLOOR_FACTOR = 0.6
-DEFAULT_ALPHA_MIN = 1e-3
-
-
-def _range_for(key: str, scene: DraawScene | None = None):
-    node_param = None if scene is None else scene.sdf_param(key)
-    if node_param is not None:
-        return scene.sdf.param_range(node_param)             # an SDF object's radius > 0, ...
-    parts = key.split(".")
-    for p in reversed(parts):
-        if p in RANGES:
-            return RANGES[p]
-    return (None, None)
-
-
-def _views(scene: DraawScene, views):
-    """Sensors for each view: the scene's own camera, or camera tables as in [camera]."""
-    if views is None:
-        return [scene.mi_scene.sensors()[0]]
-    from .scene.camera import camera_to_look_at, sensor_dict
-    from .scene.schema import Where
-    if not isinstance(views, (list, tuple)) or not views:
-        raise DraawError("fit: views must be a non-empty list of camera tables or mi.Sensor objects")
-    w, h = scene.resolution
-    # a view without a field of view has the scene camera's (it had [camera]'s default, 40
-    # degrees, whatever the scene's was: its references were fitted through another lens)
-    own = mi.traverse(scene.mi_scene.sensors()[0])
-    x_fov = float(np.array(own["x_fov"]).ravel()[0]) if "x_fov" in own else 40.0
-    # the film's own filter object, not its name: a gaussian's stddev or a lanczos' lobes that
-    # an XML scene sets reach the other views too
-    rfilter = scene.mi_scene.sensors()[0].film().rfilter()
-    out = []
-    for i, v in enumerate(views):
-        if isinstance(v, mi.Sensor):
-            size = tuple(int(c) for c in v.film().crop_size())
-            if size != (w, h):     # (a raw Dr.Jit size error, or pixels compared scrambled)
-                raise DraawError(f"fit: views[{i}] is a sensor of {size[0]}x{size[1]} pixels; "
-                                 f"expected the references' {w}x{h}")
-            out.append(v)
-            continue
-        if isinstance(v, dict) and "fov" not in v:
-            if "fov_axis" in v:
-                raise DraawError(f"fit: views[{i}] has fov_axis but no fov; give both, or neither "
-                                 "for the scene camera's")
-            v = {**v, "fov": x_fov, "fov_axis": "x"}
-        look = camera_to_look_at(v, Where("fit") / "views" / i)
-        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], rfilter,
-                                            scene.settings.get("sampler", "independent"))))
-    return out
-
-
-def _sampler_spp(scene: DraawScene, spp: int, name: str) -> int:
-    """The per-pixel count the scene's sampler takes nearest ``spp`` (from below where it can).
-    A stratifying sampler rounds other counts up (``multijitter``: 35 for 32) with a Mitsuba
-    warning at every render; a fit cannot split its renders into passes (one kernel per run),
-    so it says once which count it uses and uses it."""
-    from .render import sample_passes
-    got = sample_passes(scene.mi_scene, spp, spp)[0]
-    if got != spp:
-        from .scene.camera import sampler_plugin
-        warnings.warn(f"fit: the scene's {sampler_plugin(scene.mi_scene.sensors()[0].sampler())} "
-                      f"sampler takes {got} samples per pixel, not {name}={spp}; fitting with {got}",
-                      RuntimeWarning, stacklevel=3)
-    return got
-
-
-def _loss(img, ref, kind: str, exposure: str, mask=None):
-    """(loss, scale) of one view. With ``exposure="fit"`` the render is scaled by
-    ``s = <ref, ref> / <image, ref>`` (detached): the scale at which the render's projection onto
-    the reference equals the reference. Both dot products are unbiased under Monte Carlo noise
-    (``<image, ref>`` is linear in the image), unlike the least-squares ``<image, ref> /
-    <image, image>``, whose denominator picks up the pixel variance and biased the scale low
-    (-0.07 stops at 16 spp, 128x128) and with it metallic (+0.03). ``mask`` (a
-    :class:`mi.TensorXf` of 0/1 like ``ref``): the pixels that count (a display reference's
-    unclipped ones); the loss stays linear in the render, so unbiased under noise (clipping the
-    render to [0, 1] instead biased metallic by +0.18 at 8 spp)."""
-    scale = mi.Float(1.0)
-    if exposure == "fit":
-        r = ref.array if mask is None else ref.array * mask.array
-        num = dr.sum(r * r)
-        den = dr.sum(dr.detach(img.array) * r)
-        ok = (den > 0) & dr.isfinite(den)
-        scale = dr.detach(dr.select(ok, num / dr.select(ok, den, 1.0), 1.0))
-    d = img.array * scale - ref.array
-    if mask is not None:
-        d = d * mask.array
-    if kind == "l2":
-        return dr.mean(dr.square(d)), scale
-    if kind == "l1":
-        return dr.mean(dr.abs(d)), scale
-    return dr.mean(dr.square(d) / (dr.square(ref.array) + 1e-2)), scale
-
-
-class _Param:
-    """One optimised parameter: its ``mi.traverse`` key, range, and the space Adam moves it in.
-
-    Linear space: Adam moves the value itself, projected onto [lo, hi] after every step.
-    Log space (roughness, alpha): Adam moves ``u = log(value)``, projected onto
-    [log(floor), log(hi)]; a step of ``lr`` is then a relative change of the value, so the
-    optimiser resolves small roughnesses (0.05 vs 0.03) as finely as large ones and cannot
-    fall into the flat region below the alpha clamp, where the gradient vanishes (see
-    ``ROUGHNESS_FLOOR_FACTOR``).
-    """
-
-    def __init__(self, key: str, name: str, value, scene: DraawScene):
-        self.key, self.name, self.type = key, name, type(value)
-        # a texture (a tensor): its shape, to give the scene back a value it takes
-        self.shape = tuple(value.shape) if dr.is_tensor_v(value) else None
-        self.lo, self.hi = _range_for(key, scene)
-        self.space = _space_for(key)
-        if self.space == "log":
-            floor = self.lo if self.lo else 0.0
-            if key.split(".")[-2:-1] == ["roughness"] or key.endswith("roughness"):
-                floor = max(floor, ROUGHNESS_FLOOR_FACTOR * np.sqrt(_alpha_min(scene, key)))
-            self.lo = floor
-
-    def clip(self, x):
-        lo = -np.inf if self.lo is None else self.lo
-        hi = np.inf if self.hi is None else self.hi
-        if self.space == "log":
-            return dr.clip(x, float(np.log(lo)), float(np.log(hi)) if np.isfinite(hi) else np.inf)
-        return dr.clip(x, lo, hi)
-
-    def to_latent(self, value):
-        value = self.type(value)
-        if self.space == "log":
-            return self.clip(dr.log(dr.maximum(value, self.lo)))
-        return self.clip(value)
-
-    def from_latent(self, u):
-        """The scene value for latent ``u``, attached to ``u`` for AD."""
-        return dr.exp(u) if self.space == "log" else u
-
-    def project_value(self, v: np.ndarray) -> np.ndarray:
-        lo = -np.inf if self.lo is None else self.lo
-        hi = np.inf if self.hi is None else self.hi
-        return np.clip(v, lo, hi)
-
-
-def _space_for(key: str) -> str:
-    if key.startswith("sdf."):
-        return "linear"        # (an SDF node named 'alpha' or 'roughness' is no such parameter)
-    for part in reversed(key.split(".")):
-        if part in SPACES:
-            return SPACES[part]
-        if part in RANGES:
-            return "linear"
-    return "linear"
-
-
-def _alpha_min(scene: DraawScene, key: str) -> float:
-    """``alpha_min`` of the draaw BSDF that owns ``key`` (default 1e-3 for other BSDFs)."""
-    owner = key.split(".")[0]
-    try:
-        for shape in scene.mi_scene.shapes():
-            bsdf = shape.bsdf()
-            if bsdf is not None and bsdf.id() == owner:
-                return float(getattr(bsdf, "alpha_min", DEFAULT_ALPHA_MIN))
-    except Exception:  # noqa: BLE001 - best effort
-        pass
-    return DEFAULT_ALPHA_MIN
-
 
 def fit(scene, references, params, version: str | None = None, spp: int = 16, iterations: int = 100,
         lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
@@ -270,7 +95,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
     spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
         Adam iterations and learning rate (in the parameter's space: a roughness step of
-        ``lr`` is a relative change, see :class:`_Param`).
+        ``lr`` is a relative change, see :class:`~draaw_mi.fit_params.FitParam`).
     spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
     loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
     views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
@@ -353,10 +178,10 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
             raise DraawError(f"fit: resolution {tuple(resolution)} differs from the references' {w}x{h}")
         check_reference_size(scene, w, h, given[0])
         scene = scene.with_resolution(w, h)
-    sensors = _views(scene, views)
-    spp = _sampler_spp(scene, spp, "spp")
+    sensors = view_sensors(scene, views)
+    spp = sampler_spp(scene, spp, "spp")
     if spp_grad is not None:
-        spp_grad = _sampler_spp(scene, spp_grad, "spp_grad")
+        spp_grad = sampler_spp(scene, spp_grad, "spp_grad")
     if len(sensors) != len(refs):
         raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
     check_version_sees(scene, version)   # (prb fitted a smoke scene as if it had no smoke)
@@ -377,7 +202,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
     ref_t = [mi.TensorXf(r) for r in refs]
     start = {k: type(p[k])(p[k]) for k in keys}        # (a diverged fit puts these back)
     opt = mi.ad.Adam(lr=lr, beta_2=beta_2)
-    prm: dict[str, _Param] = {}
+    prm: dict[str, FitParam] = {}
     for k in keys:
         if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
             raise DraawError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
@@ -393,13 +218,13 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         value = p[k]
         if init and (names[k] in init or k in init):
             value = init.get(names[k], init.get(k))
-            lo, hi = _range_for(k, scene)
+            lo, hi = range_for(k, scene)
             v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
             if not np.all(np.isfinite(v)) or (lo is not None and np.any(v < lo)) or (hi is not None and np.any(v > hi)):
                 from .scene.schema import shown
                 raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected values in "
                                      f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]")
-        prm[k] = _Param(k, names[k], p[k], scene)
+        prm[k] = FitParam(k, names[k], p[k], scene)
         if prm[k].space == "log" and dr.width(p[k]) != 1:
             prm[k].space = "linear"            # textures: optimise texels linearly
         opt[k] = prm[k].to_latent(value)
@@ -446,7 +271,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
                         img = means[v] + (img - flat)
                     if chain is not None:
                         img = _apply_chain(img, chain)
-                    lv, sv = _loss(img, ref, loss, exposure, masks[v])
+                    lv, sv = view_loss(img, ref, loss, exposure, masks[v])
                     if v == 0:
                         scale = sv
                     lv = lv / len(sensors)

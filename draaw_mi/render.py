@@ -71,7 +71,7 @@ def make_integrator(version: str, max_depth: int, hide_emitters: bool = False, a
 
 def _integrator_error(plugin: str, props: dict, e: Exception) -> RenderError:
     """A clear message for an integrator Mitsuba would not create from ``props``."""
-    from .scene import mitsuba_error_message
+    from .scene.mitsuba_load import mitsuba_error_message
     text = str(e)
     if props.get("aovs") and not plugin.startswith("draaw"):
         return RenderError(f"render: AOVs ({props['aovs']}) come from the draaw versions v1..v4; "

@@ -49,7 +49,7 @@ import mitsuba as mi
 
 from . import speed_suite as ss
 from .bench import load_note
-from .scene import load_mitsuba_dict
+from .scene.mitsuba_load import load_mitsuba_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CACHE = os.path.join(os.path.expanduser("~"), ".cache", "draaw-mi", "speed_refs")

@@ -30,7 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from .integrators import reference_scenes as rs
-from .scene import load_mitsuba_dict
+from .scene.mitsuba_load import load_mitsuba_dict
 
 T = mi.ScalarTransform4f
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

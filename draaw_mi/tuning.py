@@ -150,7 +150,7 @@ def camera_lights(scene) -> dict:
 def spot_at(eye, target):
     """A spot light's ``to_world`` at ``eye`` shining at ``target`` (as the scene builder
     makes it); None where the two coincide (no direction: the light stays where it was)."""
-    from .scene.description import spot_up
+    from .scene.light_dicts import spot_up
     if np.allclose(eye, target):
         return None
     return look_at(eye, target, spot_up(eye, target))

@@ -20,7 +20,8 @@ import pytest
 import draaw_mi
 from draaw_mi.cli import main
 from draaw_mi.errors import DraawError
-from draaw_mi.fit import _loss, _Param
+from draaw_mi.fit_params import FitParam as _Param
+from draaw_mi.fit_views import view_loss as _loss
 
 from conftest import SCENES
 
@@ -239,7 +240,7 @@ def test_two_materials_jointly():
 def test_two_views(fit_scene):
     views = [{"origin": [0.0, 0.7, 3.2], "target": [0.0, 0.5, 0.0], "fov": 30.0},
              {"origin": [2.4, 1.9, 1.8], "target": [0.0, 0.3, 0.0], "fov": 34.0}]
-    from draaw_mi.fit import _views
+    from draaw_mi.fit_views import view_sensors as _views
     from draaw_mi.render import make_integrator
     _set(fit_scene, {"target.roughness": 0.7, "target.metallic": 0.3})
     integ = make_integrator("path", fit_scene.settings["max_depth"])
@@ -417,7 +418,7 @@ def test_a_view_without_fov_has_the_scene_cameras():
     """A ``views`` table without ``fov`` took [camera]'s default (40 degrees) whatever the
     scene's was; the scene's own camera written as a view now renders the scene's image."""
     from conftest import tiny_description
-    from draaw_mi.fit import _views
+    from draaw_mi.fit_views import view_sensors as _views
     desc = tiny_description()
     desc["camera"].update(fov=25.0, fov_axis="y")          # (a 32x24 film: x_fov is 32.9)
     scene = draaw_mi.load_scene(desc)

@@ -113,7 +113,7 @@ def test_an_xml_scenes_filter_is_its_films(tmp_path, rfilter, name):
     with pytest.raises(draaw_mi.DraawError, match=f"filter='tent' cannot override the filter of a Mitsuba "
                                                   f"scene \\('{name}'\\)"):
         draaw_mi.load_scene(str(xml), filter=other)
-    from draaw_mi.fit import _views
+    from draaw_mi.fit_views import view_sensors as _views
     (view,) = _views(scene, [{"origin": [0, 0, 4], "target": [0, 0, 0]}])
     assert str(view.film().rfilter()).split("[")[0] == str(scene.mi_scene.sensors()[0].film().rfilter()).split("[")[0]
 
@@ -133,7 +133,7 @@ def test_fit_views_keep_the_films_filter_parameters(tmp_path, rfilter):
     {rfilter}</film></sensor></scene>""")
     import mitsuba as mi
     scene = draaw_mi.load_scene(str(xml))
-    from draaw_mi.fit import _views
+    from draaw_mi.fit_views import view_sensors as _views
     (view,) = _views(scene, [{"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 40.0}])
     own = scene.mi_scene.sensors()[0]
     assert view.film().rfilter().radius() == own.film().rfilter().radius()

@@ -137,7 +137,7 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
 
 def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tuple[dict, dict]:
     """``({id: mitsuba dict or object}, info)`` for one ``[[volumes]]`` entry."""
-    from ..scene.description import safe_id
+    from ..scene.context import safe_id
     from ..scene.schema import check_keys, number, string, vector
     check_keys(entry, VOLUME_KEYS, where)
     name = safe_id(string(entry.get("name", f"volume_{index}"), where / "name"))

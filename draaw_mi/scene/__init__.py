@@ -22,25 +22,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 
-from ..errors import DraawError, ParameterError, SceneError, suggest
+from ..errors import ParameterError, SceneError, suggest
 from .camera import filter_plugin, sampler_plugin
-from .description import DEFAULT_SETTINGS, auto_light, build_mitsuba_dict
+from .description import DEFAULT_SETTINGS, build_mitsuba_dict
+from .light_dicts import auto_light
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
+from .mitsuba_load import load_dict_or_error, load_mitsuba_file, mitsuba_error_message
 from .schema import Where
+from .values import check_like, value_like
 
 SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
-
-
-def mitsuba_error_message(err: Exception) -> str:
-    """The useful line of a Mitsuba loader error (our own DraawError text when it is inside)."""
-    text = str(err)
-    for cls in ("ParameterError", "SceneError", "DraawError"):
-        m = re.search(rf"{cls}: (.+)", text)
-        if m:
-            return m.group(1).strip()
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    msg = lines[-1] if lines else type(err).__name__
-    return re.sub(r"^\[[^\]]*\]\s*", "", msg)
 
 
 @dataclass(eq=False)
@@ -155,13 +146,12 @@ class DraawScene:
         if self.mi_dict is None:
             raise SceneError(f"{self.source}: cannot change the resolution of a scene loaded from "
                              "XML or given as mi.Scene; edit its film instead")
-        import mitsuba as mi
         d = dict(self.mi_dict)
         sensor = dict(d["sensor"])
         sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
         d["sensor"] = sensor
         settings = dict(self.settings, resolution=(int(width), int(height)))
-        scaled = DraawScene(_load_dict(mi, d, self.source), settings, self.source, self.info, d, self._tmp,
+        scaled = DraawScene(load_dict_or_error(d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
         from .carry import carry_values
         carry_values(self, scaled)
@@ -239,108 +229,6 @@ class DraawScene:
         }
 
 
-# Mitsuba's scene optimisation merges meshes through a hash table keyed by object addresses
-# (shapes/merge.cpp), so the order of a scene's shapes changes from run to run. The order of
-# the emitters attached to shapes follows it, and the emitter order decides which light a
-# sample picks: a scene with two or more area lights rendered with one seed gave different
-# images in different processes (a resumed batch frame was not bit-identical). Such scenes
-# load without the optimisation (declaration order); the others keep the merged meshes, which
-# are cheaper for dr.freeze to traverse (about 0.02 ms per shape and frozen render).
-# Scenes with [[sdf]] objects load without it too: the merge swallowed the proxy meshes of two
-# SDF objects with equal materials into one shape without an id, and the tracer, which finds
-# its objects by their proxies' ids, drew nothing (GO-Draaw's sphere lists, whose spheres
-# mostly share the default colour, rendered as an empty floor).
-def _emitting_shapes(d: dict) -> int:
-    return sum(1 for v in d.values() if isinstance(v, dict) and isinstance(v.get("emitter"), dict))
-
-
-def _has_sdf_proxies(d: dict) -> bool:
-    from ..sdf.scene import PROXY_PREFIX
-    return any(isinstance(k, str) and k.startswith(PROXY_PREFIX) for k in d)
-
-
-def _canonical(v):
-    """A hashable form of a plugin dict's value, for telling equal materials apart (arrays by
-    their shape and bytes, other objects by identity)."""
-    import hashlib
-
-    import numpy as np
-    if isinstance(v, dict):
-        return tuple(sorted((k, _canonical(x)) for k, x in v.items() if k != "id"))
-    if isinstance(v, (list, tuple)):
-        return tuple(_canonical(x) for x in v)
-    if isinstance(v, (str, int, float, bool)) or v is None:
-        return v
-    try:
-        arr = np.ascontiguousarray(np.asarray(v))
-        if arr.dtype != object:
-            return ("array", arr.shape, str(arr.dtype), hashlib.sha1(arr.tobytes()).hexdigest())
-    except Exception:  # noqa: BLE001 - not array-like: identity
-        pass
-    return ("object", id(v))
-
-
-def _has_equal_materials(d: dict) -> bool:
-    """Whether two of the BSDFs the shapes of ``d`` refer to (``{"type": "ref"}``) are equal."""
-    ids = {b.get("id") for v in d.values() if isinstance(v, dict)
-           for b in [v.get("bsdf")] if isinstance(b, dict) and b.get("type") == "ref"}
-    forms = [_canonical(d[i]) for i in ids if isinstance(d.get(i), dict)]
-    return len(set(forms)) < len(forms)
-
-
-def load_mitsuba_dict(d: dict):
-    """``mi.load_dict(d)`` with the scene's emitters in a fixed order, its SDF proxies kept
-    apart and every material its own BSDF (see above).
-
-    The optimisation also merges *equal* objects: two materials with the same values became
-    one BSDF, and the second one's parameters were gone (``no parameter 'b.roughness'``: two
-    materials that start alike could not be tuned, fitted or animated apart). Such scenes load
-    without it too."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
-    optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
-    with exr_reading_threads():
-        return mi.load_dict(d, optimize=optimize)
-
-
-def _xml_shape_bsdfs(path: str) -> set:
-    """The ids of a Mitsuba XML file's top-level ``<bsdf>`` elements that its shapes refer to
-    with ``<ref id=...>`` (best effort: an unreadable file gives none; Mitsuba reports its
-    errors itself)."""
-    import xml.etree.ElementTree as ET
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError):
-        return set()
-    declared = {b.get("id") for b in root.findall("bsdf") if b.get("id")}
-    return {r.get("id") for shape in root.iter("shape") for r in shape.findall("ref")} & declared
-
-
-def load_mitsuba_file(path: str):
-    """``mi.load_file(path)`` with the scene's emitters in a fixed order and every material
-    its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
-    materials, shows only once it is loaded, so such files are parsed twice."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
-    with exr_reading_threads():
-        scene = mi.load_file(path)
-        merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
-        if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
-            scene = mi.load_file(path, optimize=False)
-    return scene
-
-
-def _load_dict(mi, d: dict, source: str):
-    from ..guard import RENDER_GUARD
-    try:
-        with RENDER_GUARD:            # (see load_scene; with_resolution comes here directly)
-            return load_mitsuba_dict(d)
-    except DraawError:
-        raise
-    except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
-        raise SceneError(f"{source}: {mitsuba_error_message(e)}") from None
-
-
 def _read_text_description(path: str) -> dict:
     from .schema import read_document
     return read_document(path, "scene file")
@@ -410,7 +298,7 @@ def _load_scene(source, **overrides) -> DraawScene:
         return _wrapped(source)
     if isinstance(source, dict):
         if source.get("type") == "scene":
-            return _from_mitsuba_scene(_load_dict(mi, source, "<dict>"), "<dict>", overrides, source,
+            return _from_mitsuba_scene(load_dict_or_error(source, "<dict>"), "<dict>", overrides, source,
                                        named_integrator="integrator" in source)
         return _from_description(source, "<dict>", os.getcwd(), overrides)
     if not isinstance(source, (str, os.PathLike)):
@@ -457,11 +345,9 @@ def _wrapped(mi_scene) -> DraawScene:
 
 
 def _from_description(desc: dict, source: str, base_dir: str, overrides: dict) -> DraawScene:
-    import mitsuba as mi
-
     tmp = tempfile.TemporaryDirectory(prefix="draaw-mi-")
     mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
-    scene = _load_dict(mi, mi_dict, source)
+    scene = load_dict_or_error(mi_dict, source)
     import copy
     return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
 
@@ -539,56 +425,6 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:
         d = d.with_resolution(*checked["resolution"])
     return d
-
-
-def value_like(current, value, key: str):
-    """``value`` for ``params[key] = ...``, in the type of the parameter's ``current`` value: a
-    list of as many numbers as a vector parameter holds becomes that vector (a ``Color3f``
-    colour, a ``Point3f`` light position or SDF centre), anything else is converted whole.
-    Batch frames and preview updates set parameters through it (the preview made any three
-    numbers a colour, which an SDF centre refused at the next frame, dropping the change).
-
-    >>> import mitsuba as mi
-    >>> type(value_like(mi.Point3f(0.0), [0.1, 0.2, 0.3], "sdf.ball.center")).__name__
-    'Point3f'
-    """
-    import drjit as dr
-    import numpy as np
-    from ..errors import RenderError
-    check_like(current, value, key)
-    seq = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)
-    try:
-        if seq and dr.depth_v(current) > 1 and len(value) == len(current):
-            return type(current)(*[float(x) for x in value])
-        return type(current)(value)
-    except Exception as e:  # noqa: BLE001 - Dr.Jit / Mitsuba constructors: many kinds
-        raise RenderError(f"params[{key!r}] = {value!r}: cannot convert to {type(current).__name__} "
-                          f"({e})") from None
-
-
-def check_like(current, value, key: str) -> None:
-    """The checks of :func:`value_like` that need no conversion (no Dr.Jit value is made, so a
-    caller need not wait for a render in another thread): a number or numbers, and for a
-    texture texels of its dimension and channel count. A colour written to a textured
-    ``base_color`` failed at ``params.update()`` and stayed queued there: every later update
-    failed with it.
-
-    >>> import mitsuba as mi, numpy as np
-    >>> check_like(mi.TensorXf(np.zeros((4, 4, 3))), [1.0, 0.0, 0.0], "m.base_color.data")
-    Traceback (most recent call last):
-    ...
-    draaw_mi.errors.RenderError: params['m.base_color.data']: texels of shape (3,); this texture takes (H, W, 3) like its (4, 4, 3)
-    """
-    import drjit as dr
-    import numpy as np
-    from ..errors import RenderError
-    if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
-        raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
-    if dr.is_tensor_v(current):
-        shape = tuple(value.shape) if dr.is_tensor_v(value) else np.shape(value)
-        if len(shape) != current.ndim or shape[-1] != current.shape[-1]:
-            raise RenderError(f"params[{key!r}]: texels of shape {shape}; this texture takes "
-                              f"(H, W, {current.shape[-1]}) like its {tuple(current.shape)}")
 
 
 __all__ = ["DraawScene", "load_scene", "SCENE_SUFFIXES", "value_like", "check_like"]

@@ -17,15 +17,15 @@ parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on.
 from __future__ import annotations
 
 import os
-import re
 
 import numpy as np
 
-from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
-from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from . import camera as cam
+from .context import BuildContext, safe_id
+from .light_dicts import light_dicts
+from .material_dicts import material_dict
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
-from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, shown, string, vector
+from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -46,55 +46,11 @@ SHAPE_KEYS = {
     "cylinder": ("p0", "p1", "radius"),
 }
 COMMON_SHAPE_KEYS = ("type", "name", "material", "emission", "emission_color") + TRANSFORM_KEYS
-LIGHT_KEYS = {
-    "point": ("position", "snap_to_camera"),
-    "spot": ("position", "snap_to_camera", "target", "cutoff_angle", "beam_width"),
-    "area": ("shape", "position", "target", "up", "size", "radius"),
-    "constant": (),
-    "envmap": ("file",),
-    "directional": ("direction",),
-}
-COMMON_LIGHT_KEYS = ("type", "name", "intensity", "color")
-#: the names of [[shapes]] and [[lights]] entries without a 'name' (their traverse keys start
-#: with them; scene.light_values finds a light's table by it)
+#: the name of a [[shapes]] entry without a 'name' (its traverse keys start with it)
 SHAPE_NAME = "{kind}{i}"
-LIGHT_NAME = "{kind}_light{i}"
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".bmp", ".tga", ".pfm", ".ppm")
 
 DEFAULT_SETTINGS = {"resolution": (256, 256), "spp": 64, "max_depth": 6, "version": "v4", "seed": 0,
                     "filter": "box", "sampler": "independent", "hide_emitters": False, "aovs": []}
-
-
-class BuildContext:
-    """State shared while translating one description (base folder, temp folder, counters)."""
-
-    def __init__(self, base_dir: str, tmp_dir: str, source: str):
-        self.base_dir, self.tmp_dir, self.source = base_dir, tmp_dir, source
-        self.counter = 0
-        self.files: list[str] = []      # every file the scene reads (info["files"])
-        self.relative: dict[str, str] = {}   # relative name as written -> the file (info["relative_files"])
-
-    def path(self, p: str) -> str:
-        """A file the scene names, resolved against its folder (and remembered)."""
-        path = p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
-        if path not in self.files:
-            self.files.append(path)
-        if not os.path.isabs(p):
-            self.relative[p] = path
-        return path
-
-    def unique(self, stem: str) -> str:
-        self.counter += 1
-        return f"{stem}_{self.counter}"
-
-
-def safe_id(name: str) -> str:
-    """A Mitsuba object id from a free-form name ('.' is reserved in parameter paths).
-
-    >>> safe_id("Blue_Light.001")
-    'Blue_Light_001'
-    """
-    return re.sub(r"[^A-Za-z0-9_-]", "_", name)
 
 
 # --------------------------------------------------------------------------- settings
@@ -169,142 +125,6 @@ def _matrix_of(t) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- materials
-# negative values a resampled image keeps (Lanczos overshoot) and that are let through
-NEGATIVE_SLACK = 1e-2
-
-
-def _check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
-    """Refuse an image file with a non-finite value in its colour channels, or, with
-    ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
-    +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
-    naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
-    read (an environment map's tint uses it: the file is read once)."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
-    try:
-        with exr_reading_threads():
-            bitmap = mi.Bitmap(path)
-    except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
-        raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
-    arr = np.asarray(bitmap)
-    if np.issubdtype(arr.dtype, np.integer):
-        return bitmap                             # 8/16-bit: finite and >= 0 by construction
-    arr = arr.reshape(arr.shape[0], arr.shape[1], -1)[..., :3]
-    bad = ~np.isfinite(arr) | (arr < -NEGATIVE_SLACK) if nonneg else ~np.isfinite(arr)
-    if bad.any():
-        y, x, c = (int(i[0]) for i in np.nonzero(bad))
-        raise where.error(f"{what} {label!r} has the value {float(arr[y, x, c]):g} at pixel "
-                          f"(x={x}, y={y}), channel {c}; expected finite values"
-                          + (" >= 0" if nonneg else ""))
-    return bitmap
-
-
-def _tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
-    """``bitmap`` as linear float RGB, each channel times ``color`` (an environment map's
-    tint)."""
-    import mitsuba as mi
-    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
-    rgb = np.array(linear, dtype=np.float32).reshape(linear.height(), linear.width(), 3)
-    return mi.Bitmap(rgb * np.asarray(color, np.float32))
-
-
-def _texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None):
-    """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts; ``lo``: the
-    least a plain number or RGB triple may be (a reflectance's 0)."""
-    import mitsuba as mi
-
-    if isinstance(value, str):
-        path = ctx.path(value)
-        if not os.path.isfile(path):
-            raise where.error(f"texture file {value!r} does not exist (looked for {path!r})")
-        if not path.lower().endswith(IMAGE_SUFFIXES):
-            raise where.error(f"{value!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
-        raw = name not in ("base_color", "reflectance", "specular_reflectance", "diffuse_reflectance")
-        return {"type": "bitmap", "filename": path, "raw": raw}
-    if _is_nested(value):
-        value = _nested_array(value, where)
-    if isinstance(value, np.ndarray):
-        arr = value.astype(np.float32)
-        if arr.ndim == 2:
-            arr = arr[..., None]
-        return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True}
-    if isinstance(value, (list, tuple)):
-        return {"type": "rgb", "value": vector(value, where, lo=lo)}
-    if lo is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
-        return number(value, where, lo=lo)            # (-0.5 rendered negative pixels)
-    return value
-
-
-def _is_nested(value) -> bool:
-    return isinstance(value, (list, tuple)) and len(value) > 0 and isinstance(value[0], (list, tuple))
-
-
-def _nested_array(value, where: Where) -> np.ndarray:
-    """A TOML/JSON array of rows (``[[0.1, 0.9], [0.5, 0.3]]``: a 2x2 texture; rows of RGB
-    triples: a colour texture) as a float array."""
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise where.error(f"{shown(value)} is not a rectangular array of numbers (a texture: rows "
-                          "of values, or rows of RGB triples)") from None
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)) or arr.size == 0:
-        # (an empty one, [[]], loaded and then aborted the process at the render)
-        raise where.error(f"an array of shape {arr.shape}; a texture is rows of values (H, W) or "
-                          "rows of RGB triples (H, W, 3), at least one of them")
-    return arr
-
-
-def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_sided_default=True) -> dict:
-    """A Mitsuba BSDF dict for one ``[materials.NAME]`` table (validated)."""
-    if not isinstance(table, dict):
-        raise where.error(f"expected a material table, got {table!r}")
-    kind = table.get("type", "draaw")
-    string(kind, where / "type")
-    if kind == "draaw":
-        check_keys(table, ("type",) + DRAAW_PARAMS + OPTIONS, where)
-        out = {"type": "draaw", "two_sided": two_sided_default}
-        for key, value in table.items():
-            if key == "type":
-                continue
-            wk = where / key
-            if key in SCALAR_PARAMS:
-                lo, hi = SCALAR_PARAMS[key][1:]
-                out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float)) \
-                    else _texture_value(value, key, ctx, wk)
-            elif key in COLOR_PARAMS:
-                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool) \
-                        and not _is_nested(value):
-                    out[key] = {"type": "rgb", "value": vector(value, wk, lo=0.0)}
-                else:
-                    out[key] = _texture_value(value, key, ctx, wk)
-            elif key == "normalmap":
-                out[key] = _texture_value(value, key, ctx, wk)
-            elif key == "normalmap_encoding":
-                out[key] = string(value, wk, ("unsigned", "signed"))
-            elif key == "two_sided":
-                out[key] = boolean(value, wk)
-            elif key == "alpha_min":
-                out[key] = number(value, wk, lo=0.0, hi=0.1, lo_open=True)
-        return out
-    # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures,
-    # whose values must be finite (a NaN texel of a diffuse reflectance rendered NaN pixels in
-    # every version), and >= 0 for reflectances and transmittances.
-    out = {"type": kind}
-    for key, value in table.items():
-        if key != "type":
-            nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
-            if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
-                out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
-                continue              # distribution = "beckmann" (each was "no texture file")
-            out[key] = _texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
-            if isinstance(value, str) and out[key].get("type") == "bitmap":
-                _check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
-            elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
-                arr = np.asarray(out[key]["data"], dtype=np.float64)
-                if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):
-                    raise (where / key).error("texture array has a non-finite"
-                                              + (" or negative" if nonneg else "") + " value")
-    return out
 
 
 # --------------------------------------------------------------------------- shapes
@@ -384,91 +204,6 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
 
 
 # --------------------------------------------------------------------------- lights
-def spot_up(position, target) -> list[float]:
-    """The up vector of a spot light's frame: +y, unless it shines (nearly) along y."""
-    d = np.subtract(target, position)
-    return [0.0, 1.0, 0.0] if abs(d[1]) < 0.999 * np.linalg.norm(d) else [1.0, 0.0, 0.0]
-
-
-def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Where) -> dict:
-    import mitsuba as mi
-
-    if not isinstance(light, dict):
-        raise where.error(f"expected a light table, got {light!r}")
-    kind = kind_of(light, where, LIGHT_KEYS)
-    check_keys(light, COMMON_LIGHT_KEYS + LIGHT_KEYS[kind], where)
-    name = string(light.get("name", LIGHT_NAME.format(kind=kind, i=index)), where / "name")
-    if safe_id(name) != name or not name:
-        raise (where / "name").error(f"{name!r} may only contain letters, digits, '_' and '-'")
-    intensity = number(light.get("intensity", 1.0), where / "intensity", lo=0.0)
-    color = vector(light.get("color", [1.0, 1.0, 1.0]), where / "color", lo=0.0)
-    rgb = {"type": "rgb", "value": [intensity * c for c in color]}
-
-    def position():
-        if light.get("snap_to_camera", False):      # GO-Draaw's "snap light to camera"
-            if "position" in light:
-                raise (where / "position").error("cannot be combined with snap_to_camera = true")
-            return [float(v) for v in look_at[0]]
-        if "position" not in light:
-            raise where.error(f"a {kind} light needs 'position' (or snap_to_camera = true)")
-        return vector(light["position"], where / "position")
-
-    if "snap_to_camera" in light:
-        boolean(light["snap_to_camera"], where / "snap_to_camera")
-    if kind == "point":
-        return {name: {"type": "point", "position": position(), "intensity": rgb}}
-    if kind == "spot":
-        pos = position()
-        target = vector(light.get("target", [float(v) for v in look_at[1]]), where / "target")
-        if np.allclose(pos, target):
-            raise (where / "target").error("equals the light's position")
-        cutoff = number(light.get("cutoff_angle", 20.0), where / "cutoff_angle", lo=0.0, hi=90.0, lo_open=True)
-        beam = number(light.get("beam_width", cutoff * 0.75), where / "beam_width", lo=0.0, hi=cutoff, lo_open=True)
-        return {name: {"type": "spot", "intensity": rgb, "cutoff_angle": cutoff, "beam_width": beam,
-                       "to_world": mi.ScalarTransform4f().look_at(origin=pos, target=target,
-                                                                  up=spot_up(pos, target))}}
-    if kind == "constant":
-        return {name: {"type": "constant", "radiance": rgb}}
-    if kind == "envmap":
-        if "file" not in light:
-            raise where.error("an envmap light needs 'file'")
-        path = ctx.path(string(light["file"], where / "file"))
-        if not os.path.isfile(path):
-            raise (where / "file").error(f"environment map {light['file']!r} does not exist")
-        image = _check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
-        if list(color) == [1.0, 1.0, 1.0]:
-            return {name: {"type": "envmap", "filename": path, "scale": intensity}}
-        # Mitsuba's envmap has a scale but no tint: the image is tinted here (its 'color' was
-        # accepted and then dropped, so the tuner's light colour vanished on reload)
-        return {name: {"type": "envmap", "bitmap": _tinted_image(image, color), "scale": intensity}}
-    if kind == "directional":
-        d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")
-        if np.linalg.norm(d) == 0:
-            raise (where / "direction").error("is the zero vector")
-        return {name: {"type": "directional", "direction": d, "irradiance": rgb}}
-    # area light: an emitting rectangle, disk or sphere that faces 'target'
-    shape = string(light.get("shape", "rectangle"), where / "shape", ("rectangle", "disk", "sphere"))
-    pos = vector(light.get("position", [0.0, 0.0, 0.0]), where / "position")
-    emitter = {"type": "area", "radiance": rgb}
-    black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
-    if shape == "sphere":
-        r = number(light.get("radius", 0.5), where / "radius", lo=0.0, lo_open=True)
-        return {name: {"type": "sphere", "center": pos, "radius": r, "emitter": emitter, "bsdf": black}}
-    target = vector(light.get("target", [pos[0], pos[1] - 1.0, pos[2]]), where / "target")
-    if np.allclose(pos, target):
-        raise (where / "target").error("equals the light's position")
-    fwd = np.subtract(target, pos)
-    up = vector(light.get("up", [0.0, 0.0, 1.0] if abs(fwd[1]) > 0.9 * np.linalg.norm(fwd) else [0.0, 1.0, 0.0]),
-                where / "up")
-    # (an up along the facing, or zero, gave a NaN transform: a light that silently lit nothing)
-    cam.check_look_at(pos, target, up, where)
-    size = light.get("size", [1.0, 1.0])
-    sx, sy = vector(size, where / "size", n=2, lo=0.0) if isinstance(size, list) else [number(size, where / "size", lo=0.0)] * 2
-    if sx == 0 or sy == 0:
-        raise (where / "size").error(f"{size!r} has a zero side")
-    t = mi.ScalarTransform4f().look_at(origin=pos, target=target, up=up).scale([sx / 2, sy / 2, 1.0])
-    return {name: {"type": shape, "to_world": t, "emitter": emitter, "bsdf": black}}
-
 
 # --------------------------------------------------------------------------- whole scene
 def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, overrides: dict | None = None):
@@ -584,13 +319,3 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     info["files"] = [f for f in ctx.files if os.path.isfile(f)]
     info["relative_files"] = dict(ctx.relative)
     return scene, settings, info
-
-
-def auto_light(bbox_min, bbox_max, origin) -> list[dict]:
-    """Lights for a bare mesh file: a point light at the camera, its intensity following the
-    mesh's size (a floor at 1e-3 made a mesh 1e-4 across 5x too bright), and a dim sky."""
-    diag = float(np.linalg.norm(np.subtract(bbox_max, bbox_min)))
-    diag = diag if diag > 0 else 1.0
-    return [{"type": "point", "position": [float(v) for v in origin], "intensity": diag ** 2 * 3.0},
-            {"type": "constant", "intensity": 0.15}]
-

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .description import LIGHT_NAME, SHAPE_NAME
+from .description import SHAPE_NAME
+from .light_dicts import LIGHT_NAME
 
 #: what follows a light's name in its traverse keys, by the value it holds
 RGB_PARAMS = ("emitter.radiance", "radiance", "intensity", "irradiance")

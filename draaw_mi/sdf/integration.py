@@ -60,7 +60,7 @@ class SDFHook:
         self.opts = opts
         by_id = {sh.id(): sh for sh in scene.shapes()}
         missing = [pid for pid in sdf.proxy_ids if pid not in by_id]
-        if missing:     # (merged into another mesh: load with optimize=False, scene.load_mitsuba_dict)
+        if missing:     # (merged into another mesh: load with optimize=False, scene.mitsuba_load.load_mitsuba_dict)
             from ..errors import RenderError
             raise RenderError(f"SDF tracer: the scene lacks the proxy shapes {missing} of its SDF "
                               "objects (merged by Mitsuba's scene optimisation?)")

@@ -466,7 +466,7 @@ def proxy_ply(path: str, bb: mi.ScalarBoundingBox3f) -> str:
 def sdf_dicts(entries, materials: dict, ctx, where):
     """``[[sdf]]`` entries -> ``(proxy shape dicts, SDFScene)``; ``materials`` (the scene's
     material dicts, by id) gains inline and GO-Draaw materials and a default one if needed."""
-    from ..scene.description import material_dict
+    from ..scene.material_dicts import material_dict
     slots: list[str] = []
 
     def material_slot(value, w):

@@ -48,7 +48,7 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
     fit_mod = sys.modules["draaw_mi.fit"]
     ref = np.array(draaw_mi.render(tiny_scene, version="path", spp=16))     # truth: roughness 0.4
     calls = {"n": 0}
-    real = fit_mod._Param.from_latent
+    real = fit_mod.FitParam.from_latent
 
     def poisoned(self, u):
         v = real(self, u)
@@ -58,9 +58,9 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
         if calls["n"] == 2:                        # second iteration: a NaN derivative
             return dr.replace_grad(v, v * dr.select(mi.Bool(True), mi.Float(np.nan), 1.0))
         return v
-    monkeypatch.setattr(fit_mod._Param, "from_latent", poisoned)
+    monkeypatch.setattr(fit_mod.FitParam, "from_latent", poisoned)
     res = draaw_mi.fit(tiny_scene, ref, ["ball.roughness"], version="v4", spp=2, iterations=5, progress=False)
-    assert calls["n"] == 5, "fit() must map its latents through _Param.from_latent (patched here)"
+    assert calls["n"] == 5, "fit() must map its latents through FitParam.from_latent (patched here)"
     vals = np.array([h["values"]["ball.roughness"] for h in res.history])
     assert np.isfinite(vals).all() and np.isfinite([h["loss"] for h in res.history]).all()
     # no jump: the iterates stay near the truth, far from the range's bounds (0.019, 1)

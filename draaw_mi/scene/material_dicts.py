@@ -1,0 +1,155 @@
+"""``[materials.NAME]`` tables -> Mitsuba BSDF dicts: the ``draaw`` plugin's parameters, any
+other Mitsuba BSDF's passed through, colours and image files as textures (checked for finite,
+non-negative values)."""
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
+from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
+from .context import BuildContext
+from .schema import Where, boolean, check_keys, number, shown, string, vector
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".bmp", ".tga", ".pfm", ".ppm")
+# negative values a resampled image keeps (Lanczos overshoot) and that are let through
+NEGATIVE_SLACK = 1e-2
+
+
+def check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
+    """Refuse an image file with a non-finite value in its colour channels, or, with
+    ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
+    +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
+    naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
+    read (an environment map's tint uses it: the file is read once)."""
+    import mitsuba as mi
+    from ..guard import exr_reading_threads
+    try:
+        with exr_reading_threads():
+            bitmap = mi.Bitmap(path)
+    except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
+        raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
+    arr = np.asarray(bitmap)
+    if np.issubdtype(arr.dtype, np.integer):
+        return bitmap                             # 8/16-bit: finite and >= 0 by construction
+    arr = arr.reshape(arr.shape[0], arr.shape[1], -1)[..., :3]
+    bad = ~np.isfinite(arr) | (arr < -NEGATIVE_SLACK) if nonneg else ~np.isfinite(arr)
+    if bad.any():
+        y, x, c = (int(i[0]) for i in np.nonzero(bad))
+        raise where.error(f"{what} {label!r} has the value {float(arr[y, x, c]):g} at pixel "
+                          f"(x={x}, y={y}), channel {c}; expected finite values"
+                          + (" >= 0" if nonneg else ""))
+    return bitmap
+
+
+def tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
+    """``bitmap`` as linear float RGB, each channel times ``color`` (an environment map's
+    tint)."""
+    import mitsuba as mi
+    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    rgb = np.array(linear, dtype=np.float32).reshape(linear.height(), linear.width(), 3)
+    return mi.Bitmap(rgb * np.asarray(color, np.float32))
+
+
+def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None):
+    """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts; ``lo``: the
+    least a plain number or RGB triple may be (a reflectance's 0)."""
+    import mitsuba as mi
+
+    if isinstance(value, str):
+        path = ctx.path(value)
+        if not os.path.isfile(path):
+            raise where.error(f"texture file {value!r} does not exist (looked for {path!r})")
+        if not path.lower().endswith(IMAGE_SUFFIXES):
+            raise where.error(f"{value!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
+        raw = name not in ("base_color", "reflectance", "specular_reflectance", "diffuse_reflectance")
+        return {"type": "bitmap", "filename": path, "raw": raw}
+    if is_nested(value):
+        value = nested_array(value, where)
+    if isinstance(value, np.ndarray):
+        arr = value.astype(np.float32)
+        if arr.ndim == 2:
+            arr = arr[..., None]
+        return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True}
+    if isinstance(value, (list, tuple)):
+        return {"type": "rgb", "value": vector(value, where, lo=lo)}
+    if lo is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return number(value, where, lo=lo)            # (-0.5 rendered negative pixels)
+    return value
+
+
+def is_nested(value) -> bool:
+    return isinstance(value, (list, tuple)) and len(value) > 0 and isinstance(value[0], (list, tuple))
+
+
+def nested_array(value, where: Where) -> np.ndarray:
+    """A TOML/JSON array of rows (``[[0.1, 0.9], [0.5, 0.3]]``: a 2x2 texture; rows of RGB
+    triples: a colour texture) as a float array."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise where.error(f"{shown(value)} is not a rectangular array of numbers (a texture: rows "
+                          "of values, or rows of RGB triples)") from None
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)) or arr.size == 0:
+        # (an empty one, [[]], loaded and then aborted the process at the render)
+        raise where.error(f"an array of shape {arr.shape}; a texture is rows of values (H, W) or "
+                          "rows of RGB triples (H, W, 3), at least one of them")
+    return arr
+
+
+def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_sided_default=True) -> dict:
+    """A Mitsuba BSDF dict for one ``[materials.NAME]`` table (validated)."""
+    if not isinstance(table, dict):
+        raise where.error(f"expected a material table, got {table!r}")
+    kind = table.get("type", "draaw")
+    string(kind, where / "type")
+    if kind == "draaw":
+        check_keys(table, ("type",) + DRAAW_PARAMS + OPTIONS, where)
+        out = {"type": "draaw", "two_sided": two_sided_default}
+        for key, value in table.items():
+            if key == "type":
+                continue
+            wk = where / key
+            if key in SCALAR_PARAMS:
+                lo, hi = SCALAR_PARAMS[key][1:]
+                out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float)) \
+                    else texture_value(value, key, ctx, wk)
+            elif key in COLOR_PARAMS:
+                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool) \
+                        and not is_nested(value):
+                    out[key] = {"type": "rgb", "value": vector(value, wk, lo=0.0)}
+                else:
+                    out[key] = texture_value(value, key, ctx, wk)
+            elif key == "normalmap":
+                out[key] = texture_value(value, key, ctx, wk)
+            elif key == "normalmap_encoding":
+                out[key] = string(value, wk, ("unsigned", "signed"))
+            elif key == "two_sided":
+                out[key] = boolean(value, wk)
+            elif key == "alpha_min":
+                out[key] = number(value, wk, lo=0.0, hi=0.1, lo_open=True)
+        return out
+    # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures,
+    # whose values must be finite (a NaN texel of a diffuse reflectance rendered NaN pixels in
+    # every version), and >= 0 for reflectances and transmittances.
+    out = {"type": kind}
+    for key, value in table.items():
+        if key != "type":
+            nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
+            if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
+                out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
+                continue              # distribution = "beckmann" (each was "no texture file")
+            out[key] = texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
+            if isinstance(value, str) and out[key].get("type") == "bitmap":
+                check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
+            elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
+                arr = np.asarray(out[key]["data"], dtype=np.float64)
+                if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):
+                    raise (where / key).error("texture array has a non-finite"
+                                              + (" or negative" if nonneg else "") + " value")
+    return out

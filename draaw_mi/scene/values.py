@@ -1,0 +1,53 @@
+"""Values written into a loaded scene's parameters (``params[key] = ...``), converted to and
+checked against the parameter's own type."""
+from __future__ import annotations
+
+
+def value_like(current, value, key: str):
+    """``value`` for ``params[key] = ...``, in the type of the parameter's ``current`` value: a
+    list of as many numbers as a vector parameter holds becomes that vector (a ``Color3f``
+    colour, a ``Point3f`` light position or SDF centre), anything else is converted whole.
+    Batch frames and preview updates set parameters through it (the preview made any three
+    numbers a colour, which an SDF centre refused at the next frame, dropping the change).
+
+    >>> import mitsuba as mi
+    >>> type(value_like(mi.Point3f(0.0), [0.1, 0.2, 0.3], "sdf.ball.center")).__name__
+    'Point3f'
+    """
+    import drjit as dr
+    import numpy as np
+    from ..errors import RenderError
+    check_like(current, value, key)
+    seq = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)
+    try:
+        if seq and dr.depth_v(current) > 1 and len(value) == len(current):
+            return type(current)(*[float(x) for x in value])
+        return type(current)(value)
+    except Exception as e:  # noqa: BLE001 - Dr.Jit / Mitsuba constructors: many kinds
+        raise RenderError(f"params[{key!r}] = {value!r}: cannot convert to {type(current).__name__} "
+                          f"({e})") from None
+
+
+def check_like(current, value, key: str) -> None:
+    """The checks of :func:`value_like` that need no conversion (no Dr.Jit value is made, so a
+    caller need not wait for a render in another thread): a number or numbers, and for a
+    texture texels of its dimension and channel count. A colour written to a textured
+    ``base_color`` failed at ``params.update()`` and stayed queued there: every later update
+    failed with it.
+
+    >>> import mitsuba as mi, numpy as np
+    >>> check_like(mi.TensorXf(np.zeros((4, 4, 3))), [1.0, 0.0, 0.0], "m.base_color.data")
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.RenderError: params['m.base_color.data']: texels of shape (3,); this texture takes (H, W, 3) like its (4, 4, 3)
+    """
+    import drjit as dr
+    import numpy as np
+    from ..errors import RenderError
+    if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
+        raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
+    if dr.is_tensor_v(current):
+        shape = tuple(value.shape) if dr.is_tensor_v(value) else np.shape(value)
+        if len(shape) != current.ndim or shape[-1] != current.shape[-1]:
+            raise RenderError(f"params[{key!r}]: texels of shape {shape}; this texture takes "
+                              f"(H, W, {current.shape[-1]}) like its {tuple(current.shape)}")
