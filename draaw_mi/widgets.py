@@ -28,7 +28,6 @@ Example (in a notebook)::
 from __future__ import annotations
 
 import collections
-import json
 import os
 import threading
 import time
@@ -48,32 +47,14 @@ except ImportError as _e:  # pragma: no cover - exercised by a test with the mod
 
 from .tuner_camera import CameraPanel, slider as _slider  # noqa: E402 (needs ipywidgets)
 from .tuner_document import DocumentPanel, _html  # noqa: E402
+from .tuner_lights import LightPanel  # noqa: E402
+from .tuner_post import PostPanel, close_widgets  # noqa: E402
 
 VERSIONS = ("v1", "v2", "v3", "v4", "path")
 LOSSLESS_EVERY = 0.5       # seconds between PNG frames on the canvas while refining at rest
 
 
-def close_widgets(*roots) -> None:
-    """Close ``roots`` and every widget under them (children, layouts, styles; dicts of
-    widgets are walked too). ipywidgets keeps each open widget in a global registry and a
-    box's ``close()`` leaves its children open, so without this a closed panel stays alive
-    with its callbacks, its tuner and the tuner's scene -- and every live draaw material
-    enlarges the BSDF calls of all later renders (vcalls cover every live instance)."""
-    seen, stack = set(), list(roots)
-    while stack:
-        w = stack.pop()
-        if isinstance(w, dict):
-            stack.extend(w.values())
-            continue
-        if id(w) in seen or not isinstance(w, W.Widget):
-            continue
-        seen.add(id(w))
-        stack.extend(getattr(w, "children", ()))
-        stack.extend(getattr(w, name, None) for name in ("layout", "style"))
-        w.close()
-
-
-class MaterialTuner(CameraPanel, DocumentPanel):
+class MaterialTuner(CameraPanel, LightPanel, PostPanel, DocumentPanel):
     """An interactive panel for one scene (see the module docstring).
 
     ==================  =======================================================================
@@ -420,128 +401,9 @@ class MaterialTuner(CameraPanel, DocumentPanel):
         self.preview.configure(**kw)
         self._options.update({k: v for k, v in kw.items() if k in self._options})
 
-    def _light_panel(self):
-        self.light_scale = W.FloatLogSlider(value=1.0, base=2, min=-4, max=4, description="intensity ×")
-        self.light_color = W.ColorPicker(value="#ffffff", description="colour")
-        self.snap_light = W.Checkbox(value=False, description="snap point lights to the camera")
-        for w in (self.light_scale, self.light_color, self.snap_light):
-            w.observe(self._guard(lambda ch: self._set_lights()), "value")
-        return W.VBox([self.light_scale, self.light_color, self.snap_light])
-
-    def _set_lights(self, positions_only: bool = False):
-        """Push the lights' intensities and places; ``positions_only``: only their places (a
-        camera move)."""
-        vals, now = self._light_places()
-        if not positions_only:
-            more, tint = self._light_intensities()
-            vals.update(more)
-            now["tint"] = tint
-        self._changed(vals)
-        self._lights_now.update(now)        # once the preview has them
-
-    def _light_intensities(self) -> tuple[dict, tuple]:
-        """The lights' values under the intensity and colour controls, and the tint."""
-        col = np.array(tuning.hex_to_linear(self.light_color.value))
-        s = float(self.light_scale.value)
-        tint = tuple(float(c) for c in col)
-        vals = {}
-        for k, base in self._light_base.items():
-            if k.endswith(".data"):         # an environment map's texels: its tint (rewriting
-                if tint != self._lights_now["tint"]:        # them rebuilds its sampling
-                    vals[k] = base * col.astype(np.float32)       # distribution: only on a change)
-                continue
-            v = base * s * (col if base.size == 3 else 1.0 if k.endswith(".scale") else col.mean())
-            vals[k] = [float(x) for x in v] if v.size == 3 else float(v[0])
-        return vals, tint
-
-    def _light_places(self) -> tuple[dict, dict]:
-        """Where the point-like lights go: at the camera if they snap (snap_to_camera ones
-        always, the others while the box is ticked), else where the scene had them; and
-        which ones snap."""
-        snapped = frozenset() if self.camera is None else frozenset(self._camera_lights).union(
-            self._light_positions if self.snap_light.value else ())
-        vals = {}
-        if snapped or self._lights_now["snapped"]:      # unsnapped: back where the scene had them
-            eye, target, _ = self._camera_now() if snapped else (None, None, None)
-            for k, pos in self._light_positions.items():
-                vals[k] = (eye if k in snapped else pos).tolist()
-            for k, aim in self._camera_lights.items():
-                if k.endswith(".to_world") and k in snapped:
-                    frame = tuning.spot_at(eye, target if aim is None else aim)
-                    if frame is not None:
-                        vals[k] = frame
-        return vals, {"snapped": snapped}
-
-    def _post_panel(self):
-        from . import post
-        self.post_rows = W.VBox([])
-        self.post_add = W.Dropdown(options=list(post.FILTERS), description="filter")
-        add = W.Button(description="add")
-        add.on_click(self._guard(lambda _b: self._post_edit(add=self.post_add.value)))
-        self.post_json = W.Textarea(value=json.dumps(self.post), layout=W.Layout(width="380px", height="80px"))
-        apply = W.Button(description="apply JSON")
-        apply.on_click(self._guard(lambda _b: self._post_from_json(self.post_json.value)))
-        self._post_rows_refresh()
-        return W.VBox([self.post_rows, W.HBox([self.post_add, add]), self.post_json, apply])
-
-    def _post_from_json(self, text):
-        try:
-            chain = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise DraawError(f"post chain JSON: {e}") from None
-        if not isinstance(chain, list):
-            raise DraawError(f"post chain JSON: expected a list of filter tables, got {type(chain).__name__}")
-        self._set_post(chain)
-
-    def _set_post(self, chain):
-        from . import post
-        # validated (ParameterError) and in one form: every parameter at the top level (an
-        # entry written with "params": {...} showed amount 1.0 and refused the slider's value)
-        self.post = post.Chain(chain).to_list()
-        self._configure(post=self.post)
-        self._post_rows_refresh()
-
-    def _post_edit(self, add=None, remove=None, up=None, amount=None):
-        chain = [dict(e) for e in self.post]
-        if add is not None:             # (a start that shows: contrast 1 is the identity)
-            chain.append({"type": add, "amount": 0.5, **_POST_START.get(add, {})})
-        if remove is not None:
-            chain.pop(remove)
-        if up is not None and up > 0:
-            chain[up - 1], chain[up] = chain[up], chain[up - 1]
-        if amount is not None:
-            chain[amount[0]]["amount"] = float(amount[1])
-        self._set_post(chain)
-
-    def _post_rows_refresh(self):
-        rows = []
-        for i, e in enumerate(self.post):
-            amt = _slider(str(e.get("type")), float(e.get("amount", 1.0)), 0.0, 1.0)
-            amt.continuous_update = False
-            amt.observe(self._guard(lambda ch, i=i: self._post_edit(amount=(i, ch["new"]))), "value")
-            upb = W.Button(description="↑", layout=W.Layout(width="36px"))
-            upb.on_click(self._guard(lambda _b, i=i: self._post_edit(up=i)))
-            rm = W.Button(description="✕", layout=W.Layout(width="36px"))
-            rm.on_click(self._guard(lambda _b, i=i: self._post_edit(remove=i)))
-            rows.append(W.HBox([amt, upb, rm]))
-        if hasattr(self, "post_rows"):
-            old = self.post_rows.children
-            self.post_rows.children = rows
-            close_widgets(*old)                 # replaced rows: out of the registry
-            self._syncing = True
-            try:
-                self.post_json.value = json.dumps(self.post)
-            finally:
-                self._syncing = False
-
 #: the newest running panel of each scene file (MaterialTuner._take_over_file)
 _PANELS: dict = {}
 _PANELS_GUARD = threading.Lock()
-
-#: what the Post tab's "add" starts a filter with, where amount 0.5 of its defaults shows nothing
-#: (contrast 1.0) or something neither linear nor encoded (half an sRGB encoding)
-_POST_START = {"contrast": {"contrast": 2.0}, "srgb": {"amount": 1.0}}
-
 
 def scaled_resolution(size, scale: float) -> tuple[int, int]:
     """The film for the resolution slider: ``size`` (W, H) itself at scale 1, else one factor
