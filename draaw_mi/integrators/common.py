@@ -3,12 +3,10 @@
 * :class:`DraawIntegrator` -- the common base (a Mitsuba ``RBIntegrator``, i.e. path-replay
   differentiable): property validation, the AOV outputs and the per-render feature flags.
 * Emitter sampling with a differentiable re-evaluation of the emitted radiance.
-* The legacy *Phong family* model of V1/V2 (Lambert + normalised Phong + mirror), built from
-  the ``draaw`` BSDF's knobs or, for other BSDFs, from their diffuse reflectance.
-* For V3: the integrator's own plain-NDF sampler of the ``draaw`` model (cosine | ``D(m)
-  cos(theta_m)`` mixture, GGX or Beckmann) and the Beckmann Cook-Torrance lobe; the
-  parameters are read through the BSDF's attributes with the formulas of
-  ``draaw_mi/materials/draaw_bsdf.py``.
+* Local frames (two-sided BSDFs seen from the back) and :func:`relative` gradients.
+
+The legacy Phong-family model of V1/V2 is in :mod:`draaw_mi.integrators.phong`, V3's own
+evaluation and sampling of the ``draaw`` model in :mod:`draaw_mi.integrators.draaw_lobes`.
 
 AOVs (property ``aovs``, a comma-separated list, or ``"all"``); channel names as in OpenEXR:
 
@@ -32,7 +30,6 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from ..materials.draaw_bsdf import clamp_st
 from .features import detect_features
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
@@ -47,10 +44,6 @@ AOV_CHANNELS: dict[str, tuple[str, ...]] = {
 INV_PI = 1.0 / math.pi
 INV_TWO_PI = 0.5 / math.pi
 LUM = (0.2126, 0.7152, 0.0722)
-# Smallest GGX alpha of the draaw BSDF (its default ``alpha_min``): alpha = sqrt(r^4 + a_min^2).
-ALPHA_MIN = 1e-3
-# Largest Phong exponent of the legacy model (roughness below ~0.12 gives this lobe).
-PHONG_MAX_EXPONENT = 1e4
 
 
 def lum(c: mi.Color3f) -> mi.Float:
@@ -315,218 +308,6 @@ def side_sign(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Bool) ->
 
 def flip_z(v: mi.Vector3f, sign: mi.Float) -> mi.Vector3f:
     return mi.Vector3f(v.x, v.y, v.z * sign)
-
-
-# ---------------------------------------------------------------------------------------
-#  Legacy Phong-family model (V1, V2)
-# ---------------------------------------------------------------------------------------
-
-class PhongMaterial:
-    """Per-lane parameters of the legacy model at a surface point.
-
-    ``kd``      Lambert albedo, ``base_color * (1 - metallic) * (1 - max(ks))``
-    ``ks``      Phong albedo, ``lerp(0.08 * specular, base_color, metallic)``
-    ``n``       Phong exponent ``2 / alpha^2 - 2`` with ``alpha = sqrt(r^4 + 1e-6)``, <= 1e4
-    ``mirror``  mirror weight (``reflection``) and ``tint = lerp(1, base_color, metallic)``
-    ``scatter`` weight of indirect diffuse light (``direct_to_scatter``)
-    Energy: ``(1 - mirror) (kd + ks) + mirror * tint <= 1`` per channel (base_color <= 1).
-    Other BSDFs: ``kd`` = their diffuse reflectance clipped to [0, 1], no Phong, no mirror.
-    """
-
-    def __init__(self, kd, ks, n, mirror, tint, scatter):
-        self.kd, self.ks, self.n = kd, ks, n
-        self.mirror, self.tint, self.scatter = mirror, tint, scatter
-
-
-def phong_material(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Bool,
-                   feats: dict[str, bool]) -> PhongMaterial:
-    """Read the legacy model's parameters (differentiable when AD is on)."""
-    kd = mi.Color3f(0.0)
-    ks = mi.Color3f(0.0)
-    n = mi.Float(1.0)
-    mirror = mi.Float(0.0)
-    tint = mi.Color3f(1.0)
-    scatter = mi.Float(1.0)
-    is_draaw = mi.Bool(False)
-    if feats["draaw_materials"]:
-        is_draaw = active & bsdf.has_attribute("direct_to_scatter", active)
-        # straight-through clamps, as the draaw BSDF's: a plain clip gave no gradient at a
-        # bound (reflection and metallic sit at 0 by default, and a fit never left them)
-        base = clamp_st(bsdf.eval_attribute("base_color", si, is_draaw), 0.0, 1.0)
-        rough = clamp_st(bsdf.eval_attribute_1("roughness", si, is_draaw), 0.0, 1.0)
-        metal = clamp_st(bsdf.eval_attribute_1("metallic", si, is_draaw), 0.0, 1.0)
-        spec = clamp_st(bsdf.eval_attribute_1("specular", si, is_draaw), 0.0, 1.0)
-        refl = clamp_st(bsdf.eval_attribute_1("reflection", si, is_draaw), 0.0, 1.0)
-        d2s = clamp_st(bsdf.eval_attribute_1("direct_to_scatter", si, is_draaw), 0.0, 1.0)
-        ks_d = dr.lerp(mi.Color3f(0.08 * spec), base, metal)
-        kd_d = base * (1.0 - metal) * (1.0 - dr.max(ks_d))
-        alpha2 = dr.square(dr.square(rough)) + 1e-6          # alpha^2, alpha = sqrt(r^4 + 1e-6)
-        # the floor at 0 only absorbs the 1e-6 (-2e-6 at roughness 1): straight through, or
-        # roughness 1 had no gradient (an optimiser at the bound stayed there); the cap on
-        # sharp lobes stays a plain clip, where the image does not change either
-        n_d = dr.minimum(clamp_st(2.0 / alpha2 - 2.0, 0.0, None), PHONG_MAX_EXPONENT)
-        kd = dr.select(is_draaw, kd_d, kd)
-        ks = dr.select(is_draaw, ks_d, ks)
-        n = dr.select(is_draaw, n_d, n)
-        mirror = dr.select(is_draaw, refl, mirror)
-        tint = dr.select(is_draaw, dr.lerp(mi.Color3f(1.0), base, metal), tint)
-        scatter = dr.select(is_draaw, d2s, scatter)
-    if feats["other_materials"]:
-        other = active & ~is_draaw
-        kd_o = dr.clip(bsdf.eval_diffuse_reflectance(si, other), 0.0, 1.0)
-        kd = dr.select(other, kd_o, kd)
-    return PhongMaterial(kd, ks, n, mirror, tint, scatter)
-
-
-def phong_lobe(n: mi.Float, cos_r: mi.Float) -> mi.Float:
-    """Normalised Phong lobe ``(n + 2) / (2 pi) * max(0, cos_r)^n`` (safe at cos_r <= 0)."""
-    ok = cos_r > 0
-    c = dr.select(ok, dr.minimum(cos_r, 1.0), 1.0)
-    return dr.select(ok, (n + 2.0) * INV_TWO_PI * dr.power(c, n), 0.0)
-
-
-def mirror_dir(wi: mi.Vector3f) -> mi.Vector3f:
-    return mi.Vector3f(-wi.x, -wi.y, wi.z)
-
-
-def phong_eval(mat: PhongMaterial, wi: mi.Vector3f, wo: mi.Vector3f, active: mi.Bool):
-    """(diffuse, glossy) parts of ``f * cos(theta_o)`` of the smooth lobes, each already
-    multiplied by ``1 - mirror``; local directions in the upper hemisphere."""
-    cos_o = mi.Frame3f.cos_theta(wo)
-    ok = active & (mi.Frame3f.cos_theta(wi) > 0) & (cos_o > 0)
-    w = (1.0 - mat.mirror) * dr.select(ok, cos_o, 0.0)
-    diffuse = mat.kd * (w * INV_PI)
-    glossy = mat.ks * (w * phong_lobe(mat.n, dr.dot(mirror_dir(wi), wo)))
-    return diffuse, glossy
-
-
-def phong_lobe_probs(mat: PhongMaterial):
-    """Probabilities (diffuse, glossy, mirror) of sampling each lobe (detached)."""
-    m = dr.detach(mat.mirror)
-    wd = (1.0 - m) * lum(dr.detach(mat.kd)) * dr.detach(mat.scatter)
-    wg = (1.0 - m) * lum(dr.detach(mat.ks))
-    wm = m * lum(dr.detach(mat.tint))
-    total = wd + wg + wm
-    ok = total > 0
-    inv = dr.select(ok, 1.0 / dr.select(ok, total, 1.0), 0.0)
-    return wd * inv, wg * inv, wm * inv
-
-
-def phong_smooth_pdf(mat: PhongMaterial, p_d, p_g, wi: mi.Vector3f, wo: mi.Vector3f):
-    """Solid-angle pdf of the diffuse + glossy part of the lobe mixture."""
-    n = dr.detach(mat.n)
-    cos_r = dr.dot(mirror_dir(wi), wo)
-    pdf_g = dr.select(cos_r > 0, (n + 1.0) * INV_TWO_PI *
-                      dr.power(dr.select(cos_r > 0, dr.minimum(cos_r, 1.0), 1.0), n), 0.0)
-    pdf_d = mi.warp.square_to_cosine_hemisphere_pdf(wo)
-    return p_d * pdf_d + p_g * pdf_g
-
-
-def phong_sample(mat: PhongMaterial, wi: mi.Vector3f, s1: mi.Float, s2: mi.Point2f):
-    """Sample the lobe mixture. Returns ``(wo, is_mirror, pdf_smooth, p_mirror)``: ``wo`` in
-    the (upper-hemisphere) local frame; ``pdf_smooth`` is the mixture pdf of smooth lobes."""
-    p_d, p_g, p_m = phong_lobe_probs(mat)
-    is_mirror = s1 >= p_d + p_g
-    is_glossy = (s1 >= p_d) & ~is_mirror
-    n = dr.detach(mat.n)
-    # glossy: cos^n lobe around the mirror direction
-    cos_a = dr.power(dr.maximum(s2.x, 1e-30), 1.0 / (n + 1.0))
-    sin_a = dr.safe_sqrt(1.0 - dr.square(cos_a))
-    sp, cp = dr.sincos(2.0 * math.pi * s2.y)
-    r = mirror_dir(wi)
-    wo_g = mi.Frame3f(r).to_world(mi.Vector3f(sin_a * cp, sin_a * sp, cos_a))
-    wo_d = mi.warp.square_to_cosine_hemisphere(s2)
-    wo = dr.select(is_mirror, r, dr.select(is_glossy, wo_g, wo_d))
-    pdf = phong_smooth_pdf(mat, p_d, p_g, wi, wo)
-    return wo, is_mirror, pdf, p_m
-
-
-# ---------------------------------------------------------------------------------------
-#  The draaw model, evaluated and NDF-sampled by the integrator (V3)
-# ---------------------------------------------------------------------------------------
-
-def schlick(f0, f90, cos_theta):
-    m = dr.clip(1.0 - cos_theta, 0.0, 1.0)
-    m2 = dr.square(m)
-    return f0 + (f90 - f0) * (m2 * m2 * m)
-
-
-class DraawParams:
-    """``kd``, ``f0``, ``f90``, ``alpha`` of the draaw model at a surface point (see
-    ``draaw_bsdf.py``): ``kd = base (1 - metallic)``, ``f0 = lerp(0.08 specular, base,
-    metallic)``, ``f90 = min(1, 50 f0)``, ``alpha = sqrt(roughness^4 + 1e-3^2)``."""
-
-    def __init__(self, kd, f0, f90, alpha):
-        self.kd, self.f0, self.f90, self.alpha = kd, f0, f90, alpha
-
-
-def draaw_params(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Bool) -> DraawParams:
-    base = clamp_st(bsdf.eval_attribute("base_color", si, active), 0.0, None)
-    rough = clamp_st(bsdf.eval_attribute_1("roughness", si, active), 0.0, 1.0)
-    metal = clamp_st(bsdf.eval_attribute_1("metallic", si, active), 0.0, 1.0)
-    spec = clamp_st(bsdf.eval_attribute_1("specular", si, active), 0.0, 1.0)
-    alpha = dr.sqrt(dr.square(dr.square(rough)) + ALPHA_MIN ** 2)
-    f0 = dr.lerp(mi.Color3f(0.08 * spec), base, metal)
-    return DraawParams(base * (1.0 - metal), f0, dr.minimum(1.0, 50.0 * f0), alpha)
-
-
-def _half(wi, wo):
-    h = wi + wo
-    h_len = dr.norm(h)
-    ok = h_len > 1e-12
-    return dr.select(ok, h / dr.select(ok, h_len, 1.0), mi.Vector3f(0, 0, 1))
-
-
-def draaw_spec_eval(p: DraawParams, mtype: mi.MicrofacetType, wi: mi.Vector3f,
-                    wo: mi.Vector3f, active: mi.Bool) -> mi.Color3f:
-    """Cook-Torrance lobe ``F D G / (4 cos_i)`` (= f * cos(theta_o)) of the draaw model with
-    NDF ``mtype`` and its Smith G (local directions, upper hemisphere); the diffuse lobe is
-    left to the BSDF's own ``eval`` (see ``DraawV3Integrator``)."""
-    cos_i = mi.Frame3f.cos_theta(wi)
-    cos_o = mi.Frame3f.cos_theta(wo)
-    ok = active & (cos_i > 0) & (cos_o > 0)
-    h = _half(wi, wo)
-    F = schlick(p.f0, p.f90, dr.dot(wi, h))
-    distr = mi.MicrofacetDistribution(mtype, p.alpha, False)
-    value = F * (distr.eval(h) * distr.G(wi, wo, h) / (4.0 * dr.select(ok, cos_i, 1.0)))
-    return dr.select(ok & dr.isfinite(value.x + value.y + value.z), value, 0.0)
-
-
-def draaw_spec_probability(p: DraawParams, cos_i: mi.Float) -> mi.Float:
-    """Probability of the glossy lobe (as the draaw BSDF picks it; depends on wi only)."""
-    w_spec = lum(schlick(p.f0, p.f90, cos_i))
-    w_diff = lum(p.kd) * (1.0 - w_spec)
-    total = w_spec + w_diff
-    # clipped into [0, 1]: a base colour above 1 makes w_diff negative (see the draaw BSDF)
-    return dr.detach(dr.clip(dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5), 0.0, 1.0))
-
-
-def draaw_ndf_sample(p: DraawParams, mtype: mi.MicrofacetType, wi: mi.Vector3f,
-                     s1: mi.Float, s2: mi.Point2f, active: mi.Bool):
-    """Sample the mixture (cosine hemisphere | plain NDF ``D(m) cos(theta_m)``, reflected).
-
-    Returns ``(wo, pdf, glossy)`` (detached, local frame, ``wi`` in the upper hemisphere)."""
-    p = DraawParams(*(dr.detach(x) for x in (p.kd, p.f0, p.f90, p.alpha)))
-    cos_i = mi.Frame3f.cos_theta(wi)
-    p_spec = draaw_spec_probability(p, cos_i)
-    glossy = s1 < p_spec
-    distr = mi.MicrofacetDistribution(mtype, p.alpha, False)
-    m, _ = distr.sample(mi.Vector3f(0, 0, 1), s2)
-    wo = dr.select(glossy, mi.reflect(wi, m), mi.warp.square_to_cosine_hemisphere(s2))
-    return wo, draaw_ndf_pdf(p, mtype, p_spec, wi, wo, active), glossy
-
-
-def draaw_ndf_pdf(p: DraawParams, mtype: mi.MicrofacetType, p_spec: mi.Float,
-                  wi: mi.Vector3f, wo: mi.Vector3f, active: mi.Bool) -> mi.Float:
-    """Mixture pdf of :func:`draaw_ndf_sample` (0 below the horizon)."""
-    cos_o = mi.Frame3f.cos_theta(wo)
-    ok = active & (mi.Frame3f.cos_theta(wi) > 0) & (cos_o > 0)
-    h = _half(wi, wo)
-    distr = mi.MicrofacetDistribution(mtype, p.alpha, False)
-    dot_oh = dr.abs(dr.dot(wo, h))
-    pdf_s = safe_div(distr.pdf(wi, h), 4.0 * dot_oh)
-    pdf = (1.0 - p_spec) * mi.warp.square_to_cosine_hemisphere_pdf(wo) + p_spec * pdf_s
-    return dr.detach(dr.select(ok & dr.isfinite(pdf), pdf, 0.0))
 
 
 def relative(f: mi.Color3f) -> mi.Color3f:

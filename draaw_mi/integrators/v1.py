@@ -4,8 +4,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import (DraawIntegrator, emitter_sample_one, flip_z, mirror_dir, parse_int,
-                     phong_eval, phong_material, relative, sample_emitter, side_sign)
+from .common import DraawIntegrator, emitter_sample_one, flip_z, parse_int, relative, sample_emitter, side_sign
+from .phong import mirror_dir, phong_eval, phong_material
 
 # Light from every emitter individually up to this many emitters (else one random emitter).
 MAX_UNROLLED_EMITTERS = 8
@@ -49,7 +49,7 @@ class DraawV1Integrator(DraawIntegrator):
     - direct light from **every** emitter (one sample and one shadow ray each; above
       8 emitters, one emitter picked at random) through the legacy Lambert + normalised Phong
       model of ``draaw_v2`` (exponent from roughness, see
-      :class:`~draaw_mi.integrators.common.PhongMaterial`);
+      :class:`~draaw_mi.integrators.phong.PhongMaterial`);
     - ``scatter`` cosine-weighted gather rays: indirect diffuse light from the direct light
       reflected (Lambert + Phong, one random emitter sample) by the surfaces they hit, times
       the local diffuse albedo and ``direct_to_scatter``;

@@ -4,9 +4,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import (DraawIntegrator, flip_z, parse_int, phong_eval,
-                     phong_material, phong_sample, relative, safe_div, sample_emitter,
+from .common import (DraawIntegrator, flip_z, parse_int, relative, safe_div, sample_emitter,
                      separate_adjoints, side_sign)
+from .phong import phong_eval, phong_material, phong_sample
 
 
 class DraawV2Integrator(DraawIntegrator):
@@ -41,7 +41,7 @@ class DraawV2Integrator(DraawIntegrator):
 
     A path tracer with next-event estimation (one emitter sample and a shadow ray per vertex,
     no MIS, no Russian roulette), unbiased for its own *legacy* model, a Phong family built
-    from the ``draaw`` BSDF's knobs (:class:`~draaw_mi.integrators.common.PhongMaterial`)::
+    from the ``draaw`` BSDF's knobs (:class:`~draaw_mi.integrators.phong.PhongMaterial`)::
 
         f = (1 - reflection) * (kd / pi + ks (n + 2) / (2 pi) max(0, <R(wi), wo>)^n)
             + reflection * tint * delta(wo - R(wi))

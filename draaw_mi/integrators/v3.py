@@ -5,8 +5,9 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from .common import (DraawIntegrator, draaw_spec_eval, draaw_ndf_sample, draaw_params, flip_z,
-                     parse_float, relative, safe_div, sample_emitter, separate_adjoints, side_sign)
+from .common import (DraawIntegrator, flip_z, parse_float, relative, safe_div, sample_emitter,
+                     separate_adjoints, side_sign)
+from .draaw_lobes import draaw_ndf_sample, draaw_params, draaw_spec_eval
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
 

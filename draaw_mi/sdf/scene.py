@@ -33,7 +33,6 @@ integrators find the SDF tree from the proxies' ids (``__sdf_<token>_<slot>``) i
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import re
 
@@ -42,6 +41,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import suggest
+from .go_draaw import go_draaw_entry, go_draaw_spheres
 from .node import SDFNode, box, is_infinite, vec_of
 from .operators import OPERATORS
 from .primitives import PRIMITIVES
@@ -65,9 +65,6 @@ PRIMITIVE_KEYS = {
 }
 COMMON_KEYS = ("type", "name", "material", "translate", "rotate", "scale")
 OPERATOR_KEYS = ("children", "k")
-GO_DRAAW_TYPES = {0: "distance", 1: "union", 2: "smoothUnion", 3: "intersection",
-                  4: "smoothIntersection", 5: "subtraction", 6: "smoothSubtraction", 7: "addition",
-                  8: "smoothAddition", 9: "smoothUnionNoColorMix"}
 
 
 class SDFScene:
@@ -280,7 +277,7 @@ def build_nodes(entries: list, material_slot, where, resolve=None) -> tuple[list
             check_keys(entry, ("type", "spheres", "file", "scale"), w)
             # (the nodes of a second list are named go2_sphere0, ...: names are keys)
             prefix = "go_" if not extra_roots else f"go{len(extra_roots) + 1}_"
-            extra_roots.append(_go_draaw_entry(entry, material_slot, w, resolve, prefix))
+            extra_roots.append(go_draaw_entry(entry, material_slot, w, resolve, prefix))
             continue
         name = string(entry.get("name", f"sdf{i}"), w / "name")
         if not NAME_PATTERN.fullmatch(name):
@@ -351,107 +348,6 @@ def _assign(node: SDFNode, slot: int) -> None:
         if c.material is None:
             c.slot = slot
             _assign(c, slot)
-
-
-def _go_draaw_entry(entry: dict, material_slot, where, resolve=None, prefix: str = "go_") -> SDFNode:
-    from ..scene.schema import number, string
-    if ("spheres" in entry) == ("file" in entry):
-        raise where.error("a go_draaw_spheres entry needs exactly one of 'spheres' or 'file'")
-    spheres = entry.get("spheres")
-    if "file" in entry:
-        path = string(entry["file"], where / "file")
-        if resolve is not None:
-            path = resolve(path)
-        try:
-            with open(path, encoding="utf-8") as f:
-                spheres = json.load(f)
-        except OSError as e:
-            raise (where / "file").error(f"cannot read {path!r} ({e.strerror})") from None
-        except json.JSONDecodeError as e:
-            raise (where / "file").error(f"malformed JSON at line {e.lineno}: {e.msg}") from None
-    s = number(entry.get("scale", 1.0), where / "scale", lo=0.0, lo_open=True)
-    return go_draaw_spheres(spheres, lambda i, col: material_slot(
-        {"base_color": col}, where / "spheres" / i), scale=s, where=where / "spheres", prefix=prefix)
-
-
-def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, where=None,
-                     prefix: str = "go_") -> SDFNode:
-    """A GO-Draaw sphere list (``/getSpheres`` records) as one SDF tree.
-
-    Each sphere ``i`` contributes ``op_i(sphere_i, sphere_j)`` with ``j =
-    indexOfOtherSphere`` and ``op`` from ``sdfType`` (0 distance, 1 union, 2 smoothUnion,
-    3 intersection, 4 smoothIntersection, 5 subtraction, 6 smoothSubtraction, 7 addition,
-    8 smoothAddition, 9 smoothUnionNoColorMix; names accepted too), ``k = amount * scale``; the
-    result is the union of the contributions, as GO-Draaw's march takes their minimum.
-    The smooth ones keep GO-Draaw's cubic blend (``min - h^3 k / 6``,
-    :func:`~draaw_mi.sdf.operators.cubic_smooth_union`: the polynomial smooth union shrank
-    touching spheres by k/4 instead of k/6 and bridged a gap GO-Draaw leaves open). GO-Draaw's
-    bugs are fixed (go-draaw-spec.md §5.2): smoothUnion blends the two colours
-    (type 9 keeps sphere i's), smoothIntersection uses ``k - |a - b|``, both subtractions
-    remove sphere ``i`` from sphere ``j`` (GO-Draaw's ``subtraction`` order), addition /
-    smoothAddition are the log-sum-exp soft intersections. As in GO-Draaw, a sphere whose
-    operator needs another sphere but whose index is out of range is skipped.
-    ``material_slot(i, rgb) -> (id, slot)`` assigns materials (colour = colorR..B / 255).
-    """
-    from ..errors import SceneError
-    from ..scene.schema import Where, number
-    from .operators import (cubic_smooth_intersection, cubic_smooth_subtraction, cubic_smooth_union,
-                            intersection, lse_intersection, smooth_lse_intersection, subtraction,
-                            union)
-    from .primitives import Sphere
-    where = where or Where("go_draaw_spheres")
-    if not isinstance(spheres, list) or not spheres:
-        raise where.error("expected a non-empty list of GO-Draaw sphere records")
-    names = {v: k for k, v in GO_DRAAW_TYPES.items()}
-    prims, types, others, ks = [], [], [], []
-    for i, rec in enumerate(spheres):
-        w = where / i
-        if not isinstance(rec, dict):
-            raise w.error(f"expected a sphere record, got {rec!r}")
-        c = [number(rec.get(f"center{a}", 0.0), w / f"center{a}") * scale for a in "XYZ"]
-        r = number(rec.get("radius", 16.0), w / "radius", lo=0.0, lo_open=True) * scale
-        col = [number(rec.get(f"color{a}", 255), w / f"color{a}", lo=0, hi=255) / 255.0 for a in "RGB"]
-        t = rec.get("sdfType", 0)
-        if isinstance(t, str):
-            t = names.get(t if t != "smothUnionNoColorMix" else "smoothUnionNoColorMix")
-            if t is None:
-                raise (w / "sdfType").error(f"unknown GO-Draaw operator {rec['sdfType']!r}"
-                                            f"{suggest(str(rec['sdfType']), names)}")
-        elif isinstance(t, bool) or not isinstance(t, int) or t not in GO_DRAAW_TYPES:
-            raise (w / "sdfType").error(f"{t!r} is not a GO-Draaw operator; expected 0..9 or a name")
-        sp = Sphere(c, r, name=f"{prefix}sphere{i}")
-        if material_slot is not None:
-            sp.material, sp.slot = material_slot(i, col)
-        prims.append(sp)
-        types.append(t)
-        others.append(rec.get("indexOfOtherSphere", -1))
-        ks.append(number(rec.get("amount", 0.0), w / "amount", lo=0.0) * scale)
-    parts = []
-    for i, (sp, t, j, k) in enumerate(zip(prims, types, others, ks)):
-        if t == 0:
-            parts.append(sp)
-            continue
-        if isinstance(j, bool) or not isinstance(j, int) or not (0 <= j < len(prims)):
-            continue                                   # GO-Draaw skips these
-        o = prims[j]
-        nm = f"{prefix}op{i}"
-        node = {1: lambda: union(sp, o, name=nm), 2: lambda: cubic_smooth_union(sp, o, k, name=nm),
-                9: lambda: cubic_smooth_union(sp, o, k, name=nm, material=sp.material),
-                3: lambda: intersection(sp, o, name=nm),
-                4: lambda: cubic_smooth_intersection(sp, o, k, name=nm),
-                5: lambda: subtraction(o, sp, name=nm),
-                6: lambda: cubic_smooth_subtraction(o, sp, k, name=nm),
-                7: lambda: lse_intersection(sp, o, name=nm),
-                8: lambda: smooth_lse_intersection(sp, o, k, name=nm)}[t]()
-        if t == 9:
-            node.slot = sp.slot
-        parts.append(node)
-    if not parts:
-        raise SceneError(f"{where}: no sphere survives (every operator names a missing other sphere)")
-    root = parts[0]
-    for n, p in enumerate(parts[1:]):
-        root = union(root, p, name=f"{prefix}union{n}")
-    return root
 
 
 # --------------------------------------------------------------------------- scene building

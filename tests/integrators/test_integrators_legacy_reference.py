@@ -4,7 +4,7 @@ draaw_v2 is unbiased for its own legacy Phong model (README, v2.py docstring).
 
 Independent reference: the same model written here as a small Python ``mi.BSDF`` (Lambert +
 normalised Phong around the mirror direction + a mirror lobe, weights as in
-``draaw_mi.integrators.common.PhongMaterial``), sampled by plain cosine-weighted hemisphere
+``draaw_mi.integrators.phong.PhongMaterial``), sampled by plain cosine-weighted hemisphere
 sampling (the mirror lobe by its weight), and rendered with Mitsuba's own ``path`` integrator
 (MIS, Russian roulette) on the Cornell box. draaw_v2 renders the same box with ``draaw``
 materials of the same knobs. Per-pixel z-scores over independent seeds must look like N(0, 1).

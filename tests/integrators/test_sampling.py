@@ -103,7 +103,7 @@ def test_phong_glossy_samples_follow_their_pdf(n):
     exponent off by one in the warp gave 0.667 instead of 0.5 at n = 0), and the pdf returned
     is that density."""
     import drjit as dr
-    from draaw_mi.integrators.common import PhongMaterial, phong_sample
+    from draaw_mi.integrators.phong import PhongMaterial, phong_sample
     N = 200_000
     one, zero = mi.Color3f(1.0), mi.Color3f(0.0)
     mat = PhongMaterial(kd=zero, ks=one, n=mi.Float(n), mirror=mi.Float(0.0), tint=one, scatter=mi.Float(1.0))
@@ -121,7 +121,7 @@ def test_the_legacy_models_lobes_from_a_draaw_material():
     """V1/V2's Lambert and Phong albedos from a draaw material of metallic 0.5 and a coloured
     base: ks = lerp(0.08 specular, base, metallic), kd = base (1 - metallic) (1 - max(ks))
     (the tests' materials were metallic 0 or 1, where min(ks) and max(ks) agree or kd = 0)."""
-    from draaw_mi.integrators.common import phong_material
+    from draaw_mi.integrators.phong import phong_material
     from draaw_mi.integrators.features import FEATURE_NAMES
     base, metal, spec = np.array([0.9, 0.2, 0.1]), 0.5, 0.5
     bsdf = mi.load_dict({"type": "draaw", "base_color": base.tolist(), "metallic": metal, "specular": spec,

@@ -11,7 +11,7 @@ import pytest
 import draaw_mi
 from draaw_mi.cli import main
 from draaw_mi.errors import SceneError
-from draaw_mi.sdf.scene import go_draaw_spheres
+from draaw_mi.sdf.go_draaw import go_draaw_spheres
 
 from sdf_helpers import base_description
 
