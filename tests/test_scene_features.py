@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
+from draaw_mi.errors import SceneError
 
 ALBEDO = np.array([0.6, 0.5, 0.4])
 
@@ -100,19 +101,34 @@ def test_envmap_light_is_read_and_scaled(tmp_path):
     assert np.abs(img - ALBEDO * c * 2.0).max() < 0.1 * (ALBEDO * c * 2.0).max()       # per pixel: noise
 
 
-@pytest.mark.parametrize("shape", ["disk", "sphere"])
+@pytest.mark.parametrize("shape", ["disk", "disk_size", "sphere"])
 def test_area_lights_irradiance_below_them(shape):
     """Point below the light's centre at distance h: a facing disk of radius R gives
     E = pi L R^2 / (h^2 + R^2); a sphere of radius R gives E = pi L (R / h)^2."""
     h, r, radiance = 2.0, 0.4, 5.0
-    light = {"type": "area", "shape": shape, "position": [0, h, 0], "target": [0, 0, 0], "intensity": radiance}
-    light.update({"size": [2 * r, 2 * r]} if shape == "disk" else {"radius": r})
+    light = {"type": "area", "shape": shape.split("_")[0], "position": [0, h, 0], "target": [0, 0, 0],
+             "intensity": radiance}
+    light.update({"size": [2 * r, 2 * r]} if shape == "disk_size" else {"radius": r})
     scene = _floor_scene([light], res=(9, 9),
                          camera={"origin": [0, 3, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 8})
     img, p = _render(scene, 1024), _hit_points(scene)
     assert np.linalg.norm(p[4, 4]) < 0.01                        # the centre pixel sees (0, 0, 0)
-    e = math.pi * radiance * (r * r / (h * h + r * r) if shape == "disk" else (r / h) ** 2)
+    e = math.pi * radiance * (r * r / (h * h + r * r) if shape != "sphere" else (r / h) ** 2)
     assert np.allclose(img[4, 4], ALBEDO / math.pi * e, rtol=0.02)
+
+
+@pytest.mark.parametrize("shape, extra, match", [
+    ("disk", {"radius": 0.0}, "radius"),
+    ("disk", {"radius": 0.3, "size": [1.0, 1.0]}, "not both"),
+    ("rectangle", {"radius": 0.3}, "rectangle area light has no 'radius'.*'size'"),
+    ("sphere", {"size": [1.0, 1.0]}, "sphere area light has no 'size'.*'radius'"),
+])
+def test_an_area_light_refuses_a_size_its_shape_does_not_take(shape, extra, match):
+    """A key that sizes another shape was accepted and ignored: a disk of radius 0.1, 2 or 0
+    lit the scene as the default one of radius 0.5."""
+    light = {"type": "area", "shape": shape, "position": [0, 2, 0], "target": [0, 0, 0], **extra}
+    with pytest.raises(SceneError, match=match):
+        _floor_scene([light], res=(8, 8))
 
 
 def test_emission_on_shapes():

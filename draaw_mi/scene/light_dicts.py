@@ -92,6 +92,16 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     pos = vector(light.get("position", [0.0, 0.0, 0.0]), where / "position")
     emitter = {"type": "area", "radiance": rgb}
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    # the keys that size the light: a rectangle's size, a sphere's radius, a disk's radius (or
+    # size, an ellipse); a key of another shape was accepted and ignored (a disk of radius 0.1
+    # or 2 lit the scene as one of radius 0.5)
+    wrong = {"rectangle": ("radius",), "sphere": ("size",), "disk": ()}[shape]
+    for key in wrong:
+        if key in light:
+            raise (where / key).error(f"a {shape} area light has no {key!r}; it is sized by "
+                                      + ("'size'" if shape == "rectangle" else "'radius'"))
+    if shape == "disk" and "radius" in light and "size" in light:
+        raise (where / "radius").error("give a disk light 'radius' or 'size' (an ellipse), not both")
     if shape == "sphere":
         r = number(light.get("radius", 0.5), where / "radius", lo=0.0, lo_open=True)
         return {name: {"type": "sphere", "center": pos, "radius": r, "emitter": emitter, "bsdf": black}}
@@ -103,7 +113,11 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
                 where / "up")
     # (an up along the facing, or zero, gave a NaN transform: a light that silently lit nothing)
     cam.check_look_at(pos, target, up, where)
-    size = light.get("size", [1.0, 1.0])
+    if shape == "disk" and "radius" in light:
+        r = number(light["radius"], where / "radius", lo=0.0, lo_open=True)
+        size = [2.0 * r, 2.0 * r]
+    else:
+        size = light.get("size", [1.0, 1.0])
     sx, sy = vector(size, where / "size", n=2, lo=0.0) if isinstance(size, list) else [number(size, where / "size", lo=0.0)] * 2
     if sx == 0 or sy == 0:
         raise (where / "size").error(f"{size!r} has a zero side")
