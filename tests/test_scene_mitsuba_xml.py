@@ -229,3 +229,25 @@ def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_forma
         doc["output"] = str(tmp_path / "post" / "{frame:04d}.exr")
         res = batch.run(doc, progress=False)
         assert res.rendered == 0 and "stores X, Y, Z colour" in res.failed[0]["error"]
+
+
+@pytest.mark.parametrize("bsdf, match", [
+    ('<bsdf type="dielectric"><float name="int_iro" value="1.5"/></bsdf>',
+     r"line \d+, col \d+: 'int_iro' is not a parameter of Mitsuba's 'dielectric' bsdf$"),
+    ('<bsdf type="draaw"><float name="roughnes" value="0.3"/></bsdf>',
+     r"'roughnes' is not a parameter of the 'draaw' BSDF; did you mean 'roughness'\?"),
+])
+def test_a_misspelt_bsdf_parameter_is_named_with_its_plugin(tmp_path, bsdf, match):
+    """Mitsuba lists unknown parameters on lines of their own; only the last line was kept
+    (``- float "int_iro": 1.5``), naming neither the material nor the problem."""
+    path = tmp_path / "s.xml"
+    path.write_text(f'<scene version="3.0.0"><shape type="sphere">{bsdf}</shape>{SENSOR}</scene>')
+    with pytest.raises(draaw_mi.SceneError, match=match):
+        draaw_mi.load_scene(str(path))
+
+
+def test_a_misspelt_parameter_of_a_mitsuba_material_in_a_description_names_the_material():
+    with pytest.raises(draaw_mi.SceneError, match=r"'glass': 'int_iro', 'ext_iro' are not parameters "
+                                                  r"of Mitsuba's 'dielectric' bsdf"):
+        draaw_mi.load_scene({"materials": {"glass": {"type": "dielectric", "int_iro": 1.5, "ext_iro": 1.0}},
+                             "shapes": [{"type": "sphere", "material": "glass"}]})

@@ -7,6 +7,32 @@ import re
 from ..errors import DraawError, SceneError
 
 
+def _unreferenced_message(text: str) -> str | None:
+    """Mitsuba's "Found N unreferenced properties in bsdf plugin of type "dielectric": - float
+    "int_iro": 1.5" as one line naming the object, its plugin and each unknown parameter (with
+    the closest of the draaw BSDF's parameters for a ``draaw`` one). Only the list's last line
+    was kept: ``- float "int_iro": 1.5``, which named neither the material nor the problem."""
+    m = re.search(r'unreferenced propert\w* in (?:(\w+) )?plugin of type "([^"]+)"', text)
+    if m is None:
+        return None
+    kind, plugin = m.group(1), m.group(2)
+    names = re.findall(r'^\s*-\s*\w+\s+"([^"]+)"', text[m.end():], re.M)
+    node = re.search(r'While loading dictionary node "([^"]+)"', text)
+    line = re.search(r"\((line \d+, col \d+)\)", text[:m.start()])      # an XML file's
+    place = f"{node.group(1)!r}: " if node else f"{line.group(1)}: " if line else ""
+    what = f"Mitsuba's {plugin!r} {kind}" if kind and kind != "unknown" else f"the {plugin!r} plugin"
+    if plugin == "draaw":
+        what = "the 'draaw' BSDF"
+    hint = ""
+    if plugin == "draaw" and names:
+        from ..errors import suggest
+        from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
+        hint = suggest(names[0], ALL_PARAMS + OPTIONS)
+    listed = ", ".join(repr(n) for n in names) or "?"
+    return (f"{place}{listed} {'is not a parameter' if len(names) == 1 else 'are not parameters'} "
+            f"of {what}{hint}")
+
+
 def mitsuba_error_message(err: Exception) -> str:
     """The useful line of a Mitsuba loader error (our own DraawError text when it is inside)."""
     text = str(err)
@@ -14,6 +40,9 @@ def mitsuba_error_message(err: Exception) -> str:
         m = re.search(rf"{cls}: (.+)", text)
         if m:
             return m.group(1).strip()
+    unknown = _unreferenced_message(text)
+    if unknown:
+        return unknown
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     msg = lines[-1] if lines else type(err).__name__
     return re.sub(r"^\[[^\]]*\]\s*", "", msg)
