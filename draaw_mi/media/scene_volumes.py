@@ -107,9 +107,10 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
             elif low.endswith(MESH_SUFFIXES):
                 res = _grid_resolution(entry.get("resolution", 64), where / "resolution")
                 fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))
-                g = VoxelGrid.from_mesh(path, res, fill, seed=seed, **({} if bounds is None else
-                                                                      {"bbox_min": bounds[0], "bbox_max": bounds[1]}))
-                bounds = None
+                # voxelised in the mesh's own box and then placed at 'bounds', as every other
+                # source is ('bounds' was the voxelisation window in the mesh's coordinates: a
+                # world box cropped the mesh to a piece, or to nothing, without a word)
+                g = VoxelGrid.from_mesh(path, res, fill, seed=seed)
             else:
                 raise (where / "file").error(f"{path!r}: unknown grid format; expected .npz, .vol or a mesh "
                                              f"({', '.join(MESH_SUFFIXES)})")

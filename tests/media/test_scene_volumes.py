@@ -301,3 +301,24 @@ def test_smoke_boxes_that_touch_add_up(version):
     img = np.array(draaw_mi.render(scene, version, spp=64, seed=3), dtype=np.float64)[..., :3]
     p = np.exp(-0.6)
     assert abs(img.mean() - p) < 4 * np.sqrt(p * (1 - p) / (64 * 64)), img.mean()
+
+
+def test_a_mesh_source_is_placed_at_its_bounds_whole(tmp_path):
+    """``bounds`` places a voxelised mesh in the world as it places every other source (it
+    was the voxelisation window in the mesh's coordinates: a world box away from the mesh
+    cropped it to a piece, or to nothing). The grid equals the voxelisation without bounds;
+    the smoke's box is the bounds."""
+    import trimesh
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.8)
+    mesh.export(tmp_path / "ball.obj")
+    box = [[2.0, 0.0, -0.8], [3.6, 1.6, 0.8]]
+    desc = base_desc(mode="smoke", file=str(tmp_path / "ball.obj"), resolution=12, fill="solid",
+                     density_scale=4.0, bounds=box)
+    del desc["volumes"][0]["density"]
+    s = draaw_mi.load_scene(desc)
+    ref = VoxelGrid.from_mesh(mesh, resolution=12, fill="solid")
+    grid = np.array(s.params["v.interior_medium.sigma_t.data"])[..., 0]        # (z, y, x)
+    np.testing.assert_array_equal(grid, ref.occupied.transpose(2, 1, 0).astype(np.float32))
+    shape = next(sh for sh in s.mi_scene.shapes() if sh.id() == "v")
+    bb = shape.bbox()
+    np.testing.assert_allclose([list(bb.min), list(bb.max)], box, atol=1e-5)
