@@ -3,6 +3,7 @@ one of ten operators) as SDF trees, for ``type = "go_draaw_spheres"`` entries of
 from __future__ import annotations
 
 import json
+import warnings
 
 from ..errors import suggest
 from .node import SDFNode
@@ -10,6 +11,9 @@ from .node import SDFNode
 GO_DRAAW_TYPES = {0: "distance", 1: "union", 2: "smoothUnion", 3: "intersection",
                   4: "smoothIntersection", 5: "subtraction", 6: "smoothSubtraction", 7: "addition",
                   8: "smoothAddition", 9: "smoothUnionNoColorMix"}
+#: the fields of a /getSpheres record
+RECORD_KEYS = ("centerX", "centerY", "centerZ", "radius", "colorR", "colorG", "colorB", "colorA",
+               "indexOfOtherSphere", "sdfType", "amount")
 
 
 def go_draaw_entry(entry: dict, material_slot, where, resolve=None, prefix: str = "go_") -> SDFNode:
@@ -67,6 +71,10 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
         w = where / i
         if not isinstance(rec, dict):
             raise w.error(f"expected a sphere record, got {rec!r}")
+        for key in rec:          # (a misspelt 'centreX' left the sphere at the origin)
+            if key not in RECORD_KEYS:
+                raise (w / str(key)).error(f"unknown key of a GO-Draaw sphere record"
+                                           f"{suggest(str(key), RECORD_KEYS)}")
         c = [number(rec.get(f"center{a}", 0.0), w / f"center{a}") * scale for a in "XYZ"]
         r = number(rec.get("radius", 16.0), w / "radius", lo=0.0, lo_open=True) * scale
         col = [number(rec.get(f"color{a}", 255), w / f"color{a}", lo=0, hi=255) / 255.0 for a in "RGB"]
@@ -91,7 +99,11 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
             parts.append(sp)
             continue
         if isinstance(j, bool) or not isinstance(j, int) or not (0 <= j < len(prims)):
-            continue                                   # GO-Draaw skips these
+            # GO-Draaw's march skips these (its /updateSphere refuses such an index)
+            warnings.warn(f"{where / i}: indexOfOtherSphere {j!r} names no sphere of the list "
+                          f"(0..{len(prims) - 1}); as in GO-Draaw, sphere {i} is left out",
+                          RuntimeWarning, stacklevel=2)
+            continue
         o = prims[j]
         nm = f"{prefix}op{i}"
         node = {1: lambda: union(sp, o, name=nm), 2: lambda: cubic_smooth_union(sp, o, k, name=nm),

@@ -131,7 +131,8 @@ def _d(node, p):
 
 
 def test_go_draaw_sphere_list_semantics():
-    root = go_draaw_spheres(GO_SPHERES)
+    with pytest.warns(RuntimeWarning, match=r"\[3\]: indexOfOtherSphere 7 names no sphere.*0\.\.3"):
+        root = go_draaw_spheres(GO_SPHERES)
     d = lambda c, r, p: float(np.linalg.norm(np.subtract(p, c)) - r)   # noqa: E731
     k = 8.0
     for p in ([10, 0, 0], [0, 17, 0], [30, 5, 0], [0, 40, 0], [3, 40, 0], [-9, 40, 0]):
@@ -178,6 +179,13 @@ def test_go_draaw_sphere_file_is_found_beside_the_scene_file(tmp_path, monkeypat
     names = [n for n in s.sdf.params()]
     assert "go_sphere0.radius" in names and "go2_sphere0.radius" in names
     assert len(s.sdf.roots) == 2
+
+
+def test_a_misspelt_key_of_a_go_draaw_sphere_record_is_refused():
+    """``centreX`` was taken without a word, the sphere left at the origin."""
+    bad = [{k.replace("centerX", "centreX"): v for k, v in GO_SPHERES[1].items()}]
+    with pytest.raises(SceneError, match=r"\[0\]\.centreX.*unknown key.*did you mean 'centerX'"):
+        go_draaw_spheres(bad)
 
 
 def test_go_draaw_bad_operator():
