@@ -14,9 +14,11 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import warnings
 
 from .cli_common import (EXIT_BAD_INPUT, PROGRESS_HELP, CliError, progress_mode,  # noqa: F401 (re-exported)
                          read_json)
@@ -419,6 +421,17 @@ def _bench_command(args) -> int:
     return cmd_bench(args)
 
 
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """Python warnings as ``draaw-mi: warning: ...`` lines on stderr, as the commands' own
+    (they came as ``.../cli.py:189: RuntimeWarning: ...`` and the source line after it)."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"draaw-mi: warning: {message}", file=sys.stderr if file is None else file)
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if not argv:                         # the commands, not "the following arguments are required"
@@ -432,7 +445,8 @@ def main(argv=None) -> int:
         handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit,
                    "bench": _bench_command, "batch": _cmd_batch}[args.command]
         try:
-            return handler(args)
+            with _warnings_as_lines():
+                return handler(args)
         except DraawError as e:
             raise CliError(str(e)) from None
     except CliError as e:

@@ -168,6 +168,18 @@ def _scene_passes(scene, spp: int, pass_spp: int) -> list[int]:
     return list(counts)
 
 
+def _warn_grade_left_out(version: str, chain) -> None:
+    """Warn when a GO-Draaw graded version name (``V4-Log``) comes without its grade's post
+    filter: the name renders linear light, as ``V4`` does (it said nothing)."""
+    from .integrators import VERSION_GRADES
+    grade = VERSION_GRADES.get(str(version).strip().lower())
+    if grade is None or (chain is not None and any(e.get("type") == grade for e in chain.to_list())):
+        return
+    warnings.warn(f"render: version {version!r} renders linear light, as {resolve_version(version)!r} "
+                  f"does; its {grade.capitalize()} colour grade is the post filter {grade!r} (add "
+                  f"{{'type': '{grade}'}} to the post chain)", RuntimeWarning, stacklevel=3)
+
+
 def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool | str = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
@@ -279,6 +291,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     # given: the info (and a batch frame's header) records it as the user wrote it
     from . import post as post_mod
     loaded = post_mod.load_chain(chain) if chain else None
+    _warn_grade_left_out(version, loaded)
     if (chain or denoise) and adaptive is None:
         _check_film_colour(scene, "a post chain" if chain else "denoising")
     if denoise:     # ---- denoising: check early, render the guide AOVs with the image

@@ -404,3 +404,14 @@ def test_post_png_of_an_image_rendered_with_srgb_is_not_encoded_twice(tmp_path, 
     assert "draaw:post chain does not load" in capsys.readouterr().err
     enc = 1.055 * 0.25 ** (1 / 2.4) - 0.055
     assert np.abs(matplotlib.image.imread(str(tmp_path / "old.png"))[..., :3] - enc).max() <= 0.5 / 255 + 1e-6
+
+
+def test_a_library_warning_is_one_draaw_mi_line(tmp_path, capsys):
+    """A warning from the library reaches the terminal as ``draaw-mi: warning: ...`` (it came
+    as ``.../cli.py:189: RuntimeWarning: ...`` with the source line under it)."""
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(tiny_description(resolution=[8, 6], spp=1)))
+    assert main(["render", str(path), "-o", str(tmp_path / "o.exr"), "--no-progress", "--version", "V4-Log"]) == 0
+    err = capsys.readouterr().err
+    assert "draaw-mi: warning: render: version 'V4-Log' renders linear light" in err
+    assert "RuntimeWarning" not in err and "cli.py" not in err

@@ -188,3 +188,19 @@ def test_adaptive_subsampling_refuses_what_its_corner_rays_cannot_see(name):
     shadow and mirror rays) see meshes only: SDF objects and smoke became smears."""
     with pytest.raises(draaw_mi.RenderError, match="adaptive subsampling cannot see"):
         draaw_mi.render(os.path.join(SCENES, name), spp=2, resolution=(16, 16), adaptive=8)
+
+
+def test_a_graded_go_draaw_version_without_its_grade_says_so():
+    """``V4-Log`` renders what ``V4`` renders; its Log grade is the post filter ``log``. The
+    name was taken without a word, the image left ungraded."""
+    import warnings
+    scene = draaw_mi.load_scene(tiny_description())
+    with pytest.warns(RuntimeWarning, match=r"'V4-Log' renders linear light, as 'draaw_v4'.*post filter 'log'"):
+        graded = np.array(draaw_mi.render(scene, version="V4-Log", spp=2, seed=1))
+    assert np.array_equal(graded, np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1)))
+    with pytest.warns(RuntimeWarning, match="post filter 'linear'"):
+        draaw_mi.render(scene, version="v2-linear-texture", spp=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        draaw_mi.render(scene, version="V4-Log", spp=1, post=[{"type": "log"}])
+        draaw_mi.render(scene, version="V4-Optim-V2", spp=1)           # not a graded name

@@ -47,6 +47,12 @@ VERSION_ALIASES: dict[str, str] = {
     "prbvolpath": "prbvolpath",
 }
 
+# GO-Draaw's graded versions -> the post filter that is their colour grade (go-draaw-spec.md
+# §2.10); the version itself renders linear light
+VERSION_GRADES: dict[str, str] = {
+    name: ("log" if "-log" in name else "linear")
+    for name in VERSION_ALIASES if name.startswith(("v2-", "v4-")) and ("-log" in name or "-linear" in name)}
+
 _REGISTERED = False
 
 
