@@ -364,6 +364,13 @@ def _cmd_post(args) -> int:
         # (the render's was overwritten, though the README says post keeps it)
         meta = {k: v for k, v in header.items() if k.startswith("draaw:") and isinstance(v, (str, int, float))}
         meta["draaw:post"] = json.dumps(before + after)
+        # no longer the frame a batch rendered: without its hash, and made by post, the batch
+        # reports it as foreign and leaves it alone unless told to overwrite (post run in
+        # place on a frame kept the hash, and the batch took a chain its manifest never named
+        # as done)
+        from draaw_mi.batch.exr import HASH_ATTR, MANIFEST_ATTR
+        if meta.pop(HASH_ATTR, None) is not None:
+            meta[MANIFEST_ATTR] = "draaw-mi post"
         draaw_mi.write_exr(args.output, result, channels=names, metadata=meta)
     print(f"wrote {args.output}")
     return 0

@@ -4,6 +4,7 @@ scenes whose sensor is not called "sensor", a full disk under the log, damaged l
 headers longer than the bytes the completeness check reads."""
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -159,3 +160,22 @@ def test_a_header_longer_than_the_bytes_read_is_read_in_full(tmp_path):
             fh.truncate(os.path.getsize(p) - 1)
         assert not exr_complete(p), pad
 
+
+
+def test_a_frame_post_processed_in_place_is_no_longer_done(tmp_path):
+    """``draaw-mi post`` on a batch frame, in place: the frame holds a chain its manifest never
+    named, so the batch must not count it as done (it kept the frame's hash, "1 done"); it is
+    foreign, and left alone without --overwrite."""
+    from draaw_mi.cli import main
+    out = str(tmp_path / "out")
+    a = write_manifest(tmp_path, _one_frame(tmp_path), "shot.toml")
+    assert batch.run(a, out=out, progress=False).rendered == 1
+    frame = os.path.join(out, "job0", "0000.exr")
+    chain = tmp_path / "chain.json"
+    chain.write_text(json.dumps([{"type": "contrast", "contrast": 1.5}]))
+    assert main(["post", frame, "-o", frame, "--chain", str(chain)]) == 0
+    header = batch.read_header(frame)
+    assert "contrast" in header["draaw:post"] and header["draaw:job"] == "job0"
+    assert batch.status(a, out=out)["frames"][0]["status"] == "foreign"
+    with pytest.raises(SceneError, match="made by draaw-mi post"):
+        batch.run(a, out=out, progress=False)
