@@ -57,7 +57,7 @@ def measure(args) -> str:
     import numpy as np
 
     import draaw_mi
-    from draaw_mi.bench import relmse
+    from draaw_mi.image_metrics import relmse
     from draaw_mi.io import read_exr, srgb_encode, write_exr
     from draaw_mi.preview import Preview
 

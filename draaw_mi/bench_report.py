@@ -69,7 +69,7 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
 
 
 def _plot_error_vs_time(rows, scene, depth, path):
-    from .bench import pareto_front
+    from .bench_bias import pareto_front
     from .plotting import save, subplots
     sel = [r for r in rows if r["scene"] == scene and r["max_depth"] == depth]
     fig, ax = subplots(figsize=(7, 4.8))

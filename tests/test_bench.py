@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
-from draaw_mi import bench
+from draaw_mi import bench, bench_bias, image_metrics
 from draaw_mi.bench_report import pareto_check, time_to_error
 from draaw_mi.camera_path import GO_DRAAW_BENCHMARK_PATH, interpolate
 
@@ -73,19 +73,19 @@ def test_rmse_and_relmse_against_formulas():
     rng = np.random.default_rng(1)
     gt = rng.random((8, 9, 3)).astype(np.float32)
     img = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
-    e = bench.errors(img, gt)
+    e = image_metrics.errors(img, gt)
     assert e["rmse"] == pytest.approx(np.sqrt(((img - gt) ** 2).mean()), rel=1e-6)
     assert e["relmse"] == pytest.approx(((img - gt) ** 2 / (gt ** 2 + 0.01)).mean(), rel=1e-6)
-    assert bench.errors(gt, gt)["ciede2000"] == pytest.approx(0.0, abs=1e-9)
+    assert image_metrics.errors(gt, gt)["ciede2000"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_ciede2000_matches_sharma_2005_table():
     """All 34 published pairs, both orders (the formula is symmetric), to the table's 4 decimals."""
     lab1, lab2, de = SHARMA_2005[:, :3], SHARMA_2005[:, 3:6], SHARMA_2005[:, 6]
-    got = np.asarray(bench.delta_e2000(lab1, lab2))
+    got = np.asarray(image_metrics.delta_e2000(lab1, lab2))
     assert got.shape == (34,)
     assert np.abs(got - de).max() < 6e-5, np.round(got - de, 5)
-    assert np.abs(np.asarray(bench.delta_e2000(lab2, lab1)) - de).max() < 6e-5
+    assert np.abs(np.asarray(image_metrics.delta_e2000(lab2, lab1)) - de).max() < 6e-5
 
 
 def test_ciede2000_of_images_is_the_mean_over_pixels_of_published_pairs():
@@ -97,14 +97,14 @@ def test_ciede2000_of_images_is_the_mean_over_pixels_of_published_pairs():
     keep[8:15] = False
     assert keep.sum() >= 15
     img, gt = rgb1[keep][:, None, :], rgb2[keep][:, None, :]            # an (N, 1, 3) image
-    assert bench.ciede2000(img, gt) == pytest.approx(SHARMA_2005[keep, 6].mean(), abs=2e-4)
+    assert image_metrics.ciede2000(img, gt) == pytest.approx(SHARMA_2005[keep, 6].mean(), abs=2e-4)
     # the sRGB primaries and white (IEC 61966-2-1 / CIE published Lab)
     prim = np.array([[[1.0, 0, 0]], [[0, 1.0, 0]], [[0, 0, 1.0]], [[1.0, 1.0, 1.0]]])
     ref = np.array([[53.24, 80.09, 67.20], [87.73, -86.18, 83.18], [32.30, 79.19, -107.86], [100, 0, 0]])
-    assert np.abs(bench.srgb_to_lab(prim)[:, 0] - ref).max() < 0.03      # rounding of matrix and table
+    assert np.abs(image_metrics.srgb_to_lab(prim)[:, 0] - ref).max() < 0.03      # rounding of matrix and table
     # a linear grey g: L* = 116 g^(1/3) - 16 (CIE), i.e. the display encoding is undone exactly
     g = np.array([[[0.05] * 3], [[0.2] * 3], [[0.6] * 3]])
-    assert np.allclose(bench.srgb_to_lab(g)[:, 0, 0], 116 * np.cbrt(g[:, 0, 0]) - 16, atol=1e-3)
+    assert np.allclose(image_metrics.srgb_to_lab(g)[:, 0, 0], 116 * np.cbrt(g[:, 0, 0]) - 16, atol=1e-3)
 
 
 def _bias_rows(rng, truth, gt, label, bias, spps, repeats=3, sigma=0.5):
@@ -158,7 +158,7 @@ def test_the_ground_truths_own_noise_is_not_a_bias():
 
 
 def test_pareto_and_time_to_error():
-    assert bench.pareto_front([(1, 5), (2, 3), (3, 4), (4, 1)]) == [0, 1, 3]
+    assert bench_bias.pareto_front([(1, 5), (2, 3), (3, 4), (4, 1)]) == [0, 1, 3]
     assert time_to_error([(1.0, 0.4), (4.0, 0.1)], 0.2) == pytest.approx(2.0)
     assert time_to_error([(1.0, 0.4)], 0.1) == np.inf
     rows = [{"scene": "s", "max_depth": 3, "adaptive": None, "label": lab, "time_s": t, "rmse": e}
@@ -267,6 +267,26 @@ def test_frame_times_along_a_path(tmp_path, monkeypatch):
     for r in rows:
         assert r["frames"] == 4 and 0 < r["min_s"] <= r["p10_s"] <= r["median_s"] <= r["p90_s"] <= r["max_s"]
         assert np.isfinite(r["rmse"]) and np.isfinite(r["ciede2000"])
+
+
+def test_frame_times_says_when_the_path_sees_nothing(tmp_path):
+    """GO-Draaw's path (x 300..900) over a scene a few units wide: every frame empty, RMSE 0,
+    and no word of it. The same path over the scene scaled to GO-Draaw's units does not warn."""
+    import warnings
+    desc = {"render": {"resolution": [8, 6], "spp": 1, "max_depth": 2},
+            "shapes": [{"type": "sphere", "radius": 1.0}],
+            "lights": [{"type": "point", "position": [0, 3, 3], "intensity": 10}]}
+    scene = draaw_mi.load_scene(desc)
+    with pytest.warns(RuntimeWarning, match="black in all 2 frames checked.*sees nothing"):
+        rows = bench.frame_times(scene, GO_DRAAW_BENCHMARK_PATH, versions=("v1",), frames=2, error_frames=2,
+                                 gt_spp=4, progress=False)
+    assert rows[0]["rmse"] == 0.0
+    desc["shapes"][0]["radius"] = 150.0
+    desc["lights"] = [{"type": "constant", "intensity": 1.0}]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bench.frame_times(draaw_mi.load_scene(desc), GO_DRAAW_BENCHMARK_PATH, versions=("v1",), frames=2,
+                          error_frames=2, gt_spp=4, progress=False)
 
 
 def test_frame_times_keeps_every_frame_and_the_scenes_fov_axis(monkeypatch):

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
-from draaw_mi.bench import relmse
+from draaw_mi.image_metrics import relmse
 from draaw_mi.cli import main
 from draaw_mi.denoise import DenoiserMissing, Denoiser, aux_channels, denoise_aovs
 from draaw_mi.errors import DraawError, ParameterError, RenderError
