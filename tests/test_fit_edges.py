@@ -150,3 +150,14 @@ def test_render_refuses_a_function_as_post_chain_before_rendering(render_calls):
     from draaw_mi import post
     chain = post.load_chain([{"type": "contrast", "amount": 0.0}])      # a Chain is a chain
     assert np.isfinite(np.array(draaw_mi.render(scene, spp=1, post=chain))).all()
+
+
+@pytest.mark.parametrize("step, tol, expected", [(0.00025, 5e-3, True), (0.004, 0.1, False)])
+def test_settled_bounds_the_drift_by_the_steps_of_one_eighth(step, tol, expected):
+    """128 iterations at lr 0.01: one eighth (16 steps) may move the latent by up to 0.35 x
+    16 x 0.01 = 0.056 between eighth-means. A drift of 0.004 is settled (a bound of 0.35 x
+    0.01, without the eighth's length, called it unsettled), 0.064 is not."""
+    from draaw_mi.fit_result import settled
+    hist = [{"loss": 1.0, "lr": 0.01, "values": {"m": 0.5 + step * i}, "latent": {"m": 0.5 + step * i}}
+            for i in range(128)]
+    assert settled(hist, tol) is expected

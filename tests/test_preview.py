@@ -395,3 +395,14 @@ def test_an_sdf_object_moved_in_the_preview_renders_as_a_scene_built_that_way():
     ref = _direct(other, [seed], depth=3)[..., :3]
     np.testing.assert_allclose(f2.raw * 2 - f.raw, ref, rtol=1e-4, atol=1e-5)
     assert np.abs(ref - old).max() > 0.05                  # the radius shows in this image
+
+
+def test_to_uint8_rounds_to_the_nearest_level():
+    """Frames are rounded to the nearest 8-bit level, as numpy's encoding gives them (they were
+    cut: up to one level darker)."""
+    from draaw_mi import tuning
+    from draaw_mi.io import srgb_encode
+    x = np.array([[[0.0, 0.2140, 1.0], [0.5, 0.02, 0.9]]], np.float32)     # 0.2140 encodes to 0.5
+    ref = np.round(np.clip(srgb_encode(x), 0, 1) * 255).astype(np.uint8)
+    assert np.array_equal(tuning.to_uint8(x), ref)
+    assert np.array_equal(tuning.to_uint8(np.full((1, 1, 3), 0.5, np.float32), encoded=True), [[[128] * 3]])

@@ -53,6 +53,18 @@ def test_albedo_aov(scene):
     assert not alb[~hit].any()
 
 
+def test_albedo_aov_of_another_bsdf_is_clipped_to_one():
+    """A non-draaw BSDF's diffuse reflectance above 1 (a raw texture) gives an albedo clipped
+    to [0, 1] (the documented range; it came through as 1.5)."""
+    d = rs.feature_scene(res=12, spp=1)
+    d["sensor"]["to_world"] = mi.ScalarTransform4f().look_at([0.0, 1.2, 4.0], [0.0, 0.9, 0.0], [0, 1, 0])
+    texels = mi.TensorXf(np.tile(np.float32([1.5, 0.5, 0.2]), (2, 2, 1)))
+    d["box"]["bsdf"] = {"type": "diffuse", "reflectance": {"type": "bitmap", "data": texels, "raw": True}}
+    alb = aov_image(mi.load_dict(d), "draaw_v1")[..., 8:11].reshape(-1, 3)
+    box = np.abs(alb - [1.0, 0.5, 0.2]).max(-1) < 1e-5
+    assert box.sum() >= 4 and alb.max() <= 1.0
+
+
 def test_all_versions_give_the_same_aovs(scene):
     base = aov_image(scene, "draaw_v4")[..., 3:]
     for kind in ("draaw_v1", "draaw_v2", "draaw_v3"):

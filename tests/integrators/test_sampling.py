@@ -134,3 +134,39 @@ def test_the_legacy_models_lobes_from_a_draaw_material():
     ks = (1 - metal) * 0.08 * spec + metal * base
     np.testing.assert_allclose(np.array(mat.ks).ravel(), ks, rtol=1e-5)
     np.testing.assert_allclose(np.array(mat.kd).ravel(), base * (1 - metal) * (1 - ks.max()), rtol=1e-5)
+
+
+def test_v3s_own_draaw_lobe_is_schlick_cook_torrance_of_the_draaw_parameters():
+    """V3's Beckmann lobe F D G / (4 cos_i) with the draaw model's parameters, in numpy:
+    f0 = lerp(0.08 specular, base, metallic), f90 = min(1, 50 f0), alpha = sqrt(r^4 + 1e-6);
+    D and G are Mitsuba's Beckmann at that alpha. Grazing directions, where f90 weighs."""
+    from draaw_mi.integrators.draaw_lobes import draaw_params, draaw_spec_eval
+    base, spec, metal, rough = np.array([0.8, 0.4, 0.2]), 0.5, 0.25, 0.5
+    bsdf = mi.load_dict({"type": "draaw", "base_color": base.tolist(), "specular": spec,
+                         "metallic": metal, "roughness": rough})
+    rng = np.random.default_rng(4)
+    n = 512
+    def dirs(cos_lo, cos_hi):
+        c = rng.uniform(cos_lo, cos_hi, n)
+        phi = rng.uniform(0, 2 * np.pi, n)
+        s = np.sqrt(1 - c * c)
+        return np.stack([s * np.cos(phi), s * np.sin(phi), c], axis=1)
+    wi, wo = dirs(0.05, 0.3), dirs(0.05, 1.0)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(*wi.T)
+    active = mi.Bool(np.ones(n, bool))
+    p = draaw_params(bsdf, si, active)
+    value = np.array(draaw_spec_eval(p, mi.MicrofacetType.Beckmann, si.wi, mi.Vector3f(*wo.T), active)).T
+    f0 = (1 - metal) * 0.08 * spec + metal * base
+    f90 = np.minimum(1.0, 50 * f0)
+    alpha = np.sqrt(rough ** 4 + 1e-6)
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    distr = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, alpha, False)
+    hv, wiv, wov = (mi.Vector3f(*a.T) for a in (h, wi, wo))
+    dg = np.array(distr.eval(hv) * distr.G(wiv, wov, hv))
+    m = 1 - np.clip(np.sum(wi * h, axis=1), 0, 1)
+    F = f0[None] + (f90 - f0)[None] * (m ** 5)[:, None]
+    ref = F * (dg / (4 * wi[:, 2]))[:, None]
+    np.testing.assert_allclose(value, ref, rtol=2e-4, atol=1e-6)
+    assert (m ** 5).max() > 0.3                      # grazing: f90 decides much of F

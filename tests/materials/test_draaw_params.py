@@ -163,3 +163,15 @@ def test_instance_dict_holds_only_traversable_values():
     assert b.normalmap is None and "normalmap" not in vars(b)
     bitmap = draaw(roughness=mi.TensorXf(np.full((3, 2), 0.4, np.float32)))
     assert isinstance(bitmap.roughness, mi.Texture)             # spatially varying: a texture
+
+
+@pytest.mark.parametrize("key", ["ball.base_color.value", "sky.radiance.value", "lamp.intensity.value",
+                                 "sun.irradiance.value"])
+def test_check_value_refuses_a_negative_colour_or_light_value(key):
+    """A colour, radiance, point/spot intensity or irradiance below 0 is refused (the preview
+    and the batch check their overrides with it; -5 rendered negative light); 0 is taken."""
+    from draaw_mi.errors import ParameterError
+    from draaw_mi.materials import check_value
+    with pytest.raises(ParameterError, match=r"expected values >= 0"):
+        check_value("demo", key, key, [1.0, -5.0, 1.0])
+    check_value("demo", key, key, [0.0, 0.0, 0.0])

@@ -119,6 +119,20 @@ def test_flat_normal_map_is_a_no_op(extra, reference_image):
     np.testing.assert_allclose(_render(dict(MAT, **extra)), reference_image, rtol=1e-5, atol=1e-6)
 
 
+def test_a_normal_map_file_is_read_as_data(tmp_path):
+    """A PNG normal map holds directions, not colours: read without the sRGB curve. Decoded,
+    a flat map's 128 became 0.22 and tilted every normal by about 30 degrees. Reference: the
+    same texel given as a constant."""
+    path = str(tmp_path / "flat.png")
+    mi.Bitmap(np.full((4, 4, 3), [128, 128, 255], np.uint8)).write(path)
+    rng = np.random.default_rng(3)
+    wi, wo = uniform_hemisphere(4096, rng), uniform_hemisphere(4096, rng)
+    si = make_si(wi, uv=rng.random((4096, 2)))
+    a = color_np(draaw(**MAT, normalmap=path).eval(CTX, si, vec3(wo)))
+    b = color_np(draaw(**MAT, normalmap=[128 / 255, 128 / 255, 1.0]).eval(CTX, si, vec3(wo)))
+    np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6)
+
+
 def _tilted_frame(n):
     n = np.asarray(n, dtype=np.float64)
     n = n / np.linalg.norm(n)
