@@ -22,17 +22,22 @@ def _trees():
     blob = smooth_union(Sphere((0, 0.8, 0), 0.5, name="ball", material="ball"), blk, k=0.2, name="blob")
     cut = subtraction(blob, Sphere((0.3, 1.0, 0.4), 0.3, name="bite"), name="cut")
     ring = translate(scale(Torus((0, 0.2, 0), 0.4, 0.1, name="ring"), 0.7), (1, 0, 0.5))   # nested
-    return cut, ring
+    # the other nesting: the outer scale scales the inner translation (it was dropped: the
+    # ball exported at x = 0.6 instead of 1.2)
+    pebble = scale(translate(Sphere((0, 0, 0), 0.25, name="pebble"), (0.6, -1.2, 0)), 2.0)
+    return cut, ring, pebble
 
 
 def test_scene_from_entries_has_the_same_distances():
-    cut, ring = _trees()
+    trees = _trees()
     d = base_description()
-    d["sdf"] = to_entries(cut, ring)
+    d["sdf"] = to_entries(*trees)
     sc = draaw_mi.load_scene(d)
     P = np.random.default_rng(0).uniform(-2, 2, (2000, 3)).astype(np.float32)
     p = mi.Point3f(*P.T)
-    want = np.minimum(np.array(cut.distance(p)), np.array(ring.distance(p)))
+    want = np.min([np.array(t.distance(p)) for t in trees], axis=0)
+    pebble = np.linalg.norm(P - [1.2, -2.4, 0], axis=1) - 0.5        # numpy: centre 2 x, radius 2 x
+    np.testing.assert_allclose(np.array(trees[2].distance(p)), pebble, atol=1e-5)
     np.testing.assert_allclose(np.array(sc.sdf.distance(p)), want, atol=2e-6)
     keys = draaw_mi.sdf.parameters(sc)._sdf_keys()
     assert {"sdf.ball.radius", "sdf.blob.k", "sdf.blk.size", "sdf.ring.major"} <= set(keys)

@@ -347,6 +347,31 @@ def test_cubic_operator_formulas_and_bounds(op, ref):
     assert np.all(inside >= np.array(list(bb.min)) - 1e-5) and np.all(inside <= np.array(list(bb.max)) + 1e-5)
 
 
+@pytest.mark.parametrize("op, weight_a", [
+    (union, lambda da, db: (da <= db).astype(float)),
+    (intersection, lambda da, db: (da >= db).astype(float)),
+    (subtraction, lambda da, db: (da >= -db).astype(float)),
+    (lse_intersection, lambda da, db: 1 / (1 + np.exp(db - da))),
+    (lambda a, b: smooth_lse_intersection(a, b, 0.3), lambda da, db: 1 / (1 + np.exp((db - da) / 0.3))),
+], ids=["union", "intersection", "subtraction", "lse", "smooth_lse"])
+def test_sharp_and_lse_weights_follow_the_operand_that_defines_the_surface(op, weight_a):
+    """The material weight of ``a``: 1 where ``a`` defines the distance (the min of a union,
+    the max of an intersection, ``a`` against ``-b`` of a subtraction), the softmax weight of
+    a log-sum-exp; numpy from the operators' formulas. A flipped comparison gave the outer
+    surface of a subtraction, or both sides of an intersection, the other material."""
+    a, b = Sphere((0, 0, 0), 0.6), Sphere((0.5, 0, 0), 0.4)
+    a.slot, b.slot = 0, 1
+    pts = rand_points(500, -1, 1)
+    p = mi.Point3f(*(pts[:, i].astype(np.float32) for i in range(3)))
+    _, w = op(a, b).eval(p, 2)
+    w = np.stack([np.array(x) for x in w])
+    da, db = dist(a, pts), dist(b, pts)
+    clear = np.abs(np.abs(da) - np.abs(db)) > 1e-4          # (ties: float rounding decides)
+    np.testing.assert_allclose(w[0][clear], weight_a(da, db)[clear], atol=1e-5)
+    np.testing.assert_allclose(w.sum(0), 1.0, atol=1e-6)
+    assert 0.02 < w[0].mean() < 0.98                        # both operands show
+
+
 def test_cubic_blend_weights_sum_to_one_and_follow_the_nearer_operand():
     a, b = Sphere((-0.5, 0, 0), 0.5), Sphere((0.5, 0, 0), 0.5)
     a.slot, b.slot = 0, 1
