@@ -109,6 +109,18 @@ def fd_gradient(scene, integ, key: str, h: float, spp: int, seed: int, weight=No
     return (vals[0] - vals[1]) / (2 * h)
 
 
+def ball_on_floor(ball_bsdf: dict, res: int = 12) -> mi.Scene:
+    """A ball of ``ball_bsdf`` on a diffuse floor under a point light (box filter)."""
+    T = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "scene",
+        "cam": {"type": "perspective", "fov": 45, "to_world": T().look_at(origin=[0, 1, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
+        "light": {"type": "point", "position": [0, 2, 1], "intensity": {"type": "rgb", "value": 10}},
+        "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(3), "bsdf": {"type": "diffuse"}},
+        "ball": {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5, "bsdf": ball_bsdf}})
+
+
 def official_scene(name: str, res: int):
     """``scenes/<name>.toml`` through draaw_mi.load_scene at res x res (box filter). A loader
     failure fails the test: these tests are about the shipped scenes, not stand-ins."""

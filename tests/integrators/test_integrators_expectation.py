@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from integrators_helpers import (check_same_expectation, integrator, mi, official_scene,
+from integrators_helpers import (ball_on_floor, check_same_expectation, integrator, mi, official_scene,
                                  render_np, rs, seed_stack)
 
 
@@ -157,15 +157,7 @@ def test_max_depth_semantics(depth):
 def test_legacy_versions_at_max_depth_2_give_direct_light_only(kind):
     """On diffuse materials the legacy model is Lambert's, so at max_depth 2 V1 and V2 render
     the direct light that ``path`` does (V1 gathered one bounce more there: 4 % brighter)."""
-    T = mi.ScalarTransform4f
-    scene = mi.load_dict({
-        "type": "scene",
-        "cam": {"type": "perspective", "fov": 45, "to_world": T().look_at(origin=[0, 1, 4], target=[0, 0, 0], up=[0, 1, 0]),
-                "film": {"type": "hdrfilm", "width": 12, "height": 12, "rfilter": {"type": "box"}}},
-        "light": {"type": "point", "position": [0, 2, 1], "intensity": {"type": "rgb", "value": 10}},
-        "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(3), "bsdf": {"type": "diffuse"}},
-        "ball": {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
-                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.8}}}})
+    scene = ball_on_floor({"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.8}})
     ref = seed_stack(scene, integrator("path", max_depth=2), 64, range(10))
     st = seed_stack(scene, integrator(kind, max_depth=2), 64, range(50, 60))
     check_same_expectation(ref, st)

@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from integrators_helpers import check_same_expectation, integrator, rs, seed_stack
+from integrators_helpers import ball_on_floor, check_same_expectation, integrator, rs, seed_stack
 
 PLUGIN = "test_v2_phong_reference"
 
@@ -170,18 +170,9 @@ def test_v2s_direct_to_scatter_weighs_only_the_diffuse_indirect_light():
     """``direct_to_scatter`` weighs indirect *diffuse* light. A metal ball (no diffuse lobe)
     renders the same at any value, with the same samples (it scaled the glossy indirect
     light too); a dielectric one renders darker at a lower value."""
-    T = mi.ScalarTransform4f
-
     def scene(metallic, d2s):
-        return mi.load_dict({
-            "type": "scene",
-            "cam": {"type": "perspective", "fov": 40, "to_world": T().look_at(origin=[0, 1, 4], target=[0, 0.4, 0], up=[0, 1, 0]),
-                    "film": {"type": "hdrfilm", "width": 12, "height": 12, "rfilter": {"type": "box"}}},
-            "light": {"type": "point", "position": [0, 2, 1], "intensity": {"type": "rgb", "value": 10}},
-            "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(3), "bsdf": {"type": "diffuse"}},
-            "ball": {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
-                     "bsdf": {"type": "draaw", "roughness": 0.3, "specular": 1.0, "metallic": metallic,
-                              "direct_to_scatter": d2s}}})
+        return ball_on_floor({"type": "draaw", "roughness": 0.3, "specular": 1.0, "metallic": metallic,
+                              "direct_to_scatter": d2s})
     img = {(m, d): np.array(mi.render(scene(m, d), integrator=integrator("draaw_v2", max_depth=4), spp=64, seed=2))
            for m in (1.0, 0.0) for d in (0.2, 1.0)}
     assert np.allclose(img[1.0, 0.2], img[1.0, 1.0], rtol=1e-5, atol=1e-6)
