@@ -342,7 +342,7 @@ def _cmd_post(args) -> int:
     result = np.concatenate([color, arr[..., n_color:]], axis=2)
     # the chain the image has been through: the one render applied (its header's draaw:post),
     # then this one
-    from draaw_mi.batch.exr import read_header
+    from draaw_mi.batch.exr import HASH_ATTR, MANIFEST_ATTR, read_header
     header = read_header(args.input) or {}
     before = _recorded_chain(header)
     # the chain as the user wrote it (chain.to_list() would record every default too)
@@ -368,7 +368,6 @@ def _cmd_post(args) -> int:
         # reports it as foreign and leaves it alone unless told to overwrite (post run in
         # place on a frame kept the hash, and the batch took a chain its manifest never named
         # as done)
-        from draaw_mi.batch.exr import HASH_ATTR, MANIFEST_ATTR
         if meta.pop(HASH_ATTR, None) is not None:
             meta[MANIFEST_ATTR] = "draaw-mi post"
         draaw_mi.write_exr(args.output, result, channels=names, metadata=meta)

@@ -25,7 +25,7 @@ import mitsuba as mi
 
 from .errors import RenderError, suggest
 from .progress import check_mode, progress_bar
-from .integrators import is_draaw, resolve_version
+from .integrators import VERSION_GRADES, is_draaw, resolve_version
 from .frozen import (freeze_render, freeze_supported, other_live_bsdfs,  # noqa: F401 (re-exported)
                      scene_scalars, scene_state)
 from .guard import RENDER_GUARD
@@ -171,7 +171,6 @@ def _scene_passes(scene, spp: int, pass_spp: int) -> list[int]:
 def _warn_grade_left_out(version: str, chain) -> None:
     """Warn when a GO-Draaw graded version name (``V4-Log``) comes without its grade's post
     filter: the name renders linear light, as ``V4`` does (it said nothing)."""
-    from .integrators import VERSION_GRADES
     grade = VERSION_GRADES.get(str(version).strip().lower())
     if grade is None or (chain is not None and any(e.get("type") == grade for e in chain.to_list())):
         return

@@ -95,11 +95,11 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     # the keys that size the light: a rectangle's size, a sphere's radius, a disk's radius (or
     # size, an ellipse); a key of another shape was accepted and ignored (a disk of radius 0.1
     # or 2 lit the scene as one of radius 0.5)
-    wrong = {"rectangle": ("radius",), "sphere": ("size",), "disk": ()}[shape]
-    for key in wrong:
-        if key in light:
+    takes = {"rectangle": ("size",), "disk": ("radius", "size"), "sphere": ("radius",)}[shape]
+    for key in ("radius", "size"):
+        if key in light and key not in takes:
             raise (where / key).error(f"a {shape} area light has no {key!r}; it is sized by "
-                                      + ("'size'" if shape == "rectangle" else "'radius'"))
+                                      + " or ".join(repr(k) for k in takes))
     if shape == "disk" and "radius" in light and "size" in light:
         raise (where / "radius").error("give a disk light 'radius' or 'size' (an ellipse), not both")
     if shape == "sphere":

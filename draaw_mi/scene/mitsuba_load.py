@@ -20,14 +20,11 @@ def _unreferenced_message(text: str) -> str | None:
     node = re.search(r'While loading dictionary node "([^"]+)"', text)
     line = re.search(r"\((line \d+, col \d+)\)", text[:m.start()])      # an XML file's
     place = f"{node.group(1)!r}: " if node else f"{line.group(1)}: " if line else ""
-    what = f"Mitsuba's {plugin!r} {kind}" if kind and kind != "unknown" else f"the {plugin!r} plugin"
-    if plugin == "draaw":
-        what = "the 'draaw' BSDF"
-    hint = ""
-    if plugin == "draaw" and names:
+    what, hint = f"Mitsuba's {plugin!r} {kind}" if kind and kind != "unknown" else f"the {plugin!r} plugin", ""
+    if plugin == "draaw":                   # ours: its parameters are known
         from ..errors import suggest
         from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
-        hint = suggest(names[0], ALL_PARAMS + OPTIONS)
+        what, hint = "the 'draaw' BSDF", suggest(names[0], ALL_PARAMS + OPTIONS) if names else ""
     listed = ", ".join(repr(n) for n in names) or "?"
     return (f"{place}{listed} {'is not a parameter' if len(names) == 1 else 'are not parameters'} "
             f"of {what}{hint}")
