@@ -20,19 +20,30 @@ def relmse(img: np.ndarray, gt: np.ndarray) -> float:
     return float(np.mean((img - gt) ** 2 / (gt ** 2 + 1e-2)))
 
 
+def _colour():
+    """colour-science, imported without its side effect: its import sets numpy's print options
+    to ``legacy='1.13'`` for the whole process (a user's notebook then printed arrays and
+    scalars the old way after the first benchmark)."""
+    options = np.get_printoptions()
+    try:
+        import colour
+    finally:
+        np.set_printoptions(**options)
+    return colour
+
+
 def delta_e2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
     """Per-element CIEDE2000 colour difference of CIELAB arrays (..., 3) (colour-science).
 
     >>> round(float(delta_e2000(np.array([50.0, 2.6772, -79.7751]), np.array([50.0, 0.0, -82.7485]))), 4)
     2.0425
     """
-    import colour
-    return colour.delta_E(lab1, lab2, method="CIE 2000")
+    return _colour().delta_E(lab1, lab2, method="CIE 2000")
 
 
 def srgb_to_lab(img: np.ndarray) -> np.ndarray:
     """CIELAB (D65) of a linear-sRGB image after display encoding (clipped to [0, 1])."""
-    import colour
+    colour = _colour()
     enc = srgb_encode(img[..., :3])
     xyz = colour.sRGB_to_XYZ(enc)                     # decodes the sRGB transfer function
     return colour.XYZ_to_Lab(xyz)

@@ -93,7 +93,7 @@ def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside [{lo:g}, {hi:g}] "
-                             f"(the first, {a[first]!r}, at {list(first)}); expected finite values in "
+                             f"(the first, {float(a[first])!r}, at {list(first)}); expected finite values in "
                              f"[{lo:g}, {hi:g}]")
 
 
@@ -108,7 +108,7 @@ def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ParameterError(f"{who}: {name}: {int(bad.sum())} value(s) outside [0, {hi:g}] (the first, "
-                             f"{a[first]!r}, at {list(first)}); expected {'albedos' if albedo else 'densities'} "
+                             f"{float(a[first])!r}, at {list(first)}); expected {'albedos' if albedo else 'densities'} "
                              f"in [0, {hi:g}]")
 
 

@@ -51,7 +51,8 @@ def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3,
     homogeneous medium in a null cube), ``inside`` (the camera inside a grid medium), ``fog``
     (the camera in an unbounded homogeneous medium, which is all space: no environment light,
     since ``volpath`` ends a path that leaves the scene inside a medium; ``fog_sigma_t``),
-    ``fog_sun`` (the same under a directional light)."""
+    ``fog_sun`` (the same under a directional light), ``fog_floor`` (the fog declared as the
+    floor's exterior too: a medium transition at an opaque surface)."""
     if kind in ("uniform", "gradient", "blobs", "albedo"):
         d = base(integrator, res)
         d["smoke"] = smoke_shape(grid(kind), g_phase=g_phase)
@@ -75,13 +76,15 @@ def scene_dict(kind: str, integrator: dict, res: int = 12, g_phase: float = 0.3,
         d = base(integrator, res, sensor_medium=medium, origin=(0.1, 0.2, 0.6))
         d["smoke"] = {"type": "cube", "bsdf": {"type": "null"}, "interior": medium}
         return d
-    if kind in ("fog", "fog_sun"):
+    if kind in ("fog", "fog_sun", "fog_floor"):
         fog = mi.load_dict({"type": "homogeneous", "sigma_t": fog_sigma_t, "albedo": 0.8,
                             "phase": {"type": "hg", "g": g_phase}})
         d = base(integrator, res, sensor_medium=fog)
         del d["env"]
         if kind == "fog_sun":                  # a directional light instead of the point light
             d["light"] = {"type": "directional", "direction": [-0.4, -1.0, -0.3], "irradiance": 3.0}
+        if kind == "fog_floor":
+            d["floor"]["exterior"] = fog
         return d
     raise ValueError(kind)
 

@@ -28,13 +28,14 @@ def test_bench_study_on_smoke_scene(tmp_path):
         assert r["finite"] and np.isfinite(r["rmse"])
 
 
-@pytest.mark.parametrize("kind", ["gradient", "fog", "fog_sun"])
+@pytest.mark.parametrize("kind", ["gradient", "fog", "fog_sun", "fog_floor"])
 def test_v1_march_matches_single_scattering_volpath(kind):
     """V1/V2's march (single scattering + direct light at the first surface, real
     transmittance) is exactly volpath at max_depth 2, up to the march's quadrature error,
     which falls with ``medium_steps``. ``fog``: the camera in an unbounded medium, whose
     escaping rays marched over an infinite stretch (NaN in 2 of 3 pixels); ``fog_sun``: its
-    light samples of a directional light attenuated as volpath's."""
+    light samples of a directional light attenuated as volpath's; ``fog_floor``: the floor's light
+    sample starts in the medium on the camera's side of it (its exterior), not behind it."""
     import sys
     sys.path.insert(0, os.path.dirname(__file__))
     import media_scenes as ms

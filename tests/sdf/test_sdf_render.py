@@ -174,6 +174,26 @@ def test_two_objects_with_equal_materials_are_both_drawn():
     check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
 
 
+@pytest.mark.parametrize("version", ["v1", "v4"])
+def test_albedo_aov_of_two_sdf_objects_is_each_ones_material(version):
+    """Two SDF spheres of two materials: the albedo AOV (traced without random numbers, so
+    the material of the larger blend weight) shows each sphere's own base colour, pixel for
+    pixel as two Mitsuba spheres do (the smaller weight's gave the other sphere's colour)."""
+    import copy
+    a = base_description(res=(16, 12))
+    a["shapes"] = a["shapes"][:1]                           # the floor alone
+    b = copy.deepcopy(a)
+    balls = [{"type": "sphere", "name": "left", "material": "ball", "center": [-0.7, 0.6, 0.0], "radius": 0.6},
+             {"type": "sphere", "name": "right", "material": "blocker", "center": [0.7, 0.6, 0.0], "radius": 0.6}]
+    a["shapes"] += copy.deepcopy(balls)
+    b["sdf"] = balls
+    ref, sdf = (np.array(draaw_mi.render(draaw_mi.load_scene(d), version=version, spp=1, seed=0, post=[],
+                                         aovs="albedo"))[..., 3:6] for d in (a, b))
+    colours = {tuple(c) for c in np.round(ref.reshape(-1, 3).astype(np.float64), 3)}
+    assert {(0.8, 0.3, 0.2), (0.2, 0.4, 0.7)} <= colours            # both spheres show
+    assert np.allclose(sdf, ref, atol=1e-5)
+
+
 def test_same_image_under_area_light_v4():
     ref, sdf = twin_scenes("sphere", light="area")
     check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
