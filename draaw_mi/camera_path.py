@@ -10,8 +10,8 @@ GO-Draaw's benchmark); ``faithful=False`` (default) uses ``smoothstep`` and dist
 frame over the segments.
 
 >>> frames = interpolate([(0, 0, 0, 0, 1), (1, 0, 0, 0, 1)], duration=0.05)
->>> len(frames), frames[0][0], frames[-1][0]
-(3, 0.0, 1.0)
+>>> frames.shape, float(frames[0, 0]), float(frames[-1, 0])
+((3, 5), 0.0, 1.0)
 """
 from __future__ import annotations
 

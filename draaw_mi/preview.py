@@ -44,8 +44,6 @@ from __future__ import annotations
 
 import threading
 import time
-import weakref
-from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -56,6 +54,7 @@ from .integrators import is_draaw
 from .guard import RENDER_GUARD
 from .render import _scene_lock, check_version_sees, make_integrator, pass_seed, scene_changed
 from .scene import check_like, value_like
+from .preview_worker import PreviewFrame, PreviewSuperseded, PreviewWorker  # noqa: F401  (re-exported)
 
 GUIDES = ("albedo", "normal")
 
@@ -70,15 +69,6 @@ def _budget(value, where: str) -> int:
     if n is None or isinstance(value, bool) or n < 1:
         raise ParameterError(f"{where}: max_spp={value!r}; expected an integer >= 1")
     return int(n)
-
-
-class PreviewSuperseded(DraawError):
-    """A preview's worker was stopped because another preview of its scene started."""
-
-
-# the running preview of each scene (Preview.start): one worker renders a scene at a time
-_ACTIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_ACTIVE_GUARD = threading.Lock()
 
 
 def _depth(value, where: str) -> int:
@@ -113,23 +103,7 @@ def _scale(value, where: str) -> float:
     return float(value)
 
 
-@dataclass
-class PreviewFrame:
-    """One published preview image and what it holds."""
-
-    image: np.ndarray          # (H, W, 3) float32, denoised / post-processed as asked; linear
-                               # unless ``encoded``
-    raw: np.ndarray            # (H, W, 3) the running mean itself (no denoise, no post)
-    spp: int                   # samples per pixel in the mean (0 for an interactive frame)
-    generation: int            # parameter generation the frame shows
-    interactive: bool          # a reduced-resolution first frame after a change
-    denoised: bool
-    render_s: float            # seconds spent rendering this frame
-    t_ready: float             # time.perf_counter() when it became available
-    encoded: bool = False      # image is display-encoded (the post chain ends in srgb)
-
-
-class Preview:
+class Preview(PreviewWorker):
     """Progressive running-mean renderer of one scene (see the module docstring).
 
     ==================  ========================================================================
@@ -400,106 +374,6 @@ class Preview:
         return PreviewFrame(image=image, raw=color, spp=spp, generation=generation, interactive=interactive,
                             denoised=denoised, render_s=render_s, t_ready=time.perf_counter(),
                             encoded=encoded)
-
-    # ------------------------------------------------------------------ worker thread
-    def on_frame(self, callback):
-        """Call ``callback(frame)`` (from the worker thread) for every published frame."""
-        with self._lock:
-            self._callbacks.append(callback)
-
-    def on_error(self, callback):
-        """Call ``callback(exception)`` (from the worker thread) when a frame fails; the
-        worker then waits for the next change (``error`` holds the exception until then)."""
-        with self._lock:
-            self._error_callbacks.append(callback)
-
-    def start(self):
-        """Start the worker thread (idempotent). One worker renders a scene at a time: a
-        running preview of the same :class:`~draaw_mi.scene.DraawScene` (a notebook cell run
-        again makes a new panel; the old one went on refining, fought the new one for the
-        scene's lock and rendered its parameter changes without restarting its mean) is
-        stopped, and its error callbacks get :class:`PreviewSuperseded`."""
-        with _ACTIVE_GUARD:
-            ref = _ACTIVE.get(self.scene)
-            _ACTIVE[self.scene] = weakref.ref(self)
-        other = None if ref is None else ref()
-        if other is not None and other is not self and other.running:
-            other._supersede()
-        if self._thread is not None and self._thread.is_alive():
-            self._stop.clear()        # a worker that did not stop in time goes on: not a second
-            return
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="draaw-mi-preview", daemon=True)
-        self._thread.start()
-
-    def _supersede(self):
-        """Stop: another preview of this scene started (see :meth:`start`)."""
-        self.stop()
-        error = PreviewSuperseded("stopped: a newer preview of this scene is running "
-                                  "(start() this one again to take the scene back)")
-        with self._lock:
-            self.error = error
-            callbacks = list(self._error_callbacks)
-        for cb in callbacks:
-            cb(error)
-
-    def _idle(self) -> bool:
-        return self._spp >= self.max_spp and not self._pending and self._shown_generation == self._generation
-
-    def _run(self):
-        while not self._stop.is_set():
-            with self._lock:
-                while self._idle() and not self._stop.is_set():
-                    self._wake.wait(0.5)
-            if self._stop.is_set():
-                break
-            with self._lock:
-                generation = self._generation
-            try:
-                self.step()
-            except Exception as e:  # noqa: BLE001 - shown by the UI; the thread waits for a change
-                with self._lock:
-                    if generation != self._generation:
-                        continue          # changed meanwhile: the next frame tries the new values
-                    self.error = e
-                    self._spp = self.max_spp      # idle until the next change
-                    self._shown_generation = generation
-                    self._wake.notify_all()
-                    callbacks = list(self._error_callbacks)
-                for cb in callbacks:
-                    cb(e)
-
-    def stop(self, timeout: float = 10.0):
-        """Ask the worker to stop after its current frame and wait for it."""
-        self._stop.set()
-        with self._lock:
-            self._wake.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout)
-            if not self._thread.is_alive():       # (a worker still in its frame stays known:
-                self._thread = None               # start() must not run a second one)
-
-    @property
-    def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
-
-    def wait(self, generation: int | None = None, spp: int = 0, timeout: float = 30.0) -> PreviewFrame | None:
-        """Block until a frame of ``generation`` (default: the latest) with at least ``spp``
-        samples (0: any frame, interactive included) is published and its :meth:`on_frame`
-        callbacks have run (a panel shows it); ``None`` on timeout."""
-        deadline = time.perf_counter() + timeout
-        with self._lock:
-            g = self._generation if generation is None else generation
-            while True:
-                f = self._delivered
-                if f is not None and f.generation >= g and f.spp >= spp:
-                    return f
-                if self.error is not None and self._shown_generation >= g:
-                    return None
-                left = deadline - time.perf_counter()
-                if left <= 0:
-                    return None
-                self._wake.wait(min(left, 0.5))
 
     @property
     def generation(self) -> int:
