@@ -244,6 +244,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
     moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
+    history_was_on = dr.flag(dr.JitFlag.KernelHistory)     # (a caller's own measurement)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()
     try:
@@ -306,7 +307,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
                 bar.set_postfix(loss=f"{loss_value:.3g}", **{n.split(".")[-1][:5]: _short(v) for n, v in values.items()})
                 bar.update(1)
     finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+        dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
         if bar is not None:
             bar.close()
         if len(history) < iterations:      # interrupted: leave the last iterate, detached

@@ -60,6 +60,21 @@ def test_the_fit_takes_the_scenes_version_where_it_is_differentiable():
     assert res.version == "v4"                         # path is not differentiable
 
 
+@pytest.mark.parametrize("was_on", [False, True])
+def test_the_fit_leaves_the_kernel_history_flag_as_it_found_it(was_on):
+    """fit() records kernel compiles with Dr.Jit's kernel history; it turned the flag off
+    afterwards, ending a caller's own kernel-history measurement around the fit."""
+    old = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, was_on)
+    try:
+        res = draaw_mi.fit(draaw_mi.load_scene(_scene()), np.zeros((16, 16, 3), np.float32), P,
+                           iterations=1, spp=1, progress=False)
+        assert "kernel_compiles" in res.history[0]
+        assert dr.flag(dr.JitFlag.KernelHistory) == was_on
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, old)
+
+
 def test_an_8_bit_bitmap_reference_is_refused(tmp_path):
     from draaw_mi.fit_reference import load_reference
     png = str(tmp_path / "ref.png")
