@@ -107,10 +107,12 @@ def pilot_can_miss(scene: mi.Scene) -> bool:
 
 
 def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,
-                   seed: int, moments: bool = False):
+                   seed: int, moments: bool = False, alpha: bool = False):
     """Mean (H, W, 3) and, with ``moments``, per-pixel sample variance (H, W, 3), alpha
     (H, W) and mean path length in segments (H, W; 1 where the integrator does not report
     ``last_depth``) of ``integrator.sample`` with ``spp_map[y, x]`` samples at pixel (x, y).
+    ``alpha`` (without ``moments``): the mean is (H, W, 4), the fraction of samples that hit
+    something (or saw an environment) in its fourth channel.
 
     ``spp_map``: (H, W) integers >= 1. Primal only (no gradients).
     """
@@ -167,9 +169,10 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
                 set_primary(None)
         value = L * weight
         chans = [value.x, value.y, value.z]
+        if moments or alpha:
+            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x]
         if moments:
-            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x,
-                      (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
+            chans += [(mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
                       dr.square(value.x), dr.square(value.y), dr.square(value.z)]
         # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
         sums = [dr.zeros(mi.Float, w * h) for _ in chans]
@@ -177,12 +180,12 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
         dr.eval(sums)
     arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
-    mean = arr[:, :3].reshape(h, w, 3)
     if not moments:
-        return mean
+        return arr.reshape(h, w, 4 if alpha else 3)
     n = counts[:, None].astype(np.float64)
     var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
-    return mean, var.reshape(h, w, 3), arr[:, 3].reshape(h, w), arr[:, 4].reshape(h, w)
+    return (arr[:, :3].reshape(h, w, 3), var.reshape(h, w, 3), arr[:, 3].reshape(h, w),
+            arr[:, 4].reshape(h, w))
 
 
 def _box3(a: np.ndarray) -> np.ndarray:
@@ -238,9 +241,9 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
     counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
                       score_cap=SCORE_CAP)
-    main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995)
+    main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, alpha=alpha)
+    if alpha:       # (from the pilot alone, an edge pixel's alpha had the pilot's 4-spp noise)
+        pilot = np.concatenate([pilot, valid[..., None]], -1)
     wp = a / spp
     img = wp * pilot + (1.0 - wp) * main
-    if alpha:
-        img = np.concatenate([img, valid[..., None]], -1)   # alpha from the pilot (exact 0/1)
     return mi.TensorXf(img.astype(np.float32))

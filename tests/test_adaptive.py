@@ -139,8 +139,9 @@ def test_tiny_and_odd_images(res):
 def test_render_option_and_errors(tiny_scene):
     img, info = draaw_mi.render(tiny_scene, version="path", spp=1, adaptive=4, return_info=True)
     assert np.array(img).shape == (24, 32, 3) and info["adaptive"]["traced_fraction"] < 1.0
-    with pytest.raises(draaw_mi.DraawError, match="power of two"):
-        draaw_mi.render(tiny_scene, adaptive=6)
+    for block in (6, 1):                     # (a block of 1 pixel interpolates nothing)
+        with pytest.raises(draaw_mi.DraawError, match="power of two"):
+            draaw_mi.render(tiny_scene, adaptive=block)
     with pytest.raises(draaw_mi.DraawError, match="not differentiable"):
         draaw_mi.render(tiny_scene, adaptive=8, params=tiny_scene.params)
 

@@ -172,3 +172,16 @@ def test_numpy_booleans_are_booleans():
     for flag in (False, True):
         np.testing.assert_array_equal(np.array(post.bloom(img, clamp=np.bool_(flag))),
                                       np.array(post.bloom(img, clamp=flag)))
+
+
+@pytest.mark.parametrize("word, flag", [("yes", True), ("YES", True), ("True", True), ("no", False),
+                                        ("false", False)])
+def test_a_chain_file_may_spell_a_flag_as_a_word(word, flag):
+    """A chain entry's flag given as a word (a TOML/JSON file written by hand): "yes"/"no" and
+    "true"/"false" in any case mean the flag ("yes" read as false clamped nothing)."""
+    img = np.full((2, 3, 3), 0.9, np.float32)
+    chain = [{"type": "lighten", "strength": 1.0}, {"type": "linear", "gamma": 1 / 3}]
+    got = post.apply(img, [chain[0], dict(chain[1], clamp=word)]).numpy()
+    want = post.apply(img, [chain[0], dict(chain[1], clamp=flag)]).numpy()
+    np.testing.assert_array_equal(got, want)
+    assert (got.max() <= 1.0) == flag                          # 1.8 ** (1/3) > 1 unclamped

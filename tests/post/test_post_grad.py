@@ -118,3 +118,16 @@ def test_render_chain_loss_backpropagates():
             vals.append(loss_of(chain(mi.render(scene, params, spp=4, seed=1))).item())
         fd.append((vals[0] - vals[1]) / (2 * h))
     np.testing.assert_allclose(g, fd, rtol=2e-2)
+
+
+@pytest.mark.parametrize("scale", [1e19, 1e30, 1e36])
+def test_edge_gradients_of_bright_images_are_those_of_dim_ones(scale):
+    """edge_detection is homogeneous of degree 1 (the image plus Sobel magnitudes), so its
+    gradient does not depend on the image's scale. Through the magnitude's 1/m^2 it did: past
+    1e30 the edge term's share underflowed and the gradient was the identity's."""
+    img = hdr_image(seed=9, shape=(5, 6), lo=0.05, hi=1.0)
+    w = np.random.default_rng(10).standard_normal(img.shape).astype(np.float32)
+    g1 = _vjp(post.edge_detection, img, w)
+    gs = _vjp(post.edge_detection, (img.astype(np.float64) * scale).astype(np.float32), w)
+    assert np.abs(g1 - w).max() > 0.1                        # the edges do contribute
+    np.testing.assert_allclose(gs, g1, rtol=1e-4, atol=1e-5)

@@ -71,3 +71,32 @@ def test_crt_scan_lines_of_a_tall_image_match_the_reference():
     """From 480 rows on, a scan line spans two or more rows (period H // 480 + 1): every other
     test image is shorter, where the period is 1 and a wrong period formula still agrees."""
     _compare("crt", {"radius": 2.0}, hdr_image(seed=5, shape=(480, 3)))
+
+
+@pytest.mark.parametrize("name", ["bloom", "bloom_v2"])
+def test_pixels_at_the_threshold_bloom(name):
+    """Pixels whose luminance is the threshold glow ("at or above"): at threshold 0 the black
+    pixels of an image take the glow of their bright neighbours too (with ``<=`` in place of
+    ``<`` none did)."""
+    img = hdr_image(seed=11)
+    img[::2] = 0.0                                             # every other row exactly black
+    got = _compare(name, {"threshold": 0.0, "clamp": False, "multipass": 1}, img)
+    assert got[::2].min() > 0.0                                # (the reference says so too)
+
+
+def test_quantised_values_are_fixed_points_for_every_level_count():
+    """``color_mapping(color_mapping(x)) == color_mapping(x)`` bit for bit for N = 1..40 and
+    some larger counts on a
+    dense grid, and the levels are the float64 reference's: float32's ``x N`` rounds a
+    quantised ``k / N`` just below ``k`` for 218 of 1001 inputs at N = 100 without the
+    2^-22 tolerance, and repeated passes drifted down by levels (0.99 -> 0.97 at multipass 3)."""
+    x = np.linspace(0.0, 1.0, 1001, dtype=np.float32)
+    img = np.repeat(x[:, None, None], 3, axis=2)              # (1001, 1, 3)
+    for n in [*range(1, 41), 64, 99, 100, 127, 255, 256]:
+        once = post.color_mapping(img, n).numpy()
+        np.testing.assert_array_equal(post.color_mapping(once, n).numpy(), once, err_msg=f"levels={n}")
+        want = ref.color_mapping(img.astype(np.float64), n)[:, 0, 0]
+        np.testing.assert_array_equal(np.round(once[:, 0, 0] * np.float64(n)), np.round(want * n),
+                                      err_msg=f"levels={n}")
+    np.testing.assert_array_equal(post.color_mapping(img, 100, multipass=3).numpy(),
+                                  post.color_mapping(img, 100).numpy())
