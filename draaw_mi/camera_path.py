@@ -61,11 +61,11 @@ def as_keyframes(keys) -> np.ndarray:
 
 
 def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = False) -> np.ndarray:
-    """Frames (m, 5) along the keyframes; see the module docstring for the two modes."""
+    """Frames (m, 5) along the keyframes; see the module docstring for the two modes. One
+    keyframe is a camera that stays put: its frames are that keyframe (one frame in all, so
+    ``bench.frame_times(frames=N)`` timed a single frame, and a batch repeated it N times)."""
     p = as_keyframes(keys)
     n = len(p)
-    if n < 2:
-        return p
     for name, value, unit in (("duration", duration, "seconds"), ("fps", fps, "frames per second")):
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < float("inf"):
             raise ParameterError(f"camera path: {name}={value!r}; expected a positive number of {unit}")
@@ -74,6 +74,8 @@ def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = Fa
     total = int(duration * fps) if faithful else int(round(duration * fps))
     if total < 2:
         raise ParameterError(f"camera path: {duration} s at {fps} fps gives {total} frame(s); need at least 2")
+    if n < 2:
+        return np.repeat(p, total, axis=0)
     if faithful:
         per = total // (n - 1)
         out = np.zeros((total, 5))

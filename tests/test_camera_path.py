@@ -107,6 +107,28 @@ def test_bad_durations_and_rates_are_named(kwargs, match):
         interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], **kwargs)
 
 
+@pytest.mark.parametrize("duration, fps, faithful", [(0.01, 60, False), (1, 1, False), (1, 1, True),
+                                                     (1.9, 1, True)])
+def test_a_path_of_fewer_than_two_frames_is_refused(duration, fps, faithful):
+    """A path starts at its first keyframe and ends at its last: one frame cannot be both
+    (a single frame came back, the last keyframe's in faithful mode)."""
+    from draaw_mi.errors import ParameterError
+    with pytest.raises(ParameterError, match=r"gives [01] frame\(s\); need at least 2"):
+        interpolate([[0, 0, 0, 0, 0], [1, 1, 1, 0, 0]], duration=duration, fps=fps, faithful=faithful)
+
+
+@pytest.mark.parametrize("faithful", [False, True])
+def test_one_keyframe_is_a_camera_that_stays_put_for_every_frame(faithful):
+    """One keyframe: as many frames as duration x fps, each the keyframe (it gave one frame
+    whatever the duration, so a benchmark over N frames timed one)."""
+    from draaw_mi.errors import ParameterError
+    key = [1.0, 2.0, 3.0, 0.5, -0.25]
+    frames = interpolate([key], duration=0.1, fps=60, faithful=faithful)
+    np.testing.assert_array_equal(frames, np.tile(key, (6, 1)))
+    with pytest.raises(ParameterError, match="fps=0"):          # checked as for more keys
+        interpolate([key], fps=0)
+
+
 def test_dict_keyframes_read_camerax_as_theta_and_cameray_as_phi():
     """GO-Draaw's camera_positions.json records {x, y, z, cameraX (theta), cameraY (phi)}:
     a swap would turn every path to look the wrong way."""

@@ -94,6 +94,18 @@ def test_aux_channels_and_denoise_aovs_keep_aovs():
         denoise_aovs(img, names[:-1])
 
 
+def test_a_normal_aov_without_an_albedo_aov_is_no_guide():
+    """OIDN takes a normal guide only with an albedo guide: a render with a normal AOV and no
+    albedo AOV denoises its colour unguided (the reference: denoise() of the colour alone)
+    and keeps its normals (passed on, OIDN refused the call: "normal given without albedo")."""
+    from draaw_mi.denoise import denoise
+    names = ["R", "G", "B", "N.X", "N.Y", "N.Z"]
+    img = np.random.default_rng(2).random((16, 16, 6), dtype=np.float32)
+    out = denoise_aovs(img, names)
+    np.testing.assert_array_equal(out[..., :3], denoise(img[..., :3]))
+    np.testing.assert_array_equal(out[..., 3:], img[..., 3:])
+
+
 def test_render_denoise_channels_and_errors(cornell):
     img, info = draaw_mi.render(cornell, spp=2, seed=1, denoise=True, return_info=True)
     assert img.shape == (64, 64, 3) and info["channels"] == ["R", "G", "B"] and info["denoised"]

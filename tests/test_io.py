@@ -238,3 +238,46 @@ def test_png_of_colour_and_an_aov_keeps_the_aov_out_given_the_names(tmp_path):
     assert np.all(back[..., 3] == 255) and np.all(back[..., 0] == round(float(srgb_encode(np.array([0.18]))[0]) * 255))
     with pytest.raises(IOFailure, match=r"write_png\('.*x.png'\): channels \['depth.Z'\]; expected R, G, B or Y"):
         draaw_mi.write_png(str(tmp_path / "x.png"), img[..., 4:], channels=["depth.Z"])
+
+
+def test_exr_header_ints_at_the_int32_bounds(tmp_path):
+    """The bounds of EXR's 32-bit int: 2**31 - 1 and -2**31 are ints, one past either is kept
+    as its decimal string (2**31 stored as an int wrapped to -2147483648)."""
+    from draaw_mi.batch import read_header
+    path = str(tmp_path / "b.exr")
+    meta = {"hi": 2 ** 31 - 1, "lo": -2 ** 31, "over": 2 ** 31, "under": -2 ** 31 - 1}
+    draaw_mi.write_exr(path, np.ones((2, 2, 3)), metadata=meta)
+    h = read_header(path)
+    assert [h[k] for k in meta] == [2 ** 31 - 1, -2 ** 31, "2147483648", "-2147483649"]
+
+
+@pytest.mark.parametrize("writer, name", [("write_exr", "d.exr"), ("write_png", "d.png")])
+def test_writing_onto_a_folder_is_one_clear_error(tmp_path, writer, name):
+    """An output name that is a folder: an IOFailure naming it before anything is encoded
+    (without the check: a bare IsADirectoryError after the encoding)."""
+    (tmp_path / name).mkdir()
+    with pytest.raises(IOFailure, match="it is a folder"):
+        getattr(draaw_mi, writer)(str(tmp_path / name), np.ones((2, 2, 3), np.float32))
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]       # no temporary file left
+
+
+def test_duplicate_channel_names_are_refused_and_nothing_is_written(tmp_path):
+    """Channels R, G, G: EXR keeps one channel per name, so one of them was silently lost."""
+    path = tmp_path / "dup.exr"
+    with pytest.raises(IOFailure, match="duplicate channel names"):
+        draaw_mi.write_exr(str(path), np.ones((2, 2, 3), np.float32), channels=["R", "G", "G"])
+    assert not path.exists()
+
+
+def test_a_png_of_xyz_channels_is_the_colour_they_describe(tmp_path):
+    """X, Y, Z channels (a Mitsuba xyz film) are converted to sRGB: a saturated colour keeps its
+    hue (reading only Y, it came out grey). Reference: Mitsuba's srgb_to_xyz for the input."""
+    import mitsuba as mi
+    from PIL import Image
+    rgb = np.array([0.8, 0.2, 0.1])
+    xyz = np.array(mi.srgb_to_xyz(mi.ScalarColor3f(*rgb)), np.float64).ravel()
+    img = np.tile(xyz.astype(np.float32), (2, 3, 1))
+    draaw_mi.write_png(str(tmp_path / "x.png"), img, channels=["X", "Y", "Z"])
+    back = np.asarray(Image.open(str(tmp_path / "x.png")).convert("RGB")).astype(int)
+    want = np.round(255 * srgb_encode(rgb)).astype(int)
+    assert np.abs(back - want).max() <= 1, (back[0, 0], want)
