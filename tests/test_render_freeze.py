@@ -270,7 +270,6 @@ def test_light_changes_refresh_the_power_table(monkeypatch):
     draaw_mi.render(scene, version="v4", spp=4, seed=1, post=[], max_depth=3)
     before = integ.emitter_selection(scene.mi_scene)
     key = "l1.emitter.radiance.value"                       # one of the weak lights
-    import drjit as dr
     shape = next(sh for sh in scene.mi_scene.shapes() if sh.id() == "l1")
     eid = int(np.array(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(shape.emitter())))[0])
     p = scene.params

@@ -12,7 +12,6 @@ import OpenEXR
 import pytest
 import tomli_w
 from batch_helpers import assert_bit_identical, frames_of, manifest, tiny_description, write_manifest, write_scene
-from conftest import tiny_description
 
 import draaw_mi
 from draaw_mi import batch

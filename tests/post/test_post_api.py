@@ -6,7 +6,6 @@ import doctest
 import importlib
 import inspect
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
