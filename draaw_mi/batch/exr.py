@@ -121,9 +121,11 @@ _HEADER_READ = 1 << 18
 
 def exr_complete(path: str) -> bool:
     """Whether the EXR at ``path`` holds all of its pixel data: every chunk its offset table
-    lists lies inside the file, the last one to its end. A file cut short keeps a readable
-    header, so :func:`read_header` alone took it for finished. Reads the header and the
-    offset table only (a few KiB whatever the image size); files that are not single-part
+    lists starts after the table with a header of a non-empty size and lies inside the file.
+    A file cut short keeps a readable header, so :func:`read_header` alone took it for
+    finished; a power cut can leave the header and table over zeroed blocks, whose chunks
+    read as empty (only the last chunk was looked at, so zeroed earlier ones passed). Reads
+    the header, the offset table and 8 bytes per chunk; files that are not single-part
     scanline images (tiled, deep, multi-part, newer compressions) are read in full instead.
 
     >>> import tempfile, numpy as np
@@ -152,9 +154,12 @@ def exr_complete(path: str) -> bool:
             data_at = table_at + 8 * chunks
             if min(offsets) < data_at or max(offsets) + 8 > size:
                 return False
-            fh.seek(max(offsets))
-            _, length = struct.unpack("<ii", fh.read(8))
-            return length >= 0 and max(offsets) + 8 + length <= size
+            for at in offsets:
+                fh.seek(at)
+                _, length = struct.unpack("<ii", fh.read(8))
+                if length <= 0 or at + 8 + length > size:
+                    return False
+            return True
     except (OSError, struct.error, ValueError):
         return False
 
