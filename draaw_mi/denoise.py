@@ -39,6 +39,8 @@ From a render with AOVs::
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .errors import DraawError, ParameterError
@@ -147,6 +149,9 @@ def denoise_aovs(image, channels, **kwargs):
     idx = aux_channels(names)
     albedo = arr[..., idx["albedo"]] if "albedo" in idx else None
     normal = arr[..., idx["normal"]] if ("normal" in idx and albedo is not None) else None
+    if "normal" in idx and albedo is None:
+        warnings.warn("denoise_aovs: the normal AOV guides OIDN only with an albedo AOV (render "
+                      "with aovs=['albedo', 'normal']); denoising without guides", stacklevel=2)
     color = denoise(arr[..., :n_color], albedo, normal, **kwargs)
     out = np.concatenate([color, arr[..., n_color:]], axis=2)
     if is_tensor:

@@ -243,7 +243,7 @@ def test_v4_adaptive_renders_what_the_uniform_render_does(change):
     aperture sample (dropped, the image came out pinhole-sharp) and an RGBA film's alpha (an
     empty background's 0; as 1 it read opaque) are the uniform render's, per pixel over seeds.
     The alpha of the pixels a shape covers in part has the noise of all the samples (it was
-    the 4-sample pilot's alone: 10x the uniform render's variance)."""
+    the 4-sample pilot's alone: 15x the uniform render's variance)."""
     import os
     import sys
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), "integrators"))

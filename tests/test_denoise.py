@@ -97,11 +97,13 @@ def test_aux_channels_and_denoise_aovs_keep_aovs():
 def test_a_normal_aov_without_an_albedo_aov_is_no_guide():
     """OIDN takes a normal guide only with an albedo guide: a render with a normal AOV and no
     albedo AOV denoises its colour unguided (the reference: denoise() of the colour alone)
-    and keeps its normals (passed on, OIDN refused the call: "normal given without albedo")."""
+    and keeps its normals (passed on, OIDN refused the call: "normal given without albedo"),
+    with a warning that says so (the normals were dropped without a word)."""
     from draaw_mi.denoise import denoise
     names = ["R", "G", "B", "N.X", "N.Y", "N.Z"]
     img = np.random.default_rng(2).random((16, 16, 6), dtype=np.float32)
-    out = denoise_aovs(img, names)
+    with pytest.warns(UserWarning, match="only with an albedo AOV"):
+        out = denoise_aovs(img, names)
     np.testing.assert_array_equal(out[..., :3], denoise(img[..., :3]))
     np.testing.assert_array_equal(out[..., 3:], img[..., 3:])
 
