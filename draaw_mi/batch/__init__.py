@@ -37,6 +37,8 @@ import os
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..progress import check_mode, progress_bar
 from .exr import frame_status, read_header
 from .manifest import Manifest, parse_manifest
@@ -236,7 +238,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     _check_workers(workers, scheduler, client, executor)
-    if not isinstance(overwrite, bool) and type(overwrite).__name__ != "bool_":
+    if not isinstance(overwrite, (bool, np.bool_)):
         # (the string "false" is true: another manifest's frames would be replaced)
         raise ParameterError(f"batch.run: overwrite={overwrite!r}; expected True or False")
     if executor == "dask" and client is None:
