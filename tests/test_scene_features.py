@@ -106,8 +106,9 @@ def test_area_lights_irradiance_below_them(shape):
     """Point below the light's centre at distance h: a facing disk of radius R gives
     E = pi L R^2 / (h^2 + R^2); a sphere of radius R gives E = pi L (R / h)^2."""
     h, r, radiance = 2.0, 0.4, 5.0
-    light = {"type": "area", "shape": shape.split("_")[0], "position": [0, h, 0], "target": [0, 0, 0],
-             "intensity": radiance}
+    light = {"type": "area", "shape": shape.split("_")[0], "position": [0, h, 0], "intensity": radiance}
+    if shape != "sphere":
+        light["target"] = [0, 0, 0]
     light.update({"size": [2 * r, 2 * r]} if shape == "disk_size" else {"radius": r})
     scene = _floor_scene([light], res=(9, 9),
                          camera={"origin": [0, 3, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 8})
@@ -128,6 +129,14 @@ def test_an_area_light_refuses_a_size_its_shape_does_not_take(shape, extra, matc
     lit the scene as the default one of radius 0.5."""
     light = {"type": "area", "shape": shape, "position": [0, 2, 0], "target": [0, 0, 0], **extra}
     with pytest.raises(SceneError, match=match):
+        _floor_scene([light], res=(8, 8))
+
+
+@pytest.mark.parametrize("key, value", [("target", [0, 0, 0]), ("up", [0, 0, 1])])
+def test_a_sphere_area_light_refuses_a_direction(key, value):
+    """A sphere shines all around: its 'target' and 'up' were accepted and changed nothing."""
+    light = {"type": "area", "shape": "sphere", "position": [0, 2, 0], "radius": 0.3, key: value}
+    with pytest.raises(SceneError, match=f"lights\\[0\\]\\.{key}.*sphere area light .*no '{key}'"):
         _floor_scene([light], res=(8, 8))
 
 

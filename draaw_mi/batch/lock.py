@@ -6,7 +6,8 @@ first run's atomic renames fail, and both would render the same frames. :func:`o
 makes the second run stop before it touches anything, with one line that names the folder and
 the process holding it. The kernel releases a ``flock`` when its process ends, however it
 ends (kill -9 included), so a lock never outlives its run; a run that ends normally also
-deletes its lock file, and the file a killed run leaves behind is simply locked afresh.
+deletes its lock file, and the file a killed run leaves behind is simply locked afresh (a run
+that locked a file its finishing holder had just deleted locks the folder's new one).
 
 >>> import tempfile
 >>> d = tempfile.mkdtemp()
@@ -59,35 +60,12 @@ def output_locks(folders, where: str, optional=()):
             if fcntl is None:
                 break
             path = os.path.join(folder, LOCK_NAME)
-            try:
-                fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-            except PermissionError:
-                # another user's lock file (0644): a read-only descriptor locks it just as well
-                # (flock does not care how the file was opened); its holder, if alive, still
-                # makes the flock below fail
-                try:
-                    fd = os.open(path, os.O_RDONLY)
-                except OSError as e:
-                    if folder in optional:
-                        continue
-                    raise BusyError(f"{where}: output folder {folder!r} cannot be locked: "
-                                    f"{path!r} ({e.strerror or e})") from None
-            except OSError as e:
-                if folder in optional:
-                    continue
-                raise BusyError(f"{where}: output folder {folder!r} cannot be locked: {path!r} "
-                                f"({e.strerror or e})") from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                # the holder we waited on may have deleted the file as it finished: a lock on
-                # that unlinked file would not exclude the next run, which creates a new one
-                if not _same_file(fd, path):
-                    raise BlockingIOError
-            except BlockingIOError:
-                holder = _holder(fd)
-                os.close(fd)
-                raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi "
-                                f"batch run{holder}; wait for it to finish or choose another --out") from None
+            for attempt in range(_ATTEMPTS):
+                fd = _lock_file(folder, path, where, folder in optional, last=attempt == _ATTEMPTS - 1)
+                if fd != _DELETED:
+                    break
+            if fd is None:
+                continue                # an optional folder without a lock file
             try:
                 os.ftruncate(fd, 0)
                 os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
@@ -102,6 +80,51 @@ def output_locks(folders, where: str, optional=()):
             except OSError:
                 pass
             os.close(fd)                # closing the descriptor releases its lock
+
+
+# A finishing holder deletes its lock file: a run that opened that file just before gets a
+# lock on a deleted file and opens the folder's lock file afresh, a few times at most
+_ATTEMPTS = 4
+_DELETED = -1
+
+
+def _lock_file(folder: str, path: str, where: str, optional: bool, last: bool):
+    """An open descriptor of ``path`` holding its exclusive lock; ``None`` for an ``optional``
+    folder where no lock file can be made; ``_DELETED`` where the lock was got on a file
+    its holder deleted meanwhile (try again) unless this is the ``last`` attempt."""
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except PermissionError:
+        # another user's lock file (0644): a read-only descriptor locks it just as well
+        # (flock does not care how the file was opened); its holder, if alive, still
+        # makes the flock below fail
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError as e:
+            if optional:
+                return None
+            raise BusyError(f"{where}: output folder {folder!r} cannot be locked: "
+                            f"{path!r} ({e.strerror or e})") from None
+    except OSError as e:
+        if optional:
+            return None
+        raise BusyError(f"{where}: output folder {folder!r} cannot be locked: {path!r} "
+                        f"({e.strerror or e})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        # the holder we waited on may have deleted the file as it finished: a lock on
+        # that unlinked file would not exclude the next run, which creates a new one
+        if not _same_file(fd, path):
+            if not last:
+                os.close(fd)
+                return _DELETED
+            raise BlockingIOError
+    except BlockingIOError:
+        holder = _holder(fd)
+        os.close(fd)
+        raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi "
+                        f"batch run{holder}; wait for it to finish or choose another --out") from None
+    return fd
 
 
 def _same_file(fd: int, path: str) -> bool:

@@ -103,6 +103,11 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     if shape == "disk" and "radius" in light and "size" in light:
         raise (where / "radius").error("give a disk light 'radius' or 'size' (an ellipse), not both")
     if shape == "sphere":
+        # a sphere shines all around: a 'target' or 'up' was accepted and ignored
+        for key in ("target", "up"):
+            if key in light:
+                raise (where / key).error("a sphere area light shines in every direction and has "
+                                          f"no {key!r}; use shape = \"rectangle\" or \"disk\" to aim it")
         r = number(light.get("radius", 0.5), where / "radius", lo=0.0, lo_open=True)
         return {name: {"type": "sphere", "center": pos, "radius": r, "emitter": emitter, "bsdf": black}}
     target = vector(light.get("target", [pos[0], pos[1] - 1.0, pos[2]]), where / "target")

@@ -159,12 +159,10 @@ def test_old_folder_probes_are_removed_and_fresh_ones_kept(tmp_path):
     assert sorted(os.listdir(out)) == [".draaw-probe-fresh"]
 
 
-def test_a_lock_on_a_lock_file_its_holder_just_deleted_is_refused(tmp_path, monkeypatch):
-    """The holder of a folder's lock deletes the lock file as it finishes. A run that opened
-    the file just before, and gets the flock just after, holds a lock on a deleted file that
-    excludes nobody: the next run creates a new file and locks the folder too (two runs in
-    one folder). The lock must be refused (the run is told the folder is busy)."""
-    folder = str(tmp_path)
+def _holder_finishing_meanwhile(folder, times):
+    """An ``fcntl`` whose ``flock`` first deletes the folder's lock file, as a finishing
+    holder does between a run's open and its flock, the first ``times`` times."""
+    left = [times]
 
     class HolderFinishesMeanwhile:
         LOCK_EX, LOCK_NB, LOCK_UN = real_fcntl.LOCK_EX, real_fcntl.LOCK_NB, real_fcntl.LOCK_UN
@@ -172,11 +170,41 @@ def test_a_lock_on_a_lock_file_its_holder_just_deleted_is_refused(tmp_path, monk
         @staticmethod
         def flock(fd, op):
             path = os.path.join(folder, lock.LOCK_NAME)
-            if os.path.exists(path):
+            if left[0] > 0 and os.path.exists(path):
+                left[0] -= 1
                 os.unlink(path)
             return real_fcntl.flock(fd, op)
 
-    monkeypatch.setattr(lock, "fcntl", HolderFinishesMeanwhile)
+    return HolderFinishesMeanwhile
+
+
+def test_a_lock_on_a_lock_file_its_holder_just_deleted_is_taken_on_the_new_file(tmp_path, monkeypatch):
+    """The holder of a folder's lock deletes the lock file as it finishes. A run that opened
+    the file just before, and gets the flock just after, holds a lock on a deleted file that
+    excludes nobody: the next run creates a new file and locks the folder too (two runs in
+    one folder). The run must lock the folder's lock file as it is now: the file there holds
+    its pid and a second run is refused."""
+    folder = str(tmp_path)
+    path = os.path.join(folder, lock.LOCK_NAME)
+    monkeypatch.setattr(lock, "fcntl", _holder_finishing_meanwhile(folder, times=2))
+    with lock.output_locks([folder], "a.toml"):
+        with open(path) as f:
+            assert f.read().strip() == str(os.getpid())
+        monkeypatch.setattr(lock, "fcntl", real_fcntl)
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            with pytest.raises(BlockingIOError):   # what a second run's flock meets
+                real_fcntl.flock(fd, real_fcntl.LOCK_EX | real_fcntl.LOCK_NB)
+        finally:
+            os.close(fd)
+    assert not os.path.exists(path)
+
+
+def test_a_lock_file_deleted_under_every_attempt_is_refused(tmp_path, monkeypatch):
+    """Runs that keep finishing under this one (the file deleted at each attempt): after a
+    few attempts the run is told the folder is busy, with nothing locked."""
+    folder = str(tmp_path)
+    monkeypatch.setattr(lock, "fcntl", _holder_finishing_meanwhile(folder, times=10 ** 6))
     with pytest.raises(BusyError, match="is in use by another draaw-mi batch run"):
         with lock.output_locks([folder], "a.toml"):
             pass
