@@ -39,6 +39,20 @@ def test_roulette_keeps_expectation_and_spares_strong_paths():
     assert act.all() and np.allclose(w, 0.05)
 
 
+@pytest.mark.parametrize("depth, rr_depth, stopped", [
+    (0, 1, True), (1, 2, True), (0, 2, False), (2, 4, False), (3, 4, True)])
+def test_roulette_starts_once_the_path_has_rr_depth_segments(depth, rr_depth, stopped):
+    """``depth`` counts the bounces before this one, so the vertex at ``depth`` ends segment
+    ``depth + 1``: with ``rr_depth = 2`` (V4's default) the roulette may stop a weak path at
+    its second vertex, never at its first (V4's parameter table: "path depth (number of
+    segments) from which Russian roulette may stop paths: never on the first bounce")."""
+    w, act = _run(0.05, depth=depth, rr_depth=rr_depth, n=20_000)
+    if stopped:
+        assert 0.15 < act.mean() < 0.25                   # q = 0.2
+    else:
+        assert act.all() and np.allclose(w, 0.05)
+
+
 def test_power_selection_follows_the_emitters_power():
     from draaw_mi import speed_suite as ss
     from draaw_mi.integrators.sampling import PowerSelection
