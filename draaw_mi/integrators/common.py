@@ -176,11 +176,14 @@ class DraawIntegrator(RBIntegrator):
         return mi.RayFlags.ShadingFrame
 
     def eval_aovs(self, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, active: mi.Bool,
-                  feats: dict[str, bool], cam_origin=None) -> list[mi.Float]:
+                  feats: dict[str, bool], cam_origin=None, sdf=None) -> list[mi.Float]:
         """AOV channel values at the camera ray's first hit ``si`` (primal only);
         ``cam_origin``: where the camera ray started, when it may have been continued from a
         hidden emitter (:meth:`trace_camera`): depth is measured from there, not from the
-        emitter (or, through a sphere light, from the emitter's far side)."""
+        emitter (or, through a sphere light, from the emitter's far side). ``sdf``: the
+        scene's SDF hook, whose smooth blends of materials give the albedo AOV the blend of
+        their albedos (:meth:`draaw_mi.sdf.integration.SDFHook.blended`), whichever material
+        ``si`` was given for shading."""
         valid = active & si.is_valid()
         t = si.t if cam_origin is None else dr.norm(si.p - cam_origin)
         out: list[mi.Float] = []
@@ -194,12 +197,15 @@ class DraawIntegrator(RBIntegrator):
                 out += [dr.select(valid, n.x, 0.0), dr.select(valid, n.y, 0.0),
                         dr.select(valid, n.z, 0.0)]
             elif name == "albedo":
-                alb = mi.Color3f(0.0)
-                if feats["other_materials"]:
-                    alb = dr.clip(bsdf.eval_diffuse_reflectance(si, valid), 0.0, 1.0)
-                if feats["draaw_materials"]:
-                    has = valid & bsdf.has_attribute("albedo", valid)
-                    alb = dr.select(has, bsdf.eval_attribute("albedo", si, has), alb)
+                def albedo(b, m):
+                    alb = mi.Color3f(0.0)
+                    if feats["other_materials"]:
+                        alb = dr.clip(b.eval_diffuse_reflectance(si, m), 0.0, 1.0)
+                    if feats["draaw_materials"]:
+                        has = m & b.has_attribute("albedo", m)
+                        alb = dr.select(has, b.eval_attribute("albedo", si, has), alb)
+                    return alb
+                alb = albedo(bsdf, valid) if sdf is None else sdf.blended(si, bsdf, albedo, valid)
                 alb = dr.select(valid, alb, 0.0)
                 out += [alb.x, alb.y, alb.z]
         return out
@@ -244,7 +250,7 @@ class DraawIntegrator(RBIntegrator):
         si = pi.compute_surface_interaction(ray, ray_flags=self.ray_flags(feats), active=active)
         if sdf is not None:
             si = sdf.intersect(ray, si, None, active)      # (no random numbers: the largest weight)
-        return self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
+        return self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
 
 
 # ---------------------------------------------------------------------------------------

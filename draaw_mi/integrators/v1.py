@@ -163,7 +163,7 @@ class DraawV1Integrator(DraawIntegrator):
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
 
         while dr.hint(active, max_iterations=self.max_depth,
                       label=f"draaw_v1 ({mode.name})"):

@@ -218,7 +218,7 @@ class DraawV2Integrator(DraawIntegrator):
         if sdf is not None:
             si = sdf.intersect(ray, si, sampler, active)
             valid |= active & si.is_valid()
-        aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin) if primal else self.zero_aovs()
+        aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf) if primal else self.zero_aovs()
         zero = mi.UInt32(0)
         one = mi.Spectrum(1.0)
         active_next = active & si.is_valid() & (1 < self.max_depth)

@@ -186,7 +186,7 @@ class DraawV3Integrator(DraawIntegrator):
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin)
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
 
         # ------------- Emitters seen directly by the camera -------------
         # (differentiated after the loop: no AD graph may exist while it runs)

@@ -352,7 +352,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             si0 = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
             if dr.hint(sdf is not None, mode="scalar"):
                 si0 = sdf.intersect(ray, si0, None, active)
-            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats, cam_origin)
+            aovs = self.eval_aovs(si0, si0.bsdf(ray), active, feats, cam_origin, sdf)
             del si0
 
         while dr.hint(active, max_iterations=self.max_depth,

@@ -9,7 +9,8 @@ an :class:`SDFHook` and calls
   material slot's hidden proxy shape, so ``si.bsdf()``, ``si.to_local``, ``si.spawn_ray`` and
   emitter sampling work unchanged. Where a smooth operator blends two materials, the slot is
   picked at random with the blend weights (a stochastic mixture: its expectation is the
-  weight-blended BSDF).
+  weight-blended BSDF); AOVs take the blend of the materials' values
+  (:meth:`SDFHook.blended`).
 * :meth:`SDFHook.occluded` for shadow rays (through ``common.sample_emitter``): SDFs cast
   shadows on meshes and on themselves.
 * :meth:`SDFHook.reattach` in the differential phases: the hit point, normal, frame and
@@ -99,6 +100,27 @@ class SDFHook:
                 shape = dr.gather(mi.ShapePtr, self.proxy_ptrs, idx, hit)
             s = self._interaction(ray, t, p, n, shape)
             return dr.select(hit, s, si)
+
+    def blended(self, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, value, active):
+        """``value(bsdf, mask)`` (an AOV of a BSDF at ``si``) as the expectation of
+        :meth:`intersect`'s pick at SDF points: each material slot's value weighted by its
+        blend weight at ``si.p`` (a smooth blend's AOV, the same in every version, whether
+        ``si`` got a material at random for the path or the largest weight's); ``bsdf``'s
+        own value elsewhere (meshes) and where every weight is zero."""
+        own = value(bsdf, active)
+        if len(self.proxies) == 1:
+            return own
+        on_sdf = mi.Bool(False)
+        for proxy in self.proxies:
+            on_sdf |= si.shape == mi.ShapePtr(proxy)
+        m = active & on_sdf
+        _, w = self.sdf.eval(mi.Point3f(si.p))
+        total, acc = mi.Float(0.0), dr.zeros(type(own))
+        for proxy, wi in zip(self.proxies, w):
+            wi = dr.maximum(wi, 0.0)
+            total += wi
+            acc += wi * value(mi.BSDFPtr(proxy.bsdf()), m)
+        return dr.select(m & (total > 0.0), acc / dr.maximum(total, 1e-30), own)
 
     @staticmethod
     def _interaction(ray, t, p, n, shape):

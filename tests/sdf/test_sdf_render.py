@@ -194,6 +194,43 @@ def test_albedo_aov_of_two_sdf_objects_is_each_ones_material(version):
     assert np.allclose(sdf, ref, atol=1e-5)
 
 
+def test_albedo_aov_of_a_smooth_blend_is_the_blend_the_path_shades_in_every_version():
+    """A smooth union of a red and a green diffuse sphere under a sky, direct light only: a
+    path shades a blend point with one material picked by the blend weights, so the beauty's
+    red share r / (r + g) is the red material's weight w (the sky's visibility is common to
+    both). The albedo AOV must be that blend, 0.9 (w, 1 - w, 0), and the same in every
+    version: V1-V3 took the path's random material (0.9 or 0 per sample), V4 the larger
+    weight's (a hard seam across the blend)."""
+    desc = {"render": {"resolution": [24, 16], "max_depth": 2, "filter": "box"},
+            "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "fov": 34},
+            "materials": {"red": {"type": "diffuse", "reflectance": [0.9, 0.0, 0.0]},
+                          "green": {"type": "diffuse", "reflectance": [0.0, 0.9, 0.0]}},
+            "sdf": [{"type": "sphere", "name": "a", "material": "red", "center": [-0.5, 0, 0], "radius": 0.55},
+                    {"type": "sphere", "name": "b", "material": "green", "center": [0.5, 0, 0], "radius": 0.55},
+                    {"type": "smooth_union", "name": "u", "children": ["a", "b"], "k": 0.5}],
+            "lights": [{"type": "constant", "intensity": 1.0}]}
+    scene = draaw_mi.load_scene(desc)
+
+    def albedo(version, spp, seed):
+        img = draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[], aovs="albedo")
+        return np.array(img, dtype=np.float64)[..., 3:6]
+
+    one = {v: albedo(v, 1, 0) for v in ("v1", "v2", "v3", "v4")}
+    for v in ("v1", "v2", "v3"):
+        assert np.allclose(one[v], one["v4"], atol=1e-6), v
+    a = albedo("v4", 64, 2)                        # averaged over the pixel, as the beauty is
+    inside = np.abs(a.sum(-1) - 0.9) < 1e-4        # every sample on the union (w + (1 - w) = 1)
+    w = a[..., 0] / 0.9
+    zone = inside & (w > 0.1) & (w < 0.9)
+    assert zone.sum() >= 30                        # a blend, not a seam
+    assert np.all(a[..., 2] == 0)
+    beauty = render_np(scene, "v4", 1024, 1)
+    share = beauty[..., 0] / np.maximum(beauty[..., 0] + beauty[..., 1], 1e-12)
+    # the share's noise: the red pick is a Bernoulli(w) per visible sample
+    tol = 5 * np.sqrt(np.clip(w * (1 - w), 0.0, None) / 1024) + 0.01
+    assert np.all(np.abs(share - w)[zone] <= tol[zone]), np.abs(share - w)[zone].max()
+
+
 def test_same_image_under_area_light_v4():
     ref, sdf = twin_scenes("sphere", light="area")
     check_same_expectation(seed_stack(ref, "v4", 16, range(8)), seed_stack(sdf, "v4", 16, range(100, 108)))
