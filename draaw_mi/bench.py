@@ -31,6 +31,7 @@ import numpy as np
 
 from .errors import DraawError
 from .bench_bias import estimate_bias
+from .code_digest import code_digest
 from .image_metrics import errors
 from .io import read_exr, write_exr
 from .progress import check_mode, progress_bar
@@ -87,6 +88,7 @@ def _scene_key(scene, spp: int, max_depth: int) -> str:
     elif scene.description is not None:
         h.update(json.dumps(scene.description, sort_keys=True, default=str).encode())
     h.update(repr((scene.resolution, spp, max_depth)).encode())
+    h.update(code_digest().encode())        # a fixed BSDF or integrator renders it anew
     version = reference_version(scene)
     if version != "path":            # (a cached path render of an SDF scene lacked its objects)
         h.update(version.encode())

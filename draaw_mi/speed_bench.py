@@ -106,12 +106,14 @@ def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
 def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, digest: str = ""):
     """(mean, per-pixel variance of the mean, seconds) of ``path`` at ``spp`` (see
     :func:`check_ref_spp`); cached as EXR in ``cache`` under a name with ``digest``, the scene's
-    content hash (:func:`draaw_mi.speed_suite.digest`)."""
+    content hash (:func:`draaw_mi.speed_suite.digest`), and the hash of the code that renders
+    it (:func:`draaw_mi.code_digest.code_digest`: a fixed ``draaw`` BSDF renders it anew)."""
     from .io import read_exr, write_exr
     why = check_ref_spp(spp)
     if why:
         raise ValueError(f"speed_bench.reference: spp {spp!r}; {why}")
-    path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}{'_' + digest if digest else ''}.exr")
+    from .code_digest import code_digest
+    path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}{'_' + digest if digest else ''}_c{code_digest()}.exr")
     if cache and os.path.exists(path):
         arr = read_exr(path).astype(np.float64)
         return arr[..., :3], arr[..., 3:6], 0.0
