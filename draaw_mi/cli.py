@@ -118,7 +118,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--spp", help="comma-separated spp list, default 1,2,4,...,1024")
     b.add_argument("--max-depth", help="comma-separated max_depth list (default: the scene's)")
     b.add_argument("--adaptive", type=int, help="adaptive block size to include (default 8; 0: none)")
-    b.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
+    b.add_argument("--repeats", type=int, help="timed repeats per setting (median; default 3, the "
+                   "SDF tracer study's 2 with --quick)")
     b.add_argument("--resolution", help="WxH for every scene (default: the scene's)")
     b.add_argument("--gt-spp", type=int, help="ground-truth spp (Mitsuba path; default 4096, 1024 "
                    "with --quick; --suite speed: the reference's, default 1024)")

@@ -51,7 +51,7 @@ def _bench_sdf_scenes(args, scenes, res, progress):
     for sc in scenes:
         scene = draaw_mi.load_scene(sc, **({"resolution": res} if res else {}))
         r = run_sdf_study(scene, args.out, spp=4 if args.quick else 16,
-                          repeats=min(args.repeats, 2) if args.quick else args.repeats,
+                          repeats=(2 if args.quick else 3) if args.repeats is None else args.repeats,
                           progress=progress, quick=args.quick)
         print(f"wrote {args.out}/sdf_study_{r['scene']}.json/.csv/.md and "
               f"sdf_error_vs_time_{r['scene']}.png ({len(r['rows'])} tracer settings)")
@@ -76,14 +76,15 @@ def _cmd_speed_suite(args) -> int:
     versions = args.versions.split(",") if args.versions else ["v4"]
     plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
     ref_spp = 1024 if args.gt_spp is None else args.gt_spp        # (the suite's own default)
-    argv = ["--integrators", ";".join(plugins), "--repeats", str(args.repeats),
+    repeats = 3 if args.repeats is None else args.repeats
+    argv = ["--integrators", ";".join(plugins), "--repeats", str(repeats),
             "--ref-spp", str(ref_spp),
             "--out", os.path.join(args.out, "speed_suite.md"),
             "--cache", os.path.join(args.out, "refs")]         # references reused by later runs
     if args.scenes:
         argv += ["--scenes", ",".join(args.scenes)]
-    if args.repeats < 1:
-        raise CliError(f"bench --suite speed: --repeats {args.repeats}; expected an integer >= 1")
+    if repeats < 1:
+        raise CliError(f"bench --suite speed: --repeats {repeats}; expected an integer >= 1")
     why = speed_bench.check_ref_spp(ref_spp)
     if why:
         raise CliError(f"bench --suite speed: --gt-spp {ref_spp} (the reference's spp); {why}")
@@ -127,21 +128,21 @@ def cmd_bench(args) -> int:
     from draaw_mi.integrators import resolve_version
     for v in versions:
         resolve_version(v)
-    if args.repeats < 1:
+    if args.repeats is not None and args.repeats < 1:
         raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
     res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None
     if args.quick:
         spps = int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
         res = res or (64, 64)
         gt_spp = 1024 if args.gt_spp is None else args.gt_spp     # (an explicit 4096 became 1024)
-        # (3, not 2: a small render's dr.freeze recording is made again once while the other
-        # versions' recordings settle, and the median of two was half that render: the first
-        # scene's 1-spp times came out 5-10x high)
-        repeats = min(args.repeats, 3)
     else:
         spps = int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
         gt_spp = 4096 if args.gt_spp is None else args.gt_spp
-        repeats = args.repeats
+    # 3 also with --quick, not 2: a small render's dr.freeze recording is made again once while
+    # the other versions' recordings settle, and the median of two was half that render (the
+    # first scene's 1-spp times came out 5-10x high); an explicit --repeats is kept (--quick
+    # capped it at 3)
+    repeats = 3 if args.repeats is None else args.repeats
     depths = int_list(args.max_depth, "--max-depth") if args.max_depth else None
     denoise_spp = int_list(args.denoise, "--denoise") if args.denoise else []
     frames = 60 if args.frames is None else args.frames

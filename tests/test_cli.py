@@ -194,7 +194,8 @@ def test_dry_run_and_status_are_one_or_the_other(tmp_path, capsys):
 
 
 def test_bench_quick_keeps_an_explicit_gt_spp(tmp_path, monkeypatch):
-    """--quick capped the reference at 1024 spp: an explicit --gt-spp 2048 became 1024."""
+    """--quick capped the reference at 1024 spp: an explicit --gt-spp 2048 became 1024 (and
+    an explicit --repeats 7 became 3)."""
     from draaw_mi import bench
     seen = {}
 
@@ -205,8 +206,9 @@ def test_bench_quick_keeps_an_explicit_gt_spp(tmp_path, monkeypatch):
         seen.update(k)
         raise Stop
     monkeypatch.setattr(bench, "run_study", study)
-    for argv, gt in (([], 1024), (["--gt-spp", "2048"], 2048)):
+    for argv, gt, repeats in (([], 1024, 3), (["--gt-spp", "2048"], 2048, 3), (["--repeats", "7"], 1024, 7)):
         with pytest.raises(Stop):
             main(["bench", os.path.join(SCENES, "cornell.toml"), "--quick", "--versions", "v4",
                   "--out", str(tmp_path / "o"), "--no-progress"] + argv)
         assert seen["gt_spp"] == gt
+        assert seen["repeats"] == repeats             # (--quick capped an explicit 7 at 3)
