@@ -232,6 +232,32 @@ def test_image_textures_decode_colour_and_keep_data_raw(tmp_path):
     assert np.allclose(img.mean(axis=(0, 1)), _decode([200, 100, 50]), rtol=0.02)
 
 
+@pytest.mark.parametrize("table, key, colour", [
+    ({"type": "thindielectric"}, "specular_transmittance", True),
+    ({"type": "roughdielectric"}, "specular_transmittance", True),
+    ({"type": "roughconductor"}, "specular_reflectance", True),
+    ({"type": "roughconductor"}, "alpha", False),
+])
+def test_image_files_of_other_mitsuba_bsdfs_decode_colours_and_keep_data_raw(tmp_path, key, table, colour):
+    """A PNG transmittance was read raw (only four reflectance names were decoded), so the
+    same image made a glass's tint lighter than a reflectance's. Mitsuba's ``bitmap`` decodes
+    sRGB where ``raw`` is false (it keeps 8-bit data and decodes on lookup); the texture of
+    the loaded BSDF is compared with one made from the file by hand."""
+    from draaw_mi.scene.context import BuildContext
+    from draaw_mi.scene.material_dicts import material_dict
+    from draaw_mi.scene.schema import Where
+    _png(tmp_path / "t.png", [200, 100, 50])
+    out = material_dict("m", dict(table, **{key: "t.png"}), BuildContext(str(tmp_path), str(tmp_path), "s.toml"),
+                       Where("materials.m"))
+    assert out[key] == {"type": "bitmap", "filename": str(tmp_path / "t.png"), "raw": not colour}
+    tex = mi.load_dict(out[key])
+    si = dr_zeros_si()
+    value = np.array(tex.eval(si)).ravel()
+    expect = _decode([200, 100, 50]) if colour else np.array([200, 100, 50]) / 255
+    assert np.allclose(value, expect, atol=2e-3), (value, expect)
+    mi.load_dict(out)                                      # the BSDF takes it
+
+
 def test_mtl_map_kd_texture_is_srgb_decoded(tmp_path):
     _png(tmp_path / "kd.png", [200, 100, 50])
     (tmp_path / "m.mtl").write_text("newmtl tex\nKd 1 1 1\nmap_Kd kd.png\n")

@@ -67,8 +67,7 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
             raise where.error(f"texture file {value!r} does not exist (looked for {path!r})")
         if not path.lower().endswith(IMAGE_SUFFIXES):
             raise where.error(f"{value!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
-        raw = name not in ("base_color", "reflectance", "specular_reflectance", "diffuse_reflectance")
-        return {"type": "bitmap", "filename": path, "raw": raw}
+        return {"type": "bitmap", "filename": path, "raw": not is_colour(name)}
     if is_nested(value):
         value = nested_array(value, where)
     if isinstance(value, np.ndarray):
@@ -78,9 +77,22 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
         return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True}
     if isinstance(value, (list, tuple)):
         return {"type": "rgb", "value": vector(value, where, lo=lo)}
-    if lo is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
-        return number(value, where, lo=lo)            # (-0.5 rendered negative pixels)
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        # finite, within float32, >= lo (a reflectance's -0.5 rendered negative pixels; a
+        # plastic's int_ior = nan, which TOML allows, NaN pixels), as a float: a BSDF's
+        # numbers are floats, and its int_ior = 2 failed in Mitsuba ("expected string")
+        return number(value, where, lo=lo)
     return value
+
+
+def is_colour(name: str) -> bool:
+    """Whether the BSDF parameter ``name`` is a colour (an image file of it is sRGB-decoded,
+    and its values must be >= 0), not data (roughness, metallic, alpha, eta: read raw).
+
+    >>> [is_colour(n) for n in ("base_color", "specular_transmittance", "alpha", "eta")]
+    [True, True, False, False]
+    """
+    return name == "base_color" or "reflectance" in name or "transmittance" in name
 
 
 def is_nested(value) -> bool:
@@ -140,7 +152,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
     out = {"type": kind}
     for key, value in table.items():
         if key != "type":
-            nonneg = "reflectance" in key or "transmittance" in key or key == "base_color"
+            nonneg = is_colour(key)
             if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
                 out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
                 continue              # distribution = "beckmann" (each was "no texture file")

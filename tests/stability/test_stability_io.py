@@ -114,6 +114,34 @@ def test_textures_of_other_mitsuba_bsdfs_are_checked_like_the_draaw_ones(tmp_pat
         draaw_mi.load_scene(d)
 
 
+@pytest.mark.parametrize("table, key, shown", [
+    ({"type": "plastic", "int_ior": float("nan")}, "int_ior", "nan"),
+    ({"type": "roughconductor", "alpha": float("inf")}, "alpha", "inf"),
+    ({"type": "roughdielectric", "alpha": 1e39}, "alpha", "1e\\+39"),
+])
+def test_a_plain_number_of_another_mitsuba_bsdf_must_be_finite(table, key, shown):
+    """TOML allows nan and inf: a plastic's int_ior = nan loaded and rendered NaN pixels
+    (78 of 192 values in path), while the same value as an array was refused."""
+    from conftest import tiny_description
+    from draaw_mi.errors import SceneError
+    d = tiny_description()
+    d["materials"]["ground"] = table
+    with pytest.raises(SceneError, match=rf"materials\.ground\.{key}: {shown} is (not finite|beyond float32)"):
+        draaw_mi.load_scene(d)
+
+
+def test_an_integer_index_of_refraction_is_a_number():
+    """``int_ior = 2`` (an integer in TOML) failed in Mitsuba: "The property "int_ior" has the
+    wrong type (expected string, got integer)"; it is the number 2.0."""
+    from conftest import tiny_description
+    d = tiny_description()
+    d["materials"]["ground"] = {"type": "roughplastic", "alpha": 0.2, "int_ior": 2}
+    scene = draaw_mi.load_scene(d)
+    plastic = [str(s.bsdf()) for s in scene.mi_scene.shapes() if "RoughPlastic" in str(s.bsdf())]
+    # eta = int_ior / ext_ior, Mitsuba's default exterior being air (1.000277)
+    assert len(plastic) == 1 and f"eta = [{2 / 1.000277:.6g}]" in plastic[0], plastic
+
+
 def test_a_camera_target_float32_cannot_tell_from_its_origin_is_refused():
     """origin [1e4, 1, 0] and a target 1e-4 away are one point in float32: the camera
     transform was NaN and the image plain sky, without a word."""
