@@ -172,6 +172,42 @@ def test_pareto_and_time_to_error():
     assert first["subject_s"] / first["rival_s"] == pytest.approx(1 / 1.5)
 
 
+def test_a_slower_point_at_the_same_error_is_off_the_pareto_front():
+    """(2, 5) takes longer than (1, 5) for the same error: dominated, not on the front (it
+    was kept when equal errors counted as an improvement)."""
+    assert bench_bias.pareto_front([(1, 5), (2, 5), (3, 1)]) == [0, 2]
+    assert bench_bias.pareto_front([(2, 5), (1, 5)]) == [1]
+
+
+def test_time_to_error_extrapolates_only_targets_beyond_the_measured_errors():
+    """A target inside the measured range is interpolated in log-log space with or without
+    ``extrapolate``: between (1 s, 0.4) and (4 s, 0.1) the error 0.2 is half-way in log
+    error, so half-way in log time, sqrt(1 * 4) = 2 s (the Monte Carlo law from the last
+    point, 4 * (0.1 / 0.2)^2 = 1 s, was taken instead). Below 0.1 it is that law: 0.05 at 16 s."""
+    pts = [(1.0, 0.4), (4.0, 0.1)]
+    assert time_to_error(pts, 0.2, extrapolate=True) == pytest.approx(np.sqrt(1.0 * 4.0))
+    assert time_to_error(pts, 0.2, extrapolate=False) == pytest.approx(2.0)
+    assert time_to_error(pts, 0.05, extrapolate=True) == pytest.approx(4.0 * (0.1 / 0.05) ** 2)
+
+
+def test_pareto_check_leaves_denoised_rows_out():
+    """A denoiser's rows (biased, fast, a low RMSE: 1.2 s at 0.05) are not a method of the
+    race: they were named the fastest at every level, and the subject won none. Without them
+    v4 is fastest at both of v3's levels, hand computed in log-log: 0.1 at 4 s, and 0.3 at
+    4^(ln(0.3/0.4) / ln(0.1/0.4)) = 1 / 0.75 s (v3: 8 s and 2 s)."""
+    def row(label, t, e, **extra):
+        return {"scene": "s", "max_depth": 5, "adaptive": False, "label": label, "time_s": t,
+                "rmse": e, **extra}
+    rows = [row("v4", 1.0, 0.4), row("v4", 4.0, 0.1), row("v3", 2.0, 0.3), row("v3", 8.0, 0.1),
+            row("v4+oidn (biased)", 1.2, 0.05, denoise=True)]
+    chk = pareto_check(rows, "s", 5)
+    assert chk["levels"] == 2 and chk["subject_fastest"] == 2, chk
+    assert [d["fastest"] for d in chk["details"]] == ["v4", "v4"]
+    assert [d["rival"] for d in chk["details"]] == ["v3", "v3"]
+    np.testing.assert_allclose([d["fastest_s"] for d in chk["details"]], [4.0, 1 / 0.75], rtol=1e-9)
+    np.testing.assert_allclose([d["rival_s"] for d in chk["details"]], [8.0, 2.0], rtol=1e-9)
+
+
 def test_study_writes_table_summary_and_plots(tmp_path):
     import csv
 

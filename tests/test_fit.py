@@ -454,3 +454,15 @@ def test_loss_formulas_and_the_masked_exposure_scale():
     assert float(lv[0]) == pytest.approx(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2)), rel=1e-5)
     lv, _ = _loss(T(img), T(ref), "l1", "none")
     assert float(lv[0]) == pytest.approx(np.mean(np.abs(img - ref)), rel=1e-5)
+
+
+@pytest.mark.parametrize("level,loss", [(0.0, 0.25), (-0.1, 0.36)], ids=["black", "negative"])
+def test_the_exposure_scale_is_one_for_a_render_without_a_positive_match(level, loss):
+    """A render whose dot product with the reference is not positive (all black: 0; all
+    -0.1: < 0) has no exposure scale: it stays 1 and the loss is the plain one, mean((level -
+    0.5)^2) against a reference of 0.5 (the scale was inf: a NaN loss, or -5: a zero loss for
+    a render of the wrong sign)."""
+    T = lambda a: mi.TensorXf(np.asarray(a, np.float32))          # noqa: E731
+    lv, s = _loss(T(np.full((4, 4, 3), level)), T(np.full((4, 4, 3), 0.5)), "l2", "fit")
+    assert float(s[0]) == 1.0
+    assert float(lv[0]) == pytest.approx(loss, rel=1e-6)

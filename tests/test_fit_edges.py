@@ -85,9 +85,13 @@ def test_an_8_bit_bitmap_reference_is_refused(tmp_path):
     np.testing.assert_allclose(load_reference(as_float), load_reference(png), atol=1e-3)
 
 
-def test_a_sensor_view_of_another_size_is_refused_by_name():
-    sensor = mi.load_dict({"type": "perspective", "film": {"type": "hdrfilm", "width": 32, "height": 8}})
-    with pytest.raises(DraawError, match=r"views\[0\] is a sensor of 32x8 pixels; expected the references' 16x16"):
+@pytest.mark.parametrize("width,height", [(32, 8), (16, 8)], ids=["both", "height-only"])
+def test_a_sensor_view_of_another_size_is_refused_by_name(width, height):
+    """Both sides are compared: a sensor as wide as the references but of another height was
+    taken (its pixels compared scrambled, or a raw Dr.Jit size error)."""
+    sensor = mi.load_dict({"type": "perspective", "film": {"type": "hdrfilm", "width": width, "height": height}})
+    with pytest.raises(DraawError, match=rf"views\[0\] is a sensor of {width}x{height} pixels; "
+                                         r"expected the references' 16x16"):
         draaw_mi.fit(draaw_mi.load_scene(_scene()), np.zeros((16, 16, 3), np.float32), P, views=[sensor],
                      iterations=1, spp=1, progress=False)
 

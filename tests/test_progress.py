@@ -53,6 +53,17 @@ def test_close_writes_the_last_state_once():
     assert out.getvalue().splitlines() == ["render: 3/10 spp (30 %), 0.0 s, stopped"]
 
 
+def test_close_before_any_step_still_writes_one_line():
+    """A report stopped before its first step (a time budget spent on the warm-up) wrote
+    nothing: "nothing new since the last line" was taken for step 0. Closing it writes its
+    one line, once."""
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(10, "render", "spp", file=out, every=60.0, clock=clock)
+    bar.close()
+    bar.close()
+    assert out.getvalue().splitlines() == ["render: 0/10 spp (0 %), 0.0 s, stopped"]
+
+
 class Stream(io.StringIO):
     def __init__(self, tty):
         super().__init__()
@@ -73,6 +84,14 @@ def test_modes_are_checked_by_name():
     assert isinstance(progress_bar(3, "x", "it", "lines", file=io.StringIO()), LineProgress)
     with pytest.raises(ParameterError, match=r"fit: progress='yes'; expected False, True, 'bar' or 'lines'"):
         progress_bar(3, "x", "it", "yes", where="fit")
+
+
+@pytest.mark.parametrize("mode", [1, 0, 1.0, 0.0])
+def test_numbers_equal_to_true_or_false_are_not_modes(mode):
+    """``progress=1`` (or 0, 1.0) passed as True / False (1 == True in Python); a mode is
+    one of False, None, True, 'bar' or 'lines' by identity, a string by value."""
+    with pytest.raises(ParameterError, match=rf"fit: progress={mode!r}; expected False, True"):
+        progress_bar(3, "x", "it", mode, where="fit")
 
 
 def test_render_refuses_a_bad_mode_before_it_loads_anything():

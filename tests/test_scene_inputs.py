@@ -42,6 +42,10 @@ def test_a_mitsuba_bsdfs_own_strings_pass_through():
     ({"type": "diffuse", "reflectance": [[]]}, r"materials\.m\.reflectance.*shape \(1, 0\)"),   # (SIGABRT)
     ({"type": "diffuse", "reflectance": -0.5}, r"materials\.m\.reflectance: -0\.5 is out of range"),
     ({"type": "diffuse", "reflectance": [0.5, -0.1, 0.5]}, r"materials\.m\.reflectance"),
+    # a transmittance is >= 0 too (a dielectric's -0.5 was let through)
+    pytest.param({"type": "dielectric", "specular_transmittance": -0.5},
+                 r"materials\.m\.specular_transmittance: -0\.5 is out of range; expected >= 0",
+                 id="negative-transmittance"),
 ])
 def test_bad_values_of_a_mitsuba_bsdf_are_refused(table, match):
     with pytest.raises(SceneError, match=match):

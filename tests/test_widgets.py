@@ -118,6 +118,28 @@ def test_post_chain_editor_add_reorder_amount_remove(tuner):
     np.testing.assert_allclose(f.image, expected, rtol=1e-5, atol=1e-6)
 
 
+def test_the_up_button_of_the_first_filter_leaves_the_chain_as_it_is(tuner):
+    """The first row's "↑" (up=0) swapped the first and the last filters (chain[-1] and
+    chain[0]); there is nothing above the first row, so the order stays."""
+    for name in ("contrast", "tint", "lighten"):
+        tuner._post_edit(add=name)
+    tuner._post_edit(up=0)
+    assert [e["type"] for e in tuner.post] == ["contrast", "tint", "lighten"]
+    tuner._post_edit(up=2)                                   # (the last row does move up)
+    assert [e["type"] for e in tuner.post] == ["contrast", "lighten", "tint"]
+
+
+def test_an_added_filter_starts_at_an_amount_that_shows(tuner):
+    """"add" starts a filter at amount 0.5, except where the Post tab's start says otherwise:
+    sRGB at amount 1.0 (half an encoding is neither linear nor encoded; the start was
+    overwritten by the 0.5) and contrast at contrast 2.0 (1.0 is the identity)."""
+    tuner._post_edit(add="srgb")
+    tuner._post_edit(add="contrast")
+    assert tuner.post[0]["type"] == "srgb" and tuner.post[0]["amount"] == 1.0, tuner.post
+    assert tuner.post[1]["type"] == "contrast", tuner.post
+    assert tuner.post[1]["amount"] == 0.5 and tuner.post[1]["contrast"] == 2.0, tuner.post
+
+
 def test_camera_light_and_render_options(tuner):
     tuner.refresh()
     T0 = np.array(tuner.scene.params["sensor.to_world"].matrix)

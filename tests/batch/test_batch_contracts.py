@@ -212,3 +212,31 @@ def test_a_lock_file_deleted_under_every_attempt_is_refused(tmp_path, monkeypatc
     with lock.output_locks([folder], "a.toml"):          # the next try, undisturbed, gets it
         assert os.path.exists(os.path.join(folder, lock.LOCK_NAME))
     assert not os.path.exists(os.path.join(folder, lock.LOCK_NAME))
+
+
+@pytest.mark.parametrize("was_on", [False, True])
+def test_the_in_process_executor_leaves_the_kernel_history_flag_as_it_found_it(was_on, monkeypatch):
+    """run_inprocess turns Dr.Jit's kernel history on to count each frame's compiles; it
+    left it on afterwards, so every later kernel of the process was kept in the history.
+    The flag comes back also when a result's handler raises (the frames are stubbed)."""
+    import drjit as dr
+
+    from draaw_mi.batch import frame
+    from draaw_mi.batch.executors import run_inprocess
+    monkeypatch.setattr(frame, "safe_render_frame", lambda spec, cache, track: spec)
+    seen = []
+
+    def stop(result):
+        assert dr.flag(dr.JitFlag.KernelHistory)         # on while the frames render
+        seen.append(result)
+        raise RuntimeError("stop")
+    old = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, was_on)
+    try:
+        run_inprocess([], cache=None, on_result=stop, track_kernels=True)
+        assert dr.flag(dr.JitFlag.KernelHistory) == was_on
+        with pytest.raises(RuntimeError, match="stop"):
+            run_inprocess(["a", "b"], cache=None, on_result=stop, track_kernels=True)
+        assert seen == ["a"] and dr.flag(dr.JitFlag.KernelHistory) == was_on
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, old)

@@ -239,6 +239,24 @@ def test_the_automatic_camera_frames_sdf_objects_as_it_frames_shapes():
     assert (~sky[:, :16]).sum() >= 10 and (~sky[:, 16:]).sum() >= 10, sky.astype(int)
 
 
+def test_the_automatic_camera_skips_the_sdf_proxy_and_an_unbounded_plane():
+    """The SDF objects' proxy shape is placeholder geometry (at the origin when the only SDF
+    root is an unbounded plane): counted in the bounds, it stretched the box of a sphere at
+    (10, 10, 10) back to the origin and the camera framed mostly empty space. Only the
+    sphere's box [9.5, 10.5]^3 counts; the camera is worked out by hand from auto_camera's
+    rule (40 degree fov, 1.05 margin, along (0.45, 0.35, 1))."""
+    desc = {"render": {"resolution": [8, 8], "spp": 1},
+            "shapes": [{"type": "sphere", "center": [10, 10, 10], "radius": 0.5}],
+            "sdf": [{"type": "plane", "name": "ground", "normal": [0, 1, 0], "offset": 0.0}],
+            "lights": [{"type": "constant"}]}
+    cam = draaw_mi.load_scene(desc).info["camera"]
+    radius = 0.5 * np.sqrt(3.0)                            # half the box's diagonal
+    dist = radius / np.sin(np.radians(20.0)) * 1.05
+    direction = np.array([0.45, 0.35, 1.0]) / np.linalg.norm([0.45, 0.35, 1.0])
+    np.testing.assert_allclose(cam["target"], [10.0, 10.0, 10.0], atol=1e-4)
+    np.testing.assert_allclose(cam["origin"], 10.0 + dist * direction, atol=1e-4)   # (11.04, 10.81, 12.31)
+
+
 def test_cli_info_shows_the_fixed_shape_values(tmp_path, capsys):
     """A cone's angle, a plane's (unit) normal and a transform's rotation are Python constants,
     not parameters: ``info`` listed neither. The rotation is read back as an angle about an
