@@ -7,6 +7,8 @@
 """
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from ..errors import ParameterError
@@ -28,11 +30,15 @@ def plume(resolution=(48, 64, 48), seed: int = 0, sharpness: float = 3.0) -> np.
     """A rising smoke plume in the unit box, density in [0, 1], indexed ``[ix, iy, iz]``
     (y up): a column that leaves a source near the floor, drifts, widens and breaks up into
     turbulent wisps (two octaves of value noise), fading towards the top."""
-    if isinstance(resolution, int):
-        resolution = (resolution,) * 3
-    shape = tuple(int(v) for v in resolution)
-    if len(shape) != 3 or min(shape) < 1:
-        raise ParameterError(f"plume: resolution {resolution!r}; expected (nx, ny, nz) >= 1")
+    def whole(v):
+        return isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_))
+    # (np.int64(8) was "not iterable", a float 8.0 too, and (8.5, 8, 8) became (8, 8, 8))
+    shape = (resolution,) * 3 if whole(resolution) else tuple(resolution) \
+        if isinstance(resolution, (tuple, list, np.ndarray)) else ()
+    if len(shape) != 3 or not all(whole(v) for v in shape) or min(shape) < 1:
+        raise ParameterError(f"plume: resolution {resolution!r}; expected an integer or "
+                             "(nx, ny, nz) integers >= 1")
+    shape = tuple(int(v) for v in shape)
     rng = np.random.default_rng(seed)
     x, y, z = np.meshgrid(*[(np.arange(n) + 0.5) / n for n in shape], indexing="ij")
     drift = 0.12 * np.sin(3.0 * y + rng.uniform(0, 6.3)) + 0.15 * y

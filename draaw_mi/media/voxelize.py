@@ -91,8 +91,11 @@ def voxelize(tris: np.ndarray, shape, bbox_min, bbox_max, fill: str = "surface")
     t = (np.asarray(tris, float) - lo) / size          # cell units: centres at i + 0.5
     occ = np.zeros(tuple(shape), bool)
     r = 0.5
-    tmin = np.floor(t.min(axis=1) - r - 0.5).astype(int) + 1
-    tmax = np.ceil(t.max(axis=1) + r - 0.5).astype(int)
+    # the cells whose centres (i + 0.5) lie within r of the triangle's box, ties included on
+    # both sides as the d2 <= r^2 rule includes them (floor(x) + 1 left out a lower cell at
+    # exactly r: a plane on a cell boundary filled one layer, a centred box was lopsided)
+    tmin = np.ceil(t.min(axis=1) - r - 0.5).astype(int)
+    tmax = np.floor(t.max(axis=1) + r - 0.5).astype(int)
     tmin = np.maximum(tmin, 0)
     tmax = np.minimum(tmax, shape[None, :] - 1)
     for k in range(t.shape[0]):

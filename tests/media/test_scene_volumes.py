@@ -322,3 +322,19 @@ def test_a_mesh_source_is_placed_at_its_bounds_whole(tmp_path):
     shape = next(sh for sh in s.mi_scene.shapes() if sh.id() == "v")
     bb = shape.bbox()
     np.testing.assert_allclose([list(bb.min), list(bb.max)], box, atol=1e-5)
+
+
+@pytest.mark.parametrize("resolution", [np.int64(8), (np.int32(8), 8, np.int64(8)), [8, 8, 8]])
+def test_plume_takes_numpy_integers(resolution):
+    """plume(np.int64(8)) raised a bare "'numpy.int64' object is not iterable"."""
+    from draaw_mi.media.procedural import plume
+    assert np.array_equal(plume(resolution, seed=3), plume(8, seed=3))
+
+
+@pytest.mark.parametrize("resolution", [8.0, (8.5, 8, 8), (8, 8), True, "8"])
+def test_plume_refuses_a_resolution_that_is_not_whole_numbers(resolution):
+    """A float side was truncated ((8.5, 8, 8) made an 8^3 grid) or a bare TypeError."""
+    from draaw_mi.errors import ParameterError
+    from draaw_mi.media.procedural import plume
+    with pytest.raises(ParameterError, match=r"plume: resolution .*; expected an integer or \(nx, ny, nz\)"):
+        plume(resolution)

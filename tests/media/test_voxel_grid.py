@@ -250,6 +250,27 @@ def test_surface_rule_contains_go_draaws_and_fills_its_holes():
     assert ndimage.label(~ref)[1] < ndimage.label(~ours)[1] or (ours & ~ref).sum() > 0
 
 
+def test_surface_fill_takes_the_cells_at_exactly_half_a_cell_on_both_sides():
+    """A plane on the boundary between two cell layers is half a cell from both layers'
+    centres, so the rule (centre within half a cell of the triangle) takes both; the lower
+    one was left out of the candidate cells (a plane filled layers [0, 0, 16, 0])."""
+    quad = np.array([[[-0.1, -0.1, 0.5], [1.1, -0.1, 0.5], [1.1, 1.1, 0.5]],
+                     [[-0.1, -0.1, 0.5], [1.1, 1.1, 0.5], [-0.1, 1.1, 0.5]]])
+    occ = voxelize(quad, (4, 4, 4), (0, 0, 0), (1, 1, 1))
+    assert occ.sum(axis=(0, 1)).tolist() == [0, 16, 16, 0]
+
+
+def test_surface_fill_of_a_centred_box_is_mirror_symmetric():
+    """A box centred in a grid centred on it: the occupancy is the same mirrored along each
+    axis (its x profile was [0, 0, 0, 8, 7, 4, 0, 0] at 8 cells)."""
+    import trimesh
+    tris = np.asarray(trimesh.creation.box(extents=(0.5, 0.5, 0.5)).triangles)
+    occ = voxelize(tris, (8, 8, 8), (-1, -1, -1), (1, 1, 1))
+    assert occ.sum() > 0
+    for axis in range(3):
+        assert np.array_equal(occ, np.flip(occ, axis=axis)), (axis, occ.sum(axis=(1, 2)).tolist())
+
+
 @pytest.mark.skipif(not os.path.isdir(GO_DRAAW), reason=f"GO-Draaw data not found at {GO_DRAAW}")
 def test_go_draaw_start_up_grid_on_monkey():
     g = VoxelGrid.go_draaw(os.path.join(GO_DRAAW, "monkey.obj"), seed=1)
