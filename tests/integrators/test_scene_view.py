@@ -77,6 +77,51 @@ def test_frozen_edge_map_follows_camera_film_and_light(box):
     assert len(memo) == 1                          # one view for the scene throughout
 
 
+def test_kept_edge_map_follows_a_light_that_grows_from_a_fixed_corner():
+    """A rectangle light scaled from 0.3 to 0.6 about its lower-left corner: its box's min
+    stays (bit for bit) and only its max moves. The map kept between renders must be the one
+    a fresh lookup makes (52 edge pixels); a cache keyed on the bounds' min alone kept the
+    small light's 28."""
+    T = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "draaw_v4", "max_depth": 3},
+        "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 4}},
+        "wall": {"type": "rectangle", "to_world": T().translate([0, 0, -1]).scale(3), "bsdf": {"type": "diffuse"}},
+        "light": {"type": "rectangle", "to_world": T().scale([0.3, 0.3, 1]),
+                  "emitter": {"type": "area", "radiance": 5.0}}})
+    integ, memo = scene.integrator(), {}
+    shape = scene.emitters()[0].get_shape()
+    before = shape.bbox()
+    first = np.array(integ.freeze_state(scene, memo)[1])
+    params = mi.traverse(scene)
+    params["light.to_world"] = mi.Transform4f().translate([0.3, 0.3, 0]) @ mi.Transform4f().scale([0.6, 0.6, 1])
+    params.update()
+    after = shape.bbox()
+    assert tuple(after.min) == tuple(before.min) and tuple(after.max) != tuple(before.max)
+    kept = np.array(integ.freeze_state(scene, memo)[1])
+    fresh = fresh_edges(scene)
+    assert fresh.sum() > first.sum()                       # the bigger light shows
+    np.testing.assert_array_equal(kept, fresh)
+
+
+def test_a_thin_lens_camera_gets_no_frozen_edge_map(box):
+    """A thin-lens camera samples its aperture: a pixel's rays leave from points across the
+    lens, the pinhole probe of the edge map does not say which pixels see a light's edge, and
+    splitting is ruled out: frozen_edge_map builds nothing (None; with the aperture test gone
+    it built a 12-pixel map) and the view says so; the same scene through a pinhole gets its
+    map."""
+    d = rs.cornell_draaw(res=32, spp=4)
+    d["sensor"].update(type="thinlens", aperture_radius=0.05, focus_distance=3.9)
+    lens = mi.load_dict(d)
+    integ = integrator("draaw_v4", max_depth=3)
+    view = sv.scene_view(lens, {})
+    assert integ.frozen_edge_map(lens, view) is None
+    assert not view.box_no_aperture
+    assert integ.frozen_edge_map(box, sv.scene_view(box, {})) is not None
+
+
 def test_render_keeps_one_view_per_scene(monkeypatch):
     """draaw_mi.render hands V4 the scene's memo: repeated frozen renders make the view once."""
     made = []

@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import draaw_mi  # noqa: F401
 import drjit as dr
 import mitsuba as mi
 
+from draaw_mi import ParameterError
 from draaw_mi.media import VoxelGrid
 from draaw_mi.media.faces import exterior_faces, solid_meshes
 
@@ -129,3 +131,13 @@ def test_face_colours_equal_colour_groups_and_are_differentiable():
         assert abs(ad.mean() - fd.mean()) < 4 * se, (ad, fd)
     params[key] = mi.Float(c0)
     params.update()
+
+
+def test_group_by_takes_none_or_color_only():
+    """``group_by`` groups by colour or not at all: another value ("material") is refused
+    with the valid ones, not taken for "color"."""
+    g = VoxelGrid.empty((2, 2, 2))
+    g.occupied[0, 0, 0] = True
+    with pytest.raises(ParameterError, match=r"solid_meshes: group_by='material'; expected None or 'color'"):
+        solid_meshes(g, group_by="material")
+    assert len(solid_meshes(g, group_by="color")) == 1

@@ -83,6 +83,27 @@ def test_pick_from_inside_and_along_cell_planes():
     assert g.pick((-1, 2.0, 2.5), (1, 0, 0)) == (3, 2, 2)
 
 
+def test_pick_of_a_ray_pointing_away_from_the_grid_is_none():
+    """A full grid wholly behind the ray's origin (the ray starts at x = 2 and points to +x,
+    the box is 0..1): the ray's t >= 0 part meets no cell, so no pick (the slab test took an
+    interval lying entirely at t < 0 for a hit and gave the cell (3, 2, 2))."""
+    g = VoxelGrid.empty((4, 4, 4), (0, 0, 0), (1, 1, 1))
+    g.occupied[:] = True
+    assert g.pick((2.0, 0.5, 0.5), (1, 0, 0)) is None
+    assert g.pick((2.0, 0.5, 0.5), (-1, 0, 0)) == (3, 2, 2)        # turned round: the near cell
+
+
+def test_pick_of_an_axis_parallel_ray_passing_outside_the_grid_is_none():
+    """A ray along +x at y = 1.5 passes above the box 0..1 (and one at y = -0.5 below it):
+    parallel to the y slabs and outside them, it meets no cell (the test for an origin
+    beyond the slab's upper side was missing: the ray above picked (0, 3, 2))."""
+    g = VoxelGrid.empty((4, 4, 4), (0, 0, 0), (1, 1, 1))
+    g.occupied[:] = True
+    assert g.pick((-1.0, 1.5, 0.5), (1, 0, 0)) is None
+    assert g.pick((-1.0, -0.5, 0.5), (1, 0, 0)) is None
+    assert g.pick((-1.0, 0.9, 0.5), (1, 0, 0)) == (0, 3, 2)        # inside the slab: a hit
+
+
 def test_pick_finds_thin_wall_that_64_fixed_steps_skip():
     """GO-Draaw marched 64 equal steps; a one-cell wall in a 256-cell grid is skipped."""
     g = VoxelGrid.empty((256, 1, 1), (0, 0, 0), (256, 1, 1))
@@ -385,6 +406,40 @@ def test_truncated_or_bad_vol_is_one_clear_error(tmp_path):
     p.write_bytes(b"XYZ" + raw[3:])
     with pytest.raises(ParameterError, match="magic"):
         read_vol(p)
+
+
+def _vol_header(p, version=3, encoding=1, size=(2, 2, 2, 1)):
+    """A ``.vol`` with Mitsuba's 48-byte header (``'VOL'``, version byte, int32 encoding,
+    int32 x, y, z, channels, six float32 bounds) and 8 float32 ones after it."""
+    import struct
+    p.write_bytes(struct.pack("<3sBiiiii6f", b"VOL", version, encoding, *size, 0, 0, 0, 1, 1, 1)
+                  + np.ones(8, "<f4").tobytes())
+    return p
+
+
+@pytest.mark.parametrize("header, message", [
+    (dict(version=2), r"format version 2; expected 3"),
+    (dict(encoding=0), r"encoding 0; only 1 \(float32\) is supported"),
+    (dict(size=(0, 2, 2, 1)), r"size 0x2x2x1; expected positive sizes"),
+])
+def test_a_vol_of_another_version_or_encoding_or_with_an_empty_side_is_refused(tmp_path, header, message):
+    """Mitsuba 3 reads version 3 with encoding 1 (float32) only, and a grid needs a cell: a
+    version-2 header, encoding 0 or a side of 0 was read as float32 data (a (2, 2, 0, 1)
+    grid for the side of 0) instead of one ParameterError naming what is wrong."""
+    p = _vol_header(tmp_path / "g.vol", **header)
+    with pytest.raises(ParameterError, match=r"read_vol\(.*g\.vol'\): " + message):
+        read_vol(p)
+    assert read_vol(_vol_header(tmp_path / "ok.vol"))[0].shape == (2, 2, 2, 1)   # the same, valid
+
+
+def test_an_empty_mesh_has_no_triangles_to_voxelise():
+    """trimesh.Trimesh() has no faces: one ParameterError, not a (0, 3, 3) array that
+    voxelises to an empty grid."""
+    import trimesh
+    from draaw_mi.media.voxelize import load_triangles
+    with pytest.raises(ParameterError, match="voxelize: the mesh has no triangles"):
+        load_triangles(trimesh.Trimesh())
+    assert load_triangles(trimesh.creation.box()).shape == (12, 3, 3)
 
 
 def test_a_smoke_colour_is_where_its_voxel_is():
