@@ -60,10 +60,14 @@ def output_locks(folders, where: str, optional=()):
             if fcntl is None:
                 break
             path = os.path.join(folder, LOCK_NAME)
-            for attempt in range(_ATTEMPTS):
-                fd = _lock_file(folder, path, where, folder in optional, last=attempt == _ATTEMPTS - 1)
+            for _ in range(_ATTEMPTS):
+                fd = _lock_file(folder, path, where, folder in optional)
                 if fd != _DELETED:
                     break
+            else:                       # runs finishing under this one, again and again
+                raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi batch "
+                                f"run (its lock file was replaced {_ATTEMPTS} times while this run "
+                                "locked it); wait for it to finish or choose another --out")
             if fd is None:
                 continue                # an optional folder without a lock file
             try:
@@ -88,10 +92,10 @@ _ATTEMPTS = 4
 _DELETED = -1
 
 
-def _lock_file(folder: str, path: str, where: str, optional: bool, last: bool):
+def _lock_file(folder: str, path: str, where: str, optional: bool):
     """An open descriptor of ``path`` holding its exclusive lock; ``None`` for an ``optional``
     folder where no lock file can be made; ``_DELETED`` where the lock was got on a file
-    its holder deleted meanwhile (try again) unless this is the ``last`` attempt."""
+    its holder deleted meanwhile (try again)."""
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except PermissionError:
@@ -112,18 +116,16 @@ def _lock_file(folder: str, path: str, where: str, optional: bool, last: bool):
                         f"({e.strerror or e})") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        # the holder we waited on may have deleted the file as it finished: a lock on
-        # that unlinked file would not exclude the next run, which creates a new one
-        if not _same_file(fd, path):
-            if not last:
-                os.close(fd)
-                return _DELETED
-            raise BlockingIOError
     except BlockingIOError:
         holder = _holder(fd)
         os.close(fd)
         raise BusyError(f"{where}: output folder {folder!r} is in use by another draaw-mi "
                         f"batch run{holder}; wait for it to finish or choose another --out") from None
+    # the holder we waited on may have deleted the file as it finished: a lock on that
+    # unlinked file would not exclude the next run, which creates a new one
+    if not _same_file(fd, path):
+        os.close(fd)
+        return _DELETED
     return fd
 
 

@@ -33,8 +33,11 @@ def plume(resolution=(48, 64, 48), seed: int = 0, sharpness: float = 3.0) -> np.
     def whole(v):
         return isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_))
     # (np.int64(8) was "not iterable", a float 8.0 too, and (8.5, 8, 8) became (8, 8, 8))
-    shape = (resolution,) * 3 if whole(resolution) else tuple(resolution) \
-        if isinstance(resolution, (tuple, list, np.ndarray)) else ()
+    shape = ()
+    if whole(resolution):
+        shape = (resolution,) * 3
+    elif isinstance(resolution, (tuple, list, np.ndarray)):
+        shape = tuple(resolution)
     if len(shape) != 3 or not all(whole(v) for v in shape) or min(shape) < 1:
         raise ParameterError(f"plume: resolution {resolution!r}; expected an integer or "
                              "(nx, ny, nz) integers >= 1")
