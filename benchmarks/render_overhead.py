@@ -9,7 +9,9 @@ time to the evaluated image, and the summed execution time of the kernels it lau
 (``dr.kernel_history``). Reports medians.
 
 Then the same render repeated back to back (as a fit loop or a preview repeats it), per
-version and mode.
+version and mode; then Dr.Jit's own floor: what a plain ``dr.freeze`` of ``mi.render`` with
+Mitsuba's ``path`` spends outside kernels, on this scene and on Mitsuba's ``mi.cornell_box()``
+(no draaw-mi code in the call), beside a frozen function that takes the scene and does nothing.
 
 Usage::
 
@@ -56,6 +58,93 @@ def one(scene, version, spp, seed, mode):
     kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
                if k["type"] == dr.KernelType.JIT) / 1000.0
     return wall, host, kern
+
+
+def floor_rows(scene, args) -> list:
+    """Report lines: the time outside kernels of frozen calls with no draaw-mi code in them,
+    interleaved, ``args.repeats`` each after warm-up. Rows: a frozen function taking only the
+    seed (Dr.Jit's replay alone), one taking the scene too and returning ``seed + 1`` (the
+    walk over the scene's variables, before and after the replay), ``dr.freeze`` of
+    ``mi.render`` with Mitsuba's ``path`` on this scene and on ``mi.cornell_box()`` at the
+    same size and spp, and draaw-mi's frozen ``path`` on this scene for comparison."""
+    res = args.res
+    box = mi.cornell_box()
+    box["sensor"]["film"].update(width=res, height=res, rfilter={"type": "box"})
+    box_scene = mi.load_dict(box)
+    path = mi.load_dict({"type": "path", "max_depth": scene.settings["max_depth"]})
+    seed_only = dr.freeze(lambda seed: seed + 1, auto_opaque=False)
+    with_scene = dr.freeze(lambda sc, seed: seed + 1, auto_opaque=False)
+    mi_render = dr.freeze(lambda sc, seed: mi.render(sc, integrator=path, seed=seed, spp=args.spp),
+                          auto_opaque=False)
+    ours = R.frozen_render(R.make_integrator("path", scene.settings["max_depth"]), args.spp, scene)
+    calls = {
+        "frozen `seed + 1`, seed only": lambda s: seed_only(s),
+        "frozen `seed + 1`, taking the scene": lambda s: with_scene(scene.mi_scene, s),
+        "`dr.freeze(mi.render)`, `path`, this scene": lambda s: mi_render(scene.mi_scene, s),
+        "`dr.freeze(mi.render)`, `path`, `mi.cornell_box()`": lambda s: mi_render(box_scene, s),
+        "draaw-mi's frozen `path`, this scene": lambda s: ours(scene.mi_scene, s, scene),
+    }
+    data = {k: [] for k in calls}
+    for i in range(args.repeats + 3):
+        for name, call in calls.items():
+            dr.kernel_history_clear()
+            t = time.perf_counter()
+            out = call(dr.opaque(mi.UInt32, 3000 + i))
+            dr.eval(out)
+            dr.sync_thread()
+            wall = time.perf_counter() - t
+            kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
+                       if k["type"] == dr.KernelType.JIT) / 1000.0
+            if i >= 3:                                              # after warm-up / recording
+                data[name].append((wall, kern))
+    lines = ["", f"Dr.Jit's own floor: frozen calls with no draaw-mi code in them, {args.repeats} "
+             "interleaved calls each after 3 warm-up calls, medians (outside = wall - summed JIT "
+             "kernel time):", "", "| frozen call | wall ms | outside ms | outside |", "|---|---|---|---|"]
+    for name, d in data.items():
+        wall = statistics.median(w for w, _ in d)
+        outside = statistics.median(w - k for w, k in d)
+        frac = statistics.median((w - k) / w for w, k in d)
+        lines.append(f"| {name} | {1e3 * wall:.2f} | {1e3 * outside:.3f} | {100 * frac:.1f} % |")
+    return lines
+
+
+def step_rows(scene, args) -> list:
+    """Report lines: draaw-mi's own host steps before a frozen replay (what
+    ``frozen.freeze_render``'s call does before handing over to Dr.Jit), each timed right
+    after the previous render's kernels (cold caches, as in a repeated render), V4 and
+    ``path``, ``args.repeats`` renders each, medians in microseconds."""
+    F = importlib.import_module("draaw_mi.frozen")
+    names = ("recording lookup", "live-BSDF check", "scene_scalars", "V4 freeze_state",
+             "Dr.Jit frozen call (host)")
+    lines = ["", "draaw-mi's own steps before a frozen replay, each timed right after the previous "
+             f"render's kernels, medians of {args.repeats} renders (us):", "",
+             "| version | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for version in ("v4", "path"):
+        integ = R.make_integrator(version, scene.settings["max_depth"])
+        state_of = getattr(integ, "freeze_state", None)
+        rows = []
+        for i in range(args.repeats + 3):
+            t = [time.perf_counter()]
+            call = R.frozen_render(integ, args.spp, scene)
+            t.append(time.perf_counter())
+            live = F.other_live_bsdfs(scene.mi_scene, scene)
+            t.append(time.perf_counter())
+            scalars = F.scene_scalars(scene.mi_scene, scene)
+            t.append(time.perf_counter())
+            state = None if state_of is None else state_of(scene.mi_scene, F.scene_state(scene).memo)
+            t.append(time.perf_counter())
+            with F._PAUSED:                        # as freeze_render's call does
+                img = call.frozen(scene.mi_scene, scalars, dr.opaque(mi.UInt32, 5000 + i), state, live)
+            t.append(time.perf_counter())
+            dr.eval(img)
+            dr.sync_thread()
+            if i >= 3:
+                rows.append([b - a for a, b in zip(t, t[1:])])
+        cells = [f"{1e6 * statistics.median(r[j] for r in rows):.0f}" for j in range(len(names))]
+        if state_of is None:
+            cells[3] = "-"
+        lines.append(f"| {version} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def main(argv=None) -> int:
@@ -130,6 +219,8 @@ def main(argv=None) -> int:
             frac_o = statistics.median((w - k) / w for w, _, k in d)
             cells.append(f"{1e3 * wall:.1f} | {100 * frac_o:.1f} %")
         out.append(f"| {v} | " + " | ".join(cells) + " |")
+    out += floor_rows(scene, args)
+    out += step_rows(scene, args)
     text = "\n".join(out) + "\n"
     from draaw_mi.io import print_report
     print_report(text, args.out)
