@@ -78,6 +78,22 @@ def separate_adjoints(mode) -> None:
         dr.eval()
 
 
+def propagate_adjoint(mode, δL, Lo, separate: bool = False):
+    """Path replay's adjoint step for the radiance ``Lo`` re-evaluated with AD at one vertex
+    (as Mitsuba's ``prb``): in backward mode ``δL * Lo`` goes back to the parameters; in
+    forward mode ``Lo``'s tangent is added to ``δL``. Returns ``δL`` (unchanged in backward
+    mode, or when ``Lo`` carries no gradient). ``separate``: a backward step that follows
+    another one of the same ``sample()`` (:func:`separate_adjoints`)."""
+    if dr.grad_enabled(Lo):
+        if mode == dr.ADMode.Backward:
+            if separate:
+                separate_adjoints(mode)
+            dr.backward_from(δL * Lo)
+        else:
+            δL = δL + dr.forward_to(Lo)
+    return δL
+
+
 def parse_int(props: mi.Properties, plugin: str, name: str, default: int, low: int,
               allow_minus_one: bool = False) -> int:
     """Read an integer property and check ``value >= low`` (or ``-1`` where allowed)."""
@@ -234,6 +250,24 @@ class DraawIntegrator(RBIntegrator):
         if feats["environment"] and not self.hide_emitters:
             valid = mi.Bool(active)
         return ray, pi, valid, cam_origin
+
+    def first_hit(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool,
+                  feats: dict[str, bool], flags: mi.RayFlags, primal: bool):
+        """The camera rays' first surface interaction, with SDF objects and the AOVs there:
+        ``(ray, si, valid, sdf, aovs)``. ``ray`` and ``valid`` as :meth:`trace_camera` gives
+        them (with SDF hits in ``valid``); ``sdf`` the scene's SDF hook (:meth:`sdf_hook`, or
+        ``None``); ``aovs`` the AOV values at the hit (zeros outside primal renders). V1-V3
+        start their paths here; V4 finds its first interaction inside its loop."""
+        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
+        si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+        if sdf is not None:
+            si = sdf.intersect(ray, si, sampler, active)
+            valid |= active & si.is_valid()
+        aovs = self.zero_aovs()
+        if primal and len(self.aovs) > 0:
+            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
+        return ray, si, valid, sdf, aovs
 
     def zero_aovs(self) -> list[mi.Float]:
         return [mi.Float(0.0) for _ in self.aov_names()]

@@ -4,7 +4,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import DraawIntegrator, emitter_sample_one, flip_z, parse_int, relative, sample_emitter, side_sign
+from .common import (DraawIntegrator, emitter_sample_one, flip_z, parse_int, propagate_adjoint, relative,
+                     sample_emitter, side_sign)
 from .phong import mirror_dir, phong_eval, phong_material
 
 # Light from every emitter individually up to this many emitters (else one random emitter).
@@ -154,16 +155,7 @@ class DraawV1Integrator(DraawIntegrator):
         δL = mi.Spectrum(δL if δL is not None else 0) # Differential/adjoint radiance
         β = mi.Spectrum(1)                            # Mirror-chain throughput
         active = mi.Bool(active)
-        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
-        si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
-        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
-        if dr.hint(sdf is not None, mode="scalar"):
-            si = sdf.intersect(ray, si, sampler, active)
-            valid |= active & si.is_valid()
-
-        aovs = self.zero_aovs()
-        if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
+        ray, si, valid, sdf, aovs = self.first_hit(scene, sampler, ray, active, feats, flags, primal)
 
         while dr.hint(active, max_iterations=self.max_depth,
                       label=f"draaw_v1 ({mode.name})"):
@@ -208,11 +200,7 @@ class DraawV1Integrator(DraawIntegrator):
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
                     Lo = Le + Lr + L * relative(f_mirror)
-                    if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
-                        if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                            dr.backward_from(δL * Lo)
-                        else:
-                            δL += dr.forward_to(Lo)
+                    δL = propagate_adjoint(mode, δL, Lo)
 
             depth += 1
             active = active_next

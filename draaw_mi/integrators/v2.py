@@ -4,8 +4,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import (DraawIntegrator, flip_z, parse_int, relative, safe_div, sample_emitter,
-                     separate_adjoints, side_sign)
+from .common import (DraawIntegrator, flip_z, parse_int, propagate_adjoint, relative, safe_div,
+                     sample_emitter, separate_adjoints, side_sign)
 from .phong import phong_eval, phong_material, phong_sample
 
 
@@ -186,11 +186,7 @@ class DraawV2Integrator(DraawIntegrator):
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
                     Lo = Le + Lr_dir + L * relative(f)
-                    if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
-                        if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                            dr.backward_from(δL * Lo)
-                        else:
-                            δL += dr.forward_to(Lo)
+                    δL = propagate_adjoint(mode, δL, Lo)
             depth += 1
             active = active_next
             ray = ray_next
@@ -212,13 +208,7 @@ class DraawV2Integrator(DraawIntegrator):
             return mi.Spectrum(0.0), mi.Bool(False), self.zero_aovs(), []
 
         # ---------------- first hit: emission, direct light, AOVs ----------------
-        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
-        si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
-        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
-        if sdf is not None:
-            si = sdf.intersect(ray, si, sampler, active)
-            valid |= active & si.is_valid()
-        aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf) if primal else self.zero_aovs()
+        ray, si, valid, sdf, aovs = self.first_hit(scene, sampler, ray, active, feats, flags, primal)
         zero = mi.UInt32(0)
         one = mi.Spectrum(1.0)
         active_next = active & si.is_valid() & (1 < self.max_depth)

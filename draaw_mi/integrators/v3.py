@@ -5,8 +5,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from .common import (DraawIntegrator, flip_z, parse_float, relative, safe_div, sample_emitter,
-                     separate_adjoints, side_sign)
+from .common import (DraawIntegrator, flip_z, parse_float, propagate_adjoint, relative, safe_div,
+                     sample_emitter, side_sign)
 from .draaw_lobes import draaw_ndf_sample, draaw_params, draaw_spec_eval
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
@@ -177,16 +177,7 @@ class DraawV3Integrator(DraawIntegrator):
         δL = mi.Spectrum(δL if δL is not None else 0) # Differential/adjoint radiance
         β = mi.Spectrum(1)                            # Path throughput weight
         active = mi.Bool(active)                      # Active SIMD lanes
-        ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
-        si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
-        sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
-        if dr.hint(sdf is not None, mode="scalar"):
-            si = sdf.intersect(ray, si, sampler, active)
-            valid |= active & si.is_valid()
-
-        aovs = self.zero_aovs()
-        if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
-            aovs = self.eval_aovs(si, si.bsdf(ray), active, feats, cam_origin, sdf)
+        ray, si, valid, sdf, aovs = self.first_hit(scene, sampler, ray, active, feats, flags, primal)
 
         # ------------- Emitters seen directly by the camera -------------
         # (differentiated after the loop: no AD graph may exist while it runs)
@@ -315,11 +306,7 @@ class DraawV3Integrator(DraawIntegrator):
                         Lo += Le_next * relative(dr.select(glossy_split, f_ad_glossy, f_ad))
                     elif dr.hint(hit_em and delta_bsdf, mode="scalar"):
                         Lo += Le_next
-                    if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
-                        if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                            dr.backward_from(δL * Lo)
-                        else:
-                            δL += dr.forward_to(Lo)
+                    δL = propagate_adjoint(mode, δL, Lo)
 
             β *= weight
             depth += 1
@@ -330,12 +317,8 @@ class DraawV3Integrator(DraawIntegrator):
         if dr.hint(show_em and not primal, mode="scalar"):
             with dr.resume_grad():
                 Le = si_cam.emitter(scene).eval(si_cam, cam_active)
-                if dr.hint(dr.grad_enabled(Le), mode="scalar"):
-                    if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                        separate_adjoints(mode)        # (the loop's backward_from ran first)
-                        dr.backward_from(δL * Le)
-                    else:
-                        δL += dr.forward_to(Le)
+                # (separate: the loop's backward_from ran first)
+                δL = propagate_adjoint(mode, δL, Le, separate=True)
 
         return (L if primal else δL), valid, aovs, L
 

@@ -8,7 +8,8 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import emission_split
-from .common import mis_weight, parse_bool, parse_float, relative, sample_emitter, separate_adjoints
+from .common import (mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter,
+                     separate_adjoints)
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
 
@@ -459,11 +460,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                         si_f, wo_f = sdf.reattach_sampled(ray, si, bs.wo, active_next)
                     f = bsdf.eval(ctx, si_f, wo_f, active_next)
                     Lo = Le + Lr_dir + L * relative(f)
-                    if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
-                        if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                            dr.backward_from(δL * Lo)
-                        else:
-                            δL += dr.forward_to(Lo)
+                    δL = propagate_adjoint(mode, δL, Lo)
 
             depth[si.is_valid()] += 1
             active = active_next
