@@ -26,6 +26,7 @@ from .light_dicts import light_dicts
 from .material_dicts import material_dict
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
 from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
+from .smooth_normals import smooth_normals
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -182,7 +183,10 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
                 if own not in materials:
                     materials[own] = material_dict(own, {"type": "draaw", **part.material}, ctx, where / "file")
             ply = os.path.join(ctx.tmp_dir, ctx.unique("mesh") + ".ply")
-            write_ply(ply, part.vertices, part.faces, part.uv)
+            if smooth:      # smooth across the file's split vertices, sharp at creases
+                write_ply(ply, *smooth_normals(part.vertices, part.faces, part.uv))
+            else:
+                write_ply(ply, part.vertices, part.faces, part.uv)
             d = {"type": "ply", "filename": ply, "to_world": transform, "face_normals": not smooth}
             out[safe_id(f"{name}_{part.name}") if len(parts) > 1 else name] = finish(d, own)
         return out

@@ -128,14 +128,20 @@ def load_mesh_parts(path: str, where) -> list[MeshPart]:
     return parts
 
 
-def write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
-    """Binary little-endian PLY with positions, optional (u, 1 - v) texture coordinates."""
+def write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None,
+              normals: np.ndarray | None = None) -> None:
+    """Binary little-endian PLY with positions, optional (u, 1 - v) texture coordinates and
+    optional vertex normals (which Mitsuba then uses instead of computing its own)."""
     n, m = len(vertices), len(faces)
     vfields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if normals is not None:
+        vfields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
     if uv is not None:
         vfields += [("u", "<f4"), ("v", "<f4")]
     vdata = np.empty(n, dtype=vfields)
     vdata["x"], vdata["y"], vdata["z"] = vertices[:, 0], vertices[:, 1], vertices[:, 2]
+    if normals is not None:
+        vdata["nx"], vdata["ny"], vdata["nz"] = normals[:, 0], normals[:, 1], normals[:, 2]
     if uv is not None:
         vdata["u"], vdata["v"] = uv[:, 0], 1.0 - uv[:, 1]     # OpenGL -> Mitsuba (v down)
     fdata = np.empty(m, dtype=[("n", "u1"), ("i", "<u4", 3)])
