@@ -127,30 +127,30 @@ def scene_xml(mi_dict: dict, spp: int, max_depth: int, camera=None) -> str:
     return "\n".join(lines + s + ["</scene>", ""])
 
 
-def kernel_seconds(xml_path: str, renders: int = 12) -> float:
-    """Median summed JIT kernel time (s) of ``mi.render`` of ``xml_path`` in this process,
-    after warm-up: the render work that every contender does, and so the floor of any
-    executor's time per frame."""
+def kernel_seconds(xml_paths) -> float:
+    """Mean summed JIT kernel time (s) per frame of ``mi.render`` of each frame's XML scene
+    in this process (one render each, after a warm-up render of the first): the render work
+    that every contender does, and so the floor of any executor's time per frame."""
     import drjit as dr
     import mitsuba as mi
 
-    scene = mi.load_file(xml_path)
     was = dr.flag(dr.JitFlag.KernelHistory)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        for seed in range(3):
-            dr.eval(mi.render(scene, seed=seed))
-        dr.sync_thread()
         times = []
-        for seed in range(renders):
+        for i, path in enumerate(xml_paths):
+            scene = mi.load_file(path)
+            if i == 0:
+                dr.eval(mi.render(scene, seed=999))
+                dr.sync_thread()
             dr.kernel_history_clear()
-            dr.eval(mi.render(scene, seed=100 + seed))
+            dr.eval(mi.render(scene, seed=i))
             dr.sync_thread()
             times.append(sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
                              if k["type"] == dr.KernelType.JIT) / 1000.0)
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, was)
-    return statistics.median(times)
+    return statistics.mean(times)
 
 
 def _run(cmd) -> float:
@@ -239,7 +239,7 @@ def main() -> int:
         rows[spp] = {k: statistics.median(v) for k, v in times.items()}
         rows[spp]["all"] = times
         rows[spp]["mean_cli"], rows[spp]["mean_xml"] = float(a.mean()), float(b.mean())
-        rows[spp]["kernel"] = kernel_seconds(base_xml)
+        rows[spp]["kernel"] = kernel_seconds(xmls)
     shutil.rmtree(work, ignore_errors=True)
 
     lines = ["# Batch speed: in-process batch executor vs one `mitsuba` command per frame", "",
@@ -256,8 +256,8 @@ def main() -> int:
              "* `batch-xml`: `draaw-mi batch` on the same XML scene, version `path` (same renderer and BSDF as "
              "`cli`; only the executor differs).",
              "* `batch-v4`: `draaw-mi batch` on the TOML scene with draaw-mi's `v4` integrator and `draaw` BSDF.",
-             "* `kernel`: the render kernel alone, in this process after the runs: `mi.render` of the XML scene "
-             "(the camera of frame 0), median of 12 summed `dr.kernel_history` execution times. Every contender "
+             "* `kernel`: the render kernel alone, in this process after the runs: `mi.render` of each frame's XML "
+             "scene, one render each, summed `dr.kernel_history` execution times, mean per frame. Every contender "
              "runs this work, so `cli / kernel` bounds what any executor can reach against the `mitsuba` command.",
              "", "| spp | cli s/frame | cli-exe s/frame | batch-xml s/frame | batch-v4 s/frame | kernel s/frame "
              "| cli / batch-xml | cli-exe / batch-xml | cli / batch-v4 | cli / kernel (bound) "

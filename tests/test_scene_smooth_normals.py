@@ -120,3 +120,53 @@ def test_a_smooth_obj_is_shaded_with_the_normals_of_its_shared_vertices(tmp_path
             assert np.abs(n - np.array([ref[tuple(p)] for p in pos])).max() < 1e-5
         else:
             assert not shape.has_vertex_normals()                          # flat, as GO-Draaw
+
+
+def test_texture_coordinates_follow_their_vertices_when_the_mesh_is_reindexed():
+    v, f = _bumpy_sphere()
+    uv = np.random.default_rng(4).random((len(v), 2)).astype(np.float32)   # one per shared vertex
+    out_v, out_f, out_uv, _ = smooth_normals(v, f, uv)
+    assert np.array_equal(out_uv[out_f], uv[f])
+    assert np.array_equal(out_v[out_f], np.asarray(v, np.float32)[f])
+
+
+def test_a_degenerate_face_takes_its_neighbours_normal_and_leaves_theirs_alone():
+    v, f = _bumpy_sphere()
+    a, b = f[0, 0], f[0, 1]
+    bad = np.vstack([f, [[a, a, b]]])                          # zero area, at two real vertices
+    _, of, _, n = smooth_normals(v, f)
+    _, bf, _, bn = smooth_normals(v, bad)
+    assert np.isfinite(bn).all()
+    assert np.abs(bn[bf[:-1]] - n[of]).max() < 1e-6           # the real faces' normals unchanged
+    ref = _by_position(v, _mitsuba_normals(v, f))
+    assert np.abs(bn[bf[-1]] - np.array([ref[tuple(np.float32(v[i]))] for i in (a, a, b)])).max() < 1e-5
+
+
+def test_normals_are_smooth_across_the_border_of_two_materials(tmp_path):
+    """An OBJ whose two halves use two materials: two parts, two Mitsuba shapes, and on their
+    border the same normals on both sides (each part smoothed alone left the seam faceted)."""
+    v, f = _bumpy_sphere()
+    half = v[f].mean(axis=1)[:, 2] > 0
+    lines = ["mtllib ball.mtl"] + [f"v {x} {y} {z}" for x, y, z in v]
+    for name, mask in (("top", half), ("bottom", ~half)):
+        lines.append(f"usemtl {name}")
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f[mask]]
+    (tmp_path / "ball.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "ball.mtl").write_text("newmtl top\nKd 0.8 0.2 0.2\nnewmtl bottom\nKd 0.2 0.2 0.8\n")
+    scene = draaw_mi.load_scene({"shapes": [{"type": "mesh", "file": str(tmp_path / "ball.obj"),
+                                             "smooth": True}], "render": {"resolution": [8, 8]}})
+    ref = _by_position(v, _mitsuba_normals(v, f))
+    shapes = [s for s in scene.mi_scene.shapes() if "_part" in s.id()]
+    assert len(shapes) == 2
+    for shape in shapes:
+        pos = np.asarray(scene.params[f"{shape.id()}.vertex_positions"]).reshape(-1, 3)
+        n = np.asarray(scene.params[f"{shape.id()}.vertex_normals"]).reshape(-1, 3)
+        assert np.abs(n - np.array([ref[tuple(p)] for p in pos])).max() < 1e-5
+
+
+def test_a_degenerate_face_alone_at_its_positions_gets_plus_z_not_nan():
+    v = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1], [5, 5, 5], [6, 6, 6]], float)
+    f = np.array([[0, 1, 2], [3, 4, 4]])                        # the second has no area
+    _, of, _, n = smooth_normals(v, f)
+    assert np.array_equal(n[of[1]], np.tile(np.float32([0, 0, 1]), (3, 1)))
+    assert np.array_equal(n[of[0]], np.tile(np.float32([1, 0, 0]), (3, 1)))   # the real one: +x

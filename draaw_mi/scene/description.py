@@ -26,7 +26,7 @@ from .light_dicts import light_dicts
 from .material_dicts import material_dict
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
 from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
-from .smooth_normals import smooth_normals
+from .smooth_normals import smooth_parts
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -176,15 +176,17 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         ctx.files.extend(f for f in mesh_side_files(path) if f not in ctx.files)
         parts = load_mesh_parts(path, where / "file")
         smooth = boolean(shape.get("smooth", False), where / "smooth")
-        for part in parts:
+        # smooth across the file's split vertices and its material borders, sharp at creases
+        smoothed = smooth_parts(parts) if smooth else [None] * len(parts)
+        for part, normals in zip(parts, smoothed):
             own = None
             if mat_id is None:      # take the file's material (MTL Kd / texture / glTF PBR)
                 own = safe_id(f"{name}_{part.material_name or part.name}")
                 if own not in materials:
                     materials[own] = material_dict(own, {"type": "draaw", **part.material}, ctx, where / "file")
             ply = os.path.join(ctx.tmp_dir, ctx.unique("mesh") + ".ply")
-            if smooth:      # smooth across the file's split vertices, sharp at creases
-                write_ply(ply, *smooth_normals(part.vertices, part.faces, part.uv))
+            if normals is not None:
+                write_ply(ply, *normals)
             else:
                 write_ply(ply, part.vertices, part.faces, part.uv)
             d = {"type": "ply", "filename": ply, "to_world": transform, "face_normals": not smooth}

@@ -8,6 +8,9 @@ the edges that the model means to be sharp (its floor meets its wall at 90°) an
 normals of surfaces that only touch. So each corner's normal here is the angle-weighted mean
 (Mitsuba's weighting) of the unit normals of the faces at its position that lie within
 ``crease_deg`` of its own face; the mesh is re-indexed so that each vertex has one normal.
+A file's material parts are smoothed together (:func:`smooth_parts`). The normals are made
+once, at load: ``params.update()`` after a change of ``vertex_positions`` has Mitsuba
+recompute them over each vertex alone.
 
 >>> import numpy as np
 >>> v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)   # a corner of a box
@@ -34,7 +37,29 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | Non
     """``(vertices, faces, uv, normals)``: the mesh re-indexed with one unit normal per vertex
     (float32), smooth across vertices at the same position and sharp where faces meet at more
     than ``crease_deg``. Degenerate faces (zero area) add nothing to their neighbours and take
-    the normal of their position's other faces (or +z, if none)."""
+    the normal of all other faces at their position (+z where there are none)."""
+    return reindexed(vertices, faces, uv, corner_normals(vertices, faces, crease_deg))
+
+
+def smooth_parts(parts, crease_deg: float = CREASE_DEG) -> list:
+    """:func:`smooth_normals` of a mesh file's material parts (``MeshPart``) taken together:
+    a vertex on the border of two materials gets the same normal on both sides (each part
+    alone left that seam faceted). One ``(vertices, faces, uv, normals)`` per part."""
+    counts = np.cumsum([0] + [len(p.vertices) for p in parts])
+    vertices = np.concatenate([p.vertices for p in parts])
+    faces = np.concatenate([np.asarray(p.faces, np.int64) + off for p, off in zip(parts, counts)])
+    normals = corner_normals(vertices, faces, crease_deg)
+    out, first_face = [], 0
+    for p in parts:
+        rows = slice(first_face, first_face + len(p.faces))
+        first_face += len(p.faces)
+        out.append(reindexed(p.vertices, p.faces, p.uv, normals[rows]))
+    return out
+
+
+def corner_normals(vertices: np.ndarray, faces: np.ndarray, crease_deg: float = CREASE_DEG) -> np.ndarray:
+    """``(faces, 3, 3)`` float64: the unit normal at each face's corners (see the module
+    docstring)."""
     if not 0.0 <= crease_deg <= 180.0:
         raise ValueError(f"smooth_normals: crease_deg={crease_deg!r}; expected degrees in [0, 180]")
     v = np.asarray(vertices, dtype=np.float64)
@@ -45,20 +70,23 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | Non
     unit = np.divide(cross, length, out=np.zeros_like(cross), where=length > 0)
     angles = np.stack([_angle(a, b, c), _angle(b, c, a), _angle(c, a, b)], axis=1)
 
-    corner_vertex = f.ravel()
     corner_face = np.repeat(np.arange(len(f)), 3)
     _, position = np.unique(v, axis=0, return_inverse=True)
-    corner_position = position.ravel()[corner_vertex]
+    corner_position = position.ravel()[f.ravel()]
     weighted = unit[corner_face] * angles.ravel()[:, None]       # each corner's contribution
-    face_normal = unit[corner_face]
-    normals = _gather_within_crease(corner_position, face_normal, weighted,
+    normals = _gather_within_crease(corner_position, unit[corner_face], weighted,
                                     np.cos(np.radians(crease_deg)))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
     normals[length[:, 0] == 0] = (0.0, 0.0, 1.0)
+    return normals.reshape(-1, 3, 3)
 
-    # one vertex per distinct (vertex, normal): corners that share both share a vertex
-    normals32 = normals.astype(np.float32)
+
+def reindexed(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None, normals: np.ndarray):
+    """The mesh with one vertex per distinct (vertex, corner normal): corners that share both
+    share a vertex. ``normals``: ``(faces, 3, 3)``, as :func:`corner_normals` gives them."""
+    corner_vertex = np.asarray(faces, dtype=np.int64).ravel()
+    normals32 = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
     key = np.concatenate([corner_vertex[:, None].astype(np.float64), normals32], axis=1)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     src = corner_vertex[first]
@@ -79,7 +107,7 @@ def _angle(p, q, r) -> np.ndarray:
 def _gather_within_crease(group, face_normal, weighted, cos_crease, chunk=1 << 20) -> np.ndarray:
     """For each corner ``i``: the sum of ``weighted[j]`` over the corners ``j`` of its
     ``group`` (position) whose ``face_normal`` is within the crease of its own
-    (``dot >= cos_crease``). Pairs are formed group by group, in chunks of at most ``chunk``
+    (``dot >= cos_crease``), or over all of them where its own is zero (a degenerate face). Pairs are formed group by group, in chunks of at most ``chunk``
     pairs, so a vertex shared by thousands of faces (a fan) does not need a square matrix
     of them all."""
     order = np.argsort(group, kind="stable")
@@ -96,13 +124,13 @@ def _gather_within_crease(group, face_normal, weighted, cos_crease, chunk=1 << 2
                 idx = order[start:start + size]
                 n, w = face_normal[idx], weighted[idx]
                 for r in range(0, size, rows):
-                    near = (n[r:r + rows] @ n.T >= cos_crease - 1e-12).astype(np.float64)
-                    out[idx[r:r + rows]] = near @ w
+                    near = (n[r:r + rows] @ n.T >= cos_crease - 1e-12) | ~n[r:r + rows, None].any(axis=-1)
+                    out[idx[r:r + rows]] = near.astype(np.float64) @ w
             continue
         per_block = max(1, chunk // int(size * size))
         for k in range(0, len(first), per_block):
             idx = order[first[k:k + per_block, None] + np.arange(size)]   # (groups, size)
             n = face_normal[idx]
-            near = (np.einsum("gik,gjk->gij", n, n) >= cos_crease - 1e-12).astype(np.float64)
-            out[idx] = np.einsum("gij,gjk->gik", near, weighted[idx])
+            near = (np.einsum("gik,gjk->gij", n, n) >= cos_crease - 1e-12) | ~n[:, :, None].any(axis=-1)
+            out[idx] = np.einsum("gij,gjk->gik", near.astype(np.float64), weighted[idx])
     return out
