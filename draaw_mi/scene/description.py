@@ -178,17 +178,15 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         smooth = boolean(shape.get("smooth", False), where / "smooth")
         # smooth across the file's split vertices and its material borders, sharp at creases
         smoothed = smooth_parts(parts) if smooth else [None] * len(parts)
-        for part, normals in zip(parts, smoothed):
+        for part, smoothed_part in zip(parts, smoothed):
             own = None
             if mat_id is None:      # take the file's material (MTL Kd / texture / glTF PBR)
                 own = safe_id(f"{name}_{part.material_name or part.name}")
                 if own not in materials:
                     materials[own] = material_dict(own, {"type": "draaw", **part.material}, ctx, where / "file")
             ply = os.path.join(ctx.tmp_dir, ctx.unique("mesh") + ".ply")
-            if normals is not None:
-                write_ply(ply, *normals)
-            else:
-                write_ply(ply, part.vertices, part.faces, part.uv)
+            # (vertices, faces, uv[, normals]): the part re-indexed with its smooth normals
+            write_ply(ply, *(smoothed_part or (part.vertices, part.faces, part.uv)))
             d = {"type": "ply", "filename": ply, "to_world": transform, "face_normals": not smooth}
             out[safe_id(f"{name}_{part.name}") if len(parts) > 1 else name] = finish(d, own)
         return out
