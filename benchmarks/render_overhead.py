@@ -36,28 +36,33 @@ R = importlib.import_module("draaw_mi.render")    # the module (draaw_mi.render 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def one(scene, version, spp, seed, mode):
-    """(wall, host, kernels) seconds of one render: ``host`` = until the call returns (Python
-    tracing or frozen replay; kernels run asynchronously; ``api``: the whole call, which
-    waits for its image), ``kernels`` = summed execution. ``mode``: ``frozen`` (the
-    integrator's recorded render), ``traced`` (``mi.render``), ``api`` (``draaw_mi.render``
-    as a user calls it: the frozen render plus its argument handling)."""
-    integ = R.make_integrator(version, scene.settings["max_depth"])
+def timed(call):
+    """(wall, host, kernels) seconds of ``call()``: ``host`` = until it returns (kernels run
+    asynchronously), ``wall`` = until its result is evaluated, ``kernels`` = the summed
+    execution time of the JIT kernels it launched (``dr.kernel_history``)."""
     dr.kernel_history_clear()
     t = time.perf_counter()
-    if mode == "frozen":
-        img = R.frozen_render(integ, spp, scene)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene)
-    elif mode == "api":
-        img = draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[])
-    else:
-        img = mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed)
+    out = call()
     host = time.perf_counter() - t
-    dr.eval(img)
+    dr.eval(out)
     dr.sync_thread()
     wall = time.perf_counter() - t
     kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
                if k["type"] == dr.KernelType.JIT) / 1000.0
     return wall, host, kern
+
+
+def one(scene, version, spp, seed, mode):
+    """:func:`timed` of one render (``api``: the whole call, which waits for its image).
+    ``mode``: ``frozen`` (the integrator's recorded render), ``traced`` (``mi.render``),
+    ``api`` (``draaw_mi.render`` as a user calls it: the frozen render plus its argument
+    handling)."""
+    integ = R.make_integrator(version, scene.settings["max_depth"])
+    if mode == "frozen":
+        return timed(lambda: R.frozen_render(integ, spp, scene)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene))
+    if mode == "api":
+        return timed(lambda: draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[]))
+    return timed(lambda: mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed))
 
 
 def floor_rows(scene, args) -> list:
@@ -87,14 +92,7 @@ def floor_rows(scene, args) -> list:
     data = {k: [] for k in calls}
     for i in range(args.repeats + 3):
         for name, call in calls.items():
-            dr.kernel_history_clear()
-            t = time.perf_counter()
-            out = call(dr.opaque(mi.UInt32, 3000 + i))
-            dr.eval(out)
-            dr.sync_thread()
-            wall = time.perf_counter() - t
-            kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
-                       if k["type"] == dr.KernelType.JIT) / 1000.0
+            wall, _, kern = timed(lambda: call(dr.opaque(mi.UInt32, 3000 + i)))
             if i >= 3:                                              # after warm-up / recording
                 data[name].append((wall, kern))
     lines = ["", f"Dr.Jit's own floor: frozen calls with no draaw-mi code in them, {args.repeats} "
@@ -170,17 +168,8 @@ def live_scene_rows(scene, args) -> list:
         data, walks = [], []
         for i in range(args.repeats + 3):
             seed = dr.opaque(mi.UInt32, 7000 + i)
-            dr.kernel_history_clear()
-            t = time.perf_counter()
-            img = call(scene.mi_scene, seed, scene)
-            dr.eval(img)
-            dr.sync_thread()
-            wall = time.perf_counter() - t
-            kern = sum(k.get("execution_time", 0.0) for k in dr.kernel_history()
-                       if k["type"] == dr.KernelType.JIT) / 1000.0
-            t = time.perf_counter()
-            dr.eval(walk(scene.mi_scene, seed))
-            walks.append(time.perf_counter() - t)
+            wall, _, kern = timed(lambda: call(scene.mi_scene, seed, scene))
+            walks.append(timed(lambda: walk(scene.mi_scene, seed))[0])
             if i >= 3:
                 data.append((wall, kern))
         wall = statistics.median(w for w, _ in data)

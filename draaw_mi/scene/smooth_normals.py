@@ -107,9 +107,9 @@ def _angle(p, q, r) -> np.ndarray:
 def _gather_within_crease(group, face_normal, weighted, cos_crease, chunk=1 << 20) -> np.ndarray:
     """For each corner ``i``: the sum of ``weighted[j]`` over the corners ``j`` of its
     ``group`` (position) whose ``face_normal`` is within the crease of its own
-    (``dot >= cos_crease``), or over all of them where its own is zero (a degenerate face). Pairs are formed group by group, in chunks of at most ``chunk``
-    pairs, so a vertex shared by thousands of faces (a fan) does not need a square matrix
-    of them all."""
+    (``dot >= cos_crease``), or over all of them where its own is zero (a degenerate face).
+    Pairs are formed group by group, in chunks of at most ``chunk`` pairs, so a vertex shared
+    by thousands of faces (a fan) does not need a square matrix of them all."""
     order = np.argsort(group, kind="stable")
     g = group[order]
     starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
