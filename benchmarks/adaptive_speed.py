@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import draaw_mi
-from draaw_mi.image_metrics import errors
+from draaw_mi.bench.metrics import errors
 from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

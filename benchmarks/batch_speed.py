@@ -33,7 +33,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-from draaw_mi.bench import load_note  # noqa: E402
+from draaw_mi.bench.study import load_note  # noqa: E402
 from draaw_mi.io import write_text  # noqa: E402
 BIN = os.path.dirname(sys.executable)
 FRAMES, RES = 24, 256
@@ -118,8 +118,8 @@ def scene_xml(mi_dict: dict, spp: int, max_depth: int, camera=None) -> str:
         if k == "type" or k == "integrator":
             continue
         block = _xml("", v, 4)
-        block[0] = block[0].replace(f' type="{v["type"]}"', f' type="{v["type"]}" id="{k}"', 1) \
-            if not block[0].lstrip().startswith("<bsdf type=\"twosided\"") else \
+        block[0] = block[0].replace(f' type="{v["type"]}"', f' type="{v["type"]}" id="{k}"', 1)\
+            if not block[0].lstrip().startswith("<bsdf type=\"twosided\"") else\
             block[0].replace('type="twosided"', f'type="twosided" id="{k}"', 1)
         lines += block
     s = _xml("", sensor, 4)
@@ -174,7 +174,7 @@ def main() -> int:
 
     import draaw_mi
     from draaw_mi.batch.manifest import parse_manifest
-    from draaw_mi.batch.plan import camera_frames
+    from draaw_mi.batch.planner import camera_frames
 
     global EXE
     EXE = _exe()

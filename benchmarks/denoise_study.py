@@ -19,7 +19,7 @@ METRICS = (("rmse", "RMSE (linear)"), ("relmse", "relMSE"), ("ciede2000", "mean 
 
 def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.join(HERE, "results", "denoise_study.md"),
          few=4, many=64):
-    from draaw_mi.bench import load_note
+    from draaw_mi.bench.study import load_note
     with open(study) as fh:
         result = json.load(fh)
     rows = result["rows"]

@@ -63,8 +63,8 @@ QUICK = {"near mirror, metal", "metallic exactly 0", "noisy reference", "exposur
 
 def render_reference(scene, sensor, spp, seed, mi, draaw_mi):
     """Mean of 256-spp passes of Mitsuba's path integrator (independent seeds)."""
-    from draaw_mi.render import make_integrator, pass_seeds
-    integrator = make_integrator("path", scene.settings["max_depth"])
+    from draaw_mi.rendering.passes import pass_seeds
+    integrator = mi.load_dict({"type": "path", "max_depth": scene.settings["max_depth"]})
     n = max(1, -(-spp // 256))
     acc = None
     for s in pass_seeds(seed, n):
@@ -74,7 +74,7 @@ def render_reference(scene, sensor, spp, seed, mi, draaw_mi):
 
 
 def run_case(case, res, args, mi, draaw_mi, index):
-    from draaw_mi.fit_views import view_sensors as _views
+    from draaw_mi.fitting.views import view_sensors as _views
     name, path, params, truth, tol, opts, _ = case
     scene = draaw_mi.load_scene(path, resolution=(res, res))
     p = scene.params

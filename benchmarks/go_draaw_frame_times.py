@@ -17,7 +17,7 @@ import platform
 
 import draaw_mi
 from draaw_mi.bench import frame_times
-from draaw_mi.camera_path import GO_DRAAW_BENCHMARK_PATH
+from draaw_mi.scene.camera_path import GO_DRAAW_BENCHMARK_PATH
 from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -19,7 +19,7 @@ import draaw_mi
 import drjit as dr
 import mitsuba as mi
 
-from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.bench import reference_scenes as rs
 from draaw_mi.integrators.features import describe, detect_features
 from draaw_mi.io import write_text
 

@@ -41,7 +41,7 @@ import draaw_mi
 import drjit as dr
 import mitsuba as mi
 
-from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.bench import reference_scenes as rs
 from draaw_mi.io import write_text
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -64,8 +64,8 @@ def load(name: str, res: int) -> tuple[mi.Scene, int, str]:
 
 
 def render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
-    """(image with every channel, seconds): draaw_mi.speed_bench.timed_render."""
-    from draaw_mi.speed_bench import timed_render
+    """(image with every channel, seconds): draaw_mi.bench.speed.timed_render."""
+    from draaw_mi.bench.speed import timed_render
     return timed_render(scene, integ, spp, seed)
 
 
@@ -116,7 +116,7 @@ def bench_scene(name: str, args) -> dict:
         r["t_ratio_path"] = statistics.median(x / p for x, p in zip(times[k], times["path"]))
         r["ratio_path"] = r["t_ratio_path"] * r["mse"] / target
     rows["draaw_v4"]["ratio_v3"] = statistics.median(
-        a / b for a, b in zip(times["draaw_v4"], times["draaw_v3"])) \
+        a / b for a, b in zip(times["draaw_v4"], times["draaw_v3"]))\
         * rows["draaw_v4"]["mse"] / rows["draaw_v3"]["mse"]
     # Verification: render each unbiased version at its predicted equal-error spp.
     for k in ("draaw_v4", "draaw_v3"):

@@ -40,7 +40,7 @@ import media_speed  # noqa: E402
 
 import draaw_mi.integrators.volume as volume  # noqa: E402
 import draaw_mi.media.majorant as majorant  # noqa: E402
-from draaw_mi.bench import with_load_note  # noqa: E402
+from draaw_mi.bench.study import with_load_note  # noqa: E402
 from draaw_mi.media import VoxelGrid  # noqa: E402
 from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 

@@ -39,7 +39,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "media"))
 import media_scenes as ms  # noqa: E402
 
-from draaw_mi.bench import with_load_note  # noqa: E402
+from draaw_mi.bench.study import with_load_note  # noqa: E402
 from draaw_mi.media import VoxelGrid  # noqa: E402
 from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 

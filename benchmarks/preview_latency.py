@@ -1,4 +1,4 @@
-"""Preview latency and 1-second refinement error of ``draaw_mi.preview.Preview``.
+"""Preview latency and 1-second refinement error of ``draaw_mi.rendering.preview.Preview``.
 
 What is measured (Cornell box at 256², the scene's V4 integrator and ``max_depth``):
 
@@ -57,9 +57,9 @@ def measure(args) -> str:
     import numpy as np
 
     import draaw_mi
-    from draaw_mi.image_metrics import relmse
+    from draaw_mi.bench.metrics import relmse
     from draaw_mi.io import read_exr, srgb_encode, write_exr
-    from draaw_mi.preview import Preview
+    from draaw_mi.rendering.preview import Preview
 
     if args.threads:
         dr.set_thread_count(args.threads)
@@ -134,7 +134,7 @@ def measure(args) -> str:
     def q90(x):
         return sorted(x)[max(0, int(round(0.9 * len(x))) - 1)]
     lines = [
-        "# Preview latency (draaw_mi.preview)", "",
+        "# Preview latency (draaw_mi.rendering.preview)", "",
         f"Command: `.venv/bin/python benchmarks/preview_latency.py "
         f"{os.environ.get('DRAAW_MI_BENCH_ARGS', ' '.join(sys.argv[1:]))}`".replace(" `", "`"),
         f"Run inside: {'a Jupyter kernel (ipykernel via nbclient)' if os.environ.get('DRAAW_MI_IN_KERNEL') else 'a plain Python process'}.",

@@ -2,7 +2,7 @@
 
 For each version, renders the Cornell box (``scenes/cornell.toml``) at ``--res``² and
 ``--spp`` spp ``--repeats`` times with new seeds (after warm-up calls), with
-frozen (``draaw_mi.render``'s ``frozen_render``), traced (``mi.render``) and whole
+frozen (the render session's recorded pass), traced (``mi.render``) and whole
 ``draaw_mi.render`` calls, interleaved.
 Per call: the time until the call returns (host: Python tracing or frozen replay), the wall
 time to the evaluated image, and the summed execution time of the kernels it launched
@@ -31,7 +31,7 @@ import drjit as dr
 import mitsuba as mi
 
 import importlib
-R = importlib.import_module("draaw_mi.render")    # the module (draaw_mi.render is the function)
+from draaw_mi.rendering.session import session_of  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -57,9 +57,10 @@ def one(scene, version, spp, seed, mode):
     ``mode``: ``frozen`` (the integrator's recorded render), ``traced`` (``mi.render``),
     ``api`` (``draaw_mi.render`` as a user calls it: the frozen render plus its argument
     handling)."""
-    integ = R.make_integrator(version, scene.settings["max_depth"])
+    session = session_of(scene)
+    integ = session.integrator(version, scene.settings["max_depth"])
     if mode == "frozen":
-        return timed(lambda: R.frozen_render(integ, spp, scene)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene))
+        return timed(lambda: session.recording(integ, spp)(scene.mi_scene, dr.opaque(mi.UInt32, seed), scene, session))
     if mode == "api":
         return timed(lambda: draaw_mi.render(scene, version=version, spp=spp, seed=seed, post=[]))
     return timed(lambda: mi.render(scene.mi_scene, integrator=integ, spp=spp, seed=seed))
@@ -81,13 +82,14 @@ def floor_rows(scene, args) -> list:
     with_scene = dr.freeze(lambda sc, seed: seed + 1, auto_opaque=False)
     mi_render = dr.freeze(lambda sc, seed: mi.render(sc, integrator=path, seed=seed, spp=args.spp),
                           auto_opaque=False)
-    ours = R.frozen_render(R.make_integrator("path", scene.settings["max_depth"]), args.spp, scene)
+    session = session_of(scene)
+    ours = session.recording(session.integrator("path", scene.settings["max_depth"]), args.spp)
     calls = {
         "frozen `seed + 1`, seed only": lambda s: seed_only(s),
         "frozen `seed + 1`, taking the scene": lambda s: with_scene(scene.mi_scene, s),
         "`dr.freeze(mi.render)`, `path`, this scene": lambda s: mi_render(scene.mi_scene, s),
         "`dr.freeze(mi.render)`, `path`, `mi.cornell_box()`": lambda s: mi_render(box_scene, s),
-        "draaw-mi's frozen `path`, this scene": lambda s: ours(scene.mi_scene, s, scene),
+        "draaw-mi's frozen `path`, this scene": lambda s: ours(scene.mi_scene, s, scene, session),
     }
     data = {k: [] for k in calls}
     for i in range(args.repeats + 3):
@@ -111,25 +113,26 @@ def step_rows(scene, args) -> list:
     ``frozen.freeze_render``'s call does before handing over to Dr.Jit), each timed right
     after the previous render's kernels (cold caches, as in a repeated render), V4 and
     ``path``, ``args.repeats`` renders each, medians in microseconds."""
-    F = importlib.import_module("draaw_mi.frozen")
+    F = importlib.import_module("draaw_mi.rendering.frozen")
     names = ("recording lookup", "live-BSDF check", "scene_scalars", "V4 freeze_state",
              "Dr.Jit frozen call (host)")
     lines = ["", "draaw-mi's own steps before a frozen replay, each timed right after the previous "
              f"render's kernels, medians of {args.repeats} renders (us):", "",
              "| version | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    session = session_of(scene)
     for version in ("v4", "path"):
-        integ = R.make_integrator(version, scene.settings["max_depth"])
+        integ = session.integrator(version, scene.settings["max_depth"])
         state_of = getattr(integ, "freeze_state", None)
         rows = []
         for i in range(args.repeats + 3):
             t = [time.perf_counter()]
-            call = R.frozen_render(integ, args.spp, scene)
+            call = session.recording(integ, args.spp)
             t.append(time.perf_counter())
-            live = F.other_live_bsdfs(scene.mi_scene, scene)
+            live = F.other_live_bsdfs(scene.mi_scene, session)
             t.append(time.perf_counter())
-            scalars = F.scene_scalars(scene.mi_scene, scene)
+            scalars = F.scene_scalars(scene.mi_scene, scene, session)
             t.append(time.perf_counter())
-            state = None if state_of is None else state_of(scene.mi_scene, F.scene_state(scene).memo)
+            state = None if state_of is None else state_of(scene.mi_scene, session.memo)
             t.append(time.perf_counter())
             with F._PAUSED:                        # as freeze_render's call does
                 img = call.frozen(scene.mi_scene, scalars, dr.opaque(mi.UInt32, 5000 + i), state, live)
@@ -151,7 +154,8 @@ def live_scene_rows(scene, args) -> list:
     takes the Cornell box and only adds 1 to the seed. Dr.Jit's replay walks every registered
     shape, emitter and sensor of the variant, and a BSDF call records every live BSDF, other
     scenes' too: what a notebook that keeps several scenes alive pays on each render."""
-    integ = R.make_integrator("v4", scene.settings["max_depth"])
+    session = session_of(scene)
+    integ = session.integrator("v4", scene.settings["max_depth"])
     lines = ["", "A frozen V4 render of this scene while other scenes (`scenes/material_spheres.toml`, "
              f"{args.res}x{args.res}) are loaded in the process, {args.repeats} renders each after "
              "3 warm-up renders, medians; *walk* = a frozen function that takes this scene and only "
@@ -164,11 +168,11 @@ def live_scene_rows(scene, args) -> list:
             others.append(draaw_mi.load_scene(os.path.join(ROOT, "scenes", "material_spheres.toml"),
                                               resolution=(args.res, args.res)))
         walk = dr.freeze(lambda sc, seed: seed + 1, auto_opaque=False)
-        call = R.frozen_render(integ, args.spp, scene)
+        call = session.recording(integ, args.spp)
         data, walks = [], []
         for i in range(args.repeats + 3):
             seed = dr.opaque(mi.UInt32, 7000 + i)
-            wall, _, kern = timed(lambda: call(scene.mi_scene, seed, scene))
+            wall, _, kern = timed(lambda: call(scene.mi_scene, seed, scene, session))
             walks.append(timed(lambda: walk(scene.mi_scene, seed))[0])
             if i >= 3:
                 data.append((wall, kern))
@@ -212,7 +216,7 @@ def main(argv=None) -> int:
            f"threads {dr.thread_count()}; {time.strftime('%Y-%m-%d %H:%M')}  ",
            f"`draaw_mi.render(scenes/cornell.toml, {args.res}x{args.res}, spp={args.spp}, new seed "
            f"each call)`: the integrator render call as `draaw_mi.render` makes it for such small "
-           f"renders (frozen: `frozen_render`, seed `dr.opaque`; traced: `mi.render`), medians of "
+           f"renders (frozen: the session's recording, seed `dr.opaque`; traced: `mi.render`), medians of "
            f"{args.repeats} interleaved calls after warm-up (the order of the three modes rotated). *host* = time until the call returns "
            "(Python tracing, or the frozen replay's dispatch; kernels run asynchronously), "
            "*outside* = wall - summed kernel execution time (`dr.kernel_history`; includes "

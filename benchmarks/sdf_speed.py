@@ -24,9 +24,9 @@ sys.path.insert(0, ROOT)
 
 import draaw_mi  # noqa: E402
 import drjit as dr  # noqa: E402
-from draaw_mi.bench import with_load_note  # noqa: E402
+from draaw_mi.bench.study import with_load_note  # noqa: E402
 from draaw_mi.io import atomic_path  # noqa: E402
-from draaw_mi.sdf.study import camera_march  # noqa: E402
+from draaw_mi.bench.sdf_study import camera_march  # noqa: E402
 
 
 def twin(res=128):

@@ -1,6 +1,6 @@
 """Speed suite: time to reach ``path``'s 64-spp error on ten kinds of scene.
 
-The measurement lives in :mod:`draaw_mi.speed_bench` (also ``draaw-mi bench --suite speed``);
+The measurement lives in :mod:`draaw_mi.bench.speed` (also ``draaw-mi bench --suite speed``);
 see its docstring for the method. Usage::
 
     .venv/bin/python benchmarks/speed_suite.py                      # 128 and 256, all scenes
@@ -11,7 +11,7 @@ The report goes to ``benchmarks/results/speed_suite_latest.md`` unless ``--out``
 """
 import sys
 
-from draaw_mi.speed_bench import main
+from draaw_mi.bench.speed import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -17,7 +17,7 @@ the baseline keeps its own.
 Prints, per integrator spec (the first is the baseline): median time, mean per-pixel variance
 (and from each half of the renders, to show its spread), image mean, and
 ``t*var/path`` = time ratio x variance ratio (below 1: faster than the baseline to equal error).
-Environment: ``MINF``, ``CAP``, ``CF`` override ``draaw_mi.adaptive_sampling``'s MIN_FRACTION,
+Environment: ``MINF``, ``CAP``, ``CF`` override ``draaw_mi.integrators.adaptive_sampling``'s MIN_FRACTION,
 SCORE_CAP and COST_FIXED (for tuning runs).
 """
 import os
@@ -29,9 +29,9 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-import draaw_mi.adaptive_sampling as ads
-from draaw_mi import speed_suite as ss
-from draaw_mi.speed_bench import parse_integrator
+import draaw_mi.integrators.adaptive_sampling as ads
+from draaw_mi.bench import suite as ss
+from draaw_mi.bench.speed import parse_integrator
 
 
 def main(argv) -> int:

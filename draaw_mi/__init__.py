@@ -5,7 +5,16 @@ Importing the package
 1. checks, before Dr.Jit can abort the process, that a libLLVM >= 16 is available (LLVM
    variants only) and raises :class:`DraawError` with a one-line fix otherwise;
 2. selects the Mitsuba variant (``DRAAW_MI_VARIANT``, default ``llvm_ad_rgb``);
-3. registers the plugins (BSDF ``draaw``, integrators ``draaw_v1`` .. ``draaw_v4``), idempotently.
+3. registers the plugins (BSDF ``draaw``, integrators ``draaw_v1`` .. ``draaw_v4``), idempotently;
+4. serves the module paths of the flat layout of earlier releases (``draaw_mi.preview``,
+   ``draaw_mi.fit_result``, ...: :data:`MOVED`) as their new modules, with a
+   ``DeprecationWarning``.
+
+The package is a stack of wings, each importing only the ones below it: ``cli``, ``bench``,
+``batch``, ``widgets``, ``fitting``, ``rendering``, ``scene``, ``integrators``, ``media`` /
+``post``, ``sdf`` / ``materials``, and the ground floor (``io``, ``progress``, ``plotting``,
+``guard``, ``limits``, ``errors``). Heavy or optional wings (``batch``, ``bench``, ``cli``,
+``media``, ``sdf``, ``widgets``) are imported when first named.
 
 Example::
 
@@ -16,8 +25,11 @@ Example::
 """
 from __future__ import annotations
 
+import importlib as _importlib
 import os as _os
+import sys as _sys
 
+from ._llvm import check_llvm
 from .errors import DraawError, IOFailure, ParameterError, RenderError, SceneError
 
 __version__ = "0.1.0"
@@ -30,11 +42,10 @@ def _select_variant(variant: str) -> None:
         raise DraawError(f"DRAAW_MI_VARIANT={variant!r} is not supported: draaw-mi needs a JIT "
                          "variant such as 'llvm_ad_rgb' (CPU) or 'cuda_ad_rgb' (GPU)")
     if variant.startswith("llvm"):
-        from ._llvm import check_llvm
         problem = check_llvm()
         if problem:
             raise DraawError(problem)
-    import mitsuba as mi
+    import mitsuba as mi  # only now: with libLLVM < 16, importing Dr.Jit aborts the process
     if variant not in mi.variants():
         raise DraawError(f"DRAAW_MI_VARIANT={variant!r} is not a Mitsuba variant; available: "
                          + ", ".join(mi.variants()))
@@ -44,8 +55,8 @@ def _select_variant(variant: str) -> None:
 
 _select_variant(VARIANT)
 
-from . import materials as _materials  # noqa: E402  (needs the variant)
 from . import integrators as _integrators  # noqa: E402
+from . import materials as _materials  # noqa: E402  (needs the variant)
 
 
 def register_plugins() -> None:
@@ -56,12 +67,11 @@ def register_plugins() -> None:
 
 register_plugins()
 
-from .io import read_exr, write_exr, write_png  # noqa: E402
-from .render import render  # noqa: E402
-from .scene import load_scene  # noqa: E402
-from .fit import FitResult, fit  # noqa: E402
 from . import post  # noqa: E402
-from .denoise import denoise  # noqa: E402  (pyoidn is imported only when called)
+from .fitting import FitResult, fit  # noqa: E402
+from .io import read_exr, write_exr, write_png  # noqa: E402
+from .rendering import denoise, render  # noqa: E402  (denoise imports pyoidn when called)
+from .scene import load_scene  # noqa: E402
 
 __all__ = [
     "DraawError", "SceneError", "ParameterError", "RenderError", "IOFailure", "VARIANT",
@@ -72,7 +82,37 @@ __all__ = [
 # Subpackages that ``import draaw_mi`` does not load (each costs import time or pulls optional
 # dependencies), reachable as attributes all the same: ``draaw_mi.sdf.smooth_union(...)``,
 # ``draaw_mi.batch.run(...)`` work after a plain ``import draaw_mi``, as the README writes them.
-from ._lazy import on_first_use as _on_first_use  # noqa: E402
+from ._lazy import MovedModules as _MovedModules  # noqa: E402
+from ._lazy import on_first_use as _on_first_use
 
-__getattr__ = _on_first_use(__name__, ("batch", "bench", "camera_path", "media", "orbit_canvas", "preview",
-                                       "sdf", "tuning", "widgets"))
+_LAZY = ("batch", "bench", "cli", "media", "sdf", "widgets")
+
+# Module paths of the flat layout, served as the modules' new homes with a DeprecationWarning
+# until the next release. (Not draaw_mi.render, .fit, .denoise: those names are the functions.)
+MOVED = {
+    **{f"draaw_mi.{old}": f"draaw_mi.rendering.{new}" for old, new in (
+        ("preview", "preview"), ("preview_worker", "preview_worker"), ("passes", "passes"),
+        ("frozen", "frozen"), ("film_colour", "film_colour"), ("adaptive", "subsample"))},
+    **{f"draaw_mi.fit_{name}": f"draaw_mi.fitting.{name}" for name in ("params", "reference", "result", "views")},
+    **{f"draaw_mi.{old}": f"draaw_mi.widgets.{new}" for old, new in (
+        ("tuning", "tuning"), ("orbit_canvas", "orbit_canvas"), ("tuner_camera", "camera_panel"),
+        ("tuner_lights", "lights_panel"), ("tuner_post", "post_panel"), ("tuner_document", "save_panel"))},
+    **{f"draaw_mi.{old}": f"draaw_mi.bench.{new}" for old, new in (
+        ("bench_bias", "bias"), ("bench_report", "report"), ("speed_bench", "speed"), ("speed_suite", "suite"),
+        ("image_metrics", "metrics"), ("code_digest", "code_digest"))},
+    "draaw_mi.cli_bench": "draaw_mi.cli.bench", "draaw_mi.cli_common": "draaw_mi.cli.common",
+    "draaw_mi.camera_path": "draaw_mi.scene.camera_path",
+    "draaw_mi.adaptive_sampling": "draaw_mi.integrators.adaptive_sampling",
+    "draaw_mi.integrators.reference_scenes": "draaw_mi.bench.reference_scenes",
+    "draaw_mi.sdf.study": "draaw_mi.bench.sdf_study",
+    "draaw_mi.sdf.go_draaw": "draaw_mi.scene.go_draaw_spheres",
+    "draaw_mi.media.scene_volumes": "draaw_mi.scene.volume_dicts",
+}
+if not any(isinstance(hook, _MovedModules) for hook in _sys.meta_path):
+    _sys.meta_path.insert(0, _MovedModules(MOVED))     # ahead of stale files of the old layout
+
+
+def __getattr__(name: str):
+    if f"{__name__}.{name}" in MOVED:        # draaw_mi.preview without importing it first
+        return _importlib.import_module(f"{__name__}.{name}")
+    return _on_first_use(__name__, _LAZY)(name)

@@ -1,27 +1,22 @@
 """One render at a time in this process: :data:`RENDER_GUARD`.
 
-Dr.Jit 1.5's ``dr.freeze`` recording breaks when another thread renders, synchronises or
-creates plugins while it records or replays: measured, two threads rendering two scenes
-(each with its own integrator; Mitsuba's own ``path`` too) failed with
-'jit_var_schedule(): not permitted' and 'record(): error encountered while recording', and
-with draaw-mi's frozen renders the process aborted (LLVM IR that did not parse, 'jit_var(r223):
-unknown variable!') or crashed on a ``dr.sync_thread()``; a scene loaded meanwhile made a
-replay fail ('number of registry entries (10) did not match ... (8)') and the preview fell
-back to tracing for good. That is a preview's worker beside a render(), fit, batch or
-``load_scene`` in the same notebook, or the user's own threads calling render().
+A ``dr.freeze`` recording in Dr.Jit 1.5 breaks when another thread renders, synchronises,
+creates plugins or updates parameters while it records or replays: the recording fails
+('jit_var_schedule(): not permitted', 'record(): error encountered while recording'), a
+replay reads another scene's values, or the process aborts. In a notebook that is a
+preview's worker beside a render, fit, batch or scene load of the main thread.
 
-Parameter updates count too: a batch's ``params.update()`` (its frame's camera) made while
-the preview replayed its recording of another scene rendered 4 of 8 frames wrong (pixels off
-by up to 1.6), seen in ``tests/test_render_threads.py``.
+So every render of draaw-mi runs under :data:`RENDER_GUARD`: each pass of a render session
+(:mod:`draaw_mi.rendering.session`, with its evaluation and sync), each preview frame and
+parameter update, each fit iteration (renders, gradient passes, the optimiser's update), each
+batch frame, each scene load and plugin made, and every primal ``mi.render`` with a draaw
+integrator (:meth:`DraawIntegrator.render <draaw_mi.integrators.common.DraawIntegrator.render>`).
+Kernels use every core already, so taking turns costs little. The guard is re-entrant (a
+guarded block may render again). A session's lock comes before it, never after.
 
-So draaw-mi holds :data:`RENDER_GUARD` around each render pass (with its evaluation and
-sync), each preview frame and parameter update, each fit iteration (renders, gradient
-passes, the optimiser's update), each batch frame and each scene load. Kernels use every
-core already, so taking turns costs little. One integrator instance per setting serves every
-thread for the same reason (:func:`draaw_mi.render.make_integrator`). It is re-entrant (a
-guarded block may render again: the batch's fallback to :func:`draaw_mi.render`). Take a scene's own lock (``draaw_mi.frozen._SceneState.lock``)
-before it, never after. Your own Dr.Jit work in another thread (a ``dr.backward`` of a
-differentiable render, ``mi.render``) is not guarded: hold it there too while a preview runs::
+Mitsuba's own integrators called directly (``mi.render`` with ``path``) and your own Dr.Jit
+work beside a running preview (a ``dr.backward`` of a differentiable render) are not
+guarded by draaw-mi: hold the guard around them::
 
     from draaw_mi.guard import RENDER_GUARD
     with RENDER_GUARD:
@@ -29,12 +24,14 @@ differentiable render, ``mi.render``) is not guarded: hold it there too while a 
 
 Take it around such calls, never inside a Dr.Jit callback (an integrator's
 ``render_backward``, a ``dr.CustomOp``): Dr.Jit holds its AD lock there, which a preview's
-frozen call waits for while it holds the guard -- tried, the two threads deadlocked.
+frozen call waits for while it holds the guard, and the two threads would deadlock.
 """
 from __future__ import annotations
 
 import contextlib
 import threading
+
+import drjit as dr
 
 #: see the module docstring
 RENDER_GUARD = threading.RLock()
@@ -61,7 +58,6 @@ def exr_reading_threads():
     >>> dr.thread_count(); dr.set_thread_count(n)
     1
     """
-    import drjit as dr
     if dr.thread_count() >= EXR_READ_THREADS:
         yield
         return

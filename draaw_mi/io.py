@@ -21,7 +21,9 @@ import stat
 import tempfile
 from typing import Sequence
 
+import mitsuba as mi
 import numpy as np
+import OpenEXR
 
 from .errors import IOFailure
 
@@ -143,8 +145,6 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     EXR attribute holds a 32-bit int or float: an int outside int32 is stored as its decimal
     string (a seed of 3000000000 was read back as -1294967296), a float is rounded to float32.
     """
-    import OpenEXR
-
     if os.fspath(path).lower().endswith(OTHER_IMAGE_SUFFIXES):
         raise IOFailure(f"write_exr({path!r}): the name says another image format; expected a "
                         "'.exr' name (write_png writes PNGs)")
@@ -183,8 +183,6 @@ def read_exr(path: str, with_names: bool = False):
     name. With
     ``with_names=True`` returns ``(array, names)``.
     """
-    import OpenEXR
-
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise IOFailure(f"read_exr: {path!r} does not exist")
@@ -221,7 +219,6 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 def xyz_to_srgb_matrix() -> np.ndarray:
     """Mitsuba's XYZ -> linear sRGB matrix (3 x 3, applied as ``M @ xyz``)."""
-    import mitsuba as mi
     return np.array([np.array(mi.xyz_to_srgb(mi.Color3f(*map(float, e)))).ravel() for e in np.eye(3)]).T
 
 

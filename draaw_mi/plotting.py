@@ -14,6 +14,8 @@ True
 """
 from __future__ import annotations
 
+from .io import atomic_path
+
 
 def subplots(nrows: int = 1, ncols: int = 1, figsize=(6.4, 4.8), **kwargs):
     """``(figure, axes)`` as :func:`matplotlib.pyplot.subplots` returns them, without pyplot."""
@@ -24,6 +26,5 @@ def subplots(nrows: int = 1, ncols: int = 1, figsize=(6.4, 4.8), **kwargs):
 
 def save(fig, path: str, dpi: int = 100) -> None:
     """Write ``fig`` to ``path`` as PNG, atomically (:func:`draaw_mi.io.atomic_path`)."""
-    from .io import atomic_path
     with atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")

@@ -32,7 +32,7 @@ import matplotlib.pyplot as plt
 import ipywidgets as widgets
 
 from draaw_mi import bench
-from draaw_mi.denoise import available as denoiser_available
+from draaw_mi.rendering.denoiser import available as denoiser_available
 
 SMALL = os.environ.get("DRAAW_MI_NOTEBOOK_SMALL") == "1"
 ROOT = os.path.abspath(os.path.join(os.getcwd(), "..")) if os.path.basename(os.getcwd()) == "notebooks" else os.getcwd()

@@ -70,7 +70,7 @@ print(f"change -> new frame: median {np.median(latencies) * 1e3:.0f} ms over {le
 
 The denoiser (`draaw_mi.denoise`, Intel Open Image Denoise on the CPU, guided by the albedo and
 normal AOVs) is biased but removes most of the noise of a low sample count."""),
-    ("code", """from draaw_mi.denoise import available as denoiser_available
+    ("code", """from draaw_mi.rendering.denoiser import available as denoiser_available
 
 raw = np.array(draaw_mi.render(tuner.scene, spp=4, seed=3))
 images = [("4 spp", raw)]

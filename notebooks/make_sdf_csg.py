@@ -34,7 +34,7 @@ import mitsuba as mi
 import draaw_mi
 from draaw_mi.sdf import RoundBox, Sphere, smooth_subtraction, smooth_union
 from draaw_mi.sdf.export import to_entries
-from draaw_mi.sdf.study import camera_march
+from draaw_mi.bench.sdf_study import camera_march
 
 SMALL = os.environ.get("DRAAW_MI_NOTEBOOK_SMALL") == "1"
 RES = (48, 36) if SMALL else (320, 240)

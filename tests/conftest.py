@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -10,6 +11,12 @@ import draaw_mi  # noqa: F401  (sets the variant, registers plugins)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "scenes")
+# The helper modules of the test folders (integrators_helpers, sdf_helpers, media_scenes, ...)
+# import by name from any test, whichever folder it is in
+for _folder in ("batch", "integrators", "materials", "media", "post", "sdf", "stability"):
+    _path = os.path.join(ROOT, "tests", _folder)
+    if _path not in sys.path:
+        sys.path.append(_path)
 GO_DRAAW = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
 
 

@@ -16,7 +16,7 @@ MODULES = sorted(m.name for m in pkgutil.walk_packages(draaw_mi.__path__, "draaw
 
 
 def test_the_walk_finds_the_package():
-    assert len(MODULES) > 50 and "draaw_mi.batch.plan" in MODULES and "draaw_mi.media.mitsuba_dicts" in MODULES
+    assert len(MODULES) > 50 and "draaw_mi.batch.planner" in MODULES and "draaw_mi.media.mitsuba_dicts" in MODULES
 
 
 @pytest.mark.parametrize("name", MODULES)

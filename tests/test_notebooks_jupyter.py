@@ -32,7 +32,7 @@ def test_notebook_is_generated_and_has_no_outputs(name):
         if cell.cell_type == "code":
             assert cell.outputs == [] and cell.execution_count is None, "commit notebooks without outputs"
     fresh = notebook_generator(CASES[name][0]).build()
-    assert [(c.cell_type, c.source) for c in nb.cells] == [(c.cell_type, c.source) for c in fresh.cells], \
+    assert [(c.cell_type, c.source) for c in nb.cells] == [(c.cell_type, c.source) for c in fresh.cells],\
         f"{name}.ipynb is out of date: run python notebooks/{CASES[name][0]}"
 
 

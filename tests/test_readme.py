@@ -42,7 +42,7 @@ def _envmap_gradient(readme_lines: bool):
     import drjit as dr
     import mitsuba as mi
     import draaw_mi  # noqa: F401  (variant)
-    from draaw_mi.integrators.reference_scenes import feature_scene
+    from draaw_mi.bench.reference_scenes import feature_scene
     scene = mi.load_dict(feature_scene(8, 4, integrator={"type": "draaw_v4", "max_depth": 3},
                                        area=False, envmap=True))
     params = mi.traverse(scene)

@@ -52,12 +52,13 @@ def test_cli_reports_environment_problems_in_one_line():
 
 
 def test_subpackages_are_attributes_after_a_plain_import():
-    """``import draaw_mi`` loads neither the batch, SDF nor media code, yet the README's
-    ``draaw_mi.sdf.export.to_entries(...)`` and ``draaw_mi.batch.run(...)`` work after it (they
-    raised AttributeError); a misspelt name is still an AttributeError. In a fresh interpreter."""
+    """``import draaw_mi`` loads none of the batch, bench, CLI and widget code (the scene loader
+    needs sdf/ and media/ to read its tables), yet the README's
+    ``draaw_mi.sdf.export.to_entries(...)`` and ``draaw_mi.batch.run(...)`` work after it; a
+    misspelt name is still an AttributeError. In a fresh interpreter."""
     code = (
         "import sys, draaw_mi\n"
-        "assert not {'draaw_mi.batch', 'draaw_mi.sdf', 'draaw_mi.media'} & set(sys.modules)\n"
+        "assert not {'draaw_mi.batch', 'draaw_mi.bench', 'draaw_mi.cli', 'draaw_mi.widgets'} & set(sys.modules)\n"
         "assert callable(draaw_mi.sdf.export.to_entries) and callable(draaw_mi.sdf.smooth_union)\n"
         "assert callable(draaw_mi.batch.run) and draaw_mi.media.VoxelGrid.__name__ == 'VoxelGrid'\n"
         "for bad in ('draaw_mi.sdf.exprot', 'draaw_mi.batches'):\n"

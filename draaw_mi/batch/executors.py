@@ -16,15 +16,17 @@ from __future__ import annotations
 import os
 import uuid
 
+import drjit as dr
+
+from ..errors import DraawError
+from .frame import safe_render_frame
+from .worker import dask_render_frame
+
 EXECUTORS = ("inprocess", "dask")
 
 
 def run_inprocess(specs, cache, on_result, track_kernels: bool = True) -> None:
     """Render ``specs`` one after another in this process."""
-    import drjit as dr
-
-    from .frame import safe_render_frame
-
     old = dr.flag(dr.JitFlag.KernelHistory)
     if track_kernels:
         dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -45,14 +47,12 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
 
         from distributed import Client, LocalCluster
     except ImportError:
-        from ..errors import DraawError
         raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]' "
                          "(or pip install 'dask[distributed]')") from None
     if scheduler:
         try:
             client = Client(scheduler, timeout="20s")
         except OSError as e:
-            from ..errors import DraawError
             raise DraawError(f"--scheduler {scheduler!r}: cannot connect ({e})") from None
         return client, None, None
     cores = os.cpu_count() or 1
@@ -69,8 +69,6 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
              client=None, retries: int = 3) -> None:
     """Render ``specs`` as Dask tasks; results arrive in completion order."""
     from distributed import as_completed
-
-    from .worker import dask_render_frame
 
     own = client is None
     cluster, threads = None, getattr(client, "draaw_drjit_threads", None)

@@ -34,9 +34,13 @@ import struct
 import time
 
 import numpy as np
+import OpenEXR
 
 from ..errors import IOFailure
 from ..integrators import resolve_version
+from ..io import read_exr, write_exr, write_png
+from ..post import load_chain
+from .digests import file_hash, versions
 
 HASH_ATTR = "draaw:frame_hash"
 MANIFEST_ATTR = "draaw:manifest"       # the absolute path of the manifest file that made a frame
@@ -71,7 +75,6 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     the post chain applied (``post``: a chain or a list of filter dicts; none: no attribute) and
     the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
     return_info=True)`` returned."""
-    from .plan import file_hash, versions
     meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["version"],
             "draaw:integrator": info["integrator"],
             "draaw:spp": int(info["spp"]), "draaw:seed": int(scene.settings["seed"]),
@@ -82,7 +85,6 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
         meta["draaw:scene_sha256"] = file_hash(scene_file)
     meta["draaw:sampler"] = str(scene.settings.get("sampler") or "independent")
     if post:
-        from ..post import load_chain
         meta["draaw:post"] = json.dumps(load_chain(post).to_list())
     meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})
     return meta
@@ -91,7 +93,6 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
 def write_frame(path: str, image: np.ndarray, channels, meta: dict, half: bool = False) -> None:
     """Write an (H, W, C) frame with named channels and header attributes, atomically
     (:func:`draaw_mi.io.write_exr` with ``metadata``)."""
-    from ..io import write_exr
 
     if image.ndim != 3 or image.shape[2] != len(channels):
         raise IOFailure(f"write_frame({path!r}): {len(channels)} channel names for an image of shape "
@@ -101,8 +102,6 @@ def write_frame(path: str, image: np.ndarray, channels, meta: dict, half: bool =
 
 def read_header(path: str) -> dict | None:
     """The header of an EXR, or None when the file is missing or not a readable EXR."""
-    import OpenEXR
-
     if not os.path.isfile(path):
         return None
     try:
@@ -206,7 +205,6 @@ def _scanline_layout(head: bytes):
 
 
 def _reads_in_full(path: str) -> bool:
-    import OpenEXR
     try:
         with OpenEXR.File(path) as f:
             for channel in f.channels().values():
@@ -247,7 +245,6 @@ def write_preview(spec: dict, image: np.ndarray | None = None, channels=None) ->
     """Write the frame's sRGB PNG preview, tagged with its hash; ``image`` and its
     ``channels``: the rendered frame, or ``None`` to take both from the finished EXR. The
     colour is taken by name (a luminance frame's preview took Y and two AOVs as R, G, B)."""
-    from ..io import read_exr, write_png
 
     if image is None:
         image, channels = read_exr(spec["output"], with_names=True)

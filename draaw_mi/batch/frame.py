@@ -13,21 +13,26 @@ import re
 import threading
 import time
 
+import drjit as dr
 import numpy as np
 
 from ..errors import DraawError, RenderError
-from .exr import metadata, write_frame, write_preview
-from ..scene import value_like
+from ..guard import RENDER_GUARD
+from ..rendering.film_colour import check_film_colour, scene_colour_names
+from ..rendering.renderer import MAX_PASS_SPP, render
+from ..rendering.session import apply_post, non_finite_count, session_of
+from ..scene import load_scene, value_like
 from ..scene.camera import look_at_transform, scene_fov, sensor_keys, x_fov
+from .digests import file_hash, files_hash
+from .exr import metadata, write_frame, write_preview
 
 
 class CachedScene:
     """A loaded scene, its file hash, the hash of the files it reads (textures, meshes, ...:
-    :func:`~draaw_mi.batch.plan.files_hash`) and the original values of everything frames
+    :func:`~draaw_mi.batch.planner.files_hash`) and the original values of everything frames
     override."""
 
     def __init__(self, scene, digest: str):
-        from .plan import files_hash
         self.scene, self.hash = scene, digest
         self.files_hash = files_hash(scene.info.get("files"))
         params = scene.params
@@ -41,57 +46,37 @@ class CachedScene:
             self.originals[self.camera_key] = _snapshot(params[self.camera_key])
         if self.fov_key:
             self.originals[self.fov_key] = _snapshot(params[self.fov_key])
-        self.lock = threading.Lock()
-        self.frozen: dict = {}
         self.prepared: set = set()
         self.params_moved = False        # the last apply() left an override in the scene
 
     def render(self, spec: dict):
-        """Render the frame: with a frozen function (``dr.freeze``) when the samples fit in one
-        pass, so frames after the first replay the recorded kernels instead of re-tracing the
-        integrator (the trace costs more than the kernel at low spp); otherwise through
-        :func:`draaw_mi.render`. Same bits either way: the frozen call is render()'s one-pass
-        render (the image as ``mi.render`` returns it) with its seed. Returns ``(image, info)``,
-        ``info`` with render()'s ``channels``, ``non_finite`` and ``post``."""
-        import drjit as dr
-        import mitsuba as mi
-
-        from ..film_colour import check_film_colour, scene_colour_names
-        from ..render import (MAX_PASS_SPP, _apply_post, freeze_render, freeze_supported, make_integrator,
-                              non_finite_count, render, sample_passes)
-
+        """Render the frame: one pass through the scene's render session, replayed from a
+        ``dr.freeze`` recording from the second frame on, when the samples fit in one pass (the
+        trace costs more than the kernel at low spp); otherwise through
+        :func:`draaw_mi.render`. Same bits either way: the pass is render()'s one-pass render
+        with its seed. Returns ``(image, info)``, ``info`` with render()'s ``channels``,
+        ``non_finite`` and ``post``."""
         s = self.scene.settings
         spp = spec["spp"]
-        integrator = make_integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
-                                     spec["aovs"])               # the one render() uses too
+        session = session_of(self.scene)
+        integrator = session.integrator(spec["version"], spec["max_depth"], s.get("hide_emitters", False),
+                                        spec["aovs"])               # the one render() uses too
         self._prepare(integrator, spec)
-        if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not freeze_supported(self.scene.mi_scene)
-                or sample_passes(self.scene.mi_scene, spp, MAX_PASS_SPP) != [spp]):
-            image, info = render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
-                                 max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
-                                 return_info=True)
-            return image, info
-        # as render() names and checks the film's colour (an xyz film's frames were named
-        # R, G, B, an rgba film's failed after rendering, a post chain read X, Y, Z as R, G, B)
+        if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not session.freezes(spp, True)
+                or session.sample_passes(spp, MAX_PASS_SPP) != [spp]):
+            return render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
+                          max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"], return_info=True)
+        # the film's colour checked and named as render() does it
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:
             check_film_colour(self.scene, "a post chain")
         colour = scene_colour_names(self.scene)
-        key = (id(integrator), spp)
-        fn = self.frozen.get(key)
-        if fn is None:
-            def fn(scene, seed, integrator=integrator, spp=spp):
-                return mi.render(scene, integrator=integrator, seed=seed, spp=spp)  # as render()
-            fn = self.frozen[key] = freeze_render(integrator, fn)
-        image = fn(self.scene.mi_scene, mi.UInt32(spec["seed"]), self.scene)   # (render_frame
-        dr.eval(image)                                                          # holds the guard)
-        dr.sync_thread()
+        image = session.render_pass(integrator, spp, spec["seed"], freeze=True)
         bad = 0
-        if chain:                             # (counted before it: it reads NaN/inf as 0)
+        if chain:                             # counted before the chain: it reads NaN/inf as 0
             bad = non_finite_count(image)
-            image = _apply_post(image, chain)
-        return image, {"channels": colour + list(integrator.aov_names()), "non_finite": bad,
-                       "post": chain}
+            image = apply_post(image, chain)
+        return image, {"channels": colour + list(integrator.aov_names()), "non_finite": bad, "post": chain}
 
     def _prepare(self, integrator, spec: dict) -> None:
         """Let ``integrator`` learn what it learns from the scene (V4's light pilot) with the
@@ -105,8 +90,7 @@ class CachedScene:
             params[key] = original
         params.update()
         if self.params_moved:                      # the lights as loaded, not as last moved
-            from ..render import scene_changed
-            scene_changed(self.scene.mi_scene)
+            session_of(self.scene).scene_changed()
             self.params_moved = False
         prepare(self.scene.mi_scene)
         self.prepared.add(id(integrator))
@@ -134,8 +118,7 @@ class CachedScene:
         # that dimmed a light kept V4's power table of that light's last value (frames up to
         # 1.4 off the same job rendered alone)
         if spec["params"] or self.params_moved:
-            from ..render import scene_changed
-            scene_changed(self.scene.mi_scene)       # e.g. V4's light powers
+            session_of(self.scene).scene_changed()       # e.g. V4's light powers
         self.params_moved = bool(spec["params"])
 
 
@@ -152,7 +135,6 @@ _ANY = object()          # SceneCache.get: any hash of the scene's files will do
 
 class SceneCache:
     """Scenes loaded once per process, keyed by (file, resolution); reloaded if the file changes."""
-
     def __init__(self):
         self._scenes: dict = {}
         self._guard = threading.Lock()
@@ -161,14 +143,12 @@ class SceneCache:
         """The scene of ``path`` at ``resolution``; ``digest`` / ``files``: the hashes of the
         scene file and of the files it reads that the caller planned with (a cached scene
         whose files changed since it was loaded is loaded again: a long-lived Dask worker)."""
-        from .. import load_scene
-        from .plan import file_hash
 
         where = os.path.abspath(path)
         key = (where, tuple(resolution) if resolution else None)
         with self._guard:
             entry = self._scenes.get(key)
-            if entry is not None and (digest is None or entry.hash == digest) \
+            if entry is not None and (digest is None or entry.hash == digest)\
                     and (files is _ANY or entry.files_hash == files):
                 return entry
             current = file_hash(path)
@@ -194,17 +174,14 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     Raises :class:`~draaw_mi.errors.DraawError` (bad override value, non-finite pixels, I/O)
     for a frame that cannot be finished; the file is then not written.
     """
-    import drjit as dr
-
     t0 = time.perf_counter()
     entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"], spec.get("files_hash"))
     if entry.files_hash != spec.get("files_hash"):
         raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
                           "the batch was planned; re-run the batch")
-    from ..guard import RENDER_GUARD
-    # (render() below takes the scene's lock inside the guard, the other order than
-    # draaw_mi.guard asks: safe, no other thread renders the batch's own scene)
-    with entry.lock, RENDER_GUARD:      # the frame's parameter updates too (draaw_mi.guard)
+    # the scene's lock before the guard (draaw_mi.guard); the guard covers the frame's
+    # parameter updates too
+    with session_of(entry.scene).lock, RENDER_GUARD:
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history

@@ -28,7 +28,7 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     params = { "r0m0.roughness" = { from = 0.05, to = 0.95 } }
 
 Camera tables (one of): ``orbit``; ``keyframes`` (GO-Draaw ``[x, y, z, theta, phi]`` rows,
-interpolated as in :mod:`draaw_mi.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
+interpolated as in :mod:`draaw_mi.scene.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
 ``file`` (a GO-Draaw ``camera_positions.json``); ``look_at`` (a list of
 ``{origin, target, up}`` keyframes, eased like the GO-Draaw path; ``mirror = true`` in every
 keyframe for a mirrored view, as a scene's ``[camera]``). ``fov`` sets the field of
@@ -46,8 +46,11 @@ import os
 import string as _string
 from dataclasses import dataclass, field
 
-from ..errors import SceneError
+from ..errors import SceneError, suggest
+from ..integrators import resolve_version
+from ..post import load_chain
 from ..scene.camera import check_look_at
+from ..scene.camera_path import as_keyframes
 from ..scene.schema import Where, boolean, check_keys, number, read_document, resolution, string, vector
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
@@ -64,7 +67,6 @@ EXPANDING = ("scene", "version", "spp")
 @dataclass
 class Job:
     """One validated job: a scene rendered over ``frames`` frames with fixed settings."""
-
     name: str
     scene: str                    # absolute path
     frames: int
@@ -86,7 +88,6 @@ class Job:
 @dataclass
 class Manifest:
     """A validated manifest: its jobs plus batch-wide options."""
-
     path: str
     jobs: list
     contact_sheet: bool = False
@@ -177,7 +178,6 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
         raise (where / "scene").error(f"scene file {scene!r} does not exist")
     job = Job(name=name, scene=scene, frames=1, output="")
     if jd.get("version") is not None:
-        from ..integrators import resolve_version
         job.version = string(jd["version"], where / "version")
         try:
             resolve_version(job.version)
@@ -211,7 +211,6 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
 
 def _check_post(chain, where: Where) -> list:
     """Validate a post chain as ``draaw-mi render --post`` does; keep its canonical list form."""
-    from ..post import load_chain
     if not isinstance(chain, list):
         raise where.error(f"{chain!r} is not a list of filter tables")
     try:
@@ -276,7 +275,6 @@ def _camera(cam, where: Where, base: str) -> dict:
                 raise (where / "file").error(f"{path!r} is not JSON ({e.msg} at line {e.lineno})") from None
         else:
             keys = cam["keyframes"]
-        from ..camera_path import as_keyframes
         try:
             out["keyframes"] = as_keyframes(keys if isinstance(keys, list) else [keys]).tolist()
         except Exception as e:  # noqa: BLE001 - ParameterError with the keyframe index
@@ -346,7 +344,6 @@ def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
     for f in fields:
         base_name = f.split(".")[0].split("[")[0]
         if base_name not in PATTERN_FIELDS:
-            from ..errors import suggest
             raise where.error(f"{pattern!r} uses unknown field {{{f}}}{suggest(base_name, PATTERN_FIELDS)}")
         if f != base_name:      # {job.upper} gave a folder named after a method's address
             raise where.error(f"{pattern!r}: field {{{f}}} must be a bare name ({{{base_name}}}, "

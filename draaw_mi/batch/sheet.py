@@ -7,12 +7,11 @@ import os
 import numpy as np
 
 from ..io import read_exr, write_png
+from .exr import frame_status
 
 
 def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
     """Write ``<first frame's folder>/<job>_contact.png`` for each job; return the paths."""
-    from .exr import frame_status
-
     jobs: dict = {}
     for s in specs:
         jobs.setdefault(s["job"], []).append(s)

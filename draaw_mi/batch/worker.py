@@ -7,6 +7,10 @@ from __future__ import annotations
 
 import threading
 
+import drjit as dr
+
+from .frame import SceneCache, safe_render_frame
+
 _CACHE = None
 _GUARD = threading.Lock()
 
@@ -14,12 +18,6 @@ _GUARD = threading.Lock()
 def dask_render_frame(spec: dict, drjit_threads: int | None = None) -> dict:
     """Render ``spec`` with this worker's scene cache (set up on the first task)."""
     global _CACHE
-    import drjit as dr
-
-    import draaw_mi  # noqa: F401  (variant and plugins in this process)
-
-    from .frame import SceneCache, safe_render_frame
-
     with _GUARD:
         if _CACHE is None:
             if drjit_threads:

@@ -30,6 +30,9 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
+from ..guard import RENDER_GUARD
+from ..sdf.integration import hook
+from ..sdf.tracer import TracerOptions
 from .features import detect_features
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
@@ -144,7 +147,6 @@ def parse_aovs(plugin: str, spec) -> tuple[str, ...]:
 
 class DraawIntegrator(RBIntegrator):
     """Base class of the draaw render versions (not registered itself)."""
-
     PLUGIN = "draaw"
 
     def __init__(self, props: mi.Properties):
@@ -153,10 +155,22 @@ class DraawIntegrator(RBIntegrator):
         super().__init__(props)
         self.aovs = parse_aovs(self.PLUGIN, props.get("aovs", ""))
         # SDF sphere-tracer knobs (sdf_epsilon, sdf_max_steps, sdf_relaxation; draaw_mi.sdf)
-        from ..sdf.tracer import TracerOptions
         self.sdf_tracer = TracerOptions.from_props(props, self.PLUGIN)
 
     # ------------------------------------------------------------------ interface
+    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+        """A primal render (what ``mi.render`` calls), under
+        :data:`draaw_mi.guard.RENDER_GUARD`: a render of another scene in another thread (a
+        notebook's preview beside its main thread) then waits for this one instead of
+        breaking its ``dr.freeze`` recording. The gradient passes (``render_forward``,
+        ``render_backward``) run inside Dr.Jit's AD traversal, where the guard is not taken."""
+        with RENDER_GUARD:
+            return self.render_primal(scene, sensor, seed, spp, develop, evaluate)
+
+    def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
+        """:meth:`render` itself: Mitsuba's path-replay primal render."""
+        return super().render(scene, sensor, seed, spp, develop, evaluate)
+
     def aov_names(self) -> list[str]:
         return [c for n in self.aovs for c in AOV_CHANNELS[n]]
 
@@ -171,7 +185,6 @@ class DraawIntegrator(RBIntegrator):
         no SDF objects (then no SDF code is traced into the kernel)."""
         if not feats.get("sdf"):
             return None
-        from ..sdf.integration import hook
         return hook(self, scene, feats)
 
     def to_string(self) -> str:

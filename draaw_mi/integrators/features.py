@@ -40,6 +40,9 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from ..materials.draaw_bsdf import DraawBSDF
+from ..sdf.scene import find as _find_sdf
+
 FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
@@ -60,7 +63,6 @@ _NORMALMAP_KEYS = ("normalmap", "bumpmap")
 
 
 def _is_draaw(bsdf) -> bool:
-    from ..materials.draaw_bsdf import DraawBSDF
     return isinstance(bsdf, DraawBSDF)
 
 
@@ -106,7 +108,7 @@ def scene_shapes(scene: mi.Scene) -> list:
     nodes = mi.traverse(scene).hierarchy           # every object the scene reaches, once
     members = [n for n in nodes if isinstance(n, mi.Shape)
                and n.class_name() not in ("Instance", "ShapeGroupPlugin")]      # (a shapegroup)
-    return [s for s in shapes if s.class_name() != "Instance"] + \
+    return [s for s in shapes if s.class_name() != "Instance"] +\
         [m for m in members if all(m is not s for s in shapes)]
 
 
@@ -126,7 +128,7 @@ def detect_features(scene: mi.Scene) -> dict[str, bool]:
             f["directional_lights"] = True
         elif mi.has_flag(flags, mi.EmitterFlags.Surface):
             f["area_lights"] = True
-        if mi.has_flag(flags, mi.EmitterFlags.Surface) and \
+        if mi.has_flag(flags, mi.EmitterFlags.Surface) and\
                 mi.has_flag(flags, mi.EmitterFlags.SpatiallyVarying):
             f["textures"] = True                       # textured area light: needs uv
         if mi.has_flag(flags, mi.EmitterFlags.Delta):
@@ -151,7 +153,6 @@ def detect_features(scene: mi.Scene) -> dict[str, bool]:
     if integrator is not None:
         f["aovs"] = len(integrator.aov_names()) > 0
     # SDF objects: hidden proxy shapes registered by draaw_mi.sdf.scene
-    from ..sdf.scene import find as _find_sdf
     f["sdf"] = _find_sdf(scene) is not None
     return f
 
@@ -160,3 +161,30 @@ def describe(features: dict[str, bool]) -> str:
     """One line listing the features that are on, e.g. ``'area_lights, draaw_materials'``."""
     on = [k for k in FEATURE_NAMES if features.get(k)]
     return ", ".join(on) if on else "(none)"
+
+
+# ---------------------------------------------------------------- plugin names
+_SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",
+                    "StratifiedSampler": "stratified", "LowDiscrepancySampler": "ldsampler",
+                    "OrthogonalSampler": "orthogonal"}
+
+
+_FILTER_PLUGINS = {"BoxFilter": "box", "GaussianFilter": "gaussian", "TentFilter": "tent",
+                   "LanczosSincFilter": "lanczos", "MitchellNetravaliFilter": "mitchell",
+                   "CatmullRomFilter": "catmullrom"}
+
+
+def _plugin_name(obj, names: dict) -> str:
+    """A Mitsuba object's plugin name from its class name (what ``str(obj)`` starts with)."""
+    name = str(obj).split("[")[0].strip()
+    return names.get(name, name)
+
+
+def filter_plugin(rfilter) -> str:
+    """Plugin name of a Mitsuba reconstruction filter (``"gaussian"``: a film's default)."""
+    return _plugin_name(rfilter, _FILTER_PLUGINS)
+
+
+def sampler_plugin(sampler) -> str:
+    """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
+    return _plugin_name(sampler, _SAMPLER_PLUGINS)

@@ -26,7 +26,6 @@ class PhongMaterial:
     Energy: ``(1 - mirror) (kd + ks) + mirror * tint <= 1`` per channel (base_color <= 1).
     Other BSDFs: ``kd`` = their diffuse reflectance clipped to [0, 1], no Phong, no mirror.
     """
-
     def __init__(self, kd, ks, n, mirror, tint, scatter):
         self.kd, self.ks, self.n = kd, ks, n
         self.mirror, self.tint, self.scatter = mirror, tint, scatter

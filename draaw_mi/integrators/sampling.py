@@ -112,7 +112,7 @@ class PowerSelection:
     uniform selection (Mitsuba's) is as good: a single emitter or similar powers.
 
     The table is four plain Dr.Jit arrays (:meth:`arrays`), so a ``dr.freeze`` recording can
-    take it as an input (:func:`draaw_mi.render.frozen_render`): frozen and traced renders then
+    take it as an input (:meth:`Session.recording <draaw_mi.rendering.session.Session.recording>`): frozen and traced renders then
     choose lights alike, and a replay reads the table it is given rather than a stale copy."""
 
     def __init__(self, n: int, pmf: mi.Float, cdf: mi.Float, pmf_by_id: mi.Float,

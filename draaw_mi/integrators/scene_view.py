@@ -1,6 +1,6 @@
 """What V4 reads of a scene on the host before each render, found once per scene.
 
-Why: a frozen replay (:func:`draaw_mi.render.frozen_render`) is preceded by V4's
+Why: a frozen replay (:meth:`Session.recording <draaw_mi.rendering.session.Session.recording>`) is preceded by V4's
 ``freeze_state``: the light-selection table's key and the edge map's key (camera, film,
 emitting surfaces). Right after a render's kernels every call into Mitsuba runs 5-20 times
 slower than warm (cold caches: ``scene.sensors()`` 16-26 us, ``scene.emitters()`` 18 us, against 1.4 us
@@ -12,7 +12,7 @@ camera's transform, the film's size and crop window, the shutter, the emitting s
 bounds) is still read on every render.
 
 Where a view is kept: in a ``memo`` dict that lives exactly as long as the scene -- the
-renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.frozen.freeze_render`
+renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.rendering.frozen.freeze_render`
 passes it). The view holds the scene itself, so its ``id`` names it for as long as the memo
 holds the view; an integrator's own caches never hold a view (a held scene keeps its Python
 BSDFs alive). Without a memo (a bare ``mi.Scene``) a view is made for each call: as many

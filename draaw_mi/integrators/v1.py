@@ -4,8 +4,17 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import (DraawIntegrator, emitter_sample_one, flip_z, parse_int, propagate_adjoint, relative,
-                     sample_emitter, side_sign)
+from . import volume_march
+from .common import (
+    DraawIntegrator,
+    emitter_sample_one,
+    flip_z,
+    parse_int,
+    propagate_adjoint,
+    relative,
+    sample_emitter,
+    side_sign,
+)
 from .phong import mirror_dir, phong_eval, phong_material
 
 # Light from every emitter individually up to this many emitters (else one random emitter).
@@ -15,12 +24,10 @@ MAX_UNROLLED_EMITTERS = 8
 class DraawV1Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v1:
-
     draaw V1: classic ray tracer (:monosp:`draaw_v1`)
     ---------------------------------------------------
 
     .. pluginparameters::
-
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded): 1 shows emitters only, 2 adds direct light,
@@ -45,7 +52,6 @@ class DraawV1Integrator(DraawIntegrator):
 
     The cheap rung of the ladder. At every shading point of a Whitted-style mirror chain
     (camera ray, then perfect mirror reflections):
-
     - emitted radiance of the surface hit;
     - direct light from **every** emitter (one sample and one shadow ray each; above
       8 emitters, one emitter picked at random) through the legacy Lambert + normalised Phong
@@ -75,14 +81,12 @@ class DraawV1Integrator(DraawIntegrator):
     sampling.
 
     .. tabs::
-
         .. code-tab:: python
 
             'type': 'draaw_v1',
             'max_depth': 4,
             'scatter': 8
     """
-
     PLUGIN = "draaw_v1"
 
     def __init__(self, props: mi.Properties):
@@ -141,7 +145,6 @@ class DraawV1Integrator(DraawIntegrator):
         feats = self.features(scene)
         # ---- participating media: GO-Draaw's single-scattering march, fixed (volume_march)
         if dr.hint(feats["media"], mode="scalar"):
-            from . import volume_march
             return volume_march.sample(self, mode, scene, sampler, ray, active)
         # ---- end media
         flags = self.ray_flags(feats)

@@ -4,20 +4,28 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .common import (DraawIntegrator, flip_z, parse_int, propagate_adjoint, relative, safe_div,
-                     sample_emitter, separate_adjoints, side_sign)
+from . import volume_march
+from .common import (
+    DraawIntegrator,
+    flip_z,
+    parse_int,
+    propagate_adjoint,
+    relative,
+    safe_div,
+    sample_emitter,
+    separate_adjoints,
+    side_sign,
+)
 from .phong import phong_eval, phong_material, phong_sample
 
 
 class DraawV2Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v2:
-
     draaw V2: energy-conserving Phong-family path tracer (:monosp:`draaw_v2`)
     --------------------------------------------------------------------------
 
     .. pluginparameters::
-
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -42,7 +50,6 @@ class DraawV2Integrator(DraawIntegrator):
     A path tracer with next-event estimation (one emitter sample and a shadow ray per vertex,
     no MIS, no Russian roulette), unbiased for its own *legacy* model, a Phong family built
     from the ``draaw`` BSDF's knobs (:class:`~draaw_mi.integrators.phong.PhongMaterial`)::
-
         f = (1 - reflection) * (kd / pi + ks (n + 2) / (2 pi) max(0, <R(wi), wo>)^n)
             + reflection * tint * delta(wo - R(wi))
         ks = lerp(0.08 specular, base_color, metallic)
@@ -73,14 +80,12 @@ class DraawV2Integrator(DraawIntegrator):
     with a proper Monte Carlo estimator; ``scatter`` paths split only at the first hit.
 
     .. tabs::
-
         .. code-tab:: python
 
             'type': 'draaw_v2',
             'max_depth': 6,
             'scatter': 2
     """
-
     PLUGIN = "draaw_v2"
 
     def __init__(self, props: mi.Properties):
@@ -197,7 +202,6 @@ class DraawV2Integrator(DraawIntegrator):
         feats = self.features(scene)
         # ---- participating media: GO-Draaw's single-scattering march, fixed (volume_march)
         if dr.hint(feats["media"], mode="scalar"):
-            from . import volume_march
             return volume_march.sample(self, mode, scene, sampler, ray, active)
         # ---- end media
         flags = self.ray_flags(feats)

@@ -5,8 +5,17 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from .common import (DraawIntegrator, flip_z, parse_float, propagate_adjoint, relative, safe_div,
-                     sample_emitter, side_sign)
+from . import volume
+from .common import (
+    DraawIntegrator,
+    flip_z,
+    parse_float,
+    propagate_adjoint,
+    relative,
+    safe_div,
+    sample_emitter,
+    side_sign,
+)
 from .draaw_lobes import draaw_ndf_sample, draaw_params, draaw_spec_eval
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
@@ -15,12 +24,10 @@ DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Bec
 class DraawV3Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v3:
-
     draaw V3: physically based path tracer (:monosp:`draaw_v3`)
     ------------------------------------------------------------
 
     .. pluginparameters::
-
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -54,7 +61,6 @@ class DraawV3Integrator(DraawIntegrator):
 
     The accuracy reference of the ladder: the ``draaw`` model of design.md §3 rendered by a
     plain, unbiased path tracer that is easy to check:
-
     - next-event estimation (one emitter sample with a shadow ray per vertex) and **no MIS**:
       every light path is counted by exactly one strategy, chosen per vertex and lobe before
       sampling. Emitters hit by BSDF-sampled rays count for camera rays, after delta bounces
@@ -99,14 +105,12 @@ class DraawV3Integrator(DraawIntegrator):
     ``scatter`` and ``directToScatter`` knobs have no role here.
 
     .. tabs::
-
         .. code-tab:: python
 
             'type': 'draaw_v3',
             'max_depth': 8,
             'distribution': 'beckmann'
     """
-
     PLUGIN = "draaw_v3"
 
     def __init__(self, props: mi.Properties):
@@ -155,7 +159,6 @@ class DraawV3Integrator(DraawIntegrator):
         feats = self.features(scene)
         # ---- participating media (draaw_mi.integrators.volume), only when the scene has them
         if dr.hint(feats["media"], mode="scalar"):
-            from . import volume
             return volume.sample(self, mode, scene, sampler, ray, δL, state_in, active,
                                  russian_roulette=False)
         # ---- end media

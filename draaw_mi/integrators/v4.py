@@ -7,9 +7,10 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from . import emission_split
-from .common import (mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter,
-                     separate_adjoints)
+from . import adaptive_sampling as ads
+from . import emission_split, volume
+from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
+from .light_pilot import learn_selection
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
 
@@ -21,12 +22,10 @@ LIGHT_SELECTION = "auto"
 class DraawV4Integrator(emission_split.EmissionSplitting):
     r"""
     .. _integrator-draaw_v4:
-
     draaw V4: optimised physically based path tracer (:monosp:`draaw_v4`)
     ----------------------------------------------------------------------
 
     .. pluginparameters::
-
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -76,7 +75,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
        - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
          AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates
          each pixel's variance and path length, the rest of the budget goes where it lowers
-         the error most per unit of cost (:mod:`draaw_mi.adaptive_sampling`). (Default: |true|)
+         the error most per unit of cost (:mod:`draaw_mi.integrators.adaptive_sampling`). (Default: |true|)
 
      * - hide_emitters
        - |bool|
@@ -93,7 +92,6 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     through the generic interface; the ``draaw`` BSDF samples its own mixture of cosine and
     GGX *visible-normal* sampling), with the variance and speed optimisations of a production
     path tracer:
-
     - emitter sampling and BSDF sampling combined by multiple importance sampling (power
       heuristic);
     - Russian roulette from ``rr_depth`` on that stops only weak paths (throughput below
@@ -136,7 +134,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     uniform count and no pixel takes more than a capped share, which bounds the loss where a
     small pilot misses rare bright paths. Scenes whose error sits in glints of delta lights on
     near-mirror surfaces (the thesis glass scene) render uniformly: a small pilot misses them
-    (:func:`~draaw_mi.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
+    (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
     stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
     2-10x off the variance of ``path`` (and of V4 on most suite scenes), and adaptive sampling
     on top measured 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
@@ -156,14 +154,12 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     ``normal`` AOV.
 
     .. tabs::
-
         .. code-tab:: python
 
             'type': 'draaw_v4',
             'max_depth': 8,
             'aovs': 'depth,normal'
     """
-
     PLUGIN = "draaw_v4"
 
     def __init__(self, props: mi.Properties):
@@ -185,7 +181,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self._tables = {}              # selection key -> (emitter array, table | None, learned)
         self._frozen_selection = None  # (PowerSelection | None,) while a recording runs
         self.skip_constant_nee = not parse_bool(props, "draaw_v4", "constant_env_nee", False)
-        self.want_depth = False        # set by draaw_mi.adaptive_sampling around its pilot pass
+        self.want_depth = False        # set by draaw_mi.integrators.adaptive_sampling around its pilot pass
         self.last_depth = None
         self.init_emission_split(props)
 
@@ -223,7 +219,6 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         power = PowerSelection.of(scene) if entry is None else entry[1]
         if not learns or (self.light_selection == "auto" and power is not None):
             return self._store(key, scene, power, learned=False)
-        from .light_pilot import learn_selection
         sel = None if self.features(scene)["media"] else learn_selection(self, scene)
         return self._store(key, scene, sel if sel is not None else power, learned=True)
 
@@ -240,7 +235,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
     def forget_scene(self, scene, learned: bool = False) -> None:
         """Drop ``scene``'s cached power table (its lights changed): the next render computes
-        it anew. :func:`draaw_mi.render.scene_changed` calls this. A learned table stays
+        it anew. :meth:`Session.scene_changed <draaw_mi.rendering.session.Session.scene_changed>` calls this. A learned table stays
         (see :mod:`~.light_pilot`) unless ``learned``."""
         for key in [k for k, e in self._tables.items() if k[0] == id(scene) and (learned or not e[2])]:
             del self._tables[key]
@@ -254,7 +249,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
     def freeze_state(self, scene, memo: dict | None = None):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
-        input (:func:`draaw_mi.render.frozen_render`): the light table's arrays (or ``None``)
+        input (:meth:`Session.recording <draaw_mi.rendering.session.Session.recording>`): the light table's arrays (or ``None``)
         and the first sensor's edge map for emission splitting (or ``None``). Computed here,
         outside the recording, so frozen and traced renders choose alike. ``memo``: a dict
         that lives as long as ``scene`` (:func:`~.scene_view.scene_view`), which makes this
@@ -275,11 +270,10 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             self._frozen_selection = self._frozen_edges = None
 
     # ------------------------------------------------- adaptive sampling (primal renders)
-    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+    def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (box filter, no
         AOVs, a plain seed) the unbiased two-pass adaptive render of
-        :mod:`draaw_mi.adaptive_sampling`, otherwise ``RBIntegrator.render``."""
-        from .. import adaptive_sampling as ads
+        :mod:`draaw_mi.integrators.adaptive_sampling`, otherwise ``RBIntegrator.render``."""
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
@@ -292,7 +286,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
             return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
         try:
-            return super().render(scene, sensor, seed, spp, develop, evaluate)
+            return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._primary = None
 
@@ -304,7 +298,6 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         feats = self.features(scene)
         # ---- participating media (draaw_mi.integrators.volume), only when the scene has them
         if dr.hint(feats["media"], mode="scalar"):
-            from . import volume
             return volume.sample(self, mode, scene, sampler, ray, δL, state_in, active,
                                  russian_roulette=True)
         # ---- end media

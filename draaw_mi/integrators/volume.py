@@ -42,6 +42,7 @@ from ..errors import ParameterError, RenderError
 from ..media.majorant import build_majorant
 from . import volume_tracking as vt
 from .common import mis_weight
+from .features import scene_shapes
 from .volume_tracking import _bw, coefficients, medium_interaction
 
 # While a medium parameter is differentiated, majorants are scaled by this factor: path replay
@@ -58,9 +59,7 @@ MEDIA_RR_DEPTH = 5            # first depth at which Russian roulette may stop a
 
 class MediaTable:
     """Every medium of a scene with its majorant, as Dr.Jit arrays indexed per lane."""
-
     def __init__(self, scene: mi.Scene, factor: float = 1.0):
-        from .features import scene_shapes
         top = scene.shapes()
         for shape in scene_shapes(scene):
             if all(shape is not s for s in top) and (shape.interior_medium() or shape.exterior_medium()):

@@ -17,6 +17,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .features import scene_shapes
+
 # per flight; an exhausted flight counts as absorbed (documented). A guard against loops that
 # never end (NaN distances), far above honest flights: one voxel of optical depth 5000 at the
 # finest majorant level, scaled x2 in a differentiated render, takes ~10^4 null steps per cell.
@@ -33,7 +35,6 @@ def partly_null(scene: mi.Scene) -> bool:
     """Whether a shape's BSDF lets light through in part (``mask``: the ``Null`` flag and
     other lobes). Such surfaces were crossed as if absent in smoke scenes (an opaque masked
     card disappeared); where none is, their handling adds no kernel code."""
-    from .features import scene_shapes
     null = int(mi.BSDFFlags.Null)
     for shape in scene_shapes(scene):
         bsdf = shape.bsdf()

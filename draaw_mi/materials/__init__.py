@@ -1,12 +1,8 @@
 """Materials: the ``draaw`` BSDF plugin (metallic/roughness model + GO-Draaw's legacy knobs)."""
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
-from ..errors import ParameterError
-from ..limits import FLOAT32_MAX, FOV_RANGE
+from .checks import check_value
+from .draaw_bsdf import register_draaw_bsdf
 
 _REGISTERED = False
 
@@ -16,112 +12,8 @@ def register() -> None:
     global _REGISTERED
     if _REGISTERED:
         return
-    from .draaw_bsdf import register_draaw_bsdf
     register_draaw_bsdf()
     _REGISTERED = True
 
 
-def check_value(who: str, name: str, key: str, v) -> None:
-    """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
-    wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
-    parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
-    as a scene file's ``[[volumes]]`` table has them (``phase_function.g``: |g| < 1 in float32,
-    ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 rendered negative pixels). Raises
-    :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
-    range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
-    planner check their overrides with it.
-
-    >>> check_value("demo", "ball.roughness", "ball.roughness.value", 0.3)
-    >>> check_value("demo", "ball.roughness", "ball.roughness.value", 3.0)
-    Traceback (most recent call last):
-    ...
-    draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
-    """
-    from .draaw_bsdf import SCALAR_PARAMS
-    parts = key.split(".")
-    # the material parameter a ``<shape>.<param>.value`` / ``.data`` key sets (None otherwise)
-    param = parts[-2] if len(parts) >= 3 and parts[-1] in ("value", "data") else None
-    nums = None
-    if isinstance(v, (bool, np.bool_, str, bytes)) or v is None:
-        raise ParameterError(f"{who}: {name}={v!r}; expected a number")
-    if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
-        nums = [float(v)]                    # (numpy scalars too: np.float32(7) passed unchecked)
-    elif isinstance(v, np.ndarray) and v.ndim > 1:
-        if any(p.endswith("medium") for p in parts[:-1]):
-            _check_medium_grid(who, name, key, v)    # (NaN or negative densities rendered NaN)
-        elif param in SCALAR_PARAMS or param == "base_color":
-            # a material texture's texels (NaN texels were zeroed without a word; the same
-            # values in a scene file are refused); value_like checks their shape
-            lo, hi = SCALAR_PARAMS[param][1:] if param in SCALAR_PARAMS else (0.0, FLOAT32_MAX)
-            _check_texels(who, name, v, lo, hi)
-        return
-    elif isinstance(v, (list, tuple, np.ndarray)):
-        try:
-            nums = [float(x) for x in v]
-        except (TypeError, ValueError):
-            raise ParameterError(f"{who}: {name}={v!r}; expected numbers") from None
-        if param in SCALAR_PARAMS and len(nums) != 1:     # (3 numbers made a 3-wide Float)
-            lo, hi = SCALAR_PARAMS[param][1:]
-            raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
-        if param not in SCALAR_PARAMS and len(nums) != 3:
-            raise ParameterError(f"{who}: {name}={v!r}; expected 3 numbers (an RGB colour)")
-    if nums is None:
-        return                                   # a Mitsuba value (transform, colour): as is
-    if not all(math.isfinite(x) and abs(x) <= FLOAT32_MAX for x in nums):   # (stored as float32)
-        raise ParameterError(f"{who}: {name}={v!r}; expected finite numbers (in float32, |x| <= 3.4e38)")
-    if parts[-1] == "x_fov":
-        if not all(FOV_RANGE[0] <= x <= FOV_RANGE[1] for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected a field of view in "
-                                 f"[{FOV_RANGE[0]}, {FOV_RANGE[1]}] degrees")
-        return
-    if any(p.endswith("medium") for p in parts[:-1]):
-        _check_medium_value(who, name, parts, v, nums)
-        return
-    if param in SCALAR_PARAMS:
-        lo, hi = SCALAR_PARAMS[param][1:]
-        if not all(lo <= x <= hi for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
-    elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
-        raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
-
-
-def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
-    """A material texture's texels: finite, in ``[lo, hi]``."""
-    a = np.asarray(texels, np.float64)
-    with np.errstate(invalid="ignore"):
-        bad = ~np.isfinite(a) | (a < lo) | (a > hi)
-    if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside [{lo:g}, {hi:g}] "
-                             f"(the first, {float(a[first])!r}, at {list(first)}); expected finite values in "
-                             f"[{lo:g}, {hi:g}]")
-
-
-def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:
-    """A medium's grid (``*.sigma_t.data``, ``*.albedo.data``): finite values >= 0 that
-    float32 holds, albedos at most 1."""
-    a = np.asarray(grid, np.float64)
-    albedo = ".albedo." in f".{key}."
-    hi = 1.0 if albedo else FLOAT32_MAX
-    with np.errstate(invalid="ignore"):
-        bad = ~np.isfinite(a) | (a < 0) | (a > hi)
-    if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise ParameterError(f"{who}: {name}: {int(bad.sum())} value(s) outside [0, {hi:g}] (the first, "
-                             f"{float(a[first])!r}, at {list(first)}); expected {'albedos' if albedo else 'densities'} "
-                             f"in [0, {hi:g}]")
-
-
-def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None:
-    """:func:`check_value` for a participating medium's parameter (``parts``: its key split
-    at the dots, e.g. ``plume.interior_medium.phase_function.g``)."""
-    if parts[-2:] == ["phase_function", "g"]:
-        if not all(abs(float(np.float32(x))) < 1.0 for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g with |g| < 1 "
-                                 "(in float32)")
-    elif parts[-1] == "scale":
-        if not all(0.0 <= x <= FLOAT32_MAX for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected a density scale >= 0 (finite in float32)")
-    elif "albedo" in parts:
-        if not all(0.0 <= x <= 1.0 for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected values in [0, 1]")
+__all__ = ["check_value", "register"]

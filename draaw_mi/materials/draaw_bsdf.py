@@ -97,13 +97,12 @@ def _schlick(f0, f90, cos_theta):
 
 # Every live DraawBSDF. A dr.freeze recording that makes a BSDF virtual call fails when a
 # Python BSDF instance is alive but not among its inputs (Dr.Jit 1.5 checks the whole registry
-# domain; C++ plugins are not affected): draaw_mi.frozen.freeze_render passes these along.
+# domain; C++ plugins are not affected): draaw_mi.rendering.frozen.freeze_render passes these along.
 LIVE_INSTANCES: "weakref.WeakSet" = weakref.WeakSet()
 
 
 class DraawBSDF(mi.BSDF):
     """Metallic/roughness GGX + Lambert BSDF with GO-Draaw's legacy knobs (see module doc)."""
-
     # Every dr.freeze replay traverses each Python plugin's instance __dict__ (Dr.Jit's
     # traverse_py_cb_ro), paying per entry: about 3 us for a plain Python value, 5 us for a
     # nested texture. So plain options live in slots, outside the __dict__, an absent normal
@@ -354,7 +353,7 @@ class DraawBSDF(mi.BSDF):
 
     def to_string(self):
         fields = ", ".join(f"{n}={textures.describe(getattr(self, n))}" for n in ALL_PARAMS)
-        nm = f", normalmap={textures.describe(self.normalmap)} ({'signed' if self.normalmap_signed else 'unsigned'})" \
+        nm = f", normalmap={textures.describe(self.normalmap)} ({'signed' if self.normalmap_signed else 'unsigned'})"\
             if self.normalmap is not None else ""
         return f"DraawBSDF[{fields}{nm}, two_sided={self.two_sided}]"
 

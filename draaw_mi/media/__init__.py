@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from .voxel_grid import VoxelGrid
 from .volfile import read_vol, write_vol
+from .voxel_grid import VoxelGrid
 
 __all__ = ["VoxelGrid", "read_vol", "write_vol"]

@@ -18,6 +18,7 @@ integrator come for free: they are ordinary triangles.
 """
 from __future__ import annotations
 
+import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
@@ -69,7 +70,6 @@ def exterior_faces(occ, bbox_min, bbox_max):
 
 
 def _mesh(name: str, v: np.ndarray, f: np.ndarray, bsdf, face_color: np.ndarray | None):
-    import mitsuba as mi
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
@@ -96,7 +96,6 @@ def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group
     ``base_color`` is replaced by the voxel colours) or a full Mitsuba BSDF dict with a
     ``type`` (then ``group_by="color"`` is needed for colours). Empty grids give ``{}``.
     """
-    import mitsuba as mi
     if group_by not in (None, "color"):
         raise ParameterError(f"solid_meshes: group_by={group_by!r}; expected None or 'color'")
     v, f, cells = exterior_faces(grid.occupied, grid.bbox_min, grid.bbox_max)

@@ -41,6 +41,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 GLOBAL_BOX = 1e6        # half-size of the box of a global (1x1x1) majorant
@@ -64,7 +66,6 @@ class Majorant:
 
 def _probe_box(medium, inside) -> tuple[np.ndarray, np.ndarray] | None:
     """The medium's box from ``intersect_aabb`` rays through a point ``inside`` it."""
-    import mitsuba as mi
     lo, hi = np.zeros(3), np.zeros(3)
     for a in range(3):
         d = [0.0, 0.0, 0.0]
@@ -168,8 +169,6 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     """Majorant of a Mitsuba medium (see module doc). ``inside``: a point inside the medium's
     box used to locate it (default: its centre as reported for a probe from the origin);
     ``factor``: the tracker multiplies the bounds by it (the level is chosen for that)."""
-    import drjit as dr
-    import mitsuba as mi
     mei = dr.zeros(mi.MediumInteraction3f)
     mei.p = mi.Point3f(*[float(v) for v in (inside if inside is not None else (0.0, 0.0, 0.0))])
     if medium.is_homogeneous():

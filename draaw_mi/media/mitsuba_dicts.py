@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import numbers
 
+import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
@@ -34,7 +35,6 @@ FILTERS = ("nearest", "trilinear")
 
 def unit_cube_to_box(bbox_min, bbox_max):
     """``mi.ScalarTransform4f`` mapping [0, 1]^3 onto the box (how ``gridvolume`` is placed)."""
-    import mitsuba as mi
     lo = np.asarray(bbox_min, float)
     hi = np.asarray(bbox_max, float)
     return mi.ScalarTransform4f().translate(lo.tolist()).scale((hi - lo).tolist())
@@ -44,7 +44,7 @@ def check_g(g_phase, where: str = "smoke") -> float:
     """The Henyey-Greenstein g, which must be finite with |g| < 1."""
     # numpy scalars are numbers (np.float32(0.5) was refused); |g| < 1 in float32, as Mitsuba
     # stores it (0.99999999 is 1 there, and the hg plugin failed to load)
-    if isinstance(g_phase, bool) or not isinstance(g_phase, numbers.Real) \
+    if isinstance(g_phase, bool) or not isinstance(g_phase, numbers.Real)\
             or not math.isfinite(g_phase) or abs(float(np.float32(g_phase))) >= 1.0:
         raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
     return float(g_phase)
@@ -54,7 +54,6 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
                  albedo=None) -> dict:
     """Mitsuba dict of a ``heterogeneous`` medium from ``grid.density`` / ``grid.smoke_color``
     (or a constant RGB ``albedo``)."""
-    import mitsuba as mi
     g_phase = check_g(g_phase, "smoke_medium")
     if isinstance(scale, bool) or not (isinstance(scale, numbers.Real) and math.isfinite(scale)
                                                    and 0 <= scale <= FLOAT32_MAX):
@@ -90,7 +89,6 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
 
 def smoke_shape(grid, **medium_kw) -> dict:
     """A ``cube`` with a ``null`` BSDF around the grid's box, the smoke as its interior."""
-    import mitsuba as mi
     lo, hi = np.asarray(grid.bbox_min, float), np.asarray(grid.bbox_max, float)
     to_world = mi.ScalarTransform4f().translate(((lo + hi) / 2).tolist()).scale(((hi - lo) / 2).tolist())
     return {"type": "cube", "to_world": to_world, "bsdf": {"type": "null"},

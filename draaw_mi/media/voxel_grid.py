@@ -24,12 +24,15 @@ from __future__ import annotations
 
 import os
 
+import mitsuba as mi
 import numpy as np
 
 from ..errors import IOFailure, ParameterError
 from ..io import atomic_path
 from ..limits import FLOAT32_MAX
 from .pick import traverse
+from .volfile import read_vol, write_vol
+from .voxelize import load_triangles, voxelize
 
 Index = tuple[int, int, int]
 
@@ -57,7 +60,6 @@ class VoxelGrid:
     bbox_min/max    (3,) float64       world box of the grid
     ==============  =================  ==========================================================
     """
-
     def __init__(self, occupied, color, density, smoke_color, bbox_min, bbox_max, seed: int | None = 0):
         self.occupied = np.asarray(occupied, dtype=bool)
         self.color = np.asarray(color, dtype=np.float32)
@@ -129,7 +131,6 @@ class VoxelGrid:
                   color=(0.8, 0.8, 0.8), seed: int | None = 0) -> "VoxelGrid":
         """Voxelise a mesh (a file path or a ``trimesh.Trimesh``); see
         :func:`draaw_mi.media.voxelize.voxelize`. Default box: the mesh's bounding box."""
-        from .voxelize import load_triangles, voxelize
         tris = load_triangles(mesh)
         if bbox_min is None or bbox_max is None:
             pts = tris.reshape(-1, 3)
@@ -155,7 +156,6 @@ class VoxelGrid:
         distance to the triangle rather than to its plane plus a barycentric test, which
         left holes along the edges of thin triangles (see :func:`~draaw_mi.media.voxelize.voxelize`).
         """
-        from .voxelize import load_triangles, voxelize
         tris = load_triangles(mesh_path) * float(scale)
         pts = tris.reshape(-1, 3)
         lo, hi = pts.min(0) * 0.75, pts.max(0) * 0.75
@@ -252,7 +252,6 @@ class VoxelGrid:
     def pick_pixel(self, sensor, x: float, y: float) -> Index | None:
         """First occupied cell under pixel ``(x, y)`` (pixel centre at ``+0.5``) of a Mitsuba
         sensor (or a scene / :class:`~draaw_mi.scene.DraawScene`, whose first sensor is used)."""
-        import mitsuba as mi
         if hasattr(sensor, "scene"):
             sensor = sensor.scene
         if isinstance(sensor, mi.Scene):
@@ -416,7 +415,6 @@ class VoxelGrid:
     def from_vol(cls, path: str, seed: int | None = 0) -> "VoxelGrid":
         """Import a density grid from Mitsuba's ``.vol`` format (1 channel: density; 3
         channels: the mean is the density). Bounds come from the file."""
-        from .volfile import read_vol
         data, lo, hi = read_vol(path)
         dens = data.mean(axis=3).transpose(2, 1, 0)            # (Z, Y, X) -> [ix, iy, iz]
         try:
@@ -426,7 +424,6 @@ class VoxelGrid:
 
     def save_vol(self, path: str, what: str = "density") -> None:
         """Write ``density`` (1 channel) or ``smoke_color`` (3 channels) as a Mitsuba ``.vol``."""
-        from .volfile import write_vol
         if what == "density":
             arr = self.density[..., None]
         elif what == "smoke_color":

@@ -48,7 +48,7 @@ from .aberration import ChromaticAberration, chromatic_aberration
 from .blur import Bloom, BloomV2, Sharpen, bloom, bloom_v2, sharpen
 from .chain import FILTERS, Chain, apply, display_encoded, filter_class, load_chain
 from .color import ColorMapping, Contrast, Lighten, Tint, color_mapping, contrast, lighten, tint
-from .crt import CRT, crt
+from .crt_look import CRT, crt
 from .edges import EdgeDetection, edge_detection
 from .tone import SRGB, Linear, Log, linear, log, srgb
 

@@ -60,7 +60,6 @@ class Param:
     ``aliases`` are other accepted names (GO-Draaw's JSON names); ``components`` name the three
     components separately (GO-Draaw's ``ColorR``/``ColorG``/``ColorB``).
     """
-
     name: str
     default: Any
     kind: str = "float"
@@ -155,7 +154,6 @@ def multipass_param(default: int) -> Param:
 @dataclass
 class FilterSpec:
     """Name, parameters and effect of one filter; see the module docstring."""
-
     name: str
     params: tuple[Param, ...]
     effect: Effect
@@ -256,7 +254,6 @@ class Filter:
     Subclasses set ``spec`` and give ``__init__`` an explicit signature. ``Filter(...)(image)``
     equals the plain function called with the same parameters.
     """
-
     spec: FilterSpec
 
     def __init__(self, **params: Any) -> None:

@@ -88,7 +88,6 @@ def chromatic_aberration(image: Any, shift: float = 2.0, *, boundary: str = "ref
 
 class ChromaticAberration(Filter):
     """Callable form of :func:`chromatic_aberration`."""
-
     spec = CHROMATIC_ABERRATION
 
     def __init__(self, shift: float = 2.0, *, boundary: str = "reflect", amount: float = 1.0,

@@ -108,7 +108,6 @@ def bloom(image: Any, threshold: float = 0.05, intensity: float = 1.1, *, clamp:
 
 class Bloom(Filter):
     """Callable form of :func:`bloom`."""
-
     spec = BLOOM
 
     def __init__(self, threshold: float = 0.05, intensity: float = 1.1, *, clamp: bool = True,
@@ -156,7 +155,6 @@ def bloom_v2(image: Any, threshold: float = 0.05, intensity: float = 1.1, spread
 
 class BloomV2(Filter):
     """Callable form of :func:`bloom_v2`."""
-
     spec = BLOOM_V2
 
     def __init__(self, threshold: float = 0.05, intensity: float = 1.1, spread: float = 0.7,
@@ -216,7 +214,6 @@ def sharpen(image: Any, sharpness: float = 1.0, *, boundary: str = "reflect",
 
 class Sharpen(Filter):
     """Callable form of :func:`sharpen`."""
-
     spec = SHARPEN
 
     def __init__(self, sharpness: float = 1.0, *, boundary: str = "reflect",

@@ -16,12 +16,13 @@ from typing import Any, Iterable, Iterator, Mapping
 import mitsuba as mi
 
 from ..errors import IOFailure, ParameterError
+from ..io import write_text
 from ._spec import Filter, norm_name, unknown_name_message
 from ._util import as_image, finite_rgb, join_alpha, split_alpha
 from .aberration import ChromaticAberration
 from .blur import Bloom, BloomV2, Sharpen
 from .color import ColorMapping, Contrast, Lighten, Tint
-from .crt import CRT
+from .crt_look import CRT
 from .edges import EdgeDetection
 from .tone import SRGB, Linear, Log
 
@@ -79,7 +80,6 @@ class Chain:
         >>> len(chain), chain(np.zeros((8, 8, 3), np.float32)).shape
         (2, (8, 8, 3))
     """
-
     def __init__(self, filters: Iterable[Mapping[str, Any] | Filter] = (), *,
                  source: str | None = None) -> None:
         if isinstance(filters, (str, bytes, Mapping)) or not isinstance(filters, Iterable):
@@ -116,7 +116,6 @@ class Chain:
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write :meth:`to_list` as JSON (readable by :func:`load_chain`), atomically (a
         crash mid-write left a truncated file in place of the previous chain)."""
-        from ..io import write_text
         write_text(os.fspath(path), json.dumps(self.to_list(), indent=2) + "\n")
 
     def __repr__(self) -> str:

@@ -64,7 +64,6 @@ def contrast(image: Any, contrast: float = 1.0, pivot: float = 0.5, *,
 
 class Contrast(Filter):
     """Callable form of :func:`contrast`: ``Contrast(2.0)(image)``."""
-
     spec = CONTRAST
 
     def __init__(self, contrast: float = 1.0, pivot: float = 0.5, *, amount: float = 1.0,
@@ -121,7 +120,6 @@ def tint(image: Any, color: Sequence[float] | str | float = (1.0, 1.0, 1.0),
 
 class Tint(Filter):
     """Callable form of :func:`tint`."""
-
     spec = TINT
 
     def __init__(self, color: Sequence[float] | str | float = (1.0, 1.0, 1.0),
@@ -173,7 +171,6 @@ def lighten(image: Any, strength: float = 0.1, *, amount: float = 1.0,
 
 class Lighten(Filter):
     """Callable form of :func:`lighten`."""
-
     spec = LIGHTEN
 
     def __init__(self, strength: float = 0.1, *, amount: float = 1.0,
@@ -243,7 +240,6 @@ def color_mapping(image: Any, levels: int | Sequence[int] = 16, *, amount: float
 
 class ColorMapping(Filter):
     """Callable form of :func:`color_mapping`."""
-
     spec = COLOR_MAPPING
 
     def __init__(self, levels: int | Sequence[int] = 16, *, amount: float = 1.0,

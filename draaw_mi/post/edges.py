@@ -86,7 +86,6 @@ def edge_detection(image: Any, distance: float = 1.0,
 
 class EdgeDetection(Filter):
     """Callable form of :func:`edge_detection`."""
-
     spec = EDGE_DETECTION
 
     def __init__(self, distance: float = 1.0,

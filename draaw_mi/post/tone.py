@@ -84,7 +84,6 @@ def linear(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool
 
 class Linear(Filter):
     """Callable form of :func:`linear`."""
-
     spec = LINEAR
 
     def __init__(self, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = True,
@@ -140,7 +139,6 @@ def log(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = 
 
 class Log(Filter):
     """Callable form of :func:`log`."""
-
     spec = LOG
 
     def __init__(self, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = True,
@@ -198,7 +196,6 @@ def srgb(image: Any, *, inverse: bool = False, amount: float = 1.0,
 
 class SRGB(Filter):
     """Callable form of :func:`srgb`."""
-
     spec = SRGB_SPEC
 
     def __init__(self, *, inverse: bool = False, amount: float = 1.0,

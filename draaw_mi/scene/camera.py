@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import math
 
+import mitsuba as mi
 import numpy as np
 
+from ..integrators.features import filter_plugin, sampler_plugin  # noqa: F401 (re-exported)
 from ..limits import FOV_RANGE
 from .schema import Where, boolean, check_keys, number, string, vector
 
@@ -45,7 +47,6 @@ def x_fov(fov: float, fov_axis: str, width: int, height: int) -> float:
     >>> round(x_fov(30.0, "y", 32, 16), 4), x_fov(30.0, "x", 32, 16)
     (56.3736, 30.0)
     """
-    import mitsuba as mi
     if fov_axis == "x":
         return float(fov)
     props = mi.Properties()
@@ -152,7 +153,6 @@ def look_at_transform(origin, target, up, mirror: bool = False):
     >>> round(float(np.linalg.det(np.array(m.matrix))), 4)
     -1.0
     """
-    import mitsuba as mi
     t = mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin], target=[float(v) for v in target],
                                        up=[float(v) for v in up])
     return t @ mi.ScalarTransform4f().scale([-1.0, 1.0, 1.0]) if mirror else t
@@ -206,32 +206,6 @@ def check_look_at(origin, target, up, where) -> None:
             "move it further along the view direction")
     if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
         raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
-
-
-_SAMPLER_PLUGINS = {"IndependentSampler": "independent", "MultijitterSampler": "multijitter",
-                    "StratifiedSampler": "stratified", "LowDiscrepancySampler": "ldsampler",
-                    "OrthogonalSampler": "orthogonal"}
-
-
-_FILTER_PLUGINS = {"BoxFilter": "box", "GaussianFilter": "gaussian", "TentFilter": "tent",
-                   "LanczosSincFilter": "lanczos", "MitchellNetravaliFilter": "mitchell",
-                   "CatmullRomFilter": "catmullrom"}
-
-
-def _plugin_name(obj, names: dict) -> str:
-    """A Mitsuba object's plugin name from its class name (what ``str(obj)`` starts with)."""
-    name = str(obj).split("[")[0].strip()
-    return names.get(name, name)
-
-
-def filter_plugin(rfilter) -> str:
-    """Plugin name of a Mitsuba reconstruction filter (``"gaussian"``: a film's default)."""
-    return _plugin_name(rfilter, _FILTER_PLUGINS)
-
-
-def sampler_plugin(sampler) -> str:
-    """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
-    return _plugin_name(sampler, _SAMPLER_PLUGINS)
 
 
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,

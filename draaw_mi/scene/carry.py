@@ -10,7 +10,11 @@ from __future__ import annotations
 
 import math
 
-from .camera import x_fov
+import mitsuba as mi
+import numpy as np
+
+from ..guard import RENDER_GUARD
+from .camera import scene_fov, x_fov
 
 #: traverse keys not carried besides the films (what changes): faces cannot be edited
 _SKIP_SUFFIXES = (".faces",)
@@ -45,10 +49,6 @@ def carry_values(src, dst) -> None:
     another resolution, and update ``dst``. Keys ``dst`` lacks (Mitsuba's generated names of
     unnamed objects) are skipped; the sensor's ``x_fov`` is converted so that the file's
     ``fov_axis`` keeps its angle (:func:`fov_for_aspect`)."""
-    import mitsuba as mi
-    import numpy as np
-    from ..guard import RENDER_GUARD
-    from .camera import scene_fov
     sp, dp = src.params, dst.params
     axis = scene_fov(src)[1]
     changed = False

@@ -8,7 +8,6 @@ import re
 
 class BuildContext:
     """State shared while translating one description (base folder, temp folder, counters)."""
-
     def __init__(self, base_dir: str, tmp_dir: str, source: str):
         self.base_dir, self.tmp_dir, self.source = base_dir, tmp_dir, source
         self.counter = 0

@@ -9,7 +9,7 @@ The description has these top-level tables (all optional but ``shapes``)::
     [[shapes]]   type = mesh | sphere | rectangle | disk | cube | cylinder, material, emission, ...
     [[lights]]   type = point | spot | area | constant | envmap | directional, intensity, color
     [[post]]     post-processing chain (see draaw_mi.post)
-    [[volumes]]  voxel grids as solid voxels or smoke (see draaw_mi.media.scene_volumes)
+    [[volumes]]  voxel grids as solid voxels or smoke (see draaw_mi.scene.volume_dicts)
 
 Materials are declared once at the top of the Mitsuba dict under their own names, so their
 parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on.
@@ -18,15 +18,22 @@ from __future__ import annotations
 
 import os
 
+import mitsuba as mi
 import numpy as np
 
+from ..errors import DraawError, suggest
+from ..integrators import resolve_version
+from ..post import load_chain
 from . import camera as cam
 from .context import BuildContext, safe_id
+from .framing import scene_bounds
 from .light_dicts import light_dicts
 from .material_dicts import material_dict
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
 from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
+from .sdf_dicts import sdf_dicts
 from .smooth_normals import smooth_parts
+from .volume_dicts import check_camera_outside_smoke, check_smoke_boxes_disjoint, volume_dicts
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -68,8 +75,6 @@ def parse_settings(desc: dict, where: Where) -> dict:
         s["max_depth"] = number(render["max_depth"], w / "max_depth", lo=-1, hi=1024, integer=True)
     if "version" in render:
         s["version"] = string(render["version"], w / "version")
-        from ..errors import DraawError
-        from ..integrators import resolve_version
         try:
             resolve_version(s["version"])          # a typo names the file and the field
         except DraawError as e:
@@ -93,8 +98,6 @@ def parse_settings(desc: dict, where: Where) -> dict:
 # --------------------------------------------------------------------------- transforms
 def to_world(table: dict, where: Where):
     """``matrix`` or scale -> rotate -> translate, as an mi.ScalarTransform4f."""
-    import mitsuba as mi
-
     t = mi.ScalarTransform4f()
     if "matrix" in table:
         for k in ("translate", "rotate", "scale"):
@@ -156,7 +159,6 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
     else:
         mat_id = string(mat_ref, where / "material")
         if mat_id not in materials:
-            from ..errors import suggest
             raise (where / "material").error(f"unknown material {mat_id!r}{suggest(mat_id, materials)}")
     emitter = _emitter(shape, where)
     transform = to_world(shape, where)
@@ -251,7 +253,6 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     # --- SDF objects ([[sdf]], see draaw_mi.sdf.scene): hidden proxy shapes carry their BSDFs
     sdf_scene = None
     if desc.get("sdf") is not None:
-        from ..sdf.scene import sdf_dicts
         proxies, sdf_scene = sdf_dicts(desc["sdf"], materials, ctx, where / "sdf")
         shape_entries.update(proxies)
     # --- end SDF
@@ -261,7 +262,6 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if not isinstance(volumes, list):
         raise (where / "volumes").error("expected a list of volume tables ([[volumes]])")
     if volumes:
-        from ..media.scene_volumes import volume_dicts
         for i, vol in enumerate(volumes):
             entries, vinfo = volume_dicts(vol, i, mats, ctx, where / "volumes" / i)
             for key, d in entries.items():
@@ -269,16 +269,13 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
                     raise (where / "volumes" / i / "name").error(f"duplicate name {key!r}")
                 shape_entries[key] = d
             volume_info.append(vinfo)
-        from ..media.scene_volumes import check_smoke_boxes_disjoint
         check_smoke_boxes_disjoint(volume_info, where)
     # ---- end [[volumes]] ------------------------------------------------------------------
 
     if camera_table is None:
-        from .framing import scene_bounds
         camera_table = cam.auto_camera(*scene_bounds(shape_entries, sdf_scene))
     look_at = cam.camera_to_look_at(camera_table, where / "camera")
     if volume_info:
-        from ..media.scene_volumes import check_camera_outside_smoke
         w_px, h_px = settings["resolution"]
         reach = cam.near_reach(look_at[5], cam.x_fov(look_at[3], look_at[4], w_px, h_px), w_px, h_px)
         check_camera_outside_smoke(look_at[0], volume_info, where, reach)
@@ -304,8 +301,6 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if post is not None and not isinstance(post, list):
         raise (where / "post").error("expected a list of filter tables ([[post]])")
     if post:
-        from ..errors import DraawError
-        from ..post import load_chain
         try:
             load_chain(post)                       # validate names, parameters and ranges now
         except DraawError as e:

@@ -1,6 +1,7 @@
 """World bounds of a scene description's geometry, for automatic cameras."""
 from __future__ import annotations
 
+import mitsuba as mi
 import numpy as np
 
 
@@ -11,7 +12,6 @@ def scene_bounds(shape_entries: dict, sdf_scene=None):
     <draaw_mi.sdf.scene.SDFScene.bboxes>`); their proxy shapes (a point at the centre of all
     the SDF boxes) are skipped, and so are unbounded roots (a plane). Nothing bounded: the
     unit box around the origin."""
-    import mitsuba as mi
 
     skip = set(sdf_scene.proxy_ids) if sdf_scene is not None else set()
     los, his = [], []
@@ -19,7 +19,7 @@ def scene_bounds(shape_entries: dict, sdf_scene=None):
         if key in skip:
             continue
         try:
-            shape = d if not isinstance(d, dict) else \
+            shape = d if not isinstance(d, dict) else\
                 mi.load_dict({k: v for k, v in d.items() if k not in ("bsdf", "emitter", "interior")})
         except Exception:  # noqa: BLE001 - bounds are best effort
             continue

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 
+import mitsuba as mi
 import numpy as np
 
 from . import camera as cam
@@ -32,7 +33,6 @@ def spot_up(position, target) -> list[float]:
 
 
 def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Where) -> dict:
-    import mitsuba as mi
 
     if not isinstance(light, dict):
         raise where.error(f"expected a light table, got {light!r}")

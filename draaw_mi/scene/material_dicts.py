@@ -6,10 +6,12 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING
 
+import mitsuba as mi
 import numpy as np
 
-from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
+from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
+from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
 
@@ -27,8 +29,6 @@ def check_image_values(path: str, label: str, where: Where, what: str, nonneg: b
     +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
     naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
     read (an environment map's tint uses it: the file is read once)."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
     try:
         with exr_reading_threads():
             bitmap = mi.Bitmap(path)
@@ -50,7 +50,6 @@ def check_image_values(path: str, label: str, where: Where, what: str, nonneg: b
 def tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
     """``bitmap`` as linear float RGB, each channel times ``color`` (an environment map's
     tint)."""
-    import mitsuba as mi
     linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
     rgb = np.array(linear, dtype=np.float32).reshape(linear.height(), linear.width(), 3)
     return mi.Bitmap(rgb * np.asarray(color, np.float32))
@@ -59,7 +58,6 @@ def tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
 def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None):
     """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts; ``lo``: the
     least a plain number or RGB triple may be (a reflectance's 0)."""
-    import mitsuba as mi
 
     if isinstance(value, str):
         path = ctx.path(value)
@@ -129,10 +127,10 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             wk = where / key
             if key in SCALAR_PARAMS:
                 lo, hi = SCALAR_PARAMS[key][1:]
-                out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float)) \
+                out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float))\
                     else texture_value(value, key, ctx, wk)
             elif key in COLOR_PARAMS:
-                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool) \
+                if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool)\
                         and not is_nested(value):
                     out[key] = {"type": "rgb", "value": vector(value, wk, lo=0.0)}
                 else:

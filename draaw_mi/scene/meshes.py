@@ -10,14 +10,16 @@ files so that materials can be referenced by name (keys ``<material>.<param>`` i
 """
 from __future__ import annotations
 
+import json
 import logging
+import mmap
 import os
 from dataclasses import dataclass, field
+from urllib.parse import unquote
 
 import numpy as np
 
 from ..io import srgb_decode
-
 
 GO_DRAAW_GREY = 178.0 / 255.0
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
@@ -168,7 +170,7 @@ def mesh_side_files(path: str) -> list[str]:
     """The files a mesh file reads besides itself: an OBJ's material libraries (``mtllib``)
     and the images they name (``map_Kd`` and the other ``map_*``, ``bump``, ``norm``,
     ``disp``), a ``.gltf``'s external buffers and images. Those that exist, as absolute
-    paths; a batch keys its frames by their content too (:mod:`draaw_mi.batch.plan`).
+    paths; a batch keys its frames by their content too (:mod:`draaw_mi.batch.planner`).
 
     >>> import os, tempfile
     >>> d = tempfile.mkdtemp()
@@ -197,7 +199,6 @@ def mesh_side_files(path: str) -> list[str]:
                 for image in _lines_starting(mtl, ("map_", "bump", "norm", "disp")):
                     add(image.split()[-1], os.path.dirname(mtl))     # options come first
     elif lower.endswith(".gltf"):
-        import json
         try:
             with open(path, encoding="utf-8") as fh:
                 doc = json.load(fh)
@@ -206,7 +207,6 @@ def mesh_side_files(path: str) -> list[str]:
         for entry in list(doc.get("buffers", [])) + list(doc.get("images", [])):
             uri = entry.get("uri") if isinstance(entry, dict) else None
             if isinstance(uri, str) and not uri.startswith("data:"):
-                from urllib.parse import unquote
                 add(unquote(uri), folder)
     return found
 
@@ -222,7 +222,6 @@ def _lines_starting(path: str, keywords: tuple) -> list[str]:
     >>> _lines_starting(p, ("map_",))
     ['-s 1 1 1 a b.png']
     """
-    import mmap
     out = []
     try:
         with open(path, "rb") as fh:

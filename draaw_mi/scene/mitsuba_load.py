@@ -2,9 +2,17 @@
 and equal materials kept apart, and Mitsuba's errors cut to their useful line."""
 from __future__ import annotations
 
+import hashlib
 import re
+import xml.etree.ElementTree as ET
 
-from ..errors import DraawError, SceneError
+import mitsuba as mi
+import numpy as np
+
+from ..errors import DraawError, SceneError, suggest
+from ..guard import RENDER_GUARD, exr_reading_threads
+from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
+from ..sdf.scene import PROXY_PREFIX
 
 
 def _unreferenced_message(text: str) -> str | None:
@@ -22,8 +30,6 @@ def _unreferenced_message(text: str) -> str | None:
     place = f"{node.group(1)!r}: " if node else f"{line.group(1)}: " if line else ""
     what, hint = f"Mitsuba's {plugin!r} {kind}" if kind and kind != "unknown" else f"the {plugin!r} plugin", ""
     if plugin == "draaw":                   # ours: its parameters are known
-        from ..errors import suggest
-        from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
         what, hint = "the 'draaw' BSDF", suggest(names[0], ALL_PARAMS + OPTIONS) if names else ""
     listed = ", ".join(repr(n) for n in names) or "?"
     return (f"{place}{listed} {'is not a parameter' if len(names) == 1 else 'are not parameters'} "
@@ -61,16 +67,13 @@ def _emitting_shapes(d: dict) -> int:
 
 
 def _has_sdf_proxies(d: dict) -> bool:
-    from ..sdf.scene import PROXY_PREFIX
     return any(isinstance(k, str) and k.startswith(PROXY_PREFIX) for k in d)
 
 
 def _canonical(v):
     """A hashable form of a plugin dict's value, for telling equal materials apart (arrays by
     their shape and bytes, other objects by identity)."""
-    import hashlib
 
-    import numpy as np
     if isinstance(v, dict):
         return tuple(sorted((k, _canonical(x)) for k, x in v.items() if k != "id"))
     if isinstance(v, (list, tuple)):
@@ -102,8 +105,6 @@ def load_mitsuba_dict(d: dict):
     one BSDF, and the second one's parameters were gone (``no parameter 'b.roughness'``: two
     materials that start alike could not be tuned, fitted or animated apart). Such scenes load
     without it too."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
     optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
     with exr_reading_threads():
         return mi.load_dict(d, optimize=optimize)
@@ -113,7 +114,6 @@ def _xml_shape_bsdfs(path: str) -> set:
     """The ids of a Mitsuba XML file's top-level ``<bsdf>`` elements that its shapes refer to
     with ``<ref id=...>`` (best effort: an unreadable file gives none; Mitsuba reports its
     errors itself)."""
-    import xml.etree.ElementTree as ET
     try:
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError):
@@ -126,8 +126,6 @@ def load_mitsuba_file(path: str):
     """``mi.load_file(path)`` with the scene's emitters in a fixed order and every material
     its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
     materials, shows only once it is loaded, so such files are parsed twice."""
-    import mitsuba as mi
-    from ..guard import exr_reading_threads
     with exr_reading_threads():
         scene = mi.load_file(path)
         merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
@@ -137,7 +135,6 @@ def load_mitsuba_file(path: str):
 
 
 def load_dict_or_error(d: dict, source: str):
-    from ..guard import RENDER_GUARD
     try:
         with RENDER_GUARD:            # (see load_scene; with_resolution comes here directly)
             return load_mitsuba_dict(d)

@@ -5,7 +5,7 @@ after a successful load, to learn what the load depended on:
 
 - the **files** it reads (``<include>`` files, meshes, textures, environment maps, volume
   grids, spectra: every ``filename``), so that batch frames of the scene go stale when one of
-  them changes (:func:`draaw_mi.batch.plan.files_hash`), as for TOML scenes;
+  them changes (:func:`draaw_mi.batch.planner.files_hash`), as for TOML scenes;
 - whether it, or a file it includes, declares an ``<integrator>`` (which then becomes the
   scene's render version).
 

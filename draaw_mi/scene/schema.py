@@ -5,9 +5,12 @@ Every error is a :class:`SceneError` whose message starts with the location
 """
 from __future__ import annotations
 
+import json
 import math
 import numbers
 from typing import Any, Iterable
+
+import tomllib
 
 from ..errors import SceneError, suggest
 from ..limits import FLOAT32_MAX
@@ -31,7 +34,6 @@ def shown(value: Any, limit: int = 60) -> str:
 
 class Where:
     """A location in a scene description, used to prefix error messages."""
-
     def __init__(self, source: str, path: str = ""):
         self.source, self.path = source, path
 
@@ -171,8 +173,6 @@ def rotations(table: dict, where: Where) -> list:
 def read_document(path: str, what: str = "scene file") -> dict:
     """A TOML (``.toml``) or JSON (any other name) file as a dict; every error is a
     :class:`SceneError` naming the file (and the line, for malformed JSON)."""
-    import json
-    import tomllib
     try:
         with open(path, "rb") as f:
             raw = f.read()

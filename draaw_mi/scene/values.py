@@ -2,6 +2,11 @@
 checked against the parameter's own type."""
 from __future__ import annotations
 
+import drjit as dr
+import numpy as np
+
+from ..errors import RenderError
+
 
 def value_like(current, value, key: str):
     """``value`` for ``params[key] = ...``, in the type of the parameter's ``current`` value: a
@@ -14,9 +19,6 @@ def value_like(current, value, key: str):
     >>> type(value_like(mi.Point3f(0.0), [0.1, 0.2, 0.3], "sdf.ball.center")).__name__
     'Point3f'
     """
-    import drjit as dr
-    import numpy as np
-    from ..errors import RenderError
     check_like(current, value, key)
     seq = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)
     try:
@@ -41,9 +43,6 @@ def check_like(current, value, key: str) -> None:
     ...
     draaw_mi.errors.RenderError: params['m.base_color.data']: texels of shape (3,); this texture takes (H, W, 3) like its (4, 4, 3)
     """
-    import drjit as dr
-    import numpy as np
-    from ..errors import RenderError
     if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
         raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
     if dr.is_tensor_v(current):

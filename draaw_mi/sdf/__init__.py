@@ -11,15 +11,28 @@ Build a tree in Python::
 
 Each node has ``.distance(p)`` (``mi.Point3f`` -> ``mi.Float``), ``.eval(p, n)`` (distance and
 material weights), ``.bbox()`` and ``.params()``. In a scene description, ``[[sdf]]`` entries
-are placed into the render by ``draaw_mi.load_scene`` (see :mod:`draaw_mi.sdf.scene`).
+are read by ``draaw_mi.load_scene`` (:mod:`draaw_mi.scene.sdf_dicts`) and reach the integrators
+through :mod:`draaw_mi.sdf.scene`.
 """
 from __future__ import annotations
 
 from .node import SDFNode
-from .operators import (OPERATORS, addition, cubic_smooth_intersection, cubic_smooth_subtraction,
-                        cubic_smooth_union, intersection, lse_intersection, smooth_addition,
-                        smooth_intersection, smooth_lse_intersection, smooth_subtraction,
-                        smooth_union, subtraction, union)
+from .operators import (
+                        OPERATORS,
+                        addition,
+                        cubic_smooth_intersection,
+                        cubic_smooth_subtraction,
+                        cubic_smooth_union,
+                        intersection,
+                        lse_intersection,
+                        smooth_addition,
+                        smooth_intersection,
+                        smooth_lse_intersection,
+                        smooth_subtraction,
+                        smooth_union,
+                        subtraction,
+                        union,
+)
 from .params import SDFParameters, parameters
 from .primitives import PRIMITIVES, Box, Capsule, Cone, Cylinder, Plane, RoundBox, Sphere, Torus
 from .transforms import Transform, rotate, scale, translate
@@ -36,4 +49,4 @@ __all__ = [
 from .._lazy import on_first_use as _on_first_use  # noqa: E402
 
 # draaw_mi.sdf.export.to_entries(...) and the like after a plain ``import draaw_mi``
-__getattr__ = _on_first_use(__name__, ("export", "integration", "scene", "study", "tracer"))
+__getattr__ = _on_first_use(__name__, ("export", "integration", "scene", "tracer"))

@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import ParameterError
 from .node import SDFNode, scalar_of, vec_of
 from .operators import Operator
+from .primitives import PRIMITIVE_KEYS
 from .transforms import Transform, axis_angle
 
 
@@ -47,7 +48,6 @@ def to_entries(*roots: SDFNode) -> list[dict]:
     returns  a list of dicts, children before their operators
     ======== =====================================================================
     """
-    from .scene import PRIMITIVE_KEYS
     entries: list[dict] = []
     used: dict[str, int] = {}
 

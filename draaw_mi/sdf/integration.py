@@ -40,6 +40,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..errors import RenderError
 from .scene import find
 from .tracer import TracerOptions, march, normal, reattach_t
 
@@ -62,7 +63,6 @@ class SDFHook:
         by_id = {sh.id(): sh for sh in scene.shapes()}
         missing = [pid for pid in sdf.proxy_ids if pid not in by_id]
         if missing:     # (merged into another mesh: load with optimize=False, scene.mitsuba_load.load_mitsuba_dict)
-            from ..errors import RenderError
             raise RenderError(f"SDF tracer: the scene lacks the proxy shapes {missing} of its SDF "
                               "objects (merged by Mitsuba's scene optimisation?)")
         self.proxies = [by_id[pid] for pid in sdf.proxy_ids]

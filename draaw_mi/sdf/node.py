@@ -24,10 +24,10 @@ import math
 import numbers
 
 import drjit as dr
-import numpy as np
 import mitsuba as mi
+import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, suggest
 
 INF = float("inf")
 # how far inside an open lower bound (radius > 0) an optimiser's projection stays
@@ -114,7 +114,6 @@ class SDFNode:
     ``name`` names the node in parameter keys and errors; ``material`` (a material name of
     the scene, or ``None`` to inherit) is resolved to a slot by :mod:`draaw_mi.sdf.scene`.
     """
-
     kind = "node"
 
     def __init__(self, name: str | None = None, material: str | None = None):
@@ -194,7 +193,6 @@ class SDFNode:
     def _checked_value(self, key: str, value):
         """``value`` as this node stores parameter ``key`` (range-checked, not cross-checked)."""
         if key not in self._params:
-            from ..errors import suggest
             raise ParameterError(f"sdf.{self.kind} {self.name!r}: no parameter {key!r}"
                                  f"{suggest(key, self._params)}")
         old = self._params[key]
@@ -229,7 +227,6 @@ class SDFNode:
 
     def _check(self) -> None:
         """Cross-parameter checks (overridden where needed)."""
-
     def own_params(self) -> dict:
         return dict(self._params)
 

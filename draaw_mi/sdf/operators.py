@@ -43,14 +43,14 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .node import SDFNode, box, is_infinite, pad, scalar_of
+from ..errors import ParameterError
+from .node import SDFNode, box, infinite_box, is_infinite, pad, scalar_of
 
 K_MIN = 1e-12
 
 
 def _union_box(a, b):
     if is_infinite(a) or is_infinite(b):
-        from .node import infinite_box
         return infinite_box()
     return box([min(float(x), float(y)) for x, y in zip(a.min, b.min)],
                [max(float(x), float(y)) for x, y in zip(a.max, b.max)])
@@ -75,12 +75,10 @@ def _select_w(cond, wa, wb):
 
 class Operator(SDFNode):
     """A binary operator node (``a`` first operand, ``b`` second)."""
-
     smooth = False
 
     def __init__(self, a: SDFNode, b: SDFNode, k=None, name=None, material=None):
         if not isinstance(a, SDFNode) or not isinstance(b, SDFNode):
-            from ..errors import ParameterError
             raise ParameterError(f"sdf.{self.kind}: operands must be SDF nodes, got "
                                  f"{type(a).__name__} and {type(b).__name__}")
         super().__init__(name, material)
@@ -102,7 +100,6 @@ class Operator(SDFNode):
 
     def _check(self):
         if self.smooth and scalar_of(self.k) < 0:
-            from ..errors import ParameterError
             raise ParameterError(f"sdf.{self.kind} {self.name!r}: k={scalar_of(self.k)}; expected >= 0")
 
     # combine(da, db) -> (d, h) where h is the weight of operand a
@@ -232,7 +229,6 @@ class CubicSmoothSubtraction(CubicSmoothIntersection):
 
 class LSEIntersection(Operator):
     """``k log(e^(a/k) + e^(b/k))``, evaluated as ``max + k log1p(e^(-|a-b|/k))``."""
-
     kind = "lse_intersection"
     smooth = False
     temperature = None

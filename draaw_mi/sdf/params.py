@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from ..errors import ParameterError
+
 PREFIX = "sdf."
 
 
 class SDFParameters(mi.SceneParameters):
     """``base`` (``mi.traverse`` of the scene, made if not given) plus ``"sdf.NODE.PARAM"``."""
-
     def __init__(self, scene, base=None):
         super().__init__({}, {})
         self._base = mi.traverse(scene.mi_scene) if base is None else base
@@ -66,7 +67,6 @@ class SDFParameters(mi.SceneParameters):
         that a frame's size and radius are checked with each other, in either order."""
         name = self.sdf_name(key)
         if name is not None:
-            from ..errors import ParameterError
             self._pending.pop(name, None)
             try:
                 self._sdf.set(name, value)
@@ -94,8 +94,8 @@ class SDFParameters(mi.SceneParameters):
 def parameters(scene) -> SDFParameters:
     """``mi.traverse`` of a loaded draaw scene plus its ``"sdf.NODE.PARAM"`` keys (a fresh
     traversal; :attr:`DraawScene.all_params <draaw_mi.scene.DraawScene.all_params>` is the
-    scene's own, shared with ``scene.params``)."""
-    from ..scene import DraawScene, load_scene
-    if not isinstance(scene, DraawScene):
-        scene = load_scene(scene)
+    scene's own, shared with ``scene.params``). ``scene``: what ``draaw_mi.load_scene`` returns."""
+    if not (hasattr(scene, "mi_scene") and hasattr(scene, "sdf")):
+        raise ParameterError(f"sdf.parameters: scene={scene!r}; expected a scene loaded with "
+                             "draaw_mi.load_scene (load a file first)")
     return SDFParameters(scene)

@@ -40,7 +40,6 @@ def _len2(x, y):
 
 class Sphere(SDFNode):
     """Sphere of ``radius`` > 0 around ``center`` (exact)."""
-
     kind = "sphere"
     _lower_bounds = {"radius": 0.0}
 
@@ -59,7 +58,6 @@ class Sphere(SDFNode):
 
 class Box(SDFNode):
     """Axis-aligned box with full edge lengths ``size`` (each > 0) centred at ``center``."""
-
     kind = "box"
 
     def __init__(self, center=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0), name=None, material=None):
@@ -155,7 +153,6 @@ class Torus(SDFNode):
 
 class Cylinder(SDFNode):
     """Capped cylinder along y centred at ``center``: ``radius`` > 0, full ``height`` > 0."""
-
     kind = "cylinder"
     _lower_bounds = {"radius": 0.0, "height": 0.0}
 
@@ -273,3 +270,16 @@ class Plane(SDFNode):
 
 
 PRIMITIVES = {cls.kind: cls for cls in (Sphere, Box, RoundBox, Torus, Cylinder, Capsule, Cone, Plane)}
+
+
+#: the ``[[sdf]]`` table keys of each primitive (its constructor's parameters)
+PRIMITIVE_KEYS = {
+    "sphere": ("center", "radius"),
+    "box": ("center", "size"),
+    "round_box": ("center", "size", "radius"),
+    "torus": ("center", "major", "minor"),
+    "cylinder": ("center", "radius", "height"),
+    "capsule": ("a", "b", "radius"),
+    "cone": ("center", "angle", "height"),
+    "plane": ("normal", "offset"),
+}

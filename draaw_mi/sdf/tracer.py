@@ -46,7 +46,6 @@ _TETRA = ((1.0, -1.0, -1.0), (-1.0, -1.0, 1.0), (-1.0, 1.0, -1.0), (1.0, 1.0, 1.
 
 class TracerOptions:
     """Sphere-tracer knobs (see the module docstring)."""
-
     def __init__(self, hit_epsilon: float = 1e-5, max_steps: int = 256, relaxation: float = 1.0):
         if not (isinstance(hit_epsilon, (int, float)) and 0 < hit_epsilon <= 5e-5):
             raise ParameterError(f"sdf tracer: hit_epsilon={hit_epsilon!r}; expected a number in "

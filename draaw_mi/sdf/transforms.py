@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
-from .node import SDFNode, _scalar, _vec3, box, is_infinite, scalar_of, vec_of
+from .node import SDFNode, _scalar, _vec3, box, infinite_box, is_infinite, scalar_of, vec_of
 
 
 def axis_angle(R: np.ndarray) -> tuple[list[float], float]:
@@ -130,7 +130,6 @@ class Transform(SDFNode):
     def bbox(self):
         bb = self.child.bbox()
         if is_infinite(bb):
-            from .node import infinite_box
             return infinite_box()
         s, t = scalar_of(self.scale), np.array(vec_of(self.translate))
         lo, hi = np.array(list(bb.min), float), np.array(list(bb.max), float)

@@ -52,5 +52,5 @@ def assert_bit_identical(a: dict, b: dict):
     assert sorted(a) == sorted(b), (sorted(a), sorted(b))
     for k in a:
         assert a[k].shape == b[k].shape, k
-        assert np.array_equal(a[k].view(np.uint32), b[k].view(np.uint32)), \
+        assert np.array_equal(a[k].view(np.uint32), b[k].view(np.uint32)),\
             f"{k}: max |diff| {np.abs(a[k] - b[k]).max()}"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from batch_helpers import manifest, write_manifest
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 from draaw_mi.batch import lock
 from draaw_mi.batch.exr import _scanline_layout, exr_complete
 from draaw_mi.errors import BusyError, IOFailure
@@ -145,7 +145,7 @@ def test_a_job_setting_wins_over_the_defaults(tmp_path):
 def test_old_folder_probes_are_removed_and_fresh_ones_kept(tmp_path):
     """A folder probe older than the grace period is a killed run's leftover and goes; a
     fresh one may be another run's, in the instant before its lock, and stays."""
-    from draaw_mi.batch import PROBE_GRACE_S, remove_temp_files
+    from draaw_mi.batch.runner import PROBE_GRACE_S, remove_temp_files
     out = tmp_path / "out"
     out.mkdir()
     old, fresh = out / ".draaw-probe-old", out / ".draaw-probe-fresh"
@@ -221,9 +221,9 @@ def test_the_in_process_executor_leaves_the_kernel_history_flag_as_it_found_it(w
     The flag comes back also when a result's handler raises (the frames are stubbed)."""
     import drjit as dr
 
-    from draaw_mi.batch import frame
+    from draaw_mi.batch import executors
     from draaw_mi.batch.executors import run_inprocess
-    monkeypatch.setattr(frame, "safe_render_frame", lambda spec, cache, track: spec)
+    monkeypatch.setattr(executors, "safe_render_frame", lambda spec, cache, track: spec)
     seen = []
 
     def stop(result):

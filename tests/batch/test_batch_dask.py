@@ -8,7 +8,7 @@ import signal
 import pytest
 from batch_helpers import assert_bit_identical, frames_of, manifest
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 
 distributed = pytest.importorskip("distributed", reason="Dask is an optional extra: pip install 'draaw-mi[batch]'")
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from batch_helpers import frames_of, manifest, write_manifest
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 from draaw_mi.errors import SceneError
 
 

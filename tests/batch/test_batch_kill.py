@@ -14,7 +14,7 @@ import time
 import pytest
 from batch_helpers import assert_bit_identical, frames_of, manifest, write_manifest
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 from draaw_mi.io import read_exr
 
 CLI = "import sys; from draaw_mi.cli import main; sys.exit(main())"

@@ -6,7 +6,7 @@ import os
 import pytest
 from batch_helpers import manifest, write_manifest
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 from draaw_mi.cli import main
 from draaw_mi.errors import ParameterError, SceneError
 

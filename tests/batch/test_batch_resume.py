@@ -12,7 +12,7 @@ from batch_helpers import assert_bit_identical, frames_of, manifest, write_manif
 from conftest import tiny_description
 
 import draaw_mi
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 
 
 def test_resume_renders_only_missing_corrupt_and_stale_frames(tmp_path):
@@ -139,17 +139,17 @@ def test_frames_another_run_finished_before_the_lock_are_not_rendered_again(tmp_
     lock once the first is done. It must read the frames' state again under the lock and
     render nothing (it rendered every frame a second time)."""
     import contextlib
-    from draaw_mi.batch import lock as lock_mod
+    from draaw_mi.batch import runner        # the module that takes the locks
     doc = manifest(tmp_path, frames=2)
-    real = lock_mod.output_locks
+    real = runner.output_locks
 
     @contextlib.contextmanager
     def first_run_finishes_meanwhile(folders, where, optional=()):
-        monkeypatch.setattr(lock_mod, "output_locks", real)
+        monkeypatch.setattr(runner, "output_locks", real)
         assert batch.run(doc, progress=False).rendered == 2     # the other run
         with real(folders, where, optional):
             yield
-    monkeypatch.setattr(lock_mod, "output_locks", first_run_finishes_meanwhile)
+    monkeypatch.setattr(runner, "output_locks", first_run_finishes_meanwhile)
     res = batch.run(doc, progress=False)
     assert res.complete and res.rendered == 0 and res.skipped == 2
 
@@ -158,7 +158,6 @@ def test_a_frame_is_stale_when_a_file_its_scene_reads_changes(tmp_path, capsys):
     """Frames are keyed by the scene file and by the files it reads: a texture named in the
     scene, an OBJ mesh, its material library and the image that names. Changing any of them
     makes the finished frames stale (they stayed "done" and were never rendered again)."""
-    from draaw_mi.cli import main
     (tmp_path / "quad.obj").write_text(
         "mtllib quad.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\n"
         "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paint\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
@@ -255,10 +254,8 @@ def test_finished_frames_in_read_only_folders_are_complete(tmp_path, monkeypatch
     """An archive on a read-only share: ``--status``, ``--dry-run`` and a run with nothing to
     render exited 2 ("output folder ... is not writable"). The folders are made read-only as
     the planner sees them (root writes anywhere, so permission bits cannot do it here)."""
-    import importlib
     from draaw_mi.batch import lock as lock_mod
     from draaw_mi.cli import main
-    plan_mod = importlib.import_module("draaw_mi.batch.plan")
     from draaw_mi.errors import SceneError
     doc = manifest(tmp_path, frames=2)
     path = write_manifest(tmp_path, doc)
@@ -275,9 +272,10 @@ def test_finished_frames_in_read_only_folders_are_complete(tmp_path, monkeypatch
     def no_lock_files(folders, where, optional=()):
         assert not folders, folders            # only folders it may skip
         return real_lock([], where, ())
-    monkeypatch.setattr(plan_mod, "check_writable", read_only)
-    monkeypatch.setattr(plan_mod, "prepare_outputs", read_only)
-    monkeypatch.setattr(lock_mod, "output_locks", no_lock_files)
+    from draaw_mi.batch import runner        # the module that checks, prepares and locks
+    monkeypatch.setattr(runner, "check_writable", read_only)
+    monkeypatch.setattr(runner, "prepare_outputs", read_only)
+    monkeypatch.setattr(runner, "output_locks", no_lock_files)
     assert main(["batch", path, "--status"]) == 0
     assert main(["batch", path, "--dry-run"]) == 0
     assert main(["batch", path, "--no-progress"]) == 0

@@ -14,8 +14,8 @@ import tomli_w
 from batch_helpers import assert_bit_identical, frames_of, manifest, tiny_description, write_manifest, write_scene
 
 import draaw_mi
-from draaw_mi import batch
-from draaw_mi.batch.plan import frame_seed, param_value
+from draaw_mi.batch import runner as batch
+from draaw_mi.batch.planner import frame_seed, param_value
 
 
 def test_frame_equals_an_independent_render(tmp_path):
@@ -83,7 +83,7 @@ def test_plan_cameras_params_and_seeds(tmp_path):
 
 
 def test_go_draaw_keyframes_follow_camera_path(tmp_path, go_draaw_dir):
-    from draaw_mi.camera_path import interpolate
+    from draaw_mi.scene.camera_path import interpolate
     from draaw_mi.scene.camera import go_draaw_look_at
 
     doc = manifest(tmp_path, frames=6, camera={"file": os.path.join(go_draaw_dir, "camera_positions.json"),
@@ -133,7 +133,7 @@ def test_frames_of_a_scenes_own_mirrored_go_draaw_camera_are_rehashed(tmp_path, 
     """A job without a camera renders the scene's own; a GO-Draaw [camera] with sin φ > 0
     renders mirrored since the fix, and its frames made before stayed "done" (same hash).
     They are re-hashed; every other frame keeps its hash (the key is absent there)."""
-    from draaw_mi.batch.plan import frame_hash
+    from draaw_mi.batch.planner import frame_hash
     desc = tiny_description()
     desc["camera"] = {"position": [0.0, 0.5, 5.0], "angles": [-1.3, phi], "fov": 40.0}
     scene = os.path.join(str(tmp_path), "s.toml")
@@ -177,10 +177,10 @@ def test_exr_layers_metadata_and_half(tmp_path):
     assert set(chans) == {"R", "G", "B", "depth.Z", "N.X", "N.Y", "N.Z"}
     assert all(c.dtype == np.float16 and c.shape == (24, 32) for c in chans.values())
     assert h["draaw:frame_hash"] == specs[1]["hash"] and h["draaw:spp"] == 4
-    assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4" \
+    assert h["draaw:seed"] == specs[1]["seed"] and h["draaw:version"] == "v4"\
         and h["draaw:integrator"] == "draaw_v4"
     assert h["draaw:mitsuba"] == "3.9.1" and h["draaw:draaw_mi"] == draaw_mi.__version__
-    from draaw_mi.batch.plan import file_hash
+    from draaw_mi.batch.planner import file_hash
     assert h["draaw:scene_sha256"] == file_hash(specs[1]["scene"])
     # depth is the distance to the first hit: about |camera - sphere| - radius at the centre
     o = np.array(specs[1]["camera"]["origin"])
@@ -204,7 +204,7 @@ def test_kernel_check_sees_a_recompile(tmp_path):
     """The detector is not blind: a frame with another max_depth (a literal in the kernel)
     shows up as new kernels."""
     from draaw_mi.batch.executors import run_inprocess
-    from draaw_mi.batch.plan import frame_hash
+    from draaw_mi.batch.planner import frame_hash
 
     m, specs, cache = batch.load(manifest(tmp_path, frames=3))
     specs[2]["max_depth"] = 2
@@ -332,7 +332,7 @@ def test_doctests():
     import doctest
 
     import sys
-    plan_mod = sys.modules["draaw_mi.batch.plan"]        # draaw_mi.batch.plan is also the function
+    plan_mod = sys.modules["draaw_mi.batch.planner"]        # draaw_mi.batch.planner is also the function
     result = doctest.testmod(plan_mod)
     assert result.attempted >= 1 and result.failed == 0
     from draaw_mi.batch import lock
@@ -369,13 +369,14 @@ def test_a_job_after_one_that_moved_a_light_renders_as_if_alone(tmp_path):
 def test_a_scene_is_loaded_once_per_run(tmp_path, monkeypatch):
     """Planning asks the cache for the scene at its own resolution (no override), frames ask
     with the spec's resolution: one load serves both (it loaded twice, and held both)."""
+    from draaw_mi.batch import frame          # the module of the scene cache
     loads = []
-    real = draaw_mi.load_scene
+    real = frame.load_scene
 
     def counting(*args, **kwargs):
         loads.append(kwargs.get("resolution"))
         return real(*args, **kwargs)
-    monkeypatch.setattr(draaw_mi, "load_scene", counting)
+    monkeypatch.setattr(frame, "load_scene", counting)
     assert batch.run(manifest(tmp_path, frames=2), progress=False).complete
     assert loads == [None]
     # a job at another resolution is another scene
@@ -439,13 +440,13 @@ def test_a_contact_sheet_that_cannot_be_written_leaves_the_run_complete(tmp_path
     """Every frame rendered, then the sheet fails: the result (and the exit status) say the
     frames are all there and the summary says why there is no sheet (it was exit 2 and no
     summary, as for a bad manifest)."""
-    from draaw_mi.batch import sheet
+    from draaw_mi.batch import runner        # the module that writes the sheets
     from draaw_mi.cli import main
     from draaw_mi.errors import IOFailure
 
     def failing(specs):
         raise IOFailure("write_png('x_contact.png'): disk full")
-    monkeypatch.setattr(sheet, "contact_sheets", failing)
+    monkeypatch.setattr(runner, "contact_sheets", failing)
     doc = manifest(tmp_path, frames=2)
     doc["contact_sheet"] = True
     path = write_manifest(tmp_path, doc)

@@ -9,8 +9,8 @@ import tomli_w
 from conftest import tiny_description
 
 import draaw_mi
-from draaw_mi import batch
-from draaw_mi.batch.plan import frame_seed, param_value
+from draaw_mi.batch import runner as batch
+from draaw_mi.batch.planner import frame_seed, param_value
 
 
 def _sdf_scene_file(folder) -> str:

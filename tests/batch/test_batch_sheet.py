@@ -5,7 +5,7 @@ import numpy as np
 from batch_helpers import manifest, write_scene
 from PIL import Image
 
-from draaw_mi import batch
+from draaw_mi.batch import runner as batch
 from draaw_mi.io import read_exr
 
 

@@ -19,7 +19,6 @@ import math
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-import pytest
 
 from integrators_helpers import ball_on_floor, check_same_expectation, integrator, rs, seed_stack
 

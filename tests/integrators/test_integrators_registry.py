@@ -9,7 +9,7 @@ import mitsuba as mi
 from draaw_mi.errors import ParameterError, RenderError
 from draaw_mi.integrators import (FEATURE_NAMES, PLUGINS, VERSION_ALIASES, detect_features,
                                   register, resolve_version)
-from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.bench import reference_scenes as rs
 
 
 @pytest.mark.parametrize("plugin", PLUGINS)

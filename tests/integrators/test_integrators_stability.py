@@ -131,7 +131,6 @@ def test_v3_stops_a_path_whose_throughput_is_zero(monkeypatch):
     the loop never ends (cut at 400)."""
     import draaw_mi
     from draaw_mi.integrators import v3
-    from draaw_mi.render import make_integrator
     d = {"render": {"resolution": [4, 4], "spp": 1, "max_depth": -1, "filter": "box"},
          "camera": {"origin": [0, 0, 0], "target": [0, 0, -1]},
          "materials": {"m": {"base_color": [0.3] * 3, "roughness": 1.0, "metallic": 0.0, "specular": 0.0}},
@@ -149,7 +148,7 @@ def test_v3_stops_a_path_whose_throughput_is_zero(monkeypatch):
     monkeypatch.setattr(v3.DraawV3Integrator, "_eval", counted)
     dr.set_flag(dr.JitFlag.SymbolicLoops, False)
     try:
-        img = np.array(mi.render(scene.mi_scene, integrator=make_integrator("v3", -1), spp=1, seed=0))
+        img = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "draaw_v3", "max_depth": -1}), spp=1, seed=0))
     finally:
         dr.set_flag(dr.JitFlag.SymbolicLoops, True)
     assert 20 < calls[0] <= 400 and np.isfinite(img).all() and img.mean() > 0

@@ -3,20 +3,19 @@ moments, the table it gives, when ``auto`` learns, determinism, refresh after li
 and frozen renders taking the learned table."""
 from __future__ import annotations
 
-import importlib
 
 import numpy as np
 import pytest
 
-import drjit as dr
 import draaw_mi
 from integrators_helpers import integrator, mi
 
 from draaw_mi.integrators import light_pilot as lp
-from draaw_mi.integrators import reference_scenes as rs
+from draaw_mi.bench import reference_scenes as rs
 from draaw_mi.integrators.sampling import PowerSelection
 
-R = importlib.import_module("draaw_mi.render")
+from draaw_mi.rendering import session as S
+from draaw_mi.rendering.session import session_of
 
 
 def two_point_lights(i_left: float, i_right: float, res: int = 16) -> dict:
@@ -86,7 +85,7 @@ def test_auto_learns_where_power_does_not_apply_and_keeps_power_where_it_does():
     auto.prepare_selection(sky_and_area)
     sel = auto.emitter_selection(sky_and_area)
     assert sel is not None and np.ptp(sel.pmf_np) > 0.2           # learned: far from uniform
-    from draaw_mi import speed_suite as ss
+    from draaw_mi.bench import suite as ss
     many = ss.load("many_lights", 16)
     power = PowerSelection.of(many)
     auto.prepare_selection(many)
@@ -108,7 +107,7 @@ def test_learned_table_is_deterministic_and_relearns_only_when_asked():
     key = next(k for k in scene.params.keys() if k.startswith("left") and "intensity" in k)
     scene.params[key] = mi.Color3f(16.0)
     scene.params.update()
-    integ.forget_scene(scene.mi_scene)            # what render.scene_changed does: the learned
+    integ.forget_scene(scene.mi_scene)            # what Session.scene_changed does: the learned
     integ.prepare_selection(scene.mi_scene)       # table stays (no pilot per slider step) ...
     np.testing.assert_array_equal(integ.emitter_selection(scene.mi_scene).pmf_np, tables[0])
     integ.forget_scene(scene.mi_scene, learned=True)   # ... unless asked
@@ -133,12 +132,12 @@ def test_frozen_and_traced_renders_use_the_learned_table(monkeypatch):
     """The table is learned before the recording (freeze_state), enters it as an input, and
     frozen and traced renders choose lights alike."""
     scene = draaw_mi.load_scene(rs.feature_scene(res=16, spp=4, constant=True))
-    integ = R.make_integrator("v4", 3)
-    monkeypatch.setattr(R, "FREEZE", True)
+    integ = session_of(scene).integrator("v4", 3)
+    monkeypatch.setattr(S, "FREEZE", True)
     frozen = [np.array(draaw_mi.render(scene, version="v4", spp=8, seed=s, post=[], max_depth=3))
               for s in (1, 2)]
     assert integ.emitter_selection(scene.mi_scene) is not None  # learned, not uniform
-    monkeypatch.setattr(R, "FREEZE", False)
+    monkeypatch.setattr(S, "FREEZE", False)
     traced = [np.array(draaw_mi.render(scene, version="v4", spp=8, seed=s, post=[], max_depth=3))
               for s in (1, 2)]
     for f, t in zip(frozen, traced):

@@ -54,7 +54,7 @@ def test_roulette_starts_once_the_path_has_rr_depth_segments(depth, rr_depth, st
 
 
 def test_power_selection_follows_the_emitters_power():
-    from draaw_mi import speed_suite as ss
+    from draaw_mi.bench import suite as ss
     from draaw_mi.integrators.sampling import PowerSelection
     scene = ss.load("many_lights", 8)
     sel = PowerSelection.of(scene)

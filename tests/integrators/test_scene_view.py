@@ -4,18 +4,17 @@ light table as a traced render, and leave every changeable input (camera, film, 
 bounds) read anew, so the edge map a recording gets is the one a fresh lookup makes."""
 from __future__ import annotations
 
-import importlib
 
 import numpy as np
 import pytest
 
-from integrators_helpers import dr, integrator, mi, rs
+from integrators_helpers import integrator, mi, rs
 
 import draaw_mi
 from draaw_mi.integrators import emission_split, scene_view as sv
 from draaw_mi.integrators.v4 import DraawV4Integrator
 
-R = importlib.import_module("draaw_mi.render")
+from draaw_mi.rendering import session as S
 
 
 @pytest.fixture()
@@ -132,7 +131,7 @@ def test_render_keeps_one_view_per_scene(monkeypatch):
         real(self, scene)
 
     monkeypatch.setattr(sv.SceneView, "__init__", counting)
-    monkeypatch.setattr(R, "FREEZE", True)
+    monkeypatch.setattr(S, "FREEZE", True)
     scene = draaw_mi.load_scene(rs.cornell_draaw(res=16, spp=4))
     for seed in range(4):
         draaw_mi.render(scene, version="v4", spp=4, seed=seed, post=[])

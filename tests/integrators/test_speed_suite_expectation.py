@@ -1,4 +1,4 @@
-"""Every scene of the speed suite (``draaw_mi.speed_suite``): ``draaw_v4`` with its default
+"""Every scene of the speed suite (``draaw_mi.bench.suite``): ``draaw_v4`` with its default
 variance reduction (roulette threshold, adaptive sampling at >= 64 spp) keeps ``path``'s
 expectation, per pixel (z-scores of the seed-stack means, as in
 test_integrators_expectation.py; 10x10 pixels, 12 seeds x 512 spp per integrator)."""
@@ -9,7 +9,7 @@ import pytest
 
 from integrators_helpers import check_same_expectation, integrator, seed_stack
 
-from draaw_mi import speed_suite as ss
+from draaw_mi.bench import suite as ss
 
 
 @pytest.mark.parametrize("name", list(ss.SCENES))

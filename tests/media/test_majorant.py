@@ -211,7 +211,7 @@ def test_dense_voxel_in_a_small_grid_transmits_as_the_closed_form(integrator, di
         params.update()
     img = np.array(mi.render(scene, params, spp=spp, seed=0), dtype=np.float64)[..., 0]
     if differentiated:
-        assert volume._TABLES and all(t[-1].values.numpy().max() == 2e4 for t in volume._TABLES.values()), \
+        assert volume._TABLES and all(t[-1].values.numpy().max() == 2e4 for t in volume._TABLES.values()),\
             "the differentiated table was not used"
     medium = [s for s in scene.shapes() if s.interior_medium() is not None][0].interior_medium()
     centre = np.array(g.centers()[2, 2, 1])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
-from draaw_mi import bench
+from draaw_mi.bench import study as bench
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SMOKE = os.path.join(ROOT, "scenes", "smoke.toml")

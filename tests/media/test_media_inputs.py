@@ -104,7 +104,7 @@ def test_a_medium_inside_a_shapegroup_is_refused_by_v3_v4_and_seen_by_v1_v2():
     (the instance only) and rendered it empty (1.0 against volpath's 0.16); they now refuse
     it by name. V1/V2 find media at their hits: the same image as without the group. Such
     scenes are not frozen (a recording of media aborts Dr.Jit 1.5)."""
-    from draaw_mi.frozen import freeze_supported
+    from draaw_mi.rendering.frozen import freeze_supported
     T = mi.ScalarTransform4f
     sphere = {"type": "sphere", "radius": 0.5, "bsdf": {"type": "null"},
               "interior": {"type": "homogeneous", "sigma_t": 4.0, "albedo": 0.5}}

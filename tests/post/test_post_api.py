@@ -156,7 +156,7 @@ def test_public_api_surface():
         assert getattr(post, name) is not None
 
 
-@pytest.mark.parametrize("module", ["color", "blur", "edges", "aberration", "crt", "tone",
+@pytest.mark.parametrize("module", ["color", "blur", "edges", "aberration", "crt_look", "tone",
                                     "chain"])
 def test_doctests(module):
     mod = importlib.import_module(f"draaw_mi.post.{module}")

@@ -128,7 +128,7 @@ def test_a_mitsuba_vector_centre_keeps_its_gradient():
 
 
 def test_ranges_an_optimiser_projects_onto():
-    from draaw_mi.fit_params import range_for as _range_for
+    from draaw_mi.fitting.params import range_for as _range_for
     from draaw_mi.sdf.node import OPEN_MARGIN
     sc, _ = _scene()
     assert _range_for("sdf.ball.radius", sc) == (OPEN_MARGIN, None)
@@ -139,7 +139,7 @@ def test_ranges_an_optimiser_projects_onto():
     assert _range_for("sdf.block.size", sc) == (pytest.approx(0.2 + OPEN_MARGIN), None)  # each side >= 2 r
     with pytest.raises(ParameterError, match="no parameter 'radus'; did you mean 'radius'"):
         sc.sdf.param_range("ball.radus")
-    from draaw_mi.fit_params import space_for as _space_for
+    from draaw_mi.fitting.params import space_for as _space_for
     assert _space_for("sdf.alpha.center") == "linear"     # a node named like a BSDF parameter
 
 

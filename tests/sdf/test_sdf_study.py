@@ -7,7 +7,7 @@ import os
 import pytest
 
 import draaw_mi
-from draaw_mi.sdf.study import run_sdf_study
+from draaw_mi.bench.sdf_study import run_sdf_study
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -39,7 +39,7 @@ def test_sdf_study_bookkeeping_over_repeats(monkeypatch, tmp_path):
 
     import numpy as np
 
-    import draaw_mi.sdf.study as st
+    import draaw_mi.bench.sdf_study as st
     clock = [0.0]
     # timed renders' durations by (iteration cap, seed): seeds 11, 18, 25 are the repeats
     durations = {(4096, 11): 3.0, (4096, 18): 1.0, (4096, 25): 2.0,
@@ -74,8 +74,8 @@ def test_sdf_study_bookkeeping_over_repeats(monkeypatch, tmp_path):
 def test_cli_bench_sends_sdf_scenes_to_the_tracer_study(monkeypatch, tmp_path, capsys):
     """`draaw-mi bench` runs the tracer study on [[sdf]] scenes (Mitsuba's path, the main
     study's ground truth, cannot see SDFs) and the main study on the others."""
-    import draaw_mi.bench as bench
-    import draaw_mi.sdf.study as study
+    import draaw_mi.bench.study as bench
+    import draaw_mi.cli.bench as study            # the module that runs the SDF study
     from draaw_mi.cli import main
     calls = {"sdf": [], "main": []}
 

@@ -45,7 +45,7 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
     the parameters, so the loss is not the place to inject it. Without the guard, Adam's moments
     turn NaN and every later iterate is projected onto a bound of the roughness range."""
     import sys
-    fit_mod = sys.modules["draaw_mi.fit"]
+    fit_mod = sys.modules["draaw_mi.fitting.fitter"]
     ref = np.array(draaw_mi.render(tiny_scene, version="path", spp=16))     # truth: roughness 0.4
     calls = {"n": 0}
     real = fit_mod.FitParam.from_latent

@@ -1,0 +1,515 @@
+"""Inverse fitting: recover material parameters (roughness, metallic, colour, ...) from images.
+
+``fit(scene, references, params=["mat.roughness", "mat.metallic"])`` renders the scene with a
+differentiable (path-replay) integrator, compares it with one reference image per view, and
+runs Adam on the named parameters. It runs in four phases around a :class:`FitSettings`:
+:func:`_validate` (every argument, before anything renders), :func:`_set_up` (references,
+views, integrator, parameters: a :class:`FitProblem`), :func:`_iterate` (the Adam loop, each
+iteration one render and gradient pass per view through the scene's render session) and
+:func:`_report` (the averaged values, written back into the caller's scene, and the
+:class:`~draaw_mi.fitting.result.FitResult`).
+
+How it stays robust and unbiased (see design.md §8, the guide §1b, §9, and
+benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
+
+* **Valid ranges by projection.** After every Adam step each parameter is clipped to its
+  range (roughness, metallic, specular, reflection, direct_to_scatter in [0, 1]; colours >= 0,
+  or [0, 1] for ``base_color``). Projection rather than a sigmoid reparameterisation keeps the
+  exact bounds reachable (metallic exactly 0 or 1) with no vanishing gradients near them.
+* **Roughness in log space.** Adam moves ``log(roughness)``: a step is a relative change, so
+  0.05 vs 0.03 resolves as finely as 0.5 vs 0.3. In linear space Adam overshot small targets
+  into the region below the alpha clamp (alpha = sqrt(r^4 + alpha_min^2)), where the gradient
+  vanishes like r^3, and stayed at 0. The log-space floor is ``0.6 * sqrt(alpha_min)`` (0.019
+  by default): every roughness below it renders within 6 % of alpha_min, i.e. the same.
+* **Adam with beta_2 = 0.9** (not 0.999). The gradient shrinks by orders of magnitude on the
+  way to the optimum; with a long second-moment memory the early, large gradients keep the
+  step tiny and the fit stalls wherever it is after a few dozen iterations (measured: 0.062
+  instead of 0.05 after 150 iterations, with a gradient pointing down at SNR 2.7 per step).
+* **Decorrelated, sanitised gradients.** Each iteration renders with a new seed and the
+  adjoint pass with another (Mitsuba's ``seed_grad``), so ``2 (I - ref) dI`` is unbiased for
+  the gradient of the expected loss. NaN/Inf gradient entries are zeroed before each step,
+  so one bad sample cannot poison Adam's moments for the rest of the run.
+* **One kernel per run.** Resolution, spp and the integrator stay fixed; only the seed (not
+  baked into the kernel) and the parameter values (arrays) change, so the render kernels are
+  compiled on the first iteration and then reused (``result.kernel_compiles`` tells).
+* **Noise-robust estimate.** The reported values are the average of the iterates over the last
+  ``average_last`` fraction of the run (Polyak averaging), which removes most of the Monte Carlo
+  jitter of the final iterate; the learning rate decays along a cosine to ``lr_final * lr``.
+* **Non-linear losses see an averaged render** (``smooth``, on with a post chain or the l1
+  loss). A non-linear map of a noisy render is biased: E[f(I)] != f(E[I]) (a clamped bloom
+  moved metallic 0.6 -> 0.78). With ``smooth`` the chain receives a running mean of the recent
+  renders (weight = current learning-rate fraction) that carries the current render's
+  derivative: ``mean + (I - detach(I))``.
+* **Exposure.** ``exposure="fit"`` compares ``s * image`` with the reference, where
+  ``s = <ref, ref> / <image, ref>`` (detached) is recomputed every iteration: the fit becomes
+  insensitive to a global exposure difference (the scale is reported in stops, averaged like
+  the parameters). This estimate is unbiased under Monte Carlo noise; the least-squares
+  ``<image, ref> / <image, image>`` is not (its denominator adds the pixel variance).
+* **Seeds.** The same ``seed`` gives the same run, noise included: repeated runs with one seed
+  agree with each other whatever the error is, and ``prb`` and ``v4`` share most random
+  numbers. Judge accuracy over seeds.
+
+Example::
+
+    >>> import draaw_mi
+    >>> scene = draaw_mi.load_scene("scenes/fit_sphere.toml", resolution=(32, 32))
+    >>> ref = draaw_mi.render(scene, version="path", spp=64)
+    >>> res = draaw_mi.fit(scene, ref, params=["target.roughness", "target.metallic"],
+    ...                    iterations=3, spp=4, progress=False)             # doctest: +SKIP
+    >>> sorted(res.values)                                                  # doctest: +SKIP
+    ['target.metallic', 'target.roughness']
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .. import post as post_mod
+from ..errors import DraawError, ParameterError
+from ..guard import RENDER_GUARD
+from ..integrators import is_draaw, resolve_version
+from ..progress import check_mode, progress_bar
+from ..rendering.session import Session, session_of
+from ..scene import DraawScene, load_scene
+from ..scene.schema import shown
+from .params import FitParam, range_for
+from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
+from .result import FitResult, settled
+from .views import LOSSES, sampler_spp, view_loss, view_sensors
+
+#: iterations after which a parameter that never got a gradient is reported (_warn_unmoved)
+ZERO_GRADIENT_ITERATIONS = 5
+
+
+@dataclass
+class FitSettings:
+    """:func:`fit`'s keyword arguments, checked (see its docstring for each)."""
+    version: str | None = None
+    spp: int = 16
+    iterations: int = 100
+    lr: float = 0.05
+    loss: str = "l2"
+    post: object = None
+    progress: bool | str = True
+    seed: int = 0
+    exposure: str = "fixed"
+    init: dict | None = None
+    max_depth: int | None = None
+    average_last: float = 0.25
+    tol: float = 5e-3
+    resolution: object = None
+    lr_final: float = 0.1
+    spp_grad: int | None = None
+    beta_2: float = 0.9
+    smooth: bool | None = None
+
+
+@dataclass
+class FitProblem:
+    """What :func:`_set_up` makes of the scene, references and parameters."""
+    scene: DraawScene                  # the scene rendered (a copy at the references' size)
+    callers_scene: DraawScene          # the scene given, which receives the fitted values
+    session: Session
+    integrator: object
+    sensors: list
+    refs: list                         # mi.TensorXf per view
+    masks: list                        # a display reference's unclipped pixels, or None
+    chain: object                      # the loaded post chain, or None
+    keys: list                         # mi.traverse keys (of scene.all_params)
+    names: dict                        # key -> the name as given
+    prm: dict                          # key -> FitParam
+    start: dict                        # key -> the scene's value (a diverged fit puts it back)
+    initial: dict                      # key -> the value the optimiser starts from
+    version: str
+    spp: int
+    spp_grad: int | None
+    smooth: bool
+
+
+def fit(scene, references, params, version: str | None = None, spp: int = 16, iterations: int = 100,
+        lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
+        seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,
+        average_last: float = 0.25, tol: float = 5e-3, resolution=None, lr_final: float = 0.1,
+        spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None) -> FitResult:
+    """Fit ``params`` of ``scene`` so that its renders match ``references``.
+
+    Parameters
+    ----------
+    scene: a DraawScene, scene file or description dict. On return the scene holds the
+        fitted values.
+    references: one reference per view: an EXR/PNG path, an (H, W, 3) float array or tensor
+        (linear; see :func:`load_reference`). Of the scene's size, or of another size with
+        its aspect ratio: the fit then renders at the references' size.
+        A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
+        saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
+        pixels above 1 fitted roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
+        when they counted).
+    params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
+    version: integrator (``v1``..``v4``, ``prb``); must be differentiable. Default the
+        scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
+    spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
+        Adam iterations and learning rate (in the parameter's space: a roughness step of
+        ``lr`` is a relative change, see :class:`~draaw_mi.fitting.params.FitParam`).
+    spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
+    loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
+    views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
+        (a table without ``fov`` has the scene camera's field of view).
+    post: a post-processing chain (list of dicts) applied to each render inside the loss;
+        default the scene's ``post``, as :func:`draaw_mi.render` applies it (``[]``: none).
+        The scene's ``hide_emitters`` holds too: a reference rendered from the scene file
+        is then one the fit can render.
+    exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
+    init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the
+        scene's current values.
+    seed: seed of the run; iteration ``i`` renders with an independent seed derived from it,
+        and the gradient pass with another one (Mitsuba decorrelates primal and adjoint).
+    lr_final: the learning rate decays along a cosine from ``lr`` to ``lr * lr_final``.
+    average_last: the reported values are the mean of the iterates over this last fraction.
+    beta_2: Adam's second-moment decay (0.9: the step size follows the shrinking gradient).
+    smooth: feed the loss a running mean of recent renders carrying the current render's
+        derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
+    tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fitting.result.settled`).
+    progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
+    """
+    check_mode(progress, "fit")
+    t0 = time.perf_counter()
+    settings = _validate(FitSettings(version, spp, iterations, lr, loss, post, progress, seed, exposure, init,
+                                     max_depth, average_last, tol, resolution, lr_final, spp_grad, beta_2,
+                                     smooth))
+    problem = _set_up(scene, references, params, views, settings)
+    opt = _optimiser(problem, settings)
+    history, compiles = _iterate(problem, settings, opt)
+    return _report(problem, settings, opt, history, compiles, t0)
+
+
+def _validate(s: FitSettings) -> FitSettings:
+    """``s`` with every value checked: a bad one is a :class:`ParameterError` naming it."""
+    if s.loss not in LOSSES:
+        raise ParameterError(f"fit: loss={s.loss!r}; expected one of {', '.join(LOSSES)}")
+    if s.exposure not in ("fixed", "fit"):
+        raise ParameterError(f"fit: exposure={s.exposure!r}; expected 'fixed' or 'fit'")
+    for name, value, lo in (("spp", s.spp, 1), ("iterations", s.iterations, 1),
+                            ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+            raise ParameterError(f"fit: {name}={value!r}; expected an integer >= {lo}")
+    if isinstance(s.lr, bool) or not (isinstance(s.lr, (int, float)) and 0 < s.lr < float("inf")):
+        raise ParameterError(f"fit: lr={s.lr!r}; expected a positive finite number")
+    if isinstance(s.seed, bool) or not isinstance(s.seed, int) or not 0 <= s.seed <= 0xFFFFFFFF:
+        raise ParameterError(f"fit: seed={s.seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
+    if not (isinstance(s.average_last, (int, float)) and 0 < s.average_last <= 1):
+        raise ParameterError(f"fit: average_last={s.average_last!r}; expected a fraction in (0, 1]")
+    # lr_final in [0, 1] (below 0 the averaged iterations climb the loss), beta_2 in [0, 1)
+    for name, value, hi_open in (("lr_final", s.lr_final, False), ("beta_2", s.beta_2, True)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                0 <= value < 1 if hi_open else 0 <= value <= 1):
+            raise ParameterError(f"fit: {name}={value!r}; expected a number in [0, 1{')' if hi_open else ']'}")
+    if isinstance(s.tol, bool) or not isinstance(s.tol, (int, float)) or not s.tol >= 0:
+        raise ParameterError(f"fit: tol={s.tol!r}; expected a number >= 0")
+    if s.smooth is not None and not isinstance(s.smooth, (bool, np.bool_)):
+        raise ParameterError(f"fit: smooth={s.smooth!r}; expected True, False or None")
+    return s
+
+
+def _set_up(scene, references, params, views, s: FitSettings) -> FitProblem:
+    """The scene at the references' size, its views, the integrator and the parameters."""
+    if isinstance(params, str):
+        params = [params]
+    if not params:
+        raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
+    if not isinstance(scene, DraawScene):
+        scene = load_scene(scene)
+    version = s.version
+    if version is None:                 # the scene's where it can be differentiated, else v4
+        own = scene.settings.get("version") or "v4"
+        version = own if is_draaw(own) or resolve_version(own) in ("prb", "prbvolpath") else "v4"
+    post = list(scene.settings.get("post", [])) if s.post is None else s.post   # as render() does
+    chain = None
+    if post:
+        chain = post_mod.load_chain(post) if not callable(post) else post
+    encoded = chain is not None and display_encoded_post(post)
+    given = references if isinstance(references, (list, tuple)) else [references]
+    if not given:
+        raise ParameterError("fit: references is empty; give one reference image per view")
+    refs = [load_reference(r, encoded, who=f"fit: references[{i}]" if len(given) > 1 else "fit")
+            for i, r in enumerate(given)]
+    masks = [mi.TensorXf(unclipped_mask(r)) if is_display_reference(g) else None
+             for g, r in zip(given, refs)]
+    h, w = refs[0].shape[:2]
+    if any(r.shape != refs[0].shape for r in refs):
+        raise DraawError(f"fit: references differ in shape: {[r.shape for r in refs]}")
+    callers_scene = scene
+    if s.resolution is not None or scene.resolution != (w, h):
+        if s.resolution is not None and tuple(s.resolution) != (w, h):
+            raise DraawError(f"fit: resolution {tuple(s.resolution)} differs from the references' {w}x{h}")
+        check_reference_size(scene, w, h, given[0])
+        scene = scene.with_resolution(w, h)
+    sensors = view_sensors(scene, views)
+    spp = sampler_spp(scene, s.spp, "spp")
+    spp_grad = None if s.spp_grad is None else sampler_spp(scene, s.spp_grad, "spp_grad")
+    if len(sensors) != len(refs):
+        raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
+    session = session_of(scene)
+    session.check_version_sees(version)      # prb would fit a smoke scene as if it had no smoke
+    integrator = session.integrator(version, scene.settings["max_depth"] if s.max_depth is None else s.max_depth,
+                                    scene.settings.get("hide_emitters", False))
+    if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
+        raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
+    keys, names, prm, start, initial = _parameters(scene, params, s.init)
+    smooth = (chain is not None or s.loss == "l1") if s.smooth is None else bool(s.smooth)
+    return FitProblem(scene, callers_scene, session, integrator, sensors, [mi.TensorXf(r) for r in refs], masks,
+                      chain, keys, names, prm, start, initial, version, spp, spp_grad, smooth)
+
+
+def _parameters(scene, params, init):
+    """``(keys, names, FitParams, the scene's values, the values to start from)`` of the
+    parameters named ``params`` (``init`` overrides the scene's)."""
+    p = scene.all_params                 # mi.traverse plus the SDF objects' "sdf.NODE.PARAM"
+    keys = [scene.key(name) for name in params]
+    if len(set(keys)) != len(keys):
+        raise ParameterError(f"fit: params name a parameter twice: {params}")
+    names = dict(zip(keys, params))
+    if init:
+        unknown = sorted(set(init) - set(params) - set(keys))
+        if unknown:
+            raise ParameterError(f"fit: init names {unknown}, which are not in params {list(params)}")
+    start = {k: type(p[k])(p[k]) for k in keys}
+    initial = {k: p[k] for k in keys}
+    prm: dict[str, FitParam] = {}
+    for k in keys:
+        if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
+            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
+                             "Mitsuba stores as integers (not differentiable); give the texture as a "
+                             "float image (EXR) to fit it")
+        if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
+            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
+        # what the plugin declares non-differentiable (a point light's position: its samples
+        # are taken without gradients) would get a zero gradient and keep its start
+        if k in scene.params and scene.params.flags(k) & int(mi.ParamFlags.NonDifferentiable):
+            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
+                             "its Mitsuba plugin (it would keep its starting value)")
+        prm[k] = FitParam(k, names[k], p[k], scene)
+        if prm[k].space == "log" and dr.width(p[k]) != 1:
+            prm[k].space = "linear"            # textures: optimise texels linearly
+    if init:
+        for k in keys:
+            if names[k] in init or k in init:
+                value = init.get(names[k], init.get(k))
+                lo, hi = range_for(k, scene)
+                v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
+                if not np.all(np.isfinite(v)) or (lo is not None and np.any(v < lo)) or (
+                        hi is not None and np.any(v > hi)):
+                    raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected values in "
+                                         f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]")
+                initial[k] = value
+    return keys, names, prm, start, initial
+
+
+def _optimiser(problem: FitProblem, s: FitSettings):
+    """Adam over each parameter's latent (its optimiser coordinate), from its start."""
+    opt = mi.ad.Adam(lr=s.lr, beta_2=s.beta_2)
+    for k in problem.keys:
+        opt[k] = problem.prm[k].to_latent(problem.initial[k])
+    return opt
+
+
+def _push(problem: FitProblem, opt) -> None:
+    """Scene values from the optimiser's latents (AD-attached), then update the scene."""
+    p = problem.scene.all_params
+    for k in problem.keys:
+        p[k] = problem.prm[k].from_latent(opt[k])
+    p.update()
+    problem.session.scene_changed()            # e.g. V4's light powers, if lights are fitted
+
+
+def _iterate(problem: FitProblem, s: FitSettings, opt):
+    """Run the Adam iterations; returns ``(history, kernels compiled after the first)``.
+    Interrupted, the scene keeps the last iterate (detached)."""
+    keys, names, prm, sensors = problem.keys, problem.names, problem.prm, problem.sensors
+    p = problem.scene.all_params
+    means: list = [None] * len(sensors)
+    bar = progress_bar(s.iterations, "fit", "it", s.progress, where="fit")
+    history: list = []
+    moved: set = set()                       # parameters that got a non-zero gradient
+    scale = mi.Float(1.0)
+    compiles = 0
+    history_was_on = dr.flag(dr.JitFlag.KernelHistory)     # a caller's own measurement
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    try:
+        for it in range(s.iterations):
+            frac = it / max(s.iterations - 1, 1)
+            opt.set_learning_rate(s.lr * (s.lr_final + (1.0 - s.lr_final) * 0.5 * (1.0 + np.cos(np.pi * frac))))
+            with problem.session.lock, RENDER_GUARD:     # one render at a time (draaw_mi.guard)
+                total = mi.Float(0.0)
+                for v, (sensor, ref) in enumerate(zip(sensors, problem.refs)):
+                    _push(problem, opt)       # fresh AD edges latent -> scene value for this view
+                    img = problem.session.render_pass(
+                        problem.integrator, problem.spp, (s.seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF,
+                        params=p, sensor=sensor, spp_grad=problem.spp if problem.spp_grad is None else problem.spp_grad)
+                    img = img[:, :, :3] if img.shape[2] > 3 else img
+                    if problem.smooth:
+                        img, means[v] = _smoothed(img, means[v], opt, s.lr)
+                    if problem.chain is not None:
+                        img = _apply_chain(img, problem.chain)
+                    lv, sv = view_loss(img, ref, s.loss, s.exposure, problem.masks[v])
+                    if v == 0:
+                        scale = sv
+                    lv = lv / len(sensors)
+                    dr.backward(lv)      # one view at a time; gradients accumulate in the latents
+                    total += dr.detach(lv)
+                for k in keys:
+                    g = dr.grad(opt[k])
+                    g = dr.select(dr.isfinite(g), g, 0.0)
+                    dr.set_grad(opt[k], g)
+                    # (a host read per parameter, in the first iterations only)
+                    if it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None):
+                        moved.add(k)
+                if it == min(s.iterations, ZERO_GRADIENT_ITERATIONS) - 1:
+                    _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)
+                opt.step()
+                for k in keys:
+                    opt[k] = prm[k].clip(opt[k])
+            entry, new = _history_entry(problem, s, opt, it, float(total[0]), scale)
+            history.append(entry)
+            if it > 0:
+                compiles += new
+            if bar is not None:
+                bar.set_postfix(loss=f"{entry['loss']:.3g}",
+                                **{n.split(".")[-1][:5]: _short(v) for n, v in entry["values"].items()})
+                bar.update(1)
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
+        if bar is not None:
+            bar.close()
+        if len(history) < s.iterations:      # interrupted: leave the last iterate, detached
+            for k in keys:
+                p[k] = prm[k].from_latent(dr.detach(opt[k]))
+            with RENDER_GUARD:
+                p.update()
+    return history, compiles
+
+
+def _smoothed(img, mean, opt, lr: float):
+    """``(image for the loss, new running mean)``: the value of a running mean of the recent
+    renders with the derivative of this one, ``mean + (I - detach(I))``. Its weight is the
+    current learning-rate fraction (1 -> lr_final), so the mean spans more iterations as the
+    parameters slow down."""
+    flat = dr.detach(img)
+    w = dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
+    if mean is None:                           # w = 1 on the first iteration: mean = flat
+        mean = dr.zeros(mi.TensorXf, flat.shape)
+    mean = mean + w * (flat - mean)
+    dr.eval(mean)
+    return mean + (img - flat), mean
+
+
+def _history_entry(problem: FitProblem, s: FitSettings, opt, it: int, loss_value: float, scale):
+    """``(one iteration's history entry, kernels compiled in it)``."""
+    keys, names, prm = problem.keys, problem.names, problem.prm
+    values = {names[k]: _record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape) for k in keys}
+    new = sum(1 for kk in dr.kernel_history() if kk["type"] == dr.KernelType.JIT and not kk["cache_hit"])
+    # linear space: the latent is the value (one record, not a second copy of a texture)
+    latent = {names[k]: values[names[k]] if prm[k].space == "linear"
+              else _record(dr.detach(opt[k]), prm[k].shape) for k in keys}
+    entry = {"iteration": it, "loss": loss_value, "values": values, "kernel_compiles": new,
+             "lr": float(opt.lr) if isinstance(opt.lr, (int, float)) else s.lr, "latent": latent}
+    if s.exposure == "fit":
+        entry["exposure_stops"] = float(np.log2(max(float(scale[0]), 1e-30)))
+    return entry, new
+
+
+def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: int, t0: float) -> FitResult:
+    """The iterates averaged over the last ``average_last`` of the run, set in the scene (and
+    in the caller's, when the fit rendered a copy), a final render and the result."""
+    keys, names, prm, scene = problem.keys, problem.names, problem.prm, problem.scene
+    p = scene.all_params
+    n_avg = max(1, int(round(s.iterations * s.average_last)))
+    averaged = {k: prm[k].project_value(np.array([h["values"][names[k]] for h in history[-n_avg:]],
+                                                 dtype=float).mean(axis=0)) for k in keys}
+    bad = [names[k] for k in keys if not np.all(np.isfinite(averaged[k]))]
+    if bad:
+        with RENDER_GUARD:
+            for k in keys:
+                p[k] = problem.start[k]
+            p.update()
+            problem.session.scene_changed()
+        raise DraawError(f"fit: {', '.join(bad)} diverged to NaN/Inf (last loss "
+                         f"{history[-1]['loss']:.3g}); the scene keeps its starting values: "
+                         f"try a smaller lr (now {s.lr:g})")
+    fitted = {}
+    for k in keys:
+        mean = averaged[k]
+        if prm[k].shape is not None:         # a texture: back in its own shape
+            fitted[names[k]] = mean.astype(np.float32).reshape(prm[k].shape)
+            p[k] = prm[k].type(fitted[names[k]])
+        else:
+            fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
+            p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
+    with RENDER_GUARD:
+        p.update()
+    final = problem.session.render_pass(problem.integrator, problem.spp, (s.seed + 12345) & 0xFFFFFFFF,
+                                        sensor=problem.sensors[0])
+    final = final[:, :, :3] if final.shape[2] > 3 else final
+    if problem.chain is not None:
+        final = _apply_chain(final, problem.chain)
+    final = np.array(final)
+    if problem.callers_scene is not scene:          # fitted at the references' size: a copy
+        with RENDER_GUARD:
+            q = problem.callers_scene.all_params
+            for k in keys:
+                q[k] = type(p[k])(p[k])
+            q.update()
+            session_of(problem.callers_scene).scene_changed()
+    return FitResult(values=fitted, history=history, image=final[..., :3], converged=settled(history, s.tol),
+                     iterations=s.iterations, seconds=time.perf_counter() - t0, kernel_compiles=compiles,
+                     exposure_stops=float(np.mean([h["exposure_stops"] for h in history[-n_avg:]]))
+                     if s.exposure == "fit" else 0.0, version=problem.version)
+
+
+def _apply_chain(img, chain):
+    return chain(img) if callable(chain) else post_mod.apply(img, chain)
+
+
+def _scalar(v):
+    a = np.array(v).ravel()
+    return float(a[0]) if a.size == 1 else a.tolist()
+
+
+def _record(v, shape):
+    """A parameter's value as the history keeps it: a float, a list (a colour) or, for a
+    texture (``shape``), a float32 array of its shape (a list of Python floats per texel and
+    iteration took 32 bytes a texel: 1.3 GB over 200 iterations of a 256x256 RGB texture)."""
+    if shape is None:
+        return _scalar(v)
+    return np.array(v, dtype=np.float32).reshape(shape)
+
+
+def _warn_unmoved(names: list, iterations: int) -> None:
+    """Warn about parameters whose gradient was zero in every iteration so far: the renders
+    do not depend on them through anything the version differentiates (an environment map's
+    texels in Mitsuba 3.9, a light its plugin samples without gradients), so they keep their
+    starting values."""
+    if names:
+        warnings.warn(f"fit: {', '.join(names)} got a zero gradient in all of the first {iterations} "
+                      "iterations: the renders do not depend on it through anything this version "
+                      "differentiates (is it visible? differentiable?); it keeps its value",
+                      RuntimeWarning, stacklevel=4)
+
+
+def _short(v):
+    """A parameter's value for the progress report: a number, a colour, or a texture's mean.
+
+    >>> _short(0.25), _short([0.5, 0.25, 1.0]), _short(np.full((4, 4, 3), 0.5))
+    ('0.250', '[0.50,0.25,1.00]', 'mean 0.500')
+    """
+    arr = np.asarray(v, dtype=np.float64)
+    if arr.ndim == 0:
+        return f"{float(arr):.3f}"
+    if arr.size <= 4:
+        return "[" + ",".join(f"{x:.2f}" for x in arr.ravel()) + "]"
+    return f"mean {arr.mean():.3f}"

@@ -1,0 +1,249 @@
+"""Unbiased adaptive sampling: a per-pixel sample-count map, and a two-pass render that sets it.
+
+* :func:`render_spp_map` renders one wavefront in which pixel ``i`` gets ``spp_map[i]``
+  samples (any counts >= 1; the wavefront is ``sum(spp_map)`` samples long, each sample
+  finds its pixel) and returns the per-pixel mean and, optionally, the per-pixel sample
+  variance. It needs a box reconstruction filter (each sample belongs to exactly one pixel).
+* :func:`allocate` turns a per-pixel variance estimate into a map: ``m_i = m_min + extra_i``
+  with ``extra_i`` proportional to the (3x3-smoothed) standard deviation, which minimises
+  ``sum_i sigma_i^2 / m_i`` for a fixed total (as Cycles' adaptive sampling aims for); counts
+  are rounded stochastically with a seeded generator, so the total is the budget on average.
+* :func:`render_adaptive` (``draaw_v4``'s primal render for ``spp >= min_spp``): a *pilot*
+  pass of ``a = spp / 16`` samples per pixel estimates the variance, a *main* pass spends the
+  rest of the budget with the map, and the image is ``(a / spp) * pilot + (1 - a / spp) *
+  main``. The weights are constants and the main pass's counts depend only on the pilot, so
+  ``E[main | pilot] = E[pixel]`` and the image is unbiased (a count-weighted mean of both
+  passes would not be: the counts would depend on the pilot's values).
+
+Same seed, same image (up to the order of atomic additions into the per-pixel sums): the
+pilot and main passes use seeds derived from ``seed``, and the rounding generator is seeded
+from it too. Memory does not grow with spp: each sample finds its pixel by a binary search
+over the per-pixel start indices inside the kernel and is summed into per-pixel totals.
+
+>>> import numpy as np
+>>> m = allocate(np.array([0.0, 1.0, 4.0, 0.0]).reshape(1, 4), budget=16, m_min=1, seed=0,
+...              smooth=False)
+>>> int(m.min()) >= 1, abs(int(m.sum()) - 16) <= 2
+(True, True)
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .emission_split import PrimaryRays
+from .features import sampler_plugin, scene_shapes
+
+PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
+MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
+# Floor and cap bound what a wrong pilot costs. A 4-sample pilot misses rare bright paths (the
+# point light's glints on the thesis scene's near-mirror floor, 95 % of its variance in ten
+# pixels): with a floor of 1/4 and no cap V4 measured 3.0x path's variance x time there at
+# 256x256, with 1/2 and a cap of 4x the mean score 1.3x; the Cornell box's gain shrank from
+# 0.26x to 0.43x, the spheres' from 0.61x to 0.70x (benchmarks/results/speed_suite.md).
+SCORE_CAP = 4.0             # cap of a pixel's allocation score, in multiples of the mean
+COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera ray, set-up, film)
+
+
+def supported(sensor: mi.Sensor) -> bool:
+    """Whether adaptive sampling can render for this sensor and pays: an ``hdrfilm``-like film
+    (not spectral-special), a box filter, no crop window and no border, and the independent
+    sampler.
+
+    Not with a stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification
+    already removes most of the variance that adaptive sampling would move (multijitter has
+    a tenth of the independent sampler's variance at 64 spp on the Cornell box), a pilot's
+    sample variance no longer measures a stratified mean's error, and per-pixel counts break
+    the strata. Measured with stratified rounds (each pixel's count split into uniform
+    rounds the sampler can stratify): 1.23-1.44x the variance x time of uniform V4 with the
+    same sampler on the Cornell box, the spheres and the envmap scene at 128x128, 64 spp
+    (``benchmarks/results/speed_suite.md``)."""
+    if sampler_plugin(sensor.sampler()) != "independent":
+        return False
+    film = sensor.film()
+    if mi.has_flag(film.flags(), mi.FilmFlags.Special):
+        return False
+    if not film.rfilter().is_box_filter() or film.sample_border():
+        return False
+    return tuple(film.crop_size()) == tuple(film.size()) and tuple(film.crop_offset()) == (0, 0)
+
+
+GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is a rare event
+
+
+def _min_roughness(bsdf: mi.BSDF) -> float:
+    """Smallest roughness (draaw) or alpha (Mitsuba's rough BSDFs) of ``bsdf``; 1 when it has
+    none (delta or diffuse lobes cannot make a delta light's glint)."""
+    p = mi.traverse(bsdf)
+    vals = []
+    for key in p.keys():
+        leaf = key.split(".")[-2] if key.endswith((".value", ".data")) else key.split(".")[-1]
+        if leaf in ("roughness", "alpha", "alpha_u", "alpha_v"):
+            v = np.array(p[key], dtype=np.float64).ravel()
+            if v.size:
+                vals.append(float(v.min()))
+    return min(vals) if vals else 1.0
+
+
+def pilot_can_miss(scene: mi.Scene) -> bool:
+    """Whether the scene's error may sit in events too rare for a pilot of a few samples:
+    the highlights of delta lights (point, spot, sun) on near-mirror surfaces. There the
+    pilot misses most of the pixels that carry the variance, and every pixel it judged quiet
+    loses samples: measured on the thesis scene (a point light over a floor of roughness
+    0.05), adaptive sampling cost 2.0x ``path``'s variance x time at 256x256 (24 renders)
+    where V4 without it cost 1.15x. Such scenes render with uniform sampling."""
+    delta = any(mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in scene.emitters())
+    if not delta:
+        return False
+    seen = set()
+    for shape in scene_shapes(scene):
+        b = shape.bsdf()
+        if b is None or id(b) in seen:
+            continue
+        seen.add(id(b))
+        if _min_roughness(b) < GLINT_ROUGHNESS:
+            return True
+    return False
+
+
+def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,
+                   seed: int, moments: bool = False, alpha: bool = False):
+    """Mean (H, W, 3) and, with ``moments``, per-pixel sample variance (H, W, 3), alpha
+    (H, W) and mean path length in segments (H, W; 1 where the integrator does not report
+    ``last_depth``) of ``integrator.sample`` with ``spp_map[y, x]`` samples at pixel (x, y).
+    ``alpha`` (without ``moments``): the mean is (H, W, 4), the fraction of samples that hit
+    something (or saw an environment) in its fourth channel.
+
+    ``spp_map``: (H, W) integers >= 1. Primal only (no gradients).
+    """
+    film = sensor.film()
+    w, h = (int(v) for v in film.size())
+    m = np.asarray(spp_map)
+    # (a transposed (W, H) or flat map was taken in the wrong pixel order, 2.9 as 2 samples)
+    if m.shape != (h, w) or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all()\
+            or (m != np.round(m)).any() or m.min() < 1:
+        what = (f"shape {m.shape}" if m.shape != (h, w) else f"dtype {m.dtype}"
+                if not np.issubdtype(m.dtype, np.number) else f"values from {m.min()} to {m.max()}")
+        raise ValueError(f"render_spp_map: spp_map has {what}; expected ({h}, {w}) whole counts >= 1")
+    counts = m.astype(np.int64).reshape(-1)
+    total = int(counts.sum())
+    if total >= 2 ** 32:
+        raise ValueError(f"render_spp_map: {total} samples exceed 2^32; render in passes")
+    with dr.suspend_grad():
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, total)
+        # pixel of every sample, inside the kernel (no per-sample array: memory does not grow
+        # with spp): the last pixel whose first sample index is <= the sample index
+        starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)   # P + 1 entries
+        first = mi.UInt32(starts)
+        idx = dr.arange(mi.UInt32, total)
+        pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, first, i) <= idx) - 1
+        y = pixel // w
+        x = pixel - y * w
+        pos = mi.Vector2f(mi.Float(x), mi.Float(y)) + sampler.next_2d()
+        aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Vector2f(0.0)
+        time = sensor.shutter_open()
+        if sensor.shutter_open_time() > 0:
+            time += sampler.next_1d() * sensor.shutter_open_time()
+        ray, weight = sensor.sample_ray_differential(
+            time=time, sample1=0.0, sample2=pos * mi.ScalarVector2f(1.0 / w, 1.0 / h),
+            sample3=aperture)
+        reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
+        if reports_depth:
+            integrator.want_depth = True
+        set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
+        if set_primary is not None:       # each ray's pixel, for its emission splitting
+            set_primary(PrimaryRays(ray, sensor, mi.Vector2f(mi.Float(x), mi.Float(y)),
+                                    mi.ScalarVector2f(1.0 / w, 1.0 / h), mi.ScalarVector2f(0.0),
+                                    weight))
+        try:
+            L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
+                                               ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
+                                               state_in=None, active=mi.Bool(True))
+            depth = integrator.last_depth if reports_depth else None   # segments per path
+        finally:
+            if reports_depth:
+                integrator.want_depth, integrator.last_depth = False, None
+            if set_primary is not None:
+                set_primary(None)
+        value = L * weight
+        chans = [value.x, value.y, value.z]
+        if moments or alpha:
+            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x]
+        if moments:
+            chans += [(mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
+                      dr.square(value.x), dr.square(value.y), dr.square(value.z)]
+        # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
+        sums = [dr.zeros(mi.Float, w * h) for _ in chans]
+        for acc, v in zip(sums, chans):
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
+        dr.eval(sums)
+    arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
+    if not moments:
+        return arr.reshape(h, w, 4 if alpha else 3)
+    n = counts[:, None].astype(np.float64)
+    var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
+    return (arr[:, :3].reshape(h, w, 3), var.reshape(h, w, 3), arr[:, 3].reshape(h, w),
+            arr[:, 4].reshape(h, w))
+
+
+def _box3(a: np.ndarray) -> np.ndarray:
+    p = np.pad(a, 1, mode="edge")
+    return sum(p[i:i + a.shape[0], j:j + a.shape[1]] for i in range(3) for j in range(3)) / 9.0
+
+
+def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
+             smooth: bool = True, cost: np.ndarray | None = None,
+             score_cap: float | None = None) -> np.ndarray:
+    """Per-pixel counts (H, W) >= ``m_min``.
+
+    Without ``cost``: about ``budget`` samples in all, the part above the minimum proportional
+    to the standard deviation (``variance``: (H, W), per pixel). With ``cost`` (relative cost
+    of one sample per pixel, (H, W) > 0): ``budget`` is a total *cost*, and the part above the
+    minimum is proportional to ``sd / sqrt(cost)`` -- the allocation that minimises
+    ``sum_i variance_i / m_i`` for that total cost.
+    """
+    v = _box3(variance) if smooth else variance
+    sd = np.sqrt(np.maximum(v, 0.0))
+    c = np.ones_like(sd) if cost is None else np.maximum(cost, 1e-6)
+    extra = max(budget - m_min * c.sum(), 0.0)
+    score = sd / np.sqrt(c)
+    if score_cap is not None and score.size:
+        # A pilot of a few samples sees a rare bright path (a glint, a caustic) in some pixels
+        # and misses it in their twins: uncapped, the few pixels that saw one take most of the
+        # budget and the rest fall to the minimum. The cap bounds a pixel's share.
+        mean = float((score * c).sum() / c.sum())
+        if mean > 0:
+            score = np.minimum(score, score_cap * mean)
+    total = float((score * c).sum())
+    # no variance seen anywhere (a black or noise-free image): the same count everywhere
+    want = m_min + (extra * score / total if total > 0 else np.full_like(sd, extra / c.sum()))
+    rng = np.random.default_rng(seed)
+    base = np.floor(want)
+    return (base + (rng.random(want.shape) < want - base)).astype(np.int64)
+
+
+def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
+                    alpha: bool):
+    """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor."""
+    film = sensor.film()
+    w, h = (int(v) for v in film.size())
+    seed = int(seed)
+    a = max(2, spp // PILOT_FRACTION)
+    rest = spp - a
+    pilot, var, valid, segments = render_spp_map(integrator, scene, sensor, np.full((h, w), a),
+                                                 seed, moments=True)
+    s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
+    # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation ray
+    # per segment (smoothed like the variance: both are estimated from few samples).
+    cost = _box3(COST_FIXED + 2.0 * segments)
+    # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
+    counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
+                      score_cap=SCORE_CAP)
+    main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, alpha=alpha)
+    if alpha:       # (from the pilot alone, an edge pixel's alpha had the pilot's 4-spp noise)
+        pilot = np.concatenate([pilot, valid[..., None]], -1)
+    wp = a / spp
+    img = wp * pilot + (1.0 - wp) * main
+    return mi.TensorXf(img.astype(np.float32))

@@ -1,0 +1,49 @@
+"""The colour channels a film stores (its ``pixel_format``), and the check that a post chain
+or the denoiser gets R, G, B."""
+from __future__ import annotations
+
+import re
+
+from ..errors import RenderError
+from ..io import DEFAULT_NAMES
+from .session import session_of
+
+
+def film_colour_names(film) -> list[str]:
+    """The colour channels a Mitsuba film stores, from its ``pixel_format`` (``rgb``, ``rgba``,
+    ``xyz``, ``xyza``, ``y``, ``ya``; Mitsuba exposes it only in the film's description), by
+    their count where the description names none.
+
+    >>> import mitsuba as mi
+    >>> film_colour_names(mi.load_dict({"type": "hdrfilm", "pixel_format": "xyza"}))
+    ['X', 'Y', 'Z', 'A']
+    """
+    n = int(film.base_channels_count())
+    fmt = re.search(r"pixel_format = (\w+)", str(film))
+    names = [c.upper() for c in fmt.group(1)] if fmt else []
+    return names if len(names) == n else list(DEFAULT_NAMES[n])
+
+
+def scene_colour_names(scene) -> list[str]:
+    """:func:`film_colour_names` of the scene's first film, found once per scene (a film's
+    pixel format is fixed at loading; read after the kernels were launched, the lookup waited
+    for a core: 0.1 ms a small render)."""
+    memo = session_of(scene).memo
+    key = "film colour"
+    names = memo.get(key)
+    if names is None:
+        names = memo[key] = film_colour_names(scene.mi_scene.sensors()[0].film())
+    return list(names)
+
+
+def check_film_colour(scene, what: str) -> None:
+    """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
+    XYZ (an XML scene's pixel_format) is refused before the render, not after it (a post chain
+    failed with a shape error; the denoiser read Y and two AOV channels as colour; both read
+    X, Y, Z as R, G, B)."""
+    names = scene_colour_names(scene)
+    if names[:3] != ["R", "G", "B"]:
+        fmt = {"y": "luminance", "ya": "luminance_alpha"}.get("".join(names).lower(), "".join(names).lower())
+        raise RenderError(f"render: the film of {scene.source} stores {', '.join(names)} colour "
+                          f"(pixel_format {fmt!r}); {what} needs rgb or rgba: "
+                          "set the film's pixel_format to rgb, or drop post/denoise")

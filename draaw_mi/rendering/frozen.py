@@ -1,0 +1,231 @@
+"""Frozen small renders: what a ``dr.freeze`` recording of ``mi.render`` takes as input.
+
+Small renders (the Jupyter preview, the fit loop, a batch's frames) replay a recording instead
+of re-tracing the Python integrator (:meth:`Session.recording <draaw_mi.rendering.session.Session.recording>`). A recording's key
+sees the types of its inputs, not the host constants that Mitsuba's kernels bake in, so
+everything a replay must follow is handed to it here (:func:`freeze_render`): the scene, its
+host-side parameters and tensor shapes (:func:`scene_scalars`), the integrator's
+scene-dependent state (V4's light table and edge map), and the live Python BSDFs that the
+scene does not hold (:func:`other_live_bsdfs`). What is found once per scene is kept in
+the scene's :class:`~draaw_mi.rendering.session.Session` (``cache`` below: its ``scalars``,
+``own_bsdfs`` and ``memo``).
+"""
+from __future__ import annotations
+
+import gc
+import threading
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..integrators.features import scene_shapes
+from ..materials.draaw_bsdf import LIVE_INSTANCES
+from ..sdf.scene import PROXY_PREFIX
+
+
+def freeze_supported(mi_scene) -> bool:
+    """Whether renders of ``mi_scene`` may be recorded with ``dr.freeze``: not when the scene
+    has SDF objects (the tracer reads node parameters while it is traced) or participating
+    media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
+    aborts the process). The preview and the batch executor ask this too."""
+    # flags and ids only (no JIT reads): a check between replays must not disturb the
+    # recording's inputs; a shape group's members (with a medium) are found by a traversal,
+    # made only where the scene has an instance (features.scene_shapes)
+    for sh in scene_shapes(mi_scene):
+        if sh.id().startswith(PROXY_PREFIX):
+            return False                               # SDF proxies
+        if sh.interior_medium() is not None or sh.exterior_medium() is not None:
+            return False
+    return all(s.get_medium() is None for s in mi_scene.sensors())
+
+
+# Host-side parameters that no kernel reads (silhouette weights serve projective gradients,
+# thread reordering only the GPU): left out of scene_scalars' key
+_IGNORED_SCALARS = ("silhouette_sampling_weight", "allow_thread_reordering")
+
+
+def scene_scalars(mi_scene, scene=None, cache=None) -> tuple:
+    """The plain-number parameters of ``mi_scene`` (``mi.traverse`` entries held on the
+    host: floats, ints, bools and one-level scalar arrays such as the film's size), read as
+    they are now, and the shapes of its tensor parameters (textures, environment maps,
+    grids). Kernels bake these in as constants, and a ``dr.freeze`` replay keeps its
+    recording's (its key sees the inputs' types, not their sizes): the lights' sampling
+    weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
+    ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
+    ``sensor.film.size`` changed returned an image of the old size), a texture's ``to_uv``
+    transform (a host-side matrix: a replay kept the old tiling; also when a Python plugin
+    exposes it with ``cb.put``), a texture's resolution
+    (an environment map's data swapped for a smaller image: up to 45 off from the second
+    replay on). Without this a replay after ``params.update`` of one of them went on
+    rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
+    render; a sampling weight: up to 26). Passed to the recording as Python values, which are
+    part of its key, a change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
+    one, and ``cache``, its session, make this a few microseconds (its parameter table is walked
+    once); without them ``mi_scene`` is traversed on each call.
+
+    >>> import mitsuba as mi
+    >>> scene = mi.load_dict(mi.cornell_box())  # clip distances, shutter, light weight, film
+    >>> [x if isinstance(x, tuple) else round(x, 3) for x in scene_scalars(scene)]
+    [0.001, 100.0, 0.0, 0.0, 1.0, (256, 256), (256, 256), (0, 0)]
+    """
+    state = None if scene is None else cache
+    access = None if state is None else state.scalars
+    if access is None or access[0] is not scene.params:
+        params = mi.traverse(mi_scene) if scene is None else scene.params
+        groups: tuple = ([], [], [], [], [])      # plain, vectors, matrices, tensors, others
+        for key in params.keys():
+            value, vtype, node, _ = params.properties[key]
+            if key.endswith(_IGNORED_SCALARS):
+                continue
+            # vtype None: a Python plugin's cb.put of the object itself, which params.update
+            # changes in place (a nanobind type; a plain Python number it cannot change)
+            probe = value if vtype is None else params.get_property(value, vtype, node)
+            group = _key_group(probe, python_plugin=vtype is None)
+            if group is not None:
+                groups[group].append((value, vtype, node))
+        access = (params,) + groups
+        if state is not None:
+            state.scalars = access
+    get = access[0].get_property
+
+    def read(value, vtype, node):
+        return value if vtype is None else get(value, vtype, node)
+    return (tuple(read(*e) for e in access[1])
+            + tuple(tuple(read(*e)) for e in access[2])
+            + tuple(_matrix_entries(read(*e)) for e in access[3])
+            + tuple(tuple(read(*e).shape) for e in access[4])
+            + tuple(repr(read(*e)) for e in access[5]))
+
+
+def _key_group(value, python_plugin: bool) -> int | None:
+    """Which part of :func:`scene_scalars`' key a parameter's value goes to: 0 a plain
+    number, 1 a host-side vector (the film's size, crop size, offset), 2 a host-side matrix or
+    transform (a texture's ``to_uv``), 3 a tensor (its shape: a texture's or grid's
+    resolution), 4 another host-side value (a string, a ``Scalar*`` bounding box: its
+    ``repr``); ``None``: nothing to key (a JIT array, which ``dr.freeze`` follows itself)."""
+    kind = type(value)
+    if kind in (float, int, bool):
+        return None if python_plugin else 0
+    if dr.is_tensor_v(kind):
+        return 3
+    if dr.is_array_v(kind):
+        return None if dr.is_jit_v(kind) else (1 if dr.depth_v(kind) == 1 else 2)
+    if hasattr(value, "matrix"):
+        return None if dr.is_jit_v(type(value.matrix)) else 2
+    if isinstance(value, str) or kind.__name__.startswith("Scalar"):
+        return 4
+    return None
+
+
+def _matrix_entries(value) -> tuple:
+    """A host-side matrix or transform's entries as a flat tuple of Python numbers (not
+    ``getattr(value, "matrix")`` on an array: Dr.Jit reads that as a swizzle)."""
+    return tuple(np.asarray(value if dr.is_array_v(value) else value.matrix).ravel().tolist())
+
+
+def other_live_bsdfs(mi_scene, cache=None) -> list:
+    """The live draaw BSDFs that ``mi_scene``'s shapes do not hold (ordered by ``id``). With
+    ``cache`` (the session of ``mi_scene``'s :class:`DraawScene`) the scene's own BSDFs are looked up
+    once (a shape's BSDF cannot be replaced), and while the live ones are exactly the scene's
+    own, no walk over them is needed (the walk over shapes and live BSDFs took 10-67 us a
+    render on the material spheres, with warm or cold caches; the lookup takes 1 us)."""
+    state = cache
+    own = None if state is None else state.own_bsdfs
+    if own is None:
+        ids = frozenset(id(sh.bsdf()) for sh in mi_scene.shapes())
+        own = (ids, sum(1 for b in LIVE_INSTANCES if id(b) in ids))
+        if state is not None:
+            state.own_bsdfs = own
+    if len(LIVE_INSTANCES) == own[1]:      # all live ones are the scene's (they live with it)
+        return []
+    return sorted((b for b in LIVE_INSTANCES if id(b) not in own[0]), key=id)
+
+
+#: recordings one frozen render keeps (see freeze_render)
+RECORDINGS_KEPT = 8
+
+
+class _CollectorPaused:
+    """Python's cycle collector off while a frozen render runs (nested and across threads: on
+    again when the last one ends, if it was on when the first began). A collection during a
+    ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's buffers, a dead preview's
+    recordings) aborts the process: "RecordThreadState::enqueue_host_func(): this function
+    cannot be recorded!" (seen in the test suite once recordings went with their scenes).
+    A class rather than a generator context manager: this runs on every replay (1 us, not 2)."""
+    __slots__ = ()
+    depth = 0
+    was_enabled = False
+    guard = threading.Lock()
+
+    def __enter__(self):
+        cls = _CollectorPaused
+        with cls.guard:
+            if cls.depth == 0:
+                cls.was_enabled = gc.isenabled()
+                gc.disable()
+            cls.depth += 1
+
+    def __exit__(self, *exc):
+        cls = _CollectorPaused
+        with cls.guard:
+            cls.depth -= 1
+            if cls.depth == 0 and cls.was_enabled:
+                gc.enable()
+        return False
+
+
+_PAUSED = _CollectorPaused()
+
+
+def freeze_render(integrator, body):
+    """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
+    with the integrator's scene-dependent state (V4's light-selection table, from its
+    ``freeze_state``) passed to the recording as an input. Without it the recording would run
+    a different sampler than a traced render, or replay a stale table. The preview and the
+    batch executor record their renders through this too."""
+    state_of = getattr(integrator, "freeze_state", None)
+    use_state = getattr(integrator, "frozen_state", None)
+
+    def recorded(mi_scene, scalars, seed, state, live_bsdfs):
+        if use_state is None:
+            return body(mi_scene, seed)
+        with use_state(state):
+            return body(mi_scene, seed)
+
+    # Every input opaque from the first recording: with literals kept (auto_opaque), a
+    # stratifying sampler's state, which the first render changes, made the second call
+    # re-record and compile a kernel anew (a batch job recompiled at its third frame); the
+    # walls are the same (benchmarks/results/render_overhead.md).
+    # At most RECORDINGS_KEPT recordings, the least recently used dropped: each value of a
+    # plain-number parameter (scene_scalars) records anew, on purpose, so an animated light
+    # weight or a resized film would otherwise pile up compiled recordings for as long as the
+    # integrator lives, and Dr.Jit's "recorded N times" warning would fire on every render.
+    frozen = dr.freeze(recorded, auto_opaque=False, limit=RECORDINGS_KEPT, warn_after=1 << 30)
+
+    failed = []                      # a recording that failed once: trace from then on
+
+    def call(mi_scene, seed, scene=None, cache=None):
+        """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any, and
+        ``cache`` its session (a cheaper read of its plain-number parameters, see
+        :func:`scene_scalars`)."""
+        if failed:
+            return body(mi_scene, seed)
+        # every live Python BSDF that the scene does not hold itself (those it holds are
+        # traversed with it): without them the recording of a BSDF call fails (see
+        # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
+        live = other_live_bsdfs(mi_scene, cache)
+        memo = None if cache is None else cache.memo
+        try:
+            with _PAUSED:
+                return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed,
+                              None if state_of is None else state_of(mi_scene, memo), live)
+        except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
+            failed.append(str(e))
+            warnings.warn(f"freeze_render: dr.freeze could not record this render "
+                          f"({str(e).splitlines()[0][:200]}); it is traced from now on",
+                          RuntimeWarning, stacklevel=2)
+            return body(mi_scene, seed)
+    call.frozen = frozen
+    return call

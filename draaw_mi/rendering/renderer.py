@@ -1,0 +1,317 @@
+"""``draaw_mi.render``: render a scene with a chosen version, in passes, with progress and budget.
+
+Large sample counts are split into passes of at most ``pass_spp`` samples with independent
+seeds; the image is the spp-weighted mean of the passes (GO-Draaw's "frame averaging", done as
+a true mean rather than its exponential moving average). Same arguments and seed, same image.
+Each pass is rendered by the scene's :class:`~draaw_mi.rendering.session.Session`; a render
+runs in three phases: :func:`_settings` (check and resolve every argument, before anything
+renders), the passes, and :func:`_finish` (the mean, channel names, denoising, the post chain).
+
+>>> import draaw_mi
+>>> scene = draaw_mi.load_scene({"render": {"resolution": [16, 16]},
+...     "shapes": [{"type": "sphere"}], "lights": [{"type": "constant"}],
+...     "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+>>> img = draaw_mi.render(scene, version="path", spp=4, seed=1)
+>>> img.shape
+(16, 16, 3)
+"""
+from __future__ import annotations
+
+import numbers
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .. import post as post_mod
+from ..errors import RenderError
+from ..guard import RENDER_GUARD
+from ..integrators import VERSION_GRADES, is_draaw, resolve_version
+from ..integrators.common import AOV_CHANNELS
+from ..io import channel_names
+from ..progress import check_mode, progress_bar
+from ..scene import DraawScene, load_scene
+from ..scene.schema import Where
+from ..scene.schema import resolution as parse_res
+from .denoiser import AUX_AOVS, denoise_aovs, load_pyoidn
+from .film_colour import check_film_colour, scene_colour_names
+from .passes import pass_seeds
+from .session import apply_post, non_finite_count, session_of
+from .subsample import render_adaptive
+
+#: the most samples of one pass (memory: each sample's path state lives at once)
+MAX_PASS_SPP = 256
+
+
+@dataclass
+class RenderSettings:
+    """What :func:`render` renders, every argument checked and resolved against the scene."""
+    scene: DraawScene
+    version: str
+    spp: int
+    seed: int
+    max_depth: int
+    pass_spp: int
+    hide_emitters: bool
+    aovs: list
+    options: dict
+    chain: list | None                 # the post chain as given (recorded as the user wrote it)
+    loaded: object = None              # ... and loaded (a draaw_mi.post.Chain), or None
+    denoise: bool = False
+    guide_aovs: list = field(default_factory=list)   # AOVs rendered only for the denoiser
+
+
+def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
+           max_depth: int | None = None, resolution=None, *, params=None, progress: bool | str = False,
+           time_budget: float | None = None, pass_spp: int | None = None, post=None,
+           hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
+           integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
+    """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = the film's colour channels,
+    R, G, B, or an XML film's R, G, B, A / X, Y, Z[, A] / Y[, A], + AOV channels).
+
+    Parameters
+    ----------
+    scene: a :class:`DraawScene`, file name, description dict or ``mi.Scene`` (load a file
+        once and pass the scene: small renders replay a recording kept with it).
+    version: ``"v1"`` .. ``"v4"`` (GO-Draaw names accepted), ``"path"`` or ``"prb"``, and
+        ``"volpath"`` / ``"prbvolpath"`` for media; default the scene's ``render.version``.
+        Mitsuba's integrators cannot see ``[[sdf]]`` objects, ``path`` / ``prb`` not media:
+        such a request raises :class:`RenderError`.
+    spp, seed, max_depth, resolution ((W, H)): override the scene's render settings.
+    params: ``mi.traverse`` parameters, for differentiable renders (``dr.backward`` works).
+    progress: ``True``/``"bar"`` a tqdm bar over passes, ``"lines"`` a line now and then
+        (for logs, :mod:`draaw_mi.progress`).
+    time_budget: seconds; stop after the pass that reaches it (at least one pass runs); the
+        image is the mean of the passes done (``return_info`` tells how many samples).
+    pass_spp: samples per pass (default: all at once up to 256, 16 with a time budget). The
+        bar advances per pass: give e.g. 16 for a finer one (another layout of passes draws
+        other samples: another image of the same expectation).
+    post: a post-processing chain (list of dicts) to apply; default the scene's ``post``;
+        ``[]`` disables it.
+    hide_emitters: hide directly seen lights (default: the scene's ``render.hide_emitters``).
+    aovs: extra outputs after the colour, any of ``"depth"``, ``"depth_log"``, ``"normal"``,
+        ``"albedo"`` (or ``"all"``): channels ``depth.Z``, ``N.X/Y/Z``, ``albedo.R/G/B``
+        (draaw versions only; default the scene's ``render.aovs``).
+    integrator_options: further properties of the integrator plugin, e.g. ``{"rr_depth": 8}``
+        or V4's ``{"light_selection": "power"}`` (see each integrator's docstring).
+    return_info: also return a dict with ``spp``, ``passes``, ``seconds``, ``channels`` (names),
+        ``post`` (the chain applied) and ``non_finite`` (NaN/inf values of the render before
+        denoising and the chain, which read them as 0).
+    adaptive: block size (a power of two, e.g. 8) for adaptive subsampling with bilinear
+        interpolation (see :mod:`draaw_mi.rendering.subsample`; biased, not differentiable, no AOVs).
+    denoise: denoise the colour with Intel OIDN (:func:`draaw_mi.denoise`, needs ``pyoidn``),
+        guided by albedo and normal AOVs rendered for it (returned only if asked for in
+        ``aovs``); applied before the post chain. Biased, not differentiable.
+
+    Example::
+        >>> import draaw_mi
+        >>> img, info = draaw_mi.render("scenes/cornell.toml", spp=4, resolution=(32, 24),
+        ...                             aovs=["depth"], return_info=True)
+        >>> img.shape, info["channels"]
+        ((24, 32, 4), ['R', 'G', 'B', 'depth.Z'])
+    """
+    check_mode(progress, "render")
+    if adaptive is not None and (time_budget is not None or pass_spp is not None):
+        given = "time_budget" if time_budget is not None else "pass_spp"
+        raise RenderError(f"render: adaptive= renders every sample in one launch, without passes; "
+                          f"drop {given}= or adaptive=")
+    rs = _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
+                   hide_emitters, aovs, integrator_options, adaptive, denoise)
+    session = session_of(rs.scene)
+    if adaptive is not None:
+        return _render_adaptive(rs, session, adaptive, params, return_info, progress)
+    integrator = session.integrator(rs.version, rs.max_depth, rs.hide_emitters, rs.aovs, **rs.options)
+    counts = session.sample_passes(rs.spp, rs.pass_spp)
+    n_passes = len(counts)
+    # (the samples taken: a sampler rounds spp up to its pattern, 5 -> 8 of ldsampler)
+    bar = progress_bar(sum(counts), f"render {rs.version}", "spp", progress, leave=False, where="render")
+    acc, done, passes, t0 = None, 0, 0, time.perf_counter()
+    with session.lock:                         # the passes of one render see one scene
+        for count, pseed in zip(counts, pass_seeds(rs.seed, n_passes)):
+            img = session.render_pass(integrator, count, pseed, params=params)
+            if n_passes == 1:
+                acc = img                      # one pass: no extra scaling kernels (small renders)
+            else:
+                with RENDER_GUARD:
+                    acc = img * count if acc is None else acc + img * count
+                    dr.eval(acc)
+                    dr.sync_thread()
+            done += count
+            passes += 1
+            if bar is not None:
+                bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
+                bar.update(count)
+            if time_budget is not None and time.perf_counter() - t0 >= time_budget:
+                break
+    if bar is not None:
+        bar.close()
+    image, names, bad = _finish(rs, integrator, acc, done, n_passes, return_info)
+    if return_info:
+        return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
+                       "channels": names, "version": rs.version, "integrator": resolve_version(rs.version),
+                       "denoised": rs.denoise, "non_finite": bad, "post": rs.chain}
+    return image
+
+
+def _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
+              hide_emitters, aovs, integrator_options, adaptive, denoise) -> RenderSettings:
+    """:func:`render`'s arguments checked and resolved against the scene's settings (nothing
+    renders before every argument is known to be good)."""
+    if not isinstance(scene, DraawScene):
+        scene = load_scene(scene)
+    s = scene.settings
+    if resolution is not None:
+        size = tuple(parse_res(resolution, Where("render") / "resolution"))
+        if params is not None and size != scene.resolution:
+            # the reloaded copy has its own parameters: gradients would not reach `params`
+            raise RenderError(f"render: resolution={resolution!r} with params= renders a reloaded "
+                              "copy of the scene that `params` do not belong to; render "
+                              "`scene.with_resolution(w, h)` and traverse that instead")
+        scene = scene.with_resolution(*size)
+    version = s["version"] if version is None else version
+    spp = _check_int("spp", s["spp"] if spp is None else spp, 1)
+    seed = _check_int("seed", s["seed"] if seed is None else seed, 0, 2 ** 32 - 1)     # a UInt32
+    max_depth = _check_int("max_depth", s["max_depth"] if max_depth is None else max_depth, -1)
+    if time_budget is not None and (isinstance(time_budget, bool) or not (
+            isinstance(time_budget, numbers.Real) and 0 < time_budget < float("inf"))):
+        raise RenderError(f"render: time_budget={time_budget!r}; expected a positive number of seconds")
+    if pass_spp is None:
+        # not from the progress mode: the passes' seeds make the samples, and V4 samples
+        # adaptively only in passes of 64 spp or more
+        pass_spp = min(spp, 16 if time_budget else MAX_PASS_SPP)
+    pass_spp = _check_int("pass_spp", pass_spp, 1)
+    hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
+    if not isinstance(hide, (bool, np.bool_)):             # a truthy string is not True
+        raise RenderError(f"render: hide_emitters={hide!r}; expected True or False")
+    if integrator_options is not None and not isinstance(integrator_options, dict):
+        raise RenderError(f"render: integrator_options={integrator_options!r}; expected a dict of "
+                          "integrator plugin properties, e.g. {'rr_depth': 8}")
+    if aovs is None:
+        aovs = s.get("aovs", [])
+        if aovs and not is_draaw(version):
+            warnings.warn(f"render: {version!r} renders colour only; the scene's AOVs "
+                          f"({', '.join(aovs)}) come from v1..v4", RuntimeWarning, stacklevel=3)
+            aovs = []
+    elif isinstance(aovs, str):
+        aovs = [aovs]                          # "depth" or "all", not its characters
+    session_of(scene).check_version_sees(version)
+    if callable(post) and not isinstance(post, post_mod.Chain):
+        raise RenderError(f"render: post={post!r}; expected a chain (a list of filter tables, a Chain "
+                          "or a JSON file): apply a function of your own to the returned image")
+    chain = s.get("post", []) if post is None else post
+    # loaded and checked now, before the render; ``chain`` stays as given: the info (and a
+    # batch frame's header) records it as the user wrote it
+    loaded = post_mod.load_chain(chain) if chain else None
+    _warn_grade_left_out(version, loaded)
+    if (chain or denoise) and adaptive is None:
+        check_film_colour(scene, "a post chain" if chain else "denoising")
+    guides: list = []
+    if denoise:                                # check early, render the guide AOVs with the image
+        aovs, guides = _denoise_aovs(params, adaptive, aovs, version)
+    return RenderSettings(scene, version, spp, seed, max_depth, pass_spp, bool(hide), list(aovs),
+                          dict(integrator_options or {}), chain, loaded, bool(denoise), guides)
+
+
+def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int, count_bad: bool):
+    """``(image, channel names, non-finite values)``: the mean of the passes, named by the
+    film's colour channels as its pixel_format stores them (R, G, B[, A], X, Y, Z[, A] or
+    Y[, A]) and the AOVs', denoised and post-processed as asked. The non-finite values are
+    counted before denoising and the chain, which read NaN/inf as 0 and would hide them."""
+    aov_names = integrator.aov_names()
+    colour = scene_colour_names(rs.scene)
+    names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
+             else channel_names(acc.shape[2], aov_names))
+    image = acc
+    if n_passes > 1:
+        with RENDER_GUARD:
+            image = acc / done
+            dr.eval(image)
+            dr.sync_thread()
+    bad = non_finite_count(image) if count_bad else 0
+    if rs.denoise or rs.chain:
+        with RENDER_GUARD:                     # denoising, post: their kernels and reads back
+            if rs.denoise:
+                image, names = _denoised(image, names, rs.guide_aovs)
+            if rs.chain:
+                image = apply_post(image, rs.loaded)
+    return image, names, bad
+
+
+def _warn_grade_left_out(version: str, chain) -> None:
+    """Warn when a GO-Draaw graded version name (``V4-Log``) comes without its grade's post
+    filter: the name renders linear light, as ``V4`` does."""
+    grade = VERSION_GRADES.get(str(version).strip().lower())
+    if grade is None or (chain is not None and any(e.get("type") == grade for e in chain.to_list())):
+        return
+    warnings.warn(f"render: version {version!r} renders linear light, as {resolve_version(version)!r} "
+                  f"does; its {grade.capitalize()} colour grade is the post filter {grade!r} (add "
+                  f"{{'type': '{grade}'}} to the post chain)", RuntimeWarning, stacklevel=4)
+
+
+def _render_adaptive(rs: RenderSettings, session, block, params, return_info, progress):
+    """:func:`render` with adaptive subsampling (:mod:`draaw_mi.rendering.subsample`)."""
+    if params is not None:
+        raise RenderError("render: adaptive subsampling is not differentiable; drop params= or adaptive=")
+    if rs.aovs:
+        raise RenderError("render: adaptive subsampling renders colour only; drop aovs or adaptive=")
+    holds = session.holds()
+    if holds["sdf"] or holds["media"]:
+        # its corner signatures (camera, shadow and mirror rays) see meshes only: SDF objects
+        # and smoke would come out as interpolated smears
+        what = "[[sdf]] objects" if holds["sdf"] else "participating media"
+        raise RenderError(f"render: adaptive subsampling cannot see {what} ({rs.scene.source}); drop adaptive=")
+    integrator = session.integrator(rs.version, rs.max_depth, rs.hide_emitters, (), **rs.options)
+    t0 = time.perf_counter()
+    bar = progress_bar(rs.spp, f"render {rs.version} adaptive", "spp", progress, leave=False, where="render")
+    image, stats = render_adaptive(rs.scene, block=block, spp=rs.spp, seed=rs.seed, integrator=integrator)
+    if bar is not None:                        # one launch: the bar fills at once
+        bar.update(rs.spp)
+        bar.close()
+    bad = non_finite_count(image) if return_info else 0      # before the chain: see _finish
+    if rs.chain:
+        image = apply_post(image, rs.loaded)
+    if return_info:
+        return image, {"non_finite": bad, "spp": rs.spp, "passes": 1, "seconds": time.perf_counter() - t0,
+                       "channels": ["R", "G", "B"], "version": rs.version,
+                       "integrator": resolve_version(rs.version), "adaptive": stats, "post": rs.chain}
+    return image
+
+
+def _denoise_aovs(params, adaptive, aovs, version):
+    """(AOVs to render, the ones added only to guide the denoiser) for ``denoise=True``.
+    Mitsuba's own integrators (``path``, ``prb``) have no AOV outputs: colour-only denoising."""
+    if params is not None:
+        raise RenderError("render: denoise=True is not differentiable; drop params= or denoise=")
+    if adaptive is not None:
+        raise RenderError("render: denoise=True cannot be combined with adaptive= (no AOVs there)")
+    load_pyoidn()                             # the one-line install hint before any rendering
+    aovs = [aovs] if isinstance(aovs, str) else list(aovs)
+    if not is_draaw(version):
+        return aovs, []
+    asked = {a.strip() for item in aovs for a in str(item).split(",")}
+    if "all" in asked:
+        return aovs, []
+    extra = [a for a in AUX_AOVS if a not in asked]
+    return aovs + extra, extra
+
+
+def _denoised(image, names, extra_aovs):
+    out = denoise_aovs(image, names)
+    drop = {c for a in extra_aovs for c in AOV_CHANNELS[a]}
+    keep = [i for i, n in enumerate(names) if n not in drop]
+    if len(keep) < len(names):
+        out = mi.TensorXf(np.ascontiguousarray(np.asarray(out)[..., keep]))
+        names = [names[i] for i in keep]
+    return out, names
+
+
+def _check_int(name, value, lo, hi=None) -> int:
+    """``value`` as a Python int, numpy integers too (``2 ** np.arange(k)`` in a notebook)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo \
+            or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise RenderError(f"render: {name}={value!r}; expected an integer {rng}")
+    return int(value)

@@ -1,0 +1,311 @@
+"""One render session per scene: the one place where draaw-mi renders a pass.
+
+A :class:`Session` belongs to one :class:`~draaw_mi.scene.DraawScene` (:func:`session_of`
+makes it on first use and keeps it as long as the scene lives). It owns
+
+* the scene's **lock** (an ``RLock``): two threads never render one scene at once, and a
+  multi-pass render or a fit iteration keeps the scene to itself;
+* its **integrators** (:meth:`Session.integrator`, one instance per set of options; V4 keeps
+  what it learns of the scene in its instance);
+* its **recordings**: ``dr.freeze`` replays of one-pass renders (:mod:`.frozen` says what a
+  recording takes as input) and what is found once per scene for them;
+* its **workers** (the preview's thread): :meth:`Session.close`, the context manager and a
+  hook at interpreter exit stop them, so that no thread is inside a Dr.Jit kernel while
+  Dr.Jit shuts down (a forgotten tuner ended its script with SIGSEGV or SIGABRT).
+
+:meth:`Session.render_pass` renders one pass -- traced, or replayed from a recording -- and
+:func:`apply_post` applies a post chain to its colour; :func:`draaw_mi.render`, a batch frame,
+the preview and :func:`draaw_mi.fit` all render through them.
+
+Renders of different scenes from different threads are serialised: every pass runs under
+:data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), and so does
+``mi.render`` with a draaw integrator called directly. Take a session's lock before the
+guard, never after.
+
+>>> import draaw_mi
+>>> from draaw_mi.rendering.session import session_of
+>>> scene = draaw_mi.load_scene({"render": {"resolution": [8, 8], "filter": "box"},
+...     "shapes": [{"type": "sphere"}], "lights": [{"type": "constant"}],
+...     "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+>>> with session_of(scene) as session:
+...     integrator = session.integrator("v4", max_depth=3)
+...     session.render_pass(integrator, spp=4, seed=0).shape
+(8, 8, 3)
+"""
+from __future__ import annotations
+
+import atexit
+import threading
+import weakref
+
+import drjit as dr
+import mitsuba as mi
+
+from .. import post
+from ..errors import RenderError
+from ..guard import RENDER_GUARD
+from ..integrators import resolve_version
+from ..integrators.features import detect_features
+from .frozen import freeze_render, freeze_supported
+from .passes import sample_passes
+from .plugins import integrator_props, make_plugin
+
+#: ``freeze="small"`` records renders of at most this many pixels and samples per pixel
+FREEZE_MAX_PIXELS = 128 * 128
+FREEZE_MAX_SPP = 16
+#: set False to trace every render (debugging)
+FREEZE = True
+#: seconds a worker gets to finish its frame when its session closes
+WORKER_STOP_S = 10.0
+
+# What Mitsuba's own integrators cannot show: draaw-mi traces SDF objects inside v1..v4 only,
+# and path / prb pass through media as if they were empty
+BLIND = {"path": ("sdf", "media"), "prb": ("sdf", "media"), "volpath": ("sdf",), "prbvolpath": ("sdf",)}
+
+
+class Session:
+    """Everything draaw-mi keeps to render one scene (see the module docstring).
+
+    Beside the lock, integrators, recordings and workers it holds what is found once per
+    scene: whether renders may be recorded (``freezable``), the film, the plain-number
+    parameter readers (``scalars``) and own BSDFs (``own_bsdfs``) of :mod:`.frozen`, the pass
+    plans of its sampler (``passes``) and ``memo``, where integrators (V4's
+    ``freeze_state``) and the renderer keep their own findings.
+    """
+    def __init__(self, scene):
+        self._scene = weakref.ref(scene)
+        self.source = scene.source
+        self.lock = threading.RLock()
+        self.freezable = self.film = self.scalars = self.own_bsdfs = None
+        self.memo: dict = {}
+        self.passes: dict = {}
+        self.recordings: dict = {}            # (id(integrator), spp) -> a recorded render
+        self._integrators: dict = {}          # plugin properties -> integrator
+        self._integrator_keys: dict = {}      # integrator()'s arguments as given -> properties
+        self._workers: weakref.WeakSet = weakref.WeakSet()
+        _LIVE.add(self)
+
+    @property
+    def scene(self):
+        """The :class:`~draaw_mi.scene.DraawScene` (it owns the session, not the other way)."""
+        scene = self._scene()
+        if scene is None:
+            raise RenderError(f"render session of {self.source}: its scene is gone")
+        return scene
+
+    # ------------------------------------------------------------------ integrators
+    def integrator(self, version: str, max_depth: int, hide_emitters: bool = False, aovs=(), **options):
+        """The integrator plugin for ``version`` with these options, made once per session.
+        :class:`~draaw_mi.errors.RenderError` names an option the plugin does not take."""
+        try:                                 # the arguments as given (a render's first step)
+            fast = (version, max_depth, bool(hide_emitters), tuple(aovs), tuple(sorted(options.items())))
+            integrator = self._integrators.get(self._integrator_keys.get(fast))
+        except TypeError:                    # an unhashable option value
+            fast = integrator = None
+        if integrator is not None:
+            return integrator
+        props = integrator_props(version, max_depth, hide_emitters, aovs, **options)
+        key = tuple(sorted((k, str(v)) for k, v in props.items()))
+        if key not in self._integrators:
+            with RENDER_GUARD:               # (a plugin made while a recording replays breaks it)
+                self._integrators[key] = make_plugin(props)
+        if fast is not None:
+            self._integrator_keys[fast] = key
+        return self._integrators[key]
+
+    def scene_changed(self) -> None:
+        """Tell the session's integrators that the scene's parameters changed: V4 recomputes
+        its power-based light-selection table at the next render instead of keeping the old
+        one (a table its light pilot learned stays: see
+        :mod:`draaw_mi.integrators.light_pilot`). The preview, the batch and the fit call this
+        after ``params.update()``; call it too after changing light intensities yourself
+        (renders stay unbiased without it, but a stale table samples a dimmed light as often
+        as before)."""
+        mi_scene = self.scene.mi_scene
+        for integrator in list(self._integrators.values()):
+            forget = getattr(integrator, "forget_scene", None)
+            if forget is not None:
+                forget(mi_scene)
+
+    # ------------------------------------------------------------------ what the scene holds
+    def holds(self) -> dict:
+        """``{"sdf": bool, "media": bool}``: whether the scene has ``[[sdf]]`` objects or
+        participating media (found once)."""
+        holds = self.memo.get("holds")
+        if holds is None:
+            feats = detect_features(self.scene.mi_scene)
+            holds = self.memo["holds"] = {"sdf": bool(feats["sdf"]), "media": bool(feats["media"])}
+        return holds
+
+    def check_version_sees(self, version: str) -> None:
+        """Raise :class:`~draaw_mi.errors.RenderError` when ``version`` cannot show what the
+        scene holds: ``[[sdf]]`` objects for any of Mitsuba's integrators, media for
+        ``path`` / ``prb``. The render would otherwise drop them without a word."""
+        plugin = resolve_version(version)
+        blind = BLIND.get(plugin)
+        if not blind:
+            return
+        holds = self.holds()
+        if "sdf" in blind and holds["sdf"]:
+            raise RenderError(f"render: {self.source} has [[sdf]] objects, which Mitsuba's {plugin!r} "
+                              "cannot see (draaw-mi traces them in v1..v4); pick v1..v4")
+        if "media" in blind and holds["media"]:
+            raise RenderError(f"render: {self.source} has participating media, which Mitsuba's "
+                              f"{plugin!r} passes through as empty; pick v1..v4 or volpath")
+
+    def sample_passes(self, spp: int, pass_spp: int) -> list[int]:
+        """:func:`~draaw_mi.rendering.passes.sample_passes` of the scene, remembered where its
+        sampler is one of Mitsuba's (they round counts by their kind alone)."""
+        counts = self.passes.get((spp, pass_spp))
+        if counts is None:
+            mi_scene = self.scene.mi_scene
+            with RENDER_GUARD:                # (probing forks the sampler: a plugin call)
+                counts = sample_passes(mi_scene, spp, pass_spp)
+            if type(mi_scene.sensors()[0].sampler()) is mi.Sampler:
+                if len(self.passes) >= 64:
+                    self.passes.clear()
+                self.passes[(spp, pass_spp)] = counts
+        return list(counts)
+
+    # ------------------------------------------------------------------ one pass
+    def freezes(self, spp: int, freeze="small") -> bool:
+        """Whether a primal pass of ``spp`` samples replays a recording: ``freeze`` True when
+        the scene can be recorded (no SDF objects, no media: :func:`.frozen.freeze_supported`,
+        asked once), ``"small"`` only for films of at most :data:`FREEZE_MAX_PIXELS` pixels
+        and :data:`FREEZE_MAX_SPP` samples (where tracing costs more than the kernels: the
+        rule of :func:`draaw_mi.render`), False never. The film size is read every time
+        (parameters can change it)."""
+        if not FREEZE or not freeze or (freeze == "small" and spp > FREEZE_MAX_SPP):
+            return False
+        if self.freezable is None:
+            mi_scene = self.scene.mi_scene
+            self.freezable = freeze_supported(mi_scene)
+            self.film = mi_scene.sensors()[0].film()          # a sensor's film stays its own
+        if not self.freezable:
+            return False
+        if freeze != "small":
+            return True
+        w, h = self.film.size()
+        return int(w) * int(h) <= FREEZE_MAX_PIXELS
+
+    def render_pass(self, integrator, spp: int, seed: int, *, params=None, sensor=None, spp_grad=None,
+                    freeze="small"):
+        """Render one pass of ``spp`` samples with ``seed`` (an int, or an opaque ``mi.UInt32``
+        that keeps a traced kernel from being compiled anew for each seed) and return the evaluated image
+        (``mi.TensorXf`` (H, W, C), as ``mi.render`` gives it). ``params`` (``mi.traverse``
+        parameters) makes it differentiable (traced; ``sensor`` and ``spp_grad`` as in
+        ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
+        bits either way."""
+        scene = self.scene
+        with self.lock, RENDER_GUARD:
+            if params is None and sensor is None and self.freezes(spp, freeze):
+                if isinstance(seed, int):
+                    seed = dr.opaque(mi.UInt32, seed)
+                image = self.recording(integrator, spp)(scene.mi_scene, seed, scene, self)
+            else:
+                image = mi.render(scene.mi_scene, params, sensor=0 if sensor is None else sensor,
+                                  integrator=integrator, seed=seed, spp=spp,
+                                  spp_grad=0 if spp_grad is None else spp_grad)
+            dr.eval(image)
+            dr.sync_thread()
+        return image
+
+    def recording(self, integrator, spp: int):
+        """``f(mi_scene, seed: mi.UInt32, scene, session) -> image``: ``mi.render`` recorded with
+        ``dr.freeze``, one recording per integrator and spp (:func:`.frozen.freeze_render`)."""
+        key = (id(integrator), int(spp))
+        fn = self.recordings.get(key)
+        if fn is None:
+            def render_once(mi_scene, seed):
+                return mi.render(mi_scene, integrator=integrator, seed=seed, spp=spp)
+            fn = self.recordings[key] = freeze_render(integrator, render_once)
+        return fn
+
+    # ------------------------------------------------------------------ workers and lifetime
+    def add_worker(self, worker) -> None:
+        """Register ``worker`` (an object with ``stop(timeout)``, e.g. a preview whose thread
+        renders this scene): :meth:`close` and the interpreter's exit stop it. Held weakly."""
+        self._workers.add(worker)
+
+    def workers(self) -> list:
+        """The registered workers (:meth:`add_worker`) that are still alive."""
+        return list(self._workers)
+
+    def close(self, timeout: float = WORKER_STOP_S) -> None:
+        """Stop the workers (each finishes its frame, at most ``timeout`` seconds) and let go of
+        the recordings and integrators. The scene renders again afterwards, through a new
+        session."""
+        for worker in list(self._workers):
+            worker.stop(timeout)
+        self._workers.clear()
+        with self.lock, RENDER_GUARD:
+            self.recordings.clear()
+            self._integrators.clear()
+            self._integrator_keys.clear()
+        scene = self._scene()
+        with _SESSIONS_GUARD:
+            if scene is not None and _SESSIONS.get(scene) is self:
+                del _SESSIONS[scene]
+        _LIVE.discard(self)
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def __repr__(self) -> str:
+        return (f"Session[{self.source}, {len(self._integrators)} integrators, {len(self.recordings)} "
+                f"recordings, {len(self._workers)} workers]")
+
+
+_SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session
+_SESSIONS_GUARD = threading.Lock()
+_LIVE: "weakref.WeakSet" = weakref.WeakSet()          # every open session (close_all)
+
+
+def session_of(scene) -> Session:
+    """The render session of the :class:`~draaw_mi.scene.DraawScene` ``scene`` (made on first
+    use; it lives as long as the scene, or until it is closed)."""
+    session = _SESSIONS.get(scene)
+    if session is None:
+        with _SESSIONS_GUARD:
+            session = _SESSIONS.get(scene)
+            if session is None:
+                session = _SESSIONS[scene] = Session(scene)
+    return session
+
+
+def scene_changed(scene) -> None:
+    """:meth:`Session.scene_changed` of ``scene``'s session (a
+    :class:`~draaw_mi.scene.DraawScene`), if it has one."""
+    session = _SESSIONS.get(scene)
+    if session is not None:
+        session.scene_changed()
+
+
+def close_all(timeout: float = WORKER_STOP_S) -> None:
+    """Close every open session: their workers stop. Runs at interpreter exit, before Dr.Jit
+    shuts down (a worker inside a kernel then crashed the process)."""
+    for session in list(_LIVE):
+        session.close(timeout)
+
+
+atexit.register(close_all)
+
+
+def apply_post(image, chain):
+    """``image`` with the post chain ``chain`` (a loaded :class:`~draaw_mi.post.Chain`)
+    applied to its colour channels; AOV channels beyond the fourth pass through."""
+    if image.shape[2] <= 4:
+        return post.apply(image, chain)
+    color = post.apply(image[:, :, :3], chain)
+    return dr.concat([color, image[:, :, 3:]], axis=2)
+
+
+def non_finite_count(image) -> int:
+    """How many values of ``image`` (a tensor) are NaN or ±inf."""
+    with RENDER_GUARD:
+        n = int(dr.count(~dr.isfinite(image.array))[0])
+    return n

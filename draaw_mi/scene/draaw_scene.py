@@ -1,0 +1,228 @@
+"""The loaded scene: :class:`DraawScene`, a Mitsuba scene with draaw-mi's settings and names.
+
+Its parameters (:attr:`~DraawScene.params`, :attr:`~DraawScene.all_params` with the SDF
+objects'), names resolved to parameter keys (:meth:`~DraawScene.key`), value checks, a copy at
+another resolution, and its description with fitted values written back. Scenes are made by
+:func:`draaw_mi.scene.load_scene` (:mod:`~draaw_mi.scene.loading`).
+"""
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import mitsuba as mi
+
+from ..errors import ParameterError, SceneError, suggest
+from ..integrators.features import detect_features
+from ..materials import check_value
+from ..sdf.params import PREFIX, SDFParameters
+from .carry import carry_values
+from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
+from .mitsuba_load import load_dict_or_error
+from .sdf_dicts import write_back
+
+
+@dataclass(eq=False)
+class DraawScene:
+    """A loaded scene: the Mitsuba scene plus draaw-mi's render settings and names.
+
+    Attributes: ``mi_scene`` (mi.Scene), ``settings`` (resolution, spp, max_depth, version, seed,
+    filter, hide_emitters, aovs, post), ``source`` (file name or ``<dict>``), ``info`` (material,
+    shape and light names, camera).
+    """
+    mi_scene: Any
+    settings: dict
+    source: str
+    info: dict = field(default_factory=dict)
+    mi_dict: dict | None = None
+    _tmp: Any = None
+    description: dict | None = None
+    _params: Any = None
+    _all_params: Any = None
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) of the film."""
+        size = self.mi_scene.sensors()[0].film().size()
+        return int(size[0]), int(size[1])
+
+    @property
+    def params(self):
+        """``mi.traverse`` of the scene (cached; call ``.update()`` after changing values)."""
+        if self._params is None:
+            self._params = mi.traverse(self.mi_scene)
+        return self._params
+
+    @property
+    def all_params(self):
+        """:attr:`params` plus the parameters of the scene's ``[[sdf]]`` objects as
+        ``"sdf.NODE.PARAM"`` (a :class:`draaw_mi.sdf.SDFParameters` over the same
+        ``mi.traverse``); :attr:`params` itself when the scene has none. Batch overrides, the
+        fit and the preview read and write parameters through it.
+
+        >>> # scene.all_params["sdf.red_ball.radius"] = 0.6; scene.all_params.update()
+        """
+        if self.sdf is None:
+            return self.params
+        if self._all_params is None:
+            self._all_params = SDFParameters(self, base=self.params)
+        return self._all_params
+
+    def sdf_param(self, key: str) -> str | None:
+        """``"NODE.PARAM"`` when ``key`` is one of the scene's ``"sdf.NODE.PARAM"`` keys,
+        else ``None``."""
+        return None if self.sdf is None else self.all_params.sdf_name(key)
+
+    def check_value(self, who: str, name: str, key: str, value) -> None:
+        """Raise :class:`~draaw_mi.errors.ParameterError` (naming ``who``) if ``value`` is
+        not one parameter ``key`` (of :attr:`all_params`; ``name`` as the user wrote it) takes:
+        an SDF object's range (radius > 0, ...), else the materials' ranges
+        (:func:`draaw_mi.materials.check_value`). Nothing changes."""
+        self.check_values(who, {name: (key, value)})
+
+    def check_values(self, who: str, values: dict) -> None:
+        """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are
+        checked with each other (a round box's new size with its new radius), on top of the
+        scene's current values."""
+        sdf, names = {}, []
+        for name, (key, value) in values.items():
+            node_param = self.sdf_param(key)
+            if node_param is not None:
+                sdf[node_param] = value
+                names.append(name)
+            else:
+                check_value(who, name, key, value)
+        if sdf:
+            try:
+                self.sdf.check_many(sdf)
+            except ParameterError as e:
+                raise ParameterError(f"{who}: {', '.join(names)}: {e}") from None
+
+    def key(self, name: str) -> str:
+        """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's
+        ``sdf.NODE.PARAM``) to a key of :attr:`all_params`.
+
+        >>> # scene.key("gold.roughness") -> "gold.roughness.value"
+        """
+        keys = list(self.all_params.keys())
+        for cand in (name, f"{name}.value", f"{name}.data"):
+            if cand in keys:
+                return cand
+        # the names people write: material.parameter (not Mitsuba's .value / .data keys)
+        short = sorted({k.removesuffix(".value").removesuffix(".data") for k in keys})
+        ending = [k for k in short if k.endswith("." + name)]
+        if ending:                 # a bare parameter name ("roughness"): the materials that have it
+            shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
+            raise SceneError(f"{self.source}: no parameter {name!r}; name the material too: {shown}")
+        hint = suggest(name, short)
+        if "; did you mean" not in hint:
+            hint = suggest(name, keys)
+        if hint.startswith("; valid:") and len(short) > 12:
+            hint = "; `draaw-mi info` lists the scene's materials"
+        raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
+
+    def with_resolution(self, width: int, height: int) -> "DraawScene":
+        """The same scene with another film size. It reloads the Mitsuba scene and carries the
+        current parameter values over (:func:`~draaw_mi.scene.carry.carry_values`): edits
+        made through :attr:`params` stay; the copy has its own ``mi.traverse``."""
+        if (width, height) == self.resolution:
+            return self
+        if self.mi_dict is None:
+            raise SceneError(f"{self.source}: cannot change the resolution of a scene loaded from "
+                             "XML or given as mi.Scene; edit its film instead")
+        d = dict(self.mi_dict)
+        sensor = dict(d["sensor"])
+        sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
+        d["sensor"] = sensor
+        settings = dict(self.settings, resolution=(int(width), int(height)))
+        scaled = DraawScene(load_dict_or_error(d, self.source), settings, self.source, self.info, d, self._tmp,
+                          self.description)
+        carry_values(self, scaled)
+        return scaled
+
+    def updated_description(self, values: dict, dest: str | None = None) -> dict:
+        """The scene description with ``{"material.parameter": value}`` written into its
+        ``[materials]`` tables, a light's radiance into its ``[[lights]]`` table
+        (:mod:`~draaw_mi.scene.light_values`) and ``{"sdf.NODE.PARAM": value}`` into its ``[[sdf]]`` tables
+        (for saving fitted scenes). ``dest``: the file it will be
+        written to; file names relative to the scene's folder are rewritten relative to
+        ``dest``'s folder (written elsewhere, the scene lost its meshes and textures)."""
+        if self.description is None:
+            raise SceneError(f"{self.source}: only TOML/JSON/dict scenes can be written back")
+        desc = copy.deepcopy(self.description)
+        if dest is not None:
+            desc = _rebased(desc, self.info.get("relative_files", {}), os.path.dirname(os.path.abspath(dest)))
+        mats = desc.setdefault("materials", {})
+        for name, value in values.items():
+            # (every sdf.* name goes to the [[sdf]] tables, which say why one cannot be written)
+            if self.sdf is not None and name.startswith(PREFIX) and name not in self.params:
+                try:
+                    write_back(desc.get("sdf"), name[len(PREFIX):], value)
+                except ValueError as e:
+                    raise SceneError(f"{self.source}: cannot write {name!r} back: {e}") from None
+                continue
+            if write_light(desc, name, value):        # a light's intensity and colour
+                continue
+            mat, _, param = name.partition(".")
+            if mat in light_names(desc):
+                raise SceneError(f"{self.source}: cannot write {name!r} back: of a light, only "
+                                 f"{', '.join(RGB_PARAMS + SCALAR_PARAMS)} can be written")
+            param = param.removesuffix(".value").removesuffix(".data")
+            if mat not in mats or not param or "." in param:
+                raise SceneError(f"{self.source}: cannot write {name!r} back: no material or light "
+                                 f"{mat!r} in the file (parameters of [materials], [[lights]], emitting "
+                                 "[[shapes]] and [[sdf]] can be written)")
+            mats[mat][param] = value
+        return desc
+
+    @property
+    def sdf(self):
+        """The scene's :class:`draaw_mi.sdf.scene.SDFScene` (``[[sdf]]`` entries), or ``None``."""
+        return self.info.get("sdf")
+
+    def features(self) -> dict:
+        """Which effects the scene calls for (emitter kinds, textures, ...); ``aovs`` also
+        where the scene's ``[render]`` table asks for them (render gives them to the
+        integrator: the loaded scene's own integrator has none, and info said "off")."""
+        f = detect_features(self.mi_scene)
+        f["aovs"] = f["aovs"] or bool(self.settings.get("aovs"))
+        return f
+
+    def summary(self) -> dict:
+        """Everything ``draaw-mi info SCENE`` prints."""
+        s = self.mi_scene
+        return {
+            "source": self.source,
+            "resolution": list(self.resolution),
+            # the description's names (Mitsuba merges meshes into one unnamed shape)
+            "shapes": self.info.get("shapes") or [sh.id() or "unnamed" for sh in s.shapes()
+                                                  if not sh.id().startswith("__sdf_")],
+            "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
+            "materials": self.info.get("materials", []),
+            "settings": {k: v for k, v in self.settings.items() if k != "post"},
+            "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
+            "features": self.features(),
+            "volumes": self.info.get("volumes", []),
+            **({"sdf": self.sdf.describe()} if self.sdf is not None else {}),
+        }
+
+
+_NAME_FIELDS = frozenset({"name", "material", "type", "shape", "mode", "children", "version"})
+
+
+def _rebased(node, files: dict, folder: str):
+    """``node`` (a description) with every string that is one of ``files``' relative names
+    replaced by the name of that file relative to ``folder`` (the names the loader resolved
+    against the scene's folder: only those, and not in fields that name things, so a shape
+    whose material is called like a texture file keeps it)."""
+    if isinstance(node, dict):
+        return {k: v if k in _NAME_FIELDS else _rebased(v, files, folder) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_rebased(v, files, folder) for v in node]
+    if isinstance(node, str) and node in files:
+        return os.path.relpath(files[node], folder)
+    return node
+
+

@@ -1,0 +1,203 @@
+"""Loading scenes: :func:`load_scene` from TOML / JSON / dict descriptions, Mitsuba XML,
+Mitsuba dicts and ``mi.Scene`` objects, and bare mesh files.
+
+Example::
+
+    >>> import draaw_mi
+    >>> scene = draaw_mi.load_scene("scenes/cornell.toml", resolution=(32, 24), spp=4)
+    >>> scene.resolution, scene.settings["spp"]
+    ((32, 24), 4)
+"""
+from __future__ import annotations
+
+import copy
+import os
+import re
+import tempfile
+import warnings
+
+import mitsuba as mi
+
+from ..errors import SceneError, suggest
+from ..guard import RENDER_GUARD
+from .camera import auto_camera, filter_plugin, sampler_plugin
+from .description import DEFAULT_SETTINGS, SAMPLERS, build_mitsuba_dict
+from .draaw_scene import DraawScene
+from .light_dicts import auto_light
+from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
+from .mitsuba_load import load_dict_or_error, load_mitsuba_file, mitsuba_error_message
+from .mitsuba_xml import xml_references
+from .schema import Where, number, read_document, resolution, string
+
+SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
+
+
+def _read_text_description(path: str) -> dict:
+    return read_document(path, "scene file")
+
+
+def _bare_mesh_description(path: str) -> dict:
+    """A description for a mesh file alone: camera and lights placed from its bounds."""
+    parts = load_mesh_parts(path, Where(path))
+    lo, hi = bounds(parts)
+    camera = auto_camera(lo, hi)
+    return {"shapes": [{"type": "mesh", "file": os.path.abspath(path)}], "camera": camera,
+            "lights": auto_light(lo, hi, camera["origin"])}
+
+
+# description fields that name things, never files
+def load_scene(source, **overrides) -> DraawScene:
+    """Load a scene from a TOML/JSON/XML/mesh file, a description dict, a Mitsuba scene dict
+    (``{"type": "scene", ...}``) or an ``mi.Scene``.
+
+    ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
+    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are
+    :class:`SceneError` naming the file and field.
+
+    Example::
+        >>> import draaw_mi
+        >>> scene = draaw_mi.load_scene("scenes/cornell.toml", resolution=(32, 24), spp=4)
+        >>> scene.resolution, scene.settings["spp"], scene.key("metal.roughness")
+        ((32, 24), 4, 'metal.roughness.value')
+    """
+    with RENDER_GUARD:       # (plugins made while another thread replayed a recording broke it)
+        return _load_scene(source, **overrides)
+
+
+def _load_scene(source, **overrides) -> DraawScene:
+
+    bad = set(overrides) - set(DEFAULT_SETTINGS)
+    if bad:
+        name = sorted(bad)[0]
+        raise SceneError(f"load_scene: unknown setting {name!r}{suggest(name, DEFAULT_SETTINGS)}")
+    if isinstance(source, DraawScene):
+        return source
+    if isinstance(source, mi.Scene):
+        if overrides:
+            return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
+        return _wrapped(source)
+    if isinstance(source, dict):
+        if source.get("type") == "scene":
+            return _from_mitsuba_scene(load_dict_or_error(source, "<dict>"), "<dict>", overrides, source,
+                                       named_integrator="integrator" in source)
+        return from_description(source, "<dict>", os.getcwd(), overrides)
+    if not isinstance(source, (str, os.PathLike)):
+        raise SceneError(f"load_scene: expected a file name, dict or mi.Scene, got {type(source).__name__}")
+    path = os.fspath(source)
+    if not os.path.exists(path):
+        raise SceneError(f"{path}: scene file does not exist")
+    if os.path.isdir(path):
+        raise SceneError(f"{path}: is a folder, not a scene file")
+    lower = path.lower()
+    if not lower.endswith(SCENE_SUFFIXES):
+        raise SceneError(f"{path}: unknown scene format; expected one of {', '.join(SCENE_SUFFIXES)}")
+    if lower.endswith(".xml"):
+        try:
+            scene = load_mitsuba_file(path)
+        except Exception as e:  # noqa: BLE001
+            raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
+        files, named = xml_references(path)      # (includes followed, comments ignored)
+        return _from_mitsuba_scene(scene, path, overrides, named_integrator=named, files=files)
+    if lower.endswith((".toml", ".json")):
+        desc = _read_text_description(path)
+    else:
+        desc = _bare_mesh_description(path)
+    return from_description(desc, path, os.path.dirname(os.path.abspath(path)), overrides)
+
+
+# The DraawScene of each recent bare mi.Scene (render(mi_scene) wraps it on every call, and the
+# renderer keeps its recordings per DraawScene: a new wrapper recorded anew, 5x slower than a
+# replay). Holding the mi.Scene keeps its id from being reused; the oldest is let go.
+_WRAPPED: dict = {}
+WRAPPED_KEPT = 4
+
+
+def _wrapped(mi_scene) -> DraawScene:
+    key = id(mi_scene)
+    entry = _WRAPPED.pop(key, None)
+    if entry is None:             # (an entry holds its scene: its id is not reused meanwhile)
+        entry = (mi_scene, _from_mitsuba_scene(mi_scene, "<mi.Scene>", {}))
+    _WRAPPED[key] = entry                       # (most recent last)
+    while len(_WRAPPED) > WRAPPED_KEPT:
+        _WRAPPED.pop(next(iter(_WRAPPED)))
+    return entry[1]
+
+
+def from_description(desc: dict, source: str, base_dir: str, overrides: dict) -> DraawScene:
+    tmp = tempfile.TemporaryDirectory(prefix="draaw-mi-")
+    mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
+    scene = load_dict_or_error(mi_dict, source)
+    return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
+
+
+#: the smallest value of each integer override of :func:`load_scene` (the CLI names its flags
+#: with them)
+OVERRIDE_MINIMA = {"spp": 1, "max_depth": -1, "seed": 0}
+
+
+def _checked(overrides: dict, source: str) -> dict:
+    where = Where(source) / "override"
+    out = dict(overrides)
+    if out.get("resolution") is not None:
+        out["resolution"] = resolution(out["resolution"], where / "resolution")
+    for key, lo in OVERRIDE_MINIMA.items():
+        if out.get(key) is not None:
+            out[key] = number(out[key], where / key, lo=lo, integer=True)
+    if out.get("sampler") is not None:
+        out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
+    return out
+
+
+# Mitsuba integrator classes (their to_string() names) -> the render version that is them
+_INTEGRATOR_VERSIONS = {"PathIntegrator": "path", "PRBIntegrator": "prb",
+                        "VolumetricSimplePathIntegrator": "volpath", "PRBVolpathIntegrator": "prbvolpath",
+                        **{f"DraawV{i}Integrator": f"draaw_v{i}" for i in range(1, 5)}}
+
+
+def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None,
+                        named_integrator: bool = False, files: list | None = None) -> DraawScene:
+    """``named_integrator``: the XML file or dict names its integrator, which then becomes
+    the scene's render version (a scene without one renders with draaw-mi's default).
+    ``files``: the files the scene reads besides its own (``info["files"]``)."""
+    sensors = scene.sensors()
+    if not sensors:
+        raise SceneError(f"{source}: the scene has no sensor (camera)")
+    settings = dict(DEFAULT_SETTINGS)
+    size = sensors[0].film().size()
+    settings["resolution"] = (int(size[0]), int(size[1]))
+    settings["spp"] = int(sensors[0].sampler().sample_count())
+    settings["sampler"] = sampler_plugin(sensors[0].sampler())
+    # (the film's own: 'info' said box for an XML film with Mitsuba's default gaussian, and
+    # fit's extra views were made with a box filter)
+    settings["filter"] = filter_plugin(sensors[0].film().rfilter())
+    integ = scene.integrator()
+    if integ is not None:      # C++ integrators expose max_depth only through to_string()
+        m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
+        if m:
+            depth = int(m.group(1))
+            settings["max_depth"] = depth - 2 ** 32 if depth >= 2 ** 31 else depth   # -1 prints unsigned
+        # (the file's hide_emitters was dropped: the sky it hides rendered, mean 0.95 for 0.05)
+        settings["hide_emitters"] = bool(getattr(integ, "hide_emitters", False))
+        if named_integrator:
+            kind = str(integ).split("[", 1)[0].strip()
+            if kind in _INTEGRATOR_VERSIONS:
+                settings["version"] = _INTEGRATOR_VERSIONS[kind]
+            else:
+                warnings.warn(f"{source}: its integrator {kind} is not one of draaw-mi's render "
+                              f"versions; it renders with {settings['version']!r} unless a version "
+                              "is given", RuntimeWarning, stacklevel=3)
+    settings["post"] = []
+    checked = _checked(overrides, source)
+    if checked.get("sampler") not in (None, settings["sampler"]):
+        raise SceneError(f"{source}: sampler={checked['sampler']!r} cannot override the sampler of a "
+                         f"Mitsuba scene ({settings['sampler']!r}); set it in the scene itself")
+    if checked.get("filter") not in (None, settings["filter"]):
+        raise SceneError(f"{source}: filter={checked['filter']!r} cannot override the filter of a "
+                         f"Mitsuba scene ({settings['filter']!r}); set it in the scene's film")
+    settings.update({k: v for k, v in checked.items() if v is not None})
+    d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
+    # (the checked value: the command line's "32x32" went in as a string, and a traceback out)
+    if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:
+        d = d.with_resolution(*checked["resolution"])
+    return d
+

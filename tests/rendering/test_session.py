@@ -1,0 +1,161 @@
+"""The render session (draaw_mi.rendering.session): one per scene, the one place a pass is
+rendered, and its lifetime (close, the context manager, the hook at interpreter exit)."""
+from __future__ import annotations
+
+import gc
+import threading
+import time
+import weakref
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from conftest import tiny_description
+from draaw_mi.guard import RENDER_GUARD
+from draaw_mi.rendering import session as S
+from draaw_mi.rendering.preview import Preview
+from draaw_mi.rendering.session import Session, apply_post, close_all, session_of
+
+
+@pytest.fixture
+def scene():
+    return draaw_mi.load_scene(tiny_description())
+
+
+def test_one_session_per_scene_and_it_goes_with_the_scene():
+    a = draaw_mi.load_scene(tiny_description())
+    b = draaw_mi.load_scene(tiny_description())
+    assert session_of(a) is session_of(a) and session_of(a) is not session_of(b)
+    gone = weakref.ref(session_of(a))
+    del a
+    gc.collect()
+    assert gone() is None                     # the session holds its scene weakly
+
+
+def test_a_pass_is_the_image_mi_render_gives(scene):
+    """A traced pass is ``mi.render`` with the session's integrator, bit for bit; a replayed
+    one the same image (to float rounding), for ints and opaque seeds alike."""
+    session = session_of(scene)
+    integ = session.integrator("v4", 4)
+    direct = np.array(mi.render(scene.mi_scene, integrator=integ, spp=4, seed=7))
+    traced = np.array(session.render_pass(integ, 4, 7, freeze=False))
+    assert np.array_equal(traced, direct) and direct.mean() > 0
+    for seed in (7, dr.opaque(mi.UInt32, 7)):
+        replayed = np.array(session.render_pass(integ, 4, seed, freeze=True))
+        assert np.allclose(replayed, direct, rtol=1e-5, atol=1e-6)
+    assert (id(integ), 4) in session.recordings
+
+
+def test_a_differentiable_pass_carries_gradients(scene):
+    session = session_of(scene)
+    integ = session.integrator("v4", 3)
+    p = scene.params
+    key = scene.key("ball.roughness")
+    dr.enable_grad(p[key])
+    p.update()
+    img = session.render_pass(integ, 4, 1, params=p)
+    dr.backward(dr.mean(img.array))
+    assert session.recordings == {}            # a differentiable pass is traced, never recorded
+    g = dr.grad(p[key])
+    assert np.isfinite(np.array(g)).all() and float(np.abs(np.array(g)).max()) > 0
+
+
+def test_close_stops_the_workers_and_lets_go_of_recordings_and_integrators(scene):
+    pv = Preview(scene, version="v4", max_depth=3, max_spp=100000)
+    pv.start()
+    try:
+        assert pv.wait(spp=2, timeout=60) is not None
+        session = session_of(scene)
+        assert session.workers() == [pv] and session.recordings
+        t0 = time.perf_counter()
+        session.close()
+        assert time.perf_counter() - t0 < 5 and not pv.running
+        assert session.recordings == {} and session.workers() == []
+        assert session_of(scene) is not session               # a closed session is not reused
+        img = np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1))      # renders again
+        assert np.isfinite(img).all() and img.mean() > 0
+    finally:
+        pv.stop()
+
+
+def test_the_context_manager_and_close_all_stop_workers():
+    a = draaw_mi.load_scene(tiny_description())
+    b = draaw_mi.load_scene(tiny_description())
+    with session_of(a) as session:
+        pa = Preview(a, version="v2", max_depth=2, max_spp=100000)
+        pa.start()
+        assert pa.wait(spp=1, timeout=60) is not None and session.workers() == [pa]
+    assert not pa.running
+    pb = Preview(b, version="v2", max_depth=2, max_spp=100000)
+    pb.start()
+    assert pb.wait(spp=1, timeout=60) is not None
+    close_all()                                   # what the interpreter's exit runs
+    assert not pb.running
+
+
+def test_a_second_preview_of_a_scene_supersedes_the_first_through_the_session(scene):
+    first = Preview(scene, version="v2", max_depth=2, max_spp=100000)
+    second = Preview(scene, version="v2", max_depth=2, max_spp=100000)
+    first.start()
+    try:
+        assert first.wait(spp=1, timeout=60) is not None
+        second.start()
+        assert not first.running and second.running
+        assert second in session_of(scene).workers()
+    finally:
+        first.stop()
+        second.stop()
+
+
+def test_a_draaw_integrator_called_directly_waits_for_the_guard(scene):
+    """``mi.render`` with a draaw integrator renders under RENDER_GUARD: while another thread
+    holds the guard (a preview's frame, a recording), it waits instead of running beside it."""
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    np.array(mi.render(scene.mi_scene, integrator=integ, spp=1, seed=0))          # traced once
+    done = threading.Event()
+
+    def render():
+        mi.render(scene.mi_scene, integrator=integ, spp=1, seed=1)
+        done.set()
+    with RENDER_GUARD:
+        t = threading.Thread(target=render)
+        t.start()
+        assert not done.wait(0.5)              # held up by the guard
+    assert done.wait(60)
+    t.join()
+
+
+def test_a_version_that_cannot_see_the_scene_is_refused(tmp_path):
+    desc = tiny_description()
+    desc["sdf"] = [{"type": "sphere", "name": "blob", "center": [1.5, 0.5, 0], "radius": 0.3}]
+    sdf_scene = draaw_mi.load_scene(desc)
+    session = session_of(sdf_scene)
+    assert session.holds() == {"sdf": True, "media": False}
+    session.check_version_sees("v4")
+    with pytest.raises(draaw_mi.RenderError, match=r"\[\[sdf\]\] objects, which Mitsuba's 'path' cannot see"):
+        session.check_version_sees("path")
+
+
+def test_freeze_rules(scene, monkeypatch):
+    session = session_of(scene)
+    assert session.freezes(16) and not session.freezes(32) and session.freezes(32, True)
+    assert not session.freezes(1, False)
+    monkeypatch.setattr(S, "FREEZE", False)
+    assert not session.freezes(1, True)
+
+
+def test_apply_post_leaves_aov_channels_alone():
+    img = mi.TensorXf(np.full((2, 2, 6), 0.25, np.float32))
+    out = np.array(apply_post(img, [{"type": "contrast", "contrast": 2.0}]))
+    assert np.array_equal(out[..., 3:], np.full((2, 2, 3), 0.25, np.float32))
+    assert not np.allclose(out[..., :3], 0.25)
+
+
+def test_the_session_says_what_it_holds(scene):
+    session = session_of(scene)
+    session.integrator("v1", 2)
+    assert repr(session) == f"Session[{scene.source}, 1 integrators, 0 recordings, 0 workers]"
+    assert isinstance(session, Session) and session.scene is scene

@@ -1,0 +1,85 @@
+"""Scene loading, from a review: a mesh without material is GO-Draaw grey (not trimesh's
+stand-in texture); a Mitsuba BSDF's own strings pass through; empty texture arrays, negative
+reflectances and area lights without an up are refused by name; an XML integrator's
+hide_emitters holds; numpy numbers are numbers."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.errors import SceneError
+
+BASE = {"render": {"resolution": [8, 8], "spp": 4}, "camera": {"origin": [0, 0, 4]},
+        "shapes": [{"type": "sphere", "material": "m"}], "lights": [{"type": "constant"}]}
+
+
+def test_a_mesh_with_uvs_and_no_material_is_go_draaw_grey(tmp_path):
+    obj = tmp_path / "quad.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    scene = draaw_mi.load_scene(str(obj), resolution=(8, 8))
+    keys = [k for k in scene.params.keys() if "base_color" in k]
+    assert keys and all(k.endswith(".value") for k in keys), keys        # (a 2x2 '.data' texture)
+    np.testing.assert_allclose(np.array(scene.params[keys[0]]).ravel(), 178 / 255, rtol=1e-6)   # (0.127)
+
+
+def test_a_mitsuba_bsdfs_own_strings_pass_through():
+    """Strings other than the plugins' defaults, read back from the loaded BSDFs (they were
+    taken for texture files: "no texture file 'Au'")."""
+    import mitsuba as mi
+
+    def bsdf(table):
+        return draaw_mi.load_scene(dict(BASE, materials={"m": table})).mi_scene.shapes()[0].bsdf()
+    gold = mi.traverse(bsdf({"type": "conductor", "material": "Au"}))
+    own = mi.traverse(mi.load_dict({"type": "conductor", "material": "Au"}))
+    np.testing.assert_allclose(np.array(gold["eta.value"]), np.array(own["eta.value"]))
+    assert float(mi.traverse(bsdf({"type": "dielectric", "int_ior": "water"}))["eta"]) ==\
+        pytest.approx(1.333 / 1.000277, rel=1e-4)
+    assert "distribution = ggx" in str(bsdf({"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}))
+
+
+@pytest.mark.parametrize("table,match", [
+    ({"type": "diffuse", "reflectance": [[]]}, r"materials\.m\.reflectance.*shape \(1, 0\)"),   # (SIGABRT)
+    ({"type": "diffuse", "reflectance": -0.5}, r"materials\.m\.reflectance: -0\.5 is out of range"),
+    ({"type": "diffuse", "reflectance": [0.5, -0.1, 0.5]}, r"materials\.m\.reflectance"),
+    # a transmittance is >= 0 too (a dielectric's -0.5 was let through)
+    pytest.param({"type": "dielectric", "specular_transmittance": -0.5},
+                 r"materials\.m\.specular_transmittance: -0\.5 is out of range; expected >= 0",
+                 id="negative-transmittance"),
+])
+def test_bad_values_of_a_mitsuba_bsdf_are_refused(table, match):
+    with pytest.raises(SceneError, match=match):
+        draaw_mi.load_scene(dict(BASE, materials={"m": table}))
+
+
+@pytest.mark.parametrize("up", [[0, 0, 1], [0, 0, 0]])
+def test_an_area_light_needs_an_up_across_its_facing(up):
+    desc = dict(BASE, materials={"m": {"type": "diffuse"}},
+                lights=[{"type": "area", "position": [0, 0, 2], "target": [0, 0, 0], "up": up}])
+    with pytest.raises(SceneError, match=r"lights\[0\]\.up"):          # (a NaN transform: black)
+        draaw_mi.load_scene(desc)
+
+
+def test_an_xml_integrators_hide_emitters_holds(tmp_path):
+    xml = tmp_path / "s.xml"
+    xml.write_text("""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="4"/><boolean name="hide_emitters" value="true"/></integrator>
+  <sensor type="perspective"><float name="fov" value="30"/>
+    <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/><rfilter type="box"/></film>
+  </sensor>
+  <shape type="sphere"><float name="radius" value="0.5"/><bsdf type="diffuse"/></shape>
+  <emitter type="constant"/>
+</scene>""")
+    scene = draaw_mi.load_scene(str(xml))
+    assert scene.settings["hide_emitters"] is True
+    img = np.array(draaw_mi.render(scene, spp=4))
+    assert img[0, 0].max() == 0.0                                   # the sky it hides (was 1.0)
+
+
+def test_numpy_numbers_are_numbers():
+    scene = draaw_mi.load_scene("scenes/cornell.toml", resolution=(np.int64(8), np.int64(8)), spp=np.int64(4))
+    img = draaw_mi.render(scene, spp=np.int64(4), seed=np.uint32(3), max_depth=np.int32(3))
+    assert scene.resolution == (8, 8) and np.array(img).shape == (8, 8, 3)
+    a = np.array(draaw_mi.render(scene, spp=4, seed=3, max_depth=3))
+    assert np.array_equal(np.array(img), a)
