@@ -42,7 +42,7 @@ def suggest(name: str, valid: Iterable[str]) -> str:
     ' (there are none)'
     """
     valid = sorted(set(valid))
-    if not valid:              # ("; valid: " with nothing after it: a scene with no materials)
+    if not valid:              # (not "; valid: " with nothing after it: a scene with no materials)
         return " (there are none)"
     close = difflib.get_close_matches(name, valid, n=1, cutoff=0.6)
     if close:

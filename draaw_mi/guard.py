@@ -45,8 +45,8 @@ def exr_reading_threads():
     """At least :data:`EXR_READ_THREADS` Dr.Jit threads within the block, the count as it was
     after it; taken around Mitsuba's scene loads and image reads. Mitsuba 3.9.1 decodes EXR
     files on Dr.Jit's thread pool (``Bitmap::read_exr``: OpenEXR's tasks through nanothread)
-    and with 0 or 1 threads waits for ever on an OpenEXR semaphore: ``draaw-mi render
-    --threads 1`` of a scene with an EXR texture or environment map hung, so did a batch's
+    and with 0 or 1 threads waits for ever on an OpenEXR semaphore: without this, ``draaw-mi
+    render --threads 1`` of a scene with an EXR texture or environment map hangs, as do a batch's
     Dask workers on two cores (one thread each) and a ``dr.set_thread_count(1)`` notebook.
     Holds :data:`RENDER_GUARD` when it changes the count (no render runs meanwhile).
 

@@ -98,7 +98,7 @@ def atomic_path(path: str, suffix: str):
         yield tmp
         try:                                 # a file replaced keeps its mode (as sed -i does:
             mode = stat.S_IMODE(os.stat(path).st_mode)      # a read-only or group-readable
-        except OSError:                                     # output was reset to 0644)
+        except OSError:                                     # output stays so, not 0644)
             umask = os.umask(0)
             os.umask(umask)
             mode = 0o666 & ~umask            # mkstemp makes 0600 files; give the usual mode
@@ -143,7 +143,7 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     float32 become ``inf`` as in any EXR writer — they are not clipped silently. ``metadata``:
     extra header attributes (str, int or float values), e.g. draaw-mi's ``draaw:*`` keys. An
     EXR attribute holds a 32-bit int or float: an int outside int32 is stored as its decimal
-    string (a seed of 3000000000 was read back as -1294967296), a float is rounded to float32.
+    string (as an int, a seed of 3000000000 reads back as -1294967296), a float is rounded to float32.
     """
     if os.fspath(path).lower().endswith(OTHER_IMAGE_SUFFIXES):
         raise IOFailure(f"write_exr({path!r}): the name says another image format; expected a "
@@ -166,7 +166,7 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
             raise IOFailure(f"write_exr({path!r}): metadata {key!r} = {value!r}; expected a new "
                             "attribute name and a str, int or float value")
         if isinstance(value, int) and not -2 ** 31 <= value < 2 ** 31:
-            value = str(value)      # (an EXR int is 32-bit: 3000000000 came back -1294967296)
+            value = str(value)      # (an EXR int is 32-bit: 3000000000 would read back -1294967296)
         header[key] = value
     with atomic_path(path, ".exr") as tmp:
         try:
@@ -244,7 +244,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     import matplotlib.image
 
     if not os.fspath(path).lower().endswith(".png"):
-        # (an 8-bit PNG was written under an .exr name; write_exr refuses the mirror case)
+        # (no 8-bit PNG under an .exr name; write_exr refuses the mirror case)
         raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
     arr = to_numpy(image, f"write_png({path!r})")
     if channels is not None:
@@ -264,7 +264,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
     if c in (2, 4) and not encoded:
         # a film's colour is premultiplied by its alpha (what EXR stores), a PNG's is not:
-        # stored as it came, partly covered pixels were dark fringes (as in Mitsuba's own
+        # stored as it comes, partly covered pixels would be dark fringes (as in Mitsuba's own
         # film.write); alpha-0 pixels keep their colour (a visible sky)
         a = np.clip(np.nan_to_num(arr[..., c - 1:c]), 0.0, 1.0)      # (as stored below)
         rgb = np.where(a > 0, rgb / np.where(a > 0, a, 1.0), rgb)
@@ -272,7 +272,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
         raise IOFailure(f"write_png({path!r}): exposure={exposure!r} needs a linear image; "
                         "this one is display-encoded (encoded=True)")
     out = np.clip(np.nan_to_num(rgb), 0.0, 1.0) if encoded else srgb_encode(rgb * (2.0 ** exposure))
-    if c in (2, 4):                  # (grey, alpha) kept its alpha too
+    if c in (2, 4):                  # (grey, alpha) keeps its alpha too
         out = np.concatenate([out, np.clip(np.nan_to_num(arr[..., c - 1:c]), 0, 1)], axis=2)
     u8 = np.round(out * 255.0).astype(np.uint8)
     with atomic_path(path, ".png") as tmp:

@@ -10,6 +10,6 @@ True
 FLOAT32_MAX = 3.4028234663852886e38
 
 #: a camera's field of view in degrees: what scene files take ([camera] fov), the tuner's slider
-#: shows and parameter updates (``sensor.x_fov``) are checked against (the slider went to 179.5,
-#: and a scene saved there did not load again)
+#: shows and parameter updates (``sensor.x_fov``) are checked against (one range, so a scene saved
+#: from the slider's end loads again)
 FOV_RANGE = (0.1, 179.0)

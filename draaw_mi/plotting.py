@@ -1,7 +1,7 @@
 """Figures for files, drawn without pyplot: no backend switch, no global figure list.
 
-``matplotlib.use("Agg")`` inside a library call switched a notebook's inline backend for the
-rest of the session (its next ``plt.show()`` drew nothing). A :class:`matplotlib.figure.Figure`
+``matplotlib.use("Agg")`` inside a library call would switch a notebook's inline backend for the
+rest of the session (its next ``plt.show()`` would draw nothing). A :class:`matplotlib.figure.Figure`
 made directly renders with its own Agg canvas and is garbage-collected like any object; a
 notebook still displays one returned as a cell's value.
 

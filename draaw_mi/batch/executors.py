@@ -76,7 +76,7 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
         client, cluster, threads = dask_client(workers, scheduler)
     # task keys unique to this run: a key that names only the frame's content (its hash) is
     # the same for another run of the manifest into another folder on a shared scheduler,
-    # and Dask merges tasks of one key (that run's frames went to the first run's files)
+    # and Dask merges tasks of one key (that run's frames would go to the first run's files)
     run_token = uuid.uuid4().hex[:12]
     try:
         futures = {}

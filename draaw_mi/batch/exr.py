@@ -121,9 +121,9 @@ _HEADER_READ = 1 << 18
 def exr_complete(path: str) -> bool:
     """Whether the EXR at ``path`` holds all of its pixel data: every chunk its offset table
     lists starts after the table with a header of a non-empty size and lies inside the file.
-    A file cut short keeps a readable header, so :func:`read_header` alone took it for
+    A file cut short keeps a readable header, so :func:`read_header` alone would take it for
     finished; a power cut can leave the header and table over zeroed blocks, whose chunks
-    read as empty (only the last chunk was looked at, so zeroed earlier ones passed). Reads
+    read as empty (every chunk is looked at: zeroed ones before the last count too). Reads
     the header, the offset table and 8 bytes per chunk; files that are not single-part
     scanline images (tiled, deep, multi-part, newer compressions) are read in full instead.
 
@@ -184,7 +184,7 @@ def _scanline_layout(head: bytes):
             (length,) = struct.unpack_from("<i", head, tend + 1)
         except (ValueError, struct.error):
             # the header goes on past the bytes read (a large draaw:params): decode in full
-            # (a complete frame was 'damaged' and rendered again on every run)
+            # (else a complete frame reads as 'damaged' and renders again on every run)
             return None
         value = head[tend + 5:tend + 5 + length]
         if len(value) != length:
@@ -229,8 +229,8 @@ def frame_status(spec: dict) -> str:
         return "damaged"
     if spec.get("preview"):
         tag = _png_hash(preview_path(spec))
-        # a PNG without a hash was written by draaw-mi before previews carried one, after its
-        # EXR: it is this frame's
+        # a PNG without a hash comes from a draaw-mi whose previews carry none, written after
+        # its EXR: it is this frame's
         if tag is None or (tag and tag != spec["hash"]):
             return "no-preview"
     return "done"
@@ -244,7 +244,8 @@ def preview_path(spec: dict) -> str:
 def write_preview(spec: dict, image: np.ndarray | None = None, channels=None) -> None:
     """Write the frame's sRGB PNG preview, tagged with its hash; ``image`` and its
     ``channels``: the rendered frame, or ``None`` to take both from the finished EXR. The
-    colour is taken by name (a luminance frame's preview took Y and two AOVs as R, G, B)."""
+    colour is taken by name (by position, a luminance frame's preview would take Y and two
+    AOVs as R, G, B)."""
 
     if image is None:
         image, channels = read_exr(spec["output"], with_names=True)

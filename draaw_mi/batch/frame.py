@@ -38,7 +38,7 @@ class CachedScene:
         params = scene.params
         self.camera_key, self.fov_key = sensor_keys(scene)
         # a camera table's fov is measured as the scene's is, along its fov_axis (an XML
-        # scene's: its sensor's x_fov); a y-axis fov written into x_fov zoomed in 1.9x
+        # scene's: its sensor's x_fov); a y-axis fov written into x_fov would zoom in 1.9x
         self.fov, self.fov_axis = scene_fov(scene)
         # copies: params[key] is the scene's own value, which the next update changes in place
         self.originals: dict = {}
@@ -114,9 +114,9 @@ class CachedScene:
         for key, original in self.originals.items():
             params[key] = wanted.get(key, original)
         params.update()
-        # also when this frame only puts overrides back: a job without overrides after one
-        # that dimmed a light kept V4's power table of that light's last value (frames up to
-        # 1.4 off the same job rendered alone)
+        # also when this frame only puts overrides back: else a job without overrides after
+        # one that dimmed a light keeps V4's power table of that light's last value (frames up
+        # to 1.4 off the same job rendered alone)
         if spec["params"] or self.params_moved:
             session_of(self.scene).scene_changed()       # e.g. V4's light powers
         self.params_moved = bool(spec["params"])
@@ -162,8 +162,8 @@ class SceneCache:
             scene = load_scene(path, **({"resolution": tuple(resolution)} if resolution else {}))
             entry = self._scenes[key] = CachedScene(scene, current)
             # the same scene under the resolution it has: planning asks without one (the
-            # scene's own), frames ask with the spec's; a second copy took a second load and
-            # its memory (and, live beside the first, other kernels)
+            # scene's own), frames ask with the spec's; a second copy would take a second load
+            # and its memory (and, live beside the first, other kernels)
             self._scenes.setdefault((where, tuple(scene.resolution)), entry)
             return entry
 
@@ -212,8 +212,8 @@ def kernel_signature(entry: dict) -> str:
     """What a kernel computes, from its ``dr.kernel_history()`` entry: the hash of its code
     with the load alignments and its own name left out. Dr.Jit specialises a kernel to the
     alignment of the buffers it is given, so a small kernel outside the recorded render (an
-    8-wide camera update) came with a new hash on frames whose buffers the PNG previews had
-    moved, and a batch warned of recompiles that computed the same thing."""
+    8-wide camera update) gets a new hash on frames whose buffers the PNG previews moved; by
+    hash alone, a batch would warn of recompiles that compute the same thing."""
     key = str(entry["hash"])
     sig = _SIGNATURES.get(key)          # (a replayed frame's kernels: found, not read again)
     if sig is None:

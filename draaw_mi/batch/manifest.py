@@ -239,7 +239,7 @@ def _camera(cam, where: Where, base: str) -> dict:
                         "degrees": number(o.get("degrees", 360.0), wo / "degrees"),
                         "start": number(o.get("start", 0.0), wo / "start"),
                         "up": vector(o.get("up", [0, 1, 0]), wo / "up")}
-        if math.hypot(*out["orbit"]["up"]) < 1e-9:      # (every frame came out black, exit 0)
+        if math.hypot(*out["orbit"]["up"]) < 1e-9:      # (else every frame is black, exit 0)
             raise (wo / "up").error(f"{out['orbit']['up']} has no direction; expected the orbit's axis, "
                                     "such as [0, 1, 0]")
     elif kind == "look_at":
@@ -345,7 +345,7 @@ def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
         base_name = f.split(".")[0].split("[")[0]
         if base_name not in PATTERN_FIELDS:
             raise where.error(f"{pattern!r} uses unknown field {{{f}}}{suggest(base_name, PATTERN_FIELDS)}")
-        if f != base_name:      # {job.upper} gave a folder named after a method's address
+        if f != base_name:      # {job.upper} would name a folder after a method's address
             raise where.error(f"{pattern!r}: field {{{f}}} must be a bare name ({{{base_name}}}, "
                               "with an optional format such as {frame:04d})")
     if job.frames > 1 and "frame" not in fields:
@@ -357,8 +357,8 @@ def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
         raise where.error(f"{pattern!r} cannot be formatted ({e})") from None
     if os.path.isabs(pattern):
         return pattern
-    # the folder as it is written: braces in it are text, not fields (an --out of 'out{x}'
-    # raised KeyError, and '{job}dir' put every job in a folder of its own)
+    # the folder as it is written: braces in it are text, not fields (else an --out of 'out{x}'
+    # raises KeyError, and '{job}dir' puts every job in a folder of its own)
     return os.path.join(out_base.replace("{", "{{").replace("}", "}}"), pattern)
 
 

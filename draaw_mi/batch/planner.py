@@ -63,8 +63,8 @@ def frame_hash(spec: dict) -> str:
     if spec.get("files_hash"):     # (only then: frames of scenes that read no file keep their hash)
         keys += ("files_hash",)
     if spec.get("scene_camera_mirror"):
-        # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored since
-        # session 35; its frames made before are stale, the others keep their hash)
+        # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored, so its
+        # frames hashed without this key are stale; the others keep their hash)
         keys += ("scene_camera_mirror",)
     values = {k: spec.get(k) for k in keys}
     values["version"] = canonical_version(values["version"])
@@ -185,11 +185,11 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             except DraawError as e:
                 raise SceneError(f"{loc}: params: {e}") from None
             same = [n for n in keys if n != name and keys[n] == keys[name]]
-            if same:      # (the last one won, silently)
+            if same:      # (else the last one wins, silently)
                 raise SceneError(f"{loc}: params: {name!r} and {same[0]!r} are the same parameter "
                                  f"{keys[name]!r}; keep one")
             if job.camera is not None and keys[name] in (entry.fov_key, entry.camera_key):
-                # (the camera table's view replaced the override, silently)
+                # (else the camera table's view replaces the override, silently)
                 raise SceneError(f"{loc}: params.{name}: the job's camera table sets the view and "
                                  "field of view; give camera.fov, or drop the camera table")
             _check_shape(loc, name, job.params[name], scene.all_params[keys[name]], keys[name])
@@ -224,7 +224,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "resolution": list(scene.resolution),
                 "version": version, "spp": int(spp), "sampler": s.get("sampler"),
                 # (a job without a seed takes its scene's, as render() does: two scenes
-                # that differed only in render.seed gave bit-identical frames)
+                # that differ only in render.seed give different frames)
                 "seed": frame_seed(int(s.get("seed", 0)) if job.seed is None else job.seed, f),
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
                 "camera": cams[f] if cams else None,
@@ -251,7 +251,7 @@ def components(value) -> int:
 
 def _check_shape(loc, name, spec, current, key):
     """An override's values fit the parameter: not a transform, not integers, as many
-    components, convertible to its type (else the frames failed one by one at render time)."""
+    components, convertible to its type (else the frames fail one by one at render time)."""
 
     kind_name = type(current).__name__
     if "Transform" in kind_name:
@@ -279,8 +279,8 @@ def _check_values(loc, keys: dict, specs: dict, frames: int, scene) -> None:
     """Every frame's value of an override within the parameter's range (roughness in [0, 1],
     colours >= 0, finite: :func:`draaw_mi.materials.check_value`; an SDF object's radius > 0,
     a round box's radius within its size, ...: :meth:`SDFScene.check
-    <draaw_mi.sdf.scene.SDFScene.check>`), before anything renders. (Out-of-range values
-    rendered as the clamped value, with exit status 0.) A frame's values are checked
+    <draaw_mi.sdf.scene.SDFScene.check>`), before anything renders (an out-of-range
+    value would render as the clamped one, with exit status 0). A frame's values are checked
     together, on the scene as loaded (each frame starts from it)."""
     for f in range(frames):
         values = {}

@@ -100,9 +100,9 @@ def load(manifest, out: str | None = None, cache=None):
 
 
 def _check_log(m: Manifest, specs: list) -> None:
-    """The log must be a file of its own: a ``log`` key naming a frame's EXR appended JSON to
-    the finished frame (and ``--status`` then failed to decode it); one naming a folder
-    raised IsADirectoryError from the run."""
+    """The log must be a file of its own: a ``log`` key naming a frame's EXR would append JSON
+    to the finished frame (which ``--status`` then fails to decode); one naming a folder would
+    raise IsADirectoryError from the run."""
     path = log_path(m)
 
     def same(p):                 # one file, told apart as plan() tells the outputs apart
@@ -119,8 +119,8 @@ def _check_log(m: Manifest, specs: list) -> None:
 def log_path(m: Manifest) -> str:
     """The manifest's log: its ``log`` key, else ``<manifest>.batch.jsonl`` in the folder the
     output patterns share before their first field (``out/`` for ``out/{job}/{frame}.exr``).
-    It depends on the patterns, not on the jobs: with the folder the frames shared, adding a
-    job moved the log, and ``--status`` lost the errors recorded before."""
+    It depends on the patterns, not on the jobs: with the folder the frames share, adding a
+    job would move the log, and ``--status`` would lose the errors recorded before."""
     if m.log:
         return m.log
     folders = [fixed_folder(job.output) for job in m.jobs]
@@ -259,7 +259,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         if todo:
             raise
         # every frame is done in folders that cannot be written (an archive on a read-only
-        # share): complete, nothing to write (this was exit 2)
+        # share): complete, nothing to write (not an error)
         res.seconds = time.perf_counter() - t0
         return res
     # every folder a frame of the manifest lives in: those of finished frames exist (and may
@@ -299,8 +299,8 @@ def _check_workers(workers, scheduler, client, executor) -> None:
 
 def _refuse_foreign(m: Manifest, foreign: list) -> None:
     """Refuse a run that would replace frames another manifest file made: two manifests
-    whose jobs share names (``job0`` by default) and an output folder overwrote each other's
-    finished frames without a word."""
+    whose jobs share names (``job0`` by default) and an output folder would overwrite each
+    other's finished frames without a word."""
     if not foreign:
         return
     first = foreign[0]["output"]
@@ -349,7 +349,7 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
                 first_kernels[r["job"]] |= new
         log.write(event="frame", hash=hashes.get(r["output"]), **{k: v for k, v in r.items() if k != "kernels"})
         if bar is not None:
-            # the counts first, without a redraw (tqdm drew done=5 beside 4/6); the step
+            # the counts first, without a redraw (else tqdm draws done=5 beside 4/6); the step
             # draws both, and writes a LineProgress line
             bar.set_postfix(done=res.rendered, failed=len(res.failed), refresh=False)
             bar.update(1)

@@ -13,7 +13,7 @@ def _bias_term_se(row: dict, n: int | None) -> float:
     """Standard error of one row's ``mse - variance``: the spread of its repeats' errors
     (``mse_se``; a firefly in one repeat shows there), but at least what Gaussian pixel noise
     of that variance gives over ``n`` values and the repeats (three repeats' spread alone
-    was 10x too small at times), plus the error of the variance estimate itself."""
+    can be 10x too small), plus the error of the variance estimate itself."""
     se, var, r = row.get("mse_se", np.nan), row["variance"], row.get("repeats")
     if not np.isfinite(se):
         return np.nan
@@ -40,12 +40,12 @@ def estimate_bias(rows: list[dict], gt_spp: int | None = None, reference: dict |
     weighted by ``1 / variance^2`` (the estimate's noise grows with the variance term).
     ``floor`` is the ground truth's own noise, ``variance * spp / gt_spp`` of the ground
     truth's integrator (``reference``: ``{scene: label}``, its rows in the study at the same
-    depth; without them the method's own variance stands in): every method, ``path``
-    included, showed it as a bias. ``resolved``
+    depth; without them the method's own variance stands in): left in, it shows as a bias of
+    every method, ``path`` included. ``resolved``
     is False where the estimate is within :data:`BIAS_SIGMAS` standard errors of zero (from the
     spread of the repeats' errors, ``mse_se``); ``bias`` is then an upper bound. (Taken at the
-    highest spp alone, from 2-3 repeats, V4 showed the ground truth's noise as a bias of
-    0.0145 on the Cornell box while V1, biased by -10 % in its mean, showed 0.)
+    highest spp alone, from 2-3 repeats, V4 shows the ground truth's noise as a bias of
+    0.0145 on the Cornell box while V1, biased by -10 % in its mean, shows 0.)
     """
     out = {}
     groups: dict = {}

@@ -22,8 +22,8 @@ def relmse(img: np.ndarray, gt: np.ndarray) -> float:
 
 def _colour():
     """colour-science, imported without its side effect: its import sets numpy's print options
-    to ``legacy='1.13'`` for the whole process (a user's notebook then printed arrays and
-    scalars the old way after the first benchmark)."""
+    to ``legacy='1.13'`` for the whole process (a user's notebook would then print arrays
+    and scalars the old way after the first benchmark)."""
     options = np.get_printoptions()
     try:
         import colour

@@ -237,7 +237,7 @@ def main(argv=None, command: str | None = None) -> int:
                     "only); benchmarks/results/speed_suite.md is the hand-curated record")
     args = ap.parse_args(argv)
     for opt, value in (("--spp", args.spp), ("--repeats", args.repeats)):
-        if value < 1:          # (--spp 0 rendered at the sampler's 64 spp and reported 0)
+        if value < 1:          # (--spp 0 would render at the sampler's 64 spp and report 0)
             ap.error(f"{opt} {value}; expected an integer >= 1")
     why = check_ref_spp(args.ref_spp)
     if why:
@@ -261,7 +261,7 @@ def main(argv=None, command: str | None = None) -> int:
             r = bench(name, res, args)
             if r is not None:
                 results.append(r)
-    if not results:          # (an empty table and exit 0 looked like a finished run)
+    if not results:          # (an empty table and exit 0 would look like a finished run)
         raise SystemExit("speed suite: every requested scene was skipped; nothing was measured")
     text = report(results, args)
     print_report(text, args.out)

@@ -99,7 +99,7 @@ def _scene_key(scene, spp: int, max_depth: int) -> str:
     h.update(repr((scene.resolution, spp, max_depth)).encode())
     h.update(code_digest().encode())        # a fixed BSDF or integrator renders it anew
     version = reference_version(scene)
-    if version != "path":            # (a cached path render of an SDF scene lacked its objects)
+    if version != "path":            # (a path render of an SDF scene lacks its objects)
         h.update(version.encode())
     return h.hexdigest()[:16]
 
@@ -147,7 +147,7 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
     stretch of the machine falls on all of them alike rather than on whichever ran then."""
     first = [_timed_render(scene, s, seed + 1000)[1] for s in settings]
     # a second warm-up where it is cheap: in a fresh process the second render of a setting
-    # still ran 1.5-5x slower than later ones (and landed in the timed median)
+    # still runs 1.5-5x slower than later ones (and would land in the timed median)
     for s, t in zip(settings, first):
         if t < WARMUP_AGAIN_S:
             _timed_render(scene, s, seed + 1001)
@@ -295,7 +295,7 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
 
 def ground_truth_depth(depths) -> int:
     """The ground truth's ``max_depth`` for a study of ``depths``: unbounded (-1) if they hold
-    it, else the deepest (a shallower one showed the depth gap as every deeper setting's
+    it, else the deepest (a shallower one would show the depth gap as every deeper setting's
     error and bias; at a lower depth it is that depth's bias, which the study is to show).
 
     >>> ground_truth_depth([3, 12]), ground_truth_depth([6, -1, 2]), ground_truth_depth([6])
@@ -323,7 +323,7 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
     """
     check_mode(progress, "bench.frame_times")
 
-    # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncated 123 * 60 / 60 to 122)
+    # (frames "seconds" at 1 fps: frames / 60 s at 60 fps truncates 123 * 60 / 60 to 122)
     path = interpolate(keyframes, duration=frames, fps=1, faithful=faithful)
     own_fov, fov_axis = scene_fov(scene)
     fov = own_fov if fov is None else fov
@@ -346,7 +346,7 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
                                  post=[]))[..., :3]
     if gts and not any(np.any(g != 0) for g in gts.values()):
         # (GO-Draaw's own path, in its units (x 300..900), over a scene of a few units: every
-        # frame empty, an error of 0 and the times of empty renders, without a word)
+        # frame is empty, with an error of 0 and the times of empty renders)
         warnings.warn(f"frame_times: the ground truth is black in all {len(gts)} frames checked: the "
                       "camera path sees nothing of the scene (is it in the scene's units? GO-Draaw's "
                       "paths are in GO-Draaw's); the errors and times are of empty frames",

@@ -7,7 +7,9 @@ import os
 import shlex
 import sys
 
+from ..bench import speed as speed_bench
 from ..bench import study as bench
+from ..bench import suite as speed_suite
 from ..bench.sdf_study import has_sdf, run_sdf_study
 from ..errors import DraawError, suggest
 from ..integrators import resolve_version
@@ -17,9 +19,6 @@ from ..scene import load_scene
 from ..scene.camera_path import as_keyframes
 from ..scene.schema import Where
 from ..scene.schema import resolution as parse_res
-
-from ..bench import speed as speed_bench
-from ..bench import suite as speed_suite
 from .common import CliError, int_list, progress_mode, read_json
 
 # the options of the accuracy study that the SDF tracer study and the speed suite do not use:
@@ -38,7 +37,7 @@ def _given(args, names) -> list[str]:
 
 def _split_sdf_scenes(args, scenes) -> tuple[list, list]:
     """(scenes with [[sdf]] entries, the others); refuses the accuracy study's options when
-    every scene goes to the SDF tracer study (they were ignored, exit 0), and names them on
+    every scene goes to the SDF tracer study (which does not use them), and names them on
     stderr when some do (they apply to the other scenes only)."""
     sdf = [sc for sc in scenes if has_sdf(sc)]
     rest = [sc for sc in scenes if sc not in sdf]
@@ -74,7 +73,7 @@ def _cmd_speed_suite(args) -> int:
             raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))} "
                            f"(the suite's scenes: {', '.join(speed_suite.SCENES)})")
     ignored = _given(args, ["max_depth", "adaptive", "quick", "denoise", "camera_path", "frames"])
-    if ignored:                                     # (they were dropped silently)
+    if ignored:                                     # (refused, not dropped silently)
         raise CliError(f"bench --suite speed: {', '.join(ignored)} {'does' if len(ignored) == 1 else 'do'} "
                        "not apply to the speed suite (each scene has its own max_depth; its options: "
                        "--versions, --spp, --gt-spp, --repeats, --resolution, --out); leave "
@@ -133,14 +132,14 @@ def cmd_bench(args) -> int:
     if args.quick:
         spps = int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
         res = res or (64, 64)
-        gt_spp = 1024 if args.gt_spp is None else args.gt_spp     # (an explicit 4096 became 1024)
+        gt_spp = 1024 if args.gt_spp is None else args.gt_spp     # (an explicit 4096 stays 4096)
     else:
         spps = int_list(args.spp, "--spp") if args.spp else [2 ** k for k in range(11)]
         gt_spp = 4096 if args.gt_spp is None else args.gt_spp
     # 3 also with --quick, not 2: a small render's dr.freeze recording is made again once while
-    # the other versions' recordings settle, and the median of two was half that render (the
-    # first scene's 1-spp times came out 5-10x high); an explicit --repeats is kept (--quick
-    # capped it at 3)
+    # the other versions' recordings settle, and the median of two is half that render (the
+    # first scene's 1-spp times come out 5-10x high); an explicit --repeats is kept, also with
+    # --quick
     repeats = 3 if args.repeats is None else args.repeats
     depths = int_list(args.max_depth, "--max-depth") if args.max_depth else None
     denoise_spp = int_list(args.denoise, "--denoise") if args.denoise else []

@@ -33,7 +33,6 @@ from ..io import read_exr, write_exr, write_png
 from ..post import display_encoded
 from ..rendering import render
 from ..scene import OVERRIDE_MINIMA, load_scene
-
 from .bench import cmd_bench
 from .common import EXIT_BAD_INPUT, PROGRESS_HELP, CliError, progress_mode, read_json  # noqa: F401 (re-exported)
 
@@ -56,7 +55,7 @@ def _writable(path: str, suffixes: tuple[str, ...], what: str) -> str:
     if not os.path.isdir(probe) or not os.access(probe, os.W_OK | os.X_OK):
         raise CliError(f"{what} {path!r} is not writable (folder {probe!r})")
     # permission bits do not tell for root, read-only mounts or /proc: write and delete a file
-    # in the nearest existing folder (else the render ran for nothing, and failed at its write)
+    # in the nearest existing folder (else the render runs for nothing, and fails at its write)
     try:
         fd, name = tempfile.mkstemp(prefix=".draaw-probe-", dir=probe)
         os.close(fd)
@@ -186,7 +185,7 @@ def _cmd_render(args) -> int:
         if args.threads < 1:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")
         dr.set_thread_count(args.threads)
-    for key, lo in OVERRIDE_MINIMA.items():      # (was blamed on the scene file: "override.spp")
+    for key, lo in OVERRIDE_MINIMA.items():      # (named as the flag, not as "override.spp")
         value = getattr(args, key)
         if value is not None and value < lo:
             raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer >= {lo}")
@@ -347,7 +346,7 @@ def _cmd_post(args) -> int:
     after = chain_doc["chain"] if isinstance(chain_doc, dict) else chain_doc     # ({"chain": [...]})
     if args.output.lower().endswith(".png"):
         # encoded by either chain (an input rendered with a chain ending in srgb): stored as
-        # it is (the new chain's alone was looked at, and such an input was encoded twice)
+        # it is (by the new chain's alone, such an input would be encoded twice)
         try:
             encoded = post.display_encoded(before + after)
         except DraawError as e:
@@ -357,14 +356,14 @@ def _cmd_post(args) -> int:
             encoded = post.display_encoded(after)
         write_png(args.output, result, channels=names, encoded=encoded)
     else:
-        # the input's draaw:* attributes go along (what rendered it), with the chain applied
-        # (the render's was overwritten, though the README says post keeps it)
+        # the input's draaw:* attributes go along (what rendered it), draaw:post with this chain
+        # after the render's (the README says post keeps it)
         meta = {k: v for k, v in header.items() if k.startswith("draaw:") and isinstance(v, (str, int, float))}
         meta["draaw:post"] = json.dumps(before + after)
         # no longer the frame a batch rendered: without its hash, and made by post, the batch
-        # reports it as foreign and leaves it alone unless told to overwrite (post run in
-        # place on a frame kept the hash, and the batch took a chain its manifest never named
-        # as done)
+        # reports it as foreign and leaves it alone unless told to overwrite (with the hash kept,
+        # post run in place on a frame would pass to the batch as done with a chain its manifest
+        # never named)
         if meta.pop(HASH_ATTR, None) is not None:
             meta[MANIFEST_ATTR] = "draaw-mi post"
         write_exr(args.output, result, channels=names, metadata=meta)
@@ -424,7 +423,7 @@ def _bench_command(args) -> int:
 @contextlib.contextmanager
 def _warnings_as_lines():
     """Python warnings as ``draaw-mi: warning: ...`` lines on stderr, as the commands' own
-    (they came as ``.../cli.py:189: RuntimeWarning: ...`` and the source line after it)."""
+    (not as ``.../cli.py:189: RuntimeWarning: ...`` and the source line after it)."""
     def show(message, category, filename, lineno, file=None, line=None):
         print(f"draaw-mi: warning: {message}", file=sys.stderr if file is None else file)
     with warnings.catch_warnings():

@@ -17,9 +17,9 @@ benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
   or [0, 1] for ``base_color``). Projection rather than a sigmoid reparameterisation keeps the
   exact bounds reachable (metallic exactly 0 or 1) with no vanishing gradients near them.
 * **Roughness in log space.** Adam moves ``log(roughness)``: a step is a relative change, so
-  0.05 vs 0.03 resolves as finely as 0.5 vs 0.3. In linear space Adam overshot small targets
+  0.05 vs 0.03 resolves as finely as 0.5 vs 0.3. In linear space Adam overshoots small targets
   into the region below the alpha clamp (alpha = sqrt(r^4 + alpha_min^2)), where the gradient
-  vanishes like r^3, and stayed at 0. The log-space floor is ``0.6 * sqrt(alpha_min)`` (0.019
+  vanishes like r^3, and stays at 0. The log-space floor is ``0.6 * sqrt(alpha_min)`` (0.019
   by default): every roughness below it renders within 6 % of alpha_min, i.e. the same.
 * **Adam with beta_2 = 0.9** (not 0.999). The gradient shrinks by orders of magnitude on the
   way to the optimum; with a long second-moment memory the early, large gradients keep the
@@ -37,7 +37,7 @@ benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
   jitter of the final iterate; the learning rate decays along a cosine to ``lr_final * lr``.
 * **Non-linear losses see an averaged render** (``smooth``, on with a post chain or the l1
   loss). A non-linear map of a noisy render is biased: E[f(I)] != f(E[I]) (a clamped bloom
-  moved metallic 0.6 -> 0.78). With ``smooth`` the chain receives a running mean of the recent
+  moves metallic 0.6 -> 0.78). With ``smooth`` the chain receives a running mean of the recent
   renders (weight = current learning-rate fraction) that carries the current render's
   derivative: ``mean + (I - detach(I))``.
 * **Exposure.** ``exposure="fit"`` compares ``s * image`` with the reference, where
@@ -147,8 +147,8 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         its aspect ratio: the fit then renders at the references' size.
         A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
         saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
-        pixels above 1 fitted roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
-        when they counted).
+        pixels above 1 fits roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
+        when they count).
     params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
     version: integrator (``v1``..``v4``, ``prb``); must be differentiable. Default the
         scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
@@ -483,7 +483,7 @@ def _scalar(v):
 def _record(v, shape):
     """A parameter's value as the history keeps it: a float, a list (a colour) or, for a
     texture (``shape``), a float32 array of its shape (a list of Python floats per texel and
-    iteration took 32 bytes a texel: 1.3 GB over 200 iterations of a 256x256 RGB texture)."""
+    iteration would take 32 bytes a texel: 1.3 GB over 200 iterations of a 256x256 RGB texture)."""
     if shape is None:
         return _scalar(v)
     return np.array(v, dtype=np.float32).reshape(shape)

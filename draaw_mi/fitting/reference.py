@@ -95,7 +95,7 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
 
 def _exr_colour(path: str, arr: np.ndarray, names: list, who: str) -> np.ndarray:
     """The colour of an EXR reference (see :func:`load_reference`), or an error that lists
-    its channels (a layered EXR was read as its channels in name order: A, B, G)."""
+    its channels (a layered EXR's channels in name order, A, B, G, are not its colour)."""
     index = {n: i for i, n in enumerate(names)}
     if all(c in index for c in "RGB"):
         return arr[..., [index["R"], index["G"], index["B"]]]
@@ -113,11 +113,11 @@ def _exr_colour(path: str, arr: np.ndarray, names: list, who: str) -> np.ndarray
 
 def _array_reference(ref, who: str) -> np.ndarray:
     """An array/tensor reference as (H, W[, 1 | 3 | 4]) float32 values, or an error (an 8-bit
-    array was taken as linear values of 0-255, a channel-first one rendered a 3-pixel-high
+    array would be taken as linear values of 0-255, a channel-first one as a 3-pixel-high
     image)."""
     if isinstance(ref, mi.Bitmap) and ref.component_format() not in (mi.Struct.Type.Float16, mi.Struct.Type.Float32,
                                                                       mi.Struct.Type.Float64):
-        # (an 8-bit PNG's bitmap was taken as linear values of 0-255: a loss of 12455, no word)
+        # (else an 8-bit PNG's bitmap is taken as linear values of 0-255: a loss of 12455)
         raise ParameterError(f"{who}: reference mi.Bitmap of component format {ref.component_format()}; "
                              "expected float values (linear): pass the PNG file, or "
                              "bitmap.convert(component_format=mi.Struct.Type.Float32, srgb_gamma=False)")
@@ -141,7 +141,7 @@ def display_encoded_post(post) -> bool:
 def check_reference_size(scene: DraawScene, w: int, h: int, reference) -> None:
     """A reference of another size than the scene's film is fitted at its own size when it
     has the same aspect ratio (a smaller reference makes a faster fit); another aspect ratio
-    would stretch the image (a 48x24 reference of a 24x24 scene was fitted without a word)."""
+    would stretch the image, and is refused (a 48x24 reference of a 24x24 scene, say)."""
     sw, sh = scene.resolution
     what = reference if isinstance(reference, (str, os.PathLike)) else "the reference"
     if abs(w * sh - h * sw) > 0.02 * max(w * sh, h * sw):

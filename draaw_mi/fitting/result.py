@@ -127,8 +127,8 @@ def settled(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
     ``lr`` a step while its
     gradient keeps its sign); and the loss is finite. Noise-robust: it looks at averaged
     iterates, not the last step. The drift test is what tells a decayed learning rate from
-    an optimum: the cosine decay stops every parameter, and a 20-iteration run still
-    descending (metallic at 1.0 for a truth of 0.8) was called converged. Measured on the
+    an optimum: the cosine decay stops every parameter, and without it a 20-iteration run still
+    descending (metallic at 1.0 for a truth of 0.8) counts as converged. Measured on the
     fit-sphere scene (16 spp): drift ratios 0.01-0.2 after 100 iterations, 0.55 after 40,
     0.76 after 20.
 

@@ -27,8 +27,8 @@ def view_sensors(scene: DraawScene, views):
     if not isinstance(views, (list, tuple)) or not views:
         raise DraawError("fit: views must be a non-empty list of camera tables or mi.Sensor objects")
     w, h = scene.resolution
-    # a view without a field of view has the scene camera's (it had [camera]'s default, 40
-    # degrees, whatever the scene's was: its references were fitted through another lens)
+    # a view without a field of view has the scene camera's, not [camera]'s default of 40
+    # degrees (its references would be fitted through another lens)
     own = mi.traverse(scene.mi_scene.sensors()[0])
     x_fov = float(np.array(own["x_fov"]).ravel()[0]) if "x_fov" in own else 40.0
     # the film's own filter object, not its name: a gaussian's stddev or a lanczos' lobes that
@@ -38,7 +38,7 @@ def view_sensors(scene: DraawScene, views):
     for i, v in enumerate(views):
         if isinstance(v, mi.Sensor):
             size = tuple(int(c) for c in v.film().crop_size())
-            if size != (w, h):     # (a raw Dr.Jit size error, or pixels compared scrambled)
+            if size != (w, h):     # (else a raw Dr.Jit size error, or pixels compared scrambled)
                 raise DraawError(f"fit: views[{i}] is a sensor of {size[0]}x{size[1]} pixels; "
                                  f"expected the references' {w}x{h}")
             out.append(v)
@@ -72,11 +72,11 @@ def view_loss(img, ref, kind: str, exposure: str, mask=None):
     ``s = <ref, ref> / <image, ref>`` (detached): the scale at which the render's projection onto
     the reference equals the reference. Both dot products are unbiased under Monte Carlo noise
     (``<image, ref>`` is linear in the image), unlike the least-squares ``<image, ref> /
-    <image, image>``, whose denominator picks up the pixel variance and biased the scale low
+    <image, image>``, whose denominator picks up the pixel variance and biases the scale low
     (-0.07 stops at 16 spp, 128x128) and with it metallic (+0.03). ``mask`` (a
     :class:`mi.TensorXf` of 0/1 like ``ref``): the pixels that count (a display reference's
     unclipped ones); the loss stays linear in the render, so unbiased under noise (clipping the
-    render to [0, 1] instead biased metallic by +0.18 at 8 spp)."""
+    render to [0, 1] instead biases metallic by +0.18 at 8 spp)."""
     scale = mi.Float(1.0)
     if exposure == "fit":
         r = ref.array if mask is None else ref.array * mask.array

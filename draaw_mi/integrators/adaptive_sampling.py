@@ -39,8 +39,8 @@ PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
 # Floor and cap bound what a wrong pilot costs. A 4-sample pilot misses rare bright paths (the
 # point light's glints on the thesis scene's near-mirror floor, 95 % of its variance in ten
-# pixels): with a floor of 1/4 and no cap V4 measured 3.0x path's variance x time there at
-# 256x256, with 1/2 and a cap of 4x the mean score 1.3x; the Cornell box's gain shrank from
+# pixels): with a floor of 1/4 and no cap V4 measures 3.0x path's variance x time there at
+# 256x256, with 1/2 and a cap of 4x the mean score 1.3x; the Cornell box's gain shrinks from
 # 0.26x to 0.43x, the spheres' from 0.61x to 0.70x (benchmarks/results/speed_suite.md).
 SCORE_CAP = 4.0             # cap of a pixel's allocation score, in multiples of the mean
 COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera ray, set-up, film)
@@ -91,8 +91,8 @@ def pilot_can_miss(scene: mi.Scene) -> bool:
     the highlights of delta lights (point, spot, sun) on near-mirror surfaces. There the
     pilot misses most of the pixels that carry the variance, and every pixel it judged quiet
     loses samples: measured on the thesis scene (a point light over a floor of roughness
-    0.05), adaptive sampling cost 2.0x ``path``'s variance x time at 256x256 (24 renders)
-    where V4 without it cost 1.15x. Such scenes render with uniform sampling."""
+    0.05), adaptive sampling costs 2.0x ``path``'s variance x time at 256x256 (24 renders)
+    where V4 without it costs 1.15x. Such scenes render with uniform sampling."""
     delta = any(mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in scene.emitters())
     if not delta:
         return False
@@ -120,7 +120,7 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
     film = sensor.film()
     w, h = (int(v) for v in film.size())
     m = np.asarray(spp_map)
-    # (a transposed (W, H) or flat map was taken in the wrong pixel order, 2.9 as 2 samples)
+    # (refused: a transposed (W, H) or flat map would be read in the wrong pixel order, 2.9 samples as 2)
     if m.shape != (h, w) or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all()\
             or (m != np.round(m)).any() or m.min() < 1:
         what = (f"shape {m.shape}" if m.shape != (h, w) else f"dtype {m.dtype}"
@@ -242,7 +242,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
                       score_cap=SCORE_CAP)
     main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, alpha=alpha)
-    if alpha:       # (from the pilot alone, an edge pixel's alpha had the pilot's 4-spp noise)
+    if alpha:       # (from the pilot alone, an edge pixel's alpha would have the pilot's 4-spp noise)
         pilot = np.concatenate([pilot, valid[..., None]], -1)
     wp = a / spp
     img = wp * pilot + (1.0 - wp) * main

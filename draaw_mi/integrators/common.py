@@ -56,8 +56,8 @@ def lum(c: mi.Color3f) -> mi.Float:
 
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
     """Power-heuristic weight of strategy ``a`` (detached; 0 where not finite), as
-    ``1 / (1 + (b/a)^2)``: squaring the pdfs themselves overflowed above 1.8e19 (a tiny or
-    grazing area light) and gave inf / inf, weight 0 instead of 1."""
+    ``1 / (1 + (b/a)^2)``: squaring the pdfs themselves overflows above 1.8e19 (a tiny or
+    grazing area light) and gives inf / inf, weight 0 instead of 1."""
     ok = pdf_a > 0
     r = pdf_b / dr.select(ok, pdf_a, 1.0)
     w = dr.select(ok, dr.rcp(1.0 + dr.square(r)), 0.0)
@@ -74,9 +74,9 @@ def safe_div(a, b, ok=None):
 def separate_adjoints(mode) -> None:
     """Call between two ``dr.backward_from`` of one ``sample()``: in backward mode, evaluate
     the first one's gradient scatters before the second is traced. In one kernel, Dr.Jit 1.5
-    (LLVM, two threads) lost part of a texture's gradient at random: V2's base_color texture
-    gave 0.108-0.144 for one seed over six runs, and 0 in some (scalar parameters, a plain
-    reduction, were not affected)."""
+    (LLVM, two threads) loses part of a texture's gradient at random: V2's base_color texture
+    gets 0.108-0.144 for one seed over six runs, and 0 in some (scalar parameters, a plain
+    reduction, are not affected)."""
     if mode == dr.ADMode.Backward:
         dr.eval()
 
@@ -110,7 +110,7 @@ def parse_int(props: mi.Properties, plugin: str, name: str, default: int, low: i
 
 
 def parse_bool(props: mi.Properties, plugin: str, name: str, default: bool) -> bool:
-    """Read a boolean property (the string "false" was read as True by ``bool()``)."""
+    """Read a boolean property: only a bool (``bool()`` would read the string "false" as True)."""
     value = props.get(name, default)
     if not isinstance(value, bool):
         raise ParameterError(f"{plugin}: {name}={value!r}; expected a boolean (true or false)")
@@ -118,7 +118,7 @@ def parse_bool(props: mi.Properties, plugin: str, name: str, default: bool) -> b
 
 
 def parse_float(props: mi.Properties, plugin: str, name: str, default: float) -> float:
-    """Read a number property (``True`` was read as 1.0, a string failed in ``float()``)."""
+    """Read a number property: an int or float, not a bool (``float()`` reads ``True`` as 1.0)."""
     value = props.get(name, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f"{plugin}: {name}={value!r}; expected a number")

@@ -93,8 +93,8 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
 def scene_shapes(scene: mi.Scene) -> list:
     """The shapes whose surfaces a ray can hit: ``scene.shapes()``, with an ``instance``'s
     shape-group members in place of the instance (``scene.shapes()`` lists the instance only,
-    with a default diffuse BSDF: instanced glass or textures were not seen, and V3/V4
-    rendered such scenes 8 % dark). The members are found through Mitsuba's traversal, run
+    with a default diffuse BSDF: instanced glass or textures would go unseen, and V3/V4
+    render such scenes 8 % dark). The members are found through Mitsuba's traversal, run
     only when there is an instance.
 
     >>> d = {"type": "scene", "g": {"type": "shapegroup", "s": {"type": "sphere", "bsdf": {"type": "dielectric"}}},

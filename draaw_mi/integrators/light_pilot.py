@@ -17,8 +17,8 @@ pixel at 256x256 and about 0.2 s on two cores, whatever the render's size) and r
 ``p_i = (1 - UNIFORM_SHARE) * sqrt(M_i) / sum_j sqrt(M_j) + UNIFORM_SHARE / n``. The
 probabilities are fixed before the render, so the render stays unbiased; an emitter whose
 contribution the pilot misses keeps the uniform share, which bounds what a poor pilot costs.
-On the thesis glass scene the learned table took V4 from 0.93x to 0.60x ``path``'s variance
-x time at 256x256; rare contributions are what a pilot can miss (there, 2^16 paths gave the
+On the thesis glass scene the learned table takes V4 from 0.93x to 0.60x ``path``'s variance
+x time at 256x256; rare contributions are what a pilot can miss (there, 2^16 paths give the
 point light 0.34 with one seed and 0.86 with another), hence 2^18
 (``benchmarks/results/speed_suite.md``).
 

@@ -43,8 +43,8 @@ def phong_material(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Boo
     is_draaw = mi.Bool(False)
     if feats["draaw_materials"]:
         is_draaw = active & bsdf.has_attribute("direct_to_scatter", active)
-        # straight-through clamps, as the draaw BSDF's: a plain clip gave no gradient at a
-        # bound (reflection and metallic sit at 0 by default, and a fit never left them)
+        # straight-through clamps, as the draaw BSDF's: a plain clip gives no gradient at a
+        # bound (reflection and metallic sit at 0 by default, and a fit would never leave them)
         base = clamp_st(bsdf.eval_attribute("base_color", si, is_draaw), 0.0, 1.0)
         rough = clamp_st(bsdf.eval_attribute_1("roughness", si, is_draaw), 0.0, 1.0)
         metal = clamp_st(bsdf.eval_attribute_1("metallic", si, is_draaw), 0.0, 1.0)
@@ -55,7 +55,7 @@ def phong_material(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, active: mi.Boo
         kd_d = base * (1.0 - metal) * (1.0 - dr.max(ks_d))
         alpha2 = dr.square(dr.square(rough)) + 1e-6          # alpha^2, alpha = sqrt(r^4 + 1e-6)
         # the floor at 0 only absorbs the 1e-6 (-2e-6 at roughness 1): straight through, or
-        # roughness 1 had no gradient (an optimiser at the bound stayed there); the cap on
+        # roughness 1 has no gradient (an optimiser at the bound would stay there); the cap on
         # sharp lobes stays a plain clip, where the image does not change either
         n_d = dr.minimum(clamp_st(2.0 / alpha2 - 2.0, 0.0, None), PHONG_MAX_EXPONENT)
         kd = dr.select(is_draaw, kd_d, kd)

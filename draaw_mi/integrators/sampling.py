@@ -125,9 +125,9 @@ class PowerSelection:
     @staticmethod
     def from_power(scene: mi.Scene, power: np.ndarray) -> "PowerSelection":
         power = np.maximum(np.asarray(power, np.float64), 0.0)
-        # a share spread evenly: a dark light (intensity 0, or 1e-3 of the others) was
-        # practically never sampled, so its gradient came out 0, or 35x off on the seed that
-        # drew it; a light being fitted up from dark is a normal inverse-lighting case
+        # a share spread evenly: else a dark light (intensity 0, or 1e-3 of the others) is
+        # practically never sampled, so its gradient comes out 0, or 35x off on the seed that
+        # draws it; a light being fitted up from dark is a normal inverse-lighting case
         pmf = (1.0 - POWER_UNIFORM_SHARE) * power / power.sum() + POWER_UNIFORM_SHARE / power.size
         cdf = np.cumsum(pmf)
         cdf[-1] = 1.0
@@ -156,8 +156,8 @@ class PowerSelection:
         if any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in emitters):
             # An environment's power (through the scene's bounding sphere) says little about
             # what it gives the visible surfaces: measured on the thesis scene (sky, area
-            # light, point light), the table gave the sky 58 % of the light samples and
-            # starved the point light, whose glints on the near-mirror floor carry most of the
+            # light, point light), the table gives the sky 58 % of the light samples and
+            # starves the point light, whose glints on the near-mirror floor carry most of the
             # image's variance (pbrt-v4 also keeps infinite lights out of its power/BVH sampling).
             return None
         power = np.array([emitter_power(e, scene) for e in emitters])

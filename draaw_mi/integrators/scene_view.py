@@ -16,7 +16,7 @@ renderer's state for a :class:`~draaw_mi.scene.DraawScene` (:func:`draaw_mi.rend
 passes it). The view holds the scene itself, so its ``id`` names it for as long as the memo
 holds the view; an integrator's own caches never hold a view (a held scene keeps its Python
 BSDFs alive). Without a memo (a bare ``mi.Scene``) a view is made for each call: as many
-calls as before, no saving.
+calls as without one, no saving.
 """
 from __future__ import annotations
 

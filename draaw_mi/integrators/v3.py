@@ -259,7 +259,7 @@ class DraawV3Integrator(DraawIntegrator):
                 wo_d = flip_z(wo_d, sign)
                 if dr.hint(feats["normal_maps"] and self.distribution == "ggx", mode="scalar"):
                     # a normal-mapped BSDF evaluates in its perturbed frame: sampling the NDF
-                    # around the unperturbed normal put near-zero pdfs under its glossy peak
+                    # around the unperturbed normal puts near-zero pdfs under its glossy peak
                     # (roughness 0.1, a 17-degree tilt: image means 0.2 to 66 over seeds)
                     mapped = act_d & bsdf.has_attribute("normalmap", act_d)
                     bs_m, _ = bsdf.sample(ctx, si, s1, s2, mapped)
@@ -274,8 +274,8 @@ class DraawV3Integrator(DraawIntegrator):
                 delta &= ~is_draaw
             weight = safe_div(f, pdf, active & (pdf > 0))
             ray_next = si.spawn_ray(si.to_world(wo))
-            # a path whose throughput reached 0 carries nothing more (with max_depth = -1
-            # in a closed scene it bounced on: 28 s for an 8x8 image that 1024 bounces make)
+            # a path whose throughput reached 0 carries nothing more (else, with max_depth = -1
+            # in a closed scene, it bounces on: 28 s for an 8x8 image that 1024 bounces make)
             active_next = active & (dr.max(weight) != 0) & (dr.max(β * weight) > 0)
             si_next = scene.ray_intersect(ray_next, ray_flags=flags, coherent=False,
                                           active=active_next)

@@ -110,20 +110,20 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
     What is on by default and why (``benchmarks/results/speed_suite.md``, ten scenes of
     different kinds, time to reach ``path``'s 64-spp error): the roulette threshold because
-    ``path``-style roulette from depth 2 cost up to 1.7x the time in environment-lit scenes
+    ``path``-style roulette from depth 2 costs up to 1.7x the time in environment-lit scenes
     (stopping bright paths adds variance) while never roulette costs speed in enclosed
-    scenes; power selection because it cut the error of the 24-light scene about 8x at the
+    scenes; power selection because it cuts the error of the 24-light scene about 8x at the
     same cost; where it does not apply (emitters of similar power, or an environment among
     them: an environment's power says little about what it gives the visible surfaces, and
-    on the thesis scene a power table starved the point light, whose glints carry most of the
+    on the thesis scene a power table starves the point light, whose glints carry most of the
     variance) selection learned by a pilot of 2^18 camera paths (about 0.2 s once per scene,
-    :mod:`~draaw_mi.integrators.light_pilot`), which took the thesis glass scene from 0.90x to
+    :mod:`~draaw_mi.integrators.light_pilot`), which takes the thesis glass scene from 0.90x to
     0.59x ``path``'s variance x time at 256x256 and the material spheres (sky and area light)
-    to 0.76x of uniform selection's; it lost 10 % to the power table on the 24-light scene,
+    to 0.76x of uniform selection's; it loses 10 % to the power table on the 24-light scene,
     hence ``auto``; emission splitting because in a scene that shows its lights most of a
     low-spp image's error sits in the pixels on their edges (87 % of the variance of the
     Cornell box at 128x128, in 0.7 % of its pixels): variance x time against ``path`` at 128x128
-    and 4 spp went from 1.0 to 0.13 on the Cornell box and from 1.0 to 0.015 on the scene with a
+    and 4 spp goes from 1.0 to 0.13 on the Cornell box and from 1.0 to 0.015 on the scene with a
     small bright bulb in view, at 0-5 % more kernel time, and nothing changes where no emitting
     surface is in view (``benchmarks/variance_study.py``); adaptive sampling because the error of
     most images is dominated by few pixels (emitter edges, highlights, caustics), and it is
@@ -137,7 +137,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
     stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
     2-10x off the variance of ``path`` (and of V4 on most suite scenes), and adaptive sampling
-    on top measured 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
+    on top measures 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
     ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with

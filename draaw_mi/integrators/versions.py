@@ -67,6 +67,6 @@ def is_draaw(version: str) -> bool:
     return resolve_version(version) in PLUGINS
 
 
-# the error's list: the names a user picks from (the 35 aliases made one unreadable line)
+# the error's list: the names a user picks from (the 35 aliases would make one unreadable line)
 MAIN_VERSIONS = ("expected v1, v2, v3, v4, path, prb, volpath or prbvolpath (or a GO-Draaw name "
                  "such as V2M or V4-Log-Optim; all: draaw_mi.integrators.VERSION_ALIASES)")

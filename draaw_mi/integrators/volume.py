@@ -63,7 +63,7 @@ class MediaTable:
         top = scene.shapes()
         for shape in scene_shapes(scene):
             if all(shape is not s for s in top) and (shape.interior_medium() or shape.exterior_medium()):
-                # (its medium was ignored: a smoke-filled instanced sphere rendered as empty)
+                # (its medium would be ignored: a smoke-filled instanced sphere renders as empty)
                 raise RenderError(f"draaw integrators: a participating medium on a shape inside a "
                                   f"shapegroup ({shape.id() or shape.class_name()}) is not supported; "
                                   "move the shape out of the group, or render with volpath")
@@ -141,9 +141,9 @@ def media_table(scene: mi.Scene) -> MediaTable:
     key = id(scene)
     stamp = []
     diff = False
-    # the sensors' media too: a medium only the camera sits in was neither stamped (an edited
-    # density kept the old majorant) nor seen as differentiated (a density gradient of the
-    # wrong sign: no null collisions under a tight bound)
+    # the sensors' media too: else a medium only the camera sits in is neither stamped (an
+    # edited density keeps the old majorant) nor seen as differentiated (a density gradient of
+    # the wrong sign: no null collisions under a tight bound)
     media = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
     media += [s.get_medium() for s in scene.sensors()]
     traversed = set()
@@ -218,7 +218,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     ctx = mi.BSDFContext()
     max_depth = integ.max_depth
     # Russian roulette in media: from depth 5 with survival up to 0.99, as volpath. The
-    # surface-tuned draaw_v4 default (depth 2) doubled the variance in dense media, where
+    # surface-tuned draaw_v4 default (depth 2) doubles the variance in dense media, where
     # every path scatters many times with a throughput of albedo^k.
     rr_depth = max(integ.rr_depth, MEDIA_RR_DEPTH)
     rr_min = getattr(integ, "rr_min", 0.05)

@@ -1,9 +1,9 @@
 """``draaw_v1`` / ``draaw_v2`` in scenes with media: GO-Draaw's single-scattering ray march,
 fixed (``go-draaw-spec.md`` §4.3).
 
-GO-Draaw marched 12 equal steps with one *global* density, used a transmittance that started
-at a user "transmittance" value (a brightness gain), estimated the light's transmittance from
-the whole box chord regardless of where the light was, and ignored surfaces. Here:
+GO-Draaw marches 12 equal steps with one *global* density, uses a transmittance that starts
+at a user "transmittance" value (a brightness gain), estimates the light's transmittance from
+the whole box chord regardless of where the light is, and ignores surfaces. Here:
 
 * the camera ray is marched through every medium segment it crosses (``null`` boundaries
   switch media) in ``medium_steps`` equal steps per segment with a random offset (stochastic
@@ -43,7 +43,7 @@ MAX_SEGMENTS = 16
 def _segment_end(scene, ray, t0, t1, active):
     """``(t1', unbounded)``: the end of the marched stretch ``[t0, t1]``. An unbounded medium
     (Mitsuba's ``homogeneous`` as the camera's medium: its box is all space) along a ray that
-    leaves the scene has ``t1 = inf``, and equal steps over it gave NaN pixels. Its stretch
+    leaves the scene has ``t1 = inf``, and equal steps over it give NaN pixels. Its stretch
     ends where the ray leaves a sphere of twice the scene's bounding radius: the light
     scattered in beyond it is not gathered (bias, as the march's), and the transmittance
     past it is :func:`_tail`'s."""
@@ -173,7 +173,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
             ph, _ = phase.eval_pdf(mi.PhaseFunctionContext(sampler), mei, ds.d, march)
             # this step's own attenuation up to the sample, then through it
             T_half = T * dr.exp(-s_t * (u * dt))
-            # (an infinite sigma: T_half 0 times sigma_s inf was NaN)
+            # (an infinite sigma: T_half 0 times sigma_s inf is NaN)
             L[march & (dr.max(T_half) > 0)] = L + T_half * s_s * ph * Lw * dt
             T[march] = T * dr.exp(-s_t * dt)
             k += 1
@@ -189,7 +189,7 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
         # emission of what the ray finally sees (surface or environment)
         seen = (live & ~si.is_valid()) | opaque
         # (the march never turns: every segment is the camera ray, so what it ends on is seen
-        # directly, through any number of smoke boundaries; hiding only segment 0 showed the
+        # directly, through any number of smoke boundaries; hiding only segment 0 would show the
         # sky through a smoke box)
         if dr.hint(not integ.hide_emitters, mode="scalar"):
             L[seen] = L + T * si.emitter(scene).eval(si, seen)

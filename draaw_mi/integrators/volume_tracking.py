@@ -33,8 +33,8 @@ _LOBES = int(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection | mi
 
 def partly_null(scene: mi.Scene) -> bool:
     """Whether a shape's BSDF lets light through in part (``mask``: the ``Null`` flag and
-    other lobes). Such surfaces were crossed as if absent in smoke scenes (an opaque masked
-    card disappeared); where none is, their handling adds no kernel code."""
+    other lobes). Smoke scenes must not cross such surfaces as if absent (an opaque masked
+    card would disappear); where none is, their handling adds no kernel code."""
     null = int(mi.BSDFFlags.Null)
     for shape in scene_shapes(scene):
         bsdf = shape.bsdf()

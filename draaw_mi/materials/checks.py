@@ -16,7 +16,7 @@ def check_value(who: str, name: str, key: str, v) -> None:
     wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
     parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
     as a scene file's ``[[volumes]]`` table has them (``phase_function.g``: |g| < 1 in float32,
-    ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 rendered negative pixels). Raises
+    ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 would render negative pixels). Raises
     :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
     range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
     planner check their overrides with it.
@@ -34,13 +34,13 @@ def check_value(who: str, name: str, key: str, v) -> None:
     if isinstance(v, (bool, np.bool_, str, bytes)) or v is None:
         raise ParameterError(f"{who}: {name}={v!r}; expected a number")
     if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
-        nums = [float(v)]                    # (numpy scalars too: np.float32(7) passed unchecked)
+        nums = [float(v)]                    # (numpy scalars too: np.float32(7) is checked as 7.0)
     elif isinstance(v, np.ndarray) and v.ndim > 1:
         if any(p.endswith("medium") for p in parts[:-1]):
-            _check_medium_grid(who, name, key, v)    # (NaN or negative densities rendered NaN)
+            _check_medium_grid(who, name, key, v)    # (NaN or negative densities render NaN)
         elif param in SCALAR_PARAMS or param == "base_color":
-            # a material texture's texels (NaN texels were zeroed without a word; the same
-            # values in a scene file are refused); value_like checks their shape
+            # a material texture's texels (NaN texels are refused, not zeroed, as the same
+            # values in a scene file are); value_like checks their shape
             lo, hi = SCALAR_PARAMS[param][1:] if param in SCALAR_PARAMS else (0.0, FLOAT32_MAX)
             _check_texels(who, name, v, lo, hi)
         return
@@ -49,7 +49,7 @@ def check_value(who: str, name: str, key: str, v) -> None:
             nums = [float(x) for x in v]
         except (TypeError, ValueError):
             raise ParameterError(f"{who}: {name}={v!r}; expected numbers") from None
-        if param in SCALAR_PARAMS and len(nums) != 1:     # (3 numbers made a 3-wide Float)
+        if param in SCALAR_PARAMS and len(nums) != 1:     # (3 numbers would make a 3-wide Float)
             lo, hi = SCALAR_PARAMS[param][1:]
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
         if param not in SCALAR_PARAMS and len(nums) != 3:

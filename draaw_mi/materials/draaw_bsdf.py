@@ -128,8 +128,8 @@ class DraawBSDF(mi.BSDF):
                                  f"{', '.join(NORMALMAP_ENCODINGS)}")
         self.normalmap_signed = enc == "signed"
         if "normalmap" in props:
-            # values within the encoding's range (a texel of 1e30 or Inf overflowed the
-            # normalisation: black patches, where NaN and zero-length texels fall back)
+            # values within the encoding's range (a texel of 1e30 or Inf would overflow the
+            # normalisation into black patches; NaN and zero-length texels fall back)
             lo, hi = (-1.0, 1.0) if self.normalmap_signed else (0.0, 1.0)
             lo, hi = lo - NORMALMAP_SLACK, hi + NORMALMAP_SLACK
             self.normalmap = textures.texture_property(props, "normalmap", None, lo, hi, color=True)
@@ -172,8 +172,8 @@ class DraawBSDF(mi.BSDF):
         w_spec = _lum(_schlick(f0, f90, cos_i))
         w_diff = _lum(kd) * (1.0 - w_spec)
         total = w_spec + w_diff
-        # clipped: a base colour above 1 (an optimiser's step) made w_diff negative, p > 1
-        # and the mixture pdf negative in 11 % of directions
+        # clipped: a base colour above 1 (an optimiser's step) makes w_diff negative; unclipped,
+        # p > 1 and the mixture pdf is negative in 11 % of directions
         return dr.clip(dr.select(total > 0, w_spec / dr.select(total > 0, total, 1.0), 0.5), 0.0, 1.0)
 
     # ------------------------------------------------------------------ shading frame
@@ -333,7 +333,7 @@ class DraawBSDF(mi.BSDF):
         return self.eval_attribute(name, si, active)
 
     def traverse(self, cb):
-        # a constant under the key its uniform texture had: NAME.value
+        # a constant under the key its uniform texture would have: NAME.value
         for name in ALL_PARAMS:
             value = getattr(self, name)
             if isinstance(value, mi.Texture):

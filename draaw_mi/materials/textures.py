@@ -48,8 +48,8 @@ def _range(lo, hi):
 def constant_texture(value, color: bool) -> mi.Texture:
     """A constant texture, built through ``mi.Properties`` rather than a nested
     ``mi.load_dict``: plugin constructors run on Mitsuba's parallel scene-loading threads, and a
-    parser re-entered from there raced with other plugins being loaded (seen as random
-    ``std::bad_alloc`` / ``basic_string`` errors while a ``roughconductor`` read its data)."""
+    parser re-entered from there races with other plugins being loaded (random
+    ``std::bad_alloc`` / ``basic_string`` errors while a ``roughconductor`` reads its data)."""
     props = mi.Properties("constant")
     if color:
         props["value"] = mi.ScalarColor3f(*[float(v) for v in value])
@@ -62,7 +62,7 @@ def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     """A bitmap texture from a file name or an (H, W[, C]) array (values as given, linear)."""
     if isinstance(source, str):
         # found as Mitsuba finds a bitmap's file: an XML scene's folder is on the resolver's
-        # path (only the working directory was searched)
+        # path, not only the working directory
         path = str(mi.file_resolver().resolve(source))
         if not os.path.isfile(path):
             raise ParameterError(f"draaw BSDF: {name}={source!r}: texture file does not exist")
@@ -109,7 +109,7 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
         _check_range(name, lo, hi, [value], "value")
         return constant_texture([value] * 3 if color else value, color)
     if isinstance(value, str):
-        # checked as a texture table's bitmap is (a file of NaN roughness rendered NaN)
+        # checked as a texture table's bitmap is (a file of NaN roughness renders NaN)
         tex = bitmap_texture(value, raw=(name in RAW_BY_DEFAULT), name=name)
         _check_range(name, lo, hi, texture_values(tex), "texture values")
         return tex

@@ -112,7 +112,7 @@ def solid_meshes(grid, material: dict | None = None, name: str = "voxels", group
         bsdf = mi.load_dict(dict(mat, base_color={"type": "mesh_attribute", "name": "face_color"}))
         return {name: _mesh(name, v, f, bsdf, colors)}
     key = _COLOUR_KEYS.get(mat["type"])
-    if key is None:             # (Mitsuba's 'unreferenced property "base_color"')
+    if key is None:             # (else Mitsuba's 'unreferenced property "base_color"')
         raise ParameterError(f"solid_meshes: material type {mat['type']!r} has no colour parameter "
                              f"draaw-mi knows; expected one of {', '.join(sorted(_COLOUR_KEYS))}")
     out = {}

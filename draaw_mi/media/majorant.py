@@ -10,8 +10,8 @@ integrators walk it with a DDA and track within each coarse cell against its own
   ``k`` voxels per axis spans ``k + 1`` voxel centres and takes their maximum: a trilinear
   lookup inside it blends only those centres (a tight bound), a ``nearest`` lookup reads one
   of them (conservative too). Cells with faces on voxel faces would need a one-voxel
-  dilation (``k + 2`` voxels): with one dense voxel in a 4^3 grid that spread its bound over
-  27 of 64 cells, and flights through empty space ran out of steps (rendered too dark).
+  dilation (``k + 2`` voxels): with one dense voxel in a 4^3 grid that spreads its bound over
+  27 of 64 cells, and flights through empty space run out of steps (too dark a render).
 * **Cell size chosen per medium.** ``k`` starts at ``resolution`` cells per axis and halves
   down to one voxel, keeping the level of least expected work per ray -- ``chord * (sum_a
   1 / (2 k h_a) + mean(majorant))``: DDA steps plus tentative collisions over a box's mean

@@ -42,8 +42,8 @@ def unit_cube_to_box(bbox_min, bbox_max):
 
 def check_g(g_phase, where: str = "smoke") -> float:
     """The Henyey-Greenstein g, which must be finite with |g| < 1."""
-    # numpy scalars are numbers (np.float32(0.5) was refused); |g| < 1 in float32, as Mitsuba
-    # stores it (0.99999999 is 1 there, and the hg plugin failed to load)
+    # numpy scalars are numbers (np.float32(0.5) too); |g| < 1 in float32, as Mitsuba
+    # stores it (0.99999999 is 1 there, and the hg plugin fails to load)
     if isinstance(g_phase, bool) or not isinstance(g_phase, numbers.Real)\
             or not math.isfinite(g_phase) or abs(float(np.float32(g_phase))) >= 1.0:
         raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
@@ -63,7 +63,7 @@ def smoke_medium(grid, g_phase: float = 0.0, scale: float = 1.0, filter_type: st
         raise ParameterError(f"smoke_medium: filter={filter_type!r}; expected one of {', '.join(FILTERS)}")
     grid.validate("smoke_medium")
     peak = float(np.max(grid.density)) * scale if grid.density.size else 0.0
-    if peak > FLOAT32_MAX:                 # (stored as inf: V4 black, V1/V2 NaN)
+    if peak > FLOAT32_MAX:                 # (it would be stored as inf: V4 black, V1/V2 NaN)
         raise ParameterError(f"smoke_medium: scale={scale!r} times the densest voxel "
                              f"({float(np.max(grid.density))!r}) is {peak:.3g}, beyond float32 (3.4e38)")
     to_world = unit_cube_to_box(grid.bbox_min, grid.bbox_max)

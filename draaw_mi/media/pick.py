@@ -1,6 +1,6 @@
 """Exact grid traversal (Amanatides & Woo DDA) of one ray through a regular grid, in numpy.
 
-Used for picking the first occupied voxel along a ray. GO-Draaw marched 64 equal steps
+Used for picking the first occupied voxel along a ray. GO-Draaw marches 64 equal steps
 through the box (``go-draaw-spec.md`` §4.4), which skips thin features; the DDA visits every
 cell the ray crosses, in order, exactly once.
 

@@ -32,7 +32,7 @@ def plume(resolution=(48, 64, 48), seed: int = 0, sharpness: float = 3.0) -> np.
     turbulent wisps (two octaves of value noise), fading towards the top."""
     def whole(v):
         return isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_))
-    # (np.int64(8) was "not iterable", a float 8.0 too, and (8.5, 8, 8) became (8, 8, 8))
+    # (numpy ints are whole numbers; a float, 8.0 or 8.5, is refused, not cut to 8)
     shape = ()
     if whole(resolution):
         shape = (resolution,) * 3

@@ -2,7 +2,7 @@
 
 Arrays are numpy, indexed ``[ix, iy, iz]`` (shape ``(nx, ny, nz)``; colours get a trailing
 RGB axis); the grid covers the world box ``bbox_min .. bbox_max`` and cells need not be cubic.
-Colours are linear RGB in [0, 1] (GO-Draaw kept 0-255 RGBA; "occupied" there meant alpha != 0,
+Colours are linear RGB in [0, 1] (GO-Draaw keeps 0-255 RGBA; "occupied" there means alpha != 0,
 here it is the ``occupied`` mask). Density is the extinction coefficient sigma_t in 1/world
 units (>= 0); the smoke colour is the single-scattering albedo.
 
@@ -42,7 +42,7 @@ def _color(value, where: str) -> np.ndarray:
     if c.size == 1:
         c = np.repeat(c, 3)
     if c.size != 3 or not np.all(np.isfinite(c)) or np.any(c < 0) or np.any(c > 1):
-        # (a colour above 1 was clipped to 1 without a word)
+        # (a colour above 1 is refused, not clipped)
         raise ParameterError(f"{where}: colour {value!r}; expected 3 values in [0, 1]")
     return c.astype(np.float32)
 
@@ -151,10 +151,10 @@ class VoxelGrid:
         ``resolution``³ cells, each triangle voxelised, filled cells with a random colour,
         smoke colour (0, 0, 0) and density 0.001 everywhere.
 
-        Fixed quirks: the per-cell centre positions were stored transposed (x<->z), which only
-        affected GO-Draaw's baked light map (not built here); the surface test uses the
+        Fixed quirks: GO-Draaw stores the per-cell centre positions transposed (x<->z), which only
+        affects its baked light map (not built here); the surface test uses the
         distance to the triangle rather than to its plane plus a barycentric test, which
-        left holes along the edges of thin triangles (see :func:`~draaw_mi.media.voxelize.voxelize`).
+        leaves holes along the edges of thin triangles (see :func:`~draaw_mi.media.voxelize.voxelize`).
         """
         tris = load_triangles(mesh_path) * float(scale)
         pts = tris.reshape(-1, 3)
@@ -206,7 +206,7 @@ class VoxelGrid:
             if a.shape != shape + (3,):
                 raise ParameterError(f"{where}: {name} has shape {a.shape}; expected {shape + (3,)}")
             if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1):
-                # (above 1: a solid colour amplified light, a smoke albedo was clipped unsaid)
+                # (above 1, a solid colour would amplify light and a smoke albedo be clipped unsaid)
                 raise ParameterError(f"{where}: {name} has values outside [0, 1] or non-finite ones; "
                                      "expected colours in [0, 1]")
         d = self.density
@@ -230,7 +230,7 @@ class VoxelGrid:
         """Cell containing world point ``p`` (the max face belongs to the last cell), or None."""
         p = np.asarray(p, float)
         rel = (p - self.bbox_min) / self.cell_size
-        # (a NaN coordinate passed both tests: index -9223372036854775808)
+        # (a NaN coordinate would pass both tests: index -9223372036854775808)
         if not np.all(np.isfinite(p)) or np.any(rel < 0) or np.any(p > self.bbox_max):
             return None
         i = np.minimum(np.floor(rel).astype(int), np.asarray(self.shape) - 1)
@@ -240,7 +240,7 @@ class VoxelGrid:
         """First occupied cell along the ray ``origin + t direction`` (t >= 0), or None.
 
         Exact: a DDA visits every cell the ray crosses (fixes GO-Draaw's 64 fixed steps, which
-        skipped thin features and could pick a cell behind the visible one)."""
+        skip thin features and can pick a cell behind the visible one)."""
         d = np.asarray(direction, float)
         if not np.all(np.isfinite(d)) or not np.any(d != 0):
             raise ParameterError(f"VoxelGrid.pick: direction {direction!r}; expected a finite non-zero vector")
@@ -272,7 +272,7 @@ class VoxelGrid:
             a = np.asarray(at, dtype=float)
         except (TypeError, ValueError):
             a = np.empty(0)
-        if a.shape in ((3,), (2, 3)) and not np.all(np.isfinite(a)):    # (int(nan): a bare ValueError)
+        if a.shape in ((3,), (2, 3)) and not np.all(np.isfinite(a)):    # (int(nan) is a bare ValueError)
             raise ParameterError(f"VoxelGrid.{what}: at={at!r}; expected finite numbers")
         if a.shape == (3,):
             i = tuple(int(v) for v in a)
@@ -299,8 +299,8 @@ class VoxelGrid:
         """Set the colour of the cell ``at`` (an index, or the first occupied cell along a ray
         ``(origin, direction)``). Returns the cell edited, or None on a miss.
 
-        Fixed quirk: GO-Draaw's paint randomness ``(U() - 1) m`` only ever darkened RGB and
-        raised alpha; here the noise is ``(U() - 0.5) m`` per channel, clipped to [0, 1]."""
+        Fixed quirk: GO-Draaw's paint randomness ``(U() - 1) m`` only ever darkens RGB and
+        raises alpha; here the noise is ``(U() - 0.5) m`` per channel, clipped to [0, 1]."""
         i = self._target(at, "draw")
         if i is not None:
             self.color[i] = self._noisy(color, randomness, rng, 1, "VoxelGrid.draw")[0]
@@ -318,7 +318,7 @@ class VoxelGrid:
     def add(self, at, color, randomness: float = 0.0, rng=None) -> Index | None:
         """Fill the 3x3x3 block around ``at`` (index or ray) with ``color``; returns the centre.
 
-        Fixed quirk: GO-Draaw offset the linear index, so the brush wrapped across row ends
+        Fixed quirk: GO-Draaw offsets the linear index, so the brush wraps across row ends
         (and the grid's faces); here the block is clipped at the grid's faces."""
         i = self._target(at, "add")
         if i is None:
@@ -333,8 +333,8 @@ class VoxelGrid:
     def paint(self, color, randomness: float = 0.0, rng=None) -> int:
         """Recolour every existing voxel (independent noise per voxel); returns the count.
 
-        Fixed quirk: GO-Draaw counted a voxel as existing only if some RGB > 25 and alpha >
-        128, so dark voxels were never repainted; here every occupied voxel is."""
+        Fixed quirk: GO-Draaw counts a voxel as existing only if some RGB > 25 and alpha >
+        128, so dark voxels are never repainted; here every occupied voxel is."""
         n = int(self.occupied.sum())
         self.color[self.occupied] = self._noisy(color, randomness, rng, n, "VoxelGrid.paint")
         return n
@@ -349,7 +349,7 @@ class VoxelGrid:
     def set_smoke_color(self, color, randomness: float = 0.0, rng=None) -> None:
         """Set every cell's smoke colour, with per-channel noise ``(U() - 0.5) randomness``.
 
-        Fixed quirk: GO-Draaw added the noise when ``density > 0`` instead of when
+        Fixed quirk: GO-Draaw adds the noise when ``density > 0`` instead of when
         ``randomness > 0``."""
         n = int(np.prod(self.shape))
         self.smoke_color[:] = self._noisy(color, randomness, rng, n,
@@ -359,12 +359,12 @@ class VoxelGrid:
         """Turn solid voxels into smoke: their colour becomes the smoke colour and their
         density ``density``; the voxels are removed unless ``keep_solid``. Returns the count.
 
-        Fixed quirks: GO-Draaw copied colours of cells with alpha > 10 but kept one global
-        density (the medium stayed homogeneous); here the density is per cell."""
+        Fixed quirks: GO-Draaw copies colours of cells with alpha > 10 but keeps one global
+        density (the medium stays homogeneous); here the density is per cell."""
         if isinstance(density, bool) or not isinstance(density, (int, float, np.integer, np.floating)):
             raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a number")
         density = float(density)
-        # (finite where it is stored: in float32, 1e39 was Inf)
+        # (finite where it is stored: in float32, 1e39 is Inf)
         if not 0 <= density <= FLOAT32_MAX:
             raise ParameterError(f"VoxelGrid.to_smoke: density={density!r}; expected a value >= 0 "
                                  "and finite in float32")

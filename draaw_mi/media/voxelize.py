@@ -3,7 +3,7 @@
 * ``surface``: a cell is filled when its centre lies within half a cell of the triangle,
   distances measured in *cell units* (each axis scaled by its cell size). Any plane then
   fills at least one cell in every grid column along its dominant axis, so surfaces have no
-  holes. GO-Draaw (``go-draaw-spec.md`` §4.1) used the distance to the triangle's *plane*
+  holes. GO-Draaw (``go-draaw-spec.md`` §4.1) uses the distance to the triangle's *plane*
   (<= half the largest cell side) plus a barycentric test of the centre's projection, which
   drops cells along the edges of thin triangles and leaves holes; fixed here.
 * ``solid``: ``surface`` plus the interior, found by parity along x: every cell-centre line
@@ -92,8 +92,8 @@ def voxelize(tris: np.ndarray, shape, bbox_min, bbox_max, fill: str = "surface")
     occ = np.zeros(tuple(shape), bool)
     r = 0.5
     # the cells whose centres (i + 0.5) lie within r of the triangle's box, ties included on
-    # both sides as the d2 <= r^2 rule includes them (floor(x) + 1 left out a lower cell at
-    # exactly r: a plane on a cell boundary filled one layer, a centred box was lopsided)
+    # both sides as the d2 <= r^2 rule includes them (floor(x) + 1 would leave out a lower cell
+    # at exactly r: a plane on a cell boundary would fill one layer, a centred box be lopsided)
     tmin = np.ceil(t.min(axis=1) - r - 0.5).astype(int)
     tmax = np.floor(t.max(axis=1) + r - 0.5).astype(int)
     tmin = np.maximum(tmin, 0)

@@ -29,11 +29,11 @@ Conventions shared by all filters (differences from GO-Draaw are listed in each 
   CRT's ``clamp``, the Lin/Log grades' saturation at 1), each switchable with ``clamp=False``;
   negative values are allowed (contrast, sharpen can produce them).
 * Distances (shift, Sobel distance, bloom spread, CRT radius) are in pixels. GO-Draaw's shaders
-  use texel units, which made ``Strength`` and ``Radius`` tiny or huge; its parameter names are
+  use texel units, which makes ``Strength`` and ``Radius`` tiny or huge; its parameter names are
   accepted but read in pixels.
 * Non-finite colour values (NaN, ±inf, from a user's image: draaw-mi's renders have none)
-  are read as 0 before the first filter, as :func:`draaw_mi.denoise` does; a blur spread one
-  NaN pixel over a 13 × 13 square. ``amount = 0`` returns finite inputs exactly.
+  are read as 0 before the first filter, as :func:`draaw_mi.denoise` does (a blur would spread
+  one NaN pixel over a 13 × 13 square). ``amount = 0`` returns finite inputs exactly.
 * Alpha (4th channel) passes through untouched.
 * Differentiable end to end (fused ``dr.gather`` kernels; the quantiser uses a
   straight-through gradient). Parameters are Python numbers and are baked into the kernels:

@@ -56,8 +56,8 @@ def as_image(image: Any, where: str) -> mi.TensorXf:
 
 def finite_rgb(rgb: mi.TensorXf) -> mi.TensorXf:
     """``rgb`` with its non-finite values (NaN, ±inf) read as 0, as :func:`draaw_mi.denoise`
-    does: one bad pixel of a user's image otherwise spread through every blur (a NaN pixel
-    became a 13 × 13 NaN square under the default bloom). Finite values pass bit-identical
+    does: one bad pixel of a user's image would otherwise spread through every blur (a NaN
+    pixel would become a 13 × 13 NaN square under the default bloom). Finite values pass bit-identical
     with gradient 1; the replaced ones get gradient 0.
 
     >>> import mitsuba as mi
@@ -118,14 +118,14 @@ def luminance(c: mi.Color3f) -> mi.Float:
 def safe_norm2(gx: Any, gy: Any) -> Any:
     """sqrt(gx² + gy²) with a zero (not NaN/inf) gradient where both are 0, and no overflow:
     the squares are of the components divided by the larger one (hypot's scaling; plain
-    squares made edges of 1e19-bright pixels infinite).
+    squares would make edges of 1e19-bright pixels infinite).
 
     >>> import mitsuba as mi
     >>> round(float(safe_norm2(mi.Float(3e30), mi.Float(4e30))[0]) / 1e30, 5)
     5.0
     """
     # m detached: the value is m's either way, and the derivative through rcp(m) (-1/m^2)
-    # underflowed past 1e19 (NaN gradients of bright edges); d/dgx = gx / |g| as it should
+    # underflows past 1e19 (NaN gradients of bright edges); d/dgx = gx / |g| as it should
     m = dr.detach(dr.maximum(dr.abs(gx), dr.abs(gy)))
     pos = m > 0
     inv = dr.select(pos, dr.rcp(dr.select(pos, m, 1.0)), 0.0)

@@ -92,7 +92,7 @@ class Chain:
 
     def __call__(self, image: Any) -> mi.TensorXf:
         rgb, alpha = split_alpha(as_image(image, "apply()"))
-        rgb = finite_rgb(rgb)               # (NaN/inf read as 0: a blur spread them)
+        rgb = finite_rgb(rgb)               # (NaN/inf read as 0: a blur would spread them)
         for f in self.filters:
             rgb = f.spec.run_rgb(rgb, f.params)
         return join_alpha(rgb, alpha)
@@ -115,7 +115,7 @@ class Chain:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write :meth:`to_list` as JSON (readable by :func:`load_chain`), atomically (a
-        crash mid-write left a truncated file in place of the previous chain)."""
+        crash mid-write leaves the previous chain, not a truncated file)."""
         write_text(os.fspath(path), json.dumps(self.to_list(), indent=2) + "\n")
 
     def __repr__(self) -> str:
@@ -126,7 +126,7 @@ def display_encoded(chain: Iterable[Any] | Chain | None) -> bool:
     """Whether ``chain``'s output is display-encoded: its last ``srgb`` filter encodes (an
     ``inverse=True`` one decodes, and no ``srgb`` leaves the image linear). What writes 8-bit
     images (PNG files, the Jupyter preview) then stores the values as they are instead of
-    encoding them a second time, which washed them out.
+    encoding them a second time, which would wash them out.
 
     >>> display_encoded([{"type": "bloom"}, {"type": "srgb"}]), display_encoded([])
     (True, False)

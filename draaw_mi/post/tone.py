@@ -31,7 +31,7 @@ def _positive_power(x: mi.Float, e: float) -> mi.Float:
 def _linear(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     e = 1.0 / (3.0 * p.gamma)
     # (s·c)^e / s = 2^(e log2 c + (e - 1) log2 s), in one exponent: as a product, s^(e-1)
-    # overflowed float32 below gamma 0.0196 (0 * inf: NaN on black pixels) and a Python float
+    # overflows float32 below gamma 0.0196 (0 * inf: NaN on black pixels) and a Python float
     # below 0.0026 (OverflowError), where the result is a finite step
     x = rgb.array
     pos = x > 0.0

@@ -26,7 +26,7 @@ def film_colour_names(film) -> list[str]:
 
 def scene_colour_names(scene) -> list[str]:
     """:func:`film_colour_names` of the scene's first film, found once per scene (a film's
-    pixel format is fixed at loading; read after the kernels were launched, the lookup waited
+    pixel format is fixed at loading; read after the kernels are launched, the lookup waits
     for a core: 0.1 ms a small render)."""
     memo = session_of(scene).memo
     key = "film colour"
@@ -38,9 +38,9 @@ def scene_colour_names(scene) -> list[str]:
 
 def check_film_colour(scene, what: str) -> None:
     """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
-    XYZ (an XML scene's pixel_format) is refused before the render, not after it (a post chain
-    failed with a shape error; the denoiser read Y and two AOV channels as colour; both read
-    X, Y, Z as R, G, B)."""
+    XYZ (an XML scene's pixel_format) is refused before the render, not after it (else a post
+    chain fails with a shape error, the denoiser reads Y and two AOV channels as colour, and
+    both read X, Y, Z as R, G, B)."""
     names = scene_colour_names(scene)
     if names[:3] != ["R", "G", "B"]:
         fmt = {"y": "luminance", "ya": "luminance_alpha"}.get("".join(names).lower(), "".join(names).lower())

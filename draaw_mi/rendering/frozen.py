@@ -54,11 +54,11 @@ def scene_scalars(mi_scene, scene=None, cache=None) -> tuple:
     recording's (its key sees the inputs' types, not their sizes): the lights' sampling
     weights (Mitsuba's ``pdf_emitter_direction`` reads them through a virtual-call getter), a
     ``dielectric``'s ``eta``, the shutter, the film's size (a replay after
-    ``sensor.film.size`` changed returned an image of the old size), a texture's ``to_uv``
-    transform (a host-side matrix: a replay kept the old tiling; also when a Python plugin
+    ``sensor.film.size`` changes would return an image of the old size), a texture's ``to_uv``
+    transform (a host-side matrix: a replay would keep the old tiling; also when a Python plugin
     exposes it with ``cb.put``), a texture's resolution
     (an environment map's data swapped for a smaller image: up to 45 off from the second
-    replay on). Without this a replay after ``params.update`` of one of them went on
+    replay on). Without this a replay after ``params.update`` of one of them goes on
     rendering the old value (``eta`` 1.5 -> 2.65 on the glass scene: up to 4.8 off the traced
     render; a sampling weight: up to 26). Passed to the recording as Python values, which are
     part of its key, a change records anew. ``scene``, the :class:`DraawScene` of ``mi_scene`` where there is
@@ -129,7 +129,7 @@ def other_live_bsdfs(mi_scene, cache=None) -> list:
     """The live draaw BSDFs that ``mi_scene``'s shapes do not hold (ordered by ``id``). With
     ``cache`` (the session of ``mi_scene``'s :class:`DraawScene`) the scene's own BSDFs are looked up
     once (a shape's BSDF cannot be replaced), and while the live ones are exactly the scene's
-    own, no walk over them is needed (the walk over shapes and live BSDFs took 10-67 us a
+    own, no walk over them is needed (the walk over shapes and live BSDFs takes 10-67 us a
     render on the material spheres, with warm or cold caches; the lookup takes 1 us)."""
     state = cache
     own = None if state is None else state.own_bsdfs
@@ -152,7 +152,7 @@ class _CollectorPaused:
     again when the last one ends, if it was on when the first began). A collection during a
     ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's buffers, a dead preview's
     recordings) aborts the process: "RecordThreadState::enqueue_host_func(): this function
-    cannot be recorded!" (seen in the test suite once recordings went with their scenes).
+    cannot be recorded!".
     A class rather than a generator context manager: this runs on every replay (1 us, not 2)."""
     __slots__ = ()
     depth = 0
@@ -195,8 +195,8 @@ def freeze_render(integrator, body):
             return body(mi_scene, seed)
 
     # Every input opaque from the first recording: with literals kept (auto_opaque), a
-    # stratifying sampler's state, which the first render changes, made the second call
-    # re-record and compile a kernel anew (a batch job recompiled at its third frame); the
+    # stratifying sampler's state, which the first render changes, makes the second call
+    # re-record and compile a kernel anew (a batch job would recompile at its third frame); the
     # walls are the same (benchmarks/results/render_overhead.md).
     # At most RECORDINGS_KEPT recordings, the least recently used dropped: each value of a
     # plain-number parameter (scene_scalars) records anew, on purpose, so an animated light

@@ -91,8 +91,8 @@ def _depth(value, where: str) -> int:
 
 
 def _chain(value, where: str):
-    """A post chain as given, once it is known to load (an unknown filter failed at the first
-    frame, on the render thread)."""
+    """A post chain as given, once it is known to load (an unknown filter fails here, not at
+    the first frame on the render thread)."""
     try:
         load_chain(value)
     except DraawError as e:
@@ -194,7 +194,7 @@ class Preview(PreviewWorker):
                     load_pyoidn()
                 self._integrator_for(self.scene)
             except Exception:
-                for k, v in old.items():        # all or nothing (a half-applied change stuck)
+                for k, v in old.items():        # all or nothing (a half-applied change would stick)
                     setattr(self, k, v)
                 raise
             if "interactive_scale" in options:
@@ -249,7 +249,7 @@ class Preview(PreviewWorker):
     def reset(self) -> int:
         """Restart the accumulation (e.g. after changing the scene from outside)."""
         with self._lock:
-            self._lo = None              # (its low-resolution copy showed the old values first)
+            self._lo = None              # (else its low-resolution copy shows the old values first)
             return self._bump()
 
     # ------------------------------------------------------------------ one frame
@@ -268,8 +268,8 @@ class Preview(PreviewWorker):
                         p[key] = value_like(p[key], v, key)
                     p.update()
                 except Exception:
-                    # put the old values back: a value params.update() refused stayed queued
-                    # in the parameters, and every later change failed with it
+                    # put the old values back: a value params.update() refused stays queued
+                    # in the parameters, and every later change would fail with it
                     for key, v in old.items():
                         p[key] = v
                     p.update()
@@ -326,8 +326,8 @@ class Preview(PreviewWorker):
             callbacks = list(self._callbacks)
         for cb in callbacks:
             cb(frame)
-        with self._lock:        # wait() returns once the callbacks have shown it (a script read
-            self._delivered = frame      # the panel's previous image, status and error line)
+        with self._lock:        # wait() returns once the callbacks have shown it (else a script
+            self._delivered = frame      # reads the panel's previous image, status and error line)
             self._wake.notify_all()
         return frame
 

@@ -53,8 +53,8 @@ class PreviewWorker:
     def start(self):
         """Start the worker thread (idempotent). One worker renders a scene at a time: a
         running preview of the same :class:`~draaw_mi.scene.DraawScene` (a notebook cell run
-        again makes a new panel; the old one went on refining, fought the new one for the
-        scene's lock and rendered its parameter changes without restarting its mean) is
+        again makes a new panel; left running, the old one would go on refining, fight the new
+        one for the scene's lock and render its parameter changes without restarting its mean) is
         stopped, and its error callbacks get :class:`PreviewSuperseded`. The worker is the
         scene session's (:meth:`~draaw_mi.rendering.session.Session.add_worker`): closing the
         session, or the interpreter's exit, stops it."""

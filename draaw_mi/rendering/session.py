@@ -11,7 +11,7 @@ makes it on first use and keeps it as long as the scene lives). It owns
   recording takes as input) and what is found once per scene for them;
 * its **workers** (the preview's thread): :meth:`Session.close`, the context manager and a
   hook at interpreter exit stop them, so that no thread is inside a Dr.Jit kernel while
-  Dr.Jit shuts down (a forgotten tuner ended its script with SIGSEGV or SIGABRT).
+  Dr.Jit shuts down (a forgotten tuner would end its script with SIGSEGV or SIGABRT).
 
 :meth:`Session.render_pass` renders one pass -- traced, or replayed from a recording -- and
 :func:`apply_post` applies a post chain to its colour; :func:`draaw_mi.render`, a batch frame,
@@ -287,7 +287,7 @@ def scene_changed(scene) -> None:
 
 def close_all(timeout: float = WORKER_STOP_S) -> None:
     """Close every open session: their workers stop. Runs at interpreter exit, before Dr.Jit
-    shuts down (a worker inside a kernel then crashed the process)."""
+    shuts down (a worker still inside a kernel would crash the process)."""
     for session in list(_LIVE):
         session.close(timeout)
 

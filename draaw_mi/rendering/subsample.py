@@ -65,7 +65,7 @@ def _sample_points(scene, integrator, xs: np.ndarray, ys: np.ndarray, spp: int, 
     px = dr.gather(mi.Float, _jit(mi.Float, xs.astype(np.float32)), idx)
     py = dr.gather(mi.Float, _jit(mi.Float, ys.astype(np.float32)), idx)
     # independent samples: the scene's sampler, cloned, stratifies over its own sample count,
-    # not over these lanes (every lane took sample 0 of a multijitter pattern: a skewed
+    # not over these lanes (else every lane takes sample 0 of a multijitter pattern: a skewed
     # jitter, pixel means 13 sigma off on a 300-seed test)
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(dr.opaque(mi.UInt32, seed), n * spp)
@@ -128,11 +128,11 @@ def check_adaptive_camera(scene) -> None:
     sensor = scene.mi_scene.sensors()[0]
     film = sensor.film()
     colour = film_colour_names(film)
-    if colour != ["R", "G", "B"]:       # (an rgba film's alpha was dropped without a word)
+    if colour != ["R", "G", "B"]:       # (an rgba film's alpha would be dropped)
         raise RenderError(f"render_adaptive: adaptive subsampling renders R, G, B; the film of {scene.source} "
                           f"stores {', '.join(colour)}: set its pixel_format to rgb, or drop adaptive=")
     # its rays go through pixel centres of the whole film with the aperture's centre: a
-    # thin lens rendered pinhole-sharp, a crop window came back as the whole film
+    # thin lens would render pinhole-sharp, a crop window come back as the whole film
     if sensor.needs_aperture_sample():
         raise RenderError(f"render_adaptive: adaptive subsampling traces pinhole rays; the camera of {scene.source} "
                           "has an aperture (thinlens): drop adaptive=")

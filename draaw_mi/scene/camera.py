@@ -59,8 +59,8 @@ def sensor_keys(scene) -> tuple[str | None, str | None]:
     """The ``mi.traverse`` keys of the ``to_world`` and ``x_fov`` of the sensor that renders
     ``scene`` (a :class:`~draaw_mi.scene.DraawScene`): its first; ``None`` for what it lacks.
     Found by the object, not by the name: a Mitsuba XML sensor is called after its ``id``
-    (``Camera.to_world``) or, without one, ``object_<address>.to_world``, and a key chosen by
-    "sensor" in its name refused camera tables for such scenes.
+    (``Camera.to_world``) or, without one, ``object_<address>.to_world``, so a key chosen by
+    "sensor" in its name would miss it and refuse camera tables for such scenes.
 
     >>> import mitsuba as mi
     >>> from draaw_mi.scene import load_scene
@@ -199,7 +199,7 @@ def check_look_at(origin, target, up, where) -> None:
         raise (where / "target").error("equals 'origin'; the camera needs a view direction")
     if np.linalg.norm(d) < FLOAT32_SEPARATION * max(1.0, np.linalg.norm(origin), np.linalg.norm(target)):
         # Mitsuba builds the camera in float32: origin [1e4, 1, 0] and a target 1e-4 away
-        # are one point there, and the transform came out NaN (an image of plain sky)
+        # are one point there, and the transform would come out NaN (an image of plain sky)
         raise (where / "target").error(
             f"is {np.linalg.norm(d):g} from 'origin', too close to tell apart in float32 at "
             f"{max(np.linalg.norm(origin), np.linalg.norm(target)):g} from the world origin; "
@@ -229,7 +229,7 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
 
 def auto_camera(bbox_min, bbox_max, fov: float = 40.0):
     """A camera framing a bounding box from the front-top-right, for bare mesh files, with
-    clip planes that follow the box's size (the defaults, 0.01 and 1e4, showed plain sky for
+    clip planes that follow the box's size (the defaults, 0.01 and 1e4, show plain sky for
     a mesh 1e-4 or 1e4 across).
 
     >>> cam = auto_camera([0, 0, 0], [1e-4, 1e-4, 1e-4])

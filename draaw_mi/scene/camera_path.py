@@ -62,15 +62,15 @@ def as_keyframes(keys) -> np.ndarray:
 
 def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = False) -> np.ndarray:
     """Frames (m, 5) along the keyframes; see the module docstring for the two modes. One
-    keyframe is a camera that stays put: its frames are that keyframe (one frame in all, so
-    ``bench.frame_times(frames=N)`` timed a single frame, and a batch repeated it N times)."""
+    keyframe is a camera that stays put: its frames are that keyframe, as many as a moving
+    camera's (so that ``bench.frame_times(frames=N)`` times N frames, not a single one)."""
     p = as_keyframes(keys)
     n = len(p)
     for name, value, unit in (("duration", duration, "seconds"), ("fps", fps, "frames per second")):
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < float("inf"):
             raise ParameterError(f"camera path: {name}={value!r}; expected a positive number of {unit}")
     # GO-Draaw truncates D * 60 (Go's int()); otherwise rounded: 2.05 s at 60 fps is 123
-    # frames, and the float product 122.99999999999999 truncated to 122
+    # frames, and the float product 122.99999999999999 would truncate to 122
     total = int(duration * fps) if faithful else int(round(duration * fps))
     if total < 2:
         raise ParameterError(f"camera path: {duration} s at {fps} fps gives {total} frame(s); need at least 2")

@@ -148,7 +148,7 @@ class DraawScene:
         (:mod:`~draaw_mi.scene.light_values`) and ``{"sdf.NODE.PARAM": value}`` into its ``[[sdf]]`` tables
         (for saving fitted scenes). ``dest``: the file it will be
         written to; file names relative to the scene's folder are rewritten relative to
-        ``dest``'s folder (written elsewhere, the scene lost its meshes and textures)."""
+        ``dest``'s folder (written elsewhere, the scene would lose its meshes and textures)."""
         if self.description is None:
             raise SceneError(f"{self.source}: only TOML/JSON/dict scenes can be written back")
         desc = copy.deepcopy(self.description)
@@ -185,7 +185,7 @@ class DraawScene:
     def features(self) -> dict:
         """Which effects the scene calls for (emitter kinds, textures, ...); ``aovs`` also
         where the scene's ``[render]`` table asks for them (render gives them to the
-        integrator: the loaded scene's own integrator has none, and info said "off")."""
+        integrator: the loaded scene's own integrator has none, so by it alone info would say "off")."""
         f = detect_features(self.mi_scene)
         f["aovs"] = f["aovs"] or bool(self.settings.get("aovs"))
         return f

@@ -58,8 +58,8 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
     8 smoothAddition, 9 smoothUnionNoColorMix; names accepted too), ``k = amount * scale``; the
     result is the union of the contributions, as GO-Draaw's march takes their minimum.
     The smooth ones keep GO-Draaw's cubic blend (``min - h^3 k / 6``,
-    :func:`~draaw_mi.sdf.operators.cubic_smooth_union`: the polynomial smooth union shrank
-    touching spheres by k/4 instead of k/6 and bridged a gap GO-Draaw leaves open). GO-Draaw's
+    :func:`~draaw_mi.sdf.operators.cubic_smooth_union`: the polynomial smooth union would shrink
+    touching spheres by k/4 instead of k/6 and bridge a gap GO-Draaw leaves open). GO-Draaw's
     bugs are fixed (go-draaw-spec.md §5.2): smoothUnion blends the two colours
     (type 9 keeps sphere i's), smoothIntersection uses ``k - |a - b|``, both subtractions
     remove sphere ``i`` from sphere ``j`` (GO-Draaw's ``subtraction`` order), addition /
@@ -76,7 +76,7 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
         w = where / i
         if not isinstance(rec, dict):
             raise w.error(f"expected a sphere record, got {rec!r}")
-        for key in rec:          # (a misspelt 'centreX' left the sphere at the origin)
+        for key in rec:          # (a misspelt 'centreX' would leave the sphere at the origin)
             if key not in RECORD_KEYS:
                 raise (w / str(key)).error(f"unknown key of a GO-Draaw sphere record"
                                            f"{suggest(str(key), RECORD_KEYS)}")

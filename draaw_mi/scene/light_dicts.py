@@ -79,8 +79,8 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         image = check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
         if list(color) == [1.0, 1.0, 1.0]:
             return {name: {"type": "envmap", "filename": path, "scale": intensity}}
-        # Mitsuba's envmap has a scale but no tint: the image is tinted here (its 'color' was
-        # accepted and then dropped, so the tuner's light colour vanished on reload)
+        # Mitsuba's envmap has a scale but no tint: the image is tinted here (so its 'color' is
+        # not dropped, and the tuner's light colour survives a reload)
         return {name: {"type": "envmap", "bitmap": tinted_image(image, color), "scale": intensity}}
     if kind == "directional":
         d = vector(light.get("direction", [0.0, -1.0, 0.0]), where / "direction")
@@ -93,8 +93,8 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     emitter = {"type": "area", "radiance": rgb}
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
     # the keys that size the light: a rectangle's size, a sphere's radius, a disk's radius (or
-    # size, an ellipse); a key of another shape was accepted and ignored (a disk of radius 0.1
-    # or 2 lit the scene as one of radius 0.5)
+    # size, an ellipse); a key of another shape is refused, not ignored (the light would keep
+    # its default size)
     takes = {"rectangle": ("size",), "disk": ("radius", "size"), "sphere": ("radius",)}[shape]
     for key in ("radius", "size"):
         if key in light and key not in takes:
@@ -103,7 +103,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     if shape == "disk" and "radius" in light and "size" in light:
         raise (where / "radius").error("give a disk light 'radius' or 'size' (an ellipse), not both")
     if shape == "sphere":
-        # a sphere shines all around: a 'target' or 'up' was accepted and ignored
+        # a sphere shines all around: a 'target' or 'up' is refused, not ignored
         for key in ("target", "up"):
             if key in light:
                 raise (where / key).error("a sphere area light shines in every direction and has "
@@ -116,7 +116,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
     fwd = np.subtract(target, pos)
     up = vector(light.get("up", [0.0, 0.0, 1.0] if abs(fwd[1]) > 0.9 * np.linalg.norm(fwd) else [0.0, 1.0, 0.0]),
                 where / "up")
-    # (an up along the facing, or zero, gave a NaN transform: a light that silently lit nothing)
+    # (an up along the facing, or zero, would give a NaN transform: a light that lights nothing)
     cam.check_look_at(pos, target, up, where)
     if shape == "disk" and "radius" in light:
         r = number(light["radius"], where / "radius", lo=0.0, lo_open=True)
@@ -133,7 +133,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
 
 def auto_light(bbox_min, bbox_max, origin) -> list[dict]:
     """Lights for a bare mesh file: a point light at the camera, its intensity following the
-    mesh's size (a floor at 1e-3 made a mesh 1e-4 across 5x too bright), and a dim sky."""
+    mesh's size (a floor at 1e-3 would make a mesh 1e-4 across 5x too bright), and a dim sky."""
     diag = float(np.linalg.norm(np.subtract(bbox_max, bbox_min)))
     diag = diag if diag > 0 else 1.0
     return [{"type": "point", "position": [float(v) for v in origin], "intensity": diag ** 2 * 3.0},

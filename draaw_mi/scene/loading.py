@@ -60,7 +60,7 @@ def load_scene(source, **overrides) -> DraawScene:
         >>> scene.resolution, scene.settings["spp"], scene.key("metal.roughness")
         ((32, 24), 4, 'metal.roughness.value')
     """
-    with RENDER_GUARD:       # (plugins made while another thread replayed a recording broke it)
+    with RENDER_GUARD:       # (plugins made while another thread replays a recording break it)
         return _load_scene(source, **overrides)
 
 
@@ -106,7 +106,7 @@ def _load_scene(source, **overrides) -> DraawScene:
 
 
 # The DraawScene of each recent bare mi.Scene (render(mi_scene) wraps it on every call, and the
-# renderer keeps its recordings per DraawScene: a new wrapper recorded anew, 5x slower than a
+# renderer keeps its recordings per DraawScene: a new wrapper would record anew, 5x slower than a
 # replay). Holding the mi.Scene keeps its id from being reused; the oldest is let go.
 _WRAPPED: dict = {}
 WRAPPED_KEPT = 4
@@ -167,8 +167,8 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     settings["resolution"] = (int(size[0]), int(size[1]))
     settings["spp"] = int(sensors[0].sampler().sample_count())
     settings["sampler"] = sampler_plugin(sensors[0].sampler())
-    # (the film's own: 'info' said box for an XML film with Mitsuba's default gaussian, and
-    # fit's extra views were made with a box filter)
+    # (the film's own: an XML film with Mitsuba's default gaussian is no box filter, neither in
+    # 'info' nor in fit's extra views)
     settings["filter"] = filter_plugin(sensors[0].film().rfilter())
     integ = scene.integrator()
     if integ is not None:      # C++ integrators expose max_depth only through to_string()
@@ -176,7 +176,7 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         if m:
             depth = int(m.group(1))
             settings["max_depth"] = depth - 2 ** 32 if depth >= 2 ** 31 else depth   # -1 prints unsigned
-        # (the file's hide_emitters was dropped: the sky it hides rendered, mean 0.95 for 0.05)
+        # (the file's hide_emitters is kept: the sky it hides would render, mean 0.95 for 0.05)
         settings["hide_emitters"] = bool(getattr(integ, "hide_emitters", False))
         if named_integrator:
             kind = str(integ).split("[", 1)[0].strip()
@@ -196,7 +196,7 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
                          f"Mitsuba scene ({settings['filter']!r}); set it in the scene's film")
     settings.update({k: v for k, v in checked.items() if v is not None})
     d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
-    # (the checked value: the command line's "32x32" went in as a string, and a traceback out)
+    # (the checked value: the command line's "32x32" would go in as a string, and a traceback out)
     if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:
         d = d.with_resolution(*checked["resolution"])
     return d

@@ -26,7 +26,7 @@ NEGATIVE_SLACK = 1e-2
 def check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
     """Refuse an image file with a non-finite value in its colour channels, or, with
     ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
-    +Inf: its environment map rendered NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
+    +Inf: its environment map renders NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
     naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
     read (an environment map's tint uses it: the file is read once)."""
     try:
@@ -76,9 +76,9 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
     if isinstance(value, (list, tuple)):
         return {"type": "rgb", "value": vector(value, where, lo=lo)}
     if isinstance(value, (int, float)) and not isinstance(value, bool):
-        # finite, within float32, >= lo (a reflectance's -0.5 rendered negative pixels; a
+        # finite, within float32, >= lo (a reflectance's -0.5 renders negative pixels; a
         # plastic's int_ior = nan, which TOML allows, NaN pixels), as a float: a BSDF's
-        # numbers are floats, and its int_ior = 2 failed in Mitsuba ("expected string")
+        # numbers are floats, and its int_ior = 2 would fail in Mitsuba ("expected string")
         return number(value, where, lo=lo)
     return value
 
@@ -106,7 +106,7 @@ def nested_array(value, where: Where) -> np.ndarray:
         raise where.error(f"{shown(value)} is not a rectangular array of numbers (a texture: rows "
                           "of values, or rows of RGB triples)") from None
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3)) or arr.size == 0:
-        # (an empty one, [[]], loaded and then aborted the process at the render)
+        # (an empty one, [[]], would load and then abort the process at the render)
         raise where.error(f"an array of shape {arr.shape}; a texture is rows of values (H, W) or "
                           "rows of RGB triples (H, W, 3), at least one of them")
     return arr
@@ -145,7 +145,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                 out[key] = number(value, wk, lo=0.0, hi=0.1, lo_open=True)
         return out
     # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures,
-    # whose values must be finite (a NaN texel of a diffuse reflectance rendered NaN pixels in
+    # whose values must be finite (a NaN texel of a diffuse reflectance renders NaN pixels in
     # every version), and >= 0 for reflectances and transmittances.
     out = {"type": kind}
     for key, value in table.items():
@@ -153,7 +153,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             nonneg = is_colour(key)
             if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
                 out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
-                continue              # distribution = "beckmann" (each was "no texture file")
+                continue              # distribution = "beckmann" (none is a texture file)
             out[key] = texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
             if isinstance(value, str) and out[key].get("type") == "bitmap":
                 check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)

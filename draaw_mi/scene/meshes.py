@@ -38,7 +38,7 @@ class MeshPart:
 def _invented(mat) -> bool:
     """Whether ``mat`` is the stand-in trimesh makes for a mesh with texture coordinates but
     no material (``empty_material``: no name of its own, a 2x2 image of one colour). GO-Draaw
-    shades such meshes grey (go-draaw-spec 2.2); read as a texture, monkey.obj came out at
+    shades such meshes grey (go-draaw-spec 2.2); read as a texture, monkey.obj would come out at
     albedo 0.127 instead of 0.698."""
     image = getattr(mat, "image", None)
     if hasattr(mat, "_name") or image is None or getattr(image, "size", None) != (2, 2):
@@ -49,7 +49,7 @@ def _invented(mat) -> bool:
 
 def _material_of(geom) -> tuple[str | None, dict]:
     """(material name, draaw parameters) of a trimesh geometry; a glTF base colour is its factor
-    times its decoded texture (the factor was dropped when a texture was present)."""
+    times its decoded texture (the factor applies with a texture too)."""
     visual = getattr(geom, "visual", None)
     mat = getattr(visual, "material", None)
     if mat is not None and _invented(mat):
@@ -82,8 +82,8 @@ def _material_of(geom) -> tuple[str | None, dict]:
         arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
         out["base_color"] = srgb_decode(arr).astype(np.float32)
         if factor is not None:
-            # the factor is linear: it scales the decoded texture (it was dropped, and a white
-            # texture tinted by (0.2, 1, 1) rendered white)
+            # the factor is linear: it scales the decoded texture (so a white texture tinted by
+            # (0.2, 1, 1) renders cyan, not white)
             out["base_color"] = (out["base_color"] * factor.astype(np.float32)).astype(np.float32)
     return name, out
 
@@ -214,7 +214,7 @@ def mesh_side_files(path: str) -> list[str]:
 def _lines_starting(path: str, keywords: tuple) -> list[str]:
     r"""The rest of each line of a text file whose first word starts with one of ``keywords``
     (``\n``, ``\r\n`` or ``\r`` line ends). The file is mapped, not read, and searched for
-    each keyword's bytes (a Python loop over a 3-million-line OBJ took a second a load).
+    each keyword's bytes (a Python loop over a 3-million-line OBJ takes a second a load).
 
     >>> import os, tempfile
     >>> p = os.path.join(tempfile.mkdtemp(), "m.mtl")

@@ -18,8 +18,8 @@ from ..sdf.scene import PROXY_PREFIX
 def _unreferenced_message(text: str) -> str | None:
     """Mitsuba's "Found N unreferenced properties in bsdf plugin of type "dielectric": - float
     "int_iro": 1.5" as one line naming the object, its plugin and each unknown parameter (with
-    the closest of the draaw BSDF's parameters for a ``draaw`` one). Only the list's last line
-    was kept: ``- float "int_iro": 1.5``, which named neither the material nor the problem."""
+    the closest of the draaw BSDF's parameters for a ``draaw`` one). The list's last line
+    alone, ``- float "int_iro": 1.5``, names neither the material nor the problem."""
     m = re.search(r'unreferenced propert\w* in (?:(\w+) )?plugin of type "([^"]+)"', text)
     if m is None:
         return None
@@ -54,14 +54,14 @@ def mitsuba_error_message(err: Exception) -> str:
 # Mitsuba's scene optimisation merges meshes through a hash table keyed by object addresses
 # (shapes/merge.cpp), so the order of a scene's shapes changes from run to run. The order of
 # the emitters attached to shapes follows it, and the emitter order decides which light a
-# sample picks: a scene with two or more area lights rendered with one seed gave different
-# images in different processes (a resumed batch frame was not bit-identical). Such scenes
+# sample picks: a scene with two or more area lights rendered with one seed would give different
+# images in different processes (a resumed batch frame would not be bit-identical). Such scenes
 # load without the optimisation (declaration order); the others keep the merged meshes, which
 # are cheaper for dr.freeze to traverse (about 0.02 ms per shape and frozen render).
-# Scenes with [[sdf]] objects load without it too: the merge swallowed the proxy meshes of two
+# Scenes with [[sdf]] objects load without it too: the merge swallows the proxy meshes of two
 # SDF objects with equal materials into one shape without an id, and the tracer, which finds
-# its objects by their proxies' ids, drew nothing (GO-Draaw's sphere lists, whose spheres
-# mostly share the default colour, rendered as an empty floor).
+# its objects by their proxies' ids, would draw nothing (GO-Draaw's sphere lists, whose spheres
+# mostly share the default colour, would render as an empty floor).
 def _emitting_shapes(d: dict) -> int:
     return sum(1 for v in d.values() if isinstance(v, dict) and isinstance(v.get("emitter"), dict))
 
@@ -101,9 +101,9 @@ def load_mitsuba_dict(d: dict):
     """``mi.load_dict(d)`` with the scene's emitters in a fixed order, its SDF proxies kept
     apart and every material its own BSDF (see above).
 
-    The optimisation also merges *equal* objects: two materials with the same values became
-    one BSDF, and the second one's parameters were gone (``no parameter 'b.roughness'``: two
-    materials that start alike could not be tuned, fitted or animated apart). Such scenes load
+    The optimisation also merges *equal* objects: two materials with the same values become
+    one BSDF, and the second one's parameters are gone (``no parameter 'b.roughness'``: two
+    materials that start alike cannot be tuned, fitted or animated apart). Such scenes load
     without it too."""
     optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
     with exr_reading_threads():

@@ -18,7 +18,7 @@ from ..limits import FLOAT32_MAX
 
 def shown(value: Any, limit: int = 60) -> str:
     """``repr(value)`` cut to about ``limit`` characters, for error messages (a texture given
-    inline as nested lists printed thousands of numbers).
+    inline as nested lists would print thousands of numbers).
 
     >>> shown([[0.5, 0.5, 0.5]] * 64)
     '[[0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0. ... (a list of 64)'
@@ -65,7 +65,7 @@ def check_keys(table: dict, allowed: Iterable[str], where: Where, required: Iter
 def number(value: Any, where: Where, lo: float | None = None, hi: float | None = None,
            integer: bool = False, lo_open: bool = False) -> float:
     """A finite number (or int) within [lo, hi] (or (lo, hi] with ``lo_open``); numpy
-    numbers too (np.int64(8) was "not a number")."""
+    numbers too (np.int64(8) is one)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):      # (numpy's bool is neither)
         raise where.error(f"{shown(value)} is not a number")
     value = int(value) if isinstance(value, numbers.Integral) else float(value)

@@ -2,7 +2,7 @@
 
 Why not Mitsuba's own: a mesh file splits a vertex wherever its corners' texture coordinates
 (or file normals) differ, and Mitsuba averages face normals over each split vertex alone. On
-GO-Draaw's ``monkey.obj`` (1974 vertices at 513 positions) that left ``smooth = true`` almost
+GO-Draaw's ``monkey.obj`` (1974 vertices at 513 positions) that leaves ``smooth = true`` almost
 as faceted as flat shading. Averaging over every face at a position instead would round off
 the edges that the model means to be sharp (its floor meets its wall at 90°) and cancel the
 normals of surfaces that only touch. So each corner's normal here is the angle-weighted mean
@@ -44,7 +44,7 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | Non
 def smooth_parts(parts, crease_deg: float = CREASE_DEG) -> list:
     """:func:`smooth_normals` of a mesh file's material parts (``MeshPart``) taken together:
     a vertex on the border of two materials gets the same normal on both sides (each part
-    alone left that seam faceted). One ``(vertices, faces, uv, normals)`` per part."""
+    alone would leave that seam faceted). One ``(vertices, faces, uv, normals)`` per part."""
     counts = np.cumsum([0] + [len(p.vertices) for p in parts])
     vertices = np.concatenate([p.vertices for p in parts])
     faces = np.concatenate([np.asarray(p.faces, np.int64) + off for p, off in zip(parts, counts)])

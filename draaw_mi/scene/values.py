@@ -12,8 +12,8 @@ def value_like(current, value, key: str):
     """``value`` for ``params[key] = ...``, in the type of the parameter's ``current`` value: a
     list of as many numbers as a vector parameter holds becomes that vector (a ``Color3f``
     colour, a ``Point3f`` light position or SDF centre), anything else is converted whole.
-    Batch frames and preview updates set parameters through it (the preview made any three
-    numbers a colour, which an SDF centre refused at the next frame, dropping the change).
+    Batch frames and preview updates set parameters through it (three numbers are not always a
+    colour: an SDF centre would refuse one at the next frame, dropping the change).
 
     >>> import mitsuba as mi
     >>> type(value_like(mi.Point3f(0.0), [0.1, 0.2, 0.3], "sdf.ball.center")).__name__
@@ -34,8 +34,8 @@ def check_like(current, value, key: str) -> None:
     """The checks of :func:`value_like` that need no conversion (no Dr.Jit value is made, so a
     caller need not wait for a render in another thread): a number or numbers, and for a
     texture texels of its dimension and channel count. A colour written to a textured
-    ``base_color`` failed at ``params.update()`` and stayed queued there: every later update
-    failed with it.
+    ``base_color`` would fail at ``params.update()`` and stay queued there: every later update
+    would fail with it.
 
     >>> import mitsuba as mi, numpy as np
     >>> check_like(mi.TensorXf(np.zeros((4, 4, 3))), [1.0, 0.0, 0.0], "m.base_color.data")

@@ -63,7 +63,7 @@ def _array(value, where, key):
     return arr
 
 
-#: voxels per axis at most (4800 per axis asked for 885 GB of float64 and killed the process)
+#: voxels per axis at most (4800 per axis would ask for 885 GB of float64 and kill the process)
 MAX_GRID_RESOLUTION = 1024
 
 
@@ -87,7 +87,7 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
     voxelised = "file" in entry and str(entry["file"]).lower().endswith(MESH_SUFFIXES)
     for key in ("resolution", "fill"):
         if key in entry and not voxelised:
-            # (they were taken and ignored: a grid that is not a voxelised mesh has its own size)
+            # (refused, not ignored: a grid that is not a voxelised mesh has its own size)
             hint = "; a procedural grid's size is procedural.resolution" if "procedural" in entry else ""
             raise (where / key).error(f"'{key}' sets how a mesh 'file' is voxelised; this volume has "
                                       f"no mesh file{hint}")
@@ -108,8 +108,8 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
                 res = _grid_resolution(entry.get("resolution", 64), where / "resolution")
                 fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))
                 # voxelised in the mesh's own box and then placed at 'bounds', as every other
-                # source is ('bounds' was the voxelisation window in the mesh's coordinates: a
-                # world box cropped the mesh to a piece, or to nothing, without a word)
+                # source is (a world box used as the voxelisation window in the mesh's coordinates
+                # would crop the mesh to a piece, or to nothing, without a word)
                 g = VoxelGrid.from_mesh(path, res, fill, seed=seed)
             else:
                 raise (where / "file").error(f"{path!r}: unknown grid format; expected .npz, .vol or a mesh "
@@ -161,7 +161,7 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
             if not np.any(grid.density > 0) and np.any(grid.occupied):
                 # a voxelised mesh or an occupancy grid as smoke: density 1 per voxel (times
                 # density_scale) and the voxel colours as albedo, as VoxelGrid.to_smoke does
-                # (it was refused: "no density > 0", for a source that has no density)
+                # (not refused for "no density > 0": such a source has no density)
                 grid.to_smoke(1.0)
             if not np.any(grid.density > 0):
                 raise (where / "density").error("the grid has no density > 0 and no occupied voxel "
@@ -219,13 +219,13 @@ def check_smoke_boxes_disjoint(volume_info: list, where) -> None:
 
 
 def check_camera_outside_smoke(origin, volume_info: list, where, reach: float) -> None:
-    """A camera inside a ``[[volumes]]`` smoke box rendered as if the smoke were not around
-    it (the sensor's medium is not set, so every version, and volpath, started each camera
-    ray in vacuum: density 1e6 looked like no smoke at all). Refused until it is supported.
+    """A camera inside a ``[[volumes]]`` smoke box would render as if the smoke were not around
+    it (the sensor's medium is not set, so every version, and volpath, starts each camera
+    ray in vacuum: density 1e6 looks like no smoke at all). Refused until it is supported.
     ``reach``: how far from the origin the camera's rays start (its near clip along the
     corner rays, :func:`draaw_mi.scene.camera.near_reach`): a camera on a box's face, or
-    closer to it than that, started its rays inside the smoke without crossing the face and
-    rendered it absent as well."""
+    closer to it than that, starts its rays inside the smoke without crossing the face and
+    renders it absent as well."""
     o = np.asarray(origin, float)
     for v in volume_info:
         lo, hi = (np.asarray(b, float) for b in v["bounds"])

@@ -143,7 +143,7 @@ class SDFHook:
             ray = si.spawn_ray(dr.detach(ds.d))
             # an environment or a sun is at infinity, not at the finite ds.dist Mitsuba gives
             # it (twice the radius of the mesh scene's bounds, which leave out the SDF objects:
-            # a closed SDF sphere of radius 100 let the sky in)
+            # a closed SDF sphere of radius 100 would let the sky in)
             far = ~dr.isfinite(ds.dist) | mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
             tmax = dr.select(far, dr.inf, ds.dist * (1.0 - 1e-4))
             _, hit, _ = march(self.sdf, ray.o, ray.d, tmax, mi.Bool(active), self.opts)
@@ -172,8 +172,8 @@ class SDFHook:
         """``(si_d, wo_d)`` for re-evaluating a BSDF sample ``wo`` (local to ``si``) with SDF
         shape derivatives: ``si`` re-attached (:meth:`reattach`) and the sampled direction
         held fixed in *world* space, so that a turning normal changes the BSDF value. Held in
-        the local frame it turned with the surface: V4 under an environment it reaches by BSDF
-        sampling alone gave a zero radius gradient (finite differences: 0.039)."""
+        the local frame it would turn with the surface: V4 under an environment it reaches by
+        BSDF sampling alone would get a zero radius gradient (finite differences: 0.039)."""
         si_d = self.reattach(ray, si, active)
         return si_d, si_d.to_local(dr.detach(si.to_world(wo)))
 
@@ -183,7 +183,7 @@ class SDFHook:
         cosine) factor of ``em_weight`` to the (attached) point ``si.p``; values unchanged.
         Directional and environment samples depend on the direction only: they are told by
         their emitter's ``Infinite`` flag, as a directional light's samples carry a finite
-        ``dist`` (twice the scene's radius; by that alone a sun was a point light, with a
+        ``dist`` (twice the scene's radius; by that alone a sun would be a point light, with a
         gradient 2.2x too large). ``common.sample_emitter`` evaluates the emitter at the
         detached point in SDF scenes, so that a point light's own ``1 / dist^2`` is not
         counted twice."""

@@ -35,10 +35,10 @@ OPEN_MARGIN = 1e-4
 
 
 def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
-    if isinstance(value, (str, bytes)):         # ("123" was (1, 2, 3); "abc" a bare ValueError)
+    if isinstance(value, (str, bytes)):         # ("123" would be (1, 2, 3); "abc" a bare ValueError)
         raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers")
     try:
-        if dr.is_array_v(value):     # a Dr.Jit array (mi.Vector3f: float() refused its entries)
+        if dr.is_array_v(value):     # a Dr.Jit array (mi.Vector3f: float() refuses its entries)
             v = tuple(float(x) for x in np.array(dr.detach(value), dtype=np.float64).reshape(-1))
         else:
             v = tuple(float(x) for x in value)
@@ -51,8 +51,8 @@ def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
 
 def _as_point3(value):
     """A JIT 3-vector of another type (``mi.Vector3f``, ``mi.Normal3f``, ``mi.Color3f``) as
-    the ``mi.Point3f`` a node stores (width 1), its AD edges kept; anything else unchanged (they were
-    refused as "expected 3 numbers")."""
+    the ``mi.Point3f`` a node stores (width 1), its AD edges kept, so that it is not refused as
+    "expected 3 numbers"; anything else unchanged."""
     if (dr.is_array_v(value) and dr.is_jit_v(value) and not isinstance(value, mi.Point3f)
             and dr.depth_v(value) == 2 and dr.size_v(value) == 3 and dr.type_v(value) == dr.VarType.Float32
             and dr.backend_v(value) == dr.backend_v(mi.Float) and dr.width(value) == 1):
@@ -62,7 +62,7 @@ def _as_point3(value):
 
 def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool = False) -> float:
     if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
-        value = float(value)               # numpy scalars too (np.float32(0.5) was refused)
+        value = float(value)               # numpy scalars too (np.float32(0.5))
     elif not isinstance(value, (str, bytes, bool, np.bool_)):
         try:
             value = float(value[0]) if len(value) == 1 else value   # 1-element Dr.Jit array
@@ -144,7 +144,7 @@ class SDFNode:
         >>> s = Sphere(radius=1.0); s.set_param("radius", 2.0); s.bbox().max.x
         2.0
         """
-        # (a round box's radius above half its size was kept after the error)
+        # (checked on a copy: a round box's radius above half its size is not kept)
         self._assign(key, self.with_values({key: value})._params[key])
 
     def check_param(self, key: str, value) -> None:
@@ -200,13 +200,13 @@ class SDFNode:
         value = _as_point3(value) if isinstance(old, mi.Point3f) else value
         if dr.is_array_v(value) and type(value) is type(old):
             vals = np.array(dr.detach(value), dtype=np.float64)
-            # (a wide array gave one object per lane of the kernel's rays; NaN, no object)
+            # (a wide array would give one object per lane of the kernel's rays; NaN, no object)
             if dr.width(value) != 1:
                 raise ParameterError(f"sdf.{self.kind} {self.name!r}: {key} is an array of width "
                                      f"{dr.width(value)}; expected one value (width 1)")
             if lo is not None:
-                # an optimiser's step can leave the range (a negative radius made the object
-                # vanish with a zero gradient; a zero cone height gave NaN distances)
+                # an optimiser's step can leave the range (a negative radius makes the object
+                # vanish with a zero gradient; a zero cone height gives NaN distances)
                 low = float(np.min(vals))
                 if not low > lo:
                     raise ParameterError(
@@ -217,7 +217,7 @@ class SDFNode:
                 raise ParameterError(f"sdf.{self.kind} {self.name!r}: {key}={vals.ravel().tolist()!r}; "
                                      "expected finite values")
             # made opaque in place (the caller's array, AD edges kept): a literal such as
-            # mi.Float(0.6) was baked into the kernel, which then compiled anew for every value
+            # mi.Float(0.6) would be baked into the kernel, compiled anew for every value
             dr.make_opaque(value)
             return value
         if isinstance(old, mi.Point3f):

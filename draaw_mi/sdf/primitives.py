@@ -82,7 +82,7 @@ class Box(SDFNode):
         return self._rounded(p, 0.0)
 
     def param_range(self, key):
-        if key == "size":              # every side > 0 (an optimiser's step made one negative)
+        if key == "size":              # every side > 0 (an optimiser's step can make one negative)
             return (OPEN_MARGIN, None)
         return super().param_range(key)
 
@@ -114,8 +114,8 @@ class RoundBox(Box):
                                  f"in [0, min(size)/2 = {0.5 * min(vec_of(self.size)):g}]")
 
     def param_range(self, key):
-        """The radius up to half the smallest side; every side at least twice the radius (a
-        fit of ``size`` alone stepped below it and stopped with an error at the update).
+        """The radius up to half the smallest side; every side at least twice the radius (so
+        a fit of ``size`` alone does not step below it and stop with an error at the update).
         Each bound holds the other parameter at its present value."""
         if key == "radius":
             return (0.0, 0.5 * min(vec_of(self.size)))

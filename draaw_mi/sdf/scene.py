@@ -78,8 +78,8 @@ class SDFScene:
 
     def set_many(self, values: dict) -> None:
         """Set several ``"NODE.PARAM"`` at once, each node's values checked with each other
-        (a round box shrunk to size 0.3 with radius 0.1 was refused when the size came first:
-        the old radius 0.25 no longer fitted). On an error nothing has changed."""
+        (a round box shrunk to size 0.3 with radius 0.1 is accepted with the size first,
+        though the old radius 0.25 does not fit it). On an error nothing has changed."""
         for node, probe, params in self._probes(values):
             for param in params:
                 node._assign(param, probe._params[param])

@@ -86,7 +86,7 @@ class TracerOptions:
 
 def _whole(v):
     """``int`` of a whole number (64, 64.0, "64"); anything else as it is, for the constructor
-    to refuse by name (``int`` truncated 64.7 to 64 without a word)."""
+    to refuse by name (``int`` would truncate 64.7 to 64 without a word)."""
     if isinstance(v, str):
         v = float(v)
     if isinstance(v, float) and v.is_integer():
@@ -147,7 +147,7 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
         o, d, tmax = dr.detach(o), dr.detach(d), dr.detach(tmax)
         t0, t1, act = ray_interval(sdf, o, d, tmax, mi.Bool(active))
         # the band's absolute part in the scene's own length (at most 1): for objects 1e-4
-        # across the band of 1e-5 was a fifth of their radius (inflated silhouettes); opaque,
+        # across, a band of 1e-5 would be a fifth of their radius (inflated silhouettes); opaque,
         # so a moving or growing object does not compile a new kernel
         eps_rel = opts.hit_epsilon * dr.opaque(mi.Float, length_scale(sdf))
         omega0 = opts.relaxation
@@ -176,11 +176,11 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
             if relax:
                 # the spheres of the last two points do not overlap, or the side changed (a
                 # step through a face head-on lands inside, where |f| + r_prev equals the
-                # step and the overlap test alone passed it: 83 % of such rays hit the back
+                # step and the overlap test alone passes it: 83 % of such rays would hit the back
                 # face at 1.5): a surface lies in between; go back and take the plain step
                 # from the previous point. Not from a point in the hit band (a ray spawned on
                 # a surface: its first steps are longer than |f| by design, and failing
-                # there turned relaxation off for the whole ray)
+                # there would turn relaxation off for the whole ray)
                 crossed = neg_prev != (fs < 0)
                 fail = (omega > 1.0) & (r_prev >= eps) & ((f + r_prev < step_prev) | crossed)
                 t_back = t - step_prev + r_prev

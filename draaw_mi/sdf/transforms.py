@@ -37,8 +37,8 @@ def axis_angle(R: np.ndarray) -> tuple[list[float], float]:
 
 def _rotation(value, name: str) -> np.ndarray:
     """``value`` as a 3x3 rotation matrix: orthonormal with determinant +1 (to float32
-    rounding). Anything else changes distances (``diag(2, 1, 1)`` doubled a sphere's, so the
-    march stepped through it) and has no angle and axis for ``describe`` or export."""
+    rounding). Anything else changes distances (``diag(2, 1, 1)`` doubles a sphere's, so the
+    march would step through it) and has no angle and axis for ``describe`` or export."""
     try:
         R = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -78,7 +78,7 @@ class Transform(SDFNode):
 
     def __init__(self, child: SDFNode, translate=(0.0, 0.0, 0.0), rotation=None, scale=1.0,
                  name=None, material=None):
-        if not isinstance(child, SDFNode):      # ('str' object has no attribute 'name')
+        if not isinstance(child, SDFNode):      # (else: 'str' object has no attribute 'name')
             raise ParameterError(f"sdf.transform: child={child!r}; expected an SDF node "
                                  "(Sphere, Box, union(...), ...)")
         super().__init__(name or f"{child.name}_xf", material)

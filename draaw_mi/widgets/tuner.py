@@ -101,7 +101,7 @@ class MaterialTuner:
                              f"pixels; expected the scene's {w}x{h} (the error line compares pixels)")
         max_spp = _budget(max_spp, "MaterialTuner")
         for name, flag in (("denoise", denoise), ("freeze", freeze), ("autostart", autostart)):
-            if not isinstance(flag, (bool, np.bool_)):     # ("no" turned denoising on)
+            if not isinstance(flag, (bool, np.bool_)):     # ("no" would turn denoising on)
                 raise DraawError(f"MaterialTuner: {name}={flag!r}; expected True or False")
         if isinstance(rest_after, bool) or not isinstance(rest_after, (int, float)) or not rest_after >= 0:
             raise DraawError(f"MaterialTuner: rest_after={rest_after!r}; expected seconds >= 0")
@@ -126,7 +126,7 @@ class MaterialTuner:
     # ------------------------------------------------------------------ plumbing
     def _take_over_file(self):
         """Stop the running panel of the same scene file: a notebook cell run again with a
-        file name made a second panel on a second scene, and the old one went on rendering
+        file name makes a second panel on a second scene, and the old one would go on rendering
         (a sixth of the new one's frame rate) with nothing left to close it. Panels on one
         :class:`~draaw_mi.scene.DraawScene` are handled by :meth:`Preview.start`."""
         src = self.base_scene.source
@@ -180,8 +180,8 @@ class MaterialTuner:
             if self._syncing:
                 return
             if isinstance(self.preview.error, PreviewSuperseded):
-                # (a change here went into the scene the newer panel shows, unrendered here,
-                # and cleared this panel's only word of why it had stopped)
+                # (a change here would go into the scene the newer panel shows, unrendered here,
+                # and clear this panel's only word of why it has stopped)
                 self.message.value = _error_html(f"{self.preview.error}; this panel no longer "
                                                  "changes the scene")
                 return
@@ -240,7 +240,7 @@ class MaterialTuner:
             e = tuning.errors(linear, self.reference)
             self.error_label.value = f"vs reference: RMSE {e['rmse']:.4f} · display RMSE {e['display_rmse']:.4f}"
             self.error_image.value = tuning.encode(tuning.error_image(linear, self.reference), "png")
-        elif self.reference is not None:    # (the last frame's numbers stayed, stale)
+        elif self.reference is not None:    # (else the last frame's numbers stay, stale)
             rh, rw = self.reference.shape[:2]
             self.error_label.value = (f"vs reference: none (the reference is {rw}x{rh}, this frame "
                                       f"{linear.shape[1]}x{linear.shape[0]}: resolution scale 1 compares)")
@@ -248,7 +248,7 @@ class MaterialTuner:
 
     def _show_error(self, error):
         """Worker-thread callback: a frame failed; say so in red (the preview waits for the
-        next change; before, the panel kept its last frame without a word)."""
+        next change, and the panel still shows its last frame)."""
         if isinstance(error, PreviewSuperseded):        # another panel of this scene started
             self.message.value = _error_html(f"{error}")
             self.status.value = "stopped"
@@ -445,8 +445,8 @@ _PANELS_GUARD = threading.Lock()
 
 def scaled_resolution(size, scale: float) -> tuple[int, int]:
     """The film for the resolution slider: ``size`` (W, H) itself at scale 1, else one factor
-    on both axes, at least 8 pixels on the shorter one (8 per axis turned 32x24 at 0.25 into
-    8x8, and a 6x6 scene at 1.0 into 8x8).
+    on both axes, at least 8 pixels on the shorter one (8 per axis would turn 32x24 at 0.25
+    into 8x8, and a 6x6 scene at 1.0 into 8x8).
 
     >>> scaled_resolution((32, 24), 0.25), scaled_resolution((6, 6), 1.0), scaled_resolution((640, 480), 0.5)
     ((11, 8), (6, 6), (320, 240))
@@ -459,8 +459,8 @@ def scaled_resolution(size, scale: float) -> tuple[int, int]:
 
 
 def _revert(args) -> None:
-    """Put a refused change's control back to the value it had (a dropdown set to a version
-    the scene cannot render showed that version while the preview kept the old one). Text
+    """Put a refused change's control back to the value it had (else a dropdown set to a
+    version the scene cannot render shows that version while the preview keeps the old one). Text
     fields keep what was typed, to be corrected."""
     change = args[0] if len(args) == 1 and isinstance(args[0], dict) else None
     owner = change.get("owner") if change else None

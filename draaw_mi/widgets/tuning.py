@@ -177,8 +177,8 @@ def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 
     e1 = h / np.linalg.norm(h)
     e2 = np.cross(up, e1)
     el0 = math.asin(max(-1.0, min(1.0, float(np.dot(d, up)) / r)))
-    # short of the pole, or where the camera is already (a camera 0.6 degrees from overhead
-    # moved 2.5 cm on Save without the orbit being touched)
+    # short of the pole, or where the camera is already (else a camera 0.6 degrees from
+    # overhead moves 2.5 cm on Save without the orbit being touched)
     lim = max(math.radians(89), abs(el0))
     el = max(-lim, min(lim, el0 + math.radians(pitch)))
     az = math.radians(yaw)
@@ -246,7 +246,7 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
             cam["mirror"] = True
         if "fov" in camera:             # the horizontal FOV (Mitsuba's x_fov)
             cam["fov"] = float(camera["fov"])
-            cam["fov_axis"] = "x"       # (a "y" kept beside it made 56.4 degrees 94 on reload)
+            cam["fov_axis"] = "x"       # (a "y" kept beside it would make 56.4 degrees 94 on reload)
         desc["camera"] = cam
     if render:
         desc["render"] = dict(desc.get("render", {}), **render)
@@ -261,8 +261,8 @@ def document(scene, materials: dict, *, camera: dict | None = None, render: dict
                 light["intensity"] = float(light_scale)
             if col != [1.0, 1.0, 1.0]:
                 light["color"] = _tinted(light.get("color", 1.0), col)
-        # emitting shapes too: the preview scales their radiance with the lights' (a saved
-        # panel stayed at 5 where the preview showed 10)
+        # emitting shapes too: the preview scales their radiance with the lights' (else a saved
+        # panel stays at 5 where the preview shows 10)
         for shape in desc.get("shapes", []):
             if "emission" not in shape:
                 continue
@@ -298,7 +298,7 @@ def snippet(source: str, materials: dict, settings: dict | None = None, resoluti
         load = f"draaw_mi.load_scene({os.path.abspath(source)!r}{res})"
     lines = ["import draaw_mi", "", f"scene = {load}", "params = scene.params"]
     for m, vals in materials.items():
-        for p, v in vals.items():        # (repr: every digit; 4 figures made 0.123456 0.1235)
+        for p, v in vals.items():        # (repr: every digit; 4 figures would make 0.123456 0.1235)
             if isinstance(v, list):
                 lines.append(f"params[{f'{m}.{p}.value'!r}] = mi.Color3f({', '.join(repr(float(x)) for x in v)})")
             else:
