@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import suggest
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
-from ..scene import load_scene
+from ..scene.loading import wrap
 from ..scene.mitsuba_load import load_mitsuba_dict
 from . import suite as ss
 from .code_digest import code_digest
@@ -95,7 +95,8 @@ def parse_integrator(spec: str, depth: int) -> dict:
 def timed_render(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
     """``(image as float64, seconds)`` of one traced pass of ``scene`` (an ``mi.Scene``) with
     ``integ``, evaluated and synchronised (:meth:`~draaw_mi.rendering.session.Session.render_pass`)."""
-    session = session_of(load_scene(scene))
+    wrapper = wrap(scene)                # not load_scene's: that keeps recent wrappers alive
+    session = session_of(wrapper)
     t = time.perf_counter()
     img = session.render_pass(integ, spp, seed, freeze=False)
     return np.array(img, dtype=np.float64), time.perf_counter() - t

@@ -112,6 +112,21 @@ _WRAPPED: dict = {}
 WRAPPED_KEPT = 4
 
 
+def wrap(mi_scene) -> DraawScene:
+    """A :class:`DraawScene` of the ``mi.Scene`` ``mi_scene``, made anew and kept by nobody
+    (:func:`load_scene` of an ``mi.Scene`` keeps its recent wrappers, and with them their
+    scenes, so that repeated renders replay their recordings). For code that renders a
+    Mitsuba scene it owns, once (a benchmark's timed render)."""
+    return _from_mitsuba_scene(mi_scene, "<mi.Scene>", {})
+
+
+def release_wrapped() -> None:
+    """Let go of the wrappers :func:`load_scene` keeps for the last bare ``mi.Scene`` objects it
+    was given, and with them of those scenes: each live scene's draaw materials take part in
+    every later kernel's BSDF calls."""
+    _WRAPPED.clear()
+
+
 def _wrapped(mi_scene) -> DraawScene:
     key = id(mi_scene)
     entry = _WRAPPED.pop(key, None)

@@ -6,6 +6,7 @@ import gc
 
 import pytest
 
+from draaw_mi.scene.loading import release_wrapped
 from integrators_helpers import dr, mi, official_scene, rs
 
 ALL_FEATURES = dict(area=True, point=True, spot=True, envmap=True, texture=True,
@@ -27,7 +28,8 @@ def render_ops(scene, integ, spp: int = 4) -> int:
 
 
 def ops_of(scene_dict: dict, kind: str = "draaw_v4", **props) -> int:
-    gc.collect()                       # vcalls cover every live instance: drop old scenes
+    release_wrapped()                  # vcalls cover every live instance: drop old scenes
+    gc.collect()
     scene = mi.load_dict(scene_dict)
     n = render_ops(scene, mi.load_dict({"type": kind, "max_depth": 5, **props}))
     del scene

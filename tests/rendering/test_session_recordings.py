@@ -381,3 +381,24 @@ def test_a_bare_mitsuba_scene_rendered_again_replays(monkeypatch):
     n = len(calls)
     again = np.array(draaw_mi.render(mi_scene, version="v4", spp=4, seed=1, post=[]))
     assert n >= 1 and len(calls) == n and np.array_equal(again, first[0])
+
+
+def test_release_wrapped_lets_go_of_bare_mitsuba_scenes():
+    """load_scene keeps the wrappers of recent bare mi.Scenes, and with them the scenes (their
+    materials then enlarge every later kernel's BSDF calls); release_wrapped lets them go."""
+    import gc
+    from draaw_mi.materials.draaw_bsdf import LIVE_INSTANCES
+    from draaw_mi.scene.loading import release_wrapped
+    release_wrapped()
+    gc.collect()
+    before = len(list(LIVE_INSTANCES))
+    mi_scene = draaw_mi.load_scene(rs.cornell_draaw(res=16, spp=4)).mi_scene
+    wrapper = draaw_mi.load_scene(mi_scene)
+    assert draaw_mi.load_scene(mi_scene) is wrapper
+    draaw_mi.render(mi_scene, version="v4", spp=1, seed=1, post=[])
+    del mi_scene, wrapper
+    gc.collect()
+    assert len(list(LIVE_INSTANCES)) > before             # kept by the wrapper cache
+    release_wrapped()
+    gc.collect()
+    assert len(list(LIVE_INSTANCES)) == before
