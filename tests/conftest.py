@@ -20,6 +20,14 @@ for _folder in ("batch", "integrators", "materials", "media", "post", "sdf", "st
 GO_DRAAW = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
 
 
+@pytest.fixture(autouse=True)
+def _batch_tests_run_in_their_folder(request, monkeypatch):
+    """A batch writes under its output folder, by default the current one: the batch tests run
+    in their own temporary folder (their manifests' relative patterns land there)."""
+    if os.sep + os.path.join("tests", "batch") + os.sep in str(request.node.fspath):
+        monkeypatch.chdir(request.getfixturevalue("tmp_path"))
+
+
 def tiny_description(**render):
     """A sphere on a floor under a point light and a dim sky, 32x24 by default."""
     r = {"resolution": [32, 24], "spp": 4, "max_depth": 4, "filter": "box"}

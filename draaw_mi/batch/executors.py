@@ -8,12 +8,18 @@ the EXR files themselves (a shared file system is assumed for remote clusters).
   the kernels of a job compile at its first frame and are reused after (recorded per frame).
 * ``dask``: a ``LocalCluster`` of spawned worker processes, one task at a time each, with Dr.Jit
   threads per worker set so that workers × threads = cores — or an existing scheduler
-  (``tcp://host:port``), whose workers keep their own Dr.Jit thread setting. Each worker loads a scene once and keeps it; a frame is a task with
-  retries, so a lost worker costs only the frame it was rendering.
+  (``tcp://host:port``, or ``tls://host:port`` with certificates), whose workers keep their own
+  Dr.Jit thread setting. Each worker loads a scene once and keeps it; a frame is a task with
+  retries, so a lost worker costs only the frame it was rendering, and a frame that kills
+  every worker it runs on is given up after ``retries`` more tries (reported as failed).
+
+Nothing is exposed beyond this machine by default: the LocalCluster's scheduler and workers
+listen on 127.0.0.1, and its dashboard is off (``dashboard=True``: on 127.0.0.1 too).
 """
 from __future__ import annotations
 
 import os
+import sys
 import uuid
 
 import drjit as dr
@@ -37,43 +43,69 @@ def run_inprocess(specs, cache, on_result, track_kernels: bool = True) -> None:
         dr.set_flag(dr.JitFlag.KernelHistory, old)
 
 
-def dask_client(workers: int | None = None, scheduler: str | None = None):
+#: the Security fields of a TLS client, by the names batch.run's ``tls`` takes
+TLS_KEYS = {"ca_file": "tls_ca_file", "cert": "tls_client_cert", "key": "tls_client_key"}
+
+
+def dask_client(workers: int | None = None, scheduler: str | None = None, tls: dict | None = None,
+                dashboard: bool = False, retries: int = 2):
     """A Dask client: to ``scheduler``, or to a new LocalCluster of ``workers`` processes.
 
+    ``tls``: ``{"ca_file", "cert", "key"}`` files for a ``tls://`` scheduler (without them,
+    Dask's own configuration, ``distributed.comm.tls``, applies). A new LocalCluster listens on
+    127.0.0.1 only; ``dashboard`` serves its dashboard there too (``client.dashboard_link``);
+    a task whose worker dies is tried ``retries`` more times, then reported (Dask's
+    ``allowed-failures``; a remote scheduler's own setting applies to it), and a worker holds
+    one task at a time (``worker-saturation`` 1: a task queued behind a crash would count as a
+    failure too; a remote scheduler's should say the same).
     Returns ``(client, cluster, drjit_threads)``; ``cluster`` is None for a remote scheduler.
     """
     try:
         import logging
 
-        from distributed import Client, LocalCluster
+        import dask
+        from distributed import Client, LocalCluster, Security
     except ImportError:
         raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]' "
                          "(or pip install 'dask[distributed]')") from None
     if scheduler:
+        security = None
+        if tls:
+            security = Security(require_encryption=True, **{TLS_KEYS[k]: v for k, v in tls.items()})
         try:
-            client = Client(scheduler, timeout="20s")
-        except OSError as e:
-            raise DraawError(f"--scheduler {scheduler!r}: cannot connect ({e})") from None
+            client = Client(scheduler, timeout="20s", **({"security": security} if security else {}))
+        except (OSError, ValueError, TypeError) as e:
+            raise DraawError(f"--scheduler {scheduler!r}: cannot connect ({_first_line(e)})") from None
         return client, None, None
     cores = os.cpu_count() or 1
     n = workers or min(cores, 2)
     threads = max(1, cores // n)
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+    # one task at a time on a worker (no queued second one): a frame that kills its worker
+    # then takes no innocent frame with it (each task on a dying worker counts one failure)
+    with dask.config.set({"distributed.scheduler.allowed-failures": int(retries),
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0" if dashboard else None,
+                               silence_logs=logging.ERROR)
     client = Client(cluster)
     client.draaw_drjit_threads = threads      # run_dask passes it to each worker's first task
     return client, cluster, threads
 
 
 def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None = None,
-             client=None, retries: int = 3) -> None:
-    """Render ``specs`` as Dask tasks; results arrive in completion order."""
+             client=None, retries: int = 2, dashboard: bool = False, tls: dict | None = None) -> None:
+    """Render ``specs`` as Dask tasks; results arrive in completion order. A frame whose
+    worker died on every try is a failed frame (``KilledWorker``), as is any other task error;
+    the run goes on with the other frames."""
     from distributed import as_completed
+    from distributed.scheduler import KilledWorker
 
     own = client is None
     cluster, threads = None, getattr(client, "draaw_drjit_threads", None)
     if own:
-        client, cluster, threads = dask_client(workers, scheduler)
+        client, cluster, threads = dask_client(workers, scheduler, tls=tls, dashboard=dashboard, retries=retries)
+        if dashboard and cluster is not None:
+            print(f"batch: Dask dashboard at {client.dashboard_link}", file=sys.stderr, flush=True)
     # task keys unique to this run: a key that names only the frame's content (its hash) is
     # the same for another run of the manifest into another folder on a shared scheduler,
     # and Dask merges tasks of one key (that run's frames would go to the first run's files)
@@ -88,12 +120,22 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
             spec = futures[fut]
             try:
                 res = fut.result()
-            except Exception as e:  # noqa: BLE001 - KilledWorker, lost scheduler, ...
+            except KilledWorker:
+                tries = f" {retries + 1} times" if own and scheduler is None else ""
                 res = {"job": spec["job"], "frame": spec["frame"], "output": spec["output"],
-                       "error": f"{type(e).__name__}: {e}"}
+                       "error": f"KilledWorker: the worker rendering it died{tries} (a crash or out of "
+                                "memory: the workers' logs say which); the other frames go on"}
+            except Exception as e:  # noqa: BLE001 - a lost scheduler, an unpicklable result, ...
+                res = {"job": spec["job"], "frame": spec["frame"], "output": spec["output"],
+                       "error": f"{type(e).__name__}: {_first_line(e)}"}
             on_result(res)
     finally:
         if own:
             client.close()
             if cluster is not None:
                 cluster.close()
+
+
+def _first_line(e: Exception) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__

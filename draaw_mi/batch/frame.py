@@ -23,6 +23,7 @@ from ..rendering.renderer import MAX_PASS_SPP, render
 from ..rendering.session import apply_post, non_finite_count, session_of
 from ..scene import load_scene, value_like
 from ..scene.camera import look_at_transform, scene_fov, sensor_keys, x_fov
+from .confine import check_inside
 from .digests import file_hash, files_hash
 from .exr import metadata, write_frame, write_preview
 
@@ -197,6 +198,8 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")
     seconds = time.perf_counter() - t0
+    # still under the output folder: a symbolic link made there since planning is not followed
+    check_inside(spec["output"], spec.get("root"), f"job {spec['job']!r} frame {spec['frame']}", "its EXR")
     if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
         write_preview(spec, arr, channels)
     write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=info["post"]), half=spec["half"])

@@ -4,8 +4,8 @@ A manifest lists jobs; a job is a scene rendered along a camera path with parame
 at some version / spp / AOVs / post chain. ``version``, ``spp`` and ``scene`` may be lists:
 the job then expands into one job per combination (named ``job-v4-16`` and so on)::
 
-    output = "out/{job}/{frame:04d}.exr"     # pattern (relative: to --out DIR or the current
-                                             # folder); fields: job scene version spp frame
+    output = "out/{job}/{frame:04d}.exr"     # pattern relative to --out DIR (or the current
+                                             # folder), inside it; fields: job scene version spp frame
     half = false                             # float16 EXR channels instead of float32
     previews = false                         # also an sRGB PNG beside every EXR
     contact_sheet = false                    # one PNG with every frame of a job, per job
@@ -35,6 +35,9 @@ keyframe for a mirrored view, as a scene's ``[camera]``). ``fov`` sets the field
 view. Parameter values: a number or list (every frame), ``{from, to}`` (linear over the
 frames) or ``{values = [...]}`` (one per frame).
 
+Every file of a run lies under the output folder: an absolute or climbing (``..``) output
+pattern or log is refused, unless ``allow_outside_out`` (:mod:`~draaw_mi.batch.confine`).
+
 Every error is one line naming the manifest, the field, the bad value and what was expected.
 """
 from __future__ import annotations
@@ -52,6 +55,7 @@ from ..post import load_chain
 from ..scene.camera import check_look_at
 from ..scene.camera_path import as_keyframes
 from ..scene.schema import Where, boolean, check_keys, number, read_document, resolution, string, vector
+from .confine import check_relative
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
 JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
@@ -92,6 +96,7 @@ class Manifest:
     jobs: list
     contact_sheet: bool = False
     log: str | None = None
+    root: str | None = None       # the output folder every file must lie under (None: anywhere)
 
 
 def read_manifest_file(path: str) -> dict:
@@ -104,11 +109,12 @@ def read_manifest_file(path: str) -> dict:
     return read_document(path, "manifest")
 
 
-def parse_manifest(source, out_dir: str | None = None) -> Manifest:
+def parse_manifest(source, out_dir: str | None = None, allow_outside_out: bool = False) -> Manifest:
     """Validate a manifest (file name or dict) into a :class:`Manifest`.
 
-    Relative scene and camera files resolve against the manifest's folder; relative output
-    patterns against ``out_dir`` when given, else against the current folder.
+    Relative scene and camera files resolve against the manifest's folder; output patterns and
+    the log against ``out_dir`` when given, else against the current folder, and they must lie
+    under it (:mod:`~draaw_mi.batch.confine`) unless ``allow_outside_out``.
     """
     if isinstance(source, dict):
         doc, name, base = source, "<manifest>", os.getcwd()
@@ -118,6 +124,7 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
     where = Where(name)
     check_keys(doc, TOP_KEYS, where, required=("jobs",))
     out_base = os.path.abspath(out_dir) if out_dir else os.getcwd()
+    confined = not allow_outside_out
     pattern = doc.get("output", DEFAULT_OUTPUT)
     half = boolean(doc.get("half", False), where / "half")
     previews = boolean(doc.get("previews", False), where / "previews")
@@ -128,6 +135,8 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
         if "{" in log or "}" in log or not log.strip() or log.endswith(("/", os.sep)):
             raise (where / "log").error(f"{log!r} must name one file (no {{fields}}: one log serves "
                                         "every job)")
+        if confined:
+            check_relative(log, where / "log", "the log")
         log = os.path.join(out_base, log)
     defaults = doc.get("defaults", {})
     check_keys(defaults, [k for k in JOB_KEYS if k != "name"], where / "defaults")
@@ -139,15 +148,15 @@ def parse_manifest(source, out_dir: str | None = None) -> Manifest:
         wj = where / "jobs" / i
         check_keys(jd, JOB_KEYS, wj)
         merged = {**{"output": pattern, "half": half, "previews": previews}, **defaults, **jd}
-        for job in _expand(merged, wj, base, out_base, i):
+        for job in _expand(merged, wj, base, out_base, i, confined):
             if job.name in names:
                 raise (wj / "name").error(f"{job.name!r} is used by two jobs; job names must be unique")
             names.add(job.name)
             jobs.append(job)
-    return Manifest(name, jobs, sheet, log)
+    return Manifest(name, jobs, sheet, log, out_base if confined else None)
 
 
-def _expand(jd: dict, where: Where, base: str, out_base: str, index: int):
+def _expand(jd: dict, where: Where, base: str, out_base: str, index: int, confined: bool):
     name = jd.get("name", f"job{index}")
     name = string(name, where / "name")
     if not name or any(c in name for c in "/\\") or name.startswith("."):
@@ -162,7 +171,7 @@ def _expand(jd: dict, where: Where, base: str, out_base: str, index: int):
     for combo in combos:
         vals = dict(zip(EXPANDING, combo))
         suffix = "".join(f"-{_tag(k, vals[k])}" for k in EXPANDING if isinstance(jd.get(k), list))
-        yield _job(dict(jd, **vals), where, base, out_base, name + suffix)
+        yield _job(dict(jd, **vals), where, base, out_base, name + suffix, confined)
 
 
 def _tag(key, value):
@@ -171,7 +180,7 @@ def _tag(key, value):
     return str(value)
 
 
-def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
+def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: bool) -> Job:
     scene = string(jd["scene"], where / "scene")
     scene = scene if os.path.isabs(scene) else os.path.normpath(os.path.join(base, scene))
     if not os.path.isfile(scene):
@@ -205,7 +214,7 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str) -> Job:
         job.camera = _camera(jd["camera"], where / "camera", base)
     job.params = _params(jd.get("params", {}), where / "params")
     job.frames = _frames(jd, job, where)
-    job.output = _pattern(jd.get("output", DEFAULT_OUTPUT), where / "output", out_base, job)
+    job.output = _pattern(jd.get("output", DEFAULT_OUTPUT), where / "output", out_base, job, confined)
     return job
 
 
@@ -333,10 +342,12 @@ def _frames(jd: dict, job: Job, where: Where) -> int:
     return frames
 
 
-def _pattern(pattern, where: Where, out_base: str, job: Job) -> str:
+def _pattern(pattern, where: Where, out_base: str, job: Job, confined: bool) -> str:
     pattern = string(pattern, where)
     if not pattern.lower().endswith(".exr"):
         raise where.error(f"{pattern!r} must end with .exr")
+    if confined:
+        check_relative(pattern, where, "frames")
     try:
         fields = [f for _, f, _, _ in _string.Formatter().parse(pattern) if f is not None]
     except ValueError as e:

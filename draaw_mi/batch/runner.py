@@ -9,10 +9,17 @@ present and its header's job hash equal to the plan's), renders the rest with an
 Parameter          Meaning
 =================  ================================================================
 ``manifest``       TOML/JSON file name or dict
-``out``            put every output under this folder (relative patterns resolve there)
+``out``            put every output under this folder (relative patterns resolve there; files
+                   outside it are refused, default: the current folder)
 ``executor``       ``"inprocess"`` (default) or ``"dask"``
 ``workers``        Dask LocalCluster worker processes (default: 2 or the core count)
-``scheduler``      ``tcp://host:port`` of an existing Dask scheduler (instead of a LocalCluster)
+``scheduler``      ``tcp://host:port`` or ``tls://host:port`` of an existing Dask scheduler
+                   (instead of a LocalCluster)
+``tls``            ``{"ca_file", "cert", "key"}``: the files of a ``tls://`` scheduler's client
+``retries``        tries after a frame's worker dies (a crash, out of memory), before the frame
+                   is reported failed (default 2)
+``dashboard``      serve the LocalCluster's dashboard on 127.0.0.1 (default: none)
+``allow_outside_out``  let the manifest put files outside ``out`` (absolute or ``..`` patterns)
 ``dry_run``        plan and report, render nothing
 ``overwrite``      replace frames that another manifest file made (default: refuse the run)
 ``progress``       tqdm bar with frames done / failed and ETA; ``"lines"``: a line every 10 s (logs)
@@ -42,7 +49,8 @@ import numpy as np
 
 from ..errors import DraawError, ParameterError, SceneError, suggest
 from ..progress import check_mode, progress_bar
-from .executors import EXECUTORS, run_dask, run_inprocess
+from .confine import check_inside
+from .executors import EXECUTORS, TLS_KEYS, run_dask, run_inprocess
 from .exr import MANIFEST_ATTR, frame_status, preview_path, read_header, write_preview
 from .frame import SceneCache
 from .lock import output_locks
@@ -90,13 +98,28 @@ class BatchResult:
                 f"log {self.log}{extra}")
 
 
-def load(manifest, out: str | None = None, cache=None):
-    """Validate and plan: ``(Manifest, frame specs, scene cache)``. Raises on a bad manifest."""
-    m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out)
+def load(manifest, out: str | None = None, cache=None, allow_outside_out: bool = False):
+    """Validate and plan: ``(Manifest, frame specs, scene cache)``. Raises on a bad manifest,
+    and on one whose files would lie outside the output folder (unless ``allow_outside_out``:
+    :mod:`~draaw_mi.batch.confine`)."""
+    m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out, allow_outside_out)
     cache = cache if cache is not None else SceneCache()
     specs = plan(m, cache)
     _check_log(m, specs)
+    _check_confined(m, specs)
     return m, specs, cache
+
+
+def _check_confined(m: Manifest, specs: list) -> None:
+    """Every frame's files and the log lie under the manifest's output folder, their fields
+    filled in and symbolic links followed; each spec carries the folder for the writer's own
+    check (a link made after planning)."""
+    if m.root is None:
+        return
+    for s in specs:
+        check_inside(s["output"], m.root, m.path, f"job {s['job']!r} frame {s['frame']}")
+        s["root"] = m.root
+    check_inside(log_path(m), m.root, m.path, "the log")
 
 
 def _check_log(m: Manifest, specs: list) -> None:
@@ -200,13 +223,13 @@ def remove_temp_files(specs) -> list[str]:
     return removed
 
 
-def status(manifest, out: str | None = None) -> dict:
+def status(manifest, out: str | None = None, allow_outside_out: bool = False) -> dict:
     """Per frame ``done`` / ``missing`` / ``stale`` (present, other job) / ``foreign``
     (present, made by another manifest file) / ``damaged``
     (unreadable or cut short) / ``no-preview``, or ``failed`` with the last error the log
     recorded for the frame's present settings. Reads only: read-only outputs are fine.
     Returns ``{"frames": [...], "counts": {...}, "log": path}``."""
-    m, specs, _ = load(manifest, out)
+    m, specs, _ = load(manifest, out, allow_outside_out=allow_outside_out)
     errors = {}
     for rec in read_log(log_path(m)):
         if rec.get("event") == "frame":
@@ -227,13 +250,15 @@ def status(manifest, out: str | None = None) -> dict:
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
         scheduler: str | None = None, progress: bool | str = True, on_result=None, dry_run: bool = False,
-        client=None, overwrite: bool = False) -> BatchResult:
+        client=None, overwrite: bool = False, allow_outside_out: bool = False, retries: int = 2,
+        dashboard: bool = False, tls: dict | None = None) -> BatchResult:
     """Render every unfinished frame of ``manifest``; see the module docstring."""
     check_mode(progress, "batch.run")
 
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     _check_workers(workers, scheduler, client, executor)
+    dask = _dask_options(executor, workers, scheduler, client, retries, dashboard, tls)
     if not isinstance(overwrite, (bool, np.bool_)):
         # (the string "false" is true: another manifest's frames would be replaced)
         raise ParameterError(f"batch.run: overwrite={overwrite!r}; expected True or False")
@@ -241,7 +266,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line
             raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'")
     t0 = time.perf_counter()
-    m, specs, cache = load(manifest, out)
+    m, specs, cache = load(manifest, out, allow_outside_out=allow_outside_out)
     states = [frame_status(s) for s in specs]
     if not overwrite:
         _refuse_foreign(m, [s for s, st in zip(specs, states) if st == "foreign"])
@@ -274,8 +299,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         kept = ("done", "no-preview") + (() if overwrite else ("foreign",))   # (written meanwhile)
         todo = [s for s, st in zip(todo, states) if st not in kept]
         res.skipped = len(specs) - len(todo)
-        return _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client,
-                       progress, on_result, t0)
+        return _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_result, t0)
 
 
 def _check_workers(workers, scheduler, client, executor) -> None:
@@ -310,8 +334,33 @@ def _refuse_foreign(m: Manifest, foreign: list) -> None:
                      "folder, or pass overwrite=True (draaw-mi batch --overwrite) to replace them")
 
 
-def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, client, progress,
-            on_result, t0) -> BatchResult:
+def _dask_options(executor, workers, scheduler, client, retries, dashboard, tls) -> dict:
+    """``run_dask``'s keyword arguments, checked: ``retries`` a whole number >= 0,
+    ``dashboard`` a flag for a LocalCluster this run starts, ``tls`` three existing files for a
+    ``tls://`` scheduler."""
+    if isinstance(retries, bool) or not isinstance(retries, numbers.Integral) or retries < 0:
+        raise ParameterError(f"batch.run: retries={retries!r}; expected an integer >= 0")
+    if not isinstance(dashboard, (bool, np.bool_)):
+        raise ParameterError(f"batch.run: dashboard={dashboard!r}; expected True or False")
+    if dashboard and (executor != "dask" or scheduler or client is not None):
+        raise ParameterError("batch.run: dashboard=True shows the LocalCluster a dask run starts; a "
+                             "scheduler's dashboard is its own (and there is none in-process)")
+    if tls is not None:
+        if not isinstance(tls, dict) or set(tls) != set(TLS_KEYS):
+            raise ParameterError(f"batch.run: tls={tls!r}; expected a dict of the files "
+                                 f"{', '.join(TLS_KEYS)} (draaw-mi batch --tls-ca-file, --tls-cert, --tls-key)")
+        if not (isinstance(scheduler, str) and scheduler.startswith("tls://")):
+            raise ParameterError(f"batch.run: tls certificates are for a tls:// scheduler; scheduler="
+                                 f"{scheduler!r}")
+        for key, path in tls.items():
+            if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
+                raise ParameterError(f"batch.run: tls {key} {path!r} is not a file")
+        tls = {k: os.fspath(v) for k, v in tls.items()}
+    return {"workers": workers, "scheduler": scheduler, "client": client, "retries": int(retries),
+            "dashboard": bool(dashboard), "tls": tls}
+
+
+def _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_result, t0) -> BatchResult:
     """``run``'s rendering phase, with the output folders locked. ``previews``: finished
     frames whose PNG preview is missing or stale, written from their EXRs."""
 
@@ -360,7 +409,7 @@ def _render(m, specs, todo, previews, cache, res, executor, workers, scheduler, 
         if executor == "inprocess":
             run_inprocess(todo, cache, handle)
         else:
-            run_dask(todo, handle, workers=workers, scheduler=scheduler, client=client)
+            run_dask(todo, handle, **dask)
     finally:
         if bar is not None:
             bar.close()

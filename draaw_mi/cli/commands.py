@@ -160,7 +160,11 @@ def _batch_parser(sub) -> None:
                        "(failed frames are listed and logged), 2 for a bad manifest or "
                        "arguments (nothing rendered), 130 when interrupted.")
     a.add_argument("manifest", help="batch manifest (.toml or .json)")
-    a.add_argument("--out", help="put every output under this folder (relative patterns resolve there)")
+    a.add_argument("--out", help="put every output under this folder (relative patterns resolve there; "
+                   "a pattern or log outside it is refused; default: the current folder)")
+    a.add_argument("--allow-outside-out", action="store_true",
+                   help="let the manifest write outside --out (absolute or '..' output patterns and "
+                   "log; symbolic links out of it): only for manifests you trust")
     mode = a.add_mutually_exclusive_group()
     mode.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
     mode.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
@@ -171,7 +175,18 @@ def _batch_parser(sub) -> None:
                    help="inprocess (default: this process, scenes loaded once) or dask (a "
                    "LocalCluster of worker processes, or --scheduler; pip install 'draaw-mi[batch]')")
     a.add_argument("--workers", type=int, help="Dask LocalCluster worker processes (default: min(cores, 2))")
-    a.add_argument("--scheduler", help="address of an existing Dask scheduler, tcp://HOST:PORT")
+    a.add_argument("--scheduler", help="address of an existing Dask scheduler, tcp://HOST:PORT or "
+                   "tls://HOST:PORT (with --tls-ca-file, --tls-cert, --tls-key, or Dask's own TLS "
+                   "configuration)")
+    a.add_argument("--tls-ca-file", help="the CA certificate a tls:// scheduler's certificate is checked with")
+    a.add_argument("--tls-cert", help="this client's certificate for a tls:// scheduler")
+    a.add_argument("--tls-key", help="the private key of --tls-cert")
+    a.add_argument("--retries", type=int, default=2,
+                   help="tries after a frame's worker dies (a crash, out of memory) before the frame "
+                   "counts as failed (default 2; a --scheduler's own allowed-failures applies there)")
+    a.add_argument("--dashboard", action="store_true",
+                   help="serve the LocalCluster's dashboard on 127.0.0.1 and print its address "
+                   "(default: no dashboard)")
     a.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 
 
@@ -392,10 +407,24 @@ def _cmd_batch(args) -> int:
         raise CliError("--workers sizes a new LocalCluster; the --scheduler's cluster has its own workers")
     if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
         raise CliError(f"--scheduler {args.scheduler!r}: expected an address such as tcp://HOST:8786")
-    if (args.workers or args.scheduler) and args.executor != "dask":
-        raise CliError("--workers and --scheduler need --executor dask")
+    if (args.workers or args.scheduler or args.dashboard) and args.executor != "dask":
+        raise CliError("--workers, --scheduler and --dashboard need --executor dask")
+    if args.dashboard and args.scheduler:
+        raise CliError("--dashboard shows the LocalCluster this run starts; the --scheduler's dashboard is its own")
+    if args.retries < 0:
+        raise CliError(f"--retries {args.retries}: expected an integer >= 0")
+    tls = {"ca_file": args.tls_ca_file, "cert": args.tls_cert, "key": args.tls_key}
+    if any(tls.values()):
+        missing = [f"--tls-{'ca-file' if k == 'ca_file' else k}" for k, v in tls.items() if not v]
+        if missing:
+            raise CliError(f"a TLS client needs --tls-ca-file, --tls-cert and --tls-key; missing {', '.join(missing)}")
+        if not (args.scheduler or "").startswith("tls://"):
+            raise CliError(f"--tls-ca-file, --tls-cert and --tls-key are for a --scheduler tls://HOST:PORT; got "
+                           f"{args.scheduler!r}")
+    else:
+        tls = None
     if args.status or args.dry_run:
-        st = batch.status(args.manifest, out=args.out)
+        st = batch.status(args.manifest, out=args.out, allow_outside_out=args.allow_outside_out)
         for f in st["frames"]:
             if args.dry_run or f["status"] != "done":
                 print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<10} {f['output']}"
@@ -409,7 +438,8 @@ def _cmd_batch(args) -> int:
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
                     scheduler=args.scheduler, progress=progress_mode(args.no_progress),
-                    overwrite=args.overwrite)
+                    overwrite=args.overwrite, allow_outside_out=args.allow_outside_out, retries=args.retries,
+                    dashboard=args.dashboard, tls=tls)
     for r in res.failed:
         print(f"failed: {r['job']} frame {r['frame']}: {r['error']}", file=sys.stderr)
     print(res.summary())

@@ -21,13 +21,15 @@ def write_scene(folder, name="tiny.toml", **render) -> str:
 
 
 def manifest(folder, frames=4, **job) -> dict:
-    """A one-job manifest dict: an orbit around the tiny scene with a roughness ramp."""
+    """A one-job manifest dict: an orbit around the tiny scene with a roughness ramp, its
+    frames in ``out/`` of the output folder (the batch tests run in their ``tmp_path``, so
+    without ``--out`` that is ``folder/out``)."""
     scene = write_scene(folder)
     j = {"name": "orbit", "scene": scene, "frames": frames, "spp": 4,
          "camera": {"orbit": {"target": [0.0, 0.5, 0.0], "radius": 5.0, "height": 0.8}},
          "params": {"ball.roughness": {"from": 0.1, "to": 0.9}}}
     j.update(job)
-    return {"output": os.path.join(str(folder), "out", "{job}", "{frame:04d}.exr"), "jobs": [j]}
+    return {"output": os.path.join("out", "{job}", "{frame:04d}.exr"), "jobs": [j]}
 
 
 def write_manifest(folder, doc, name="batch.toml") -> str:

@@ -97,7 +97,7 @@ with open(os.path.join(folder, "b.toml"), "wb") as fh:
 job = {"name": "orbit", "scene": os.path.join(folder, "b.toml"), "frames": 8, "spp": 2,
        "version": "v4", "camera": {"orbit": {"target": [0, 0, 0], "radius": 4.0, "height": 0.5}}}
 def batch_frames(out):
-    res = batch.run({"output": os.path.join(folder, out, "{frame:04d}.exr"), "jobs": [job]},
+    res = batch.run({"output": os.path.join(out, "{frame:04d}.exr"), "jobs": [job]}, out=folder,
                     progress=False)
     if res.failed:
         errors.append(f"batch {out}: {res.failed} frames failed")

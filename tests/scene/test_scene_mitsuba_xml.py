@@ -67,11 +67,12 @@ def test_an_unparsable_file_falls_back_to_the_text_test(tmp_path):
     assert xml_references(str(tmp_path / "s.xml")) == ([], True)
 
 
-def test_batch_frames_of_an_xml_scene_go_stale_when_a_file_it_reads_changes(tmp_path):
+def test_batch_frames_of_an_xml_scene_go_stale_when_a_file_it_reads_changes(tmp_path, monkeypatch):
     """A texture, a mesh or an included file of an XML scene edited: its finished frames are
     stale (they stayed "done": XML scenes listed no files)."""
     path = _scene(tmp_path)
-    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+    monkeypatch.chdir(tmp_path)                  # the batch's output folder
+    doc = {"output": "out/{frame:04d}.exr",
            "jobs": [{"name": "x", "scene": str(path), "frames": 1, "spp": 1}]}
     assert batch.run(doc, progress=False).rendered == 1
     assert len(batch.read_header(str(tmp_path / "out" / "0000.exr"))["draaw:files_sha256"]) == 64
@@ -207,12 +208,13 @@ def test_adaptive_subsampling_refuses_a_film_that_is_not_rgb(tmp_path):
 
 
 @pytest.mark.parametrize("pixel_format, colour", [("xyz", ["X", "Y", "Z"]), ("rgba", ["R", "G", "B", "A"])])
-def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_format, colour):
+def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_format, colour, monkeypatch):
     """The batch's frozen one-pass path named every frame's colour R, G, B: an xyz film's
     frames were labelled R, G, B, an rgba film's failed after rendering ("3 channel names
     for an image of shape (16, 16, 4)"); a post chain on an xyz film ran on X, Y, Z."""
     path = _film_scene(tmp_path, pixel_format)
-    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+    monkeypatch.chdir(tmp_path)                  # the batch's output folder
+    doc = {"output": "out/{frame:04d}.exr",
            "jobs": [{"name": "x", "scene": path, "frames": 1, "spp": 2, "previews": True}]}
     assert batch.run(doc, progress=False).rendered == 1
     arr, names = draaw_mi.read_exr(str(tmp_path / "out" / "0000.exr"), with_names=True)
@@ -226,7 +228,7 @@ def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_forma
     assert np.array_equal(arr, ref)                               # render()'s image, bit for bit
     if pixel_format == "xyz":
         doc["jobs"][0]["post"] = [{"type": "srgb"}]
-        doc["output"] = str(tmp_path / "post" / "{frame:04d}.exr")
+        doc["output"] = "post/{frame:04d}.exr"
         res = batch.run(doc, progress=False)
         assert res.rendered == 0 and "stores X, Y, Z colour" in res.failed[0]["error"]
 

@@ -193,13 +193,13 @@ def test_medium_values_set_after_loading_are_checked_as_in_scene_files(tmp_path,
     pv.update({key: good})
     with pytest.raises(ParameterError, match=r"Preview.update: " + key.replace(".", r"\.") + ".*" + match):
         pv.update({key: bad})
-    doc = {"output": str(tmp_path / "{job}" / "{frame:04d}.exr"),
+    doc = {"output": "{job}/{frame:04d}.exr",
            "jobs": [{"name": "m", "scene": scene_file, "resolution": [8, 6], "spp": 1, "frames": 2,
                      "params": {key: {"values": [good, bad]}}}]}
     with pytest.raises(SceneError, match=r"frame 1.*" + match):
-        batch.load(doc)
+        batch.load(doc, out=str(tmp_path))
     doc["jobs"][0]["params"][key]["values"] = [good, good]
-    batch.load(doc)
+    batch.load(doc, out=str(tmp_path))
 
 
 def test_a_camera_inside_a_smoke_box_is_refused():
@@ -228,12 +228,12 @@ def test_a_batch_camera_path_through_a_smoke_box_is_a_bad_manifest(tmp_path, cap
     from draaw_mi.cli import main
     scene = tmp_path / "smoke.toml"
     scene.write_bytes(tomli_w.dumps(base_desc()).encode())
-    doc = {"output": str(tmp_path / "out" / "{frame:04d}.exr"),
+    doc = {"output": "out/{frame:04d}.exr",
            "jobs": [{"scene": str(scene), "frames": 3, "camera": {"look_at": [
                {"origin": [0, 0, 4], "target": [0, 0, 0]}, {"origin": [0, 0, 0.2], "target": [0, 0, -3]}]}}]}
     path = tmp_path / "m.toml"
     path.write_bytes(tomli_w.dumps(doc).encode())
-    assert main(["batch", str(path), "--no-progress"]) == 2
+    assert main(["batch", str(path), "--out", str(tmp_path), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "frame 2" in err and "inside smoke volume 'v'" in err, err
     assert not (tmp_path / "out").exists()
