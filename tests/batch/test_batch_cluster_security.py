@@ -93,6 +93,23 @@ def test_a_frame_that_kills_its_worker_fails_after_the_retries_and_nothing_liste
     assert st["counts"]["failed"] == 1 and "KilledWorker" in st["frames"][1]["error"]
 
 
+def test_a_crash_takes_no_queued_frame_with_it(tmp_path):
+    """Each task on a dying worker counts a failure: a worker that queued the next frame behind
+    the crashing one (Dask's default) would report both killed. Ours hold one task at a time:
+    with no retries, exactly the crashing frame fails."""
+    doc = manifest(tmp_path, frames=4)
+    doc["output"] = "{job}/{frame:04d}.exr"
+    client, cluster, _ = dask_client(workers=1, retries=0)
+    try:
+        client.register_plugin(KillsItsWorker())
+        res = batch.run(doc, out=str(tmp_path / "dask"), executor="dask", client=client, retries=0,
+                        progress=False)
+    finally:
+        client.close()
+        cluster.close()
+    assert [(r["job"], r["frame"]) for r in res.failed] == [BAD] and res.rendered == 3
+
+
 @pytest.fixture
 def tls_files(tmp_path):
     """A temporary CA-signed certificate and key (Dask makes them), as files."""
