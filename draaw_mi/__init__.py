@@ -83,6 +83,7 @@ __all__ = [
 # dependencies), reachable as attributes all the same: ``draaw_mi.sdf.smooth_union(...)``,
 # ``draaw_mi.batch.run(...)`` work after a plain ``import draaw_mi``, as the README writes them.
 from ._lazy import MovedModules as _MovedModules  # noqa: E402
+from ._lazy import ShadowedModule as _ShadowedModule
 from ._lazy import on_first_use as _on_first_use
 
 _LAZY = ("batch", "bench", "cli", "media", "sdf", "widgets")
@@ -110,6 +111,27 @@ MOVED = {
 }
 if not any(isinstance(hook, _MovedModules) for hook in _sys.meta_path):
     _sys.meta_path.insert(0, _MovedModules(MOVED))     # ahead of stale files of the old layout
+
+# draaw_mi/render.py, fit.py and denoise.py moved too, but draaw_mi.render, .fit and .denoise
+# are the functions: ``from draaw_mi.render import X`` reads X from the new module, with a warning
+_SESSION = "session_of(scene) (draaw_mi.rendering.session)"
+for _old, _new, _elsewhere, _gone in (
+        ("render", "draaw_mi.rendering.renderer", {
+            **dict.fromkeys(("FREEZE", "FREEZE_MAX_PIXELS", "FREEZE_MAX_SPP"), "draaw_mi.rendering.session"),
+            **dict.fromkeys(("freeze_render", "freeze_supported", "other_live_bsdfs", "scene_scalars"),
+                            "draaw_mi.rendering.frozen"),
+            **dict.fromkeys(("pass_seed", "sample_passes"), "draaw_mi.rendering.passes"),
+            "film_colour_names": "draaw_mi.rendering.film_colour", "suggest": "draaw_mi.errors"}, {
+            "make_integrator": f"{_SESSION}.integrator(version, max_depth, ...)",
+            "scene_holds": f"{_SESSION}.holds()",
+            "check_version_sees": f"{_SESSION}.check_version_sees(version)",
+            "freeze_eligible": f"{_SESSION}.freezes(spp)",
+            "frozen_render": f"{_SESSION}.recording(integrator, spp)",
+            "scene_state": f"{_SESSION} holds what the renderer kept per scene",
+            "scene_changed": "draaw_mi.rendering.session.scene_changed(scene) takes the DraawScene"}),
+        ("fit", "draaw_mi.fitting.fitter", {}, {}),
+        ("denoise", "draaw_mi.rendering.denoiser", {}, {})):
+    _sys.modules.setdefault(f"{__name__}.{_old}", _ShadowedModule(f"{__name__}.{_old}", _new, _elsewhere, _gone))
 
 
 def __getattr__(name: str):

@@ -241,7 +241,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as
     ``PIL.Image.open(path).text``).
     """
-    import matplotlib.image
+    import matplotlib.image  # (0.16 s to import: paid by PNG/JPEG files only)
 
     if not os.fspath(path).lower().endswith(".png"):
         # (no 8-bit PNG under an .exr name; write_exr refuses the mirror case)

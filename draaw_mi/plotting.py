@@ -19,7 +19,7 @@ from .io import atomic_path
 
 def subplots(nrows: int = 1, ncols: int = 1, figsize=(6.4, 4.8), **kwargs):
     """``(figure, axes)`` as :func:`matplotlib.pyplot.subplots` returns them, without pyplot."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # (0.25 s to import: paid by plots only)
     fig = Figure(figsize=figsize)
     return fig, fig.subplots(nrows, ncols, **kwargs)
 

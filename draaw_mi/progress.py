@@ -60,7 +60,7 @@ def progress_bar(total: int, desc: str, unit: str, mode, *, leave: bool = True, 
         return None
     if mode == "lines":
         return LineProgress(total, desc, unit, file=file, every=every)
-    from tqdm.auto import tqdm
+    from tqdm.auto import tqdm  # (27 ms, and it probes for ipywidgets: paid by bars only)
     return tqdm(total=total, desc=desc, unit=unit, leave=leave, dynamic_ncols=True, file=file)
 
 

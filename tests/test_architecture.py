@@ -15,6 +15,7 @@ import pkgutil
 import shutil
 import subprocess
 import sys
+import warnings
 
 import pytest
 
@@ -203,3 +204,62 @@ def test_every_old_path_names_a_module_that_exists(old, new):
     """Each alias leads to a module of the new house, and no file of the old name is left."""
     assert importlib.util.find_spec(new) is not None, (old, new)
     assert not os.path.exists(os.path.join(ROOT, *old.split(".")) + ".py")
+
+
+# (what a notebook of the flat layout imports, the module that has it now); draaw_mi.render,
+# .fit, .denoise and .batch.plan name functions, so their old modules are stand-ins
+OLD_NAMES = [
+    ("draaw_mi.render", "MAX_PASS_SPP", "draaw_mi.rendering.renderer"),
+    ("draaw_mi.render", "FREEZE_MAX_SPP", "draaw_mi.rendering.session"),
+    ("draaw_mi.render", "sample_passes", "draaw_mi.rendering.passes"),
+    ("draaw_mi.fit", "ZERO_GRADIENT_ITERATIONS", "draaw_mi.fitting.fitter"),
+    ("draaw_mi.denoise", "denoise_aovs", "draaw_mi.rendering.denoiser"),
+    ("draaw_mi.batch.plan", "plan", "draaw_mi.batch.planner"),
+    ("draaw_mi.bench", "measure_group", "draaw_mi.bench.study"),
+    ("draaw_mi.bench", "estimate_bias", "draaw_mi.bench.bias"),
+    ("draaw_mi.cli", "CliError", "draaw_mi.cli.common"),
+    ("draaw_mi.batch", "Manifest", "draaw_mi.batch.manifest"),
+    ("draaw_mi.batch", "remove_temp_files", "draaw_mi.batch.runner"),
+    ("draaw_mi.scene", "build_mitsuba_dict", "draaw_mi.scene.description"),
+    ("draaw_mi.scene", "filter_plugin", "draaw_mi.integrators.features"),
+    ("draaw_mi.materials", "FOV_RANGE", "draaw_mi.limits"),
+    ("draaw_mi.integrators", "RenderError", "draaw_mi.errors"),
+]
+
+
+@pytest.mark.parametrize("old, name, new", OLD_NAMES)
+def test_the_old_names_of_faces_and_shadowed_modules_work_with_a_warning_at_the_callers_line(old, name, new):
+    importlib.import_module(old)
+    names = {}
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("default")                 # once per line, as a notebook shows them
+        exec(compile(f"from {old} import {name} as value", __file__, "exec"), names)
+    assert names["value"] is getattr(importlib.import_module(new), name)
+    assert [w.category for w in said] == [DeprecationWarning], [str(w.message) for w in said]
+    assert str(said[0].message) == (f"{old}.{name} is now {new}.{name}: import it from there "
+                                    f"({old}.{name} goes in the next release)")
+    assert said[0].filename == __file__                    # the line that named it, in a notebook too
+
+
+def test_the_shadowed_modules_leave_the_functions_alone_and_say_what_is_gone():
+    """``import draaw_mi.render`` (the old module) must not turn ``draaw_mi.render`` into a
+    module; a constant set through the old path is set where it is read now; a name the new
+    house has no more says what replaced it."""
+    import draaw_mi.batch
+    import draaw_mi.render  # noqa: F401  (the old module path)
+    from draaw_mi.rendering import session
+    assert callable(draaw_mi.render) and callable(draaw_mi.fit) and callable(draaw_mi.batch.plan)
+    old = sys.modules["draaw_mi.render"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        old.FREEZE = False
+        try:
+            assert session.FREEZE is False
+        finally:
+            old.FREEZE = True
+        with pytest.raises(ImportError, match=r"draaw_mi.render.make_integrator is gone: session_of\(scene\) "
+                                              r".*\.integrator\(version, max_depth"):
+            from draaw_mi.render import make_integrator  # noqa: F401
+        with pytest.raises(ImportError, match="cannot import name 'no_such_name'"):
+            from draaw_mi.render import no_such_name  # noqa: F401
+    assert session.FREEZE is True

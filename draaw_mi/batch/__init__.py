@@ -14,9 +14,21 @@ parameter overrides to EXR frames, atomically and resumably (see :mod:`~draaw_mi
 """
 from __future__ import annotations
 
+import sys
+
+from .._lazy import ShadowedModule, old_names
 from .exr import frame_status, read_header
 from .manifest import parse_manifest
 from .planner import plan
 from .runner import BatchResult, load, run, status
 
 __all__ = ["BatchResult", "frame_status", "load", "parse_manifest", "plan", "read_header", "run", "status"]
+
+# names the earlier release had here, served from their new modules with a DeprecationWarning
+__getattr__ = old_names(__name__, {
+    **dict.fromkeys(("PROBE_GRACE_S", "TEMP_PATTERNS", "log_path", "read_log", "remove_temp_files"),
+                    f"{__name__}.runner"),
+    "Manifest": f"{__name__}.manifest"})
+
+# draaw_mi/batch/plan.py is now planner.py (draaw_mi.batch.plan is the function)
+sys.modules.setdefault(f"{__name__}.plan", ShadowedModule(f"{__name__}.plan", f"{__name__}.planner"))

@@ -18,6 +18,7 @@ listen on 127.0.0.1, and its dashboard is off (``dashboard=True``: on 127.0.0.1 
 """
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import uuid
@@ -61,9 +62,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     Returns ``(client, cluster, drjit_threads)``; ``cluster`` is None for a remote scheduler.
     """
     try:
-        import logging
-
-        import dask
+        import dask  # (optional: the batch extra; 0.3 s with distributed)
         from distributed import Client, LocalCluster, Security
     except ImportError:
         raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]' "
@@ -97,7 +96,7 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
     """Render ``specs`` as Dask tasks; results arrive in completion order. A frame whose
     worker died on every try is a failed frame (``KilledWorker``), as is any other task error;
     the run goes on with the other frames."""
-    from distributed import as_completed
+    from distributed import as_completed  # (optional: the batch extra)
     from distributed.scheduler import KilledWorker
 
     own = client is None

@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 import OpenEXR
+from PIL import Image
 
 from ..errors import IOFailure
 from ..integrators import resolve_version
@@ -257,7 +258,6 @@ def _png_hash(path: str) -> str | None:
     """The frame hash a preview carries, ``""`` for a PNG without one, ``None`` for a missing,
     unreadable or cut-short file (its hash, written ahead of the pixels, survives a cut: the
     file must end in the IEND chunk)."""
-    from PIL import Image
 
     try:
         with open(path, "rb") as f:

@@ -1,7 +1,7 @@
 """One batch run per output folder: an exclusive ``flock`` on a lock file in each folder.
 
 A second run writing into the same folders would delete the first run's temporary files (it
-takes them for leftovers of a killed run, :func:`draaw_mi.batch.remove_temp_files`), so the
+takes them for leftovers of a killed run, :func:`draaw_mi.batch.runner.remove_temp_files`), so the
 first run's atomic renames fail, and both would render the same frames. :func:`output_locks`
 makes the second run stop before it touches anything, with one line that names the folder and
 the process holding it. The kernel releases a ``flock`` when its process ends, however it

@@ -12,6 +12,13 @@
 """
 from __future__ import annotations
 
+from .._lazy import old_names
 from .study import DEFAULT_VERSIONS, Setting, frame_times, ground_truth, measure, run_study
 
 __all__ = ["DEFAULT_VERSIONS", "Setting", "frame_times", "ground_truth", "measure", "run_study"]
+
+# names draaw_mi/bench.py had, served from their new modules with a DeprecationWarning
+__getattr__ = old_names(__name__, {
+    **dict.fromkeys(("WARMUP_AGAIN_S", "ground_truth_depth", "load_note", "measure_group", "reference_version",
+                     "scene_versions", "with_load_note"), f"{__name__}.study"),
+    "estimate_bias": f"{__name__}.bias"})

@@ -115,7 +115,7 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
     it (:func:`draaw_mi.bench.code_digest.code_digest`: a fixed ``draaw`` BSDF renders it anew)."""
     why = check_ref_spp(spp)
     if why:
-        raise ValueError(f"speed_bench.reference: spp {spp!r}; {why}")
+        raise ValueError(f"draaw_mi.bench.speed.reference: spp {spp!r}; {why}")
     path = os.path.join(cache, f"{name}_{res}_d{depth}_{spp}{'_' + digest if digest else ''}_c{code_digest()}.exr")
     if cache and os.path.exists(path):
         arr = read_exr(path).astype(np.float64)
@@ -192,7 +192,7 @@ def _fmt(x: float) -> str:
 
 def report(results: list[dict], args) -> str:
     specs = args.integrators.split(";")
-    out = ["# Speed suite: time to reach `path`'s error (draaw_mi/speed_bench.py)", "",
+    out = ["# Speed suite: time to reach `path`'s error (draaw_mi/bench/speed.py)", "",
            f"Command: `{args.command}`  ",
            f"Machine: {platform.machine()}, {os.cpu_count()} cores ({load_note()}), "
            f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "

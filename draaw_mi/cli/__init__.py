@@ -8,6 +8,11 @@
 """
 from __future__ import annotations
 
+from .._lazy import old_names
 from .commands import main
 
 __all__ = ["main"]
+
+# names draaw_mi/cli.py had, served from their new modules with a DeprecationWarning
+__getattr__ = old_names(__name__, dict.fromkeys(
+    ("CliError", "EXIT_BAD_INPUT", "PROGRESS_HELP", "progress_mode", "read_json"), f"{__name__}.common"))

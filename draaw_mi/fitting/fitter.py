@@ -450,10 +450,10 @@ def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: i
         else:
             fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
             p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
-    with RENDER_GUARD:
+    with problem.session.lock, RENDER_GUARD:       # the values and the render they show, together
         p.update()
-    final = problem.session.render_pass(problem.integrator, problem.spp, (s.seed + 12345) & 0xFFFFFFFF,
-                                        sensor=problem.sensors[0])
+        final = problem.session.render_pass(problem.integrator, problem.spp, (s.seed + 12345) & 0xFFFFFFFF,
+                                            sensor=problem.sensors[0])
     final = final[:, :, :3] if final.shape[2] > 3 else final
     if problem.chain is not None:
         final = _apply_chain(final, problem.chain)

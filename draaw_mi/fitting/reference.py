@@ -65,7 +65,7 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
         if ref.lower().endswith(".exr"):
             arr = _exr_colour(ref, *read_exr(ref, with_names=True), who)
         elif ref.lower().endswith(DISPLAY_SUFFIXES):
-            import matplotlib.image
+            import matplotlib.image  # (0.16 s to import: PNG/JPEG references only)
             try:
                 arr = matplotlib.image.imread(ref)
             except Exception as e:  # noqa: BLE001

@@ -16,6 +16,7 @@ Mitsuba integrator plugin names, and ``resolve_version(name)`` looks one up.
 """
 from __future__ import annotations
 
+from .._lazy import old_names
 from . import v1, v2, v3, v4
 from .features import FEATURE_NAMES, detect_features
 from .versions import MAIN_VERSIONS, PLUGINS, VERSION_ALIASES, VERSION_GRADES, is_draaw, resolve_version
@@ -35,3 +36,6 @@ def register() -> None:
 
 __all__ = ["FEATURE_NAMES", "MAIN_VERSIONS", "PLUGINS", "VERSION_ALIASES", "VERSION_GRADES", "detect_features",
            "is_draaw", "register", "resolve_version"]
+
+# names the earlier release had here, served from their new modules with a DeprecationWarning
+__getattr__ = old_names(__name__, dict.fromkeys(("RenderError", "suggest"), "draaw_mi.errors"))

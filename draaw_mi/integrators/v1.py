@@ -24,10 +24,12 @@ MAX_UNROLLED_EMITTERS = 8
 class DraawV1Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v1:
+
     draaw V1: classic ray tracer (:monosp:`draaw_v1`)
     ---------------------------------------------------
 
     .. pluginparameters::
+
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded): 1 shows emitters only, 2 adds direct light,
@@ -52,6 +54,7 @@ class DraawV1Integrator(DraawIntegrator):
 
     The cheap rung of the ladder. At every shading point of a Whitted-style mirror chain
     (camera ray, then perfect mirror reflections):
+
     - emitted radiance of the surface hit;
     - direct light from **every** emitter (one sample and one shadow ray each; above
       8 emitters, one emitter picked at random) through the legacy Lambert + normalised Phong
@@ -81,6 +84,7 @@ class DraawV1Integrator(DraawIntegrator):
     sampling.
 
     .. tabs::
+
         .. code-tab:: python
 
             'type': 'draaw_v1',

@@ -22,10 +22,12 @@ from .phong import phong_eval, phong_material, phong_sample
 class DraawV2Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v2:
+
     draaw V2: energy-conserving Phong-family path tracer (:monosp:`draaw_v2`)
     --------------------------------------------------------------------------
 
     .. pluginparameters::
+
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -50,6 +52,7 @@ class DraawV2Integrator(DraawIntegrator):
     A path tracer with next-event estimation (one emitter sample and a shadow ray per vertex,
     no MIS, no Russian roulette), unbiased for its own *legacy* model, a Phong family built
     from the ``draaw`` BSDF's knobs (:class:`~draaw_mi.integrators.phong.PhongMaterial`)::
+
         f = (1 - reflection) * (kd / pi + ks (n + 2) / (2 pi) max(0, <R(wi), wo>)^n)
             + reflection * tint * delta(wo - R(wi))
         ks = lerp(0.08 specular, base_color, metallic)
@@ -80,6 +83,7 @@ class DraawV2Integrator(DraawIntegrator):
     with a proper Monte Carlo estimator; ``scatter`` paths split only at the first hit.
 
     .. tabs::
+
         .. code-tab:: python
 
             'type': 'draaw_v2',

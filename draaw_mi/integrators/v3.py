@@ -24,10 +24,12 @@ DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Bec
 class DraawV3Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v3:
+
     draaw V3: physically based path tracer (:monosp:`draaw_v3`)
     ------------------------------------------------------------
 
     .. pluginparameters::
+
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -61,6 +63,7 @@ class DraawV3Integrator(DraawIntegrator):
 
     The accuracy reference of the ladder: the ``draaw`` model of design.md §3 rendered by a
     plain, unbiased path tracer that is easy to check:
+
     - next-event estimation (one emitter sample with a shadow ray per vertex) and **no MIS**:
       every light path is counted by exactly one strategy, chosen per vertex and lobe before
       sampling. Emitters hit by BSDF-sampled rays count for camera rays, after delta bounces
@@ -105,6 +108,7 @@ class DraawV3Integrator(DraawIntegrator):
     ``scatter`` and ``directToScatter`` knobs have no role here.
 
     .. tabs::
+
         .. code-tab:: python
 
             'type': 'draaw_v3',

@@ -22,10 +22,12 @@ LIGHT_SELECTION = "auto"
 class DraawV4Integrator(emission_split.EmissionSplitting):
     r"""
     .. _integrator-draaw_v4:
+
     draaw V4: optimised physically based path tracer (:monosp:`draaw_v4`)
     ----------------------------------------------------------------------
 
     .. pluginparameters::
+
      * - max_depth
        - |int|
        - Longest path depth (-1: unbounded). 1 renders only directly visible emitters, 2 direct
@@ -92,6 +94,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     through the generic interface; the ``draaw`` BSDF samples its own mixture of cosine and
     GGX *visible-normal* sampling), with the variance and speed optimisations of a production
     path tracer:
+
     - emitter sampling and BSDF sampling combined by multiple importance sampling (power
       heuristic);
     - Russian roulette from ``rr_depth`` on that stops only weak paths (throughput below
@@ -154,6 +157,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     ``normal`` AOV.
 
     .. tabs::
+
         .. code-tab:: python
 
             'type': 'draaw_v4',

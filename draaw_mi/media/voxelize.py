@@ -28,7 +28,7 @@ from ..errors import IOFailure, ParameterError
 
 def load_triangles(mesh) -> np.ndarray:
     """Triangles (T, 3, 3) float64 of a mesh file (OBJ/PLY/STL/...) or a trimesh object."""
-    import trimesh
+    import trimesh  # (0.36 s to import: paid by voxelised meshes only)
     if isinstance(mesh, (str, os.PathLike)):
         path = os.fspath(mesh)
         if not os.path.isfile(path):

@@ -90,6 +90,7 @@ def crt(image: Any, base: float = 0.5, glow: float = 1.5, radius: float = 16.0, 
     """Old-monitor look (GO-Draaw ``CRT``, the README's "Vignette").
 
     Per pixel (x, y) of an H × W image, with c its colour:
+
     * blur: 32 taps, tap i at distance ``radius · √(i / 32)`` pixels and angle
       ``θ₀ + i · 2.39996`` (golden angle), weight ``1 / (1 + √i)``, normalised by their sum
       (8.09); θ₀ is a per-pixel random angle from an integer hash of the pixel index and

@@ -33,7 +33,7 @@ Example (skipped when ``pyoidn`` is missing)::
 
 From a render with AOVs::
 
-    from draaw_mi.denoise import denoise_aovs
+    from draaw_mi.rendering.denoiser import denoise_aovs
     img, info = draaw_mi.render(scene, spp=4, aovs=["albedo", "normal"], return_info=True)
     clean = denoise_aovs(img, info["channels"])                 # colour denoised, AOVs kept
 """

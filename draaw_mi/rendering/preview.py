@@ -42,6 +42,7 @@ Example::
 """
 from __future__ import annotations
 
+import contextlib
 import numbers
 import operator
 import threading
@@ -159,15 +160,17 @@ class Preview(PreviewWorker):
         self._integrator_for(self.scene)
 
     # ------------------------------------------------------------------ configuration
-    def _integrator_for(self, scene):
-        """The integrator of the preview's settings, from ``scene``'s session (the scene, or
-        its reduced-resolution copy); raises for a version that cannot show the scene."""
+    def _integrator_for(self, scene, settings=None):
+        """The integrator of the preview's settings (``settings``: ``(version, max_depth,
+        denoise)`` as a frame read them under the lock; default the current ones), from
+        ``scene``'s session (the scene, or its reduced-resolution copy); raises for a version
+        that cannot show the scene."""
+        version, max_depth, denoise = settings or (self.version, self.max_depth, self.denoise)
         session = session_of(scene)
-        session.check_version_sees(self.version)
+        session.check_version_sees(version)
         # the denoiser's guides come from the draaw versions; Mitsuba's are denoised colour-only
-        guides = GUIDES if self.denoise and is_draaw(self.version) else ()
-        return session.integrator(self.version, self.max_depth, bool(self.scene.settings.get("hide_emitters", False)),
-                                  guides)
+        guides = GUIDES if denoise and is_draaw(version) else ()
+        return session.integrator(version, max_depth, bool(self.scene.settings.get("hide_emitters", False)), guides)
 
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or
@@ -259,7 +262,11 @@ class Preview(PreviewWorker):
         if not pending:
             return
         scenes = [self.scene] + ([self._lo] if self._lo is not None else [])
-        with session_of(self.scene).lock, RENDER_GUARD:       # parameter updates too (draaw_mi.guard)
+        # the scenes' locks (the scene's first), then the guard: parameter updates too
+        with contextlib.ExitStack() as held:
+            for sc in scenes:
+                held.enter_context(session_of(sc).lock)
+            held.enter_context(RENDER_GUARD)
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
                 old = {key: dr.copy(p[key]) for key in pending}    # (assigned in place)
@@ -295,13 +302,17 @@ class Preview(PreviewWorker):
                            and self.scene.mi_dict is not None)   # (XML / mi.Scene: no second resolution)
             index = self._frame_index
             self._frame_index += 1
+            settings = (self.version, self.max_depth, self.denoise)     # as configure() left them
         self._apply_pending()
         target = self._lo_scene() if interactive else self.scene
         # an opaque seed: a new frame's seed is new data, not a new kernel
         seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
         t0 = time.perf_counter()
-        with session_of(self.scene).lock, RENDER_GUARD:
-            img = session_of(target).render_pass(self._integrator_for(target), 1, seed, freeze=self.freeze)
+        # the scene's lock, then its reduced copy's, then the guard (a scene's lock before the
+        # guard, never after: Session.close takes them in that order)
+        session = session_of(target)
+        with session_of(self.scene).lock, session.lock, RENDER_GUARD:
+            img = session.render_pass(self._integrator_for(target, settings), 1, seed, freeze=self.freeze)
             arr = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t0
         with self._lock:

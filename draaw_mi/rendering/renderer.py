@@ -107,6 +107,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         ``aovs``); applied before the post chain. Biased, not differentiable.
 
     Example::
+
         >>> import draaw_mi
         >>> img, info = draaw_mi.render("scenes/cornell.toml", spp=4, resolution=(32, 24),
         ...                             aovs=["depth"], return_info=True)

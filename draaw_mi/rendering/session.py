@@ -4,7 +4,9 @@ A :class:`Session` belongs to one :class:`~draaw_mi.scene.DraawScene` (:func:`se
 makes it on first use and keeps it as long as the scene lives). It owns
 
 * the scene's **lock** (an ``RLock``): two threads never render one scene at once, and a
-  multi-pass render or a fit iteration keeps the scene to itself;
+  multi-pass render or a fit iteration keeps the scene to itself. The lock belongs to the
+  scene, not to the session: a session made after :meth:`Session.close` has the same one, so
+  a thread that took it just before the close still excludes the threads that come after;
 * its **integrators** (:meth:`Session.integrator`, one instance per set of options; V4 keeps
   what it learns of the scene in its instance);
 * its **recordings**: ``dr.freeze`` replays of one-pass renders (:mod:`.frozen` says what a
@@ -75,7 +77,7 @@ class Session:
     def __init__(self, scene):
         self._scene = weakref.ref(scene)
         self.source = scene.source
-        self.lock = threading.RLock()
+        self.lock = _lock_of(scene)
         self.freezable = self.film = self.scalars = self.own_bsdfs = None
         self.memo: dict = {}
         self.passes: dict = {}
@@ -263,6 +265,17 @@ class Session:
 _SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session
 _SESSIONS_GUARD = threading.Lock()
 _LIVE: "weakref.WeakSet" = weakref.WeakSet()          # every open session (close_all)
+_LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()       # DraawScene -> RLock
+_LOCKS_GUARD = threading.Lock()
+
+
+def _lock_of(scene) -> threading.RLock:
+    """The scene's lock, the same for each of its sessions (made on first use)."""
+    with _LOCKS_GUARD:
+        lock = _LOCKS.get(scene)
+        if lock is None:
+            lock = _LOCKS[scene] = threading.RLock()
+    return lock
 
 
 def session_of(scene) -> Session:

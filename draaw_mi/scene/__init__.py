@@ -29,8 +29,18 @@ True
 """
 from __future__ import annotations
 
+from .._lazy import old_names
 from .draaw_scene import DraawScene
 from .loading import OVERRIDE_MINIMA, SCENE_SUFFIXES, load_scene
 from .values import check_like, value_like
 
 __all__ = ["DraawScene", "OVERRIDE_MINIMA", "SCENE_SUFFIXES", "check_like", "load_scene", "value_like"]
+
+# names the earlier release had here, served from their new modules with a DeprecationWarning
+__getattr__ = old_names(__name__, {
+    **dict.fromkeys(("DEFAULT_SETTINGS", "build_mitsuba_dict"), f"{__name__}.description"),
+    **dict.fromkeys(("MESH_SUFFIXES", "bounds", "load_mesh_parts"), f"{__name__}.meshes"),
+    **dict.fromkeys(("load_dict_or_error", "load_mitsuba_file", "mitsuba_error_message"), f"{__name__}.mitsuba_load"),
+    **dict.fromkeys(("filter_plugin", "sampler_plugin"), "draaw_mi.integrators.features"),
+    **dict.fromkeys(("SceneError", "ParameterError", "suggest"), "draaw_mi.errors"),
+    "WRAPPED_KEPT": f"{__name__}.loading", "Where": f"{__name__}.schema", "auto_light": f"{__name__}.light_dicts"})

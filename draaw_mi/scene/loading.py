@@ -55,6 +55,7 @@ def load_scene(source, **overrides) -> DraawScene:
     :class:`SceneError` naming the file and field.
 
     Example::
+
         >>> import draaw_mi
         >>> scene = draaw_mi.load_scene("scenes/cornell.toml", resolution=(32, 24), spp=4)
         >>> scene.resolution, scene.settings["spp"], scene.key("metal.roughness")

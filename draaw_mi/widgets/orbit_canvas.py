@@ -42,7 +42,7 @@ from ..errors import DraawError, ParameterError
 def _in_notebook() -> bool:
     """Whether an IPython kernel (Jupyter) runs this process."""
     try:
-        from IPython import get_ipython
+        from IPython import get_ipython  # (optional: present in a notebook)
     except ImportError:
         return False
     shell = get_ipython()

@@ -17,6 +17,7 @@ import os
 import mitsuba as mi
 import numpy as np
 import tomli_w
+from PIL import Image
 
 from ..errors import ParameterError
 from ..io import srgb_decode, srgb_encode, write_text
@@ -77,7 +78,7 @@ def hex_to_linear(value: str) -> list[float]:
     >>> hex_to_linear("blue"), hex_to_linear("#00f")
     ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0])
     """
-    from matplotlib.colors import to_rgb
+    from matplotlib.colors import to_rgb  # (72 ms to import: colour names only)
     try:
         c = list(to_rgb(value.strip()))
     except (ValueError, AttributeError):
@@ -197,7 +198,6 @@ def to_uint8(image: np.ndarray, encoded: bool = False) -> np.ndarray:
 def encode(image: np.ndarray, fmt: str = "jpeg", quality: int = 80, encoded: bool = False) -> bytes:
     """An image as JPEG (``quality``) or PNG bytes, for ``ipywidgets.Image`` (``encoded``: see
     :func:`to_uint8`)."""
-    from PIL import Image
     buf = io.BytesIO()
     im = Image.fromarray(image if image.dtype == np.uint8 else to_uint8(image, encoded))
     if fmt == "jpeg":
@@ -221,7 +221,7 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict:
 
 def error_image(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """|display difference| in false colour (magma, 0 .. 0.25) as uint8 RGB."""
-    from matplotlib import colormaps
+    from matplotlib import colormaps  # (86 ms to import: the difference view only)
     d = np.abs(srgb_encode(np.nan_to_num(image[..., :3])) - srgb_encode(reference[..., :3])).mean(axis=2)
     return (colormaps["magma"](np.clip(d / 0.25, 0, 1))[..., :3] * 255).astype(np.uint8)
 

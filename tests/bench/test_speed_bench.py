@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from draaw_mi.bench import speed as sb
 from draaw_mi.bench import suite as ss
@@ -26,7 +27,7 @@ def test_reference_refuses_spp_that_are_not_whole_passes(monkeypatch, spp, tmp_p
     960 and 0 raised ZeroDivisionError."""
     calls = []
     monkeypatch.setattr(sb, "render", _fake_render(calls))
-    with pytest.raises(ValueError, match=rf"speed_bench.reference: spp {spp}; expected a multiple of 64 "
+    with pytest.raises(ValueError, match=rf"draaw_mi.bench.speed.reference: spp {spp}; expected a multiple of 64 "
                                          r"that is at least 128"):
         sb.reference("x", 2, None, 3, spp, str(tmp_path))
     assert calls == [] and list(tmp_path.iterdir()) == []
@@ -99,6 +100,6 @@ def test_main_does_not_overwrite_the_curated_results_by_default(monkeypatch, tmp
     written = []
     monkeypatch.setattr(sb, "print_report", lambda text, path: written.append(path))
     assert sb.main(["--scenes", "metal_018", "--res", "4", "--cache", str(tmp_path)]) == 0
-    curated = os.path.join(sb.ROOT, "benchmarks", "results", "speed_suite.md")
-    assert len(written) == 1 and os.path.abspath(written[0]) != os.path.abspath(curated)
-    assert os.path.basename(written[0]) == "speed_suite_latest.md"
+    results = os.path.join(ROOT, "benchmarks", "results")           # the repository's, found by the test
+    assert len(written) == 1 and os.path.abspath(written[0]) != os.path.join(results, "speed_suite.md")
+    assert os.path.abspath(written[0]) == os.path.join(results, "speed_suite_latest.md")

@@ -1,4 +1,4 @@
-"""Unbiased adaptive sampling (draaw_mi/adaptive_sampling.py) and its use by draaw_v4."""
+"""Unbiased adaptive sampling (draaw_mi/integrators/adaptive_sampling.py) and its use by draaw_v4."""
 from __future__ import annotations
 
 import numpy as np

@@ -75,6 +75,10 @@ def test_close_stops_the_workers_and_lets_go_of_recordings_and_integrators(scene
         assert time.perf_counter() - t0 < 5 and not pv.running
         assert session.recordings == {} and session.workers() == []
         assert session_of(scene) is not session               # a closed session is not reused
+        # but the lock is the scene's: a thread holding it across the close still excludes
+        # the renders that come after
+        assert session_of(scene).lock is session.lock
+        assert session_of(draaw_mi.load_scene(tiny_description())).lock is not session.lock
         img = np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1))      # renders again
         assert np.isfinite(img).all() and img.mean() > 0
     finally:
@@ -159,3 +163,50 @@ def test_the_session_says_what_it_holds(scene):
     session.integrator("v1", 2)
     assert repr(session) == f"Session[{scene.source}, 1 integrators, 0 recordings, 0 workers]"
     assert isinstance(session, Session) and session.scene is scene
+
+
+CLOSE_BESIDE_A_PREVIEW = """
+import os, random, sys, threading, time
+import draaw_mi
+from draaw_mi.rendering.preview import Preview
+from draaw_mi.rendering.session import session_of
+random.seed(1)
+scene = draaw_mi.load_scene({"render": {"resolution": [32, 32], "filter": "box"},
+    "materials": {"m": {"roughness": 0.5}}, "shapes": [{"type": "sphere", "material": "m"}],
+    "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+pv = Preview(scene, version="v4", max_depth=3, interactive_scale=0.5, max_spp=100000)
+pv.start()
+assert pv.wait(spp=1, timeout=60) is not None
+closes = 0
+def watchdog():
+    time.sleep(40)
+    print("hung after", closes, "closes", flush=True)
+    os._exit(3)
+threading.Thread(target=watchdog, daemon=True).start()
+t0 = time.time()
+while time.time() - t0 < SECONDS:
+    pv.update({"m.roughness": random.uniform(0.1, 0.9)})   # the next frame renders the reduced copy
+    time.sleep(random.uniform(0, 0.01))
+    lo = pv._lo
+    if lo is not None:
+        session_of(lo).close(timeout=1)                     # what close_all does at exit
+        closes += 1
+pv.stop()
+print("ok", closes, flush=True)
+"""
+
+
+def test_closing_a_session_beside_a_refining_preview_never_deadlocks():
+    """The preview renders its reduced copy holding the scene's lock and the copy's, then the
+    guard; Session.close takes the lock, then the guard. A frame that took a lock after the
+    guard -- or the lock of a session made anew after a close, which another thread then
+    closed -- deadlocked against close, and so against close_all at exit. A few seconds of
+    changes and closes found it (within 1 to 10 s)."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+    script = CLOSE_BESIDE_A_PREVIEW.replace("SECONDS", "8")
+    out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0 and out.stdout.startswith("ok"), (out.stdout, out.stderr[-2000:])
+    assert int(out.stdout.split()[1]) > 50          # it closed the copy's session many times
