@@ -23,7 +23,6 @@ from typing import Sequence
 
 import mitsuba as mi
 import numpy as np
-import OpenEXR
 
 from .errors import IOFailure
 
@@ -160,6 +159,7 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
         raise IOFailure(f"write_exr({path!r}): duplicate channel names {names}")
     dtype = np.float16 if half else np.float32
     chans = {n: np.ascontiguousarray(arr[..., i].astype(dtype)) for i, n in enumerate(names)}
+    import OpenEXR  # (15 ms to import: paid by EXR files only)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         if key in header or not isinstance(value, (str, int, float)) or isinstance(value, bool):
@@ -186,6 +186,7 @@ def read_exr(path: str, with_names: bool = False):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise IOFailure(f"read_exr: {path!r} does not exist")
+    import OpenEXR  # (15 ms to import: paid by EXR files only)
     try:
         with OpenEXR.File(path, separate_channels=True) as f:
             chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}

@@ -28,7 +28,7 @@ from ..scene import value_like
 from ..scene.camera import check_look_at, go_draaw_look_at, sensor_reach, x_fov
 from ..scene.camera_path import interpolate
 from ..scene.schema import Where
-from ..scene.volume_dicts import check_camera_outside_smoke
+from ..scene.smoke_boxes import check_camera_outside_smoke
 from .digests import file_hash, files_hash, versions  # noqa: F401 (re-exported)
 from .frame import SceneCache
 from .manifest import Manifest, format_output

@@ -4,7 +4,6 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from . import volume_march
 from .common import (
     DraawIntegrator,
     emitter_sample_one,
@@ -149,6 +148,7 @@ class DraawV1Integrator(DraawIntegrator):
         feats = self.features(scene)
         # ---- participating media: GO-Draaw's single-scattering march, fixed (volume_march)
         if dr.hint(feats["media"], mode="scalar"):
+            from . import volume_march  # (60 ms to import: paid by scenes with media only)
             return volume_march.sample(self, mode, scene, sampler, ray, active)
         # ---- end media
         flags = self.ray_flags(feats)

@@ -5,7 +5,6 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError, suggest
-from . import volume
 from .common import (
     DraawIntegrator,
     flip_z,
@@ -163,6 +162,7 @@ class DraawV3Integrator(DraawIntegrator):
         feats = self.features(scene)
         # ---- participating media (draaw_mi.integrators.volume), only when the scene has them
         if dr.hint(feats["media"], mode="scalar"):
+            from . import volume  # (60 ms to import: paid by scenes with media only)
             return volume.sample(self, mode, scene, sampler, ray, δL, state_in, active,
                                  russian_roulette=False)
         # ---- end media

@@ -8,7 +8,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import adaptive_sampling as ads
-from . import emission_split, volume
+from . import emission_split
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .light_pilot import learn_selection
 from .sampling import PowerSelection, only_constant_environment, roulette
@@ -302,6 +302,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         feats = self.features(scene)
         # ---- participating media (draaw_mi.integrators.volume), only when the scene has them
         if dr.hint(feats["media"], mode="scalar"):
+            from . import volume  # (60 ms to import: paid by scenes with media only)
             return volume.sample(self, mode, scene, sampler, ray, δL, state_in, active,
                                  russian_roulette=True)
         # ---- end media

@@ -60,7 +60,7 @@ from ..post import load_chain
 from ..scene import DraawScene, check_like, load_scene, value_like
 from ..scene.camera import sensor_reach
 from ..scene.schema import Where
-from ..scene.volume_dicts import check_camera_outside_smoke
+from ..scene.smoke_boxes import check_camera_outside_smoke
 from .denoiser import denoise, load_pyoidn
 from .passes import pass_seed
 from .preview_worker import PreviewFrame, PreviewSuperseded, PreviewWorker  # noqa: F401  (re-exported)

@@ -5,7 +5,8 @@
 * :mod:`~draaw_mi.scene.description` -- a validated description -> a Mitsuba scene dict, with
   the tables' own modules: :mod:`~draaw_mi.scene.camera`, :mod:`~draaw_mi.scene.meshes`
   (:mod:`~draaw_mi.scene.smooth_normals`), :mod:`~draaw_mi.scene.material_dicts`,
-  :mod:`~draaw_mi.scene.light_dicts`, :mod:`~draaw_mi.scene.volume_dicts` (``[[volumes]]``),
+  :mod:`~draaw_mi.scene.light_dicts`, :mod:`~draaw_mi.scene.volume_dicts` (``[[volumes]]``;
+  where their smoke boxes may lie: :mod:`~draaw_mi.scene.smoke_boxes`),
   :mod:`~draaw_mi.scene.sdf_dicts` (``[[sdf]]``, with
   :mod:`~draaw_mi.scene.go_draaw_spheres`);
 * :mod:`~draaw_mi.scene.schema` -- typed fields, ranges, unknown-key suggestions;

@@ -32,8 +32,8 @@ from .material_dicts import material_dict
 from .meshes import load_mesh_parts, mesh_side_files, write_ply
 from .schema import Where, boolean, check_keys, kind_of, number, resolution, rotations, string, vector
 from .sdf_dicts import sdf_dicts
+from .smoke_boxes import check_camera_outside_smoke, check_smoke_boxes_disjoint
 from .smooth_normals import smooth_parts
-from .volume_dicts import check_camera_outside_smoke, check_smoke_boxes_disjoint, volume_dicts
 
 TOP_KEYS = ("render", "camera", "materials", "shapes", "lights", "post", "sdf", "volumes")
 RENDER_KEYS = ("resolution", "spp", "max_depth", "version", "seed", "filter", "sampler", "hide_emitters",
@@ -262,6 +262,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     if not isinstance(volumes, list):
         raise (where / "volumes").error("expected a list of volume tables ([[volumes]])")
     if volumes:
+        from .volume_dicts import volume_dicts  # (with draaw_mi.media: 10 ms to import; volumes only)
         for i, vol in enumerate(volumes):
             entries, vinfo = volume_dicts(vol, i, mats, ctx, where / "volumes" / i)
             for key, d in entries.items():
