@@ -44,12 +44,15 @@ def run_inprocess(specs, cache, on_result, track_kernels: bool = True) -> None:
         dr.set_flag(dr.JitFlag.KernelHistory, old)
 
 
+#: tries a frame is given after its worker dies, before it counts as failed (``--retries``)
+DEFAULT_RETRIES = 2
+
 #: the Security fields of a TLS client, by the names batch.run's ``tls`` takes
 TLS_KEYS = {"ca_file": "tls_ca_file", "cert": "tls_client_cert", "key": "tls_client_key"}
 
 
 def dask_client(workers: int | None = None, scheduler: str | None = None, tls: dict | None = None,
-                dashboard: bool = False, retries: int = 2):
+                dashboard: bool = False, retries: int = DEFAULT_RETRIES):
     """A Dask client: to ``scheduler``, or to a new LocalCluster of ``workers`` processes.
 
     ``tls``: ``{"ca_file", "cert", "key"}`` files for a ``tls://`` scheduler (without them,
@@ -92,7 +95,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
 
 
 def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None = None,
-             client=None, retries: int = 2, dashboard: bool = False, tls: dict | None = None) -> None:
+             client=None, retries: int = DEFAULT_RETRIES, dashboard: bool = False, tls: dict | None = None) -> None:
     """Render ``specs`` as Dask tasks; results arrive in completion order. A frame whose
     worker died on every try is a failed frame (``KilledWorker``), as is any other task error;
     the run goes on with the other frames."""

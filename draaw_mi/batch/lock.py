@@ -96,14 +96,16 @@ def _lock_file(folder: str, path: str, where: str, optional: bool):
     """An open descriptor of ``path`` holding its exclusive lock; ``None`` for an ``optional``
     folder where no lock file can be made; ``_DELETED`` where the lock was got on a file
     its holder deleted meanwhile (try again)."""
+    # O_NOFOLLOW: a lock file that is a symbolic link (planted in a shared output folder) would
+    # have the run empty and rewrite whatever it points to
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except PermissionError:
         # another user's lock file (0644): a read-only descriptor locks it just as well
         # (flock does not care how the file was opened); its holder, if alive, still
         # makes the flock below fail
         try:
-            fd = os.open(path, os.O_RDONLY)
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
         except OSError as e:
             if optional:
                 return None

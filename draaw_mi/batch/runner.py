@@ -17,7 +17,7 @@ Parameter          Meaning
                    (instead of a LocalCluster)
 ``tls``            ``{"ca_file", "cert", "key"}``: the files of a ``tls://`` scheduler's client
 ``retries``        tries after a frame's worker dies (a crash, out of memory), before the frame
-                   is reported failed (default 2)
+                   is reported failed (default 2; dask runs only)
 ``dashboard``      serve the LocalCluster's dashboard on 127.0.0.1 (default: none)
 ``allow_outside_out``  let the manifest put files outside ``out`` (absolute or ``..`` patterns)
 ``dry_run``        plan and report, render nothing
@@ -50,7 +50,7 @@ import numpy as np
 from ..errors import DraawError, ParameterError, SceneError, suggest
 from ..progress import check_mode, progress_bar
 from .confine import check_inside
-from .executors import EXECUTORS, TLS_KEYS, run_dask, run_inprocess
+from .executors import DEFAULT_RETRIES, EXECUTORS, TLS_KEYS, run_dask, run_inprocess
 from .exr import MANIFEST_ATTR, frame_status, preview_path, read_header, write_preview
 from .frame import SceneCache
 from .lock import output_locks
@@ -102,12 +102,20 @@ def load(manifest, out: str | None = None, cache=None, allow_outside_out: bool =
     """Validate and plan: ``(Manifest, frame specs, scene cache)``. Raises on a bad manifest,
     and on one whose files would lie outside the output folder (unless ``allow_outside_out``:
     :mod:`~draaw_mi.batch.confine`)."""
+    # (the string "false" is true: the run would write wherever the manifest says)
+    _check_flag("batch", "allow_outside_out", allow_outside_out)
     m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out, allow_outside_out)
     cache = cache if cache is not None else SceneCache()
     specs = plan(m, cache)
     _check_log(m, specs)
     _check_confined(m, specs)
     return m, specs, cache
+
+
+def _check_flag(fn: str, name: str, value) -> None:
+    """Refuse a ``value`` of the keyword ``name`` that is not True or False."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ParameterError(f"{fn}: {name}={value!r}; expected True or False")
 
 
 def _check_confined(m: Manifest, specs: list) -> None:
@@ -165,7 +173,9 @@ class _Log:
         self.path, self.error = path, None
         try:
             os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-            self.fh = open(path, "a", encoding="utf-8")
+            # (O_NOFOLLOW: a link put where the log goes since planning is not written through)
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o666)
+            self.fh = os.fdopen(fd, "a", encoding="utf-8")
         except OSError as e:
             raise SceneError(f"batch: cannot open the log {path!r}: {e.strerror or e}") from None
 
@@ -250,7 +260,7 @@ def status(manifest, out: str | None = None, allow_outside_out: bool = False) ->
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
         scheduler: str | None = None, progress: bool | str = True, on_result=None, dry_run: bool = False,
-        client=None, overwrite: bool = False, allow_outside_out: bool = False, retries: int = 2,
+        client=None, overwrite: bool = False, allow_outside_out: bool = False, retries: int | None = None,
         dashboard: bool = False, tls: dict | None = None) -> BatchResult:
     """Render every unfinished frame of ``manifest``; see the module docstring."""
     check_mode(progress, "batch.run")
@@ -259,9 +269,8 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     _check_workers(workers, scheduler, client, executor)
     dask = _dask_options(executor, workers, scheduler, client, retries, dashboard, tls)
-    if not isinstance(overwrite, (bool, np.bool_)):
-        # (the string "false" is true: another manifest's frames would be replaced)
-        raise ParameterError(f"batch.run: overwrite={overwrite!r}; expected True or False")
+    # (the string "false" is true: another manifest's frames would be replaced)
+    _check_flag("batch.run", "overwrite", overwrite)
     if executor == "dask" and client is None:
         if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line
             raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'")
@@ -335,13 +344,17 @@ def _refuse_foreign(m: Manifest, foreign: list) -> None:
 
 
 def _dask_options(executor, workers, scheduler, client, retries, dashboard, tls) -> dict:
-    """``run_dask``'s keyword arguments, checked: ``retries`` a whole number >= 0,
-    ``dashboard`` a flag for a LocalCluster this run starts, ``tls`` three existing files for a
-    ``tls://`` scheduler."""
-    if isinstance(retries, bool) or not isinstance(retries, numbers.Integral) or retries < 0:
+    """``run_dask``'s keyword arguments, checked: ``retries`` (default 2) a whole number >= 0 for
+    a dask run, ``dashboard`` a flag for a LocalCluster this run starts, ``tls`` three existing
+    files for a ``tls://`` scheduler."""
+    if retries is None:
+        retries = DEFAULT_RETRIES
+    elif isinstance(retries, bool) or not isinstance(retries, numbers.Integral) or retries < 0:
         raise ParameterError(f"batch.run: retries={retries!r}; expected an integer >= 0")
-    if not isinstance(dashboard, (bool, np.bool_)):
-        raise ParameterError(f"batch.run: dashboard={dashboard!r}; expected True or False")
+    elif executor != "dask":
+        raise ParameterError(f"batch.run: retries={retries!r} is for executor='dask' (an in-process run "
+                             "has no worker to lose)")
+    _check_flag("batch.run", "dashboard", dashboard)
     if dashboard and (executor != "dask" or scheduler or client is not None):
         raise ParameterError("batch.run: dashboard=True shows the LocalCluster a dask run starts; a "
                              "scheduler's dashboard is its own (and there is none in-process)")

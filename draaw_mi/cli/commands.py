@@ -181,7 +181,7 @@ def _batch_parser(sub) -> None:
     a.add_argument("--tls-ca-file", help="the CA certificate a tls:// scheduler's certificate is checked with")
     a.add_argument("--tls-cert", help="this client's certificate for a tls:// scheduler")
     a.add_argument("--tls-key", help="the private key of --tls-cert")
-    a.add_argument("--retries", type=int, default=2,
+    a.add_argument("--retries", type=int, default=None,
                    help="tries after a frame's worker dies (a crash, out of memory) before the frame "
                    "counts as failed (default 2; a --scheduler's own allowed-failures applies there)")
     a.add_argument("--dashboard", action="store_true",
@@ -407,15 +407,17 @@ def _cmd_batch(args) -> int:
         raise CliError("--workers sizes a new LocalCluster; the --scheduler's cluster has its own workers")
     if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
         raise CliError(f"--scheduler {args.scheduler!r}: expected an address such as tcp://HOST:8786")
-    if (args.workers or args.scheduler or args.dashboard) and args.executor != "dask":
-        raise CliError("--workers, --scheduler and --dashboard need --executor dask")
+    if args.retries is not None and args.retries < 0:
+        raise CliError(f"--retries {args.retries}: expected an integer >= 0")
+    given = [flag for flag, v in (("--workers", args.workers), ("--scheduler", args.scheduler),
+                                  ("--dashboard", args.dashboard), ("--retries", args.retries is not None)) if v]
+    if given and args.executor != "dask":
+        raise CliError(f"{', '.join(given)}: {'needs' if len(given) == 1 else 'need'} --executor dask")
     if args.dashboard and args.scheduler:
         raise CliError("--dashboard shows the LocalCluster this run starts; the --scheduler's dashboard is its own")
-    if args.retries < 0:
-        raise CliError(f"--retries {args.retries}: expected an integer >= 0")
     tls = {"ca_file": args.tls_ca_file, "cert": args.tls_cert, "key": args.tls_key}
     if any(tls.values()):
-        missing = [f"--tls-{'ca-file' if k == 'ca_file' else k}" for k, v in tls.items() if not v]
+        missing = [f"--tls-{k.replace('_', '-')}" for k, v in tls.items() if not v]
         if missing:
             raise CliError(f"a TLS client needs --tls-ca-file, --tls-cert and --tls-key; missing {', '.join(missing)}")
         if not (args.scheduler or "").startswith("tls://"):

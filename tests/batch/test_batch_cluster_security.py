@@ -150,7 +150,9 @@ def test_a_batch_over_tls_renders_the_in_process_frames_and_plain_clients_are_re
     (["--tls-ca-file", "a", "--tls-cert", "b", "--tls-key", "c", "--executor", "dask", "--scheduler",
       "tcp://127.0.0.1:1"], "are for a --scheduler tls://HOST:PORT"),
     (["--retries", "-1"], "--retries -1: expected an integer >= 0"),
-    (["--dashboard"], "need --executor dask"),
+    (["--dashboard"], "draaw-mi: error: --dashboard: needs --executor dask"),
+    (["--retries", "1"], "draaw-mi: error: --retries: needs --executor dask"),
+    (["--workers", "1", "--retries", "1"], "draaw-mi: error: --workers, --retries: need --executor dask"),
     (["--dashboard", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:1"], "--dashboard shows the LocalCluster"),
 ])
 def test_the_cluster_flags_are_checked_in_one_line(tmp_path, capsys, args, message):
@@ -192,3 +194,14 @@ def test_the_dashboard_is_served_only_when_asked_and_only_on_loopback():
         finally:
             client.close()
             cluster.close()
+
+
+def test_retries_are_refused_where_no_worker_can_die(tmp_path):
+    """An in-process run has no worker to lose: retries there would be ignored without a word."""
+    from draaw_mi.errors import ParameterError
+    doc = manifest(tmp_path, frames=1)
+    with pytest.raises(ParameterError, match=r"^batch.run: retries=1 is for executor='dask'"):
+        batch.run(doc, out=str(tmp_path / "out"), retries=1, progress=False)
+    with pytest.raises(ParameterError, match=r"^batch.run: retries=-1; expected an integer >= 0"):
+        batch.run(doc, out=str(tmp_path / "out"), executor="dask", retries=-1, progress=False)
+    assert not (tmp_path / "out").exists()

@@ -12,7 +12,8 @@ from batch_helpers import frames_of, manifest, write_manifest
 from draaw_mi.batch import runner as batch
 from draaw_mi.batch.frame import SceneCache, render_frame
 from draaw_mi.cli import main
-from draaw_mi.errors import SceneError
+from draaw_mi.batch.lock import LOCK_NAME
+from draaw_mi.errors import BusyError, ParameterError, SceneError
 
 
 def tree(root) -> set:
@@ -56,9 +57,54 @@ def test_a_field_cannot_smuggle_a_climb(tmp_path, capsys):
              ["job 'orbit' frame 0 would be written to", "outside the output folder"])
 
 
-@pytest.mark.parametrize("log", ["../escaped.jsonl", "/tmp/draaw-escaped.jsonl"])
-def test_a_log_outside_is_refused(tmp_path, capsys, log):
-    _refused(tmp_path, capsys, lambda d: d.update(log=log), ["log", "--allow-outside-out"])
+@pytest.mark.parametrize("log, why", [("../escaped.jsonl", "'../escaped.jsonl' climbs out of the output folder"),
+                                      ("/tmp/draaw-escaped.jsonl", "'/tmp/draaw-escaped.jsonl' is an absolute path")])
+def test_a_log_outside_is_refused(tmp_path, capsys, log, why):
+    _refused(tmp_path, capsys, lambda d: d.update(log=log), ["log", why, "--allow-outside-out"])
+
+
+def test_a_log_through_a_symbolic_link_is_refused(tmp_path, capsys):
+    """A log name with no '..' whose folder links out: refused once the real path is known."""
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out").mkdir()
+    os.symlink(tmp_path / "elsewhere", tmp_path / "out" / "link")
+    _refused(tmp_path, capsys, lambda d: d.update(log="link/run.jsonl"),
+             ["the log would be written to", "through a symbolic link", "--allow-outside-out"], out="out")
+
+
+def test_a_log_that_became_a_link_is_not_written_through(tmp_path):
+    """The log opens without following a link put in its place after planning."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    os.symlink(victim, tmp_path / "run.jsonl")
+    with pytest.raises(SceneError, match="cannot open the log"):
+        batch._Log(str(tmp_path / "run.jsonl"))
+    assert victim.read_text() == "precious"
+
+
+def test_a_planted_lock_file_link_is_not_followed(tmp_path):
+    """Someone who can write into a shared --out plants the lock file as a link to a file of
+    the user's: the run would empty it and write its pid there."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    doc = manifest(tmp_path, frames=1)
+    folder = tmp_path / "out" / "out" / "orbit"                # the job's frames' folder
+    folder.mkdir(parents=True)
+    os.symlink(victim, folder / LOCK_NAME)
+    with pytest.raises(BusyError, match="cannot be locked"):
+        batch.run(doc, out=str(tmp_path / "out"), progress=False)
+    assert victim.read_text() == "precious" and os.path.islink(folder / LOCK_NAME)
+    assert frames_of(tmp_path / "out") == {}
+
+
+@pytest.mark.parametrize("call", [batch.run, batch.status, batch.load])
+def test_the_flag_takes_true_or_false_only(tmp_path, call):
+    """The string "false" is true: it would have lifted the confinement."""
+    doc = manifest(tmp_path, frames=1)
+    doc["output"] = "../escaped/{frame:04d}.exr"
+    with pytest.raises(ParameterError, match=r"allow_outside_out='false'; expected True or False"):
+        call(doc, out=str(tmp_path / "out"), allow_outside_out="false")
+    assert not (tmp_path / "escaped").exists()
 
 
 def test_a_symbolic_link_out_of_the_folder_is_not_written_through(tmp_path, capsys):

@@ -148,7 +148,7 @@ def test_malformed_toml_and_missing_manifest(tmp_path, capsys):
 def test_cli_flag_combinations(tmp_path, capsys):
     path = write_manifest(tmp_path, manifest(tmp_path))
     assert main(["batch", path, "--workers", "2"]) == 2
-    assert "need --executor dask" in capsys.readouterr().err
+    assert "draaw-mi: error: --workers: needs --executor dask" in capsys.readouterr().err
     assert main(["batch", path, "--executor", "dask", "--scheduler", "localhost:1"]) == 2
     assert "tcp://" in capsys.readouterr().err
 
