@@ -14,7 +14,8 @@ The package is a stack of wings, each importing only the ones below it: ``cli``,
 ``batch``, ``widgets``, ``fitting``, ``rendering``, ``scene``, ``integrators``, ``media`` /
 ``post``, ``sdf`` / ``materials``, and the ground floor (``io``, ``progress``, ``plotting``,
 ``guard``, ``limits``, ``errors``). Heavy or optional wings (``batch``, ``bench``, ``cli``,
-``media``, ``sdf``, ``widgets``) are imported when first named.
+``media``, ``widgets``) are imported when first named; ``sdf`` comes with the integrators (they
+find a scene's SDF objects).
 
 Example::
 
@@ -86,7 +87,7 @@ from ._lazy import MovedModules as _MovedModules  # noqa: E402
 from ._lazy import ShadowedModule as _ShadowedModule
 from ._lazy import on_first_use as _on_first_use
 
-_LAZY = ("batch", "bench", "cli", "media", "sdf", "widgets")
+_LAZY = ("batch", "bench", "cli", "media", "widgets")
 
 # Module paths of the flat layout, served as the modules' new homes with a DeprecationWarning
 # until the next release. (Not draaw_mi.render, .fit, .denoise: those names are the functions.)
@@ -128,7 +129,7 @@ for _old, _new, _elsewhere, _gone in (
             "freeze_eligible": f"{_SESSION}.freezes(spp)",
             "frozen_render": f"{_SESSION}.recording(integrator, spp)",
             "scene_state": f"{_SESSION} holds what the renderer kept per scene",
-            "scene_changed": "draaw_mi.rendering.session.scene_changed(scene) takes the DraawScene"}),
+            "scene_changed": f"{_SESSION}.scene_changed() (with the DraawScene, not the mi.Scene)"}),
         ("fit", "draaw_mi.fitting.fitter", {}, {}),
         ("denoise", "draaw_mi.rendering.denoiser", {}, {})):
     _sys.modules.setdefault(f"{__name__}.{_old}", _ShadowedModule(f"{__name__}.{_old}", _new, _elsewhere, _gone))

@@ -44,6 +44,7 @@ class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     """
     def __init__(self, moved: dict):
         self.moved = dict(moved)
+        self._specs: dict = {}                 # old name -> the new module's own spec, meanwhile
 
     def find_spec(self, fullname, path=None, target=None):
         if fullname not in self.moved:
@@ -54,11 +55,11 @@ class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         new = self.moved[spec.name]
         _moved_warning(spec.name, new)
         module = importlib.import_module(new)
-        self._spec = module.__spec__           # the import system sets the old name's spec on it
+        self._specs[spec.name] = module.__spec__   # the import system sets the old name's spec on it
         return module
 
     def exec_module(self, module):
-        module.__spec__ = self._spec
+        module.__spec__ = self._specs.pop(module.__spec__.name)
 
 
 def _moved_warning(old: str, new: str) -> None:

@@ -11,8 +11,10 @@ So every render of draaw-mi runs under :data:`RENDER_GUARD`: each pass of a rend
 parameter update, each fit iteration (renders, gradient passes, the optimiser's update), each
 batch frame, each scene load and plugin made, and every primal ``mi.render`` with a draaw
 integrator (:meth:`DraawIntegrator.render <draaw_mi.integrators.common.DraawIntegrator.render>`).
-Kernels use every core already, so taking turns costs little. The guard is re-entrant (a
-guarded block may render again). A session's lock comes before it, never after.
+Kernels use every core already, so taking turns costs little. The guard is re-entrant, but a
+scene's lock comes before it, never after: a block that renders a scene holds that scene's
+lock first (``with holding(scene):``, :func:`draaw_mi.rendering.session.holding`), else it
+can wait on a preview of the scene that holds the lock and waits for the guard.
 
 Mitsuba's own integrators called directly (``mi.render`` with ``path``) and your own Dr.Jit
 work beside a running preview (a ``dr.backward`` of a differentiable render) are not

@@ -263,3 +263,17 @@ def test_the_shadowed_modules_leave_the_functions_alone_and_say_what_is_gone():
         with pytest.raises(ImportError, match="cannot import name 'no_such_name'"):
             from draaw_mi.render import no_such_name  # noqa: F401
     assert session.FREEZE is True
+
+
+def test_a_plain_import_leaves_the_heavy_and_optional_parts_unloaded():
+    """``import draaw_mi`` (about 0.35 s) loads no wing that only some work needs, no media
+    code (loaded with the first scene that has media) and none of the libraries that cost
+    0.1-0.9 s to import or are optional; each is loaded where it is used."""
+    code = ("import sys, draaw_mi\n"
+            "print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('trimesh', 'colour', 'matplotlib', 'OpenEXR', 'distributed', 'dask', 'pyoidn', 'ipywidgets', "
+            "'tqdm') or m.startswith(('draaw_mi.batch', 'draaw_mi.bench', 'draaw_mi.cli', 'draaw_mi.media', "
+            "'draaw_mi.widgets', 'draaw_mi.integrators.volume')))))\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "", out.stdout

@@ -17,10 +17,9 @@ import drjit as dr
 import numpy as np
 
 from ..errors import DraawError, RenderError
-from ..guard import RENDER_GUARD
 from ..rendering.film_colour import check_film_colour, scene_colour_names
 from ..rendering.renderer import MAX_PASS_SPP, render
-from ..rendering.session import apply_post, non_finite_count, session_of
+from ..rendering.session import apply_post, holding, non_finite_count, session_of
 from ..scene import load_scene, value_like
 from ..scene.camera import look_at_transform, scene_fov, sensor_keys, x_fov
 from .confine import check_inside
@@ -180,9 +179,7 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     if entry.files_hash != spec.get("files_hash"):
         raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
                           "the batch was planned; re-run the batch")
-    # the scene's lock before the guard (draaw_mi.guard); the guard covers the frame's
-    # parameter updates too
-    with session_of(entry.scene).lock, RENDER_GUARD:
+    with holding(entry.scene):                  # (the frame's parameter updates too)
         entry.apply(spec)
         if track_kernels:
             dr.kernel_history()                     # clears the history

@@ -71,10 +71,9 @@ import numpy as np
 
 from .. import post as post_mod
 from ..errors import DraawError, ParameterError
-from ..guard import RENDER_GUARD
 from ..integrators import is_draaw, resolve_version
 from ..progress import check_mode, progress_bar
-from ..rendering.session import Session, session_of
+from ..rendering.session import Session, holding, session_of
 from ..scene import DraawScene, load_scene
 from ..scene.schema import shown
 from .params import FitParam, range_for
@@ -86,27 +85,28 @@ from .views import LOSSES, sampler_spp, view_loss, view_sensors
 ZERO_GRADIENT_ITERATIONS = 5
 
 
-@dataclass
+@dataclass(kw_only=True)
 class FitSettings:
-    """:func:`fit`'s keyword arguments, checked (see its docstring for each)."""
-    version: str | None = None
-    spp: int = 16
-    iterations: int = 100
-    lr: float = 0.05
-    loss: str = "l2"
-    post: object = None
-    progress: bool | str = True
-    seed: int = 0
-    exposure: str = "fixed"
-    init: dict | None = None
-    max_depth: int | None = None
-    average_last: float = 0.25
-    tol: float = 5e-3
-    resolution: object = None
-    lr_final: float = 0.1
-    spp_grad: int | None = None
-    beta_2: float = 0.9
-    smooth: bool | None = None
+    """:func:`fit`'s keyword arguments, checked (see its docstring for each; the defaults are
+    :func:`fit`'s)."""
+    version: str | None
+    spp: int
+    iterations: int
+    lr: float
+    loss: str
+    post: object
+    progress: bool | str
+    seed: int
+    exposure: str
+    init: dict | None
+    max_depth: int | None
+    average_last: float
+    tol: float
+    resolution: object
+    lr_final: float
+    spp_grad: int | None
+    beta_2: float
+    smooth: bool | None
 
 
 @dataclass
@@ -178,9 +178,10 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
     """
     check_mode(progress, "fit")
     t0 = time.perf_counter()
-    settings = _validate(FitSettings(version, spp, iterations, lr, loss, post, progress, seed, exposure, init,
-                                     max_depth, average_last, tol, resolution, lr_final, spp_grad, beta_2,
-                                     smooth))
+    settings = _validate(FitSettings(
+        version=version, spp=spp, iterations=iterations, lr=lr, loss=loss, post=post, progress=progress, seed=seed,
+        exposure=exposure, init=init, max_depth=max_depth, average_last=average_last, tol=tol, resolution=resolution,
+        lr_final=lr_final, spp_grad=spp_grad, beta_2=beta_2, smooth=smooth))
     problem = _set_up(scene, references, params, views, settings)
     opt = _optimiser(problem, settings)
     history, compiles = _iterate(problem, settings, opt)
@@ -344,7 +345,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
         for it in range(s.iterations):
             frac = it / max(s.iterations - 1, 1)
             opt.set_learning_rate(s.lr * (s.lr_final + (1.0 - s.lr_final) * 0.5 * (1.0 + np.cos(np.pi * frac))))
-            with problem.session.lock, RENDER_GUARD:     # one render at a time (draaw_mi.guard)
+            with holding(problem.scene):      # one render at a time (draaw_mi.guard)
                 total = mi.Float(0.0)
                 for v, (sensor, ref) in enumerate(zip(sensors, problem.refs)):
                     _push(problem, opt)       # fresh AD edges latent -> scene value for this view
@@ -389,7 +390,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
         if len(history) < s.iterations:      # interrupted: leave the last iterate, detached
             for k in keys:
                 p[k] = prm[k].from_latent(dr.detach(opt[k]))
-            with RENDER_GUARD:
+            with holding(problem.scene):
                 p.update()
     return history, compiles
 
@@ -433,7 +434,7 @@ def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: i
                                                  dtype=float).mean(axis=0)) for k in keys}
     bad = [names[k] for k in keys if not np.all(np.isfinite(averaged[k]))]
     if bad:
-        with RENDER_GUARD:
+        with holding(scene):
             for k in keys:
                 p[k] = problem.start[k]
             p.update()
@@ -450,7 +451,7 @@ def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: i
         else:
             fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
             p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
-    with problem.session.lock, RENDER_GUARD:       # the values and the render they show, together
+    with holding(scene):                          # the values and the render they show, together
         p.update()
         final = problem.session.render_pass(problem.integrator, problem.spp, (s.seed + 12345) & 0xFFFFFFFF,
                                             sensor=problem.sensors[0])
@@ -459,7 +460,7 @@ def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: i
         final = _apply_chain(final, problem.chain)
     final = np.array(final)
     if problem.callers_scene is not scene:          # fitted at the references' size: a copy
-        with RENDER_GUARD:
+        with holding(problem.callers_scene):        # (no render of it sees half the values)
             q = problem.callers_scene.all_params
             for k in keys:
                 q[k] = type(p[k])(p[k])

@@ -42,7 +42,6 @@ Example::
 """
 from __future__ import annotations
 
-import contextlib
 import numbers
 import operator
 import threading
@@ -54,7 +53,6 @@ import numpy as np
 
 from .. import post as _post
 from ..errors import DraawError, ParameterError, suggest
-from ..guard import RENDER_GUARD
 from ..integrators import is_draaw
 from ..post import load_chain
 from ..scene import DraawScene, check_like, load_scene, value_like
@@ -64,7 +62,7 @@ from ..scene.smoke_boxes import check_camera_outside_smoke
 from .denoiser import denoise, load_pyoidn
 from .passes import pass_seed
 from .preview_worker import PreviewFrame, PreviewSuperseded, PreviewWorker  # noqa: F401  (re-exported)
-from .session import session_of
+from .session import holding, session_of
 
 GUIDES = ("albedo", "normal")
 
@@ -262,11 +260,7 @@ class Preview(PreviewWorker):
         if not pending:
             return
         scenes = [self.scene] + ([self._lo] if self._lo is not None else [])
-        # the scenes' locks (the scene's first), then the guard: parameter updates too
-        with contextlib.ExitStack() as held:
-            for sc in scenes:
-                held.enter_context(session_of(sc).lock)
-            held.enter_context(RENDER_GUARD)
+        with holding(*scenes):               # (the scene's lock first, as step takes them)
             for sc in scenes:
                 p = sc.all_params               # (SDF objects' parameters too)
                 old = {key: dr.copy(p[key]) for key in pending}    # (assigned in place)
@@ -308,10 +302,8 @@ class Preview(PreviewWorker):
         # an opaque seed: a new frame's seed is new data, not a new kernel
         seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
         t0 = time.perf_counter()
-        # the scene's lock, then its reduced copy's, then the guard (a scene's lock before the
-        # guard, never after: Session.close takes them in that order)
         session = session_of(target)
-        with session_of(self.scene).lock, session.lock, RENDER_GUARD:
+        with holding(self.scene, target):    # (the scene's, then its reduced copy's)
             img = session.render_pass(self._integrator_for(target, settings), 1, seed, freeze=self.freeze)
             arr = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t0

@@ -17,6 +17,8 @@ import numpy as np
 from ..errors import DraawError
 from .session import session_of
 
+_STARTS = threading.RLock()           # one preview start at a time: see PreviewWorker.start
+
 
 @dataclass
 class PreviewFrame:
@@ -58,11 +60,12 @@ class PreviewWorker:
         stopped, and its error callbacks get :class:`PreviewSuperseded`. The worker is the
         scene session's (:meth:`~draaw_mi.rendering.session.Session.add_worker`): closing the
         session, or the interpreter's exit, stops it."""
-        session = session_of(self.scene)
-        for other in session.workers():
-            if other is not self and other.running:
-                other._supersede()
-        session.add_worker(self)
+        with _STARTS:                 # (two starts at once would each leave the other running)
+            session = session_of(self.scene)
+            for other in session.workers():
+                if other is not self and other.running:
+                    other._supersede()
+            session.add_worker(self)
         if self._thread is not None and self._thread.is_alive():
             self._stop.clear()        # a worker that did not stop in time goes on: not a second
             return

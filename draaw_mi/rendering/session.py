@@ -21,8 +21,8 @@ the preview and :func:`draaw_mi.fit` all render through them.
 
 Renders of different scenes from different threads are serialised: every pass runs under
 :data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), and so does
-``mi.render`` with a draaw integrator called directly. Take a session's lock before the
-guard, never after.
+``mi.render`` with a draaw integrator called directly. Take a scene's lock before the
+guard, never after: :func:`holding` takes them so.
 
 >>> import draaw_mi
 >>> from draaw_mi.rendering.session import session_of
@@ -37,6 +37,7 @@ guard, never after.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import threading
 import weakref
 
@@ -85,7 +86,6 @@ class Session:
         self._integrators: dict = {}          # plugin properties -> integrator
         self._integrator_keys: dict = {}      # integrator()'s arguments as given -> properties
         self._workers: weakref.WeakSet = weakref.WeakSet()
-        _LIVE.add(self)
 
     @property
     def scene(self):
@@ -110,7 +110,8 @@ class Session:
         key = tuple(sorted((k, str(v)) for k, v in props.items()))
         if key not in self._integrators:
             with RENDER_GUARD:               # (a plugin made while a recording replays breaks it)
-                self._integrators[key] = make_plugin(props)
+                if key not in self._integrators:        # (another thread may have made it meanwhile)
+                    self._integrators[key] = make_plugin(props)
         if fast is not None:
             self._integrator_keys[fast] = key
         return self._integrators[key]
@@ -248,7 +249,6 @@ class Session:
         with _SESSIONS_GUARD:
             if scene is not None and _SESSIONS.get(scene) is self:
                 del _SESSIONS[scene]
-        _LIVE.discard(self)
 
     def __enter__(self) -> "Session":
         return self
@@ -264,7 +264,6 @@ class Session:
 
 _SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session
 _SESSIONS_GUARD = threading.Lock()
-_LIVE: "weakref.WeakSet" = weakref.WeakSet()          # every open session (close_all)
 _LOCKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()       # DraawScene -> RLock
 _LOCKS_GUARD = threading.Lock()
 
@@ -290,18 +289,32 @@ def session_of(scene) -> Session:
     return session
 
 
-def scene_changed(scene) -> None:
-    """:meth:`Session.scene_changed` of ``scene``'s session (a
-    :class:`~draaw_mi.scene.DraawScene`), if it has one."""
-    session = _SESSIONS.get(scene)
-    if session is not None:
-        session.scene_changed()
+@contextlib.contextmanager
+def holding(*scenes):
+    """Hold the locks of ``scenes`` (:class:`~draaw_mi.scene.DraawScene` objects, in the order
+    given), then :data:`~draaw_mi.guard.RENDER_GUARD`: the order in which every render takes
+    them (:meth:`Session.render_pass`, :meth:`Session.close`), so that blocks which render or
+    update parameters never wait on each other in a circle.
+
+    >>> import draaw_mi
+    >>> scene = draaw_mi.load_scene({"render": {"resolution": [8, 8]}, "shapes": [{"type": "sphere"}],
+    ...     "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+    >>> with holding(scene):
+    ...     img = draaw_mi.render(scene, spp=1)       # (re-entrant: render takes them again)
+    """
+    with contextlib.ExitStack() as held:
+        for scene in scenes:
+            held.enter_context(_lock_of(scene))
+        held.enter_context(RENDER_GUARD)
+        yield
 
 
 def close_all(timeout: float = WORKER_STOP_S) -> None:
     """Close every open session: their workers stop. Runs at interpreter exit, before Dr.Jit
     shuts down (a worker still inside a kernel would crash the process)."""
-    for session in list(_LIVE):
+    with _SESSIONS_GUARD:
+        sessions = list(_SESSIONS.values())      # (a closed session has left it)
+    for session in sessions:
         session.close(timeout)
 
 

@@ -35,9 +35,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import RenderError
-from ..guard import RENDER_GUARD
 from .film_colour import film_colour_names
-from .session import session_of
+from .session import holding, session_of
 
 
 def _jit(array_type, values: np.ndarray):
@@ -155,7 +154,7 @@ def render_adaptive(scene, block: int = 8, spp: int = 1, seed: int = 0, version:
     session = session_of(scene)
     if integrator is None:
         integrator = session.integrator(version, scene.settings["max_depth"] if max_depth is None else max_depth)
-    with session.lock, RENDER_GUARD:
+    with holding(scene):
         return _render(scene, block, spp, seed, integrator)
 
 

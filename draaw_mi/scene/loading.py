@@ -32,10 +32,6 @@ from .schema import Where, number, read_document, resolution, string
 SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
 
 
-def _read_text_description(path: str) -> dict:
-    return read_document(path, "scene file")
-
-
 def _bare_mesh_description(path: str) -> dict:
     """A description for a mesh file alone: camera and lights placed from its bounds."""
     parts = load_mesh_parts(path, Where(path))
@@ -45,7 +41,6 @@ def _bare_mesh_description(path: str) -> dict:
             "lights": auto_light(lo, hi, camera["origin"])}
 
 
-# description fields that name things, never files
 def load_scene(source, **overrides) -> DraawScene:
     """Load a scene from a TOML/JSON/XML/mesh file, a description dict, a Mitsuba scene dict
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
@@ -100,7 +95,7 @@ def _load_scene(source, **overrides) -> DraawScene:
         files, named = xml_references(path)      # (includes followed, comments ignored)
         return _from_mitsuba_scene(scene, path, overrides, named_integrator=named, files=files)
     if lower.endswith((".toml", ".json")):
-        desc = _read_text_description(path)
+        desc = read_document(path, "scene file")
     else:
         desc = _bare_mesh_description(path)
     return from_description(desc, path, os.path.dirname(os.path.abspath(path)), overrides)
@@ -132,7 +127,7 @@ def _wrapped(mi_scene) -> DraawScene:
     key = id(mi_scene)
     entry = _WRAPPED.pop(key, None)
     if entry is None:             # (an entry holds its scene: its id is not reused meanwhile)
-        entry = (mi_scene, _from_mitsuba_scene(mi_scene, "<mi.Scene>", {}))
+        entry = (mi_scene, wrap(mi_scene))
     _WRAPPED[key] = entry                       # (most recent last)
     while len(_WRAPPED) > WRAPPED_KEPT:
         _WRAPPED.pop(next(iter(_WRAPPED)))
