@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.draaw-mi-installed
 
-.PHONY: setup llvm demo test test-all clean
+.PHONY: setup llvm demo test test-all docs clean
 
 setup: llvm $(STAMP)
 
@@ -18,8 +18,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e ".[dev]"
 	@touch $(STAMP)
 
+# Denoised (OIDN, installed by setup; the emitters seen directly are not denoised); the raw
+# render is kept in out/cornell.exr's channels raw.R/G/B (benchmarks/results/demo_quality.md).
 demo: setup
-	$(BIN)/draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png
+	$(BIN)/draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --denoise
 
 test: setup
 	$(BIN)/python -m pytest -m "not slow" -q
@@ -28,8 +30,20 @@ test-all: setup
 	$(BIN)/python -m pip install -q -e ".[notebooks,browser]"
 	$(BIN)/python -m pytest -q
 
+DOCS_STAMP := $(VENV)/.draaw-mi-docs-installed
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install -q -e ".[docs]"
+	@touch $(DOCS_STAMP)
+
+# The documentation site (docs/): warnings are errors (-W), every cross-reference must resolve (-n).
+# Notebook outputs are stored in docs/tutorials/ and the gallery in docs/_static/gallery/
+# (docs/execute_notebooks.py and docs/make_gallery.py refresh them); the build renders nothing.
+docs: setup $(DOCS_STAMP)
+	$(BIN)/sphinx-build -W --keep-going -n -q -b html docs docs/_build/html
+	@echo "docs: open docs/_build/html/index.html"
+
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache docs/_build docs/benchmarks
 
 # JupyterLab on notebooks/ with the widgets and the denoiser installed (material_tuning.ipynb).
 .PHONY: notebook

@@ -38,10 +38,17 @@ DEFAULT_VARIANT = "llvm_ad_rgb"
 VARIANT = _os.environ.get("DRAAW_MI_VARIANT", DEFAULT_VARIANT)
 
 
+#: the Mitsuba variants draaw-mi runs on: JIT (a kernel per render), differentiable, RGB (its
+#: BSDF and integrators compute in Color3f: a spectral, monochrome or polarised variant fails
+#: in the first render)
+SUPPORTED_VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
+
+
 def _select_variant(variant: str) -> None:
+    supported = "supported: 'llvm_ad_rgb' (CPU, the default) or 'cuda_ad_rgb' (GPU)"
     if variant.startswith("scalar"):
         raise DraawError(f"DRAAW_MI_VARIANT={variant!r} is not supported: draaw-mi needs a JIT "
-                         "variant such as 'llvm_ad_rgb' (CPU) or 'cuda_ad_rgb' (GPU)")
+                         f"variant; {supported}")
     if variant.startswith("llvm"):
         problem = check_llvm()
         if problem:
@@ -49,9 +56,18 @@ def _select_variant(variant: str) -> None:
     import mitsuba as mi  # only now: with libLLVM < 16, importing Dr.Jit aborts the process
     if variant not in mi.variants():
         raise DraawError(f"DRAAW_MI_VARIANT={variant!r} is not a Mitsuba variant; available: "
-                         + ", ".join(mi.variants()))
+                         + ", ".join(mi.variants()) + f"; {supported}")
+    if variant not in SUPPORTED_VARIANTS:       # (before set_variant: nothing is made in it)
+        why = ("renders in RGB only" if variant.endswith(("_spectral", "_mono", "_polarized")) else
+               "needs a differentiable (_ad_) variant")
+        raise DraawError(f"DRAAW_MI_VARIANT={variant!r} is not supported: draaw-mi {why}; {supported}")
     if mi.variant() != variant:
-        mi.set_variant(variant)
+        try:
+            mi.set_variant(variant)
+        except (ImportError, RuntimeError) as e:          # (cuda_ad_rgb without a GPU or driver)
+            first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+            raise DraawError(f"DRAAW_MI_VARIANT={variant!r}: Mitsuba cannot start it here ({first}); "
+                             f"use {DEFAULT_VARIANT!r}") from None
 
 
 _select_variant(VARIANT)

@@ -16,9 +16,13 @@ Example::
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import io
 import os
 import stat
+import sys
 import tempfile
+import threading
 from typing import Sequence
 
 import mitsuba as mi
@@ -176,22 +180,93 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
             raise IOFailure(f"write_exr({path!r}): {e}") from None
 
 
+_FD_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def quiet_fds():
+    """Send what C++ libraries write to file descriptors 1 and 2 and to Python's
+    ``sys.stdout`` / ``sys.stderr`` (OpenEXR's ``Warning: ...`` and ``(EXR_ERR_...)`` lines, up
+    to 18 for one cut-short file) to a buffer instead of the terminal; yields a list that holds
+    the captured text once the block ends. The descriptors and streams are the process's:
+    output of other threads during the block goes to the buffer too (an EXR read is short;
+    concurrent reads take turns)."""
+    captured: list[str] = []
+    with _FD_LOCK, tempfile.TemporaryFile() as buf:
+        _flush_all()
+        try:
+            saved = [os.dup(1), os.dup(2)]
+        except OSError:                         # (no descriptors 1 and 2: nothing to quieten)
+            yield captured
+            return
+        # (pybind11's py::print writes to sys.stdout, which need not be descriptor 1)
+        python_streams, text = (sys.stdout, sys.stderr), io.StringIO()
+        try:
+            os.dup2(buf.fileno(), 1)
+            os.dup2(buf.fileno(), 2)
+            sys.stdout = sys.stderr = text
+            yield captured
+        finally:
+            sys.stdout, sys.stderr = python_streams
+            _flush_all()                # (C's stdout is buffered in a pipe or file)
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            buf.seek(0)
+            captured.append(buf.read().decode("utf-8", "replace") + text.getvalue())
+
+
+def _flush_all() -> None:
+    """Flush Python's and the C library's buffered standard streams (what was written before
+    a redirection goes where it was meant to, what is written during one goes to the buffer)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None).fflush(None)
+
+
+def _first_message(text: str, path: str) -> str:
+    """OpenEXR's first captured line, without the file name it starts with."""
+    for line in text.splitlines():
+        line = line.strip()
+        if line:
+            return line.removeprefix(f"{path}:").strip()
+    return ""
+
+
 def read_exr(path: str, with_names: bool = False):
     """Read an EXR into an (H, W, C) float32 array, channels in a stable order.
 
     Colour channels come first (R, G, B[, A], X, Y, Z[, A] or Y[, A]), then the rest sorted by
     name. With
-    ``with_names=True`` returns ``(array, names)``.
+    ``with_names=True`` returns ``(array, names)``. A file that does not decode (cut short,
+    damaged, not an EXR) raises one :class:`~draaw_mi.errors.IOFailure` line; OpenEXR's own
+    messages about it are kept off the terminal (:func:`quiet_fds`), the first one quoted.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise IOFailure(f"read_exr: {path!r} does not exist")
     import OpenEXR  # (15 ms to import: paid by EXR files only)
-    try:
-        with OpenEXR.File(path, separate_channels=True) as f:
-            chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}
-    except Exception as e:  # noqa: BLE001
-        raise IOFailure(f"read_exr({path!r}): not a readable EXR file ({e})") from None
+    failure = None
+    with quiet_fds() as noise:
+        try:
+            with OpenEXR.File(path, separate_channels=True) as f:
+                chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}
+        except Exception as e:  # noqa: BLE001 - OpenEXR raises bare RuntimeError/ValueError
+            failure = str(e)
+    said = _first_message(noise[0] if noise else "", path)
+    if failure is None and not chans:
+        failure = "no channels"
+    if failure is not None:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+        if magic != b"\x76\x2f\x31\x01":
+            raise IOFailure(f"read_exr({path!r}): not a readable EXR file: not an EXR file at all "
+                            "(it does not start with the EXR magic number)")
+        raise IOFailure(f"read_exr({path!r}): not a readable EXR file: truncated or damaged "
+                        f"({os.path.getsize(path)} bytes; OpenEXR: {said or failure})")
     order = [n for n in ("R", "G", "B", "X", "Y", "Z", "A") if n in chans]
     order += sorted(n for n in chans if n not in order)
     arr = np.stack([chans[n] for n in order], axis=-1)

@@ -13,7 +13,8 @@ from ..plotting import save, subplots
 from .bias import pareto_front
 
 COLUMNS = ["scene", "label", "version", "adaptive", "max_depth", "spp", "time_s", "time_min_s", "compile_s",
-           "rmse", "relmse", "ciede2000", "bias_rmse", "bias_resolved", "finite", "resolution", "denoise"]
+           "rmse", "rmse_min", "rmse_max", "relmse", "ciede2000", "tail_share", "fireflies", "bias_rmse",
+           "bias_resolved", "bias_method", "finite", "resolution", "denoise"]
 
 
 def time_to_error(points: list[tuple[float, float]], target: float, extrapolate: bool = False) -> float:
@@ -70,17 +71,42 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
     return {"levels": len(levels), "subject_fastest": won, "details": details}
 
 
-def _plot_error_vs_time(rows, scene, depth, path):
+FIREFLY_NOTE = ("hollow: firefly-dominated (its repeats' RMSEs differ 2x or more: a few samples worth thousands "
+                "of times their pixel); its error jumps and can rise with spp while the expected MSE falls")
+
+
+def error_vs_time_figure(rows, scene, depth):
+    """The error-vs-time plot of one scene and depth: per setting its mean RMSE over the
+    repeats against the median time, bars from the lowest to the highest repeat, hollow
+    markers where the error is a few fireflies (``fireflies``), and per version a dashed
+    line at its bias (the RMSE it converges to against the ground truth; dotted: an upper
+    bound). The legend is outside the axes."""
     sel = [r for r in rows if r["scene"] == scene and r["max_depth"] == depth]
-    fig, ax = subplots(figsize=(7, 4.8))
+    fig, ax = subplots(figsize=(9.4, 5.0))
     labels = sorted({r["label"] for r in sel})
+    any_fireflies = any(r.get("fireflies") for r in sel)
     for lab in labels:
-        pts = sorted((r["time_s"], r["rmse"], r["spp"]) for r in sel if r["label"] == lab)
-        t, e, s = zip(*pts)
-        style = "o--" if "adaptive" in lab else "s:" if "oidn" in lab else "o-"
-        ax.plot(t, e, style, label=lab, ms=4)
-        for ti, ei, si in pts[:: max(1, len(pts) // 4)]:
-            ax.annotate(str(si), (ti, ei), fontsize=6, alpha=0.6)
+        rs = sorted((r for r in sel if r["label"] == lab), key=lambda r: (r["time_s"], r["spp"]))
+        t = [r["time_s"] for r in rs]
+        e = [r["rmse"] for r in rs]
+        style = "--" if "adaptive" in lab else ":" if "oidn" in lab else "-"
+        line, = ax.plot(t, e, style, label=lab, lw=1.2)
+        colour = line.get_color()
+        if all("rmse_min" in r for r in rs):
+            lo = [max(r["rmse"] - r["rmse_min"], 0.0) for r in rs]
+            hi = [max(r["rmse_max"] - r["rmse"], 0.0) for r in rs]
+            ax.errorbar(t, e, yerr=[lo, hi], fmt="none", ecolor=colour, elinewidth=0.8, capsize=2, alpha=0.7)
+        for r in rs:
+            hollow = bool(r.get("fireflies"))
+            ax.plot([r["time_s"]], [r["rmse"]], "o", ms=5 if hollow else 4, color=colour,
+                    mfc="white" if hollow else colour)
+        for r in rs[:: max(1, len(rs) // 4)]:
+            ax.annotate(str(r["spp"]), (r["time_s"], r["rmse"]), fontsize=6, alpha=0.6)
+        bias = rs[-1].get("bias_rmse")
+        if bias and rs[-1].get("bias_method") == "converged":
+            resolved = rs[-1].get("bias_resolved", True)
+            ax.axhline(bias, color=colour, ls="--" if resolved else ":", lw=1.0, alpha=0.8,
+                       label=f"{lab} bias {'' if resolved else '≤ '}{bias:.3g}")
     allp = [(r["time_s"], r["rmse"]) for r in sel]
     front = pareto_front(allp)
     fp = sorted(allp[i] for i in front)
@@ -88,12 +114,20 @@ def _plot_error_vs_time(rows, scene, depth, path):
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("time per image [s] (median)")
-    ax.set_ylabel("RMSE vs ground truth")
-    ax.set_title(f"{scene}: error vs time (max_depth {depth}; numbers = spp)")
+    ax.set_ylabel("RMSE vs ground truth (mean of repeats; bars: lowest-highest)")
+    ax.set_title(f"{scene}: error vs time (max_depth {depth}; numbers = spp)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    save(fig, path, dpi=110)
+    # outside the axes, on the right: it covered the data inside them
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+              title="bias (converged error): dashed;\ndotted: an upper bound", title_fontsize=6)
+    if any_fireflies:
+        fig.text(0.01, 0.01, FIREFLY_NOTE, fontsize=6.5, ha="left", va="bottom")
+    fig.tight_layout(rect=(0, 0.03 if any_fireflies else 0, 1, 1))
+    return fig
+
+
+def _plot_error_vs_time(rows, scene, depth, path):
+    save(error_vs_time_figure(rows, scene, depth), path, dpi=110)
 
 
 def _plot_error_images(images, gts, scene, spp, path):
@@ -120,6 +154,19 @@ def _plot_error_images(images, gts, scene, spp, path):
     save(fig, path, dpi=100)
 
 
+def _bias_note(result: dict) -> str:
+    if result.get("bias_from", "spp levels") == "converged renders":
+        return ("*Bias*: the RMSE between the image a version converges to and the ground truth, "
+                f"from two more renders of it at {result['ground_truth_spp'] // 2} spp each (their "
+                "noise and the ground truth's taken out; adaptive and denoised settings: from their "
+                "highest spp levels); `< x`: not resolved from the noise, at most x. A version's "
+                "RMSE cannot fall below its bias (the dashed lines of the plots): V1 and V2 render "
+                "their own models (truncated transport, Phong), not the ground truth's.")
+    return ("*Bias*: the RMSE that does not fall with spp, pooled over the highest spp levels, "
+            "the ground truth's own noise taken out; `< x`: not resolved from the noise of "
+            f"{result['repeats']} repeats, at most x.")
+
+
 def summary_markdown(result: dict) -> str:
     rows = result["rows"]
     lines = ["# draaw-mi benchmark: what accuracy costs in time", "",
@@ -128,9 +175,13 @@ def summary_markdown(result: dict) -> str:
              "max_depth studied (-1: unbounded). "
              f"Times: median of {result['repeats']} renders after warm-up (compile time separate). "
              f"Machine: {result['machine']}" + (f"; {result['load']}." if result.get("load") else "."), "",
-             "*Bias*: the RMSE that does not fall with spp, pooled over the highest spp levels, "
-             "the ground truth's own noise taken out; `< x`: not resolved from the noise of "
-             f"{result['repeats']} repeats, at most x.", ""]
+             _bias_note(result), "",
+             "*Fireflies* (†): settings whose repeats' RMSEs differ by 2x or more: their error is "
+             "a few samples worth thousands of times their pixel (V1 and V2 light "
+             "near-mirror Phong lobes by emitter sampling alone, without MIS). Their RMSE over "
+             f"{result['repeats']} repeats depends on whether such samples fell, so it jumps and "
+             "can rise with spp (the expected MSE still falls as 1 / spp); *RMSE range* is the "
+             "lowest and highest repeat.", ""]
     scenes = sorted({r["scene"] for r in rows})
     for sc in scenes:
         depths = sorted({r["max_depth"] for r in rows if r["scene"] == sc})
@@ -139,13 +190,15 @@ def summary_markdown(result: dict) -> str:
             res = sel[0]["resolution"]
             lines += [f"## {sc} ({res[0]}×{res[1]}, max_depth {d})", "",
                       f"![error vs time](error_vs_time_{sc}_d{d}.png)", "",
-                      "| setting | spp | time [s] | compile [s] | RMSE | relMSE | ΔE2000 | bias (RMSE) |",
-                      "|---|---:|---:|---:|---:|---:|---:|---:|"]
+                      "| setting | spp | time [s] | compile [s] | RMSE | RMSE range | relMSE | ΔE2000 | bias (RMSE) |",
+                      "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
             for r in sorted(sel, key=lambda r: (r["label"], r["spp"])):
                 bias = ("" if r["bias_rmse"] is None else f"{r['bias_rmse']:.4f}" if r.get("bias_resolved", True)
                         else f"< {r['bias_rmse']:.4f}")
+                spread = (f"{r['rmse_min']:.4f}–{r['rmse_max']:.4f}" if "rmse_min" in r else "")
                 lines.append(f"| {r['label']} | {r['spp']} | {r['time_s']:.4f} | {r['compile_s']:.3f} | "
-                             f"{r['rmse']:.4f} | {r['relmse']:.4f} | {r['ciede2000']:.3f} | {bias} |")
+                             f"{r['rmse']:.4f}{' †' if r.get('fireflies') else ''} | {spread} | "
+                             f"{r['relmse']:.4f} | {r['ciede2000']:.3f} | {bias} |")
             chk = pareto_check(rows, sc, d)
             if chk:
                 lines += ["", f"V4 is the fastest to reach {chk['subject_fastest']} of the {chk['levels']} "

@@ -9,10 +9,20 @@ peer), spp (powers of two), ``max_depth``, adaptive subsampling on/off — it me
 * **error** against the ground truth, averaged over the repeats (independent seeds): RMSE,
   relative MSE (``(x - gt)^2 / (gt^2 + 0.01)``) and mean CIEDE2000 of the sRGB-encoded images
   (colour-science);
-* **bias**: the error that does not fall with spp: ``sqrt(MSE - variance - floor)`` with the
-  variance of one render estimated from the independent repeats, pooled over the highest spp
-  levels, the ground truth's own noise (``floor``) taken out, and reported as an upper bound
-  where it is within the estimate's noise (see :func:`estimate_bias`).
+* **bias**: the error that does not fall with spp, i.e. how far the image a version converges
+  to is from the ground truth. Each version is rendered twice more at half the ground truth's
+  spp (cached as the ground truth is) and :func:`~draaw_mi.bench.bias.converged_bias` takes
+  both renders' noise and the ground truth's out; it is reported as an upper bound where it is
+  within the estimate's noise. (Adaptive and denoised settings, which have no such
+  reference, keep the estimate from their highest spp levels, :func:`estimate_bias`.) The
+  spp levels of a quick study (1, 4, 16) cannot tell V1's bias from its noise: the old
+  estimate gave "< 0.91" on the material spheres, where V1 converges 0.07 from ``path``.
+* **spread and fireflies**: the lowest and highest RMSE of the repeats; where they differ by
+  2x or more a setting is *firefly-dominated*: its error is a few samples thousands of times
+  the pixel's value (V1/V2 light near-mirror Phong lobes by emitter sampling alone, without
+  MIS), so over a few repeats it jumps, and can rise with spp while the expected MSE falls as
+  1 / spp. (``tail_share``, the share of the squared error in the largest 0.5 % of the
+  pixel values, is reported too: :func:`~draaw_mi.bench.bias.tail_share`.)
 
 Results are written as JSON, CSV, a Markdown summary and plots (see :mod:`draaw_mi.bench.report`).
 GO-Draaw's frame-time statistics along a camera path are in :func:`frame_times`.
@@ -40,7 +50,7 @@ from ..rendering.renderer import render
 from ..rendering.session import BLIND, session_of
 from ..scene.camera import go_draaw_look_at, look_at_transform, scene_fov, sensor_keys, x_fov
 from ..scene.camera_path import interpolate
-from .bias import estimate_bias
+from .bias import FIREFLY_SPREAD, converged_bias, estimate_bias, tail_share
 from .code_digest import code_digest
 from .metrics import errors
 from .report import write_report
@@ -124,6 +134,32 @@ def ground_truth(scene, spp: int = 4096, max_depth: int | None = None, cache_dir
     return img
 
 
+CONVERGED_SEEDS = (2 ** 31 - 3, 2 ** 31 - 5)      # the converged halves' seeds (not the gt's)
+
+
+def converged_halves(scene, version: str, spp: int, max_depth: int, cache_dir: str | None = None,
+                     progress: bool | str = False) -> tuple[np.ndarray, np.ndarray]:
+    """Two independent renders of ``version`` at ``spp // 2`` each (at least 1): what the
+    version converges to, with its noise measurable (:func:`~draaw_mi.bench.bias.converged_bias`);
+    cached as ``<cache_dir>/conv-<name>-<version>-<hash>-<k>.exr``."""
+    half = max(1, spp // 2)
+    paths = [None, None]
+    if cache_dir:
+        name = os.path.splitext(os.path.basename(scene.source or "scene"))[0]
+        key = _scene_key(scene, half, max_depth)
+        paths = [os.path.join(cache_dir, f"conv-{name}-{version}-{key}-{k}.exr") for k in (0, 1)]
+        if all(os.path.isfile(p) for p in paths):
+            return tuple(read_exr(p)[..., :3] for p in paths)
+    out = []
+    for path, seed in zip(paths, CONVERGED_SEEDS):
+        img = np.nan_to_num(np.array(render(scene, version=version, spp=half, seed=seed, max_depth=max_depth,
+                                            progress=progress, post=[]))[..., :3])
+        if path:
+            write_exr(path, img)
+        out.append(img)
+    return tuple(out)
+
+
 # --------------------------------------------------------------------------- measurement
 def _timed_render(scene, s: Setting, seed: int) -> tuple[np.ndarray, float]:
     t0 = time.perf_counter()
@@ -153,6 +189,7 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
             _timed_render(scene, s, seed + 1001)
     times, errs, imgs = ([[] for _ in settings] for _ in range(3))
     sq = [[] for _ in settings]                # each repeat's mean squared error
+    tails = [[] for _ in settings]             # each repeat's tail_share
     finite = [True for _ in settings]          # of the raw renders (imgs are nan_to_num'd)
     for r in range(repeats):
         for i, s in enumerate(settings):
@@ -162,6 +199,7 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
             finite[i] = finite[i] and bool(np.isfinite(img[..., :3]).all())
             imgs[i].append(np.nan_to_num(img[..., :3]))
             sq[i].append(float(np.mean((imgs[i][-1] - gt) ** 2)))
+            tails[i].append(tail_share(imgs[i][-1], gt))
     out = []
     for i, s in enumerate(settings):
         median = float(np.median(times[i]))
@@ -178,6 +216,13 @@ def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
                     "mse_se": float(np.std(sq[i], ddof=1) / np.sqrt(repeats)) if repeats > 1 else float("nan")})
         for k in errs[i][0]:
             row[k] = float(np.mean([e[k] for e in errs[i]]))
+        # the repeats' spread, and whether a few fireflies make the error (see tail_share)
+        row["rmse_min"] = float(min(e["rmse"] for e in errs[i]))
+        row["rmse_max"] = float(max(e["rmse"] for e in errs[i]))
+        row["tail_share"] = float(np.mean(tails[i]))
+        # fireflies: the repeats' errors differ by FIREFLY_SPREAD or more (the renders of a
+        # smooth-noise method differ by 20 % at most at 1 spp, 64x64; V1's by 10x)
+        row["fireflies"] = bool(repeats > 1 and row["rmse_max"] >= FIREFLY_SPREAD * row["rmse_min"])
         out.append((row, imgs[i][-1]))
     return out
 
@@ -220,8 +265,12 @@ def _media_versions(versions) -> list[str]:
 def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024),
               max_depths=None, adaptive=(None, 8), adaptive_spp=(1,), repeats: int = 3,
               resolution=None, gt_spp: int = 4096, out_dir: str = "out/bench", cache_dir: str | None = None,
-              progress: bool | str = True, seed: int = 1, denoise_spp=()) -> dict:
+              progress: bool | str = True, seed: int = 1, denoise_spp=(), converged: bool = True) -> dict:
     """Run the grid on every scene; write results into ``out_dir`` and return them.
+
+    ``converged``: measure each version's bias against its own converged renders (two at
+    ``gt_spp / 2`` each per version and depth, and the ground truth's integrator's, cached;
+    the module docstring); False: from the highest spp levels studied, as before.
 
     ``denoise_spp``: also measure every version at these spp with OIDN denoising
     (``render(..., denoise=True)``; labelled ``+oidn (biased)``; needs ``pyoidn``).
@@ -250,7 +299,19 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
                         if a:
                             for spp in adaptive_spp:
                                 plan.append((s, Setting(v, spp, d, a)))
-    bar = progress_bar(len(plan) + len(loaded), "bench", "setting", progress, where="bench.run_study")
+    # the converged renders behind each version's bias: (scene, version, depth), plain settings
+    conv_plan = []
+    if converged:
+        for s, setting in plan:
+            key = (s, setting.version, setting.max_depth)
+            if not setting.adaptive and not setting.denoise and key not in conv_plan:
+                conv_plan.append(key)
+        for s in loaded:          # the ground truth's integrator at its depth: the gt's noise
+            key = (s, reference_version(s), ground_truth_depth(max_depths or [s.settings["max_depth"]]))
+            if key not in conv_plan:
+                conv_plan.append(key)
+    bar = progress_bar(len(plan) + len(loaded) + len(conv_plan), "bench", "setting", progress,
+                       where="bench.run_study")
     rows, images, gts, gt_depths = [], {}, {}, {}
     for s in loaded:
         name = os.path.splitext(os.path.basename(s.source))[0]
@@ -280,14 +341,28 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
             images[(name, setting)] = img
         if bar is not None:
             bar.update(len(settings))
-    if bar is not None:
-        bar.close()
     rows = [row for _, row in sorted(rows, key=lambda p: p[0])]
     refs = {os.path.splitext(os.path.basename(s.source))[0]: reference_version(s) for s in loaded}
     bias = estimate_bias(rows, gt_spp, refs)
+    halves = {}
+    for s, v, d in conv_plan:
+        name = os.path.splitext(os.path.basename(s.source))[0]
+        if bar is not None:
+            bar.set_postfix_str(f"{name}: {v} converged ({gt_spp} spp, max_depth {d})")
+        halves[(name, v, d)] = converged_halves(s, v, gt_spp, d, cache_dir=cache_dir)
+        if bar is not None:
+            bar.update(1)
+    for (name, v, d), hv in halves.items():
+        gt_halves = halves.get((name, refs[name], gt_depths[name]))
+        bias[(name, v, d)] = converged_bias(hv, gts[name], gt_halves)
+    if bar is not None:
+        bar.close()
     for r in rows:
         r["bias_rmse"], r["bias_resolved"] = bias.get((r["scene"], r["label"], r["max_depth"]), (None, None))
+        r["bias_method"] = ("converged" if (r["scene"], r["label"], r["max_depth"]) in halves
+                            else "spp levels" if r["bias_rmse"] is not None else None)
     result = {"rows": rows, "ground_truth_spp": gt_spp, "ground_truth_depth": gt_depths, "repeats": repeats,
+              "bias_from": "converged renders" if converged else "spp levels",
               "machine": _machine(), "load": load_note()}
     write_report(result, images, gts, out_dir)
     return result

@@ -1,7 +1,10 @@
 """The ``draaw-mi`` command line: :func:`main` and its subcommands.
 
-* :mod:`~draaw_mi.cli.commands` -- the parser and the ``render``, ``info``, ``post``, ``fit``
-  and ``batch`` subcommands;
+* :mod:`~draaw_mi.cli.commands` -- the parser and the ``render``, ``post``, ``fit`` and
+  ``batch`` subcommands;
+* :mod:`~draaw_mi.cli.scenes` -- what the commands that read a scene share (``-D NAME=VALUE``
+  for a Mitsuba XML file, a manifest told from a scene, the note on an XML scene's own
+  integrator) and the ``info`` subcommand;
 * :mod:`~draaw_mi.cli.bench` -- ``bench`` (the accuracy/time study, the SDF study, the speed
   suite, denoised points);
 * :mod:`~draaw_mi.cli.common` -- the one-line error and its exit status, shared options.

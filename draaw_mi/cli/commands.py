@@ -5,6 +5,7 @@ Bad input exits with status 2 and one line on stderr (``draaw-mi: error: ...``),
 Examples::
 
     draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --spp 256
+    draaw-mi render cbox.xml -o out/cbox.png -D res=64 -D spp=16      # a Mitsuba XML file's $res, $spp
     draaw-mi info scenes/material_spheres.toml
     draaw-mi post out/cornell.exr -o out/graded.exr --chain chain.json
     draaw-mi batch scenes/batch_example.toml --out out/batch [--executor dask --workers 2]
@@ -22,19 +23,26 @@ import tempfile
 import warnings
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
-from .. import __version__, batch, integrators, materials, post
+from .. import batch, post
 from ..batch.exr import HASH_ATTR, MANIFEST_ATTR, read_header, render_metadata
 from ..errors import DraawError
 from ..fitting import fit
 from ..io import read_exr, write_exr, write_png
 from ..post import display_encoded
 from ..rendering import render
-from ..scene import OVERRIDE_MINIMA, load_scene
+from ..scene import OVERRIDE_MINIMA
 from .bench import cmd_bench
 from .common import EXIT_BAD_INPUT, PROGRESS_HELP, CliError, progress_mode, read_json  # noqa: F401 (re-exported)
+from .scenes import (
+    add_define_option,
+    check_own_integrator_flags,
+    cmd_info,
+    integrator_note,
+    load_for_cli,
+    refuse_scene_as_manifest,
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -71,11 +79,15 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("render", help="render a scene to EXR (and PNG)")
     r.add_argument("scene", help="scene file: .toml, .json, .xml or a mesh (.obj, .ply, .glb, ...)")
-    r.add_argument("-o", "--output", required=True, help="output EXR file (float32, AOVs as named channels)")
+    r.add_argument("-o", "--output", required=True, help="output image: .exr (float32, AOVs as named "
+                   "channels) or .png (8-bit sRGB, colour only)")
     r.add_argument("--png", help="also write an sRGB PNG")
-    r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), path, prb; volpath, prbvolpath for media")
+    r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), "
+                   "path, prb; volpath, prbvolpath for media; scene: the integrator an XML scene "
+                   "declares (its default when it declares one that is not a version)")
     r.add_argument("--spp", type=int, help="samples per pixel")
-    r.add_argument("--resolution", help="WxH, e.g. 640x480")
+    r.add_argument("--resolution", help="WxH, e.g. 640x480 (an XML scene's film too)")
+    add_define_option(r)
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (up to 10x less "
                    "variance at the same time), stratified, ldsampler, orthogonal")
@@ -90,6 +102,7 @@ def _parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="show the set-up, or what a scene contains and calls for")
     i.add_argument("scene", nargs="?", help="scene file")
     i.add_argument("--json", action="store_true", help="print JSON")
+    add_define_option(i)
 
     f = sub.add_parser("fit", help="fit material parameters to reference images")
     f.add_argument("scene", help="scene file (.toml, .json, .xml)")
@@ -98,7 +111,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--param", action="append", required=True,
                    help="parameter to fit, as material.parameter (e.g. gold.roughness) or an SDF object's "
                         "sdf.NODE.PARAM (e.g. sdf.ball.radius); repeatable")
-    f.add_argument("-o", "--output", help="write the fitted scene (.toml/.json) or the values (.json)")
+    f.add_argument("-o", "--output", help="write the fitted scene (.toml/.json; a TOML scene keeps its "
+                   "comments and layout, only the fitted values change) or the values (.json)")
     f.add_argument("--plot", help="write a PNG plot of loss and parameters over iterations")
     f.add_argument("--views", help="JSON file: a list of camera tables, one per --reference (without 'fov': "
                    "the scene camera's)")
@@ -113,6 +127,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss (default: the "
                    "scene's [[post]], as `draaw-mi render` applies it)")
     f.add_argument("--seed", type=int, default=0)
+    add_define_option(f)
     f.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 
     b = sub.add_parser("bench", help="measure what accuracy costs in time (error vs time study)")
@@ -124,7 +139,7 @@ def _parser() -> argparse.ArgumentParser:
                    "(default 1024; a multiple of 64, at least 128), --resolution N or NxN the sizes "
                    "(default 128 and 256); --max-depth, --adaptive, --quick, --denoise, "
                    "--camera-path and --frames do not apply")
-    b.add_argument("--quick", action="store_true", help="small grid, finishes in about a minute (55 s measured on 2 cores)")
+    b.add_argument("--quick", action="store_true", help="small grid, about 30 s on 2 cores")
     b.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
     b.add_argument("--versions", help="comma-separated, default v1,v2,v3,v4,path")
     b.add_argument("--spp", help="comma-separated spp list, default 1,2,4,...,1024")
@@ -193,7 +208,7 @@ def _batch_parser(sub) -> None:
 def _cmd_render(args) -> int:
 
 
-    _writable(args.output, (".exr",), "output")
+    _writable(args.output, (".exr", ".png"), "output")
     if args.png:
         _writable(args.png, (".png",), "--png")
     if args.threads is not None:
@@ -206,7 +221,8 @@ def _cmd_render(args) -> int:
             raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer >= {lo}")
     overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
                  "sampler": args.sampler}
-    scene = load_scene(args.scene, **{k: v for k, v in overrides.items() if v is not None})
+    scene = load_for_cli(args, **{k: v for k, v in overrides.items() if v is not None})
+    check_own_integrator_flags(args, scene)
     post = None
     if args.post:
         post = _load_chain(args.post)
@@ -217,86 +233,34 @@ def _cmd_render(args) -> int:
                                   denoise=args.denoise)
     arr = np.array(image)
     chain = info["post"]                                                 # what render() applied
-    write_exr(args.output, arr, channels=info["channels"],
-                       metadata=render_metadata(args.scene, scene, info, post=chain))
-    if args.png:
-        # the film's colour channels by name (R, G, B[, A], X, Y, Z[, A] or Y[, A] of an XML
-        # film's pixel_format), not the first three: a luminance film's depth AOV would be the
-        # PNG's alpha, an xyz film's X, Y, Z its R, G, B
-        write_png(args.png, arr, channels=info["channels"], encoded=display_encoded(chain))
+    meta = render_metadata(args.scene, scene, info, post=chain)
+    # the film's colour channels by name (R, G, B[, A], X, Y, Z[, A] or Y[, A] of an XML
+    # film's pixel_format), not the first three: a luminance film's depth AOV would be the
+    # PNG's alpha, an xyz film's X, Y, Z its R, G, B
+    for png in [p for p in (args.output, args.png) if p and p.lower().endswith(".png")]:
+        write_png(png, arr, channels=info["channels"], encoded=display_encoded(chain),
+                  text={k: str(v) for k, v in meta.items()} if png == args.output else None)
+    raw_note = ""
+    if args.output.lower().endswith(".exr"):
+        exr, names = arr, info["channels"]
+        if info.get("raw") is not None:         # --denoise: the undenoised render beside it
+            exr, names = np.concatenate([arr, info["raw"]], axis=2), names + ["raw.R", "raw.G", "raw.B"]
+            raw_note = "; plus the undenoised render in its channels raw.R/G/B"
+        write_exr(args.output, exr, channels=names, metadata=meta)
+    note = integrator_note(args, scene)
+    if note:
+        print(f"draaw-mi: note: {note}", file=sys.stderr)
     # (the render's own count: a post chain and denoising read NaN/inf as 0)
     finite = bool(np.isfinite(arr).all()) and not info.get("non_finite")
     print(f"wrote {args.output} ({arr.shape[1]}x{arr.shape[0]}, {len(info['channels'])} channels, "
           f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
           f"{info['seconds']:.2f} s"
-          + ("" if finite else ", WARNING: non-finite pixels") + ")")
+          + ("" if finite else ", WARNING: non-finite pixels") + ")" + raw_note)
     return 0
 
 
 def _load_chain(path: str):
     return post.load_chain(path)
-
-
-def _cmd_info(args) -> int:
-
-
-    out = {
-        "draaw_mi": __version__,
-        "variant": mi.variant(),
-        "mitsuba": mi.__version__,
-        "drjit": dr.__version__,
-        "llvm": ".".join(map(str, dr.detail.llvm_version())) if mi.variant().startswith("llvm") else None,
-        "threads": dr.thread_count(),
-        "plugins": {"bsdf": list(getattr(materials, "PLUGINS", ["draaw"])),
-                    "integrators": sorted(set(getattr(integrators, "PLUGINS", [])))},
-        "versions": dict(integrators.VERSION_ALIASES),
-    }
-    if args.scene:
-        out["scene"] = load_scene(args.scene).summary()
-    if args.json:
-        print(json.dumps(out, indent=2, default=str))
-        return 0
-    for key, value in out.items():
-        if key in ("scene", "versions", "plugins"):
-            continue
-        print(f"{key:>10}: {value}")
-    print(f"{'bsdfs':>10}: {', '.join(out['plugins']['bsdf'])}")
-    by_plugin: dict = {}
-    for alias, plugin in out["versions"].items():
-        if alias != plugin:
-            by_plugin.setdefault(plugin, []).append(alias)
-    for plugin in sorted(set(out["versions"].values())):
-        print(f"{'version':>10}: {plugin} ({', '.join(by_plugin.get(plugin, [])) or plugin})")
-    if args.scene:
-        s = out["scene"]
-        print(f"\nscene {s['source']}: {s['resolution'][0]}x{s['resolution'][1]}")
-        print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
-        print(f"    lights: {', '.join(s['lights']) or 'none'}")
-        print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
-        for v in s.get("volumes", []):
-            print("    volume: " + _volume_line(v))
-        print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
-        if s["post"]:
-            print(f"      post: {' -> '.join(map(str, s['post']))}")
-        if s.get("sdf"):
-            print(f"       sdf: {len(s['sdf'])} nodes")
-            for line in s["sdf"]:
-                print(f"            {line}")
-        on = [k for k, v in s["features"].items() if v]
-        off = [k for k, v in s["features"].items() if not v]
-        print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
-    return 0
-
-
-def _volume_line(v: dict) -> str:
-    """One line of ``draaw-mi info`` for a [[volumes]] entry."""
-    shape = "x".join(map(str, v["shape"]))
-    lo, hi = v["bounds"]
-    box = f"box {[round(x, 3) for x in lo]}..{[round(x, 3) for x in hi]}"
-    if v["mode"] == "smoke":
-        return (f"{v['name']}: smoke {shape}, {v['cells']} cells with density, max sigma_t "
-                f"{v['max_sigma_t']:g}, g={v['g']:g}, {box}")
-    return f"{v['name']}: solid {shape}, {v['voxels']} voxels, {v['faces']} exterior faces, {box}"
 
 
 def _cmd_fit(args) -> int:
@@ -306,7 +270,7 @@ def _cmd_fit(args) -> int:
     if args.plot:
         _writable(args.plot, (".png",), "--plot")
     views = read_json(args.views, "--views") if args.views else None
-    scene = load_scene(args.scene)
+    scene = load_for_cli(args)
     if args.output:               # fail before the fit, not after it: can the values be written?
         if scene.description is None and not args.output.lower().endswith(".json"):
             raise CliError(f"-o {args.output!r}: {args.scene} is not a TOML/JSON scene; only the "
@@ -400,6 +364,7 @@ def _recorded_chain(header: dict) -> list:
 
 def _cmd_batch(args) -> int:
     """Exit 0 when every frame of the manifest exists (done), 1 when some are missing."""
+    refuse_scene_as_manifest(args.manifest)
     cores = os.cpu_count() or 1
     if args.workers is not None and not 1 <= args.workers <= cores:
         raise CliError(f"--workers {args.workers}: expected an integer from 1 to this machine's {cores} cores")
@@ -471,7 +436,7 @@ def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
         args.argv = list(argv)               # as typed: reports repeat the command that made them
-        handler = {"render": _cmd_render, "info": _cmd_info, "post": _cmd_post, "fit": _cmd_fit,
+        handler = {"render": _cmd_render, "info": cmd_info, "post": _cmd_post, "fit": _cmd_fit,
                    "bench": _bench_command, "batch": _cmd_batch}[args.command]
         try:
             with _warnings_as_lines():

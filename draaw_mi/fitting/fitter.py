@@ -138,43 +138,42 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None) -> FitResult:
     """Fit ``params`` of ``scene`` so that its renders match ``references``.
 
-    Parameters
-    ----------
-    scene: a DraawScene, scene file or description dict. On return the scene holds the
-        fitted values.
-    references: one reference per view: an EXR/PNG path, an (H, W, 3) float array or tensor
-        (linear; see :func:`load_reference`). Of the scene's size, or of another size with
-        its aspect ratio: the fit then renders at the references' size.
-        A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
-        saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
-        pixels above 1 fits roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
-        when they count).
-    params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
-    version: integrator (``v1``..``v4``, ``prb``); must be differentiable. Default the
-        scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
-    spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
-        Adam iterations and learning rate (in the parameter's space: a roughness step of
-        ``lr`` is a relative change, see :class:`~draaw_mi.fitting.params.FitParam`).
-    spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
-    loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
-    views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
-        (a table without ``fov`` has the scene camera's field of view).
-    post: a post-processing chain (list of dicts) applied to each render inside the loss;
-        default the scene's ``post``, as :func:`draaw_mi.render` applies it (``[]``: none).
-        The scene's ``hide_emitters`` holds too: a reference rendered from the scene file
-        is then one the fit can render.
-    exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
-    init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the
-        scene's current values.
-    seed: seed of the run; iteration ``i`` renders with an independent seed derived from it,
-        and the gradient pass with another one (Mitsuba decorrelates primal and adjoint).
-    lr_final: the learning rate decays along a cosine from ``lr`` to ``lr * lr_final``.
-    average_last: the reported values are the mean of the iterates over this last fraction.
-    beta_2: Adam's second-moment decay (0.9: the step size follows the shrinking gradient).
-    smooth: feed the loss a running mean of recent renders carrying the current render's
-        derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
-    tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fitting.result.settled`).
-    progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
+    Args:
+        scene: a DraawScene, scene file or description dict. On return the scene holds the
+            fitted values.
+        references: one reference per view: an EXR/PNG path, an (H, W, 3) float array or tensor
+            (linear; see :func:`load_reference`). Of the scene's size, or of another size with
+            its aspect ratio: the fit then renders at the references' size.
+            A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
+            saturated pixels out (:func:`unclipped_mask`; fit_sphere at 64x64 with 6 % of its
+            pixels above 1 fits roughness 0.37 / metallic 0.54, against the EXR's 0.25 / 0.81,
+            when they count).
+        params: names as ``material.parameter`` (``"gold.roughness"``) or full ``mi.traverse`` keys.
+        version: integrator (``v1``..``v4``, ``prb``); must be differentiable. Default the
+            scene's ``render.version`` where it is one, else ``v4`` (same expectation as ``path``).
+        spp, iterations, lr: samples per pixel per iteration (a power of two avoids recompiles),
+            Adam iterations and learning rate (in the parameter's space: a roughness step of
+            ``lr`` is a relative change, see :class:`~draaw_mi.fitting.params.FitParam`).
+        spp_grad: samples per pixel of the gradient (adjoint) pass; default ``spp``.
+        loss: ``"l2"``, ``"l1"`` or ``"relative_l2"``.
+        views: None (the scene's camera) or a list of camera tables / mi.Sensor, one per reference
+            (a table without ``fov`` has the scene camera's field of view).
+        post: a post-processing chain (list of dicts) applied to each render inside the loss;
+            default the scene's ``post``, as :func:`draaw_mi.render` applies it (``[]``: none).
+            The scene's ``hide_emitters`` holds too: a reference rendered from the scene file
+            is then one the fit can render.
+        exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
+        init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the
+            scene's current values.
+        seed: seed of the run; iteration ``i`` renders with an independent seed derived from it,
+            and the gradient pass with another one (Mitsuba decorrelates primal and adjoint).
+        lr_final: the learning rate decays along a cosine from ``lr`` to ``lr * lr_final``.
+        average_last: the reported values are the mean of the iterates over this last fraction.
+        beta_2: Adam's second-moment decay (0.9: the step size follows the shrinking gradient).
+        smooth: feed the loss a running mean of recent renders carrying the current render's
+            derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
+        tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fitting.result.settled`).
+        progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
     """
     check_mode(progress, "fit")
     t0 = time.perf_counter()

@@ -147,7 +147,7 @@ def check_reference_size(scene: DraawScene, w: int, h: int, reference) -> None:
     if abs(w * sh - h * sw) > 0.02 * max(w * sh, h * sw):
         raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}: another aspect "
                          "ratio; render the reference with the scene's camera and film")
-    if scene.mi_dict is None:
-        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}; a scene loaded "
-                         "from XML or given as mi.Scene keeps its film's size: give a reference "
-                         "of that size")
+    if not scene.resizable:
+        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}; a scene given as "
+                         "mi.Scene keeps its film's size: give a reference of that size (or "
+                         "load the scene from its file)")

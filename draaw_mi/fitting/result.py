@@ -7,7 +7,6 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-import tomli_w
 
 from ..errors import ParameterError
 from ..io import write_exr, write_text
@@ -109,11 +108,8 @@ class FitResult:
                 value = os.path.relpath(file, os.path.dirname(os.path.abspath(path)))
                 name = base
             values[name] = value
-        doc = scene.updated_description(values, dest=path) if described else {"fitted": values}
-        if lower.endswith(".toml"):
-            text = tomli_w.dumps(doc)
-        else:
-            text = json.dumps(doc, indent=2)
+        # (a TOML scene keeps its comments and layout: only the fitted values' lines change)
+        text = scene.updated_text(values, dest=path) if described else json.dumps({"fitted": values}, indent=2)
         write_text(path, text)
         return written + [path]
 

@@ -11,7 +11,8 @@
 =============  =================================================================================
 
 ``register()`` registers them (idempotent); ``VERSION_ALIASES`` maps the names users type
-(GO-Draaw's ``V1``, ``V2``, ``V2M``, ``V4``, ..., ``v1`` .. ``v4``, ``path``, ``prb``) to
+(GO-Draaw's ``V1``, ``V2``, ``V2M``, ``V4``, ..., ``v1`` .. ``v4``, ``path``, ``prb``,
+``scene`` for a Mitsuba scene's own integrator) to
 Mitsuba integrator plugin names, and ``resolve_version(name)`` looks one up.
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 from .._lazy import old_names
 from . import v1, v2, v3, v4
 from .features import FEATURE_NAMES, detect_features
-from .versions import MAIN_VERSIONS, PLUGINS, VERSION_ALIASES, VERSION_GRADES, is_draaw, resolve_version
+from .versions import MAIN_VERSIONS, PLUGINS, SCENE_VERSION, VERSION_ALIASES, VERSION_GRADES, is_draaw, resolve_version
 
 _REGISTERED = False
 
@@ -34,7 +35,7 @@ def register() -> None:
     _REGISTERED = True
 
 
-__all__ = ["FEATURE_NAMES", "MAIN_VERSIONS", "PLUGINS", "VERSION_ALIASES", "VERSION_GRADES", "detect_features",
+__all__ = ["FEATURE_NAMES", "MAIN_VERSIONS", "PLUGINS", "SCENE_VERSION", "VERSION_ALIASES", "VERSION_GRADES", "detect_features",
            "is_draaw", "register", "resolve_version"]
 
 # names the earlier release had here, served from their new modules with a DeprecationWarning

@@ -30,7 +30,13 @@ VERSION_ALIASES: dict[str, str] = {
     # Mitsuba's volumetric path tracers (scenes with media)
     "volpath": "volpath",
     "prbvolpath": "prbvolpath",
+    # the integrator a Mitsuba XML file or dict scene declares, as it declares it (``direct``,
+    # ``aov``, ...: what Mitsuba itself would render it with)
+    "scene": "scene",
 }
+
+#: the version that is the scene's own integrator object (:data:`VERSION_ALIASES`)
+SCENE_VERSION = "scene"
 
 # GO-Draaw's graded versions -> the post filter that is their colour grade (go-draaw-spec.md
 # §2.10); the version itself renders linear light
@@ -68,5 +74,5 @@ def is_draaw(version: str) -> bool:
 
 
 # the error's list: the names a user picks from (the 35 aliases would make one unreadable line)
-MAIN_VERSIONS = ("expected v1, v2, v3, v4, path, prb, volpath or prbvolpath (or a GO-Draaw name "
+MAIN_VERSIONS = ("expected v1, v2, v3, v4, path, prb, volpath, prbvolpath or scene (or a GO-Draaw name "
                  "such as V2M or V4-Log-Optim; all: draaw_mi.integrators.VERSION_ALIASES)")

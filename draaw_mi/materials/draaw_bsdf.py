@@ -24,17 +24,47 @@ exact), and the returned weight is always ``eval / pdf`` of the same mixture.
 
 Plugin parameters
 
-.. list-table::
-   * - base_color       - texture/RGB >= 0, default 0.5      - albedo / metal tint
-   * - roughness        - texture/float in [0, 1], 0.5       - GGX alpha = roughness^2 (clamped)
-   * - metallic         - texture/float in [0, 1], 0.0       - metallic-workflow mix
-   * - specular         - texture/float in [0, 1], 0.5       - dielectric F0 = 0.08 * specular
-   * - reflection       - texture/float in [0, 1], 0.0       - legacy mirror weight (V1/V2 only)
-   * - direct_to_scatter- texture/float in [0, 1], 1.0       - legacy direct/scatter split (V1/V2)
-   * - normalmap        - texture (RGB), optional             - tangent-space normal map
-   * - normalmap_encoding - "unsigned" (0..1, default) or "signed" (-1..1)
-   * - two_sided        - bool, default False                 - shade back faces like front faces
-   * - alpha_min        - float in (0, 0.1], default 1e-3     - smallest GGX alpha
+.. pluginparameters::
+
+ * - base_color
+   - |texture|
+   - Albedo / metal tint, RGB >= 0. (Default: 0.5)
+
+ * - roughness
+   - |texture|
+   - GGX alpha = roughness^2 (clamped), in [0, 1]. (Default: 0.5)
+
+ * - metallic
+   - |texture|
+   - Metallic-workflow mix, in [0, 1]. (Default: 0.0)
+
+ * - specular
+   - |texture|
+   - Dielectric F0 = 0.08 * specular, in [0, 1]. (Default: 0.5)
+
+ * - reflection
+   - |texture|
+   - Legacy mirror weight (V1/V2 only), in [0, 1]. (Default: 0.0)
+
+ * - direct_to_scatter
+   - |texture|
+   - Legacy direct/scatter split (V1/V2), in [0, 1]. (Default: 1.0)
+
+ * - normalmap
+   - |texture|
+   - Tangent-space normal map (RGB). (Default: none)
+
+ * - normalmap_encoding
+   - |string|
+   - ``"unsigned"`` (0..1) or ``"signed"`` (-1..1). (Default: ``"unsigned"``)
+
+ * - two_sided
+   - |bool|
+   - Shade back faces like front faces. (Default: |false|)
+
+ * - alpha_min
+   - |float|
+   - Smallest GGX alpha, in (0, 0.1]. (Default: 1e-3)
 
 Values set at load time outside their range raise :class:`ParameterError`; values set by an
 optimiser through ``mi.traverse`` are clamped into range when evaluated, with a straight-through

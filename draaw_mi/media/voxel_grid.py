@@ -148,7 +148,7 @@ class VoxelGrid:
                  seed: int | None = 0) -> "VoxelGrid":
         """GO-Draaw's start-up grid (``go-draaw-spec.md`` §4.1): the mesh scaled by ``scale``
         (GO-Draaw loads scenes x75), box = the object box x0.75 *about the world origin*,
-        ``resolution``³ cells, each triangle voxelised, filled cells with a random colour,
+        ``resolution ** 3`` cells, each triangle voxelised, filled cells with a random colour,
         smoke colour (0, 0, 0) and density 0.001 everywhere.
 
         Fixed quirks: GO-Draaw stores the per-cell centre positions transposed (x<->z), which only

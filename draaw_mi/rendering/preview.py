@@ -110,19 +110,19 @@ def _scale(value, where: str) -> float:
 class Preview(PreviewWorker):
     """Progressive running-mean renderer of one scene (see the module docstring).
 
-    ==================  ========================================================================
-    Parameter           Meaning
-    ==================  ========================================================================
-    ``scene``           a :class:`~draaw_mi.scene.DraawScene` (or anything ``load_scene`` takes)
-    ``version``         integrator version (default: the scene's)
-    ``max_depth``       path depth (default: the scene's)
-    ``max_spp``         stop refining at this many samples per pixel (default 1024)
-    ``denoise``         denoise published frames with OIDN (needs ``pyoidn``; biased)
-    ``post``            post chain for published frames (default: the scene's; ``[]``: none)
-    ``interactive_scale``  resolution factor of the first frame after a change (1: full)
-    ``freeze``          record the 1-spp render with ``dr.freeze`` and replay it
-    ``seed``            base seed; frame ``i`` uses an independent seed derived from it
-    ==================  ========================================================================
+    =======================  ========================================================================
+    Parameter                Meaning
+    =======================  ========================================================================
+    ``scene``                a :class:`~draaw_mi.scene.DraawScene` (or anything ``load_scene`` takes)
+    ``version``              integrator version (default: the scene's)
+    ``max_depth``            path depth (default: the scene's)
+    ``max_spp``              stop refining at this many samples per pixel (default 1024)
+    ``denoise``              denoise published frames with OIDN (needs ``pyoidn``; biased)
+    ``post``                 post chain for published frames (default: the scene's; ``[]``: none)
+    ``interactive_scale``    resolution factor of the first frame after a change (1: full)
+    ``freeze``               record the 1-spp render with ``dr.freeze`` and replay it
+    ``seed``                 base seed; frame ``i`` uses an independent seed derived from it
+    =======================  ========================================================================
     """
     def __init__(self, scene, version: str | None = None, max_depth: int | None = None,
                  max_spp: int = 1024, denoise: bool = False, post=None, interactive_scale: float = 1.0,

@@ -47,7 +47,7 @@ import mitsuba as mi
 from .. import post
 from ..errors import RenderError
 from ..guard import RENDER_GUARD
-from ..integrators import resolve_version
+from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
 from .frozen import freeze_render, freeze_supported
 from .passes import sample_passes
@@ -106,6 +106,8 @@ class Session:
             fast = integrator = None
         if integrator is not None:
             return integrator
+        if resolve_version(version) == SCENE_VERSION:
+            return self._own_integrator(aovs, options)
         props = integrator_props(version, max_depth, hide_emitters, aovs, **options)
         key = tuple(sorted((k, str(v)) for k, v in props.items()))
         if key not in self._integrators:
@@ -115,6 +117,26 @@ class Session:
         if fast is not None:
             self._integrator_keys[fast] = key
         return self._integrators[key]
+
+    def _own_integrator(self, aovs, options):
+        """Version ``"scene"``: the integrator object the scene declares, with its file's
+        settings (``max_depth`` and ``hide_emitters`` are its own)."""
+        integrator = self.scene.mi_scene.integrator()
+        if integrator is None:
+            raise RenderError(f"render: version 'scene' renders with the integrator the scene "
+                              f"declares; {self.source} declares none (pick v1..v4, path or prb)")
+        if aovs or options:
+            given = ", ".join([f"aovs {list(aovs)}"] * bool(aovs) + [repr(k) for k in options])
+            raise RenderError(f"render: version 'scene' renders with the scene's own integrator as "
+                              f"its file sets it; {given} cannot be given to it (pick v1..v4)")
+        return integrator
+
+    def plugin_name(self, version: str) -> str:
+        """The integrator plugin ``version`` renders with (for version ``"scene"``, the one
+        the scene declares: ``direct``, ``aov``, ...)."""
+        plugin = resolve_version(version)
+        own = self.scene.info.get("integrator") if plugin == SCENE_VERSION else None
+        return own or plugin
 
     def scene_changed(self) -> None:
         """Tell the session's integrators that the scene's parameters changed: V4 recomputes

@@ -8,11 +8,13 @@ another resolution, and its description with fitted values written back. Scenes 
 from __future__ import annotations
 
 import copy
+import json
 import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import mitsuba as mi
+import tomli_w
 
 from ..errors import ParameterError, SceneError, suggest
 from ..integrators.features import detect_features
@@ -20,8 +22,9 @@ from ..materials import check_value
 from ..sdf.params import PREFIX, SDFParameters
 from .carry import carry_values
 from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
-from .mitsuba_load import load_dict_or_error
+from .mitsuba_load import load_dict_or_error, load_mitsuba_file
 from .sdf_dicts import write_back
+from .toml_edit import edited_toml
 
 
 @dataclass(eq=False)
@@ -123,20 +126,32 @@ class DraawScene:
             hint = "; `draaw-mi info` lists the scene's materials"
         raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
 
+    @property
+    def resizable(self) -> bool:
+        """Whether :meth:`with_resolution` can load the scene at another size: a description,
+        a Mitsuba dict or an XML file, not an ``mi.Scene`` given as it is."""
+        return self.mi_dict is not None or self.info.get("xml") is not None
+
     def with_resolution(self, width: int, height: int) -> "DraawScene":
         """The same scene with another film size. It reloads the Mitsuba scene and carries the
         current parameter values over (:func:`~draaw_mi.scene.carry.carry_values`): edits
         made through :attr:`params` stay; the copy has its own ``mi.traverse``."""
         if (width, height) == self.resolution:
             return self
+        settings = dict(self.settings, resolution=(int(width), int(height)))
+        xml = self.info.get("xml")
+        if self.mi_dict is None and xml is not None:      # an XML file: loaded again, resized
+            scaled = DraawScene(load_mitsuba_file(xml["path"], xml["defines"], (int(width), int(height))),
+                                settings, self.source, self.info, None, self._tmp, self.description)
+            carry_values(self, scaled)
+            return scaled
         if self.mi_dict is None:
-            raise SceneError(f"{self.source}: cannot change the resolution of a scene loaded from "
-                             "XML or given as mi.Scene; edit its film instead")
+            raise SceneError(f"{self.source}: cannot change the resolution of a scene given as "
+                             "mi.Scene; edit its film instead (or load it from its XML file or dict)")
         d = dict(self.mi_dict)
         sensor = dict(d["sensor"])
         sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
         d["sensor"] = sensor
-        settings = dict(self.settings, resolution=(int(width), int(height)))
         scaled = DraawScene(load_dict_or_error(d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
         carry_values(self, scaled)
@@ -177,6 +192,24 @@ class DraawScene:
             mats[mat][param] = value
         return desc
 
+    def updated_text(self, values: dict, dest: str) -> str:
+        """The text of :meth:`updated_description` for the file ``dest`` (``.toml`` or
+        ``.json``). A TOML scene written to TOML keeps its file's comments and layout: only the
+        lines of the values that changed are edited (:mod:`~draaw_mi.scene.toml_edit`; the file
+        is read again, and where it changed since it was loaded it is written in full)."""
+        desc = self.updated_description(values, dest=dest)
+        if not dest.lower().endswith(".toml"):
+            return json.dumps(desc, indent=2)
+        if self.source.lower().endswith(".toml") and os.path.isfile(self.source):
+            try:
+                with open(self.source, encoding="utf-8") as fh:
+                    text = edited_toml(fh.read(), self.description, desc)
+            except (OSError, UnicodeDecodeError):
+                text = None
+            if text is not None:
+                return text
+        return tomli_w.dumps(desc)
+
     @property
     def sdf(self):
         """The scene's :class:`draaw_mi.sdf.scene.SDFScene` (``[[sdf]]`` entries), or ``None``."""
@@ -196,7 +229,8 @@ class DraawScene:
         return {
             "source": self.source,
             "resolution": list(self.resolution),
-            # the description's names (Mitsuba merges meshes into one unnamed shape)
+            # the description's names, or for a Mitsuba scene each shape's id, else what its
+            # file says of it ("merged mesh of 3 shapes: ..."; mitsuba_xml.shape_names)
             "shapes": self.info.get("shapes") or [sh.id() or "unnamed" for sh in s.shapes()
                                                   if not sh.id().startswith("__sdf_")],
             "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
@@ -206,6 +240,8 @@ class DraawScene:
             "features": self.features(),
             "volumes": self.info.get("volumes", []),
             **({"sdf": self.sdf.describe()} if self.sdf is not None else {}),
+            # the integrator an XML file or dict declares (version "scene" renders with it)
+            **({"integrator": self.info["integrator"]} if self.info.get("integrator") else {}),
         }
 
 

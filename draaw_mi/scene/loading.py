@@ -14,20 +14,21 @@ import copy
 import os
 import re
 import tempfile
-import warnings
 
 import mitsuba as mi
 
 from ..errors import SceneError, suggest
 from ..guard import RENDER_GUARD
+from ..integrators import SCENE_VERSION
 from .camera import auto_camera, filter_plugin, sampler_plugin
-from .description import DEFAULT_SETTINGS, SAMPLERS, build_mitsuba_dict
+from .description import DEFAULT_SETTINGS, SAMPLERS, TOP_KEYS, build_mitsuba_dict
 from .draaw_scene import DraawScene
 from .light_dicts import auto_light
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file, mitsuba_error_message
-from .mitsuba_xml import xml_references
+from .mitsuba_xml import integrator_name, shape_names, xml_references
 from .schema import Where, number, read_document, resolution, string
+from .xml_film import check_defines, declared_defaults
 
 SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
 
@@ -41,13 +42,16 @@ def _bare_mesh_description(path: str) -> dict:
             "lights": auto_light(lo, hi, camera["origin"])}
 
 
-def load_scene(source, **overrides) -> DraawScene:
+def load_scene(source, defines: dict | None = None, **overrides) -> DraawScene:
     """Load a scene from a TOML/JSON/XML/mesh file, a description dict, a Mitsuba scene dict
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
 
     ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
-    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). Errors are
-    :class:`SceneError` naming the file and field.
+    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). ``defines``: values
+    of a Mitsuba XML file's ``$name`` parameters (its ``<default>`` values), e.g.
+    ``{"res": 64, "spp": 16}`` (``draaw-mi render -D res=64``). An XML scene's
+    ``resolution=`` sizes its first sensor's film. Errors are :class:`SceneError` naming the
+    file and field.
 
     Example::
 
@@ -57,15 +61,21 @@ def load_scene(source, **overrides) -> DraawScene:
         ((32, 24), 4, 'metal.roughness.value')
     """
     with RENDER_GUARD:       # (plugins made while another thread replays a recording break it)
-        return _load_scene(source, **overrides)
+        return _load_scene(source, defines, **overrides)
 
 
-def _load_scene(source, **overrides) -> DraawScene:
+def _load_scene(source, defines, **overrides) -> DraawScene:
 
     bad = set(overrides) - set(DEFAULT_SETTINGS)
     if bad:
         name = sorted(bad)[0]
         raise SceneError(f"load_scene: unknown setting {name!r}{suggest(name, DEFAULT_SETTINGS)}")
+    is_xml = isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith(".xml")
+    if defines is not None and not is_xml:
+        name = os.fspath(source) if isinstance(source, (str, os.PathLike)) else type(source).__name__
+        raise SceneError(f"{name}: defines={defines!r} set the $name parameters of a Mitsuba XML "
+                         "file; this is not one (give a TOML scene's values in the file, or as "
+                         "overrides such as resolution=, spp=)")
     if isinstance(source, DraawScene):
         return source
     if isinstance(source, mi.Scene):
@@ -76,6 +86,7 @@ def _load_scene(source, **overrides) -> DraawScene:
         if source.get("type") == "scene":
             return _from_mitsuba_scene(load_dict_or_error(source, "<dict>"), "<dict>", overrides, source,
                                        named_integrator="integrator" in source)
+        refuse_manifest(source, "<dict>")
         return from_description(source, "<dict>", os.getcwd(), overrides)
     if not isinstance(source, (str, os.PathLike)):
         raise SceneError(f"load_scene: expected a file name, dict or mi.Scene, got {type(source).__name__}")
@@ -88,17 +99,46 @@ def _load_scene(source, **overrides) -> DraawScene:
     if not lower.endswith(SCENE_SUFFIXES):
         raise SceneError(f"{path}: unknown scene format; expected one of {', '.join(SCENE_SUFFIXES)}")
     if lower.endswith(".xml"):
-        try:
-            scene = load_mitsuba_file(path)
-        except Exception as e:  # noqa: BLE001
-            raise SceneError(f"{path}: {mitsuba_error_message(e)}") from None
-        files, named = xml_references(path)      # (includes followed, comments ignored)
-        return _from_mitsuba_scene(scene, path, overrides, named_integrator=named, files=files)
+        return _from_xml(path, check_defines(defines, path), overrides)
     if lower.endswith((".toml", ".json")):
         desc = read_document(path, "scene file")
+        refuse_manifest(desc, path)
     else:
         desc = _bare_mesh_description(path)
     return from_description(desc, path, os.path.dirname(os.path.abspath(path)), overrides)
+
+
+def _from_xml(path: str, defines: dict, overrides: dict) -> DraawScene:
+    """A Mitsuba XML file with ``defines`` for its ``$name`` parameters, its film sized by a
+    ``resolution`` override (reloads at another size keep both: ``info["xml"]``)."""
+    size = _checked(overrides, path).get("resolution")
+    scene = load_xml(path, defines, size)
+    files, named = xml_references(path, defines)      # (includes followed, comments ignored)
+    return _from_mitsuba_scene(scene, path, overrides, named_integrator=named, files=files,
+                               xml={"path": os.path.abspath(path), "defines": defines})
+
+
+def load_xml(path: str, defines: dict, size=None):
+    """:func:`~draaw_mi.scene.mitsuba_load.load_mitsuba_file`, its errors as one
+    :class:`SceneError` line naming the file (and the defaults it declares, for a bad define)."""
+    try:
+        return load_mitsuba_file(path, defines, size)
+    except SceneError:
+        raise
+    except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
+        message = mitsuba_error_message(e)
+        if defines and "its includes use no $" in message:
+            message += f"; its <default>s: {', '.join(declared_defaults(path)) or 'none'}"
+        raise SceneError(f"{path}: {message}") from None
+
+
+def refuse_manifest(desc, source: str) -> None:
+    """A :class:`SceneError` when the document ``desc`` is a batch manifest (it has
+    ``[[jobs]]`` and none of a scene's tables), not a scene."""
+    if isinstance(desc, dict) and "jobs" in desc and not set(desc) & set(TOP_KEYS):
+        run = f"draaw-mi batch {source}" if source != "<dict>" else "draaw_mi.batch.run(...)"
+        raise SceneError(f"{source} is a batch manifest (it has [[jobs]]), not a scene; render it "
+                         f"with `{run}`")
 
 
 # The DraawScene of each recent bare mi.Scene (render(mi_scene) wraps it on every call, and the
@@ -166,10 +206,15 @@ _INTEGRATOR_VERSIONS = {"PathIntegrator": "path", "PRBIntegrator": "prb",
 
 
 def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None,
-                        named_integrator: bool = False, files: list | None = None) -> DraawScene:
+                        named_integrator: bool = False, files: list | None = None,
+                        xml: dict | None = None) -> DraawScene:
     """``named_integrator``: the XML file or dict names its integrator, which then becomes
-    the scene's render version (a scene without one renders with draaw-mi's default).
-    ``files``: the files the scene reads besides its own (``info["files"]``)."""
+    the scene's render version: the version that is it (``path``, ``prb``, ``draaw_v4``, ...)
+    or, for another of Mitsuba's (``direct``, ``aov``, ...), ``"scene"``: the scene's own
+    integrator object, with the file's settings. A scene without one renders with
+    draaw-mi's default. ``files``: the files the scene reads besides its own
+    (``info["files"]``); ``xml``: the XML file and defines it was loaded from
+    (``info["xml"]``, for reloads at another size)."""
     sensors = scene.sensors()
     if not sensors:
         raise SceneError(f"{source}: the scene has no sensor (camera)")
@@ -191,12 +236,9 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         settings["hide_emitters"] = bool(getattr(integ, "hide_emitters", False))
         if named_integrator:
             kind = str(integ).split("[", 1)[0].strip()
-            if kind in _INTEGRATOR_VERSIONS:
-                settings["version"] = _INTEGRATOR_VERSIONS[kind]
-            else:
-                warnings.warn(f"{source}: its integrator {kind} is not one of draaw-mi's render "
-                              f"versions; it renders with {settings['version']!r} unless a version "
-                              "is given", RuntimeWarning, stacklevel=3)
+            # (not one of the versions: the scene's own, as Mitsuba would render it; a version
+            # given to render() or --version replaces it)
+            settings["version"] = _INTEGRATOR_VERSIONS.get(kind, SCENE_VERSION)
     settings["post"] = []
     checked = _checked(overrides, source)
     if checked.get("sampler") not in (None, settings["sampler"]):
@@ -206,7 +248,13 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         raise SceneError(f"{source}: filter={checked['filter']!r} cannot override the filter of a "
                          f"Mitsuba scene ({settings['filter']!r}); set it in the scene's film")
     settings.update({k: v for k, v in checked.items() if v is not None})
-    d = DraawScene(scene, settings, source, {"materials": [], "files": list(files or [])}, mi_dict)
+    info = {"materials": [], "files": list(files or []),
+            "shapes": shape_names(scene, xml["path"] if xml else None)}
+    if xml is not None:
+        info["xml"] = xml
+    if integ is not None and named_integrator:
+        info["integrator"] = integrator_name(integ)
+    d = DraawScene(scene, settings, source, info, mi_dict)
     # (the checked value: the command line's "32x32" would go in as a string, and a traceback out)
     if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:
         d = d.with_resolution(*checked["resolution"])

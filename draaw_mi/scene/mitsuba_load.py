@@ -3,7 +3,9 @@ and equal materials kept apart, and Mitsuba's errors cut to their useful line.""
 from __future__ import annotations
 
 import hashlib
+import os
 import re
+import tempfile
 import xml.etree.ElementTree as ET
 
 import mitsuba as mi
@@ -13,6 +15,7 @@ from ..errors import DraawError, SceneError, suggest
 from ..guard import RENDER_GUARD, exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
 from ..sdf.scene import PROXY_PREFIX
+from .xml_film import film_sized_xml
 
 
 def _unreferenced_message(text: str) -> str | None:
@@ -43,6 +46,10 @@ def mitsuba_error_message(err: Exception) -> str:
         m = re.search(rf"{cls}: (.+)", text)
         if m:
             return m.group(1).strip()
+    unused = re.findall(r"^\s*-\s*\$([A-Za-z0-9_]+=.*)$", text, re.M) if "unused parameters" in text else []
+    if unused:                                  # (a define, -D NAME=VALUE, of no $NAME)
+        names = ", ".join("$" + u.split("=", 1)[0] for u in unused)
+        return f"define {', '.join(u.strip() for u in unused)}: the file and its includes use no {names}"
     unknown = _unreferenced_message(text)
     if unknown:
         return unknown
@@ -122,15 +129,30 @@ def _xml_shape_bsdfs(path: str) -> set:
     return {r.get("id") for shape in root.iter("shape") for r in shape.findall("ref")} & declared
 
 
-def load_mitsuba_file(path: str):
-    """``mi.load_file(path)`` with the scene's emitters in a fixed order and every material
-    its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
-    materials, shows only once it is loaded, so such files are parsed twice."""
+def load_mitsuba_file(path: str, defines: dict | None = None, size: tuple | None = None):
+    """``mi.load_file(path, **defines)`` with the scene's emitters in a fixed order and every
+    material its own BSDF (see above). Whether a file has two or more emitting shapes, or equal
+    materials, shows only once it is loaded, so such files are parsed twice. ``defines``: values
+    of the file's ``$name`` parameters (strings, :func:`~draaw_mi.scene.xml_film.check_defines`);
+    ``size``: ``(width, height)`` of the first sensor's film, loaded from a resized copy of the
+    text (:func:`~draaw_mi.scene.xml_film.film_sized_xml`)."""
+    defines = dict(defines or {})
+    if size is None:
+        return _load_file(path, path, defines)
+    text, defines = film_sized_xml(path, *size, defines)
+    with tempfile.TemporaryDirectory(prefix="draaw-mi-xml-") as folder:
+        copy = os.path.join(folder, os.path.basename(path))
+        with open(copy, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        return _load_file(copy, path, defines)
+
+
+def _load_file(path: str, source: str, defines: dict):
     with exr_reading_threads():
-        scene = mi.load_file(path)
+        scene = mi.load_file(path, **defines)
         merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
         if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
-            scene = mi.load_file(path, optimize=False)
+            scene = mi.load_file(path, optimize=False, **defines)
     return scene
 
 

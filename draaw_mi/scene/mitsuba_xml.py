@@ -7,7 +7,10 @@ after a successful load, to learn what the load depended on:
   grids, spectra: every ``filename``), so that batch frames of the scene go stale when one of
   them changes (:func:`draaw_mi.batch.planner.files_hash`), as for TOML scenes;
 - whether it, or a file it includes, declares an ``<integrator>`` (which then becomes the
-  scene's render version).
+  scene's render version);
+- names for its shapes in ``draaw-mi info`` (:func:`shape_names`: Mitsuba merges the unnamed
+  meshes of one material into one shape without an id) and for its integrator
+  (:func:`integrator_name`).
 
 Relative names are looked up where Mitsuba may find them: beside the file that names them,
 beside the scene file and in the folders of ``<path>`` tags; ``$name`` takes the value of a
@@ -34,14 +37,17 @@ import os
 import re
 import xml.etree.ElementTree as ET
 
+import mitsuba as mi
+
 #: includes deeper than this are not followed (Mitsuba's own limit is 15)
 MAX_INCLUDE_DEPTH = 15
 
 
-def xml_references(path: str) -> tuple[list[str], bool]:
+def xml_references(path: str, defines: dict | None = None) -> tuple[list[str], bool]:
     """``(files, names_integrator)`` of the Mitsuba XML scene ``path``: the absolute paths of
     the existing files it and its includes read (``path`` itself not included), and whether
-    any of them declares an ``<integrator>``."""
+    any of them declares an ``<integrator>``. ``defines``: the ``$name`` values it is loaded
+    with (they win over its ``<default>`` values)."""
     path = os.path.abspath(path)
     scene_dir = os.path.dirname(path)
     files: list[str] = []
@@ -80,7 +86,7 @@ def xml_references(path: str) -> tuple[list[str], bool]:
                 for found in _find(_subst(name, defaults), [here, scene_dir] + search):
                     _add(files, found)
 
-    visit(path, {}, [], 0)
+    visit(path, dict(defines or {}), [], 0)
     return files, named[0]
 
 
@@ -136,4 +142,68 @@ def _add(files: list[str], path: str) -> None:
         files.append(path)
 
 
-__all__ = ["xml_references"]
+def integrator_name(integrator) -> str:
+    """The plugin name of a loaded Mitsuba integrator, from its class (``DirectIntegrator``
+    -> ``direct``)."""
+    kind = str(integrator).split("[", 1)[0].strip()
+    return kind.removesuffix("Integrator").lower() or kind
+
+
+def shape_names(mi_scene, xml_path: str | None = None) -> list[str]:
+    """A name for each shape of ``mi_scene`` (SDF proxies left out): its id; for a shape
+    without one, what the XML file says of its material's shapes that are not in the scene
+    under their own ids (each one's id, else its mesh file, else its type) and the material:
+    ``"merged mesh of 3 shapes: floor, a.obj, cube (material white)"`` where Mitsuba joined the
+    meshes of one material into one shape."""
+    shapes = [sh for sh in mi_scene.shapes() if not sh.id().startswith("__sdf_")]
+    ids = {sh.id() for sh in shapes if sh.id()}
+    absent = {bsdf: [label for label, sid in group if sid not in ids]
+              for bsdf, group in (_xml_shapes(xml_path) if xml_path else {}).items()}
+    unnamed: dict = {}
+    for sh in shapes:
+        if not sh.id():
+            unnamed.setdefault(_bsdf_id(sh), []).append(sh)
+    names = []
+    for sh in shapes:
+        if sh.id():
+            names.append(sh.id())
+            continue
+        bsdf = _bsdf_id(sh)
+        material = f"material {bsdf}" if bsdf else "its own material"
+        labels, mine = absent.get(bsdf, []), unnamed[bsdf]
+        if len(mine) == 1 and len(labels) > 1:
+            shown = ", ".join(labels[:8]) + (", ..." if len(labels) > 8 else "")
+            names.append(f"merged mesh of {len(labels)} shapes: {shown} ({material})")
+        elif len(mine) == len(labels):
+            names.append(f"{labels[mine.index(sh)]} ({material})")
+        else:
+            kind = "mesh" if isinstance(sh, mi.Mesh) else str(sh).split("[", 1)[0].strip().lower()
+            names.append(f"unnamed {kind} ({material})")
+    return names
+
+
+def _bsdf_id(shape) -> str:
+    try:
+        bsdf = shape.bsdf()
+        return bsdf.id() if bsdf is not None else ""
+    except Exception:  # noqa: BLE001 - a shape without a BSDF
+        return ""
+
+
+def _xml_shapes(path: str) -> dict:
+    """``{material id: [(label, id or None), ...]}`` of the top-level shapes of ``path`` that
+    refer to a declared material (label: the id, else the mesh file's name, else the type)."""
+    root = _parse(path)
+    if root is None:
+        return {}
+    out: dict = {}
+    for shape in root.findall("shape"):
+        ref = shape.find("ref")
+        if ref is None or not ref.get("id"):
+            continue
+        file = next((n.get("value") for n in shape if n.get("name") == "filename" and n.get("value")), None)
+        label = shape.get("id") or (os.path.basename(file) if file else shape.get("type", "shape"))
+        out.setdefault(ref.get("id"), []).append((label, shape.get("id")))
+    return out
+
+__all__ = ["integrator_name", "shape_names", "xml_references"]

@@ -62,21 +62,21 @@ LOSSLESS_EVERY = 0.5       # seconds between PNG frames on the canvas while refi
 class MaterialTuner:
     """An interactive panel for one scene (see the module docstring).
 
-    ==================  =======================================================================
-    Parameter           Meaning
-    ==================  =======================================================================
-    ``scene``           a DraawScene, a scene file (.toml / .json) or a description dict
-    ``reference``       optional reference image (.exr linear, .png sRGB, or an array) of the
-                        preview's size: shows RMSE and an error image
-    ``version``         integrator version (default: the scene's)
-    ``max_spp``         refinement budget (samples per pixel)
-    ``denoise``         start with OIDN denoising on (needs ``pyoidn``)
-    ``interactive_scale``  resolution of the first frame after a change (default 0.5)
-    ``autostart``       start the worker thread now (False: call :meth:`refresh` yourself)
-    ``rest_after``      seconds without a change after which frames are sent as PNG
-    ``frame_channel``   ``"auto"`` (jupyter_rfb's canvas when installed, else an image
-                        widget), ``"rfb"`` or ``"image"``
-    ==================  =======================================================================
+    =======================  =======================================================================
+    Parameter                Meaning
+    =======================  =======================================================================
+    ``scene``                a DraawScene, a scene file (.toml / .json) or a description dict
+    ``reference``            optional reference image (.exr linear, .png sRGB, or an array) of the
+                             preview's size: shows RMSE and an error image
+    ``version``              integrator version (default: the scene's)
+    ``max_spp``              refinement budget (samples per pixel)
+    ``denoise``              start with OIDN denoising on (needs ``pyoidn``)
+    ``interactive_scale``    resolution of the first frame after a change (default 0.5)
+    ``autostart``            start the worker thread now (False: call :meth:`refresh` yourself)
+    ``rest_after``           seconds without a change after which frames are sent as PNG
+    ``frame_channel``        ``"auto"`` (jupyter_rfb's canvas when installed, else an image
+                             widget), ``"rfb"`` or ``"image"``
+    =======================  =======================================================================
 
     The Light, Camera, Post and Save tabs are panel objects (``lights_panel``,
     ``camera_panel``, ``post_panel``, ``save_panel``), each given the state and the callbacks

@@ -220,7 +220,7 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict:
 
 
 def error_image(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """|display difference| in false colour (magma, 0 .. 0.25) as uint8 RGB."""
+    """The absolute display difference in false colour (magma, 0 .. 0.25) as uint8 RGB."""
     from matplotlib import colormaps  # (86 ms to import: the difference view only)
     d = np.abs(srgb_encode(np.nan_to_num(image[..., :3])) - srgb_encode(reference[..., :3])).mean(axis=2)
     return (colormaps["magma"](np.clip(d / 0.25, 0, 1))[..., :3] * 255).astype(np.uint8)

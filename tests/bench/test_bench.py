@@ -223,8 +223,10 @@ def test_study_writes_table_summary_and_plots(tmp_path):
     for r in rows:
         assert r["time_s"] > 0 and np.isfinite(r["rmse"]) and r["finite"]
     # ground truth: cached, and equal to Mitsuba's path at 64 spp with the study's seed
-    cached = list((out / "cache").iterdir())
+    cached = [f for f in (out / "cache").iterdir() if f.name.startswith("gt-")]
     assert len(cached) == 1 and cached[0].suffix == ".exr"
+    # and two converged renders per version (each version's bias; path's is the gt's noise)
+    assert len([f for f in (out / "cache").iterdir() if f.name.startswith("conv-")]) == 4
     scene = draaw_mi.load_scene(str(scene_file))
     integ = mi.load_dict({"type": "path", "max_depth": 4})
     gt = np.array(mi.render(scene.mi_scene, integrator=integ, spp=64, seed=2 ** 31 - 1))
@@ -429,5 +431,5 @@ def test_the_ground_truth_is_rendered_at_the_studys_deepest_max_depth(tmp_path, 
     scene_file = tmp_path / "tiny.json"
     scene_file.write_text(json.dumps(tiny_description(resolution=[4, 4])))
     bench.run_study([str(scene_file)], versions=("path",), spps=(1,), max_depths=depths, adaptive=(None,),
-                    repeats=1, gt_spp=8, out_dir=str(tmp_path / "o"), progress=False)
+                    repeats=1, gt_spp=8, out_dir=str(tmp_path / "o"), progress=False, converged=False)
     assert seen == [expect] and written["ground_truth_depth"] == {"tiny": expect}

@@ -47,7 +47,7 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
         ("path", 4, 3, 3)
     assert header["draaw:integrator"] == "path"
     assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
-    assert header["draaw:sampler"] == "independent" and "draaw:post" not in header   # no chain ran
+    assert header["draaw:sampler"] == "multijitter" and "draaw:post" not in header   # no chain ran
     assert "wrote" in capsys.readouterr().out
 
 
@@ -136,7 +136,7 @@ def test_info_lists_setup_and_scene(capsys):
 BAD_ARGS = [
     ["render", "missing.toml", "-o", "{tmp}/x.exr"],
     ["render", "{scenes}/cornell.toml", "-o", "/proc/nope/x.exr"],
-    ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.png"],
+    ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.jpg"],      # (.png is an output since issue 43)
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--resolution=-4x4"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--resolution", "abc"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--spp", "0"],
@@ -149,7 +149,8 @@ BAD_ARGS = [
     ["info", "{tmp}/bad.toml"],
     ["render", "{scenes}/cornell.toml", "-o", "{tmp}/x.exr", "--bogus"],
     ["render", "{scenes}/sdf_csg.toml", "-o", "{tmp}/x.exr", "--version", "path", "--resolution", "8x8"],
-    ["render", "{tmp}/s.xml", "-o", "{tmp}/x.exr", "--resolution", "32x32"],   # (a TypeError traceback)
+    ["render", "{tmp}/s.xml", "-o", "{tmp}/x.exr", "--resolution", "32"],   # (once a TypeError traceback)
+    ["render", "{tmp}/s.xml", "-o", "{tmp}/x.exr", "-D", "res=32"],       # (the file has no $res)
 ]
 
 

@@ -39,7 +39,7 @@ def test_resolve_version(name, plugin):
 def test_every_alias_resolves_to_a_plugin():
     for alias, plugin in VERSION_ALIASES.items():
         assert resolve_version(alias) == plugin
-        assert plugin in PLUGINS + ("path", "prb", "volpath", "prbvolpath")
+        assert plugin in PLUGINS + ("path", "prb", "volpath", "prbvolpath", "scene")
 
 
 @pytest.mark.parametrize("bad", ["v5", "pth", "", "V3X"])

@@ -176,10 +176,18 @@ def test_every_option_reaches_oidn(cornell, quality, hdr, clean_aux):
 def test_render_denoise_renders_and_uses_the_guides(cornell, tmp_path):
     """render(denoise=True) with a draaw version renders the albedo and normal AOVs and hands
     them to OIDN: it equals OIDN called directly on the same render with those AOVs (HDR,
-    quality "high"), not the colour-only denoising."""
-    img = np.array(draaw_mi.render(cornell, spp=2, seed=4, denoise=True, post=[]))
-    raw, info = draaw_mi.render(cornell, spp=2, seed=4, aovs=["albedo", "normal"], post=[], return_info=True)
+    quality "high"), not the colour-only denoising. The emitters seen directly are kept out
+    of OIDN (it smeared the ceiling light's edge): the render denoised has them hidden, and
+    they are added after, undenoised (max_depth 1, the same seed); the undenoised sum is
+    ``info["raw"]``, the full render's expectation."""
+    img, dinfo = draaw_mi.render(cornell, spp=2, seed=4, denoise=True, post=[], return_info=True)
+    img = np.array(img)
+    raw, info = draaw_mi.render(cornell, spp=2, seed=4, aovs=["albedo", "normal"], post=[], return_info=True,
+                                hide_emitters=True)
     raw = np.array(raw)
+    seen = np.array(draaw_mi.render(cornell, spp=2, seed=4, max_depth=1, post=[]))
+    np.testing.assert_allclose(dinfo["raw"], raw[..., :3] + seen, rtol=1e-5, atol=1e-6)
+    img = img - seen
     idx = aux_channels(info["channels"])
     ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(raw[..., :3], 0)),
                          albedo=np.ascontiguousarray(np.clip(raw[..., idx["albedo"]], 0, 1)),
@@ -203,8 +211,10 @@ def test_cli_render_denoise(tmp_path, capsys):
     rc = main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(out), "--spp", "2",
                "--resolution", "24x16", "--seed", "1", "--denoise"])
     assert rc == 0 and "denoised" in capsys.readouterr().out
-    img = draaw_mi.read_exr(str(out))
-    assert img.shape == (16, 24, 3) and np.isfinite(img).all()
+    img, names = draaw_mi.read_exr(str(out), with_names=True)
+    # the undenoised render kept beside the denoised colour (make demo's out/cornell.exr)
+    assert img.shape == (16, 24, 6) and np.isfinite(img).all()
+    assert sorted(names[3:]) == ["raw.B", "raw.G", "raw.R"]
 
 
 def _display_rmse(x, ref):

@@ -1,0 +1,171 @@
+"""What the ``draaw-mi`` subcommands that read a scene share: ``-D name=value`` for a Mitsuba
+XML file's ``$name`` parameters, loading the scene with it, telling a batch manifest from a
+scene (and the reverse) by name, saying which integrator an XML scene renders with, and the
+``info`` command."""
+from __future__ import annotations
+
+import json
+import os
+import re
+
+import drjit as dr
+import mitsuba as mi
+
+from .. import __version__, integrators, materials
+from ..integrators import SCENE_VERSION, resolve_version
+from ..scene import load_scene
+from ..scene.description import TOP_KEYS
+from ..scene.loading import SCENE_SUFFIXES
+from ..scene.schema import read_document
+from .common import CliError
+
+DEFINE_HELP = ("NAME=VALUE: a value for a Mitsuba XML scene's $NAME parameter (its <default "
+               "name=NAME>), e.g. -D res=64 -D spp=16; repeatable")
+
+
+def add_define_option(parser) -> None:
+    """``-D NAME=VALUE`` (repeatable) on a subcommand that reads a scene."""
+    parser.add_argument("-D", "--define", action="append", metavar="NAME=VALUE", help=DEFINE_HELP)
+
+
+def parse_defines(given) -> dict | None:
+    """``-D`` values as ``{name: value}`` (``None`` when none were given)."""
+    if not given:
+        return None
+    out = {}
+    for item in given:
+        name, eq, value = item.partition("=")
+        name = name.strip()
+        if not eq or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name) or not value.strip():
+            raise CliError(f"-D {item!r}: expected NAME=VALUE, e.g. -D res=64 (a Mitsuba XML "
+                           "scene's $NAME parameter)")
+        out[name] = value.strip()
+    return out
+
+
+def load_for_cli(args, **overrides):
+    """``load_scene(args.scene, ...)`` with the command's ``-D`` values; a TOML/JSON scene
+    given ``-D``, or a batch manifest given to a scene command, is one line naming the fix."""
+    defines = parse_defines(getattr(args, "define", None))
+    if defines is not None and not args.scene.lower().endswith(".xml"):
+        raise CliError(f"-D {', '.join(f'{k}={v}' for k, v in defines.items())}: -D sets $name "
+                       f"parameters of a Mitsuba XML scene; {args.scene} is not one (set its values "
+                       "in the file, or with --resolution, --spp, ...)")
+    try:
+        return load_scene(args.scene, defines=defines, **overrides)
+    except Exception as e:
+        if "is a batch manifest" in str(e):
+            raise CliError(f"{args.command}: {args.scene} is a batch manifest (it has [[jobs]]), "
+                           f"not a scene; use `draaw-mi batch {args.scene}`") from None
+        raise
+
+
+def refuse_scene_as_manifest(path: str) -> None:
+    """One line when the file given to ``draaw-mi batch`` is a scene, not a manifest."""
+    lower = path.lower()
+    if not os.path.isfile(path) or not lower.endswith(SCENE_SUFFIXES):
+        return
+    if lower.endswith((".toml", ".json")):
+        try:
+            doc = read_document(path, "manifest")
+        except Exception:  # noqa: BLE001 - the manifest reader says what is wrong with it
+            return
+        scene_keys = sorted(set(doc) & set(TOP_KEYS)) if isinstance(doc, dict) else []
+        if "jobs" in doc or not scene_keys:
+            return
+        what = f"a scene (it has {', '.join(f'[{k}]' for k in scene_keys)}), not a batch manifest"
+    else:
+        what = "a scene file, not a batch manifest (a .toml or .json file with [[jobs]])"
+    raise CliError(f"batch: {path} is {what}; use `draaw-mi render {path} -o OUT.exr`")
+
+
+def integrator_note(args, scene) -> str | None:
+    """What a render of an XML/dict scene that declares an integrator does with it, when the
+    user may not expect it: rendered with the file's own integrator (``direct``, ...) as no
+    ``--version`` was given, or with ``--version`` instead of the one the file declares."""
+    own = scene.info.get("integrator")
+    if own is None:
+        return None
+    if args.version is None:
+        if scene.settings["version"] == SCENE_VERSION:
+            return (f"{args.scene} renders with its own integrator {own!r} (Mitsuba's, with the "
+                    "file's settings); --version picks another")
+        return None
+    if resolve_version(args.version) != resolve_version(scene.settings["version"]):
+        return (f"{args.scene} declares integrator {own!r}; rendered with --version "
+                f"{args.version} ({resolve_version(args.version)}) instead")
+    return None
+
+
+def check_own_integrator_flags(args, scene) -> None:
+    """``--max-depth`` does not reach an XML scene's own integrator (its file sets its depth)."""
+    version = args.version or scene.settings["version"]
+    if args.max_depth is not None and resolve_version(version) == SCENE_VERSION:
+        raise CliError(f"--max-depth {args.max_depth}: {args.scene} renders with its own integrator "
+                       f"{scene.info.get('integrator', '?')!r}, whose depth its file sets; set it "
+                       "there, or give --version (path, v4, ...) with --max-depth")
+
+
+def cmd_info(args) -> int:
+    """``draaw-mi info [SCENE]``: the set-up, and what a scene holds."""
+    out = {
+        "draaw_mi": __version__,
+        "variant": mi.variant(),
+        "mitsuba": mi.__version__,
+        "drjit": dr.__version__,
+        "llvm": ".".join(map(str, dr.detail.llvm_version())) if mi.variant().startswith("llvm") else None,
+        "threads": dr.thread_count(),
+        "plugins": {"bsdf": list(getattr(materials, "PLUGINS", ["draaw"])),
+                    "integrators": sorted(set(getattr(integrators, "PLUGINS", [])))},
+        "versions": dict(integrators.VERSION_ALIASES),
+    }
+    if args.scene:
+        out["scene"] = load_for_cli(args).summary()
+    if args.json:
+        print(json.dumps(out, indent=2, default=str))
+        return 0
+    for key, value in out.items():
+        if key in ("scene", "versions", "plugins"):
+            continue
+        print(f"{key:>10}: {value}")
+    print(f"{'bsdfs':>10}: {', '.join(out['plugins']['bsdf'])}")
+    by_plugin: dict = {}
+    for alias, plugin in out["versions"].items():
+        if alias != plugin:
+            by_plugin.setdefault(plugin, []).append(alias)
+    for plugin in sorted(set(out["versions"].values())):
+        print(f"{'version':>10}: {plugin} ({', '.join(by_plugin.get(plugin, [])) or plugin})")
+    if args.scene:
+        s = out["scene"]
+        print(f"\nscene {s['source']}: {s['resolution'][0]}x{s['resolution'][1]}")
+        print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
+        print(f"    lights: {', '.join(s['lights']) or 'none'}")
+        print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
+        for v in s.get("volumes", []):
+            print("    volume: " + _volume_line(v))
+        print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
+        if s.get("integrator"):
+            used = ("its own, as version 'scene'" if s["settings"]["version"] == SCENE_VERSION
+                    else f"as version {s['settings']['version']!r}")
+            print(f"integrator: {s['integrator']} (declared by the file; renders with {used})")
+        if s["post"]:
+            print(f"      post: {' -> '.join(map(str, s['post']))}")
+        if s.get("sdf"):
+            print(f"       sdf: {len(s['sdf'])} nodes")
+            for line in s["sdf"]:
+                print(f"            {line}")
+        on = [k for k, v in s["features"].items() if v]
+        off = [k for k, v in s["features"].items() if not v]
+        print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
+    return 0
+
+
+def _volume_line(v: dict) -> str:
+    """One line of ``draaw-mi info`` for a [[volumes]] entry."""
+    shape = "x".join(map(str, v["shape"]))
+    lo, hi = v["bounds"]
+    box = f"box {[round(x, 3) for x in lo]}..{[round(x, 3) for x in hi]}"
+    if v["mode"] == "smoke":
+        return (f"{v['name']}: smoke {shape}, {v['cells']} cells with density, max sigma_t "
+                f"{v['max_sigma_t']:g}, g={v['g']:g}, {box}")
+    return f"{v['name']}: solid {shape}, {v['voxels']} voxels, {v['faces']} exterior faces, {box}"

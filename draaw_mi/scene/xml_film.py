@@ -1,0 +1,119 @@
+"""Mitsuba XML scenes at another size, and their ``$name`` parameters.
+
+A Mitsuba XML file declares ``<default name="res" value="256"/>`` and uses ``$res``;
+``mi.load_file(path, res=64)`` loads it with another value. :func:`check_defines` checks such
+values (``draaw-mi render -D res=64``, ``load_scene(path, defines={"res": 64})``).
+
+The film's size is not a scene parameter (``mi.traverse`` does not list it), so a scene is
+loaded at another resolution from a copy of its text whose first sensor's film has that
+``width`` and ``height`` (:func:`film_sized_xml`); the copy names the original's folder in a
+``<path>`` tag, so that its relative meshes, textures and includes are found as before.
+
+Example::
+
+    >>> text, kept = film_sized_xml_text(
+    ...     '<scene version="3.0.0"><default name="res" value="256"/><sensor type="perspective">'
+    ...     '<film type="hdrfilm"><integer name="width" value="$res"/>'
+    ...     '<integer name="height" value="$res"/></film></sensor></scene>', "/scenes", 64, 48,
+    ...     {"res": "128"})
+    >>> 'value="64"' in text and 'value="48"' in text and '<path value="/scenes"' in text, kept
+    (True, {})
+"""
+from __future__ import annotations
+
+import os
+import re
+import xml.etree.ElementTree as ET
+
+from ..errors import SceneError
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def check_defines(defines, source: str) -> dict:
+    """``defines`` (``{name: value}``, values str, int, float or bool) as the strings Mitsuba's
+    loader takes; a :class:`SceneError` naming the bad entry otherwise."""
+    if defines is None:
+        return {}
+    if not isinstance(defines, dict):
+        raise SceneError(f"{source}: defines={defines!r}; expected a dict of $name values, e.g. "
+                         "{'res': 64}")
+    out = {}
+    for name, value in defines.items():
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise SceneError(f"{source}: define {name!r}: expected a parameter name (letters, digits, "
+                             "'_'), as the file's $name")
+        if isinstance(value, bool):
+            value = "true" if value else "false"
+        if not isinstance(value, (str, int, float)) or (isinstance(value, str) and not value.strip()):
+            raise SceneError(f"{source}: define {name}={value!r}: expected a string or number")
+        out[name] = str(value)
+    return out
+
+
+def declared_defaults(path: str) -> list[str]:
+    """The names of the ``<default>`` parameters ``path`` declares (best effort)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError, ValueError):
+        return []
+    return [n.get("name") for n in root.iter("default") if n.get("name")]
+
+
+def film_sized_xml(path: str, width: int, height: int, defines: dict) -> tuple[str, dict]:
+    """``(text, defines)``: the XML of ``path`` with its first sensor's film ``width`` x
+    ``height``, and the ``defines`` it still uses (a ``-D res=...`` that only sized the film
+    would be an unused parameter, which Mitsuba refuses)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except (OSError, UnicodeDecodeError) as e:
+        raise SceneError(f"{path}: cannot read it ({e})") from None
+    return film_sized_xml_text(text, os.path.dirname(os.path.abspath(path)), width, height, defines,
+                               source=path)
+
+
+def film_sized_xml_text(text: str, folder: str, width: int, height: int, defines: dict,
+                        source: str = "<xml>") -> tuple[str, dict]:
+    """:func:`film_sized_xml` of the XML ``text`` of a file in ``folder``."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise SceneError(f"{source}: cannot set its film size: the XML does not parse ({e})") from None
+    sensor = root.find("sensor")
+    if sensor is None:
+        raise SceneError(f"{source}: cannot set its film size: no <sensor> in the file itself (one "
+                         "in an <include>d file is sized by its own $parameters: give them with -D "
+                         "/ defines=)")
+    film = sensor.find("film")
+    if film is None:                                  # (Mitsuba's default film)
+        film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
+    for name, value in (("width", width), ("height", height)):
+        node = next((n for n in film if n.get("name") == name), None)
+        if node is None:
+            node = ET.SubElement(film, "integer", {"name": name})
+        node.tag = "integer"
+        node.set("value", str(int(value)))
+    root.insert(0, ET.Element("path", {"value": folder}))
+    out = ET.tostring(root, encoding="unicode")
+    kept = {k: v for k, v in defines.items() if re.search(rf"\${re.escape(k)}(?![A-Za-z0-9_])", out)
+            or _used_by_includes(root, folder, k)}
+    return out, kept
+
+
+def _used_by_includes(root, folder: str, name: str) -> bool:
+    """Whether an ``<include>`` of ``root`` may use ``$name`` (its file is read as text; a file
+    that cannot be found or read counts as using it: Mitsuba then says what is wrong)."""
+    for inc in root.iter("include"):
+        file = inc.get("filename", "")
+        file = file if os.path.isabs(file) else os.path.join(folder, file)
+        try:
+            with open(file, encoding="utf-8", errors="replace") as fh:
+                if f"${name}" in fh.read():
+                    return True
+        except OSError:
+            return True
+    return False
+
+
+__all__ = ["check_defines", "declared_defaults", "film_sized_xml", "film_sized_xml_text"]
