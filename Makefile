@@ -18,10 +18,11 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e ".[dev]"
 	@touch $(STAMP)
 
-# Denoised (OIDN, installed by setup; the emitters seen directly are not denoised); the raw
-# render is kept in out/cornell.exr's channels raw.R/G/B (benchmarks/results/demo_quality.md).
+# Stratified samples, denoised (OIDN, installed by setup; the emitters seen directly are not
+# denoised); the raw render is kept in out/cornell.exr's channels raw.R/G/B
+# (benchmarks/results/demo_quality.md).
 demo: setup
-	$(BIN)/draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --denoise
+	$(BIN)/draaw-mi render scenes/cornell.toml -o out/cornell.exr --png out/cornell.png --denoise --sampler multijitter
 
 test: setup
 	$(BIN)/python -m pytest -m "not slow" -q

@@ -37,6 +37,8 @@ from .bench import cmd_bench
 from .common import EXIT_BAD_INPUT, PROGRESS_HELP, CliError, progress_mode, read_json  # noqa: F401 (re-exported)
 from .scenes import (
     add_define_option,
+    add_set_option,
+    apply_sets,
     check_own_integrator_flags,
     cmd_info,
     integrator_note,
@@ -88,6 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=int, help="samples per pixel")
     r.add_argument("--resolution", help="WxH, e.g. 640x480 (an XML scene's film too)")
     add_define_option(r)
+    add_set_option(r)
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (up to 10x less "
                    "variance at the same time), stratified, ldsampler, orthogonal")
@@ -206,8 +209,6 @@ def _batch_parser(sub) -> None:
 
 
 def _cmd_render(args) -> int:
-
-
     _writable(args.output, (".exr", ".png"), "output")
     if args.png:
         _writable(args.png, (".png",), "--png")
@@ -223,6 +224,7 @@ def _cmd_render(args) -> int:
                  "sampler": args.sampler}
     scene = load_for_cli(args, **{k: v for k, v in overrides.items() if v is not None})
     check_own_integrator_flags(args, scene)
+    sets = apply_sets(scene, args.sets)
     post = None
     if args.post:
         post = _load_chain(args.post)
@@ -234,6 +236,8 @@ def _cmd_render(args) -> int:
     arr = np.array(image)
     chain = info["post"]                                                 # what render() applied
     meta = render_metadata(args.scene, scene, info, post=chain)
+    if sets:                                   # the scene file alone no longer describes the image
+        meta["draaw:set"] = json.dumps(sets)
     # the film's colour channels by name (R, G, B[, A], X, Y, Z[, A] or Y[, A] of an XML
     # film's pixel_format), not the first three: a luminance film's depth AOV would be the
     # PNG's alpha, an xyz film's X, Y, Z its R, G, B

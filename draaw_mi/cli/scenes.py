@@ -60,6 +60,48 @@ def load_for_cli(args, **overrides):
         raise
 
 
+SET_HELP = ("NAME=VALUE: set a scene parameter before rendering, named as `fit` names it "
+            "(material.parameter, a light's key such as key.emitter.radiance, sdf.NODE.PARAM); VALUE a "
+            "number or a JSON list, e.g. --set target.roughness=0.3 --set target.base_color=[0.9,0.2,0.1]; "
+            "repeatable")
+
+
+def add_set_option(parser) -> None:
+    """``--set NAME=VALUE`` (repeatable): a parameter's value for this render only."""
+    parser.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", help=SET_HELP)
+
+
+def apply_sets(scene, given) -> dict:
+    """Write ``--set`` values into the loaded ``scene``'s parameters (converted to each
+    parameter's type, as batch overrides are); ``{name: value}`` of what was set. A name the
+    scene lacks, a value that is not a number or JSON list, or one of the wrong size is a
+    :class:`CliError` naming it."""
+    from ..errors import RenderError, SceneError
+    from ..rendering.session import session_of
+    from ..scene.values import value_like
+    if not given:
+        return {}
+    params, done = scene.all_params, {}
+    for item in given:
+        name, eq, text = item.partition("=")
+        name = name.strip()
+        if not eq or not name or not text.strip():
+            raise CliError(f"--set {item!r}: expected NAME=VALUE, e.g. --set target.roughness=0.3")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            raise CliError(f"--set {item}: {text!r} is not a number or a JSON list of numbers") from None
+        try:
+            key = scene.key(name)
+            params[key] = value_like(params[key], value, key)
+        except (SceneError, RenderError) as e:
+            raise CliError(f"--set {item}: {e}") from None
+        done[name] = value
+    params.update()
+    session_of(scene).scene_changed()        # e.g. V4's light powers after a radiance change
+    return done
+
+
 def refuse_scene_as_manifest(path: str) -> None:
     """One line when the file given to ``draaw-mi batch`` is a scene, not a manifest."""
     lower = path.lower()

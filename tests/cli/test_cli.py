@@ -47,7 +47,7 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
         ("path", 4, 3, 3)
     assert header["draaw:integrator"] == "path"
     assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
-    assert header["draaw:sampler"] == "multijitter" and "draaw:post" not in header   # no chain ran
+    assert header["draaw:sampler"] == "independent" and "draaw:post" not in header   # no chain ran
     assert "wrote" in capsys.readouterr().out
 
 
