@@ -16,13 +16,9 @@ Example::
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import io
 import os
 import stat
-import sys
 import tempfile
-import threading
 from typing import Sequence
 
 import mitsuba as mi
@@ -180,60 +176,75 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
             raise IOFailure(f"write_exr({path!r}): {e}") from None
 
 
-_FD_LOCK = threading.Lock()
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+# scanlines per chunk of each compression (OpenEXR's Compression enum, 0..9)
+_LINES_PER_CHUNK = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256}
 
 
-@contextlib.contextmanager
-def quiet_fds():
-    """Send what C++ libraries write to file descriptors 1 and 2 and to Python's
-    ``sys.stdout`` / ``sys.stderr`` (OpenEXR's ``Warning: ...`` and ``(EXR_ERR_...)`` lines, up
-    to 18 for one cut-short file) to a buffer instead of the terminal; yields a list that holds
-    the captured text once the block ends. The descriptors and streams are the process's:
-    output of other threads during the block goes to the buffer too (an EXR read is short;
-    concurrent reads take turns)."""
-    captured: list[str] = []
-    with _FD_LOCK, tempfile.TemporaryFile() as buf:
-        _flush_all()
-        try:
-            saved = [os.dup(1), os.dup(2)]
-        except OSError:                         # (no descriptors 1 and 2: nothing to quieten)
-            yield captured
-            return
-        # (pybind11's py::print writes to sys.stdout, which need not be descriptor 1)
-        python_streams, text = (sys.stdout, sys.stderr), io.StringIO()
-        try:
-            os.dup2(buf.fileno(), 1)
-            os.dup2(buf.fileno(), 2)
-            sys.stdout = sys.stderr = text
-            yield captured
-        finally:
-            sys.stdout, sys.stderr = python_streams
-            _flush_all()                # (C's stdout is buffered in a pipe or file)
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            for fd in saved:
-                os.close(fd)
-            buf.seek(0)
-            captured.append(buf.read().decode("utf-8", "replace") + text.getvalue())
+def exr_cut_short(path: str) -> str | None:
+    """Why the single-part scanline EXR at ``path`` is cut short or damaged (its header, its
+    offset table or a chunk reaching past the end of the file), or ``None`` when its layout is
+    whole or is not one this check reads (tiled, multi-part, deep, an unknown compression).
 
+    Checked in Python before OpenEXR opens the file: OpenEXR reports a cut file with a dozen
+    lines of its own on the process's standard streams, which cannot be silenced for one
+    thread only.
 
-def _flush_all() -> None:
-    """Flush Python's and the C library's buffered standard streams (what was written before
-    a redirection goes where it was meant to, what is written during one goes to the buffer)."""
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    with contextlib.suppress(Exception):
-        ctypes.CDLL(None).fflush(None)
-
-
-def _first_message(text: str, path: str) -> str:
-    """OpenEXR's first captured line, without the file name it starts with."""
-    for line in text.splitlines():
-        line = line.strip()
-        if line:
-            return line.removeprefix(f"{path}:").strip()
-    return ""
+    >>> import os, tempfile, numpy as np
+    >>> d = tempfile.mkdtemp(); p = os.path.join(d, "x.exr")
+    >>> write_exr(p, np.zeros((64, 8, 3), np.float32))
+    >>> exr_cut_short(p) is None
+    True
+    >>> data = open(p, "rb").read(); _ = open(p, "wb").write(data[:len(data) - 5])
+    >>> exr_cut_short(p)
+    'its last chunk of pixels ends 5 bytes past the end of the file'
+    """
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(min(size, 1 << 20))
+        if head[:4] != _EXR_MAGIC:
+            return None
+        if len(head) < 8:
+            return "it ends inside its version field"
+        flags = int.from_bytes(head[4:8], "little")
+        if flags & (0x200 | 0x800 | 0x1000):               # tiled, deep or multi-part
+            return None
+        pos, attrs = 8, {}
+        while True:
+            if pos >= len(head):
+                return "it ends inside its header"
+            if head[pos] == 0:
+                pos += 1
+                break
+            name_end = head.find(b"\0", pos)
+            type_end = head.find(b"\0", name_end + 1) if name_end >= 0 else -1
+            if type_end < 0 or type_end + 5 > len(head):
+                return "it ends inside its header"
+            n = int.from_bytes(head[type_end + 1:type_end + 5], "little", signed=True)
+            if n < 0 or type_end + 5 + n > len(head):
+                return "it ends inside its header"
+            attrs[head[pos:name_end]] = head[type_end + 5:type_end + 5 + n]
+            pos = type_end + 5 + n
+        window, compression = attrs.get(b"dataWindow"), attrs.get(b"compression")
+        if window is None or len(window) != 16 or not compression or compression[0] not in _LINES_PER_CHUNK:
+            return None
+        ymin, ymax = (int.from_bytes(window[i:i + 4], "little", signed=True) for i in (4, 12))
+        lines = _LINES_PER_CHUNK[compression[0]]
+        chunks = max(0, -(-(ymax - ymin + 1) // lines))
+        table_end = pos + 8 * chunks
+        if table_end > size:
+            return "it ends inside its table of chunk offsets"
+        fh.seek(pos)
+        offsets = np.frombuffer(fh.read(8 * chunks), dtype="<u8")
+        if chunks and (offsets.min() < table_end or offsets.max() + 8 > size):
+            return f"its offsets point past the end of the file ({size} bytes)"
+        if chunks:
+            last = int(offsets.max())
+            fh.seek(last + 4)
+            packed = int.from_bytes(fh.read(4), "little", signed=True)
+            if last + 8 + packed > size:
+                return f"its last chunk of pixels ends {last + 8 + packed - size} bytes past the end of the file"
+    return None
 
 
 def read_exr(path: str, with_names: bool = False):
@@ -242,31 +253,34 @@ def read_exr(path: str, with_names: bool = False):
     Colour channels come first (R, G, B[, A], X, Y, Z[, A] or Y[, A]), then the rest sorted by
     name. With
     ``with_names=True`` returns ``(array, names)``. A file that does not decode (cut short,
-    damaged, not an EXR) raises one :class:`~draaw_mi.errors.IOFailure` line; OpenEXR's own
-    messages about it are kept off the terminal (:func:`quiet_fds`), the first one quoted.
+    damaged, not an EXR) raises one :class:`~draaw_mi.errors.IOFailure` line; a scanline file
+    cut short is found before OpenEXR reads it (:func:`exr_cut_short`), so OpenEXR's own
+    messages about it never reach the terminal.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise IOFailure(f"read_exr: {path!r} does not exist")
-    import OpenEXR  # (15 ms to import: paid by EXR files only)
-    failure = None
-    with quiet_fds() as noise:
-        try:
-            with OpenEXR.File(path, separate_channels=True) as f:
-                chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}
-        except Exception as e:  # noqa: BLE001 - OpenEXR raises bare RuntimeError/ValueError
-            failure = str(e)
-    said = _first_message(noise[0] if noise else "", path)
-    if failure is None and not chans:
-        failure = "no channels"
-    if failure is not None:
+    try:
         with open(path, "rb") as fh:
             magic = fh.read(4)
-        if magic != b"\x76\x2f\x31\x01":
-            raise IOFailure(f"read_exr({path!r}): not a readable EXR file: not an EXR file at all "
-                            "(it does not start with the EXR magic number)")
+        cut = exr_cut_short(path)
+    except OSError as e:
+        raise IOFailure(f"read_exr({path!r}): cannot read it: {e.strerror or e}") from None
+    if magic != _EXR_MAGIC:
+        raise IOFailure(f"read_exr({path!r}): not a readable EXR file: not an EXR file at all "
+                        "(it does not start with the EXR magic number)")
+    if cut is not None:
         raise IOFailure(f"read_exr({path!r}): not a readable EXR file: truncated or damaged "
-                        f"({os.path.getsize(path)} bytes; OpenEXR: {said or failure})")
+                        f"({os.path.getsize(path)} bytes: {cut})")
+    import OpenEXR  # (15 ms to import: paid by EXR files only)
+    try:
+        with OpenEXR.File(path, separate_channels=True) as f:
+            chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}
+    except Exception as e:  # noqa: BLE001 - OpenEXR raises bare RuntimeError/ValueError
+        raise IOFailure(f"read_exr({path!r}): not a readable EXR file: truncated or damaged "
+                        f"({os.path.getsize(path)} bytes; OpenEXR: {e})") from None
+    if not chans:
+        raise IOFailure(f"read_exr({path!r}): not a readable EXR file: it has no channels")
     order = [n for n in ("R", "G", "B", "X", "Y", "Z", "A") if n in chans]
     order += sorted(n for n in chans if n not in order)
     arr = np.stack([chans[n] for n in order], axis=-1)

@@ -31,6 +31,8 @@ from sphinx.directives.code import CodeBlock
 from sphinx.util import logging
 from sphinx.util.nodes import nested_parse_with_titles
 
+from draaw_mi.io import write_text
+
 logger = logging.getLogger(__name__)
 DOCS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROOT = os.path.dirname(DOCS)
@@ -303,8 +305,8 @@ def write_benchmark_pages(app):
         path = os.path.join(out, f"{page}.md")
         wanted.add(path)
         if not os.path.isfile(path) or open(path, encoding="utf-8").read() != body:
-            with open(path, "w", encoding="utf-8") as fh:     # unchanged pages keep their mtime
-                fh.write(body)
+            write_text(path, body)      # atomic: a build beside this one never reads half a page;
+                                        # unchanged pages keep their mtime
     for name in os.listdir(out):
         path = os.path.join(out, name)
         if name.endswith(".md") and path not in wanted:

@@ -212,6 +212,8 @@ def _cmd_render(args) -> int:
     _writable(args.output, (".exr", ".png"), "output")
     if args.png:
         _writable(args.png, (".png",), "--png")
+        if os.path.abspath(args.png) == os.path.abspath(args.output):
+            raise CliError(f"--png {args.png}: the same file as -o; -o {args.output} already writes the PNG")
     if args.threads is not None:
         if args.threads < 1:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")

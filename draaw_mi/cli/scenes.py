@@ -5,6 +5,7 @@ scene (and the reverse) by name, saying which integrator an XML scene renders wi
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 
@@ -12,11 +13,14 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import __version__, integrators, materials
+from ..errors import RenderError, SceneError
 from ..integrators import SCENE_VERSION, resolve_version
+from ..rendering.session import session_of
 from ..scene import load_scene
 from ..scene.description import TOP_KEYS
 from ..scene.loading import SCENE_SUFFIXES
 from ..scene.schema import read_document
+from ..scene.values import value_like
 from .common import CliError
 
 DEFINE_HELP = ("NAME=VALUE: a value for a Mitsuba XML scene's $NAME parameter (its <default "
@@ -76,9 +80,6 @@ def apply_sets(scene, given) -> dict:
     parameter's type, as batch overrides are); ``{name: value}`` of what was set. A name the
     scene lacks, a value that is not a number or JSON list, or one of the wrong size is a
     :class:`CliError` naming it."""
-    from ..errors import RenderError, SceneError
-    from ..rendering.session import session_of
-    from ..scene.values import value_like
     if not given:
         return {}
     params, done = scene.all_params, {}
@@ -88,9 +89,14 @@ def apply_sets(scene, given) -> dict:
         if not eq or not name or not text.strip():
             raise CliError(f"--set {item!r}: expected NAME=VALUE, e.g. --set target.roughness=0.3")
         try:
-            value = json.loads(text)
+            value = json.loads(text, parse_constant=_refuse_constant)
         except ValueError:
-            raise CliError(f"--set {item}: {text!r} is not a number or a JSON list of numbers") from None
+            value = None
+        numbers = value if isinstance(value, list) else [value]
+        if not numbers or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                  and math.isfinite(x) for x in numbers):
+            raise CliError(f"--set {item}: {text!r} is not a finite number or a JSON list of finite "
+                           "numbers")
         try:
             key = scene.key(name)
             params[key] = value_like(params[key], value, key)
@@ -100,6 +106,10 @@ def apply_sets(scene, given) -> dict:
     params.update()
     session_of(scene).scene_changed()        # e.g. V4's light powers after a radiance change
     return done
+
+
+def _refuse_constant(name: str):
+    raise ValueError(f"{name} is not a finite number")
 
 
 def refuse_scene_as_manifest(path: str) -> None:
@@ -142,6 +152,9 @@ def integrator_note(args, scene) -> str | None:
 def check_own_integrator_flags(args, scene) -> None:
     """``--max-depth`` does not reach an XML scene's own integrator (its file sets its depth)."""
     version = args.version or scene.settings["version"]
+    if resolve_version(version) == SCENE_VERSION and not scene.info.get("integrator"):
+        raise CliError(f"--version {version}: {args.scene} declares no integrator of its own to render "
+                       "with; give a render version (v4, path, ...)")
     if args.max_depth is not None and resolve_version(version) == SCENE_VERSION:
         raise CliError(f"--max-depth {args.max_depth}: {args.scene} renders with its own integrator "
                        f"{scene.info.get('integrator', '?')!r}, whose depth its file sets; set it "

@@ -29,7 +29,7 @@ import numpy as np
 from .. import post as post_mod
 from ..errors import RenderError
 from ..guard import RENDER_GUARD
-from ..integrators import VERSION_GRADES, is_draaw, resolve_version
+from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version
 from ..integrators.common import AOV_CHANNELS
 from ..io import channel_names
 from ..progress import check_mode, progress_bar
@@ -178,6 +178,13 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
                               "`scene.with_resolution(w, h)` and traverse that instead")
         scene = scene.with_resolution(*size)
     version = s["version"] if version is None else version
+    if resolve_version(version) == SCENE_VERSION:
+        ignored = [f"{n}={v!r}" for n, v in (("max_depth", max_depth), ("hide_emitters", hide_emitters))
+                   if v is not None]
+        if ignored:
+            warnings.warn(f"render: version 'scene' renders with the integrator the scene declares, "
+                          f"with its own settings: {', '.join(ignored)} not applied (give a version "
+                          "such as 'v4' or 'path' to set them)", RuntimeWarning, stacklevel=3)
     spp = _check_int("spp", s["spp"] if spp is None else spp, 1)
     seed = _check_int("seed", s["seed"] if seed is None else seed, 0, 2 ** 32 - 1)     # a UInt32
     max_depth = _check_int("max_depth", s["max_depth"] if max_depth is None else max_depth, -1)
@@ -249,7 +256,7 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int, count
 def _emission_apart(rs: RenderSettings, session, time_budget) -> bool:
     """Whether ``denoise=True`` keeps the emitters seen directly out of the denoiser: draaw
     versions (the guides), emitters shown, an RGB film, no media, a fixed spp, no AOVs asked
-    for (theirs would come from the render with the emitters hidden)."""
+    for beyond the denoiser's guides (such renders take the one-pass path)."""
     return (rs.denoise and is_draaw(rs.version) and not rs.hide_emitters and time_budget is None
             and not [a for a in rs.aovs if a not in rs.guide_aovs]
             and scene_colour_names(rs.scene) == ["R", "G", "B"] and not session.holds()["media"])
@@ -259,20 +266,23 @@ def _render_denoised_apart(rs: RenderSettings, progress, return_info):
     """``denoise=True`` with the emitters seen directly left out of the denoiser: OIDN smears
     the edge of a bright emitter (the Cornell box's ceiling light at 18 next to a ceiling at
     0.2 came out 3.5 lower along its edge, an RMSE of 0.042 at 256x256 where the raw 64-spp
-    render has 0.020). The image is rendered with the emitters hidden and denoised, then the
-    emitters seen by the camera (``max_depth=1``, the same seed: the same camera rays) are
-    added undenoised; the sum has the expectation of the full render before denoising. The
-    undenoised sum is ``info["raw"]`` (H, W, 3)."""
+    render has 0.020). The full render is the undenoised image, ``info["raw"]`` (H, W, 3);
+    the emitters seen by the camera (``max_depth=1``, the same seed: the same camera rays where
+    the sampling is not adaptive) are rendered apart, the rest (full minus seen, at least 0) is
+    denoised, and the seen emitters are added back undenoised. (Rendering the rest with the
+    emitters hidden instead would shade what lies behind an area light where the camera sees
+    it: a light seen from its back would vanish.)"""
     common = dict(version=rs.version, spp=rs.spp, seed=rs.seed, pass_spp=rs.pass_spp, post=[],
                   integrator_options=rs.options or None)
     t0 = time.perf_counter()
-    hidden, info = render(rs.scene, max_depth=rs.max_depth, hide_emitters=True, aovs=rs.aovs,
-                          progress=progress, return_info=True, **common)
+    full, info = render(rs.scene, max_depth=rs.max_depth, hide_emitters=False, aovs=rs.aovs,
+                        progress=progress, return_info=True, **common)
     seen = render(rs.scene, max_depth=1, hide_emitters=False, aovs=[], **common)
     with RENDER_GUARD:
-        arr = np.array(hidden)
+        arr = np.array(full)
         emission = np.nan_to_num(np.array(seen)[..., :3])
-        raw = arr[..., :3] + emission
+        raw = arr[..., :3].copy()
+        arr[..., :3] = np.maximum(np.nan_to_num(arr[..., :3]) - emission, 0.0)
         out, names = _denoised(mi.TensorXf(arr), info["channels"], rs.guide_aovs)
         out = np.array(out)
         out[..., :3] += emission

@@ -48,7 +48,11 @@ def test_set_renders_the_scene_with_those_values_and_says_so_in_the_header(tmp_p
 
 @pytest.mark.parametrize("given, says", [
     ("nosuch.roughness=0.3", "no parameter 'nosuch.roughness'"),
-    ("target.roughness=rough", "'rough' is not a number or a JSON list"),
+    ("target.roughness=rough", "'rough' is not a finite number or a JSON list"),
+    ("target.roughness=NaN", "is not a finite number"),
+    ("target.roughness=1e999", "is not a finite number"),
+    ("target.roughness=true", "is not a finite number"),
+    ("target.base_color=[]", "is not a finite number"),
     ("target.roughness", "expected NAME=VALUE"),
     ("target.base_color=[0.1,0.2]", "cannot convert to Color3f"),
 ])

@@ -110,6 +110,10 @@ def test_an_xml_scenes_own_integrator_renders_it_when_no_version_is_given(tmp_pa
     assert info["integrator"] == "direct"
     own = np.array(mi.render(mi.load_file(path, res=16, spp=16), seed=2))
     assert np.allclose(np.array(img), own, atol=1e-5)         # Mitsuba's own render of the file
+    # a depth asked of the scene's own integrator is not applied: said, not silent
+    with pytest.warns(RuntimeWarning, match=r"max_depth=2 not applied"):
+        img2 = draaw_mi.render(scene, seed=2, max_depth=2)
+    assert np.allclose(np.array(img2), own, atol=1e-5)
     # another version, given, renders instead; the integrator the file names is in the info
     _, info = draaw_mi.render(scene, version="path", seed=2, return_info=True, spp=1)
     assert info["integrator"] == "path"
@@ -143,3 +147,15 @@ def test_info_names_merged_meshes_by_the_shapes_in_them(capsys):
     assert {"light", "left_wall", "right_wall"} <= set(names)
     assert main(["info", CBOX]) == 0
     assert "merged mesh of 5 shapes" in capsys.readouterr().out
+
+
+def test_version_scene_for_a_file_without_an_integrator_is_one_line(tmp_path, capsys):
+    """``--version scene`` asks for the scene's own integrator: a TOML scene has none, said in
+    one line (it said "renders with its own integrator '?'" with --max-depth, a RenderError
+    traceback-free but late without)."""
+    scene = os.path.join(os.path.dirname(CBOX), "..", "..", "..", "scenes", "fit_sphere.toml")
+    assert main(["render", scene, "--version", "scene", "-o", str(tmp_path / "x.exr"),
+                 "--resolution", "8x8", "--spp", "1", "--max-depth", "3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "declares no integrator of its own" in err[0], err
+    assert not (tmp_path / "x.exr").exists()
