@@ -15,6 +15,7 @@ import mitsuba as mi
 from .. import __version__, integrators, materials
 from ..errors import RenderError, SceneError
 from ..integrators import SCENE_VERSION, resolve_version
+from ..integrators.features import filter_gated_speedups
 from ..rendering.session import session_of
 from ..scene import load_scene
 from ..scene.description import TOP_KEYS
@@ -175,7 +176,12 @@ def cmd_info(args) -> int:
         "versions": dict(integrators.VERSION_ALIASES),
     }
     if args.scene:
-        out["scene"] = load_for_cli(args).summary()
+        loaded = load_for_cli(args)
+        out["scene"] = loaded.summary()
+        gated = None
+        if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
+            gated = filter_gated_speedups(loaded.mi_scene.sensors()[0])
+        out["scene"]["v4_gated"] = gated
     if args.json:
         print(json.dumps(out, indent=2, default=str))
         return 0
@@ -212,6 +218,8 @@ def cmd_info(args) -> int:
         on = [k for k, v in s["features"].items() if v]
         off = [k for k, v in s["features"].items() if not v]
         print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
+        if s.get("v4_gated"):
+            print(f"   v4 note: {s['v4_gated']}")
     return 0
 
 

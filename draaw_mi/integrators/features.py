@@ -185,6 +185,20 @@ def filter_plugin(rfilter) -> str:
     return _plugin_name(rfilter, _FILTER_PLUGINS)
 
 
+def filter_gated_speedups(sensor) -> str | None:
+    """What ``draaw_v4`` leaves off because of ``sensor``'s pixel filter, as one sentence, or
+    ``None`` with a box filter. Adaptive sampling gives pixels their own sample counts and
+    emission splitting traces extra rays per pixel: both need each sample to count for its
+    own pixel only, which a box filter gives and a tent, gaussian, Lanczos or Mitchell filter
+    (whose samples are splatted into neighbouring pixels) does not."""
+    rfilter = sensor.film().rfilter()
+    if rfilter.is_box_filter():
+        return None
+    return (f"adaptive sampling and emission splitting are off: the film's pixel filter is "
+            f"{filter_plugin(rfilter)!r} and each needs 'box' (a sample that counts for its own pixel "
+            "only): filter = \"box\" in a scene's [render], <rfilter type=\"box\"/> in an XML film")
+
+
 def sampler_plugin(sampler) -> str:
     """Plugin name of a Mitsuba sampler object (``"multijitter"``, ``"independent"``, ...)."""
     return _plugin_name(sampler, _SAMPLER_PLUGINS)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -10,6 +11,7 @@ from ..errors import ParameterError
 from . import adaptive_sampling as ads
 from . import emission_split
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
+from .features import filter_gated_speedups
 from .light_pilot import learn_selection
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
@@ -281,6 +283,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
+        self._say_filter_gates(sensor)
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
@@ -293,6 +296,17 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._primary = None
+
+    def _say_filter_gates(self, sensor) -> None:
+        """A ``RuntimeWarning``, once per integrator and pixel filter, when the film's filter
+        turns adaptive sampling and emission splitting off (both on by default)."""
+        if not (self.adaptive or self.emission_split > 1):
+            return
+        gated = filter_gated_speedups(sensor)
+        said = self.__dict__.setdefault("_said_gates", set())
+        if gated is not None and gated not in said:
+            said.add(gated)
+            warnings.warn(f"draaw_v4: {gated}", RuntimeWarning, stacklevel=2)
 
     @dr.syntax
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
