@@ -15,6 +15,7 @@ with these seeds; the demo itself uses the scene's seed), ``--only NAME,...``, `
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import shlex
 import subprocess
@@ -112,7 +113,8 @@ def reference(path: str, spp: int) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--ref", default="/tmp/demo_ref.exr")
+    ap.add_argument("--ref", help="reference EXR (rendered when missing; default: under /tmp, named by "
+                    "the scene file's hash and the reference spp, so an edited scene gets a new one)")
     ap.add_argument("--ref-spp", type=int, default=4096)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seeds", default="0,1,2")
@@ -122,6 +124,10 @@ def main(argv=None) -> int:
     sys.path.insert(0, ROOT)
     from draaw_mi.bench.study import load_note
 
+    if args.ref is None:
+        with open(os.path.join(ROOT, SCENE), "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()[:12]
+        args.ref = f"/tmp/demo_ref-{digest}-{args.ref_spp}.exr"
     ref = reference(args.ref, args.ref_spp)
     seeds = [int(s) for s in args.seeds.split(",")]
     names = args.only.split(",") if args.only else list(CANDIDATES)

@@ -237,7 +237,7 @@ def exr_cut_short(path: str) -> str | None:
         fh.seek(pos)
         offsets = np.frombuffer(fh.read(8 * chunks), dtype="<u8")
         if chunks and (offsets.min() < table_end or offsets.max() + 8 > size):
-            return f"its offsets point past the end of the file ({size} bytes)"
+            return "its chunk offsets point past the end of the file"
         if chunks:
             last = int(offsets.max())
             fh.seek(last + 4)
