@@ -43,7 +43,7 @@ import numpy as np
 
 from .. import load_scene
 from ..errors import DraawError
-from ..integrators import resolve_version
+from ..integrators import SCENE_VERSION, resolve_version
 from ..io import read_exr, write_exr
 from ..progress import check_mode, progress_bar
 from ..rendering.renderer import render
@@ -238,9 +238,15 @@ def reference_version(scene) -> str:
 def scene_versions(scene, versions) -> list[str]:
     """``versions`` as they apply to ``scene``: with media ``path`` / ``prb`` become
     ``volpath`` (:func:`_media_versions`); with ``[[sdf]]`` objects Mitsuba's integrators,
-    which cannot see them, are left out (with a warning)."""
+    which cannot see them, are left out (with a warning), and so is ``scene`` (the scene's own
+    integrator) for a scene that declares none."""
     holds = session_of(scene).holds()
     out = _media_versions(versions) if holds["media"] else list(versions)
+    own = [v for v in out if resolve_version(v) == SCENE_VERSION]
+    if own and not scene.info.get("integrator"):
+        warnings.warn(f"{scene.source}: declares no integrator of its own for version "
+                      f"{own[0]!r}; left out", RuntimeWarning, stacklevel=3)
+        out = [v for v in out if v not in own]
     if holds["sdf"]:
         blind = [v for v in out if "sdf" in BLIND.get(resolve_version(v), ())]
         if blind:

@@ -433,3 +433,16 @@ def test_the_ground_truth_is_rendered_at_the_studys_deepest_max_depth(tmp_path, 
     bench.run_study([str(scene_file)], versions=("path",), spps=(1,), max_depths=depths, adaptive=(None,),
                     repeats=1, gt_spp=8, out_dir=str(tmp_path / "o"), progress=False, converged=False)
     assert seen == [expect] and written["ground_truth_depth"] == {"tiny": expect}
+
+
+def test_version_scene_is_left_out_for_a_scene_without_an_integrator_of_its_own():
+    """``--versions scene`` asks for the scene's own integrator: a TOML scene has none, so the
+    study leaves it out at once, with a warning (it failed after the ground-truth renders);
+    an XML scene that declares one keeps it."""
+    from draaw_mi.bench.study import scene_versions
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "fit_sphere.toml"), resolution=(8, 8))
+    with pytest.warns(RuntimeWarning, match="declares no integrator of its own"):
+        assert scene_versions(scene, ["scene", "v4"]) == ["v4"]
+    xml = os.path.join(os.path.dirname(__file__), "..", "scene", "data", "cbox.xml")
+    own = draaw_mi.load_scene(xml, defines={"res": 8})
+    assert own.info.get("integrator") and scene_versions(own, ["scene", "v4"]) == ["scene", "v4"]
