@@ -179,6 +179,13 @@ def test_no_module_carries_the_dotted_name_of_a_public_function():
     assert clashes == []
 
 
+def _python(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter in the project's folder; it must exit 0."""
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out
+
+
 def test_the_old_module_paths_work_for_one_release_with_a_warning():
     """Notebooks' imports of the flat layout keep working (the same module objects) and say
     where things are now."""
@@ -191,8 +198,7 @@ def test_the_old_module_paths_work_for_one_release_with_a_warning():
             "from draaw_mi.fit_result import FitResult\n"
             "print(draaw_mi.preview.Preview is Preview, draaw_mi.tuning.__name__, draaw_mi.fit_views.__name__,\n"
             "      FitResult is draaw_mi.FitResult, callable(draaw_mi.render), callable(draaw_mi.fit))\n")
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
+    out = _python(code)
     said = out.stdout.splitlines()
     assert said[0] == ("warned: draaw_mi.preview is now draaw_mi.rendering.preview: import it from there "
                        "(draaw_mi.preview goes in the next release)")
@@ -274,6 +280,5 @@ def test_a_plain_import_leaves_the_heavy_and_optional_parts_unloaded():
             "('trimesh', 'colour', 'matplotlib', 'OpenEXR', 'distributed', 'dask', 'pyoidn', 'ipywidgets', "
             "'tqdm') or m.startswith(('draaw_mi.batch', 'draaw_mi.bench', 'draaw_mi.cli', 'draaw_mi.media', "
             "'draaw_mi.widgets', 'draaw_mi.integrators.volume')))))\n")
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
+    out = _python(code)
     assert out.stdout.strip() == "", out.stdout

@@ -190,6 +190,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self.want_depth = False        # set by draaw_mi.integrators.adaptive_sampling around its pilot pass
         self.last_depth = None
         self.init_emission_split(props)
+        self._said_gates = set()         # the filter notes already warned (_say_filter_gates)
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -303,9 +304,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         if not (self.adaptive or self.emission_split > 1):
             return
         gated = filter_gated_speedups(sensor)
-        said = self.__dict__.setdefault("_said_gates", set())
-        if gated is not None and gated not in said:
-            said.add(gated)
+        if gated is not None and gated not in self._said_gates:
+            self._said_gates.add(gated)
             warnings.warn(f"draaw_v4: {gated}", RuntimeWarning, stacklevel=2)
 
     @dr.syntax

@@ -40,8 +40,7 @@ def _merge(target, old, new) -> None:
             del target[key]
         pairs = [(key, old.get(key, _MISSING), value) for key, value in new.items()]
     else:
-        pairs = list(enumerate(zip(old, new)))
-        pairs = [(i, before, after) for i, (before, after) in pairs]
+        pairs = [(i, before, after) for i, (before, after) in enumerate(zip(old, new))]
     for key, before, after in pairs:
         if before is not _MISSING and before == after:
             continue
