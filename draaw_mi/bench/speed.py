@@ -50,7 +50,6 @@ from ..errors import suggest
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
 from ..scene.loading import wrap
-from ..scene.mitsuba_load import load_mitsuba_dict
 from . import suite as ss
 from .code_digest import code_digest
 from .study import load_note
@@ -140,10 +139,10 @@ def bench(name: str, res: int, args) -> dict | None:
     if d is None:
         print(f"[{name}] skipped: its GO-Draaw data is absent (looked for {ss.GO_DRAAW}/monkey.obj)", file=sys.stderr)
         return None
-    scene = load_mitsuba_dict(d)                   # a fixed emitter order
+    scene = ss.load_built(d)                       # a fixed emitter order
     depth = ss.max_depth(name)
     ref_dict = d if args.sampler == "independent" else ss.build(name, res)
-    ref_scene = scene if args.sampler == "independent" else load_mitsuba_dict(ref_dict)
+    ref_scene = scene if args.sampler == "independent" else ss.load_built(ref_dict)
     ref, ref_var, t_ref = reference(name, res, ref_scene, depth, args.ref_spp, args.cache,
                                     ss.digest(ref_dict))
     noise = float(ref_var.mean())

@@ -17,7 +17,18 @@ scene               kind
 ``envmap``          an environment map with a bright sun-like spot, objects on a floor
 ``glass``           the thesis scene: smooth glass, gold, a near-mirror floor (max_depth 8)
 ``monkey``          GO-Draaw's monkey mesh, checker-textured and normal-mapped, area light
+``cornell_tent``    the Cornell box under a tent pixel filter
+``spheres_gauss``   the material spheres under a gaussian filter (Mitsuba's default)
+``envmap_gauss``    the environment-map scene under a gaussian filter
+``mitsuba_cbox``    Mitsuba's tutorial-style Cornell box, ``scenes/mitsuba_cbox.xml`` loaded by
+                    ``mi.load_file`` untouched (its tent filter, Mitsuba's diffuse BSDFs)
+``doorway``         a closed room lit only through a doorway by a lamp outside
+``glossy_diffuse``  a floor lit only through a glossy metal panel (the lamp behind a wall)
+``lights_2000``     2,000 small area lights of different powers (1:40) over objects
 ==================  =============================================================================
+
+Every scene renders with a box pixel filter unless its entry names another (the ``_tent`` /
+``_gauss`` scenes) or keeps its own (``mitsuba_cbox``: as shipped).
 
 >>> sorted(SCENES)[:3]
 ['constant_env', 'cornell', 'envmap']
@@ -154,35 +165,122 @@ def monkey(res):
     return d
 
 
-# name -> (kind, builder, max_depth)
+def mitsuba_cbox(res):
+    return {"type": "xml", "filename": os.path.join(ROOT, "scenes", "mitsuba_cbox.xml")}
+
+
+def _wall(center, normal, half, bsdf) -> dict:
+    """A two-sided rectangle at ``center`` facing ``normal`` with half sizes ``half``."""
+    c = np.asarray(center, float)
+    up = [0, 0, 1] if abs(normal[1]) > 0.9 else [0, 1, 0]
+    return {"type": "rectangle", "bsdf": bsdf,
+            "to_world": T().look_at(origin=list(c), target=list(c + np.asarray(normal, float)), up=up)
+            .scale([half[0], half[1], 1.0])}
+
+
+def doorway(res):
+    """A 4 x 2.5 x 4 room whose only light comes through a door in its right wall from a lamp
+    outside; the camera sees the room's far corner, not the door's patch of floor."""
+    white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.7]}}}
+    d = {"type": "scene",
+         "sensor": {"type": "perspective", "fov": 60,
+                    "to_world": T().look_at(origin=[1.6, 1.4, 1.7], target=[-1.0, 0.8, -1.0], up=[0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": res, "height": res}},
+         "floor": _wall([0, 0, 0], [0, 1, 0], [2, 2], white),
+         "ceiling": _wall([0, 2.5, 0], [0, -1, 0], [2, 2], white),
+         "back": _wall([0, 1.25, -2], [0, 0, 1], [2, 1.25], white),
+         "front": _wall([0, 1.25, 2], [0, 0, -1], [2, 1.25], white),
+         "left": _wall([-2, 1.25, 0], [1, 0, 0], [2, 1.25], white),
+         # right wall (x = 2) with a door at z in [-0.5, 0.5], y in [0, 1.8]
+         "right_a": _wall([2, 1.25, -1.25], [-1, 0, 0], [0.75, 1.25], white),
+         "right_b": _wall([2, 1.25, 1.25], [-1, 0, 0], [0.75, 1.25], white),
+         "lintel": _wall([2, 2.15, 0], [-1, 0, 0], [0.5, 0.35], white),
+         "ball": {"type": "sphere", "center": [-1.0, 0.5, -1.0], "radius": 0.5,
+                  "bsdf": rs.draaw([0.8, 0.5, 0.3], roughness=0.4)},
+         "lamp": _wall([3.2, 1.4, 0.0], [-1, -0.3, 0], [0.4, 0.4],
+                       {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}})}
+    d["lamp"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": [60.0, 55.0, 50.0]}}
+    return d
+
+
+def glossy_diffuse(res):
+    """A diffuse floor lit only by a lamp's light off a glossy metal panel overhead: a wall
+    hides the lamp from the floor beyond it and from the camera."""
+    d = _base(res, origin=(4.0, 2.6, 4.0), target=(1.3, 0.2, 0.0))
+    d["wall"] = _wall([0.0, 0.9, 0.0], [1, 0, 0], [3.0, 0.9],
+                      {"type": "twosided", "bsdf": {"type": "diffuse"}})
+    d["panel"] = _wall([2.2, 3.8, 0.0], [-0.5, -0.87, 0.0], [0.9, 1.2],
+                       rs.draaw([0.95, 0.93, 0.88], roughness=0.15, metallic=1.0))
+    d["lamp"] = _wall([-0.6, 1.2, 0.0], [0.76, 0.65, 0.0], [0.3, 0.3],
+                      {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}})
+    d["lamp"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": [80.0, 75.0, 70.0]}}
+    d["ball"] = {"type": "sphere", "center": [1.6, 0.4, 0.8], "radius": 0.4,
+                 "bsdf": rs.draaw([0.3, 0.5, 0.8], roughness=0.5)}
+    return d
+
+
+def lights_2000(res):
+    d = _base(res, origin=(0.0, 3.0, 5.5))
+    d["ball"] = {"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
+                 "bsdf": rs.draaw([0.7, 0.7, 0.7], roughness=0.3, metallic=0.3)}
+    rng = np.random.default_rng(11)
+    for i in range(2000):
+        x, z = -3.0 + 6.0 * (i % 50) / 49, -2.5 + 4.5 * (i // 50) / 39
+        power = 40.0 if rng.random() < 0.05 else 1.0
+        d[f"l{i}"] = _area([x, 2.5 + 0.2 * rng.random(), z], 0.03, list(power * 3.0 * (0.5 + 0.5 * rng.random(3))))
+    return d
+
+
+# name -> (kind, builder, max_depth, pixel filter: a plugin name, or None for the scene's own)
 SCENES = {
-    "cornell": ("enclosed", cornell, 6),
-    "spheres": ("open, area light", spheres, 6),
-    "metal_018": ("open, glossy metal r=0.18", metal_018, 5),
-    "metals": ("open, metals r=0.05/0.15/0.3", metals, 5),
-    "small_light": ("small bright light", small_light, 5),
-    "many_lights": ("24 lights, powers 1:40", many_lights, 5),
-    "constant_env": ("constant environment only", constant_env, 5),
-    "envmap": ("environment map with sun", envmap, 5),
-    "glass": ("glass, thesis scene", glass, 8),
-    "monkey": ("GO-Draaw mesh, texture + normal map", monkey, 5),
+    "cornell": ("enclosed", cornell, 6, "box"),
+    "spheres": ("open, area light", spheres, 6, "box"),
+    "metal_018": ("open, glossy metal r=0.18", metal_018, 5, "box"),
+    "metals": ("open, metals r=0.05/0.15/0.3", metals, 5, "box"),
+    "small_light": ("small bright light", small_light, 5, "box"),
+    "many_lights": ("24 lights, powers 1:40", many_lights, 5, "box"),
+    "constant_env": ("constant environment only", constant_env, 5, "box"),
+    "envmap": ("environment map with sun", envmap, 5, "box"),
+    "glass": ("glass, thesis scene", glass, 8, "box"),
+    "monkey": ("GO-Draaw mesh, texture + normal map", monkey, 5, "box"),
+    "cornell_tent": ("enclosed, tent filter", cornell, 6, "tent"),
+    "spheres_gauss": ("open, area light, gaussian filter", spheres, 6, "gaussian"),
+    "envmap_gauss": ("environment map, gaussian filter", envmap, 5, "gaussian"),
+    "mitsuba_cbox": ("Mitsuba's XML Cornell box (tent)", mitsuba_cbox, 6, None),
+    "doorway": ("room lit through a doorway", doorway, 6, "box"),
+    "glossy_diffuse": ("floor lit via a glossy panel", glossy_diffuse, 6, "box"),
+    "lights_2000": ("2,000 small lights, powers 1:40", lights_2000, 5, "box"),
 }
 
 
 def build(name: str, res: int, sampler: str = "independent", spp: int = 64) -> dict | None:
     """The Mitsuba dict of suite scene ``name`` at ``res``², or ``None`` when its data is
-    absent (the GO-Draaw mesh). ``sampler``: Mitsuba sampler plugin for the sensor."""
+    absent (the GO-Draaw mesh). ``sampler``: Mitsuba sampler plugin for the sensor. An XML
+    scene is ``{"type": "xml", "filename": ..., "defines": {...}}`` (:func:`load_built`; its
+    own sampler and filter, ``$res`` and ``$spp`` set)."""
     d = SCENES[name][1](res)
     if d is None:
         return None
     d = dict(d)
+    if d["type"] == "xml":
+        return dict(d, defines={"res": res, "spp": spp})
     d.pop("integrator", None)
     sensor = dict(d["sensor"])
     sensor["sampler"] = {"type": sampler, "sample_count": spp}
-    film = dict(sensor["film"], width=res, height=res, rfilter={"type": "box"})
+    film = dict(sensor["film"], width=res, height=res)
+    if SCENES[name][3] is not None:
+        film["rfilter"] = {"type": SCENES[name][3]}
     sensor["film"] = film
     d["sensor"] = sensor
     return d
+
+
+def load_built(d: dict) -> mi.Scene:
+    """The scene of a :func:`build` dict: a fixed emitter order for a dict, ``mi.load_file``
+    with the defines for an XML file."""
+    if d["type"] == "xml":
+        return mi.load_file(d["filename"], **{k: str(v) for k, v in d["defines"].items()})
+    return load_mitsuba_dict(d)
 
 
 def digest(d: dict) -> str:
@@ -225,7 +323,7 @@ def digest(d: dict) -> str:
 
 def load(name: str, res: int, sampler: str = "independent") -> mi.Scene | None:
     d = build(name, res, sampler)
-    return None if d is None else load_mitsuba_dict(d)    # a fixed emitter order
+    return None if d is None else load_built(d)
 
 
 def max_depth(name: str) -> int:

@@ -15,7 +15,7 @@ import mitsuba as mi
 from .. import __version__, integrators, materials
 from ..errors import RenderError, SceneError
 from ..integrators import SCENE_VERSION, resolve_version
-from ..integrators.features import filter_gated_speedups
+from ..integrators.features import sensor_gated_speedups
 from ..rendering.session import session_of
 from ..scene import load_scene
 from ..scene.description import TOP_KEYS
@@ -180,7 +180,7 @@ def cmd_info(args) -> int:
         out["scene"] = loaded.summary()
         gated = None
         if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
-            gated = filter_gated_speedups(loaded.mi_scene.sensors()[0])
+            gated = sensor_gated_speedups(loaded.mi_scene.sensors()[0])
         out["scene"]["v4_gated"] = gated
     if args.json:
         print(json.dumps(out, indent=2, default=str))

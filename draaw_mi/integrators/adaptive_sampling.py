@@ -3,7 +3,10 @@
 * :func:`render_spp_map` renders one wavefront in which pixel ``i`` gets ``spp_map[i]``
   samples (any counts >= 1; the wavefront is ``sum(spp_map)`` samples long, each sample
   finds its pixel) and returns the per-pixel mean and, optionally, the per-pixel sample
-  variance. It needs a box reconstruction filter (each sample belongs to exactly one pixel).
+  variance. With a box filter each sample belongs to its pixel; with another filter the
+  samples are splatted with the weight ``1 / spp_map`` of their pixel, which keeps the
+  filtered image's expectation (:mod:`~draaw_mi.integrators.film_splat`); the variance is
+  always that of the pixel's own samples (what the allocation needs).
 * :func:`allocate` turns a per-pixel variance estimate into a map: ``m_i = m_min + extra_i``
   with ``extra_i`` proportional to the (3x3-smoothed) standard deviation, which minimises
   ``sum_i sigma_i^2 / m_i`` for a fixed total (as Cycles' adaptive sampling aims for); counts
@@ -13,7 +16,10 @@
   rest of the budget with the map, and the image is ``(a / spp) * pilot + (1 - a / spp) *
   main``. The weights are constants and the main pass's counts depend only on the pilot, so
   ``E[main | pilot] = E[pixel]`` and the image is unbiased (a count-weighted mean of both
-  passes would not be: the counts would depend on the pilot's values).
+  passes would not be: the counts would depend on the pilot's values). Where the pilot's
+  even and odd samples disagree on where the noise is (:func:`pilot_agreement`: rare bright
+  paths, as light that arrives through a doorway or off a glossy panel), the main pass is
+  uniform.
 
 Same seed, same image (up to the order of atomic additions into the per-pixel sums): the
 pilot and main passes use seeds derived from ``seed``, and the rounding generator is seeded
@@ -32,8 +38,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .emission_split import PrimaryRays
+from .emission_split import PrimaryRays, film_mapping
 from .features import sampler_plugin, scene_shapes
+from .film_splat import FilmSplat
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
@@ -48,8 +55,8 @@ COST_FIXED = 1.0            # cost of a sample beyond its rays, in rays (camera 
 
 def supported(sensor: mi.Sensor) -> bool:
     """Whether adaptive sampling can render for this sensor and pays: an ``hdrfilm``-like film
-    (not spectral-special), a box filter, no crop window and no border, and the independent
-    sampler.
+    (not spectral-special) that does not sample its border, and the independent sampler. Any
+    pixel filter (:mod:`~draaw_mi.integrators.film_splat`), any crop window.
 
     Not with a stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification
     already removes most of the variance that adaptive sampling would move (multijitter has
@@ -64,12 +71,42 @@ def supported(sensor: mi.Sensor) -> bool:
     film = sensor.film()
     if mi.has_flag(film.flags(), mi.FilmFlags.Special):
         return False
-    if not film.rfilter().is_box_filter() or film.sample_border():
-        return False
-    return tuple(film.crop_size()) == tuple(film.size()) and tuple(film.crop_offset()) == (0, 0)
+    return not film.sample_border()
 
 
 GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is a rare event
+# Below this rank correlation the pilot's two halves disagree on where the noise is: its map
+# would be noise. Measured (Spearman of the 3x3-smoothed per-pixel deviations of even and odd
+# pilot samples, 4 samples per pixel, 128^2 and 256^2): 0.58-0.95 on the speed suite's scenes
+# where adaptive sampling pays, 0.15 in the room lit through a doorway and 0.09-0.11 on the
+# floor lit by a glossy panel, where it cost 1.8x the error of a uniform render.
+AGREEMENT_MIN = 0.35
+
+
+def _ranks(a: np.ndarray) -> np.ndarray:
+    r = np.empty(a.size)
+    r[np.argsort(a, kind="stable")] = np.arange(a.size)
+    return r
+
+
+def pilot_agreement(halves: np.ndarray) -> float:
+    """Rank correlation, over pixels, of the noise that two independent halves of a pilot see
+    (``halves``: (H, W, 2) per-pixel sample variances, :func:`render_spp_map`'s fifth result),
+    after the 3x3 smoothing the allocation uses: near 1 where the pilot finds the noisy pixels
+    reliably, near 0 where rare paths make its variance map noise (1.0 for an image without
+    noise: nothing to disagree about).
+
+    >>> rng = np.random.default_rng(0)
+    >>> noise = rng.random((16, 16)) ** 4
+    >>> same = np.stack([noise, noise * 1.1], -1)
+    >>> apart = np.stack([noise, rng.random((16, 16)) ** 4], -1)
+    >>> round(pilot_agreement(same), 2), pilot_agreement(apart) < 0.35
+    (1.0, True)
+    """
+    a, b = (np.sqrt(_box3(halves[..., i])).ravel() for i in range(2))
+    if a.size < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
+        return 1.0
+    return float(np.corrcoef(_ranks(a), _ranks(b))[0, 1])
 
 
 def _min_roughness(bsdf: mi.BSDF) -> float:
@@ -108,17 +145,21 @@ def pilot_can_miss(scene: mi.Scene) -> bool:
 
 
 def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,
-                   seed: int, moments: bool = False, alpha: bool = False):
+                   seed: int, moments: bool = False, alpha: bool = False, halves: bool = False):
     """Mean (H, W, 3) and, with ``moments``, per-pixel sample variance (H, W, 3), alpha
     (H, W) and mean path length in segments (H, W; 1 where the integrator does not report
     ``last_depth``) of ``integrator.sample`` with ``spp_map[y, x]`` samples at pixel (x, y).
     ``alpha`` (without ``moments``): the mean is (H, W, 4), the fraction of samples that hit
-    something (or saw an environment) in its fourth channel.
+    something (or saw an environment) in its fourth channel. ``halves`` (with ``moments``):
+    a fifth result, (H, W, 2), the sample variance of the channel sum over each pixel's even
+    and odd samples apart (two independent estimates, for :func:`pilot_agreement`).
 
-    ``spp_map``: (H, W) integers >= 1. Primal only (no gradients).
+    ``spp_map``: (H, W) integers >= 1 (the film's crop window). Primal only (no gradients).
     """
     film = sensor.film()
-    w, h = (int(v) for v in film.size())
+    w, h = (int(v) for v in film.crop_size())
+    ox, oy = (int(v) for v in film.crop_offset())
+    box = film.rfilter().is_box_filter()
     m = np.asarray(spp_map)
     # (refused: a transposed (W, H) or flat map would be read in the wrong pixel order, 2.9 samples as 2)
     if m.shape != (h, w) or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all()\
@@ -141,22 +182,28 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, first, i) <= idx) - 1
         y = pixel // w
         x = pixel - y * w
-        pos = mi.Vector2f(mi.Float(x), mi.Float(y)) + sampler.next_2d()
+        corner = mi.Vector2f(mi.Float(x + ox), mi.Float(y + oy))     # film coordinates
+        pos = corner + sampler.next_2d()
         aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Vector2f(0.0)
         time = sensor.shutter_open()
         if sensor.shutter_open_time() > 0:
             time += sampler.next_1d() * sensor.shutter_open_time()
-        ray, weight = sensor.sample_ray_differential(
-            time=time, sample1=0.0, sample2=pos * mi.ScalarVector2f(1.0 / w, 1.0 / h),
-            sample3=aperture)
+        scale, offset = film_mapping(film)
+        sample2 = pos * scale if (ox, oy) == (0, 0) else dr.fma(pos, scale, offset)
+        ray, weight = sensor.sample_ray_differential(time=time, sample1=0.0, sample2=sample2,
+                                                     sample3=aperture)
+        splat = None
+        if not box:      # the filtered image, from samples weighted by 1 / their pixel's count
+            film.prepare([])
+            splat = FilmSplat(film)
+            share = dr.rcp(dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel))
         reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
         if reports_depth:
             integrator.want_depth = True
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
         if set_primary is not None:       # each ray's pixel, for its emission splitting
-            set_primary(PrimaryRays(ray, sensor, mi.Vector2f(mi.Float(x), mi.Float(y)),
-                                    mi.ScalarVector2f(1.0 / w, 1.0 / h), mi.ScalarVector2f(0.0),
-                                    weight))
+            set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
+                                    splat=None if splat is None else (splat, share)))
         try:
             L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
@@ -168,24 +215,45 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
             if set_primary is not None:
                 set_primary(None)
         value = L * weight
+        if splat is not None:
+            splat.put(pos, value, dr.select(valid, 1.0, 0.0), share)
+            filtered = splat.develop()
+            if not moments:
+                dr.eval(filtered)
+                return np.array(filtered, dtype=np.float64).reshape(h, w, 4 if alpha else 3)
         chans = [value.x, value.y, value.z]
         if moments or alpha:
             chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x]
         if moments:
             chans += [(mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
                       dr.square(value.x), dr.square(value.y), dr.square(value.z)]
+        if moments and halves:       # the channel sum's moments over odd and even samples apart
+            odd = ((idx - dr.gather(mi.UInt32, first, pixel)) & 1) == 1
+            v = value.x + value.y + value.z
+            for part in (~odd, odd):
+                chans += [dr.select(part, v, 0.0), dr.select(part, dr.square(v), 0.0),
+                          dr.select(part, 1.0, 0.0) + 0.0 * v]
         # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
         sums = [dr.zeros(mi.Float, w * h) for _ in chans]
         for acc, v in zip(sums, chans):
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
-        dr.eval(sums)
+        dr.eval(sums if splat is None else (sums, filtered))     # one kernel traces the paths
     arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
     if not moments:
         return arr.reshape(h, w, 4 if alpha else 3)
     n = counts[:, None].astype(np.float64)
     var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
-    return (arr[:, :3].reshape(h, w, 3), var.reshape(h, w, 3), arr[:, 3].reshape(h, w),
-            arr[:, 4].reshape(h, w))
+    mean = arr[:, :3].reshape(h, w, 3) if splat is None else \
+        np.array(filtered, dtype=np.float64).reshape(h, w, -1)[..., :3]
+    out = (mean, var.reshape(h, w, 3), arr[:, 3].reshape(h, w), arr[:, 4].reshape(h, w))
+    if not halves:
+        return out
+    parts = []
+    for j in (8, 11):                  # (sum, sum of squares, count) of even, then odd samples
+        k = np.maximum(arr[:, j + 2] * counts, 1.0)
+        m1, m2 = arr[:, j] * counts / k, arr[:, j + 1] * counts / k
+        parts.append(np.maximum(m2 - m1 * m1, 0.0) * k / np.maximum(k - 1, 1))
+    return out + (np.stack(parts, -1).reshape(h, w, 2),)
 
 
 def _box3(a: np.ndarray) -> np.ndarray:
@@ -228,19 +296,22 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
                     alpha: bool):
     """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor."""
     film = sensor.film()
-    w, h = (int(v) for v in film.size())
+    w, h = (int(v) for v in film.crop_size())
     seed = int(seed)
     a = max(2, spp // PILOT_FRACTION)
     rest = spp - a
-    pilot, var, valid, segments = render_spp_map(integrator, scene, sensor, np.full((h, w), a),
-                                                 seed, moments=True)
+    pilot, var, valid, segments, halves = render_spp_map(
+        integrator, scene, sensor, np.full((h, w), a), seed, moments=True, halves=True)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
-    # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation ray
-    # per segment (smoothed like the variance: both are estimated from few samples).
-    cost = _box3(COST_FIXED + 2.0 * segments)
-    # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
-    counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
-                      score_cap=SCORE_CAP)
+    if pilot_agreement(halves) < AGREEMENT_MIN:
+        counts = np.full((h, w), rest)          # the pilot cannot tell where the noise is
+    else:
+        # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation
+        # ray per segment (smoothed like the variance: both are estimated from few samples).
+        cost = _box3(COST_FIXED + 2.0 * segments)
+        # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
+        counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2,
+                          cost=cost, score_cap=SCORE_CAP)
     main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, alpha=alpha)
     if alpha:       # (from the pilot alone, an edge pixel's alpha would have the pilot's 4-spp noise)
         pilot = np.concatenate([pilot, valid[..., None]], -1)

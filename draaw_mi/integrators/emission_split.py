@@ -17,7 +17,9 @@ sensor's importance weight); each stratified ray is uniform over its cell, so th
 mean ``W Le`` has the same expectation as the camera sample's. Which pixels split does not
 depend on the samples (an edge map fixed before the render), so any choice keeps the
 expectation. With other filters a sample is splatted with a weight that depends on its
-position, which the extra rays do not share: no splitting there.
+position: there each extra ray is splatted at its own position instead of being added to
+the camera sample's value (:mod:`~draaw_mi.integrators.film_splat`; primal renders only:
+the adjoint passes of a filtered film do not split).
 
 Which pixels (:func:`edge_map`): the emitting surfaces' bounding boxes, projected by the
 sensor, bound where a light can be seen (:func:`emitter_rect`); inside that rectangle probe
@@ -31,7 +33,7 @@ than half a pixel can fall between the probes: its pixels are not split, which l
 gain there, not the expectation.
 
 Only where the scene calls for it (:func:`applies`): an area emitter, emitters shown (not
-``hide_emitters``), a box filter, a sensor without aperture or shutter samples, no SDF
+``hide_emitters``), a sensor without aperture or shutter samples, no SDF
 objects (sphere-traced surfaces would occlude the light for the camera path but not for the
 extra rays), no media (V4 hands those to :mod:`~draaw_mi.integrators.volume`), and an
 emitting surface in view with at least one edge pixel (lights seen only from behind have
@@ -65,17 +67,21 @@ class PrimaryRays:
 
     ``pixel``: integer corner of each ray's pixel in film coordinates (crop offset included);
     ``scale`` / ``offset``: film position -> the sensor's ``[0, 1]^2`` sample;
-    ``weight``: the camera rays' importance weights (the renderer multiplies ``L`` by them).
+    ``weight``: the camera rays' importance weights (the renderer multiplies ``L`` by them);
+    ``splat``: ``None`` (the extra rays' emission is added to ``L``: box filters) or
+    ``(FilmSplat, per-sample weight)``: each extra ray is splatted into the film at its own
+    position (:mod:`~draaw_mi.integrators.film_splat`).
 
     A plain class, not a dataclass or tuple: ``dr.syntax`` loops in ``sample()`` read the
     integrator, and Dr.Jit takes the arrays of every dataclass / tuple attribute it reaches
     as loop state (an edge map held in a tuple breaks V4's loop with a size mismatch).
     """
-    __slots__ = ("ray", "sensor", "pixel", "scale", "offset", "weight")
+    __slots__ = ("ray", "sensor", "pixel", "scale", "offset", "weight", "splat")
 
-    def __init__(self, ray, sensor, pixel, scale, offset, weight):
+    def __init__(self, ray, sensor, pixel, scale, offset, weight, splat=None):
         self.ray, self.sensor, self.pixel = ray, sensor, pixel
         self.scale, self.offset, self.weight = scale, offset, weight
+        self.splat = splat
 
 
 class Held:
@@ -104,15 +110,15 @@ def check_rays(k: int) -> int:
 
 
 def sensor_allows(k: int, hide_emitters: bool, sensor: mi.Sensor,
-                  box_no_aperture: bool | None = None) -> bool:
+                  no_aperture: bool | None = None) -> bool:
     """The integrator's and the sensor's side of :func:`applies` (cheap: no scene walk).
-    ``box_no_aperture``: whether the film's filter is a box and the sensor samples no
-    aperture, if known (:class:`~.scene_view.SceneView`); the shutter is read each time."""
+    ``no_aperture``: whether the sensor samples no aperture, if known
+    (:class:`~.scene_view.SceneView`); the shutter is read each time."""
     if k <= 1 or hide_emitters or mi.is_spectral:
         return False             # (spectral: the extra rays would need the path's wavelengths)
-    if box_no_aperture is None:
-        box_no_aperture = sensor.film().rfilter().is_box_filter() and not sensor.needs_aperture_sample()
-    return box_no_aperture and sensor.shutter_open_time() == 0
+    if no_aperture is None:
+        no_aperture = not sensor.needs_aperture_sample()
+    return no_aperture and sensor.shutter_open_time() == 0
 
 
 def applies(k: int, hide_emitters: bool, sensor: mi.Sensor, feats: dict[str, bool]) -> bool:
@@ -182,7 +188,7 @@ def _film_ray(sensor: mi.Sensor, pos: mi.Vector2f, scale, offset, active) -> tup
                              mi.Point2f(0.5), active)
 
 
-def _film_mapping(film: mi.Film) -> tuple:
+def film_mapping(film: mi.Film) -> tuple:
     """Film position -> the sensor's ``[0, 1]^2`` sample, as Mitsuba's ``sample_rays``."""
     scale = dr.rcp(mi.ScalarVector2f(film.crop_size()))
     return scale, -mi.ScalarVector2f(film.crop_offset()) * scale
@@ -208,7 +214,7 @@ def edge_map(scene: mi.Scene, sensor: mi.Sensor, rect: tuple[int, int, int, int]
         lx = idx - ly * lw
         fx, fy = 0.5 * mi.Float(lx) + ox, 0.5 * mi.Float(ly) + oy   # film coordinates
         probe = (fx >= x0) & (fx <= x1) & (fy >= y0) & (fy <= y1)
-        ray, _ = _film_ray(sensor, mi.Vector2f(fx, fy), *_film_mapping(film), probe)
+        ray, _ = _film_ray(sensor, mi.Vector2f(fx, fy), *film_mapping(film), probe)
         si, seen = _emission_seen(scene, ray, flags, probe, surfaces_only=True)
         lum = mi.luminance(si.emitter(scene).eval(si, seen))
         lum = dr.select(seen & dr.isfinite(lum), lum, 0.0)
@@ -250,14 +256,18 @@ def visible_emission(mode: dr.ADMode, scene: mi.Scene, primary: PrimaryRays, sam
     """
     primal = mode == dr.ADMode.Primal
     g = math.isqrt(k)
+    splat = primary.splat if primal else None
     inv_w = dr.select(primary.weight != 0.0, dr.rcp(primary.weight), 0.0) / k
+    if dr.hint(splat is not None, mode="scalar"):
+        block, share = splat[0], splat[1] / k        # film units: the camera weight stays on
+        inv_w = share
     total = mi.Spectrum(0.0)
     tangent = mi.Spectrum(0.0)
     j = mi.UInt32(0)
     while active & (j < k):
         cell = mi.Vector2f(mi.Float(j % g), mi.Float(j // g))
-        ray, w = _film_ray(primary.sensor, primary.pixel + (cell + sampler.next_2d(active)) / g,
-                           primary.scale, primary.offset, active)
+        pos = primary.pixel + (cell + sampler.next_2d(active)) / g
+        ray, w = _film_ray(primary.sensor, pos, primary.scale, primary.offset, active)
         si, seen = _emission_seen(scene, dr.detach(ray), flags, active)
         with dr.resume_grad(when=not primal):
             Le = dr.detach(w) * inv_w * si.emitter(scene).eval(si, seen)
@@ -267,6 +277,9 @@ def visible_emission(mode: dr.ADMode, scene: mi.Scene, primary: PrimaryRays, sam
                         dr.backward_from(δL * Le)
                     else:
                         tangent += dr.forward_to(Le)
+        if dr.hint(splat is not None, mode="scalar"):
+            block.put_emission(pos, Le, seen)     # at its own position, with its own filter weight
+            Le = mi.Spectrum(0.0)
         total += dr.detach(Le)
         j += 1
     return total, tangent
@@ -302,7 +315,7 @@ class EmissionSplitting(DraawIntegrator):
         ignores the map, which costs one probe pass per camera, or none without an area light."""
         view = scene_view(scene) if view is None else view
         if view.sensor is None or not sensor_allows(self.emission_split, self.hide_emitters,
-                                                    view.sensor, view.box_no_aperture):
+                                                    view.sensor, view.no_aperture):
             return None
         return self.edge_map(scene, view.sensor, view)
 
@@ -342,9 +355,10 @@ class EmissionSplitting(DraawIntegrator):
         ray, weight, pos = super().sample_rays(scene, sensor, sampler, *args, **kwargs)
         film = sensor.film()
         self._primary = None
+        # (other filters: film_splat.render_uniform makes its own, with a splat)
         if self.emission_split > 1 and film.rfilter().is_box_filter():
             # with a box filter ``pos`` is the pixel's integer corner
-            scale, offset = _film_mapping(film)
+            scale, offset = film_mapping(film)
             self._primary = PrimaryRays(ray, sensor, mi.Vector2f(pos), scale, offset, weight)
         return ray, weight, pos
 

@@ -185,18 +185,18 @@ def filter_plugin(rfilter) -> str:
     return _plugin_name(rfilter, _FILTER_PLUGINS)
 
 
-def filter_gated_speedups(sensor) -> str | None:
-    """What ``draaw_v4`` leaves off because of ``sensor``'s pixel filter, as one sentence, or
-    ``None`` with a box filter. Adaptive sampling gives pixels their own sample counts and
-    emission splitting traces extra rays per pixel: both need each sample to count for its
-    own pixel only, which a box filter gives and a tent, gaussian, Lanczos or Mitchell filter
-    (whose samples are splatted into neighbouring pixels) does not."""
-    rfilter = sensor.film().rfilter()
-    if rfilter.is_box_filter():
-        return None
-    return (f"adaptive sampling and emission splitting are off: the film's pixel filter is "
-            f"{filter_plugin(rfilter)!r} and each needs 'box' (a sample that counts for its own pixel "
-            "only): filter = \"box\" in a scene's [render], <rfilter type=\"box\"/> in an XML film")
+def sensor_gated_speedups(sensor) -> str | None:
+    """What ``draaw_v4`` leaves off because of ``sensor``'s film or lens, as one sentence, or
+    ``None``. Every pixel filter keeps them (:mod:`~draaw_mi.integrators.film_splat`); a film
+    that samples beyond its border turns adaptive sampling off (those samples belong to no
+    pixel's count), a lens aperture or an open shutter turns emission splitting off (its
+    extra rays leave through a pinhole at the shutter's opening)."""
+    off = []
+    if sensor.film().sample_border():
+        off.append("adaptive sampling is off: the film samples beyond its border (sample_border)")
+    if sensor.needs_aperture_sample() or sensor.shutter_open_time() > 0:
+        off.append("emission splitting is off: the camera samples a lens aperture or an open shutter")
+    return "; ".join(off) or None
 
 
 def sampler_plugin(sampler) -> str:

@@ -40,10 +40,10 @@ class SceneView:
     <draaw_mi.integrators.v4.DraawV4Integrator.selection_key>`); ``emitter_array``: the
     array (a cache entry that holds it keeps its index from going to another scene);
     ``sensor`` / ``film``: the first sensor and its film (``None`` without sensors);
-    ``box_no_aperture``: whether that film's filter is a box and the sensor samples no
-    aperture; ``emitting_shapes``: the emitters' shapes (area lights).
+    ``no_aperture``: whether that sensor samples no aperture (emission splitting needs it);
+    ``emitting_shapes``: the emitters' shapes (area lights).
     """
-    __slots__ = ("scene", "key", "emitter_array", "sensor", "film", "box_no_aperture",
+    __slots__ = ("scene", "key", "emitter_array", "sensor", "film", "no_aperture",
                  "emitting_shapes")
 
     def __init__(self, scene: mi.Scene):
@@ -54,8 +54,7 @@ class SceneView:
         sensors = scene.sensors()
         self.sensor = sensors[0] if sensors else None
         self.film = None if self.sensor is None else self.sensor.film()
-        self.box_no_aperture = (self.sensor is not None and self.film.rfilter().is_box_filter()
-                                and not self.sensor.needs_aperture_sample())
+        self.no_aperture = self.sensor is not None and not self.sensor.needs_aperture_sample()
         self.emitting_shapes = tuple(sh for sh in (e.get_shape() for e in emitters) if sh is not None)
 
     def emitter_bounds(self) -> tuple:
@@ -75,8 +74,8 @@ def scene_view(scene: mi.Scene, memo: dict | None = None) -> SceneView:
     >>> view = scene_view(scene, memo)
     >>> scene_view(scene, memo) is view, scene_view(scene) is view
     (True, False)
-    >>> len(view.emitting_shapes), view.box_no_aperture, view.key == scene_view(scene).key
-    (1, False, True)
+    >>> len(view.emitting_shapes), view.no_aperture, view.key == scene_view(scene).key
+    (1, True, True)
     """
     if memo is None:
         return SceneView(scene)

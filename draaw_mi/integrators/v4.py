@@ -9,9 +9,9 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import adaptive_sampling as ads
-from . import emission_split
+from . import emission_split, film_splat
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
-from .features import filter_gated_speedups
+from .features import sensor_gated_speedups
 from .light_pilot import learn_selection
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import emitters_key, scene_view
@@ -76,7 +76,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
      * - adaptive
        - |bool|
-       - Unbiased adaptive sampling for primal renders of at least 64 spp (box filter, no
+       - Unbiased adaptive sampling for primal renders of at least 64 spp (any pixel filter, no
          AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates
          each pixel's variance and path length, the rest of the budget goes where it lowers
          the error most per unit of cost (:mod:`draaw_mi.integrators.adaptive_sampling`). (Default: |true|)
@@ -190,7 +190,7 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self.want_depth = False        # set by draaw_mi.integrators.adaptive_sampling around its pilot pass
         self.last_depth = None
         self.init_emission_split(props)
-        self._said_gates = set()         # the filter notes already warned (_say_filter_gates)
+        self._said_gates = set()         # the film / lens notes already warned (_say_sensor_gates)
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -278,13 +278,15 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
-        """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (box filter, no
-        AOVs, a plain seed) the unbiased two-pass adaptive render of
-        :mod:`draaw_mi.integrators.adaptive_sampling`, otherwise ``RBIntegrator.render``."""
+        """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (no AOVs, a plain
+        seed) the unbiased two-pass adaptive render of
+        :mod:`draaw_mi.integrators.adaptive_sampling`, otherwise ``RBIntegrator.render`` (or,
+        under a pixel filter other than box with a light's edges in view,
+        :func:`~draaw_mi.integrators.film_splat.render_uniform`, which splats the split rays)."""
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        self._say_filter_gates(sensor)
+        self._say_sensor_gates(sensor)
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
@@ -294,16 +296,21 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
             return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
         try:
+            if (develop and not sensor.film().rfilter().is_box_filter()
+                    and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
+                                               self.features(scene))
+                    and self.edge_map(scene, sensor) is not None):
+                return film_splat.render_uniform(self, scene, sensor, seed, spp, develop, evaluate)
             return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._primary = None
 
-    def _say_filter_gates(self, sensor) -> None:
-        """A ``RuntimeWarning``, once per integrator and pixel filter, when the film's filter
-        turns adaptive sampling and emission splitting off (both on by default)."""
+    def _say_sensor_gates(self, sensor) -> None:
+        """A ``RuntimeWarning``, once per integrator and reason, when the film or the lens
+        turns adaptive sampling or emission splitting off (both on by default)."""
         if not (self.adaptive or self.emission_split > 1):
             return
-        gated = filter_gated_speedups(sensor)
+        gated = sensor_gated_speedups(sensor)
         if gated is not None and gated not in self._said_gates:
             self._said_gates.add(gated)
             warnings.warn(f"draaw_v4: {gated}", RuntimeWarning, stacklevel=2)

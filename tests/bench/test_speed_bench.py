@@ -54,7 +54,7 @@ def test_an_edited_scene_gets_its_own_cached_reference(monkeypatch, tmp_path):
     reused the stale reference of the scene before the edit."""
     calls = []
     monkeypatch.setattr(sb, "render", _fake_render(calls))
-    kind, builder, depth = ss.SCENES["metal_018"]
+    kind, builder, depth, rfilter = ss.SCENES["metal_018"]
 
     def brighter(res):
         d = builder(res)
@@ -62,7 +62,7 @@ def test_an_edited_scene_gets_its_own_cached_reference(monkeypatch, tmp_path):
         return d
     args = _args(tmp_path)
     sb.bench("metal_018", 4, args)
-    monkeypatch.setitem(ss.SCENES, "metal_018", (kind, brighter, depth))
+    monkeypatch.setitem(ss.SCENES, "metal_018", (kind, brighter, depth, rfilter))
     sb.bench("metal_018", 4, args)
     files = sorted(os.listdir(tmp_path / "refs"))
     assert len(files) == 2 and all(f.startswith("metal_018_4_d5_128_") for f in files), files

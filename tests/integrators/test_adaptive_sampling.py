@@ -261,3 +261,19 @@ def test_v4_adaptive_renders_what_the_uniform_render_does(change):
         assert partly.sum() >= 5
         ratio = a[..., 3].var(0, ddof=1)[partly].sum() / b[..., 3].var(0, ddof=1)[partly].sum()
         assert ratio < 3.0, ratio
+
+
+@pytest.mark.parametrize("name, adapts", [("doorway", False), ("metal_018", True)])
+def test_a_pilot_whose_halves_disagree_renders_uniformly(monkeypatch, name, adapts):
+    """The room lit through a doorway: the pilot's even and odd samples put the noise in
+    different pixels (agreement 0.1-0.2 at 32x32), so the main pass is uniform; a glossy
+    sphere under an area light (0.86-0.89) gets its map. Allocating on the doorway's map
+    anyway cost 1.8x the error of a uniform render on the glossy-panel scene at 128x128."""
+    from draaw_mi.bench import suite as ss
+    calls = []
+    real = ads.allocate
+    monkeypatch.setattr(ads, "allocate", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    scene = ss.load(name, 32)
+    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 5}), spp=64, seed=3)
+    assert np.isfinite(np.array(img)).all()
+    assert bool(calls) == adapts, calls

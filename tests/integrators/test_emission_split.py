@@ -110,14 +110,15 @@ def kernels(scene, integ, spp: int = 4) -> list[int]:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
 
 
-@pytest.mark.parametrize("case", ["light out of view", "hide_emitters", "gaussian filter"])
+@pytest.mark.parametrize("case", ["light out of view", "hide_emitters", "thin lens"])
 def test_no_split_code_where_no_light_is_seen(case):
     if case == "light out of view":
         scene, props = cornell(16, look_down=True), {}
     elif case == "hide_emitters":
         scene, props = cornell(16), {"hide_emitters": True}
-    else:
+    else:                                # rays through a lens: a pixel's probes say nothing
         d = rs.cornell_draaw(res=16, spp=4)
+        d["sensor"].update(type="thinlens", aperture_radius=0.05, focus_distance=3.9)
         d["sensor"]["film"]["rfilter"] = {"type": "gaussian"}
         scene, props = mi.load_dict(d), {}
     on = kernels(scene, integrator("draaw_v4", max_depth=4, **props))
@@ -127,8 +128,11 @@ def test_no_split_code_where_no_light_is_seen(case):
     assert integrator("draaw_v4", max_depth=4, **props).freeze_state(scene)[1] is None
 
 
-def test_split_code_where_a_light_is_seen():
-    scene = cornell(16)
+@pytest.mark.parametrize("rfilter", ["box", "gaussian"])
+def test_split_code_where_a_light_is_seen(rfilter):
+    d = rs.cornell_draaw(res=16, spp=4)
+    d["sensor"]["film"]["rfilter"] = {"type": rfilter}
+    scene = mi.load_dict(d)
     on = kernels(scene, integrator("draaw_v4", max_depth=4))
     off = kernels(scene, integrator("draaw_v4", max_depth=4, emission_split=1))
     assert len(on) == len(off)               # the edge map is made once per camera, not per render

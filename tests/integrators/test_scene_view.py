@@ -117,7 +117,7 @@ def test_a_thin_lens_camera_gets_no_frozen_edge_map(box):
     integ = integrator("draaw_v4", max_depth=3)
     view = sv.scene_view(lens, {})
     assert integ.frozen_edge_map(lens, view) is None
-    assert not view.box_no_aperture
+    assert not view.no_aperture
     assert integ.frozen_edge_map(box, sv.scene_view(box, {})) is not None
 
 
