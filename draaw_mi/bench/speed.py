@@ -134,6 +134,21 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
     return mean, var, time.perf_counter() - t0
 
 
+def learning_time(integ, scene) -> float:
+    """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide (its decision pilot
+    and training passes; :mod:`draaw_mi.integrators.guiding`), measured on a fresh cache that
+    then replaces the integrator's; 0 for other integrators and ``guiding = "off"``."""
+    guides = getattr(integ, "guides", None)
+    if guides is None or guides.mode == "off":
+        return 0.0
+    fresh = type(guides)(guides.mode)
+    t = time.perf_counter()
+    fresh.guide(integ, scene, integ.selection_key(scene))
+    dr.sync_thread()
+    integ.guides = fresh
+    return time.perf_counter() - t
+
+
 def bench(name: str, res: int, args) -> dict | None:
     d = ss.build(name, res, args.sampler)
     if d is None:
@@ -150,12 +165,15 @@ def bench(name: str, res: int, args) -> dict | None:
     integs = [mi.load_dict(parse_integrator(s, depth)) for s in specs]
     for it in integs:
         render(scene, it, args.spp, 1)                 # compile
+    # V4's guide (its pilot and training passes) is learned once per scene: counted in every
+    # render's time, as if each were the scene's first
+    learn = [learning_time(it, scene) for it in integs]
     times = [[] for _ in specs]
     errs = [[] for _ in specs]
     for c in range(args.repeats):
         for k, it in enumerate(integs):
             img, dt = render(scene, it, args.spp, 100 + 7 * c)
-            times[k].append(dt)
+            times[k].append(dt + learn[k])
             errs[k].append(float(np.mean((img - ref) ** 2)))
     mse = [max(float(np.mean(e)) - noise, 1e-30) for e in errs]
     rows = []
@@ -165,10 +183,13 @@ def bench(name: str, res: int, args) -> dict | None:
                          mse_se=float(np.std(errs[k], ddof=1) / np.sqrt(len(errs[k]))),
                          t_ratio=t_ratio, mse_ratio=mse[k] / mse[0],
                          ratio=t_ratio * mse[k] / mse[0]))
+    for row, t_learn in zip(rows, learn):
+        row["learn"] = t_learn
     r = dict(name=name, res=res, depth=depth, rows=rows, noise=noise, t_ref=t_ref,
              ref_mean=float(ref.mean()), kind=ss.SCENES[name][0])
     line = "  ".join(f"{row['spec']}: {_fmt(row['ratio'])} (t {row['t_ratio']:.2f}, mse "
-                     f"{_fmt(row['mse_ratio'])})" for row in rows[1:])
+                     f"{_fmt(row['mse_ratio'])}{', guide %.2fs' % row['learn'] if row['learn'] else ''})"
+                     for row in rows[1:])
     print(f"[{res} {name}] path {rows[0]['time']:.3f}s  {line}", file=sys.stderr, flush=True)
     return r
 
@@ -196,7 +217,9 @@ def report(results: list[dict], args) -> str:
            f"Machine: {platform.machine()}, {os.cpu_count()} cores ({load_note()}), "
            f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "
            f"{time.strftime('%Y-%m-%d %H:%M')}  ",
-           f"Box filter, sampler `{args.sampler}` for every integrator; reference `path` at "
+           f"Each scene's own pixel filter (box unless its row says), sampler `{args.sampler}` "
+           f"for every integrator; V4's guide learning (decision pilot, training passes) added to "
+           f"each of its render times; reference `path` at "
            f"{args.ref_spp} spp (its own noise subtracted from every MSE); {args.repeats} "
            f"interleaved cycles at {args.spp} spp, one seed per render.", "",
            "Cells: **time to reach `path`'s {0}-spp RMSE, relative to `path`** = median over "

@@ -31,7 +31,7 @@ Every scene renders with a box pixel filter unless its entry names another (the 
 ``_gauss`` scenes) or keeps its own (``mitsuba_cbox``: as shipped).
 
 >>> sorted(SCENES)[:3]
-['constant_env', 'cornell', 'envmap']
+['constant_env', 'cornell', 'cornell_tent']
 """
 from __future__ import annotations
 

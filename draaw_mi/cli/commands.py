@@ -236,6 +236,8 @@ def _cmd_render(args) -> int:
                                   progress=progress_mode(args.no_progress), return_info=True,
                                   denoise=args.denoise)
     arr = np.array(image)
+    del image
+    dr.flush_malloc_cache()      # the render's cached buffers, before the EXR's own copies
     chain = info["post"]                                                 # what render() applied
     meta = render_metadata(args.scene, scene, info, post=chain)
     if sets:                                   # the scene file alone no longer describes the image

@@ -81,11 +81,12 @@ GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is 
 # where adaptive sampling pays, 0.15 in the room lit through a doorway and 0.09-0.11 on the
 # floor lit by a glossy panel, where it cost 1.8x the error of a uniform render.
 AGREEMENT_MIN = 0.35
+AGREEMENT_PIXELS = 1 << 16  # pixels the agreement is computed on, at most
 
 
 def _ranks(a: np.ndarray) -> np.ndarray:
-    r = np.empty(a.size)
-    r[np.argsort(a, kind="stable")] = np.arange(a.size)
+    r = np.empty(a.size, np.float64)
+    r[np.argsort(a, kind="stable")] = np.arange(a.size, dtype=np.float64)
     return r
 
 
@@ -103,10 +104,16 @@ def pilot_agreement(halves: np.ndarray) -> float:
     >>> round(pilot_agreement(same), 2), pilot_agreement(apart) < 0.35
     (1.0, True)
     """
-    a, b = (np.sqrt(_box3(halves[..., i])).ravel() for i in range(2))
-    if a.size < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
+    a, b = (np.sqrt(_box3(np.asarray(halves[..., i], np.float32))).ravel() for i in range(2))
+    step = -(-a.size // AGREEMENT_PIXELS)       # every step-th pixel: the statistic's noise
+    a, b = a[::step], b[::step]                 # at 2^16 pixels is ~0.004
+    n = a.size
+    if n < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return 1.0
-    return float(np.corrcoef(_ranks(a), _ranks(b))[0, 1])
+    # ranks are a permutation of 0..n-1: their mean and variance are known
+    ra, rb = _ranks(a), _ranks(b)
+    mean, var = (n - 1) / 2.0, (n * n - 1) / 12.0
+    return float((np.dot(ra, rb) / n - mean * mean) / var)
 
 
 def _min_roughness(bsdf: mi.BSDF) -> float:
@@ -145,21 +152,35 @@ def pilot_can_miss(scene: mi.Scene) -> bool:
 
 
 def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,
-                   seed: int, moments: bool = False, alpha: bool = False, halves: bool = False):
+                   seed: int, moments: bool = False, alpha: bool = False):
     """Mean (H, W, 3) and, with ``moments``, per-pixel sample variance (H, W, 3), alpha
     (H, W) and mean path length in segments (H, W; 1 where the integrator does not report
     ``last_depth``) of ``integrator.sample`` with ``spp_map[y, x]`` samples at pixel (x, y).
     ``alpha`` (without ``moments``): the mean is (H, W, 4), the fraction of samples that hit
-    something (or saw an environment) in its fourth channel. ``halves`` (with ``moments``):
-    a fifth result, (H, W, 2), the sample variance of the channel sum over each pixel's even
-    and odd samples apart (two independent estimates, for :func:`pilot_agreement`).
+    something (or saw an environment) in its fourth channel.
 
     ``spp_map``: (H, W) integers >= 1 (the film's crop window). Primal only (no gradients).
+    NumPy float64 results, for inspection; :func:`render_adaptive` keeps its passes in
+    Dr.Jit (a 1024x1024 pilot's fourteen per-pixel sums would take 112 MB per float64 copy).
     """
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
-    ox, oy = (int(v) for v in film.crop_offset())
-    box = film.rfilter().is_box_filter()
+    counts = _check_map(spp_map, h, w)
+    sums, filtered = _pass_sums(integrator, scene, sensor, counts, seed, moments, alpha)
+    if filtered is not None and not moments:
+        return np.array(filtered, dtype=np.float64).reshape(h, w, -1)[..., :4 if alpha else 3]
+    arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
+    if not moments:
+        return arr.reshape(h, w, 4 if alpha else 3)
+    n = counts[:, None].astype(np.float64)
+    var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
+    mean = arr[:, :3].reshape(h, w, 3) if filtered is None else \
+        np.array(filtered, dtype=np.float64).reshape(h, w, -1)[..., :3]
+    return mean, var.reshape(h, w, 3), arr[:, 3].reshape(h, w), arr[:, 4].reshape(h, w)
+
+
+def _check_map(spp_map, h: int, w: int) -> np.ndarray:
+    """``spp_map`` as flat uint32 counts, or ValueError naming what is wrong with it."""
     m = np.asarray(spp_map)
     # (refused: a transposed (W, H) or flat map would be read in the wrong pixel order, 2.9 samples as 2)
     if m.shape != (h, w) or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all()\
@@ -167,19 +188,41 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         what = (f"shape {m.shape}" if m.shape != (h, w) else f"dtype {m.dtype}"
                 if not np.issubdtype(m.dtype, np.number) else f"values from {m.min()} to {m.max()}")
         raise ValueError(f"render_spp_map: spp_map has {what}; expected ({h}, {w}) whole counts >= 1")
-    counts = m.astype(np.int64).reshape(-1)
-    total = int(counts.sum())
-    if total >= 2 ** 32:
-        raise ValueError(f"render_spp_map: {total} samples exceed 2^32; render in passes")
+    if int(m.sum(dtype=np.int64)) >= 2 ** 32:
+        raise ValueError(f"render_spp_map: {int(m.sum(dtype=np.int64))} samples exceed 2^32; render in passes")
+    return m.astype(np.uint32).reshape(-1)
+
+
+def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
+               moments: bool, alpha: bool, pilot: bool = False):
+    """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
+    evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
+    count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
+    ``alpha`` the hit count; with ``moments`` the summed path lengths and R^2, G^2, B^2.
+    ``pilot`` (uniform ``counts``): what :func:`render_adaptive` reads in as few channels as
+    it can: R, G, B, [hits if ``alpha``], path lengths, the sum of R^2 + G^2 + B^2, and of the
+    channel sum ``s = R + G + B``: ``s`` and ``s^2`` over the odd samples, ``s^2`` over the
+    even ones. Under a filter other than box the image is the splatted one (``film_splat``)."""
+    film = sensor.film()
+    w, h = (int(v) for v in film.crop_size())
+    ox, oy = (int(v) for v in film.crop_offset())
+    uniform = isinstance(counts, int)
+    total = counts * w * h if uniform else int(counts.sum(dtype=np.int64))
     with dr.suspend_grad():
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, total)
-        # pixel of every sample, inside the kernel (no per-sample array: memory does not grow
-        # with spp): the last pixel whose first sample index is <= the sample index
-        starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)   # P + 1 entries
-        first = mi.UInt32(starts)
         idx = dr.arange(mi.UInt32, total)
-        pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, first, i) <= idx) - 1
+        if uniform:        # (opaque: one kernel for every pilot size)
+            pixel = idx // dr.opaque(mi.UInt32, counts)
+            first = pixel * dr.opaque(mi.UInt32, counts)
+            count_of = dr.opaque(mi.Float, counts)
+        else:
+            # pixel of every sample, inside the kernel (no per-sample array: memory does not
+            # grow with spp): the last pixel whose first sample index is <= the sample index
+            starts = mi.UInt32(np.concatenate([[0], np.cumsum(counts, dtype=np.uint32)]))
+            pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, starts, i) <= idx) - 1
+            first = dr.gather(mi.UInt32, starts, pixel)
+            count_of = dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel)
         y = pixel // w
         x = pixel - y * w
         corner = mi.Vector2f(mi.Float(x + ox), mi.Float(y + oy))     # film coordinates
@@ -192,12 +235,12 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
         sample2 = pos * scale if (ox, oy) == (0, 0) else dr.fma(pos, scale, offset)
         ray, weight = sensor.sample_ray_differential(time=time, sample1=0.0, sample2=sample2,
                                                      sample3=aperture)
-        splat = None
-        if not box:      # the filtered image, from samples weighted by 1 / their pixel's count
+        splat = share = None
+        if not film.rfilter().is_box_filter():   # weighted by 1 / the sample's pixel's count
             film.prepare([])
             splat = FilmSplat(film)
-            share = dr.rcp(dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel))
-        reports_depth = moments and hasattr(integrator, "want_depth")     # draaw_v4
+            share = dr.rcp(count_of)
+        reports_depth = (moments or pilot) and hasattr(integrator, "want_depth")     # draaw_v4
         if reports_depth:
             integrator.want_depth = True
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
@@ -215,50 +258,42 @@ def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.n
             if set_primary is not None:
                 set_primary(None)
         value = L * weight
+        filtered = None
         if splat is not None:
             splat.put(pos, value, dr.select(valid, 1.0, 0.0), share)
             filtered = splat.develop()
-            if not moments:
-                dr.eval(filtered)
-                return np.array(filtered, dtype=np.float64).reshape(h, w, 4 if alpha else 3)
         chans = [value.x, value.y, value.z]
-        if moments or alpha:
-            chans += [dr.select(valid, 1.0, 0.0) + 0.0 * value.x]
-        if moments:
-            chans += [(mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x,
-                      dr.square(value.x), dr.square(value.y), dr.square(value.z)]
-        if moments and halves:       # the channel sum's moments over odd and even samples apart
-            odd = ((idx - dr.gather(mi.UInt32, first, pixel)) & 1) == 1
+        hits = dr.select(valid, 1.0, 0.0) + 0.0 * value.x
+        lengths = (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x
+        if pilot:
+            odd = ((idx - first) & 1) == 1
             v = value.x + value.y + value.z
-            for part in (~odd, odd):
-                chans += [dr.select(part, v, 0.0), dr.select(part, dr.square(v), 0.0),
-                          dr.select(part, 1.0, 0.0) + 0.0 * v]
+            chans += [hits] if alpha else []
+            chans += [lengths, dr.squared_norm(value), dr.select(odd, v, 0.0),
+                      dr.select(odd, v * v, 0.0), dr.select(odd, 0.0, v * v)]
+        elif moments or alpha:
+            chans += [hits]
+            if moments:
+                chans += [lengths, dr.square(value.x), dr.square(value.y), dr.square(value.z)]
+        if splat is not None and not (moments or pilot):
+            chans = []                # the splatted image is the result
         # Samples of a pixel are contiguous: a local (in-packet) reduction before the atomics.
         sums = [dr.zeros(mi.Float, w * h) for _ in chans]
         for acc, v in zip(sums, chans):
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
-        dr.eval(sums if splat is None else (sums, filtered))     # one kernel traces the paths
-    arr = np.stack([np.array(v, dtype=np.float64) for v in sums], -1) / counts[:, None]
-    if not moments:
-        return arr.reshape(h, w, 4 if alpha else 3)
-    n = counts[:, None].astype(np.float64)
-    var = np.maximum(arr[:, 5:8] - arr[:, :3] ** 2, 0.0) * n / np.maximum(n - 1, 1)
-    mean = arr[:, :3].reshape(h, w, 3) if splat is None else \
-        np.array(filtered, dtype=np.float64).reshape(h, w, -1)[..., :3]
-    out = (mean, var.reshape(h, w, 3), arr[:, 3].reshape(h, w), arr[:, 4].reshape(h, w))
-    if not halves:
-        return out
-    parts = []
-    for j in (8, 11):                  # (sum, sum of squares, count) of even, then odd samples
-        k = np.maximum(arr[:, j + 2] * counts, 1.0)
-        m1, m2 = arr[:, j] * counts / k, arr[:, j + 1] * counts / k
-        parts.append(np.maximum(m2 - m1 * m1, 0.0) * k / np.maximum(k - 1, 1))
-    return out + (np.stack(parts, -1).reshape(h, w, 2),)
+        dr.eval(sums, filtered)      # one kernel traces the paths
+    return sums, filtered
 
 
 def _box3(a: np.ndarray) -> np.ndarray:
     p = np.pad(a, 1, mode="edge")
-    return sum(p[i:i + a.shape[0], j:j + a.shape[1]] for i in range(3) for j in range(3)) / 9.0
+    out = p[:a.shape[0], :a.shape[1]].copy()
+    for i in range(3):
+        for j in range(3):
+            if i or j:
+                out += p[i:i + a.shape[0], j:j + a.shape[1]]
+    out /= 9.0
+    return out
 
 
 def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
@@ -272,49 +307,99 @@ def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
     minimum is proportional to ``sd / sqrt(cost)`` -- the allocation that minimises
     ``sum_i variance_i / m_i`` for that total cost.
     """
-    v = _box3(variance) if smooth else variance
-    sd = np.sqrt(np.maximum(v, 0.0))
-    c = np.ones_like(sd) if cost is None else np.maximum(cost, 1e-6)
-    extra = max(budget - m_min * c.sum(), 0.0)
-    score = sd / np.sqrt(c)
+    v = _box3(np.asarray(variance, np.float32)) if smooth else np.array(variance, np.float32)
+    score = np.sqrt(np.maximum(v, 0.0, out=v), out=v)            # the deviation, in place
+    c = np.ones_like(score) if cost is None else np.maximum(np.asarray(cost, np.float32), 1e-6)
+    extra = max(budget - m_min * float(c.sum(dtype=np.float64)), 0.0)
+    score /= np.sqrt(c)
     if score_cap is not None and score.size:
         # A pilot of a few samples sees a rare bright path (a glint, a caustic) in some pixels
         # and misses it in their twins: uncapped, the few pixels that saw one take most of the
         # budget and the rest fall to the minimum. The cap bounds a pixel's share.
-        mean = float((score * c).sum() / c.sum())
+        mean = float(np.dot(score.ravel(), c.ravel()) / c.sum(dtype=np.float64))
         if mean > 0:
-            score = np.minimum(score, score_cap * mean)
-    total = float((score * c).sum())
+            np.minimum(score, score_cap * mean, out=score)
+    total = float(np.dot(score.ravel().astype(np.float64), c.ravel()))
     # no variance seen anywhere (a black or noise-free image): the same count everywhere
-    want = m_min + (extra * score / total if total > 0 else np.full_like(sd, extra / c.sum()))
+    if total > 0:
+        want = score
+        want *= np.float32(extra / total)
+    else:
+        want = np.full_like(score, extra / float(c.sum(dtype=np.float64)))
+    want += m_min
     rng = np.random.default_rng(seed)
     base = np.floor(want)
-    return (base + (rng.random(want.shape) < want - base)).astype(np.int64)
+    want -= base                      # the fraction, rounded up with that probability
+    return (base + (rng.random(want.shape, dtype=np.float32) < want)).astype(np.uint32)
 
 
 def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
                     alpha: bool):
-    """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor."""
+    """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor.
+
+    Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
+    (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     seed = int(seed)
     a = max(2, spp // PILOT_FRACTION)
     rest = spp - a
-    pilot, var, valid, segments, halves = render_spp_map(
-        integrator, scene, sensor, np.full((h, w), a), seed, moments=True, halves=True)
+    wp = a / spp
+    sums, filtered = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True)
+    var, segments, halves = _pilot_maps(sums, a, alpha, h, w)     # (keeps only the image's sums)
+    channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
     if pilot_agreement(halves) < AGREEMENT_MIN:
-        counts = np.full((h, w), rest)          # the pilot cannot tell where the noise is
+        counts = np.full(h * w, rest, np.uint32)     # the pilot cannot tell where the noise is
     else:
         # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation
         # ray per segment (smoothed like the variance: both are estimated from few samples).
         cost = _box3(COST_FIXED + 2.0 * segments)
         # Variance of the sum of the channels (one number per pixel); same total cost as uniform.
-        counts = allocate(var.sum(-1), rest * cost.sum(), max(1, int(rest // MIN_FRACTION)), s2,
-                          cost=cost, score_cap=SCORE_CAP)
-    main = render_spp_map(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, alpha=alpha)
-    if alpha:       # (from the pilot alone, an edge pixel's alpha would have the pilot's 4-spp noise)
-        pilot = np.concatenate([pilot, valid[..., None]], -1)
-    wp = a / spp
-    img = wp * pilot + (1.0 - wp) * main
-    return mi.TensorXf(img.astype(np.float32))
+        counts = allocate(var, rest * float(cost.sum(dtype=np.float64)),
+                          max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
+                          score_cap=SCORE_CAP).reshape(-1)
+    del var, segments, halves
+    if filtered is not None:          # both passes' splatted images (film_splat)
+        pilot = filtered
+        del sums
+        _, main = _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False)
+        img = dr.fma(pilot, wp, main * (1.0 - wp))
+        dr.eval(img)
+        return img                    # (H, W, 3|4): the film's own channels
+    pilot = [v * (wp / a) for v in sums[:channels]]
+    del sums
+    main, _ = _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False)
+    per = (1.0 - wp) * dr.rcp(mi.Float(counts.astype(np.float32)))
+    del counts
+    out = dr.zeros(mi.Float, h * w * channels)
+    at = dr.arange(mi.UInt32, h * w) * channels
+    for c in range(channels):
+        dr.scatter(out, dr.fma(main[c], per, pilot[c]), at + c)
+    dr.eval(out)
+    return mi.TensorXf(out, (h, w, channels))
+
+
+def _pilot_maps(sums: list, n: int, alpha: bool, h: int, w: int):
+    """From a uniform pilot's sums (:func:`_pass_sums` with ``pilot``, ``n`` samples per
+    pixel): the summed per-channel sample variance, the mean path length and the two halves'
+    variances of the channel sum, as (H, W) float32 maps (computed in Dr.Jit). Removes the
+    moments from ``sums`` (the image's channels stay) and frees their memory."""
+    k = 4 if alpha else 3
+    lengths, squares, odd_s, odd_s2, even_s2 = sums[k:k + 5]
+    inv = 1.0 / n
+    var = squares * inv
+    for c in range(3):
+        var -= dr.square(sums[c] * inv)
+    var = dr.maximum(var, 0.0) * (n / max(n - 1, 1))
+    halves = []
+    even_s = sums[0] + sums[1] + sums[2] - odd_s
+    for m, s, s2 in ((n - n // 2, even_s, even_s2), (n // 2, odd_s, odd_s2)):
+        mean = s * (1.0 / m)
+        halves.append(dr.maximum(s2 * (1.0 / m) - mean * mean, 0.0) * (m / max(m - 1, 1)))
+    seg = lengths * inv
+    dr.eval(var, seg, halves)
+    del sums[k:], lengths, squares, odd_s, odd_s2, even_s2, even_s     # the image's sums stay
+    dr.flush_malloc_cache()           # the moments' memory, before the NumPy copies
+    as_map = lambda v: np.array(v, dtype=np.float32).reshape(h, w)   # noqa: E731
+    return as_map(var), as_map(seg), np.stack([as_map(v) for v in halves], -1)

@@ -9,7 +9,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat
+from . import emission_split, film_splat, guiding
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .features import sensor_gated_speedups
 from .light_pilot import learn_selection
@@ -81,6 +81,13 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
          each pixel's variance and path length, the rest of the budget goes where it lowers
          the error most per unit of cost (:mod:`draaw_mi.integrators.adaptive_sampling`). (Default: |true|)
 
+     * - guiding
+       - |string|
+       - Guided paths in primal renders (:mod:`~draaw_mi.integrators.guiding`): ``auto``
+         guides where a pilot of 2^15 camera paths finds most of the light arriving after the
+         first bounce (once per scene); ``on`` always; ``off`` never. Gradient passes sample
+         the BSDF alone. (Default: ``auto``)
+
      * - hide_emitters
        - |bool|
        - Do not show directly visible emitters (area emitters are skipped, the environment
@@ -105,7 +112,10 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
       still gets the samples its gradient needs);
     - emission splitting: where a light is seen directly, its emission in the pixels on its
       edges comes from 16 stratified extra camera rays (no shading, one intersection each);
-    - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased);
+    - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased),
+      under any pixel filter (:mod:`~draaw_mi.integrators.film_splat`);
+    - guided paths where light arrives indirectly (a learned grid of directional histograms
+      in a one-sample MIS mixture with the BSDF);
     - a kernel specialised to the scene: each feature of
       :func:`~draaw_mi.integrators.features.detect_features` (area / delta / environment
       emitters, delta BSDFs, textures and normal maps, AOVs) is a Python-level branch, so an
@@ -191,6 +201,11 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self.last_depth = None
         self.init_emission_split(props)
         self._said_gates = set()         # the film / lens notes already warned (_say_sensor_gates)
+        mode = str(props.get("guiding", "auto"))
+        if mode not in ("auto", "on", "off"):
+            raise ParameterError(f"draaw_v4: guiding={mode!r}; expected 'auto', 'on' or 'off'")
+        self.guides = guiding.GuideCache(mode)
+        self._guide = self._guide_records = None    # set around guided primal renders (guiding.py)
 
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
@@ -246,6 +261,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         (see :mod:`~.light_pilot`) unless ``learned``."""
         for key in [k for k, e in self._tables.items() if k[0] == id(scene) and (learned or not e[2])]:
             del self._tables[key]
+        if learned:
+            self.guides.forget(id(scene))
 
     @staticmethod
     def selection_key(scene) -> tuple:
@@ -287,6 +304,18 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         self._say_sensor_gates(sensor)
+        guide = None
+        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        if self.guides.wanted(sensor, n) and not dr.flag(dr.JitFlag.FreezingScope) \
+                and not self.features(scene)["media"]:
+            guide = self.guides.guide(self, scene, self.selection_key(scene))
+        self._guide = guide
+        try:
+            return self._render_primal(scene, sensor, seed, spp, develop, evaluate)
+        finally:
+            self._guide = None
+
+    def _render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
@@ -337,6 +366,9 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         delta_bsdf = feats["delta_bsdfs"]
         ctx = mi.BSDFContext()
         sel = self.emitter_selection(scene) if has_nee else None
+        guide = self._guide if primal else None       # guided paths (guiding.py)
+        rec = self._guide_records if primal else None # a guide's training pass
+        lane = dr.arange(mi.UInt32, dr.width(ray)) if rec is not None else None
         # emitters seen directly: from stratified extra camera rays (emission_split.py)
         primary, edges = self.split_inputs(scene, ray, feats)
         split = edges is not None                     # an emitting surface in view
@@ -405,6 +437,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                     Le = β * w_bsdf * ds.emitter.eval(si, em_active)
 
             active_next &= (depth + 1 < self.max_depth) & si.is_valid()
+            if dr.hint(guide is not None or rec is not None, mode="scalar"):
+                guidable = active_next & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
 
             # ---------------------- Emitter sampling ----------------------
             Lr_dir = mi.Spectrum(0.0)
@@ -435,6 +469,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                     else:
                         f_em = bsdf.eval(ctx, si_em, wo, active_em)
                     if dr.hint(mis_em, mode="scalar"):
+                        if dr.hint(guide is not None, mode="scalar"):
+                            pdf_em = guiding.mix_pdf(guide, si.p, ds.d, pdf_em, guidable)
                         w_em = mis_weight(ds.pdf, pdf_em)
                         if dr.hint(delta_em, mode="scalar"):
                             w_em = dr.select(ds.delta, 1.0, w_em)
@@ -451,10 +487,15 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
             # ------------------ Detached BSDF sampling -------------------
             if dr.hint(not (has_nee and primal), mode="scalar"):     # else fused above
                 bs, bsdf_w = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
+            if dr.hint(guide is not None, mode="scalar"):
+                bs, bsdf_w = guiding.mix_sample(guide, bsdf, ctx, si, bs, bsdf_w, sampler, guidable)
 
             L = (L + Le + Lr_dir) if primal else (L - Le - Lr_dir)
             ray_next = si.spawn_ray(si.to_world(bs.wo))
             β *= bsdf_w
+            if dr.hint(rec is not None, mode="scalar"):
+                rec.put(lane, depth, si.p, si.to_world(bs.wo), (L.x + L.y + L.z) / 3.0,
+                        (β.x + β.y + β.z) / 3.0, bs.pdf, guidable)
             if dr.hint(delta_bsdf, mode="scalar"):
                 η *= bs.eta
                 prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)

@@ -1,0 +1,302 @@
+"""Guided paths: where light arrives indirectly, sample the directions it comes from.
+
+Why: in a room lit through a doorway, or on a floor lit only by a lamp's reflection in a
+glossy panel, almost every BSDF-sampled path misses what lights the surface; next-event
+estimation cannot help either (the lamp is hidden). Path guiding (Müller et al. 2017,
+"Practical Path Guiding"; OpenPGL) learns the incident radiance while rendering and samples
+it. Here the learned structure is a fixed spatial grid over where the training paths' vertices
+lie (their 1st to 99th percentiles per axis, not the scene's bounds) whose cells each
+hold a directional histogram over the sphere (:data:`BINS_Z` x :data:`BINS_PHI` equal-area
+bins: uniform in ``cos theta`` and ``phi``), in Dr.Jit arrays -- bounded memory
+(at most 16^3 cells (:data:`MAX_GRID`) x 128 bins x 2 floats: 4 MiB; while it is learned, 32
+bytes per recorded vertex, 48 MiB for 2^18 paths of 6 vertices, whatever the image's size).
+
+Learning (:func:`learn_guide`, once per scene, cached by ``draaw_v4``): a pass of
+:data:`TRAIN_PATHS` / 2 camera paths records, at each vertex whose BSDF has no delta lobe, the
+cell, the direction sampled and the radiance that came back along it, ``(L_end - L_k) /
+beta_k``; each record adds ``luminance / pdf`` (an estimate of the incident radiance's
+integral over its bin) to its cell's bin. A second pass of :data:`TRAIN_PATHS` paths, guided
+by the first histogram, adds its records (the hard directions are found more often). Cells
+are smoothed with their neighbours, and each cell's distribution keeps :data:`UNIFORM_SHARE`
+spread uniformly.
+
+Sampling (``draaw_v4``'s loop, primal renders only): at a vertex without delta lobes, the
+next direction comes from the guide with probability :data:`GUIDE_PROB`, else from the BSDF;
+the weight is ``f cos / (a p_guide + (1 - a) p_bsdf)`` (one-sample MIS over the mixture)
+for either choice, and the same mixture density enters the MIS weights against next-event
+estimation, so the estimate stays unbiased whatever the guide learned. Gradient passes (path
+replay) sample the BSDF alone and replay exactly that.
+
+When (:func:`indirect_share`, ``guiding = "auto"``): a pilot of :data:`DECIDE_PATHS` camera
+paths measures the share of the image's light that arrives after the first bounce; guiding
+is on from :data:`SHARE_MIN` up (about 0.9 in the doorway scene and 1.0 behind the glossy
+panel; 0.3-0.5 in the Cornell box and the open scenes of the speed suite).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+BINS_Z, BINS_PHI = 8, 16            # directional bins per cell (equal solid angle)
+BINS = BINS_Z * BINS_PHI
+MAX_GRID = 16                       # cells per axis at most
+RECORDS_PER_CELL = 400              # the grid is as fine as the records allow
+TRAIN_PATHS = 1 << 18               # camera paths per training pass
+DECIDE_PATHS = 1 << 15              # camera paths of the pilot that decides ("auto")
+GUIDE_SEED = 0x6D1DE
+GUIDE_PROB = 0.5                    # share of directions drawn from the guide
+UNIFORM_SHARE = 0.2                 # of each cell's distribution, spread over all bins
+SHARE_MIN = 0.6                     # indirect share from which "auto" guides
+MAX_RECORD_DEPTH = 16               # vertices recorded per path at most
+AUTO_MIN_SPP = 64                   # "auto" looks for a guide from this many spp ...
+AUTO_MIN_SAMPLES = 32 * DECIDE_PATHS  # ... and this many samples in the render
+
+
+class Guide:
+    """A learned spatial-directional distribution (see the module docstring).
+
+    A plain class: ``dr.syntax`` loops read the integrator, and Dr.Jit would take the arrays
+    of a dataclass or tuple attribute as loop state.
+    """
+    __slots__ = ("lo", "scale", "res", "prob", "cdf")
+
+    def __init__(self, lo, scale, res: int, prob: np.ndarray):
+        self.lo, self.scale, self.res = lo, scale, int(res)
+        self.prob = mi.Float(prob.ravel().astype(np.float32))
+        cdf = np.cumsum(prob.reshape(-1, BINS), axis=1)
+        self.cdf = mi.Float(cdf.ravel().astype(np.float32))
+
+    def cell(self, p: mi.Point3f) -> mi.UInt32:
+        g = (p - self.lo) * self.scale
+        r = self.res
+        i = [dr.clip(mi.Int32(dr.floor(c)), 0, r - 1) for c in (g.x, g.y, g.z)]
+        return mi.UInt32((i[2] * r + i[1]) * r + i[0])
+
+    def pdf(self, p: mi.Point3f, d: mi.Vector3f, active: mi.Bool) -> mi.Float:
+        """Solid-angle density of direction ``d`` (world) at ``p``."""
+        key = self.cell(p) * BINS + bin_of(d)
+        return dr.gather(mi.Float, self.prob, key, active) * (BINS / (4.0 * math.pi))
+
+    def sample(self, p: mi.Point3f, u: mi.Point2f, active: mi.Bool):
+        """``(direction, pdf)``: a bin by the cell's cumulative table, a direction uniform in it."""
+        base = self.cell(p) * BINS
+        b = dr.binary_search(0, BINS - 1, lambda i: dr.gather(mi.Float, self.cdf, base + i, active) <= u.x)
+        hi = dr.gather(mi.Float, self.cdf, base + b, active)
+        pb = dr.gather(mi.Float, self.prob, base + b, active)
+        t = dr.clip((u.x - (hi - pb)) * dr.select(pb > 0, dr.rcp(pb), 0.0), 0.0, 1.0)
+        bz = b // BINS_PHI
+        z = -1.0 + 2.0 * (mi.Float(bz) + t) / BINS_Z
+        phi = 2.0 * math.pi * (mi.Float(b - bz * BINS_PHI) + u.y) / BINS_PHI
+        r = dr.safe_sqrt(1.0 - z * z)
+        d = mi.Vector3f(r * dr.cos(phi), r * dr.sin(phi), z)
+        return d, pb * (BINS / (4.0 * math.pi))
+
+
+def bin_of(d: mi.Vector3f) -> mi.UInt32:
+    """Equal-area bin of unit direction ``d``: ``cos theta = d.z`` and ``phi`` uniform."""
+    bz = dr.clip(mi.Int32(dr.floor((d.z + 1.0) * (0.5 * BINS_Z))), 0, BINS_Z - 1)
+    phi = dr.atan2(d.y, d.x)
+    phi = dr.select(phi < 0, phi + 2.0 * math.pi, phi)
+    bp = dr.clip(mi.Int32(dr.floor(phi * (BINS_PHI / (2.0 * math.pi)))), 0, BINS_PHI - 1)
+    return mi.UInt32(bz * BINS_PHI + bp)
+
+
+class Records:
+    """Per-vertex records of a training pass (filled by ``draaw_v4``'s loop while
+    :func:`recording`): the vertex's point and sampled direction, the path's radiance so far
+    ``L`` and ``q = beta * pdf`` (throughput after the vertex times the direction's density;
+    0 where nothing was recorded); ``L_end`` the paths' final radiance. 32 bytes a vertex:
+    2^18 paths of 6 vertices take 48 MiB while a guide is learned."""
+    __slots__ = ("n", "depth", "p", "d", "L", "q", "L_end")
+
+    def __init__(self, n: int, depth: int):
+        self.n, self.depth = n, depth
+        m = n * depth
+        self.p = dr.zeros(mi.Point3f, m)
+        self.d = dr.zeros(mi.Vector3f, m)
+        self.L, self.q = dr.zeros(mi.Float, m), dr.zeros(mi.Float, m)
+        self.L_end = None
+
+    def valid(self) -> mi.Bool:
+        return self.q > 0
+
+    def put(self, lane: mi.UInt32, depth: mi.UInt32, p, d, L, beta, pdf, active) -> None:
+        active = active & (depth < self.depth)
+        idx = lane * self.depth + depth
+        for arr, v in ((self.p, p), (self.d, d), (self.L, L), (self.q, beta * pdf)):
+            dr.scatter(arr, v, idx, active)
+
+
+@contextlib.contextmanager
+def recording(integrator, records: Records, guide: Guide | None):
+    """Within this block ``integrator`` (``draaw_v4``) writes :class:`Records` (and samples with
+    ``guide``, if given)."""
+    integrator._guide_records, integrator._guide = records, guide
+    try:
+        yield
+    finally:
+        integrator._guide_records, integrator._guide = None, None
+
+
+def _trace(integrator, scene: mi.Scene, paths: int, seed: int, guide: Guide | None) -> Records:
+    sensor = scene.sensors()[0]
+    depth = integrator.max_depth if integrator.max_depth <= MAX_RECORD_DEPTH else MAX_RECORD_DEPTH
+    rec = Records(paths, max(int(depth), 1))
+    with dr.suspend_grad():
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, paths)
+        ray, w = sensor.sample_ray_differential(time=sensor.shutter_open(), sample1=0.5,
+                                                sample2=sampler.next_2d(), sample3=mi.Point2f(0.5))
+        with recording(integrator, rec, guide):
+            L, _, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
+                                           ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
+                                           state_in=None, active=mi.Bool(True))
+        rec.L_end = (L.x + L.y + L.z) / 3.0
+        dr.eval(rec.p, rec.d, rec.L, rec.q, rec.L_end)
+    return rec
+
+
+def _incident(rec: Records):
+    """Per record: ``(valid, luminance of the incident radiance / pdf)``, as numpy arrays."""
+    lane = dr.arange(mi.UInt32, rec.n * rec.depth) // rec.depth
+    L_end = dr.gather(mi.Float, rec.L_end, lane)
+    valid = rec.valid()
+    val = dr.select(valid, dr.maximum(L_end - rec.L, 0.0) / rec.q, 0.0)
+    return valid, dr.select(dr.isfinite(val), val, 0.0)
+
+
+def indirect_share(integrator, scene: mi.Scene, paths: int = DECIDE_PATHS) -> float:
+    """Share of the light of ``paths`` camera paths that arrives after their first vertex
+    (0 for a black image)."""
+    rec = _trace(integrator, scene, paths, GUIDE_SEED ^ 0xD, None)
+    first = dr.arange(mi.UInt32, rec.n) * rec.depth
+    L0 = dr.select(dr.gather(mi.Float, rec.q, first) > 0, dr.gather(mi.Float, rec.L, first), rec.L_end)
+    total = float(dr.sum(rec.L_end)[0]) if dr.width(rec.L_end) else 0.0
+    after = float(dr.sum(rec.L_end - L0)[0])
+    return after / total if total > 0 and math.isfinite(total) else 0.0
+
+
+def _histogram(rec: Records, lo: np.ndarray, scale: np.ndarray, res: int) -> np.ndarray:
+    valid, val = _incident(rec)
+    g = Guide.__new__(Guide)
+    g.lo, g.scale, g.res = mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res
+    key = g.cell(rec.p) * BINS + bin_of(rec.d)
+    hist = dr.zeros(mi.Float, res ** 3 * BINS)
+    dr.scatter_reduce(dr.ReduceOp.Add, hist, val, key, valid & (val > 0))
+    return np.array(hist, dtype=np.float64).reshape(res, res, res, BINS)
+
+
+def _distribution(hist: np.ndarray) -> np.ndarray:
+    """Per cell: smoothed with its 26 neighbours (half weight), normalised, a uniform share."""
+    res = hist.shape[0]
+    pad = np.pad(hist, ((1, 1), (1, 1), (1, 1), (0, 0)))
+    near = sum(pad[1 + i:1 + i + res, 1 + j:1 + j + res, 1 + k:1 + k + res]
+               for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1))
+    h = hist + 0.5 * (near - hist) / 26.0
+    tot = h.sum(-1, keepdims=True)
+    p = np.where(tot > 0, (1.0 - UNIFORM_SHARE) * h / np.where(tot > 0, tot, 1.0) + UNIFORM_SHARE / BINS,
+                 1.0 / BINS)
+    return p
+
+
+def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS) -> Guide | None:
+    """Two training passes (the second guided by the first's histogram); ``None`` when the
+    scene has no finite bounds or the passes saw no indirect light."""
+    first = _trace(integrator, scene, paths // 2, GUIDE_SEED, None)
+    valid = np.array(first.valid())
+    n_valid = int(np.count_nonzero(valid))
+    if n_valid < 64:
+        return None
+    # the grid spans where the paths' vertices are (1st-99th percentile), not the scene's
+    # bounds: a large floor or a far lamp would leave most cells empty
+    pts = np.array(first.p, dtype=np.float64).T[valid]
+    lo, hi = np.percentile(pts, 1, axis=0), np.percentile(pts, 99, axis=0)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        return None
+    ext = np.maximum(hi - lo, 1e-3 * max(float(np.max(hi - lo)), 1e-3))
+    lo, hi = lo - 1e-3 * ext, hi + 1e-3 * ext
+    res = int(np.clip(round((3 * n_valid / RECORDS_PER_CELL) ** (1 / 3)), 2, MAX_GRID))
+    scale = res / (hi - lo)
+    hist = _histogram(first, lo, scale, res)
+    del first, pts, valid              # (the second pass's records take their place)
+    if not hist.any():
+        return None
+    guide = Guide(mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res, _distribution(hist))
+    second = _trace(integrator, scene, paths, GUIDE_SEED + 1, guide)
+    hist = hist + _histogram(second, lo, scale, res)
+    return Guide(mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res, _distribution(hist))
+
+
+def mix_sample(guide: Guide, bsdf, ctx, si, bs, bsdf_w, sampler, guidable):
+    """The next direction from the one-sample mixture of ``guide`` (probability
+    :data:`GUIDE_PROB`) and the BSDF sample ``bs`` already drawn, at the ``guidable`` lanes:
+    ``(bs, weight)`` with ``bs.wo`` the direction taken, ``bs.pdf`` the mixture's density
+    (what the MIS weights at the next emitter hit use) and ``weight = f cos / pdf``."""
+    u = sampler.next_1d()
+    u2 = sampler.next_2d()
+    use_g = guidable & (u < GUIDE_PROB)
+    d_g, pg_g = guide.sample(si.p, u2, use_g)
+    wo_g = si.to_local(d_g)
+    f_g, pb_g = bsdf.eval_pdf(ctx, si, wo_g, use_g)
+    pg_b = guide.pdf(si.p, si.to_world(bs.wo), guidable & ~use_g)
+    pb = dr.select(use_g, pb_g, bs.pdf)
+    mix = GUIDE_PROB * dr.select(use_g, pg_g, pg_b) + (1.0 - GUIDE_PROB) * pb
+    f = dr.select(use_g, f_g, bsdf_w * bs.pdf)
+    w = dr.select(mix > 0, f * dr.rcp(mix), 0.0)
+    bs.wo = dr.select(use_g, wo_g, bs.wo)
+    bs.pdf = dr.select(guidable, mix, bs.pdf)
+    return bs, dr.select(guidable, w, bsdf_w)
+
+
+def mix_pdf(guide: Guide, p, d, pdf_bsdf, guidable):
+    """The mixture's density of direction ``d`` (world) at ``p``, where ``guidable``."""
+    return dr.select(guidable, GUIDE_PROB * guide.pdf(p, d, guidable) + (1.0 - GUIDE_PROB) * pdf_bsdf,
+                     pdf_bsdf)
+
+
+class GuideCache:
+    """``draaw_v4``'s guides, one per scene (its ``selection_key``), learned before the first
+    guided primal render and kept for the scene's lifetime, as the learned light table.
+    ``mode``: ``"auto"`` (guide where :func:`indirect_share` >= :data:`SHARE_MIN`), ``"on"``
+    or ``"off"``."""
+
+    def __init__(self, mode: str):
+        self.mode = mode
+        self._entries = {}        # key -> (emitter array, Guide | None, indirect share)
+
+    def wanted(self, sensor: mi.Sensor, spp: int) -> bool:
+        """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
+        guide: always with ``"on"``; with ``"auto"`` from :data:`AUTO_MIN_SPP` spp and
+        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs at most 3 % of
+        the render's samples once per scene (previews, fits' iterations and small test
+        renders do not pay it)."""
+        if self.mode != "auto":
+            return self.mode == "on"
+        size = sensor.film().crop_size()
+        return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= AUTO_MIN_SAMPLES
+
+    def guide(self, integrator, scene: mi.Scene, key: tuple) -> Guide | None:
+        """The guide to render ``scene`` with, or ``None`` (learned here on a first call)."""
+        if self.mode == "off":
+            return None
+        entry = self._entries.get(key)
+        if entry is None:
+            share = indirect_share(integrator, scene) if self.mode == "auto" else 1.0
+            guide = learn_guide(integrator, scene) if share >= SHARE_MIN else None
+            if len(self._entries) >= 4:
+                self._entries.pop(next(iter(self._entries)))
+            entry = self._entries[key] = (scene.emitters_dr(), guide, share)
+        return entry[1]
+
+    def share(self, key: tuple) -> float | None:
+        """The indirect share measured for the scene of ``key`` (``None``: not yet)."""
+        entry = self._entries.get(key)
+        return None if entry is None else entry[2]
+
+    def forget(self, scene_id: int) -> None:
+        for key in [k for k in self._entries if k[0] == scene_id]:
+            del self._entries[key]
