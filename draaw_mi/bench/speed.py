@@ -134,7 +134,7 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
     return mean, var, time.perf_counter() - t0
 
 
-def learning_time(integ, scene) -> float:
+def learning_time(integ, scene, spp: int) -> float:
     """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide (its decision pilot
     and training passes; :mod:`draaw_mi.integrators.guiding`), measured on a fresh cache that
     then replaces the integrator's; 0 for other integrators and ``guiding = "off"``."""
@@ -142,8 +142,11 @@ def learning_time(integ, scene) -> float:
     if guides is None or guides.mode == "off":
         return 0.0
     fresh = type(guides)(guides.mode)
+    sensor = scene.sensors()[0]
+    size = sensor.film().crop_size()
     t = time.perf_counter()
-    fresh.guide(integ, scene, integ.selection_key(scene))
+    if fresh.wanted(sensor, spp):                  # what a render of spp would learn
+        fresh.guide(integ, scene, integ.selection_key(scene), spp * int(size[0]) * int(size[1]))
     dr.sync_thread()
     integ.guides = fresh
     return time.perf_counter() - t
@@ -167,7 +170,7 @@ def bench(name: str, res: int, args) -> dict | None:
         render(scene, it, args.spp, 1)                 # compile
     # V4's guide (its pilot and training passes) is learned once per scene: counted in every
     # render's time, as if each were the scene's first
-    learn = [learning_time(it, scene) for it in integs]
+    learn = [learning_time(it, scene, args.spp) for it in integs]
     times = [[] for _ in specs]
     errs = [[] for _ in specs]
     for c in range(args.repeats):

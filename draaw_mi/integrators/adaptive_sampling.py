@@ -113,7 +113,7 @@ def pilot_agreement(halves: np.ndarray) -> float:
     # ranks are a permutation of 0..n-1: their mean and variance are known
     ra, rb = _ranks(a), _ranks(b)
     mean, var = (n - 1) / 2.0, (n * n - 1) / 12.0
-    return float((np.dot(ra, rb) / n - mean * mean) / var)
+    return float(((ra * rb).sum() / n - mean * mean) / var)   # (no BLAS: see allocate)
 
 
 def _min_roughness(bsdf: mi.BSDF) -> float:
@@ -214,15 +214,15 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         idx = dr.arange(mi.UInt32, total)
         if uniform:        # (opaque: one kernel for every pilot size)
             pixel = idx // dr.opaque(mi.UInt32, counts)
-            first = pixel * dr.opaque(mi.UInt32, counts)
-            count_of = dr.opaque(mi.Float, counts)
+            first = lambda: pixel * dr.opaque(mi.UInt32, counts)             # noqa: E731
+            count_of = lambda: dr.opaque(mi.Float, counts)                   # noqa: E731
         else:
             # pixel of every sample, inside the kernel (no per-sample array: memory does not
             # grow with spp): the last pixel whose first sample index is <= the sample index
-            starts = mi.UInt32(np.concatenate([[0], np.cumsum(counts, dtype=np.uint32)]))
+            starts = mi.UInt32(np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32))
             pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, starts, i) <= idx) - 1
-            first = dr.gather(mi.UInt32, starts, pixel)
-            count_of = dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel)
+            first = lambda: dr.gather(mi.UInt32, starts, pixel)              # noqa: E731
+            count_of = lambda: dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel)  # noqa: E731
         y = pixel // w
         x = pixel - y * w
         corner = mi.Vector2f(mi.Float(x + ox), mi.Float(y + oy))     # film coordinates
@@ -239,7 +239,7 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         if not film.rfilter().is_box_filter():   # weighted by 1 / the sample's pixel's count
             film.prepare([])
             splat = FilmSplat(film)
-            share = dr.rcp(count_of)
+            share = dr.rcp(count_of())
         reports_depth = (moments or pilot) and hasattr(integrator, "want_depth")     # draaw_v4
         if reports_depth:
             integrator.want_depth = True
@@ -263,10 +263,10 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             splat.put(pos, value, dr.select(valid, 1.0, 0.0), share)
             filtered = splat.develop()
         chans = [value.x, value.y, value.z]
-        hits = dr.select(valid, 1.0, 0.0) + 0.0 * value.x
-        lengths = (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x
+        hits = dr.select(valid, 1.0, 0.0) + 0.0 * value.x if moments or alpha or pilot else None
+        lengths = (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x if depth is not None or moments else None
         if pilot:
-            odd = ((idx - first) & 1) == 1
+            odd = ((idx - first()) & 1) == 1
             v = value.x + value.y + value.z
             chans += [hits] if alpha else []
             chans += [lengths, dr.squared_norm(value), dr.select(odd, v, 0.0),
@@ -316,10 +316,12 @@ def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
         # A pilot of a few samples sees a rare bright path (a glint, a caustic) in some pixels
         # and misses it in their twins: uncapped, the few pixels that saw one take most of the
         # budget and the rest fall to the minimum. The cap bounds a pixel's share.
-        mean = float(np.dot(score.ravel(), c.ravel()) / c.sum(dtype=np.float64))
+        mean = float((score * c).sum(dtype=np.float64) / c.sum(dtype=np.float64))
         if mean > 0:
             np.minimum(score, score_cap * mean, out=score)
-    total = float(np.dot(score.ravel().astype(np.float64), c.ravel()))
+    # (no np.dot: OpenBLAS's threads spin on after a call and slowed the main pass's kernel,
+    # launched right after, by a third on two cores)
+    total = float((score * c).sum(dtype=np.float64))
     # no variance seen anywhere (a black or noise-free image): the same count everywhere
     if total > 0:
         want = score

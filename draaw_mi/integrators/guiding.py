@@ -27,10 +27,12 @@ for either choice, and the same mixture density enters the MIS weights against n
 estimation, so the estimate stays unbiased whatever the guide learned. Gradient passes (path
 replay) sample the BSDF alone and replay exactly that.
 
-When (:func:`indirect_share`, ``guiding = "auto"``): a pilot of :data:`DECIDE_PATHS` camera
-paths measures the share of the image's light that arrives after the first bounce; guiding
-is on from :data:`SHARE_MIN` up (about 0.9 in the doorway scene and 1.0 behind the glossy
-panel; 0.3-0.5 in the Cornell box and the open scenes of the speed suite).
+When (:func:`indirect_share`, ``guiding = "auto"``, renders of at least 64 spp and 2^21
+samples): a pilot of :data:`DECIDE_PATHS` camera paths measures the share of the image's
+light that arrives after the first bounce; guiding is on from :data:`SHARE_MIN` up (1.0
+behind the glossy panel, 0.67 in the thesis scene; 0.45 in the room lit through a doorway,
+0.25-0.35 in the Cornell box and the open scenes of the speed suite). The training passes
+take at most the render's samples / :data:`TRAIN_SHARE` paths.
 """
 from __future__ import annotations
 
@@ -46,14 +48,15 @@ BINS = BINS_Z * BINS_PHI
 MAX_GRID = 16                       # cells per axis at most
 RECORDS_PER_CELL = 400              # the grid is as fine as the records allow
 TRAIN_PATHS = 1 << 18               # camera paths per training pass
-DECIDE_PATHS = 1 << 15              # camera paths of the pilot that decides ("auto")
+DECIDE_PATHS = 1 << 13              # camera paths of the pilot that decides ("auto")
 GUIDE_SEED = 0x6D1DE
 GUIDE_PROB = 0.5                    # share of directions drawn from the guide
 UNIFORM_SHARE = 0.2                 # of each cell's distribution, spread over all bins
 SHARE_MIN = 0.6                     # indirect share from which "auto" guides
 MAX_RECORD_DEPTH = 16               # vertices recorded per path at most
 AUTO_MIN_SPP = 64                   # "auto" looks for a guide from this many spp ...
-AUTO_MIN_SAMPLES = 32 * DECIDE_PATHS  # ... and this many samples in the render
+AUTO_MIN_SAMPLES = 1 << 21          # ... and this many samples in the render
+TRAIN_SHARE = 48                    # training paths: at most the render's samples / this
 
 
 class Guide:
@@ -271,22 +274,25 @@ class GuideCache:
     def wanted(self, sensor: mi.Sensor, spp: int) -> bool:
         """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
         guide: always with ``"on"``; with ``"auto"`` from :data:`AUTO_MIN_SPP` spp and
-        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs at most 3 % of
-        the render's samples once per scene (previews, fits' iterations and small test
+        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs at most about
+        2 % of the render's time once per scene (previews, fits' iterations and small test
         renders do not pay it)."""
         if self.mode != "auto":
             return self.mode == "on"
         size = sensor.film().crop_size()
         return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= AUTO_MIN_SAMPLES
 
-    def guide(self, integrator, scene: mi.Scene, key: tuple) -> Guide | None:
-        """The guide to render ``scene`` with, or ``None`` (learned here on a first call)."""
+    def guide(self, integrator, scene: mi.Scene, key: tuple, samples: int | None = None) -> Guide | None:
+        """The guide to render ``scene`` with, or ``None`` (learned here on a first call, from
+        :data:`TRAIN_PATHS` paths, or ``samples / TRAIN_SHARE`` for a render of ``samples``
+        samples if fewer: the training stays a small part of the render's time)."""
         if self.mode == "off":
             return None
         entry = self._entries.get(key)
         if entry is None:
             share = indirect_share(integrator, scene) if self.mode == "auto" else 1.0
-            guide = learn_guide(integrator, scene) if share >= SHARE_MIN else None
+            paths = TRAIN_PATHS if samples is None else int(np.clip(samples // TRAIN_SHARE, 1 << 14, TRAIN_PATHS))
+            guide = learn_guide(integrator, scene, paths) if share >= SHARE_MIN else None
             if len(self._entries) >= 4:
                 self._entries.pop(next(iter(self._entries)))
             entry = self._entries[key] = (scene.emitters_dr(), guide, share)

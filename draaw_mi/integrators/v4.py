@@ -84,9 +84,9 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
      * - guiding
        - |string|
        - Guided paths in primal renders (:mod:`~draaw_mi.integrators.guiding`): ``auto``
-         guides where a pilot of 2^15 camera paths finds most of the light arriving after the
-         first bounce (once per scene); ``on`` always; ``off`` never. Gradient passes sample
-         the BSDF alone. (Default: ``auto``)
+         guides renders of at least 64 spp and 2^21 samples where a pilot of 2^13 camera paths
+         finds most of the light arriving after the first bounce (once per scene); ``on``
+         always; ``off`` never. Gradient passes sample the BSDF alone. (Default: ``auto``)
 
      * - hide_emitters
        - |bool|
@@ -308,7 +308,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         if self.guides.wanted(sensor, n) and not dr.flag(dr.JitFlag.FreezingScope) \
                 and not self.features(scene)["media"]:
-            guide = self.guides.guide(self, scene, self.selection_key(scene))
+            size = sensor.film().crop_size()
+            guide = self.guides.guide(self, scene, self.selection_key(scene), n * int(size[0]) * int(size[1]))
         self._guide = guide
         try:
             return self._render_primal(scene, sensor, seed, spp, develop, evaluate)

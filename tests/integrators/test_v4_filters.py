@@ -159,3 +159,20 @@ def test_a_crop_window_renders_adaptively_with_paths_expectation(monkeypatch):
     v4 = seed_stack(scene, integrator("draaw_v4", max_depth=3), 64, range(50, 58))
     assert len(calls) == 8 and v4.shape == ref.shape == (8, 8, 10, 3)
     check_same_expectation(ref, v4)
+
+
+def test_aovs_under_a_filter_with_split_rays(monkeypatch):
+    """AOVs beside the split rays' splats: the AOV channels are those of the render without
+    splitting (same seed). A split splat that wrote zeros into too few channels would shift
+    the AOVs into the weight channel."""
+    calls = []
+    real = film_splat.render_uniform
+    monkeypatch.setattr(film_splat, "render_uniform", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    scene = cornell(24, "gaussian")
+    on = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=3, aovs="depth,normal"),
+                            spp=16, seed=2))
+    off = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=3, aovs="depth,normal",
+                                                          emission_split=1), spp=16, seed=2))
+    assert calls == [1] and on.shape == off.shape == (24, 24, 7)
+    np.testing.assert_allclose(on[..., 3:], off[..., 3:], rtol=1e-5, atol=1e-6)   # (atomics order)
+    assert np.isfinite(on).all()        # (the colour's expectation: the tests above)
