@@ -108,10 +108,16 @@ def small_light(res):
     return d
 
 
-def many_lights(res):
+def _ball_under_lights(res) -> dict:
+    """A glossy ball on the floor, seen from above: the many-light scenes' stage."""
     d = _base(res, origin=(0.0, 3.0, 5.5))
     d["ball"] = {"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
                  "bsdf": rs.draaw([0.7, 0.7, 0.7], roughness=0.3, metallic=0.3)}
+    return d
+
+
+def many_lights(res):
+    d = _ball_under_lights(res)
     rng = np.random.default_rng(7)
     for i in range(24):
         x, z = -3.0 + 6.0 * (i % 6) / 5, -2.5 + 4.5 * (i // 6) / 3
@@ -220,14 +226,13 @@ def glossy_diffuse(res):
 
 
 def lights_2000(res):
-    d = _base(res, origin=(0.0, 3.0, 5.5))
-    d["ball"] = {"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
-                 "bsdf": rs.draaw([0.7, 0.7, 0.7], roughness=0.3, metallic=0.3)}
+    """2,000 small lights on a 50 x 40 grid, one in twenty 40x brighter (at random)."""
+    d = _ball_under_lights(res)
     rng = np.random.default_rng(11)
     for i in range(2000):
-        x, z = -3.0 + 6.0 * (i % 50) / 49, -2.5 + 4.5 * (i // 50) / 39
         power = 40.0 if rng.random() < 0.05 else 1.0
-        d[f"l{i}"] = _area([x, 2.5 + 0.2 * rng.random(), z], 0.03, list(power * 3.0 * (0.5 + 0.5 * rng.random(3))))
+        pos = [-3.0 + 6.0 * (i % 50) / 49, 2.5 + 0.2 * rng.random(), -2.5 + 4.5 * (i // 50) / 39]
+        d[f"l{i}"] = _area(pos, 0.03, list(power * 3.0 * (0.5 + 0.5 * rng.random(3))))
     return d
 
 

@@ -85,8 +85,18 @@ AGREEMENT_PIXELS = 1 << 16  # pixels the agreement is computed on, at most
 
 
 def _ranks(a: np.ndarray) -> np.ndarray:
+    """Ranks of ``a`` (0-based), tied values sharing their mean rank: a mostly black image's
+    many zero variances must not be ranked by pixel index (the same order in both halves,
+    which would read as agreement)."""
+    order = np.argsort(a, kind="stable")
+    sa = a[order]
+    new = np.empty(a.size, bool)
+    new[:1] = True
+    np.not_equal(sa[1:], sa[:-1], out=new[1:])
+    starts = np.flatnonzero(new)
+    sizes = np.diff(np.append(starts, a.size))
     r = np.empty(a.size, np.float64)
-    r[np.argsort(a, kind="stable")] = np.arange(a.size, dtype=np.float64)
+    r[order] = np.repeat(starts + (sizes - 1) / 2.0, sizes)
     return r
 
 
@@ -103,6 +113,9 @@ def pilot_agreement(halves: np.ndarray) -> float:
     >>> apart = np.stack([noise, rng.random((16, 16)) ** 4], -1)
     >>> round(pilot_agreement(same), 2), pilot_agreement(apart) < 0.35
     (1.0, True)
+    >>> dark = np.zeros((16, 16, 2)); dark[3, 4, 0] = dark[12, 9, 1] = 1.0   # one speck each
+    >>> pilot_agreement(dark) < 0.35
+    True
     """
     a, b = (np.sqrt(_box3(np.asarray(halves[..., i], np.float32))).ravel() for i in range(2))
     step = -(-a.size // AGREEMENT_PIXELS)       # every step-th pixel: the statistic's noise
@@ -110,10 +123,11 @@ def pilot_agreement(halves: np.ndarray) -> float:
     n = a.size
     if n < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return 1.0
-    # ranks are a permutation of 0..n-1: their mean and variance are known
     ra, rb = _ranks(a), _ranks(b)
-    mean, var = (n - 1) / 2.0, (n * n - 1) / 12.0
-    return float(((ra * rb).sum() / n - mean * mean) / var)   # (no BLAS: see allocate)
+    ra -= (n - 1) / 2.0                # (the mean rank, ties or not)
+    rb -= (n - 1) / 2.0
+    den = np.sqrt((ra * ra).sum() * (rb * rb).sum())
+    return float((ra * rb).sum() / den) if den > 0 else 1.0   # (no BLAS: see allocate)
 
 
 def _min_roughness(bsdf: mi.BSDF) -> float:
