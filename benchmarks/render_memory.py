@@ -57,7 +57,7 @@ def main(argv=None) -> int:
                 walls[v].append(wall)
                 print(f"[{r}] {v}: {mib:.0f} MiB, {wall:.1f} s", file=sys.stderr, flush=True)
     med = {v: statistics.median(p) for v, p in peaks.items()}
-    lines = [f"# Peak resident memory of `draaw-mi render` (benchmarks/render_memory.py)", "",
+    lines = ["# Peak resident memory of `draaw-mi render` (benchmarks/render_memory.py)", "",
              f"{time.strftime('%Y-%m-%d %H:%M')}: `{args.scene}` at {args.res}x{args.res}, {args.spp} spp, "
              f"{args.repeats} processes per integrator (alternating), `/usr/bin/time -v`.", "",
              "| integrator | peak MiB (median) | each run | wall s (median) |", "|---|---|---|---|"]

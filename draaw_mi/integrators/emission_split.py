@@ -204,30 +204,35 @@ def edge_map(scene: mi.Scene, sensor: mi.Sensor, rect: tuple[int, int, int, int]
     film = sensor.film()
     ox, oy = (int(v) for v in film.crop_offset())
     cw, ch = (int(v) for v in film.crop_size())
-    lw = 2 * cw + 1                                                 # lattice points per row
+    rx0, ry0, rx1, ry1 = rect
+    lw, lh = 2 * (rx1 - rx0) + 1, 2 * (ry1 - ry0) + 1                # lattice over the rectangle
     with dr.suspend_grad():
-        # opaque bounds: a moved camera (a preview's orbit, a batch's frames) moves the
-        # rectangle, and literal bounds would compile a new probe kernel for every camera
-        x0, y0, x1, y1 = (dr.opaque(mi.Float, v) for v in rect)
-        idx = dr.arange(mi.UInt32, lw * (2 * ch + 1))
-        ly = idx // lw
-        lx = idx - ly * lw
-        fx, fy = 0.5 * mi.Float(lx) + ox, 0.5 * mi.Float(ly) + oy   # film coordinates
-        probe = (fx >= x0) & (fx <= x1) & (fy >= y0) & (fy <= y1)
-        ray, _ = _film_ray(sensor, mi.Vector2f(fx, fy), *film_mapping(film), probe)
-        si, seen = _emission_seen(scene, ray, flags, probe, surfaces_only=True)
+        # opaque sizes and bounds: a moved camera (a preview's orbit, a batch's frames) moves
+        # the rectangle, and literals would compile a new probe kernel for every camera; the
+        # lattice spans the rectangle only (the whole film's took 16 MB at 1024x1024)
+        w_l = dr.opaque(mi.UInt32, lw)
+        idx = dr.arange(mi.UInt32, lw * lh)
+        ly = idx // w_l
+        lx = idx - ly * w_l
+        fx = 0.5 * mi.Float(lx) + dr.opaque(mi.Float, rx0)               # film coordinates
+        fy = 0.5 * mi.Float(ly) + dr.opaque(mi.Float, ry0)
+        ray, _ = _film_ray(sensor, mi.Vector2f(fx, fy), *film_mapping(film), True)
+        si, seen = _emission_seen(scene, ray, flags, mi.Bool(True), surfaces_only=True)
         lum = mi.luminance(si.emitter(scene).eval(si, seen))
         lum = dr.select(seen & dr.isfinite(lum), lum, 0.0)
         dr.eval(lum)
         p = dr.arange(mi.UInt32, cw * ch)
-        py = p // cw
-        c = 2 * py * lw + 2 * (p - py * cw)                         # the pixel's top-left corner
+        py = mi.Int32(p // cw)
+        qx = mi.Int32(p) - py * cw + (ox - dr.opaque(mi.Int32, rx0))    # pixel in the rectangle
+        qy = py + (oy - dr.opaque(mi.Int32, ry0))
+        inside = (qx >= 0) & (qx < dr.opaque(mi.Int32, rx1 - rx0)) & (qy >= 0) & (qy < dr.opaque(mi.Int32, ry1 - ry0))
+        c = mi.UInt32(2 * qy * mi.Int32(w_l) + 2 * qx)                  # the pixel's top-left corner
         hi, lo = mi.Float(0.0), mi.Float(dr.inf)
         for dy in range(3):
             for dx in range(3):
-                v = dr.gather(mi.Float, lum, c + dy * lw + dx)
+                v = dr.gather(mi.Float, lum, c + dy * w_l + dx, inside)
                 hi, lo = dr.maximum(hi, v), dr.minimum(lo, v)
-        edges = hi - lo > EDGE_CONTRAST * hi
+        edges = inside & (hi - lo > EDGE_CONTRAST * hi)
         dr.eval(edges)
     return edges
 
