@@ -9,7 +9,8 @@ lie (their 1st to 99th percentiles per axis, not the scene's bounds) whose cells
 hold a directional histogram over the sphere (:data:`BINS_Z` x :data:`BINS_PHI` equal-area
 bins: uniform in ``cos theta`` and ``phi``), in Dr.Jit arrays -- bounded memory
 (at most 16^3 cells (:data:`MAX_GRID`) x 128 bins x 2 floats: 4 MiB; while it is learned, 32
-bytes per recorded vertex, 48 MiB for 2^18 paths of 6 vertices, whatever the image's size).
+bytes per recorded vertex of a batch of :data:`CHUNK_PATHS` paths, 12 MiB at 6 vertices,
+whatever the image's size).
 
 Learning (:func:`learn_guide`, once per scene, cached by ``draaw_v4``): a pass of
 :data:`TRAIN_PATHS` / 2 camera paths records, at each vertex whose BSDF has no delta lobe, the
@@ -49,6 +50,7 @@ BINS = BINS_Z * BINS_PHI
 MAX_GRID = 16                       # cells per axis at most
 RECORDS_PER_CELL = 400              # the grid is as fine as the records allow
 TRAIN_PATHS = 1 << 18               # camera paths per training pass
+CHUNK_PATHS = 1 << 16               # traced at a time (records: 12 MiB at 6 vertices)
 DECIDE_PATHS = 1 << 13              # camera paths of the pilot that decides ("auto")
 GUIDE_SEED = 0x6D1DE
 GUIDE_PROB = 0.5                    # share of directions drawn from the guide
@@ -114,7 +116,7 @@ class Records:
     :func:`recording`): the vertex's point and sampled direction, the path's radiance so far
     ``L`` and ``q = beta * pdf`` (throughput after the vertex times the direction's density;
     0 where nothing was recorded); ``L_end`` the paths' final radiance. 32 bytes a vertex:
-    2^18 paths of 6 vertices take 48 MiB while a guide is learned."""
+    a batch of 2^16 paths of 6 vertices takes 12 MiB."""
     __slots__ = ("n", "depth", "p", "d", "L", "q", "L_end")
 
     def __init__(self, n: int, depth: int):
@@ -207,10 +209,18 @@ def _distribution(hist: np.ndarray) -> np.ndarray:
     return p
 
 
+def _chunks(paths: int) -> list[int]:
+    """``paths`` as batches of at most :data:`CHUNK_PATHS`."""
+    n = -(-paths // CHUNK_PATHS)
+    return [paths // n + (k < paths % n) for k in range(n)]
+
+
 def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS) -> Guide | None:
-    """Two training passes (the second guided by the first's histogram); ``None`` when the
-    scene has no finite bounds or the passes saw no indirect light."""
-    first = _trace(integrator, scene, paths // 2, GUIDE_SEED, None)
+    """Two training passes of ``paths / 2`` and ``paths`` paths (the second guided by the
+    first's histogram), each traced in batches of at most :data:`CHUNK_PATHS` paths so that
+    the records stay small; ``None`` when the passes saw no indirect light."""
+    sizes1, sizes2 = _chunks(max(paths // 2, 1)), _chunks(paths)
+    first = _trace(integrator, scene, sizes1[0], GUIDE_SEED, None)
     valid = np.array(first.valid())
     n_valid = int(np.count_nonzero(valid))
     if n_valid < 64:
@@ -223,15 +233,19 @@ def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS) -> Guide 
         return None
     ext = np.maximum(hi - lo, 1e-3 * max(float(np.max(hi - lo)), 1e-3))
     lo, hi = lo - 1e-3 * ext, hi + 1e-3 * ext
-    res = int(np.clip(round((3 * n_valid / RECORDS_PER_CELL) ** (1 / 3)), 2, MAX_GRID))
+    expected = n_valid * (sum(sizes1) + sum(sizes2)) / sizes1[0]      # records of both passes
+    res = int(np.clip(round((expected / RECORDS_PER_CELL) ** (1 / 3)), 2, MAX_GRID))
     scale = res / (hi - lo)
     hist = _histogram(first, lo, scale, res)
-    del first, pts, valid              # (the second pass's records take their place)
+    del first, pts, valid
+    for k, n in enumerate(sizes1[1:], 1):
+        hist += _histogram(_trace(integrator, scene, n, GUIDE_SEED + 7919 * k, None), lo, scale, res)
     if not hist.any():
         return None
     guide = Guide(mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res, _distribution(hist))
-    second = _trace(integrator, scene, paths, GUIDE_SEED + 1, guide)
-    hist = hist + _histogram(second, lo, scale, res)
+    for k, n in enumerate(sizes2):
+        hist += _histogram(_trace(integrator, scene, n, GUIDE_SEED + 1 + 7919 * k, guide), lo, scale, res)
+    dr.flush_malloc_cache()           # the records' memory
     return Guide(mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res, _distribution(hist))
 
 
