@@ -278,7 +278,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             filtered = splat.develop()
         chans = [value.x, value.y, value.z]
         hits = dr.select(valid, 1.0, 0.0) + 0.0 * value.x if moments or alpha or pilot else None
-        lengths = (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x if depth is not None or moments else None
+        # (1 per path where the integrator reports no lengths: V4's media paths)
+        lengths = (mi.Float(depth) if depth is not None else 1.0) + 0.0 * value.x if moments or pilot else None
         if pilot:
             odd = ((idx - first()) & 1) == 1
             v = value.x + value.y + value.z
