@@ -143,10 +143,10 @@ def learning_time(integ, scene, spp: int) -> float:
         return 0.0
     fresh = type(guides)(guides.mode)
     sensor = scene.sensors()[0]
-    size = sensor.film().crop_size()
+    if not fresh.wanted(sensor, spp):              # a render of spp looks for no guide
+        return 0.0
     t = time.perf_counter()
-    if fresh.wanted(sensor, spp):                  # what a render of spp would learn
-        fresh.guide(integ, scene, integ.selection_key(scene), spp * int(size[0]) * int(size[1]))
+    fresh.for_render(integ, scene, sensor, spp)    # what a render of spp learns
     dr.sync_thread()
     integ.guides = fresh
     return time.perf_counter() - t

@@ -77,10 +77,7 @@ class Guide:
         self.cdf = mi.Float(cdf.ravel().astype(np.float32))
 
     def cell(self, p: mi.Point3f) -> mi.UInt32:
-        g = (p - self.lo) * self.scale
-        r = self.res
-        i = [dr.clip(mi.Int32(dr.floor(c)), 0, r - 1) for c in (g.x, g.y, g.z)]
-        return mi.UInt32((i[2] * r + i[1]) * r + i[0])
+        return cell_of(p, self.lo, self.scale, self.res)
 
     def pdf(self, p: mi.Point3f, d: mi.Vector3f, active: mi.Bool) -> mi.Float:
         """Solid-angle density of direction ``d`` (world) at ``p``."""
@@ -100,6 +97,14 @@ class Guide:
         r = dr.safe_sqrt(1.0 - z * z)
         d = mi.Vector3f(r * dr.cos(phi), r * dr.sin(phi), z)
         return d, pb * (BINS / (4.0 * math.pi))
+
+
+def cell_of(p: mi.Point3f, lo, scale, res: int) -> mi.UInt32:
+    """Grid cell of point ``p`` (clamped to the grid) for a grid of ``res``^3 cells from
+    ``lo`` with ``scale`` cells per unit."""
+    g = (p - lo) * scale
+    i = [dr.clip(mi.Int32(dr.floor(c)), 0, res - 1) for c in (g.x, g.y, g.z)]
+    return mi.UInt32((i[2] * res + i[1]) * res + i[0])
 
 
 def bin_of(d: mi.Vector3f) -> mi.UInt32:
@@ -188,9 +193,7 @@ def indirect_share(integrator, scene: mi.Scene, paths: int = DECIDE_PATHS) -> fl
 
 def _histogram(rec: Records, lo: np.ndarray, scale: np.ndarray, res: int) -> np.ndarray:
     valid, val = _incident(rec)
-    g = Guide.__new__(Guide)
-    g.lo, g.scale, g.res = mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res
-    key = g.cell(rec.p) * BINS + bin_of(rec.d)
+    key = cell_of(rec.p, mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res) * BINS + bin_of(rec.d)
     hist = dr.zeros(mi.Float, res ** 3 * BINS)
     dr.scatter_reduce(dr.ReduceOp.Add, hist, val, key, valid & (val > 0))
     return np.array(hist, dtype=np.float64).reshape(res, res, res, BINS)
@@ -296,6 +299,14 @@ class GuideCache:
             return self.mode == "on"
         size = sensor.film().crop_size()
         return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= AUTO_MIN_SAMPLES
+
+    def for_render(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int) -> Guide | None:
+        """The guide for a primal render of ``spp`` samples per pixel through ``sensor``:
+        :meth:`guide` where :meth:`wanted`, else ``None``."""
+        if not self.wanted(sensor, spp):
+            return None
+        size = sensor.film().crop_size()
+        return self.guide(integrator, scene, integrator.selection_key(scene), spp * int(size[0]) * int(size[1]))
 
     def guide(self, integrator, scene: mi.Scene, key: tuple, samples: int | None = None) -> Guide | None:
         """The guide to render ``scene`` with, or ``None`` (learned here on a first call, from

@@ -304,20 +304,18 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         self._say_sensor_gates(sensor)
-        guide = None
         n = int(spp) if spp else int(sensor.sampler().sample_count())
-        if self.guides.wanted(sensor, n) and not dr.flag(dr.JitFlag.FreezingScope) \
+        # (not in recordings: a guide is learned from read-back results; not with media, which
+        # V4 hands to volume.py)
+        if self.guides.mode != "off" and not dr.flag(dr.JitFlag.FreezingScope) \
                 and not self.features(scene)["media"]:
-            size = sensor.film().crop_size()
-            guide = self.guides.guide(self, scene, self.selection_key(scene), n * int(size[0]) * int(size[1]))
-        self._guide = guide
+            self._guide = self.guides.for_render(self, scene, sensor, n)
         try:
-            return self._render_primal(scene, sensor, seed, spp, develop, evaluate)
+            return self._render_primal(scene, sensor, seed, spp, n, develop, evaluate)
         finally:
             self._guide = None
 
-    def _render_primal(self, scene, sensor, seed, spp, develop, evaluate):
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
+    def _render_primal(self, scene, sensor, seed, spp, n, develop, evaluate):
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
                 and self.max_depth > 1

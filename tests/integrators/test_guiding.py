@@ -154,3 +154,10 @@ def test_training_traces_in_bounded_batches(panel, monkeypatch):
     assert guiding.learn_guide(integ, panel, guiding.TRAIN_PATHS) is not None
     assert max(sizes) <= guiding.CHUNK_PATHS and sum(sizes) == guiding.TRAIN_PATHS // 2 + guiding.TRAIN_PATHS
     assert guiding._chunks(100_000) == [50_000, 50_000] and sum(guiding._chunks(65_537)) == 65_537
+
+
+def test_a_bad_guiding_value_is_refused_in_one_line():
+    from draaw_mi.errors import ParameterError
+    # (Mitsuba's plugin loader wraps the error in a RuntimeError that quotes it)
+    with pytest.raises((ParameterError, RuntimeError), match=r"draaw_v4: guiding='maybe'; expected 'auto', 'on' or 'off'"):
+        integrator("draaw_v4", guiding="maybe")
