@@ -107,6 +107,7 @@ class FitSettings:
     spp_grad: int | None
     beta_2: float
     smooth: bool | None
+    integrator_options: dict | None = None
 
 
 @dataclass
@@ -135,7 +136,8 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
         seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,
         average_last: float = 0.25, tol: float = 5e-3, resolution=None, lr_final: float = 0.1,
-        spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None) -> FitResult:
+        spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None,
+        integrator_options: dict | None = None) -> FitResult:
     """Fit ``params`` of ``scene`` so that its renders match ``references``.
 
     Args:
@@ -174,13 +176,16 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
             derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
         tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fitting.result.settled`).
         progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
+        integrator_options: further integrator properties, as :func:`draaw_mi.render` takes
+            them (e.g. ``{"sdf_silhouettes": False}``).
     """
     check_mode(progress, "fit")
     t0 = time.perf_counter()
     settings = _validate(FitSettings(
         version=version, spp=spp, iterations=iterations, lr=lr, loss=loss, post=post, progress=progress, seed=seed,
         exposure=exposure, init=init, max_depth=max_depth, average_last=average_last, tol=tol, resolution=resolution,
-        lr_final=lr_final, spp_grad=spp_grad, beta_2=beta_2, smooth=smooth))
+        lr_final=lr_final, spp_grad=spp_grad, beta_2=beta_2, smooth=smooth,
+        integrator_options=integrator_options))
     problem = _set_up(scene, references, params, views, settings)
     opt = _optimiser(problem, settings)
     history, compiles = _iterate(problem, settings, opt)
@@ -193,6 +198,9 @@ def _validate(s: FitSettings) -> FitSettings:
         raise ParameterError(f"fit: loss={s.loss!r}; expected one of {', '.join(LOSSES)}")
     if s.exposure not in ("fixed", "fit"):
         raise ParameterError(f"fit: exposure={s.exposure!r}; expected 'fixed' or 'fit'")
+    if s.integrator_options is not None and not isinstance(s.integrator_options, dict):
+        raise ParameterError(f"fit: integrator_options={s.integrator_options!r}; expected a dict of "
+                             "integrator properties")
     for name, value, lo in (("spp", s.spp, 1), ("iterations", s.iterations, 1),
                             ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
@@ -256,7 +264,7 @@ def _set_up(scene, references, params, views, s: FitSettings) -> FitProblem:
     session = session_of(scene)
     session.check_version_sees(version)      # prb would fit a smoke scene as if it had no smoke
     integrator = session.integrator(version, scene.settings["max_depth"] if s.max_depth is None else s.max_depth,
-                                    scene.settings.get("hide_emitters", False))
+                                    scene.settings.get("hide_emitters", False), **(s.integrator_options or {}))
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
         raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
     keys, names, prm, start, initial = _parameters(scene, params, s.init)

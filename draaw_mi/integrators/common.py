@@ -33,6 +33,7 @@ from ..errors import ParameterError, suggest
 from ..guard import RENDER_GUARD
 from ..sdf.integration import hook
 from ..sdf.tracer import TracerOptions
+from . import silhouettes
 from .features import detect_features
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
@@ -156,6 +157,15 @@ class DraawIntegrator(RBIntegrator):
         self.aovs = parse_aovs(self.PLUGIN, props.get("aovs", ""))
         # SDF sphere-tracer knobs (sdf_epsilon, sdf_max_steps, sdf_relaxation; draaw_mi.sdf)
         self.sdf_tracer = TracerOptions.from_props(props, self.PLUGIN)
+        # SDF outlines and shadow edges in the gradient passes (silhouettes.py)
+        self.sdf_silhouettes = parse_bool(props, self.PLUGIN, "sdf_silhouettes", True)
+        self.sdf_band_width = parse_float(props, self.PLUGIN, "sdf_band", 1.0)
+        if not 0.0 < self.sdf_band_width <= 8.0:
+            raise ParameterError(f"{self.PLUGIN}: sdf_band={self.sdf_band_width!r}; expected a "
+                                 "band width in pixels in (0, 8]")
+        self.sdf_band = None           # a Band while a gradient pass adds boundary terms
+        # the shading jump at creases (sharp edges, sharp operators): unbiased but noisy
+        self.sdf_creases = parse_bool(props, self.PLUGIN, "sdf_creases", False)
 
     # ------------------------------------------------------------------ interface
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
@@ -170,6 +180,25 @@ class DraawIntegrator(RBIntegrator):
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """:meth:`render` itself: Mitsuba's path-replay primal render."""
         return super().render(scene, sensor, seed, spp, develop, evaluate)
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        """Mitsuba's path-replay adjoint (interior terms), then, for SDF shape parameters,
+        the outline and shadow-edge terms (:mod:`~draaw_mi.integrators.silhouettes`)."""
+        sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        with silhouettes.boundary_band(self, scene, sensor) as band:
+            super().render_backward(scene, params, grad_in, sensor, seed, spp)
+            if band is not None:
+                silhouettes.backward(self, scene, grad_in, sensor, seed, spp)
+
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        """The gradient image: Mitsuba's path-replay tangents plus, for SDF shape parameters,
+        the outline and shadow-edge terms."""
+        sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        with silhouettes.boundary_band(self, scene, sensor) as band:
+            grad = super().render_forward(scene, params, sensor, seed, spp)
+            if band is not None:
+                grad = grad + silhouettes.forward(self, scene, sensor, seed, spp)
+        return grad
 
     def aov_names(self) -> list[str]:
         return [c for n in self.aovs for c in AOV_CHANNELS[n]]
@@ -312,7 +341,8 @@ def sample_emitter(scene: mi.Scene, si: mi.SurfaceInteraction3f, sample: mi.Poin
     Returns ``(ds, weight, active)``: ``weight`` = radiance / pdf (0 if occluded);
     ``active`` is cleared where the sample is invalid or occluded. ``sdf``: the scene's SDF
     hook (SDF objects occlude the shadow ray; in the differential phases the sample's
-    direction and distance factor follow an SDF point's re-attached position).
+    direction and distance factor follow an SDF point's re-attached position, and a visible
+    sample near an SDF's shadow edge carries that edge's gradient: ``SDFHook.shadow_boundary``).
     """
     with dr.suspend_grad():
         ds, em_weight = scene.sample_emitter_direction(si, sample, True, active)
@@ -327,6 +357,7 @@ def sample_emitter(scene: mi.Scene, si: mi.SurfaceInteraction3f, sample: mi.Poin
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
         if sdf is not None:
             ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
+            em_weight = sdf.shadow_boundary(si, ds, em_weight, active)
     return ds, em_weight, active
 
 
@@ -345,6 +376,7 @@ def emitter_sample_one(emitter: mi.Emitter, scene: mi.Scene, si: mi.SurfaceInter
         em_weight = dr.replace_grad(em_weight, safe_div(em_val, dr.detach(ds.pdf), active))
         if sdf is not None:
             ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
+            em_weight = sdf.shadow_boundary(si, ds, em_weight, active)
     return ds, dr.select(active, em_weight, 0.0), active
 
 

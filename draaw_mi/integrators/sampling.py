@@ -207,4 +207,5 @@ class PowerSelection:
             em_weight = dr.replace_grad(em_weight, dr.select(active, em_val / dr.select(active, dr.detach(ds.pdf), 1.0), 0.0))
             if sdf is not None:
                 ds, em_weight = sdf.emitter_geometry(si, ds, em_weight, active)
+                em_weight = sdf.shadow_boundary(si, ds, em_weight, active)
         return ds, em_weight, active

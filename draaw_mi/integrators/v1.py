@@ -206,8 +206,10 @@ class DraawV1Integrator(DraawIntegrator):
 
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
-                    Lo = Le + Lr + L * relative(f_mirror)
-                    δL = propagate_adjoint(mode, δL, Lo)
+                    Lo = Lr + L * relative(f_mirror)
+                    if dr.hint(sdf is not None, mode="scalar"):       # blended materials' weights
+                        Lo = Lo * sdf.pick_weight(si_d, active_next)
+                    δL = propagate_adjoint(mode, δL, Le + Lo)
 
             depth += 1
             active = active_next

@@ -133,6 +133,7 @@ class DraawV2Integrator(DraawIntegrator):
                     em_w = dr.replace_grad(em_w, safe_div(em_val, ds.pdf, act))
                     if sdf is not None and attach:
                         ds, em_w = sdf.emitter_geometry(si, ds, em_w, act)
+                        em_w = sdf.shadow_boundary(si, ds, em_w, act)
                     nee = ds, em_w, act
                 ds, em_w, act = nee
                 fd, fg = phong_eval(mat, wi, flip_z(si.to_local(ds.d), sign), act)
@@ -193,8 +194,10 @@ class DraawV2Integrator(DraawIntegrator):
             active_next &= dr.max(β) != 0
             if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
-                    Lo = Le + Lr_dir + L * relative(f)
-                    δL = propagate_adjoint(mode, δL, Lo)
+                    Lo = Lr_dir + L * relative(f)
+                    if dr.hint(sdf is not None, mode="scalar"):       # blended materials' weights
+                        Lo = Lo * sdf.pick_weight(si_d, active_next)
+                    δL = propagate_adjoint(mode, δL, Le + Lo)
             depth += 1
             active = active_next
             ray = ray_next
@@ -252,9 +255,12 @@ class DraawV2Integrator(DraawIntegrator):
             Le, Lr_dir, _ = self._light(True, scene, sampler, si_d, mat, wi_d, sign, one,
                                         mi.Bool(True), zero, active, active_next, feats, nee,
                                         sdf=sdf)
-            Lo = Le + Lr_dir
+            Lo = Lr_dir
             for L_k, _, wo, is_mirror in branches:
                 Lo = Lo + L_k * relative(self._value(mat, wi, wo, is_mirror, active_next))
+            if sdf is not None:                        # blended materials' weights
+                Lo = Lo * sdf.pick_weight(si_d, active_next)
+            Lo = Le + Lo
             if dr.grad_enabled(Lo):
                 if mode == dr.ADMode.Backward:
                     separate_adjoints(mode)            # (the loop's backward_from ran first)

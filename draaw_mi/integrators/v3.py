@@ -313,6 +313,8 @@ class DraawV3Integrator(DraawIntegrator):
                         Lo += Le_next * relative(dr.select(glossy_split, f_ad_glossy, f_ad))
                     elif dr.hint(hit_em and delta_bsdf, mode="scalar"):
                         Lo += Le_next
+                    if dr.hint(sdf is not None, mode="scalar"):       # blended materials' weights
+                        Lo = Lo * sdf.pick_weight(si_f, active_next)
                     δL = propagate_adjoint(mode, δL, Lo)
 
             β *= weight

@@ -518,8 +518,10 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                     if dr.hint(sdf is not None, mode="scalar"):       # SDF shape derivatives
                         si_f, wo_f = sdf.reattach_sampled(ray, si, bs.wo, active_next)
                     f = bsdf.eval(ctx, si_f, wo_f, active_next)
-                    Lo = Le + Lr_dir + L * relative(f)
-                    δL = propagate_adjoint(mode, δL, Lo)
+                    Lo = Lr_dir + L * relative(f)
+                    if dr.hint(sdf is not None, mode="scalar"):       # blended materials' weights
+                        Lo = Lo * sdf.pick_weight(si_f, active_next)
+                    δL = propagate_adjoint(mode, δL, Le + Lo)
 
             depth[si.is_valid()] += 1
             active = active_next

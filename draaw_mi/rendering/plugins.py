@@ -61,7 +61,7 @@ def _plugin_parameters(plugin: str) -> list[str]:
     except Exception:  # noqa: BLE001 - only a hint
         return []
     names = re.findall(r"^\s*\* - (\w+)\s*$", doc, flags=re.M)
-    names += ["sdf_epsilon", "sdf_max_steps", "sdf_relaxation"]
+    names += ["sdf_epsilon", "sdf_max_steps", "sdf_relaxation", "sdf_silhouettes", "sdf_band", "sdf_creases"]
     if plugin in ("draaw_v1", "draaw_v2"):
         names.append("medium_steps")
     return sorted(set(names))

@@ -49,4 +49,4 @@ __all__ = [
 from .._lazy import on_first_use as _on_first_use  # noqa: E402
 
 # draaw_mi.sdf.export.to_entries(...) and the like after a plain ``import draaw_mi``
-__getattr__ = _on_first_use(__name__, ("export", "integration", "scene", "tracer"))
+__getattr__ = _on_first_use(__name__, ("export", "integration", "scene", "silhouette", "tracer"))

@@ -9,7 +9,7 @@ an :class:`SDFHook` and calls
   material slot's hidden proxy shape, so ``si.bsdf()``, ``si.to_local``, ``si.spawn_ray`` and
   emitter sampling work unchanged. Where a smooth operator blends two materials, the slot is
   picked at random with the blend weights (a stochastic mixture: its expectation is the
-  weight-blended BSDF); AOVs take the blend of the materials' values
+  weight-blended BSDF; :meth:`SDFHook.pick_weight` differentiates the pick); AOVs take the blend of the materials' values
   (:meth:`SDFHook.blended`).
 * :meth:`SDFHook.occluded` for shadow rays (through ``common.sample_emitter``): SDFs cast
   shadows on meshes and on themselves.
@@ -29,11 +29,14 @@ and :meth:`SDFHook.occluded` (before ratio tracking / marching the shadow ray), 
 **Differentiated:** material and emitter parameters (path replay, as for meshes); SDF shape
 parameters (radius, centre, size, translation, scale, smooth ``k``) through the position,
 normal, direct lighting and (V3, V4) BSDF-sampled light of SDF points seen by the camera or
-by a path vertex.
-**Not differentiated:** silhouettes, shadow and occlusion boundaries (visibility
-discontinuities; no boundary term: under a sky, a floor hiding part of it from a moving SDF
-point is such a term), the mixture weights of blended materials, and in V1/V2 the light
-scattered or gathered from an SDF point (its direction is kept in the local frame).
+by a path vertex (the interior terms), and, in the gradient passes, through outlines seen by
+the camera (:mod:`draaw_mi.integrators.silhouettes`) and shadow edges on light samples
+(:meth:`SDFHook.shadow_boundary`): the boundary terms of :mod:`draaw_mi.sdf.silhouette`.
+**Not differentiated:** outlines met by bounce rays (also light reached by BSDF sampling past
+an SDF edge), the curve where an SDF meets a mesh, a mesh's shadow edge on a moving SDF point,
+and in V1/V2 the light scattered or gathered from an SDF point (its direction is kept in the
+local frame). The weights of blended materials are differentiated through the random pick
+(:meth:`SDFHook.pick_weight`).
 """
 from __future__ import annotations
 
@@ -42,7 +45,8 @@ import mitsuba as mi
 
 from ..errors import RenderError
 from .scene import find
-from .tracer import TracerOptions, march, normal, reattach_t
+from .silhouette import attached_minimum, closest_approach, kernel
+from .tracer import TracerOptions, march, near_crease, normal, reattach_t
 
 
 def hook(integrator, scene: mi.Scene, feats: dict) -> "SDFHook | None":
@@ -53,13 +57,19 @@ def hook(integrator, scene: mi.Scene, feats: dict) -> "SDFHook | None":
     if sdf is None:
         return None
     opts = getattr(integrator, "sdf_tracer", None) or TracerOptions()
-    return SDFHook(sdf, scene, opts)
+    return SDFHook(sdf, scene, opts, getattr(integrator, "sdf_band", None),
+                   getattr(integrator, "sdf_creases", False))
 
 
 class SDFHook:
-    def __init__(self, sdf, scene: mi.Scene, opts: TracerOptions):
+    """``band``: a :class:`~draaw_mi.sdf.silhouette.Band` while a gradient pass wants boundary
+    terms (:mod:`draaw_mi.integrators.silhouettes` sets it), else ``None``. ``creases``: keep
+    the normal's derivative at creases (:meth:`reattach`)."""
+    def __init__(self, sdf, scene: mi.Scene, opts: TracerOptions, band=None, creases: bool = False):
         self.sdf = sdf
         self.opts = opts
+        self.band = band
+        self.creases = creases
         by_id = {sh.id(): sh for sh in scene.shapes()}
         missing = [pid for pid in sdf.proxy_ids if pid not in by_id]
         if missing:     # (merged into another mesh: load with optimize=False, scene.mitsuba_load.load_mitsuba_dict)
@@ -122,6 +132,26 @@ class SDFHook:
             acc += wi * value(mi.BSDFPtr(proxy.bsdf()), m)
         return dr.select(m & (total > 0.0), acc / dr.maximum(total, 1e-30), own)
 
+    def pick_weight(self, si: mi.SurfaceInteraction3f, active):
+        """``1`` carrying the derivative of :meth:`intersect`'s material pick at ``si`` (call
+        under ``dr.resume_grad()`` with a re-attached ``si``): ``p_I / detach(p_I)``, ``p_I`` the
+        picked slot's blend weight over their sum. Multiplying the radiance an SDF point
+        reflects by it makes the mixture's weights differentiable (the score of the pick: its
+        expectation is the weights' own derivative times each material's radiance). ``1.0``
+        with a single material slot (no code)."""
+        if len(self.proxies) == 1:
+            return 1.0
+        _, w = self.sdf.eval(mi.Point3f(si.p))
+        total, mine = mi.Float(0.0), mi.Float(0.0)
+        for proxy, wi in zip(self.proxies, w):
+            wi = dr.maximum(wi, 0.0)
+            total += wi
+            mine = dr.select(si.shape == mi.ShapePtr(proxy), wi, mine)
+        ok = self.is_sdf(si, active) & (mine > 0) & (total > 0)
+        prob = mine / dr.select(ok, total, 1.0)
+        ratio = prob / dr.select(ok, dr.detach(prob), 1.0)
+        return dr.select(ok, dr.replace_grad(mi.Float(1.0), ratio), 1.0)
+
     @staticmethod
     def _interaction(ray, t, p, n, shape):
         s = dr.zeros(mi.SurfaceInteraction3f)
@@ -149,6 +179,32 @@ class SDFHook:
             _, hit, _ = march(self.sdf, ray.o, ray.d, tmax, mi.Bool(active), self.opts)
         return hit
 
+    def shadow_boundary(self, si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f, em_weight,
+                        active):
+        """``em_weight`` plus the shadow-edge term of a visible light sample (value 0; only in
+        the differential phases, with a :attr:`band`): where the shadow ray passes an SDF
+        within the band, ``em_weight * k(m) * dm/dpi`` (:mod:`draaw_mi.sdf.silhouette`: a
+        growing object shadows the samples it approaches). ``ds.d`` and ``si.p`` attached (the
+        closest point moves with a re-attached SDF point); call after
+        :meth:`emitter_geometry`."""
+        if self.band is None:
+            return em_weight
+        with dr.suspend_grad():
+            ray = si.spawn_ray(dr.detach(ds.d))
+            far = ~dr.isfinite(ds.dist) | mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+            tmax = dr.select(far, dr.inf, ds.dist * (1.0 - 1e-4))
+            hit, t, m, found = closest_approach(self.sdf, ray.o, ray.d, tmax, mi.Bool(active),
+                                                self.opts, self.band.pad(self.sdf))
+            p = dr.fma(ray.d, t, ray.o)
+            eps = self.band.epsilon(p)
+            k = kernel(m, eps)
+            on = active & found & ~hit & (k != 0)
+            along = dr.dot(p - dr.detach(si.p), ray.d)
+        with dr.resume_grad():
+            m_att = attached_minimum(self.sdf, si.p, ds.d, along, m, 0.5 * m + 1e-4 * eps, on)
+            term = dr.select(on, k * (m_att - dr.detach(m_att)), 0.0)
+            return em_weight + dr.detach(em_weight) * term
+
     def is_sdf(self, si: mi.SurfaceInteraction3f, active) -> mi.Bool:
         m = mi.Bool(False)
         for sh in self.proxies:
@@ -164,6 +220,13 @@ class SDFHook:
         t = reattach_t(self.sdf, o, d, dr.detach(si.t), on)
         p = mi.Point3f(dr.fma(d, t, o))
         n = normal(self.sdf, p, -d)
+        # at a crease the stencil straddles two faces: the normal's derivative is a spike of
+        # height ~1/h that averages to the shading jump's moving-edge term. Kept with
+        # ``creases`` (unbiased, and noise for every sample that does not land in it: a box's
+        # size gradient under a sky had a standard error of its own size at 32 spp, and a box
+        # size fit did not converge); left out by default
+        if not self.creases:
+            n = dr.select(near_crease(self.sdf, p, n), dr.detach(n), n)
         s = self._interaction(ray, t, p, n, si.shape)
         s.t = dr.detach(si.t)
         return dr.select(on, s, si)

@@ -63,6 +63,17 @@ CASES = {
     "far_from_origin": (
         [{"type": "sphere", "name": "s", "center": [1e4, 1e4 + 0.6, 1e4], "radius": 0.6, "material": "ball"}],
         {"origin": [1e4, 1e4 + 1.0, 1e4 + 4.0], "target": [1e4, 1e4 + 0.6, 1e4], "fov": 40}, "s.radius"),
+    "touching_spheres": (   # two spheres meeting at one point: outlines and shadows touch
+        [{"type": "sphere", "name": "a", "center": [-0.4, 0.8, 0], "radius": 0.4, "material": "ball"},
+         {"type": "sphere", "name": "b", "center": [0.4, 0.8, 0], "radius": 0.4, "material": "ball"},
+         {"type": "union", "name": "u", "children": ["a", "b"]}], None, "a.radius"),
+    "k_near_zero": (        # a blend radius of 1e-4: the blend band far thinner than the silhouette band
+        [{"type": "sphere", "name": "a", "center": [-0.35, 0.7, 0], "radius": 0.45, "material": "ball"},
+         {"type": "sphere", "name": "b", "center": [0.35, 0.7, 0], "radius": 0.45, "material": "ball"},
+         {"type": "smooth_union", "name": "u", "children": ["a", "b"], "k": 1e-4}], None, "u.k"),
+    "grazing_face": (       # the camera in the plane of a box's top face
+        [{"type": "box", "name": "b", "center": [0, 0.7, 0], "size": [1.2, 1.0, 1.2], "material": "ball"}],
+        {"origin": [0, 1.2, 4], "target": [0, 1.2, 0], "fov": 40}, "b.size"),
     "thin_box": (
         [{"type": "box", "name": "b", "center": [0, 0.7, 0], "size": [1.5, 1e-3, 1.5], "material": "ball",
           "rotate": {"axis": [1, 0, 0], "angle": 25}}], None, "b.size"),
