@@ -85,12 +85,16 @@ def boundary_samples(integrator, scene: mi.Scene, sensor: mi.Sensor, sampler: mi
         d_in, ok = inside_ray(sdf, r.o, r.d, t, m, eps, integrator.sdf_tracer)
         d_deep, ok_deep = inside_ray(sdf, r.o, r.d, t, m, eps, integrator.sdf_tracer, deeper=4.0)
         on = ok & ok_deep
+        # three radiance estimates of one path kernel: evaluated one by one, they compile it
+        # once (fused, one kernel held three copies of the integrator: 9 s to compile)
+        dr.eval(r, t, m, eps, k, d_in, d_deep, on)
         band_sampler = sampler.clone()
         band_seed = mi.UInt32(seed) + 1
         dr.make_opaque(band_seed)          # (a literal seed would compile a kernel per step)
         band_sampler.seed(band_seed, n)
         L_out = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=band_sampler,
                                   ray=mi.Ray3f(r), δL=None, state_in=None, active=mi.Bool(on))[0]
+        dr.eval(L_out, band_sampler)
         # the inside radiance at the outline: 2 L(s) - L(4 s) (sdf.silhouette), one path's
         # random numbers for both
         twin = band_sampler.clone()
@@ -98,6 +102,7 @@ def boundary_samples(integrator, scene: mi.Scene, sensor: mi.Sensor, sampler: mi
         r_in.d = d_in
         L_in = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=band_sampler, ray=r_in,
                                  δL=None, state_in=None, active=mi.Bool(on))[0]
+        dr.eval(L_in)
         r_in.d = d_deep
         L_deep = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=twin, ray=r_in,
                                    δL=None, state_in=None, active=mi.Bool(on))[0]

@@ -148,7 +148,11 @@ CASES = {
 BAND = {"subtraction_radius": 0.25}
 
 
-@pytest.mark.parametrize("case", list(CASES))
+# two more cases, run by `make test-all`
+SLOW = ("ball_centre_x", "white_ball_sky")
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW else c for c in CASES])
 def test_whole_image_gradient_matches_fd(case):
     sdf, opts, key, comp, h, version = CASES[case]
     ad, fd = ad_fd(_scene(sdf, **opts), key, comp, h, version,
