@@ -108,6 +108,13 @@ class Band:
         return 2.0 * self.width * (self.ortho + self.angle * far)
 
 
+def hit_tolerance(sdf, opts: TracerOptions, p: mi.Point3f, t: mi.Float) -> mi.Float:
+    """The sphere tracer's hit band at ``p = o + t d`` (:func:`~draaw_mi.sdf.tracer.march`'s
+    rule: the objects' size plus the distance travelled, and ~16 float spacings of ``p``)."""
+    scale = opts.hit_epsilon * dr.opaque(mi.Float, length_scale(sdf))
+    return scale + opts.hit_epsilon * t + 1e-6 * dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
+
+
 def kernel(m: mi.Float, eps: mi.Float) -> mi.Float:
     """The band weight ``(4 - 6 m/eps) / eps`` on ``0 < m < eps``, else 0.
 
@@ -139,11 +146,8 @@ def closest_approach(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active:
     with dr.suspend_grad():
         o, d, tmax = dr.detach(o), dr.detach(d), dr.detach(tmax)
         t0, t1, act = ray_interval(sdf, o, d, tmax, mi.Bool(active), pad=pad)
-        eps_rel = opts.hit_epsilon * dr.opaque(mi.Float, length_scale(sdf))
-        eps_t = opts.hit_epsilon
-
         def band(p, t):
-            return eps_rel + eps_t * t + 1e-6 * dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
+            return hit_tolerance(sdf, opts, p, t)
 
         f_o = dr.abs(sdf.distance(mi.Point3f(o)))
         state = (mi.Float(dr.select(act, t0, 0.0)), mi.Bool(False), mi.Bool(f_o >= band(o, 0.0)),
@@ -267,8 +271,7 @@ def inside_ray(sdf, o: mi.Point3f, d: mi.Vector3f, t: mi.Float, m: mi.Float, eps
     with dr.suspend_grad():
         p = mi.Point3f(dr.fma(d, t, o))
         side = dr.select(sdf.distance(p) < 0, -1.0, 1.0)      # towards the surface
-        tol = opts.hit_epsilon * (length_scale(sdf) + t) + 1e-6 * dr.maximum(
-            dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
+        tol = hit_tolerance(sdf, opts, p, t)
         depth = deeper * dr.maximum(GRAZE * eps, 4.0 * tol)
         ok = mi.Bool(True)
         g0 = side * gradient(sdf, p)
