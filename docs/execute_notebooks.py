@@ -30,7 +30,7 @@ DOCS = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(DOCS)
 NOTEBOOKS = os.path.join(ROOT, "notebooks")
 TUTORIALS = os.path.join(DOCS, "tutorials")
-NAMES = ("accuracy_vs_time", "inverse_fitting", "material_tuning", "sdf_csg", "voxels_smoke")
+NAMES = ("accuracy_vs_time", "inverse_fitting", "material_tuning", "sdf_csg", "texture_capture", "voxels_smoke")
 WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"
 # Run first in the kernel: PNG figures at a resolution that reads well and stays small.
 # ``ipywidgets.interact`` becomes one call with each control's first (or current) value: a

@@ -109,8 +109,14 @@ def _parser() -> argparse.ArgumentParser:
 
     f = sub.add_parser("fit", help="fit material parameters to reference images")
     f.add_argument("scene", help="scene file (.toml, .json, .xml)")
-    f.add_argument("--reference", action="append", required=True,
+    f.add_argument("--reference", action="append",
                    help="reference image (.exr linear, or .png sRGB); repeat once per view")
+    f.add_argument("--captures", help="JSON file: a list of captures, each {\"reference\": FILE, \"camera\": "
+                   "{...}, \"lights\": {NAME: FACTOR}} (a photo, where it was taken from and under which of "
+                   "the scene's lights; paths relative to the JSON file); instead of --reference/--views")
+    f.add_argument("--batch", type=int, help="captures rendered per iteration (default all)")
+    f.add_argument("--maps", metavar="FOLDER", help="write fitted texture maps into FOLDER as EXR, 8- and "
+                   "16-bit PNG")
     f.add_argument("--param", action="append", required=True,
                    help="parameter to fit, as material.parameter (e.g. gold.roughness) or an SDF object's "
                         "sdf.NODE.PARAM (e.g. sdf.ball.radius); repeatable")
@@ -278,6 +284,19 @@ def _cmd_fit(args) -> int:
     if args.plot:
         _writable(args.plot, (".png",), "--plot")
     views = read_json(args.views, "--views") if args.views else None
+    captures, references = None, list(args.reference or [])
+    if args.captures:
+        if references or views is not None:
+            raise CliError("--captures carries each capture's reference and camera: give it without "
+                           "--reference and --views")
+        captures = read_json(args.captures, "--captures")
+        if not isinstance(captures, list):
+            raise CliError(f"--captures {args.captures!r}: expected a JSON list of captures")
+        folder = os.path.dirname(os.path.abspath(args.captures))
+        captures = [dict(c, reference=os.path.join(folder, c["reference"]))
+                    if isinstance(c, dict) and isinstance(c.get("reference"), str) else c for c in captures]
+    elif not references:
+        raise CliError("fit: give --reference (one per view) or --captures")
     scene = load_for_cli(args)
     if args.output:               # fail before the fit, not after it: can the values be written?
         if scene.description is None and not args.output.lower().endswith(".json"):
@@ -286,10 +305,10 @@ def _cmd_fit(args) -> int:
         if scene.description is not None:
             scene.updated_description({name: 0.0 for name in args.param})
     post = _load_chain(args.post) if args.post else None
-    res = fit(scene, list(args.reference), params=list(args.param), version=args.version,
-                       spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
-                       post=post, exposure=args.exposure, seed=args.seed,
-                       progress=progress_mode(args.no_progress))
+    res = fit(scene, None if captures else references, params=list(args.param), version=args.version,
+              spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
+              post=post, exposure=args.exposure, seed=args.seed, captures=captures, batch=args.batch,
+              progress=progress_mode(args.no_progress))
     for name, value in res.values.items():
         if hasattr(value, "shape"):        # a texture
             mean = ", ".join(f"{m:.4g}" for m in value.reshape(-1, value.shape[-1]).mean(axis=0))
@@ -300,8 +319,14 @@ def _cmd_fit(args) -> int:
         print(f"exposure = {res.exposure_stops:+.4f} stops (render x {2 ** res.exposure_stops:.4f} matches the reference)")
     print(f"loss {res.losses[0]:.4g} -> {res.losses[-1]:.4g} in {res.iterations} iterations, "
           f"{res.seconds:.1f} s, {'converged' if res.converged else 'not converged'}")
+    for i, c in enumerate(res.captures):
+        if not c["explained"]:
+            print(f"capture {i} not explained: {c['why']}")
     if args.output:
         for path in res.save(args.output, scene):
+            print(f"wrote {path}")
+    if args.maps:
+        for path in res.save_maps(args.maps):
             print(f"wrote {path}")
     if args.plot:
         res.plot(args.plot)

@@ -2,12 +2,14 @@
 
 ``fit(scene, references, params=["mat.roughness", "mat.metallic"])`` renders the scene with a
 differentiable (path-replay) integrator, compares it with one reference image per view, and
-runs Adam on the named parameters. It runs in four phases around a :class:`FitSettings`:
-:func:`_validate` (every argument, before anything renders), :func:`_set_up` (references,
-views, integrator, parameters: a :class:`FitProblem`), :func:`_iterate` (the Adam loop, each
+runs Adam on the named parameters (texture maps: :mod:`~draaw_mi.fitting.maps`). It runs in
+four phases around a :class:`~draaw_mi.fitting.settings.FitSettings`:
+:func:`~draaw_mi.fitting.settings.validate` (every argument, before anything renders),
+:func:`_set_up` (references, views or captures, integrator, parameters: a
+:class:`~draaw_mi.fitting.problem.FitProblem`), :func:`_iterate` (the Adam loop, each
 iteration one render and gradient pass per view through the scene's render session) and
-:func:`_report` (the averaged values, written back into the caller's scene, and the
-:class:`~draaw_mi.fitting.result.FitResult`).
+:func:`~draaw_mi.fitting.report.report` (the averaged values, written back into the caller's
+scene, each capture's misfit, and the :class:`~draaw_mi.fitting.result.FitResult`).
 
 How it stays robust and unbiased (see design.md §8, the guide §1b, §9, and
 benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
@@ -63,7 +65,6 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -73,63 +74,21 @@ from .. import post as post_mod
 from ..errors import DraawError, ParameterError
 from ..integrators import is_draaw, resolve_version
 from ..progress import check_mode, progress_bar
-from ..rendering.session import Session, holding, session_of
+from ..rendering.session import holding, session_of
 from ..scene import DraawScene, load_scene
 from ..scene.schema import shown
+from .captures import CaptureOverrides, capture_references, light_names, parse_captures
+from .maps import MapOptions, MapSet
 from .params import FitParam, range_for
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
-from .result import FitResult, settled
-from .views import LOSSES, sampler_spp, view_loss, view_sensors
+from .problem import FitProblem, apply_chain, record
+from .report import report
+from .result import FitResult
+from .settings import FitSettings, validate
+from .views import sampler_spp, view_loss, view_sensors
 
 #: iterations after which a parameter that never got a gradient is reported (_warn_unmoved)
 ZERO_GRADIENT_ITERATIONS = 5
-
-
-@dataclass(kw_only=True)
-class FitSettings:
-    """:func:`fit`'s keyword arguments, checked (see its docstring for each; the defaults are
-    :func:`fit`'s)."""
-    version: str | None
-    spp: int
-    iterations: int
-    lr: float
-    loss: str
-    post: object
-    progress: bool | str
-    seed: int
-    exposure: str
-    init: dict | None
-    max_depth: int | None
-    average_last: float
-    tol: float
-    resolution: object
-    lr_final: float
-    spp_grad: int | None
-    beta_2: float
-    smooth: bool | None
-    integrator_options: dict | None = None
-
-
-@dataclass
-class FitProblem:
-    """What :func:`_set_up` makes of the scene, references and parameters."""
-    scene: DraawScene                  # the scene rendered (a copy at the references' size)
-    callers_scene: DraawScene          # the scene given, which receives the fitted values
-    session: Session
-    integrator: object
-    sensors: list
-    refs: list                         # mi.TensorXf per view
-    masks: list                        # a display reference's unclipped pixels, or None
-    chain: object                      # the loaded post chain, or None
-    keys: list                         # mi.traverse keys (of scene.all_params)
-    names: dict                        # key -> the name as given
-    prm: dict                          # key -> FitParam
-    start: dict                        # key -> the scene's value (a diverged fit puts it back)
-    initial: dict                      # key -> the value the optimiser starts from
-    version: str
-    spp: int
-    spp_grad: int | None
-    smooth: bool
 
 
 def fit(scene, references, params, version: str | None = None, spp: int = 16, iterations: int = 100,
@@ -137,13 +96,14 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,
         average_last: float = 0.25, tol: float = 5e-3, resolution=None, lr_final: float = 0.1,
         spp_grad: int | None = None, beta_2: float = 0.9, smooth: bool | None = None,
-        integrator_options: dict | None = None) -> FitResult:
+        integrator_options: dict | None = None, captures: list | None = None, maps=None,
+        batch: int | None = None) -> FitResult:
     """Fit ``params`` of ``scene`` so that its renders match ``references``.
 
     Args:
         scene: a DraawScene, scene file or description dict. On return the scene holds the
             fitted values.
-        references: one reference per view: an EXR/PNG path, an (H, W, 3) float array or tensor
+        references: one reference per view (or capture): an EXR/PNG path, an (H, W, 3) float array or tensor
             (linear; see :func:`load_reference`). Of the scene's size, or of another size with
             its aspect ratio: the fit then renders at the references' size.
             A PNG/JPEG is a display image, clipped to [0, 1] when written: the loss leaves its
@@ -178,52 +138,47 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
         integrator_options: further integrator properties, as :func:`draaw_mi.render` takes
             them (e.g. ``{"sdf_silhouettes": False}``).
+        captures: instead of ``views``, one dict per reference with its ``camera`` and the
+            ``lights`` it was taken under (factors by light name: 0 switches a light off), other
+            scene ``params``, and its ``reference`` when ``references`` is None (see
+            :mod:`~draaw_mi.fitting.captures`). The result's ``captures`` says how well each
+            was explained.
+        maps: how texture parameters (maps of base colour, roughness, ...) are fitted: a dict
+            of :class:`~draaw_mi.fitting.maps.MapOptions` (``parametrisation`` "pyramid" or
+            "texels", ``tv``, ``lr``, ``fill``); default a multi-scale pyramid in range.
+        batch: views (captures) rendered per iteration, drawn at random without repetition
+            (default all): a fit of many captures then takes more, cheaper iterations.
+
+    Maps, for example (one photo per capture; lights by their names in the scene)::
+
+        res = draaw_mi.fit(scene, None, ["obj.base_color", "obj.roughness", "obj.metallic"],
+                           captures=[{"reference": "photo0.png", "camera": {...},
+                                      "lights": {"sun": 1, "lamp": 0}}, ...], batch=2)
+        res.save_maps("maps/")                # EXR and PNG, one per map
     """
     check_mode(progress, "fit")
     t0 = time.perf_counter()
-    settings = _validate(FitSettings(
+    settings = validate(FitSettings(
         version=version, spp=spp, iterations=iterations, lr=lr, loss=loss, post=post, progress=progress, seed=seed,
         exposure=exposure, init=init, max_depth=max_depth, average_last=average_last, tol=tol, resolution=resolution,
         lr_final=lr_final, spp_grad=spp_grad, beta_2=beta_2, smooth=smooth,
-        integrator_options=integrator_options))
-    problem = _set_up(scene, references, params, views, settings)
+        integrator_options=integrator_options, maps=MapOptions.parse(maps), batch=batch))
+    if captures is not None:
+        if views is not None:
+            raise ParameterError("fit: give views or captures, not both (a capture has its camera)")
+        captures = parse_captures(captures, references)
+        if references is None:
+            references = capture_references(captures)
+        views = [c["camera"] for c in captures]
+    elif references is None:
+        raise ParameterError("fit: references is None; give one reference per view, or captures with theirs")
+    problem = _set_up(scene, references, params, views, settings, captures)
     opt = _optimiser(problem, settings)
     history, compiles = _iterate(problem, settings, opt)
-    return _report(problem, settings, opt, history, compiles, t0)
+    return report(problem, settings, opt, history, compiles, t0)
 
 
-def _validate(s: FitSettings) -> FitSettings:
-    """``s`` with every value checked: a bad one is a :class:`ParameterError` naming it."""
-    if s.loss not in LOSSES:
-        raise ParameterError(f"fit: loss={s.loss!r}; expected one of {', '.join(LOSSES)}")
-    if s.exposure not in ("fixed", "fit"):
-        raise ParameterError(f"fit: exposure={s.exposure!r}; expected 'fixed' or 'fit'")
-    if s.integrator_options is not None and not isinstance(s.integrator_options, dict):
-        raise ParameterError(f"fit: integrator_options={s.integrator_options!r}; expected a dict of "
-                             "integrator properties")
-    for name, value, lo in (("spp", s.spp, 1), ("iterations", s.iterations, 1),
-                            ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
-            raise ParameterError(f"fit: {name}={value!r}; expected an integer >= {lo}")
-    if isinstance(s.lr, bool) or not (isinstance(s.lr, (int, float)) and 0 < s.lr < float("inf")):
-        raise ParameterError(f"fit: lr={s.lr!r}; expected a positive finite number")
-    if isinstance(s.seed, bool) or not isinstance(s.seed, int) or not 0 <= s.seed <= 0xFFFFFFFF:
-        raise ParameterError(f"fit: seed={s.seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
-    if not (isinstance(s.average_last, (int, float)) and 0 < s.average_last <= 1):
-        raise ParameterError(f"fit: average_last={s.average_last!r}; expected a fraction in (0, 1]")
-    # lr_final in [0, 1] (below 0 the averaged iterations climb the loss), beta_2 in [0, 1)
-    for name, value, hi_open in (("lr_final", s.lr_final, False), ("beta_2", s.beta_2, True)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-                0 <= value < 1 if hi_open else 0 <= value <= 1):
-            raise ParameterError(f"fit: {name}={value!r}; expected a number in [0, 1{')' if hi_open else ']'}")
-    if isinstance(s.tol, bool) or not isinstance(s.tol, (int, float)) or not s.tol >= 0:
-        raise ParameterError(f"fit: tol={s.tol!r}; expected a number >= 0")
-    if s.smooth is not None and not isinstance(s.smooth, (bool, np.bool_)):
-        raise ParameterError(f"fit: smooth={s.smooth!r}; expected True, False or None")
-    return s
-
-
-def _set_up(scene, references, params, views, s: FitSettings) -> FitProblem:
+def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitProblem:
     """The scene at the references' size, its views, the integrator and the parameters."""
     if isinstance(params, str):
         params = [params]
@@ -269,8 +224,13 @@ def _set_up(scene, references, params, views, s: FitSettings) -> FitProblem:
         raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
     keys, names, prm, start, initial = _parameters(scene, params, s.init)
     smooth = (chain is not None or s.loss == "l1") if s.smooth is None else bool(s.smooth)
+    overrides = CaptureOverrides.build(scene.params, captures or [{"lights": {}, "params": {}}] * len(sensors),
+                                       keys, light_names(scene.params))
+    maps = MapSet({k: (np.array(initial[k], dtype=np.float64).reshape(prm[k].shape), prm[k].lo, prm[k].hi)
+                   for k in keys if prm[k].shape is not None and prm[k].lo is not None
+                   and s.maps.parametrisation == "pyramid"}, s.maps)
     return FitProblem(scene, callers_scene, session, integrator, sensors, [mi.TensorXf(r) for r in refs], masks,
-                      chain, keys, names, prm, start, initial, version, spp, spp_grad, smooth)
+                      chain, keys, names, prm, start, initial, version, spp, spp_grad, smooth, overrides, maps)
 
 
 def _parameters(scene, params, init):
@@ -321,15 +281,20 @@ def _optimiser(problem: FitProblem, s: FitSettings):
     """Adam over each parameter's latent (its optimiser coordinate), from its start."""
     opt = mi.ad.Adam(lr=s.lr, beta_2=s.beta_2)
     for k in problem.keys:
-        opt[k] = problem.prm[k].to_latent(problem.initial[k])
+        if k not in problem.maps.latents:
+            opt[k] = problem.prm[k].to_latent(problem.initial[k])
     return opt
 
 
-def _push(problem: FitProblem, opt) -> None:
-    """Scene values from the optimiser's latents (AD-attached), then update the scene."""
+def _push(problem: FitProblem, opt, view: int) -> None:
+    """Scene values for ``view``: its capture's lights and parameters, the fitted values from
+    the optimiser's latents and the maps (AD-attached); then update the scene."""
     p = problem.scene.all_params
+    problem.overrides.apply(p, view)
     for k in problem.keys:
-        p[k] = problem.prm[k].from_latent(opt[k])
+        if k not in problem.maps.latents:
+            p[k] = problem.prm[k].from_latent(opt[k])
+    problem.maps.attach(p)
     p.update()
     problem.session.scene_changed()            # e.g. V4's light powers, if lights are fitted
 
@@ -337,7 +302,7 @@ def _push(problem: FitProblem, opt) -> None:
 def _iterate(problem: FitProblem, s: FitSettings, opt):
     """Run the Adam iterations; returns ``(history, kernels compiled after the first)``.
     Interrupted, the scene keeps the last iterate (detached)."""
-    keys, names, prm, sensors = problem.keys, problem.names, problem.prm, problem.sensors
+    keys, names, prm, sensors, maps = problem.keys, problem.names, problem.prm, problem.sensors, problem.maps
     p = problem.scene.all_params
     means: list = [None] * len(sensors)
     bar = progress_bar(s.iterations, "fit", "it", s.progress, where="fit")
@@ -345,58 +310,79 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
+    order = np.random.default_rng(s.seed)    # which captures an iteration renders (batch)
+    batch = len(sensors) if s.batch is None else min(s.batch, len(sensors))
     history_was_on = dr.flag(dr.JitFlag.KernelHistory)     # a caller's own measurement
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()
     try:
         for it in range(s.iterations):
             frac = it / max(s.iterations - 1, 1)
-            opt.set_learning_rate(s.lr * (s.lr_final + (1.0 - s.lr_final) * 0.5 * (1.0 + np.cos(np.pi * frac))))
+            decay = s.lr_final + (1.0 - s.lr_final) * 0.5 * (1.0 + np.cos(np.pi * frac))
+            opt.set_learning_rate(s.lr * decay)
+            views = range(len(sensors)) if batch == len(sensors) else sorted(int(v) for v in order.choice(len(sensors), batch, replace=False))
+            view_losses = {}
             with holding(problem.scene):      # one render at a time (draaw_mi.guard)
                 total = mi.Float(0.0)
-                for v, (sensor, ref) in enumerate(zip(sensors, problem.refs)):
-                    _push(problem, opt)       # fresh AD edges latent -> scene value for this view
+                for v in views:
+                    sensor, ref = sensors[v], problem.refs[v]
+                    _push(problem, opt, v)    # fresh AD edges latent -> scene value for this view
+                    problem.overrides.select_lights(problem.integrator, problem.scene.mi_scene, v)
                     img = problem.session.render_pass(
                         problem.integrator, problem.spp, (s.seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF,
                         params=p, sensor=sensor, spp_grad=problem.spp if problem.spp_grad is None else problem.spp_grad)
+                    problem.overrides.remember_lights(problem.integrator, problem.scene.mi_scene, v)
                     img = img[:, :, :3] if img.shape[2] > 3 else img
                     if problem.smooth:
                         img, means[v] = _smoothed(img, means[v], opt, s.lr)
                     if problem.chain is not None:
-                        img = _apply_chain(img, problem.chain)
+                        img = apply_chain(img, problem.chain)
                     lv, sv = view_loss(img, ref, s.loss, s.exposure, problem.masks[v])
                     if v == 0:
                         scale = sv
-                    lv = lv / len(sensors)
+                    lv = lv / len(views)
                     dr.backward(lv)      # one view at a time; gradients accumulate in the latents
+                    maps.collect()
                     total += dr.detach(lv)
+                    view_losses[v] = lv
                 for k in keys:
-                    g = dr.grad(opt[k])
-                    g = dr.select(dr.isfinite(g), g, 0.0)
-                    dr.set_grad(opt[k], g)
-                    # (a host read per parameter, in the first iterations only)
-                    if it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None):
+                    if k in maps.latents:
+                        g_any = bool(np.any(maps.grads[k] != 0))
+                    else:
+                        g = dr.grad(opt[k])
+                        g = dr.select(dr.isfinite(g), g, 0.0)
+                        dr.set_grad(opt[k], g)
+                        # (a host read per parameter, in the first iterations only)
+                        g_any = it < ZERO_GRADIENT_ITERATIONS and k not in moved and dr.any(g != 0, axis=None)
+                    if it < ZERO_GRADIENT_ITERATIONS and g_any:
                         moved.add(k)
                 if it == min(s.iterations, ZERO_GRADIENT_ITERATIONS) - 1:
                     _warn_unmoved([names[k] for k in keys if k not in moved], it + 1)
                 opt.step()
+                maps.step((s.maps.lr or s.lr) * decay)
                 for k in keys:
-                    opt[k] = prm[k].clip(opt[k])
+                    if k not in maps.latents:
+                        opt[k] = prm[k].clip(opt[k])
             entry, new = _history_entry(problem, s, opt, it, float(total[0]), scale)
+            entry["views"] = {v: float(lv[0]) * len(views) for v, lv in view_losses.items()}
             history.append(entry)
             if it > 0:
                 compiles += new
             if bar is not None:
-                bar.set_postfix(loss=f"{entry['loss']:.3g}",
-                                **{n.split(".")[-1][:5]: _short(v) for n, v in entry["values"].items()})
+                shown_values = {n.split(".")[-1][:5]: _short(v) for n, v in entry["values"].items()}
+                if s.loss == "l2" and entry["loss"] > 0:      # the image's PSNR (peak 1)
+                    shown_values = {"psnr": f"{-10 * np.log10(entry['loss']):.1f}", **shown_values}
+                bar.set_postfix(loss=f"{entry['loss']:.3g}", **shown_values)
                 bar.update(1)
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, history_was_on)
         if bar is not None:
             bar.close()
         if len(history) < s.iterations:      # interrupted: leave the last iterate, detached
+            values = maps.values()
             for k in keys:
-                p[k] = prm[k].from_latent(dr.detach(opt[k]))
+                p[k] = mi.TensorXf(values[k]) if k in values else prm[k].from_latent(dr.detach(opt[k]))
+            problem.overrides.restore(p)
             with holding(problem.scene):
                 p.update()
     return history, compiles
@@ -419,82 +405,18 @@ def _smoothed(img, mean, opt, lr: float):
 def _history_entry(problem: FitProblem, s: FitSettings, opt, it: int, loss_value: float, scale):
     """``(one iteration's history entry, kernels compiled in it)``."""
     keys, names, prm = problem.keys, problem.names, problem.prm
-    values = {names[k]: _record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape) for k in keys}
+    maps = problem.maps.values()
+    values = {names[k]: maps[k] if k in maps else record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape)
+              for k in keys}
     new = sum(1 for kk in dr.kernel_history() if kk["type"] == dr.KernelType.JIT and not kk["cache_hit"])
     # linear space: the latent is the value (one record, not a second copy of a texture)
-    latent = {names[k]: values[names[k]] if prm[k].space == "linear"
-              else _record(dr.detach(opt[k]), prm[k].shape) for k in keys}
+    latent = {names[k]: values[names[k]] if prm[k].space == "linear" or k in maps
+              else record(dr.detach(opt[k]), prm[k].shape) for k in keys}
     entry = {"iteration": it, "loss": loss_value, "values": values, "kernel_compiles": new,
              "lr": float(opt.lr) if isinstance(opt.lr, (int, float)) else s.lr, "latent": latent}
     if s.exposure == "fit":
         entry["exposure_stops"] = float(np.log2(max(float(scale[0]), 1e-30)))
     return entry, new
-
-
-def _report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: int, t0: float) -> FitResult:
-    """The iterates averaged over the last ``average_last`` of the run, set in the scene (and
-    in the caller's, when the fit rendered a copy), a final render and the result."""
-    keys, names, prm, scene = problem.keys, problem.names, problem.prm, problem.scene
-    p = scene.all_params
-    n_avg = max(1, int(round(s.iterations * s.average_last)))
-    averaged = {k: prm[k].project_value(np.array([h["values"][names[k]] for h in history[-n_avg:]],
-                                                 dtype=float).mean(axis=0)) for k in keys}
-    bad = [names[k] for k in keys if not np.all(np.isfinite(averaged[k]))]
-    if bad:
-        with holding(scene):
-            for k in keys:
-                p[k] = problem.start[k]
-            p.update()
-            problem.session.scene_changed()
-        raise DraawError(f"fit: {', '.join(bad)} diverged to NaN/Inf (last loss "
-                         f"{history[-1]['loss']:.3g}); the scene keeps its starting values: "
-                         f"try a smaller lr (now {s.lr:g})")
-    fitted = {}
-    for k in keys:
-        mean = averaged[k]
-        if prm[k].shape is not None:         # a texture: back in its own shape
-            fitted[names[k]] = mean.astype(np.float32).reshape(prm[k].shape)
-            p[k] = prm[k].type(fitted[names[k]])
-        else:
-            fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
-            p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())
-    with holding(scene):                          # the values and the render they show, together
-        p.update()
-        final = problem.session.render_pass(problem.integrator, problem.spp, (s.seed + 12345) & 0xFFFFFFFF,
-                                            sensor=problem.sensors[0])
-    final = final[:, :, :3] if final.shape[2] > 3 else final
-    if problem.chain is not None:
-        final = _apply_chain(final, problem.chain)
-    final = np.array(final)
-    if problem.callers_scene is not scene:          # fitted at the references' size: a copy
-        with holding(problem.callers_scene):        # (no render of it sees half the values)
-            q = problem.callers_scene.all_params
-            for k in keys:
-                q[k] = type(p[k])(p[k])
-            q.update()
-            session_of(problem.callers_scene).scene_changed()
-    return FitResult(values=fitted, history=history, image=final[..., :3], converged=settled(history, s.tol),
-                     iterations=s.iterations, seconds=time.perf_counter() - t0, kernel_compiles=compiles,
-                     exposure_stops=float(np.mean([h["exposure_stops"] for h in history[-n_avg:]]))
-                     if s.exposure == "fit" else 0.0, version=problem.version)
-
-
-def _apply_chain(img, chain):
-    return chain(img) if callable(chain) else post_mod.apply(img, chain)
-
-
-def _scalar(v):
-    a = np.array(v).ravel()
-    return float(a[0]) if a.size == 1 else a.tolist()
-
-
-def _record(v, shape):
-    """A parameter's value as the history keeps it: a float, a list (a colour) or, for a
-    texture (``shape``), a float32 array of its shape (a list of Python floats per texel and
-    iteration would take 32 bytes a texel: 1.3 GB over 200 iterations of a 256x256 RGB texture)."""
-    if shape is None:
-        return _scalar(v)
-    return np.array(v, dtype=np.float32).reshape(shape)
 
 
 def _warn_unmoved(names: list, iterations: int) -> None:

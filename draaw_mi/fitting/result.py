@@ -12,6 +12,7 @@ from ..errors import ParameterError
 from ..io import write_exr, write_text
 from ..plotting import save, subplots
 from ..scene import load_scene
+from .map_outputs import plot_maps, save_maps
 
 
 @dataclass
@@ -25,7 +26,9 @@ class FitResult:
     first view (numpy, post chain applied); ``converged``: whether the parameters settled
     (their averaged iterates moved less than ``tol``, and not steadily in one direction: see
     :func:`settled`); ``exposure_stops``: the fitted exposure (0 unless ``exposure="fit"``);
-    ``version``: the integrator it rendered with.
+    ``version``: the integrator it rendered with; ``observed``: per fitted map, which texels
+    any capture saw (the others were filled from their neighbours); ``captures``: per view or
+    capture, its residual and whether the fit explained it (:func:`explained`).
     """
     values: dict
     history: list = field(default_factory=list, repr=False)      # (repr: no array dumps)
@@ -36,6 +39,8 @@ class FitResult:
     kernel_compiles: int = 0          # JIT kernels compiled after the first iteration (0 = none)
     exposure_stops: float = 0.0
     version: str = ""                 # the integrator the fit used (the scene's, or v4)
+    observed: dict = field(default_factory=dict, repr=False)   # map name -> texels seen (H, W) bool
+    captures: list = field(default_factory=list, repr=False)   # per view: explained(...)'s dicts
 
     @property
     def losses(self) -> np.ndarray:
@@ -71,6 +76,17 @@ class FitResult:
         if path is not None:
             save(fig, path, dpi=100)
         return fig
+
+    def save_maps(self, folder: str, formats=("exr", "png", "png16")) -> list[str]:
+        """Write every fitted texture into ``folder``: ``<material>.<parameter>.exr`` (linear
+        float32), ``.png`` (8-bit) and ``.16bit.png``, colour maps sRGB-encoded in the PNGs
+        (:func:`~draaw_mi.fitting.map_outputs.save_maps`). Returns the files written."""
+        return save_maps(self.values, folder, formats)
+
+    def plot_maps(self, truth: dict | None = None, path: str | None = None):
+        """The fitted maps beside ``truth`` (name -> array) where known, their error maps
+        (unobserved texels blank) and the loss (:func:`~draaw_mi.fitting.map_outputs.plot_maps`)."""
+        return plot_maps(self.values, truth, self.losses, self.observed, path)
 
     def save(self, path: str, scene=None) -> list[str]:
         """Write the fit to ``path``: for a scene described in TOML/JSON (``scene``, a
@@ -158,3 +174,43 @@ def settled(history: list, tol: float, drift_ratio: float = 0.35) -> bool:
             if drift > drift_ratio * path:
                 return False
     return True
+
+
+#: a capture is unexplained when its relative residual exceeds this many times the median
+#: capture's, and UNEXPLAINED_FLOOR
+UNEXPLAINED_RATIO = 3.0
+UNEXPLAINED_FLOOR = 0.05
+
+
+def explained(misfits: list, refs: list, masks: list) -> list:
+    """Per view: ``{"misfit": the squared error of the fitted render's expectation, "relative":
+    misfit / mean(ref^2) (1 = as far off as a black render), "explained": bool, "why": why
+    not ("" when explained)}``. ``misfits[v] = mean((I1 - ref)(I2 - ref))`` over two renders
+    with independent seeds: its expectation is ``(E[I] - ref)^2``, the Monte Carlo noise of
+    the renders left out (a capture with a bright highlight is noisier, not worse explained).
+    A view is unexplained when its relative misfit is above ``UNEXPLAINED_RATIO`` times the
+    median view's and above ``UNEXPLAINED_FLOOR``: a black or wrongly lit photo, a camera that
+    is off; or has no usable pixels (black, or saturated all over).
+
+    >>> refs = [np.full((2, 2, 3), 0.5)] * 3
+    >>> [c["explained"] for c in explained([0.001, 0.001, 0.5], refs, [None] * 3)]
+    [True, True, False]
+    """
+    out = []
+    for v, misfit in enumerate(misfits):
+        ref = np.asarray(refs[v], dtype=np.float64)
+        if masks[v] is not None:
+            ref = ref * np.asarray(masks[v])
+        energy = float(np.mean(ref * ref))
+        misfit = max(float(misfit), 0.0) if np.isfinite(misfit) else float("inf")
+        out.append({"misfit": misfit, "relative": misfit / energy if energy > 0 else float("inf")})
+    rel = np.array([c["relative"] for c in out])
+    finite = rel[np.isfinite(rel)]
+    median = float(np.median(finite)) if finite.size else 0.0
+    limit = max(UNEXPLAINED_RATIO * median, UNEXPLAINED_FLOOR)
+    for c in out:
+        c["explained"] = bool(np.isfinite(c["relative"]) and c["relative"] <= limit)
+        c["why"] = ("" if c["explained"] else "no usable pixels (a black or saturated photo)"
+                    if not np.isfinite(c["relative"]) else
+                    f"misfit {c['relative']:.3g} of its energy, over {limit:.3g} (a wrong light, camera or photo?)")
+    return out

@@ -21,7 +21,8 @@ LOSSES = ("l2", "l1", "relative_l2")
 
 
 def view_sensors(scene: DraawScene, views):
-    """Sensors for each view: the scene's own camera, or camera tables as in [camera]."""
+    """Sensors for each view: the scene's own camera, or camera tables as in [camera] (a view
+    of None: the scene's camera)."""
     if views is None:
         return [scene.mi_scene.sensors()[0]]
     if not isinstance(views, (list, tuple)) or not views:
@@ -36,6 +37,9 @@ def view_sensors(scene: DraawScene, views):
     rfilter = scene.mi_scene.sensors()[0].film().rfilter()
     out = []
     for i, v in enumerate(views):
+        if v is None:                          # (a capture without a camera: the scene's)
+            out.append(scene.mi_scene.sensors()[0])
+            continue
         if isinstance(v, mi.Sensor):
             size = tuple(int(c) for c in v.film().crop_size())
             if size != (w, h):     # (else a raw Dr.Jit size error, or pixels compared scrambled)

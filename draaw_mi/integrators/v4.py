@@ -264,6 +264,20 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         if learned:
             self.guides.forget(id(scene))
 
+    def selection_state(self, scene):
+        """``scene``'s light-selection entry as it is now (opaque; None before its first
+        render), for :meth:`restore_selection`: a fit whose captures switch lights keeps one
+        learned table per capture instead of a pilot per render."""
+        return self._tables.get(self.selection_key(scene))
+
+    def restore_selection(self, scene, state) -> None:
+        """Use ``state`` (from :meth:`selection_state` of this scene) for ``scene`` again."""
+        key = self.selection_key(scene)
+        if state is None:
+            self._tables.pop(key, None)
+        else:
+            self._tables[key] = state
+
     @staticmethod
     def selection_key(scene) -> tuple:
         """Key of ``scene``'s table in the cache: ``(id(scene), JIT index of its emitter array,

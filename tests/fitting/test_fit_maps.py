@@ -1,0 +1,158 @@
+"""The texture-map latent of fit() (draaw_mi.fitting.maps) and the map outputs
+(draaw_mi.fitting.map_outputs), against closed forms and finite differences; no renders."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from draaw_mi.errors import ParameterError
+from draaw_mi.fitting.map_outputs import map_errors, plot_maps, save_maps
+from draaw_mi.fitting.maps import MapLatent, MapOptions, fill_unobserved, pyramid_sizes, upsample_matrix
+
+
+def test_upsampling_reproduces_a_linear_ramp_between_the_edge_texels():
+    """Bilinear on texel centres: a ramp sampled at the coarse centres upsamples to the ramp at
+    the fine centres (the clamped half-texel at each edge aside). Catches an off-by-half-texel
+    (align-corners) matrix, which shifts the ramp by a quarter of a coarse texel."""
+    n_in, n_out = 8, 32
+    a = upsample_matrix(n_out, n_in)
+    coarse = (np.arange(n_in) + 0.5) / n_in
+    fine = (np.arange(n_out) + 0.5) / n_out
+    inner = (fine > coarse[0]) & (fine < coarse[-1])
+    np.testing.assert_allclose((a @ coarse)[inner], fine[inner], atol=1e-12)
+    np.testing.assert_allclose(a.sum(axis=1), 1.0)                 # a partition of unity
+
+
+def test_latent_gradients_match_finite_differences():
+    """The chain rule through the sigmoid, the pyramid's upsampling (its transpose) and the TV
+    prior: each level's analytic gradient against central differences of
+    ``loss(value(levels)) + prior``. Catches a missing sigmoid derivative, an untransposed
+    upsampling, a TV gradient of the wrong sign."""
+    rng = np.random.default_rng(3)
+    start = rng.uniform(0.2, 0.8, (8, 12, 2))
+    target = rng.uniform(0.0, 1.0, (8, 12, 2))
+    m = MapLatent(start, 0.1, 0.9, tv=0.3)
+    for lv in m.levels:
+        lv += rng.normal(0, 0.3, lv.shape)
+
+    def objective():
+        v = m.value(np.float64)
+        return 0.5 * np.sum((v - target) ** 2) + m.prior(v)[0]
+
+    v = m.value(np.float64)
+    grads = m.gradients(v - target)
+    assert len(grads) == 2 and grads[0].shape == (4, 6, 2)
+    h = 1e-6
+    for level, g in enumerate(grads):
+        for idx in [(0, 0, 0), (1, 2, 1), (g.shape[0] - 1, g.shape[1] - 1, 0)]:
+            keep = m.levels[level][idx]
+            m.levels[level][idx] = keep + h
+            up = objective()
+            m.levels[level][idx] = keep - h
+            down = objective()
+            m.levels[level][idx] = keep
+            assert g[idx] == pytest.approx((up - down) / (2 * h), rel=1e-6, abs=1e-10), (level, idx)
+
+
+def test_a_map_converges_to_its_target_in_range_and_stays_there():
+    """Adam on the pyramid drives ``0.5 |T - target|^2`` to zero, the texels in range all the
+    way, including targets at the range's ends (0 and 1: the sigmoid reaches within 1e-4)."""
+    rng = np.random.default_rng(0)
+    target = rng.uniform(0.0, 1.0, (16, 16, 3))
+    target[:4] = 0.0
+    target[-4:] = 1.0
+    m = MapLatent(np.full((16, 16, 3), 0.5), 0.0, 1.0)
+    for _ in range(400):
+        m.step(m.value() - target, 0.1)
+        v = m.value()
+        assert v.min() >= 0.0 and v.max() <= 1.0
+    assert np.abs(m.value() - target).mean() < 0.01
+
+
+@pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan, 1e30, -1e30])
+def test_a_map_stays_finite_and_in_range_under_wild_gradients(bad):
+    """What a black or saturated photo, or a firefly, can feed the map: infinite, NaN or huge
+    gradients. The texels stay finite and inside [lo, hi]; a NaN/Inf entry counts as 0."""
+    m = MapLatent(np.full((8, 8, 1), 0.3), 0.0, 1.0)
+    g = np.zeros((8, 8, 1))
+    g[2:5, 2:5] = bad
+    for _ in range(50):
+        m.step(g, 0.5)
+    v = m.value()
+    assert np.all(np.isfinite(v)) and v.min() >= 0.0 and v.max() <= 1.0
+    if not np.isfinite(bad):
+        np.testing.assert_allclose(v, 0.3, atol=1e-6)      # NaN/Inf: no step at all
+        assert not m.seen.any()
+
+
+def test_seen_texels_are_those_a_gradient_reached():
+    m = MapLatent(np.full((4, 4, 3), 0.5), 0.0, 1.0)
+    g = np.zeros((4, 4, 3))
+    g[1, 2, 0] = 1e-9
+    m.step(g, 0.01)
+    assert m.seen.sum() == 1 and m.seen[1, 2]
+
+
+def test_fill_continues_a_smooth_map_into_unseen_texels():
+    """Pull-push fill of a linear ramp with a hole keeps the ramp's values near the hole (within
+    the ramp's change over the hole), and leaves the seen texels as they were."""
+    y, x = np.mgrid[0:16, 0:16]
+    ramp = (0.02 * x + 0.01 * y)[..., None]
+    seen = np.ones((16, 16), bool)
+    seen[6:10, 6:10] = False
+    out = fill_unobserved(np.where(seen[..., None], ramp, 7.0), seen)
+    np.testing.assert_array_equal(out[seen], ramp[seen])
+    assert np.abs(out[~seen] - ramp[~seen]).max() < 0.12          # the ramp rises 0.12 over the hole
+    assert np.abs(out[~seen] - 7.0).min() > 6                    # nothing of the start is left
+
+
+def test_pyramid_sizes_and_options_are_checked():
+    assert pyramid_sizes(128, 64)[0] == (8, 4) and pyramid_sizes(128, 64)[-1] == (128, 64)
+    assert MapOptions.parse(None).parametrisation == "pyramid"
+    assert MapOptions.parse("texels").parametrisation == "texels"
+    with pytest.raises(ParameterError, match="parametrisation='wavelets'"):
+        MapOptions.parse({"parametrisation": "wavelets"})
+    with pytest.raises(ParameterError, match="tv=-1"):
+        MapOptions.parse({"tv": -1})
+    with pytest.raises(ParameterError, match="key\\(s\\) smooth"):
+        MapOptions.parse({"smooth": 1})
+
+
+def test_maps_are_saved_as_exr_and_8_and_16_bit_pngs(tmp_path):
+    """EXR keeps the values (float32); the PNGs hold a colour map sRGB-encoded and a data map as
+    it is, at 8 and 16 bits (the 16-bit file's IHDR says 16 and its values round-trip to 1/65535)."""
+    import draaw_mi
+    from draaw_mi.io import srgb_encode
+    colour = np.random.default_rng(1).uniform(0, 1, (6, 5, 3)).astype(np.float32)
+    rough = np.linspace(0, 1, 30, dtype=np.float32).reshape(6, 5, 1)
+    files = save_maps({"m.base_color": colour, "m.roughness": rough, "m.scale": 0.5}, str(tmp_path))
+    names = sorted(p.replace(str(tmp_path) + "/", "") for p in files)
+    assert names == ["m.base_color.16bit.png", "m.base_color.exr", "m.base_color.png",
+                     "m.roughness.16bit.png", "m.roughness.exr", "m.roughness.png"]
+    np.testing.assert_array_equal(draaw_mi.read_exr(str(tmp_path / "m.roughness.exr"))[..., :1], rough)
+    import matplotlib.image
+    png16 = tmp_path / "m.roughness.16bit.png"
+    assert open(png16, "rb").read()[24] == 16                        # IHDR bit depth
+    np.testing.assert_allclose(matplotlib.image.imread(str(png16)), rough[..., 0], atol=1 / 65535)
+    png8 = matplotlib.image.imread(str(tmp_path / "m.base_color.png"))[..., :3]
+    np.testing.assert_allclose(png8, srgb_encode(colour), atol=1 / 255 + 1e-6)
+
+
+def test_map_errors_count_observed_texels_only():
+    truth = {"m.metallic": np.zeros((2, 2, 1))}
+    fitted = {"m.metallic": np.array([[[0.1], [0.1]], [[1.0], [1.0]]])}
+    seen = {"m.metallic": np.array([[True, True], [False, False]])}
+    assert map_errors(fitted, truth, seen)["m.metallic"]["mae"] == pytest.approx(0.1)
+    assert map_errors(fitted, truth)["m.metallic"]["mae"] == pytest.approx(0.55)
+    with pytest.raises(ParameterError, match="'m.roughness', which was not fitted"):
+        map_errors(fitted, {"m.roughness": np.zeros((2, 2, 1))})
+
+
+def test_plot_maps_shows_fit_truth_error_and_loss(tmp_path):
+    v = {"m.base_color": np.full((4, 4, 3), 0.4, np.float32), "m.roughness": np.full((4, 4, 1), 0.2, np.float32)}
+    fig = plot_maps(v, truth=v, losses=[1.0, 0.5, 0.25], path=str(tmp_path / "maps.png"))
+    assert len(fig.axes) == 3 * 3 + 2                 # 3 rows of 3 (maps, maps, loss) + 2 colour bars
+    assert [a.get_title() for a in fig.axes[:3]] == ["m.base_color: fitted", "truth", "|error| (unobserved: blank)"]
+    assert (tmp_path / "maps.png").stat().st_size > 0
+    with pytest.raises(ParameterError, match="no texture maps"):
+        plot_maps({"m.roughness": 0.3})
