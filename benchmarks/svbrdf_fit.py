@@ -123,21 +123,8 @@ def captures(obj: str, k: int) -> list:
 
 def render_captures(scene, caps, spp: int, seed: int) -> list:
     """Mitsuba ``path`` renders of ``scene`` as each capture sees it."""
-    from draaw_mi.fitting.captures import CaptureOverrides, light_names
-    from draaw_mi.fitting.views import view_sensors
-    p = scene.params
-    over = CaptureOverrides.build(p, [dict(c, params={}) for c in caps], [], light_names(p))
-    sensors = view_sensors(scene, [c["camera"] for c in caps])
-    integrator = mi.load_dict({"type": "path", "max_depth": 2})
-    out = []
-    for i, sensor in enumerate(sensors):
-        over.apply(p, i)
-        p.update()
-        out.append(np.array(mi.render(scene.mi_scene, sensor=sensor, integrator=integrator, spp=spp,
-                                      seed=seed + i))[..., :3])
-    over.restore(p)
-    p.update()
-    return out
+    from draaw_mi.fitting.captures import render_capture
+    return [render_capture(scene, c, spp=spp, version="path", seed=seed + i) for i, c in enumerate(caps)]
 
 
 def psnr(a, b) -> float:

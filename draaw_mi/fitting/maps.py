@@ -19,8 +19,8 @@ resolution up to ``H x W``, and ``U_l`` upsamples level ``l`` bilinearly to ``H 
   restarts).
 * **Adam per latent, on every level**: the coarse levels' steps come from gradients summed
   over many texels (little noise), the finest level's from one texel's. (A second moment
-  pooled per level, ``pooled=True``, lets the few texels under a highlight take steps many
-  times ``lr``: measured on the benchmark's sphere it left spots of 0 and 1.)
+  pooled per level let the few texels under a highlight take steps many times ``lr``:
+  measured on the benchmark's sphere it left spots of 0 and 1.)
 * **Total variation** (``tv``, in value units per texel, Huber-smoothed): a prior that keeps
   flat regions flat and sharp edges sharp (metallic patches), weighed against the image loss.
 * **Visibility**: a texel is *observed* when any capture's gradient reached it. Unobserved
@@ -111,7 +111,7 @@ class MapLatent:
     """
 
     def __init__(self, start, lo: float = 0.0, hi: float | None = 1.0, *, multiscale: bool = True,
-                 tv: float = 0.0, pooled: bool = False, beta_1: float = 0.9, beta_2: float = 0.99, name: str = "texture"):
+                 tv: float = 0.0, beta_1: float = 0.9, beta_2: float = 0.99, name: str = "texture"):
         start = np.asarray(start, dtype=np.float64)
         if start.ndim != 3:
             raise ParameterError(f"MapLatent: {name} has shape {start.shape}; expected (H, W, C)")
@@ -137,8 +137,7 @@ class MapLatent:
             self.levels[0][:] = z
         self.beta_1, self.beta_2 = beta_1, beta_2
         self.m = [np.zeros_like(lv) for lv in self.levels]
-        self.pooled = pooled
-        self.v = [np.zeros(c) if pooled else np.zeros_like(lv) for lv in self.levels]
+        self.v = [np.zeros_like(lv) for lv in self.levels]
         self.t = 0
         self.seen = np.zeros((h, w), dtype=bool)       # texels any gradient reached
 
@@ -190,15 +189,13 @@ class MapLatent:
         return [_separable(ay.T, gz, ax.T) for ay, ax in self.ups]      # U_l^T gz
 
     def step(self, grad_value: np.ndarray, lr: float) -> None:
-        """One Adam step from the loss gradient with respect to the texels (``(H, W, C)``),
-        the second moment pooled per level and channel (see the module docstring)."""
+        """One Adam step from the loss gradient with respect to the texels (``(H, W, C)``)."""
         finite = np.nan_to_num(np.asarray(grad_value, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
         self.seen |= np.any(finite.reshape(self.shape) != 0, axis=2)
         self.t += 1
         for i, gl in enumerate(self.gradients(finite)):
             self.m[i] = self.beta_1 * self.m[i] + (1 - self.beta_1) * gl
-            self.v[i] = self.beta_2 * self.v[i] + (1 - self.beta_2) * (
-                np.mean(gl * gl, axis=(0, 1)) if self.pooled else gl * gl)
+            self.v[i] = self.beta_2 * self.v[i] + (1 - self.beta_2) * gl * gl
             m_hat = self.m[i] / (1 - self.beta_1 ** self.t)
             v_hat = self.v[i] / (1 - self.beta_2 ** self.t)
             self.levels[i] -= lr * m_hat / (np.sqrt(v_hat) + 1e-12)
