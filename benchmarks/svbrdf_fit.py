@@ -6,13 +6,21 @@ Objects: a sphere (Mitsuba's UV sphere), GO-Draaw's monkey (its own UVs, read fr
 ``../shared/data/go-draaw``), a flat tile. Ground truth: procedural maps in UV space (smooth
 colour blobs, smooth roughness 0.15-0.8, sharp metallic patches: :func:`truth_maps`).
 Captures: cameras around the object, each photo under an environment map (sky, ground, a sun
-and two coloured lamps) plus one point light of its own. References: Mitsuba's ``path`` at
-``--ref-spp``. Held out: a view none of the captures had, under a point light none had.
+and two coloured lamps) plus one lamp of its own. References: Mitsuba's ``path`` at
+``--ref-spp``. Held out: a view none of the captures had, under a lamp none had.
+
+Where the lamps stand (``--layout``): ``ring`` (the recorded table) beside the cameras, so the
+tile never shows a highlight; ``sweep`` where each camera sees the lamp's mirror image, at a
+point that moves over the object; ``flash`` beside the camera; ``pairs`` two captures per
+camera position. ``--lamp softbox`` makes each lamp an area light (a highlight patch, not a
+point). ``--truth constant`` / ``scalar`` fit one material (as maps / as three scalars): can
+the captures tell it apart at all? ``results/svbrdf_fit.md`` has what each gives.
 
 Run from the repository root::
 
     .venv/bin/python benchmarks/svbrdf_fit.py                       # the recorded table
     .venv/bin/python benchmarks/svbrdf_fit.py --objects sphere --captures 4 8 16
+    .venv/bin/python benchmarks/svbrdf_fit.py --objects tile --layout sweep --lamp softbox
 
 Metrics over the texels the captures observed (the pyramid fit's ``result.observed``):
 albedo PSNR (peak 1), roughness and metallic MAE; relit PSNR: the held-out render of the
@@ -59,6 +67,28 @@ def truth_maps(n: int, seed: int = 1):
     return col.astype(np.float32), rough[..., None].astype(np.float32), metal[..., None].astype(np.float32)
 
 
+#: ``--truth constant``: one material everywhere (base colour, roughness, metallic): whether a
+#: capture layout can tell the material apart at all, without the maps' own difficulty
+CONSTANT_TRUTH = (0.5, 0.25, 0.0)
+
+
+def as_scalars(desc: dict) -> dict:
+    """``desc`` with its material's maps replaced by their means (``--truth scalar``: one base
+    colour, roughness and metallic, fitted as three scalars rather than maps)."""
+    m = desc["materials"]["obj"]
+    m["base_color"] = np.mean(np.asarray(m["base_color"]), axis=(0, 1)).tolist()
+    m["roughness"] = float(np.mean(m["roughness"]))
+    m["metallic"] = float(np.mean(m["metallic"]))
+    return desc
+
+
+def constant_maps(n: int):
+    """:data:`CONSTANT_TRUTH` as ``(n, n, 3), (n, n, 1), (n, n, 1)`` maps."""
+    c, r, m = CONSTANT_TRUTH
+    return (np.full((n, n, 3), c, np.float32), np.full((n, n, 1), r, np.float32),
+            np.full((n, n, 1), m, np.float32))
+
+
 def environment(path: str, w: int = 128, h: int = 64) -> str:
     """A procedural environment map (EXR): sky gradient, a banded ground, a sun, two lamps."""
     th = (np.arange(h) + .5) / h * np.pi
@@ -75,7 +105,8 @@ def environment(path: str, w: int = 128, h: int = 64) -> str:
     return path
 
 
-def scene_description(obj: str, maps, env: str, res: int, n_lights: int) -> dict:
+def scene_description(obj: str, maps, env: str, res: int, n_lights: int, layout: str = "ring",
+                      lamp: str = "point") -> dict:
     c, r, m = maps
     shape = {"sphere": {"type": "sphere", "radius": 1.0},
              "monkey": {"type": "mesh", "file": os.path.join(DATA, "monkey.obj"), "scale": 0.2,
@@ -86,16 +117,51 @@ def scene_description(obj: str, maps, env: str, res: int, n_lights: int) -> dict
             "materials": {"obj": {"base_color": c.tolist(), "roughness": r[..., 0].tolist(),
                                   "metallic": m[..., 0].tolist()}},
             "shapes": [{**shape, "name": "thing", "material": "obj"}],
-            "lights": [{"type": "point", "name": f"L{j}", "position": light_position(obj, j, n_lights),
-                        "intensity": 20.0} for j in range(n_lights + 1)]
+            "lights": [lamp_light(obj, j, n_lights, layout, lamp) for j in range(n_lights + 1)]
             + [{"type": "envmap", "name": "env", "file": env}]}
 
 
-def camera(obj: str, i: int, k: int) -> dict:
-    """Capture ``i`` of ``k``'s camera: around the object (the tile: above it)."""
+#: the captures' own lights (``--lamp``): a point light, or a square softbox (an area light
+#: of side SOFTBOX_SIZE giving the same irradiance at the object) whose mirror image is a patch,
+#: not a point, so one capture's highlight covers many texels
+LAMPS = ("point", "softbox")
+SOFTBOX_SIZE = 1.6
+
+
+#: a softbox sits this much farther out than the point light it replaces (along the same ray
+#: from the object), above the cameras: nearer, it would stand in another capture's view
+SOFTBOX_DISTANCE = 1.6
+
+
+def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
+    """Lamp ``L{j}``'s ``[[lights]]`` entry: a point light at :func:`light_position`, or a
+    softbox on the same ray from the object (its mirror point on the tile under ``sweep``)."""
+    pos = np.array(light_position(obj, j, k, layout), dtype=float)
+    if lamp == "point":
+        return {"type": "point", "name": f"L{j}", "position": pos.tolist(), "intensity": 20.0}
+    target = np.zeros(3)
+    if layout == "sweep" and obj == "tile":
+        c = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
+        target = np.array([(pos[0] + c[0]) / 2, (pos[1] + c[1]) / 2, 0.0])
+    pos = target + SOFTBOX_DISTANCE * (pos - target)
+    radiance = 20.0 * SOFTBOX_DISTANCE ** 2 / SOFTBOX_SIZE ** 2        # the point light's irradiance
+    return {"type": "area", "name": f"L{j}", "shape": "rectangle", "position": pos.tolist(),
+            "target": target.tolist(), "size": [SOFTBOX_SIZE, SOFTBOX_SIZE], "intensity": radiance}
+
+
+#: how the captures' cameras and lamps are placed (``--layout``)
+LAYOUTS = ("flash", "pairs", "ring", "sweep")
+
+
+def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
+    """Capture ``i`` of ``k``'s camera: around the object (the tile: above it). In ``pairs``
+    two captures share each position (``k // 2`` positions)."""
+    if layout == "pairs" and i < k:
+        i, k = i // 2, max(k // 2, 1)
     a = 2 * np.pi * (i + 0.5 * (i >= k)) / k
     if obj == "tile":
-        return {"origin": [1.6 * np.cos(a), 1.6 * np.sin(a), 2.6 + 0.4 * (i % 2)], "target": [0, 0, 0],
+        r = 1.6 if layout in ("ring", "sweep") else (0.5 if i % 2 else 1.0)      # a flash's mirror point on the tile
+        return {"origin": [r * np.cos(a), r * np.sin(a), 2.6 + 0.4 * (i % 2)], "target": [0, 0, 0],
                 "up": [0, 1, 0] if abs(np.cos(a)) > 0.5 else [1, 0, 0], "fov": 40}
     z = 1.2 if i % 2 else -0.4
     if obj == "sphere":
@@ -104,7 +170,16 @@ def camera(obj: str, i: int, k: int) -> dict:
             "up": [0, 1, 0], "fov": 40}
 
 
-def light_position(obj: str, j: int, k: int) -> list:
+def light_position(obj: str, j: int, k: int, layout: str = "ring") -> list:
+    """Lamp ``j`` of ``k`` (+1 held out, ``j == k``): on a ring around the object (``ring``, and
+    the held-out lamp always); ``flash``: beside capture ``j``'s camera (0.15 above it);
+    ``pairs``: even captures a flash, odd ones a lamp on the ring."""
+    if layout == "sweep":
+        return highlight_lamp(obj, j, k)
+    if j < k and (layout == "flash" or (layout == "pairs" and j % 2 == 0)):
+        o = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
+        up = np.array([0.0, 1.0, 0.0] if obj == "monkey" else [0.0, 0.0, 1.0])
+        return (o + 0.15 * up).tolist()
     b = 2 * np.pi * j / k + (0.9 if j % 2 else -0.9)
     height = 2.0 if j % 3 else -1.0
     if obj == "sphere":
@@ -114,10 +189,30 @@ def light_position(obj: str, j: int, k: int) -> list:
     return [4 * np.sin(b), height, 4 * np.cos(b)]
 
 
-def captures(obj: str, k: int) -> list:
-    """``k`` captures: camera ``i`` and point light ``L{i}`` (the environment always on);
-    light ``L{k}`` is the held-out one."""
-    return [{"camera": camera(obj, i, k), "lights": {f"L{j}": float(j == i) for j in range(k + 1)}}
+def highlight_lamp(obj: str, j: int, k: int) -> list:
+    """``sweep``: lamp ``j`` where camera ``j`` sees its mirror reflection, at a point that moves
+    over the object from capture to capture (a golden-angle spiral; the held-out lamp ``j == k``
+    at a point of its own), so each capture shows a highlight somewhere else."""
+    c = np.array(camera(obj, j, k, "sweep")["origin"], dtype=float)
+    golden = np.pi * (3 - np.sqrt(5))
+    rho, phi = np.sqrt((j + 0.5) / (k + 1)), j * golden
+    if obj == "tile":                       # the mirror point t on the plane z = 0
+        t = 0.9 * rho * np.array([np.cos(phi), np.sin(phi), 0.0])
+        return [2 * t[0] - c[0], 2 * t[1] - c[1], c[2]]
+    v = c / np.linalg.norm(c)               # a normal tilted from the view by up to 50 degrees
+    a = np.cross(v, [0.3, 0.2, 1.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(v, a)
+    tilt = np.radians(50) * rho
+    n = np.cos(tilt) * v + np.sin(tilt) * (np.cos(phi) * a + np.sin(phi) * b)
+    lamp_dir = 2 * np.dot(n, v) * n - v
+    return (n + 3.5 * lamp_dir).tolist()
+
+
+def captures(obj: str, k: int, layout: str = "ring") -> list:
+    """``k`` captures: camera ``i`` and lamp ``L{i}`` (the environment always on); lamp
+    ``L{k}`` is the held-out one."""
+    return [{"camera": camera(obj, i, k, layout), "lights": {f"L{j}": float(j == i) for j in range(k + 1)}}
             for i in range(k)]
 
 
@@ -132,13 +227,15 @@ def psnr(a, b) -> float:
 
 
 def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
-    truth = truth_maps(n)
-    desc = scene_description(obj, truth, env, res, k)
+    truth = truth_maps(n) if args.truth == "procedural" else constant_maps(n)       # (scalar: as constant)
+    desc = scene_description(obj, truth, env, res, k, args.layout, args.lamp)
+    if args.truth == "scalar":
+        desc = as_scalars(desc)
     ref_scene = draaw_mi.load_scene(desc)
     t = time.perf_counter()
-    caps = captures(obj, k)
+    caps = captures(obj, k, args.layout)
     refs = render_captures(ref_scene, caps, args.ref_spp, 1000)
-    held = [{"camera": camera(obj, k, k), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
+    held = [{"camera": camera(obj, k, k, "sweep" if args.layout == "sweep" else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
     held_truth = render_captures(ref_scene, held, 256, 77)[0]
     t_ref = time.perf_counter() - t
     rows = []
@@ -146,22 +243,24 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     for method in args.methods:
         start = (np.full((n, n, 3), 0.5, np.float32), np.full((n, n, 1), 0.5, np.float32),
                  np.full((n, n, 1), 0.5, np.float32))
-        scene = draaw_mi.load_scene(scene_description(obj, start, env, res, k))
+        d = scene_description(obj, start, env, res, k, args.layout, args.lamp)
+        scene = draaw_mi.load_scene(as_scalars(d) if args.truth == "scalar" else d)
         t = time.perf_counter()
         r = draaw_mi.fit(scene, refs, PARAMS, captures=caps, spp=args.spp, iterations=args.iterations,
-                         batch=args.batch, maps={"parametrisation": method, "tv": args.tv if method == "pyramid" else 0.0},
+                         batch=args.batch, loss=args.loss, maps={"parametrisation": method, "tv": args.tv if method == "pyramid" else 0.0},
                          lr=args.lr if method == "pyramid" else args.lr_texels,
                          seed=args.seed, progress=not args.no_progress)
         seconds = time.perf_counter() - t
         if observed is None:
             observed = r.observed.get("obj.base_color")
         seen = observed if observed is not None else np.ones((n, n), bool)
-        v = r.values
+        v = {p: np.broadcast_to(r.values[p], t.shape) for p, t in zip(PARAMS, truth)}
         relit = psnr(render_captures(scene, held, 256, 77)[0], held_truth)
         rows.append({"object": obj, "captures": k, "texture": n, "image": res, "method": method,
                      "albedo_psnr": float(-10 * np.log10(np.mean((v["obj.base_color"] - truth[0])[seen] ** 2))),
                      "rough_mae": float(np.abs(v["obj.roughness"] - truth[1])[seen].mean()),
                      "metal_mae": float(np.abs(v["obj.metallic"] - truth[2])[seen].mean()),
+                     "mean_fit": [float(v[p][seen].mean()) for p in PARAMS],
                      "relit_psnr": relit, "seconds": seconds, "ref_seconds": t_ref,
                      "observed": float(seen.mean()),
                      "unexplained": [i for i, c in enumerate(r.captures) if not c["explained"]]})
@@ -179,6 +278,11 @@ def main(argv=None) -> int:
     ap.add_argument("--captures", nargs="+", type=int, default=[8])
     ap.add_argument("--textures", nargs="+", type=int, default=[64])
     ap.add_argument("--image", type=int, default=128)
+    ap.add_argument("--layout", choices=LAYOUTS, default="ring", help="where the captures' cameras and lamps are")
+    ap.add_argument("--lamp", choices=LAMPS, default="point", help="the captures' own lights")
+    ap.add_argument("--truth", choices=("procedural", "constant", "scalar"), default="procedural",
+                    help="the ground truth: procedural maps (smooth and sharp features), one material "
+                         "as maps (constant), or one material fitted as three scalars (scalar)")
     ap.add_argument("--methods", nargs="+", default=["pyramid", "texels"])
     ap.add_argument("--iterations", type=int, default=300)
     ap.add_argument("--batch", type=int, default=2)
@@ -186,6 +290,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ref-spp", type=int, default=512)
     ap.add_argument("--lr", type=float, default=0.05, help="the pyramid's lr (logit units)")
     ap.add_argument("--lr-texels", type=float, default=0.05, help="the texel-by-texel fit's lr (value units)")
+    ap.add_argument("--loss", default="l2", help="fit()'s loss (l2, l1, relative_l2)")
     ap.add_argument("--tv", type=float, default=0.0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plots", help="folder for a maps/truth/error figure per fit")
@@ -207,14 +312,16 @@ def main(argv=None) -> int:
              f"iterations={args.iterations}, batch={args.batch}, maps=...)` from maps of 0.5: pyramid with "
              f"lr {args.lr} (logit units) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
-             "gaussian filter. Metrics over the observed texels; relit = a held-out camera and point light, "
+             f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "
+             "Metrics over the observed texels; relit = a held-out camera and lamp, "
              "256 spp both, clipped to [0, 1]. Time = the whole fit() call.", "",
              "| object | captures | texture | image | method | albedo PSNR (dB) | roughness MAE | metallic MAE "
-             "| relit PSNR (dB) | fit time (s) | observed | unexplained captures |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| relit PSNR (dB) | fitted means (colour, r, m) | fit time (s) | observed | unexplained captures |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['object']} | {r['captures']} | {r['texture']}² | {r['image']}² | {r['method']} | "
                      f"{r['albedo_psnr']:.1f} | {r['rough_mae']:.3f} | {r['metal_mae']:.3f} | {r['relit_psnr']:.1f} | "
+                     f"{', '.join(f'{x:.2f}' for x in r['mean_fit'])} | "
                      f"{r['seconds']:.0f} | {r['observed']:.0%} | {r['unexplained'] or '-'} |")
     with open(args.out, "w") as f:
         f.write("\n".join(lines) + "\n")

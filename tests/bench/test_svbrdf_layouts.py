@@ -1,0 +1,68 @@
+"""benchmarks/svbrdf_fit.py's capture layouts, by geometry alone (nothing renders): under
+``sweep`` each capture's camera sees its lamp's mirror image on the tile, at a point of its own.
+The measured reason it matters (``ring`` leaves even one material unidentifiable) is in
+benchmarks/results/svbrdf_fit.md."""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+
+@pytest.fixture(scope="module")
+def svbrdf():
+    path = os.path.join(ROOT, "benchmarks", "svbrdf_fit.py")
+    spec = importlib.util.spec_from_file_location("svbrdf_fit_bench", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def mirror_point(camera, lamp):
+    """Where the plane z = 0 reflects ``lamp`` into ``camera``: the line from the lamp to the
+    camera's image below the plane, met at z = 0."""
+    below = np.array([camera[0], camera[1], -camera[2]])
+    lamp = np.asarray(lamp, dtype=float)
+    s = lamp[2] / (lamp[2] - below[2])
+    return lamp + s * (below - lamp)
+
+
+@pytest.mark.parametrize("k", [4, 8])
+def test_sweep_puts_each_captures_highlight_on_the_tile_in_view_at_its_own_point(svbrdf, k):
+    """Catches a lamp placed by the wrong reflection (e.g. ``2t + c``: its highlight leaves the
+    tile), a highlight outside the camera's field of view, and a spiral that repeats a point."""
+    points = []
+    for j in range(k + 1):                                  # the held-out lamp (j == k) too
+        cam = svbrdf.camera("tile", j, k, "sweep")
+        c = np.array(cam["origin"], dtype=float)
+        lamp = svbrdf.light_position("tile", j, k, "sweep")
+        t = mirror_point(c, lamp)
+        assert abs(t[0]) < 0.95 and abs(t[1]) < 0.95, (j, t)          # on the 2 x 2 tile
+        forward = -c / np.linalg.norm(c)                                # the camera looks at 0
+        to_t = (t - c) / np.linalg.norm(t - c)
+        assert np.degrees(np.arccos(np.clip(forward @ to_t, -1, 1))) < cam["fov"] / 2, (j, t)
+        points.append(t[:2])
+    p = np.array(points)
+    d = np.linalg.norm(p[:, None] - p[None], axis=2)
+    assert d[~np.eye(len(points), dtype=bool)].min() > 0.1, d
+
+
+def test_softbox_faces_the_mirror_point_on_the_same_ray_with_the_point_lamps_irradiance(svbrdf):
+    """Catches a softbox aimed at the tile's centre instead of its highlight, one moved off the
+    point lamp's ray, and a radiance that does not keep the irradiance (intensity / distance^2)."""
+    k = 8
+    for j in range(k + 1):
+        point = svbrdf.lamp_light("tile", j, k, "sweep", "point")
+        box = svbrdf.lamp_light("tile", j, k, "sweep", "softbox")
+        c = np.array(svbrdf.camera("tile", j, k, "sweep")["origin"], dtype=float)
+        t = mirror_point(c, point["position"])
+        np.testing.assert_allclose(box["target"], t, atol=1e-9)
+        ray, box_ray = np.subtract(point["position"], t), np.subtract(box["position"], t)
+        np.testing.assert_allclose(box_ray, svbrdf.SOFTBOX_DISTANCE * ray, atol=1e-9)
+        area = box["size"][0] * box["size"][1]
+        irradiance_box = box["intensity"] * area / (box_ray @ box_ray)      # far-field, facing t
+        irradiance_point = point["intensity"] / (ray @ ray)
+        assert irradiance_box == pytest.approx(irradiance_point, rel=1e-9)
