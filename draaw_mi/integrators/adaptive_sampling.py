@@ -260,7 +260,7 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
         if set_primary is not None:       # each ray's pixel, for its emission splitting
             set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
-                                    splat=None if splat is None else (splat, share)))
+                                    splat=None if splat is None else (splat, share, pos)))
         try:
             L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,

@@ -17,9 +17,10 @@ sensor's importance weight); each stratified ray is uniform over its cell, so th
 mean ``W Le`` has the same expectation as the camera sample's. Which pixels split does not
 depend on the samples (an edge map fixed before the render), so any choice keeps the
 expectation. With other filters a sample is splatted with a weight that depends on its
-position: there each extra ray is splatted at its own position instead of being added to
-the camera sample's value (:mod:`~draaw_mi.integrators.film_splat`; primal renders only:
-the adjoint passes of a filtered film do not split).
+position: there the emission seen at the first hit goes to an image block of its own,
+developed with its own weights, each extra ray at its own position and every other camera
+sample at its own (:mod:`~draaw_mi.integrators.film_splat`; primal renders only: the
+adjoint passes of a filtered film do not split).
 
 Which pixels (:func:`edge_map`): the emitting surfaces' bounding boxes, projected by the
 sensor, bound where a light can be seen (:func:`emitter_rect`); inside that rectangle probe
@@ -69,8 +70,10 @@ class PrimaryRays:
     ``scale`` / ``offset``: film position -> the sensor's ``[0, 1]^2`` sample;
     ``weight``: the camera rays' importance weights (the renderer multiplies ``L`` by them);
     ``splat``: ``None`` (the extra rays' emission is added to ``L``: box filters) or
-    ``(FilmSplat, per-sample weight)``: each extra ray is splatted into the film at its own
-    position (:mod:`~draaw_mi.integrators.film_splat`).
+    ``(FilmSplat, per-sample weight, film position)``: the emission seen at the first hit is
+    splatted into the emission's own block, by each extra ray at its own position in edge
+    pixels, by the camera sample at its position elsewhere
+    (:mod:`~draaw_mi.integrators.film_splat`).
 
     A plain class, not a dataclass or tuple: ``dr.syntax`` loops in ``sample()`` read the
     integrator, and Dr.Jit takes the arrays of every dataclass / tuple attribute it reaches
@@ -283,11 +286,25 @@ def visible_emission(mode: dr.ADMode, scene: mi.Scene, primary: PrimaryRays, sam
                     else:
                         tangent += dr.forward_to(Le)
         if dr.hint(splat is not None, mode="scalar"):
-            block.put_emission(pos, Le, seen)     # at its own position, with its own filter weight
+            block.put_emission(pos, Le, share, active)   # at its own position, with its own weight
             Le = mi.Spectrum(0.0)
         total += dr.detach(Le)
         j += 1
     return total, tangent
+
+
+def splat_own_emission(scene: mi.Scene, primary: PrimaryRays, ray: mi.Ray3f,
+                       pi: mi.PreliminaryIntersection3f, flags: mi.RayFlags, active: mi.Bool) -> None:
+    """Under a filter other than box (``primary.splat``): the emission that the camera rays
+    ``ray`` see at their first hit ``pi``, splatted into the emission's block at the samples'
+    positions with their weights (``active``: the samples outside edge pixels, whose emission
+    the camera path then leaves out). The surface interaction is computed only where an
+    emitting surface or nothing was hit (as :func:`_emission_seen`)."""
+    block, share, pos = primary.splat
+    seen = active & (~pi.is_valid() | (pi.shape.emitter() != None))  # noqa: E711
+    si = pi.compute_surface_interaction(ray, flags, seen)
+    Le = dr.detach(primary.weight) * share * si.emitter(scene).eval(si, seen)
+    block.put_emission(pos, Le, share, active)
 
 
 class EmissionSplitting(DraawIntegrator):

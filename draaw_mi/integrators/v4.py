@@ -396,8 +396,11 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         η = mi.Float(1)                               # Index of refraction
         active = mi.Bool(active)                      # Active SIMD lanes
         ray, pi, valid, cam_origin = self.trace_camera(scene, ray, active, feats)
+        splat = split and primal and primary.splat is not None   # a filter other than box
         if dr.hint(split, mode="scalar"):
             edge = emission_split.edges_of(primary, edges, active)
+            if dr.hint(splat, mode="scalar"):        # the emission seen here: a block of its own
+                emission_split.splat_own_emission(scene, primary, ray, pi, flags, active & ~edge)
             L_vis, δL_vis = emission_split.visible_emission(
                 mode, scene, primary, sampler, self.emission_split, flags, edge, δL)
             separate_adjoints(mode)      # (its backward_from before the main loop's)
@@ -435,6 +438,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                 em_active = mi.Bool(active)
                 if dr.hint(self.hide_emitters, mode="scalar"):
                     em_active &= depth > 0
+                elif dr.hint(splat, mode="scalar"):
+                    em_active &= depth > 0               # splatted before the loop
                 elif dr.hint(split, mode="scalar"):
                     em_active &= (depth > 0) | ~edge     # edge pixels: from the split rays
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
