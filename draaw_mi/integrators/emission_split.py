@@ -156,7 +156,8 @@ def emitter_rect(scene: mi.Scene, sensor: mi.Sensor) -> tuple[int, int, int, int
             ds, _ = sensor.sample_direction(it, mi.Point2f(0.5), True)
         except RuntimeError:     # a sensor that cannot project points: no splitting
             return None
-        uv = np.array(ds.uv, dtype=np.float64).T.reshape(len(boxes), 8, 2)
+        # (the sensor projects into the crop window: film coordinates add its offset)
+        uv = (np.array(ds.uv, dtype=np.float64).T + [ox, oy]).reshape(len(boxes), 8, 2)
         seen = (np.array(ds.pdf) > 0).reshape(len(boxes), 8)
     x0 = y0 = math.inf
     x1 = y1 = -math.inf

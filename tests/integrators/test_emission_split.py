@@ -155,6 +155,18 @@ def test_emitter_rect_holds_the_light(box32):
     assert emission_split.emitter_rect(down, down.sensors()[0]) is None
 
 
+def test_emitter_rect_in_a_crop_window_is_in_film_coordinates():
+    """The sensor projects points into its crop window; the rectangle is in film coordinates
+    (the edge map and the split rays use them). Read as film coordinates, a crop window's
+    projections fell left of the window and no light in it was ever split (a lost gain)."""
+    d = rs.cornell_draaw(res=32, spp=4)
+    full = mi.load_dict(d)
+    d["sensor"]["film"].update(crop_offset_x=12, crop_offset_y=1, crop_width=8, crop_height=6)
+    crop = mi.load_dict(d)
+    x0, y0, x1, y1 = emission_split.emitter_rect(full, full.sensors()[0])
+    assert emission_split.emitter_rect(crop, crop.sensors()[0]) == (max(x0, 12), max(y0, 1), min(x1, 20), min(y1, 7))
+
+
 def test_a_light_thinner_than_a_pixel_is_found():
     """At 16x16 the Cornell box's light is a strip less than a pixel tall, between two rows of
     pixel corners: the half-pixel probe lattice still finds it, and only where it is."""

@@ -188,6 +188,37 @@ def test_a_crop_window_renders_adaptively_with_paths_expectation(monkeypatch):
     check_same_expectation(ref, v4)
 
 
+def test_split_rays_in_a_crop_window_with_alpha_keep_paths_expectation(monkeypatch):
+    """A square light before an empty background and a dark panel, seen through a
+    tent-filtered RGBA film cropped to 8x6 pixels round the light's corner, uniform (16 spp):
+    the emission's own block shares the crop offset, and its image is scaled by the film's
+    weights, which sit after alpha (alpha < weight where rays miss). The emission block placed
+    at the film's origin, or scaled by the alpha channel, puts the light's edge pixels far off;
+    a light projected without the crop offset is not split at all."""
+    calls = []
+    real = film_splat.render_uniform
+    monkeypatch.setattr(film_splat, "render_uniform", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    T = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "pixel_format": "rgba",
+                            "rfilter": {"type": "tent"}, "crop_offset_x": 4, "crop_offset_y": 6,
+                            "crop_width": 8, "crop_height": 6}},
+        "light": {"type": "rectangle", "to_world": T().scale(0.5),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [10.0, 10.0, 10.0]}}},
+        "panel": {"type": "rectangle", "to_world": T().translate([-0.6, -0.6, -1.0]).scale(0.5),
+                  "bsdf": {"type": "diffuse"}}})
+    K = 12
+    ref = seed_stack(scene, integrator("path", max_depth=3), 16, range(K))
+    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=3), 16, range(300, 300 + K))
+    assert len(calls) == K and v4.shape == ref.shape == (K, 6, 8, 4)
+    alpha = ref[..., 3].mean(0)
+    assert ref[..., :3].max() > 5.0 and alpha.min() < 0.5 < alpha.max()   # light, misses, hits
+    check_same_expectation(ref, v4)
+
+
 def test_aovs_under_a_filter_with_split_rays(monkeypatch):
     """AOVs beside the split rays' splats: the AOV channels are those of the render without
     splitting (same seed). A split splat that wrote zeros into too few channels would shift
