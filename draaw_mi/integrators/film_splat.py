@@ -14,18 +14,19 @@ samples:
   the emission seen at the first hit from stratified positions over the sample's pixel. With
   a box filter every position of a pixel has the same weight, so their mean replaces the
   camera ray's own. With another filter each extra ray has its own filter weight, and the
-  emission seen at the first hit gets a film of its own: every camera sample puts it there
-  (at its position, with its weight ``1 / d``), except in edge pixels, where each of the
-  ``k`` extra rays puts its own at its position with the weight ``1 / (k d)``. Each film
+  emission seen at the first hit gets an image block of its own: every camera sample puts
+  it there (at its position, with its weight ``1 / d``), except in edge pixels, where each of the
+  ``k`` extra rays puts its own at its position with the weight ``1 / (k d)``. Each block
   divides by the weights of its own samples: pixel ``p`` =
   ``sum_s f(x_s - p) L'_s / sum_s f(x_s - p)`` (``L'``: the paths without their first hit's
   emission) ``+ sum_r f(y_r - p) Le_r / sum_r f(y_r - p)`` (``r``: the emission's samples),
-  each the filtered image of its part. One film for both, with the extra rays'
+  each the filtered image of its part. One block for both, with the extra rays'
   emission over the camera samples' weights, keeps the expectation too, but a pixel inside
   a light next to its edge then divides a stratified sum by a random one: that doubled the
   variance of the light's inner pixels under a tent filter and made splitting a loss there
   (Cornell box under a tent filter at 128x128: V4's error 0.61x ``path``'s with
   splitting, 0.44x without).
+
 So both are as unbiased as ``path``'s own ratio (consistent; its ``O(1/n)`` bias is that of
 the film's division), for box, tent, gaussian, Lanczos, Mitchell and Catmull-Rom filters
 alike (negative lobes are weights like any other). With a box filter the renderers keep
