@@ -29,6 +29,14 @@ def cornell(res: int, rfilter: str, **sensor):
     return mi.load_dict(d)
 
 
+def spy(monkeypatch, mod, name: str) -> list:
+    """Replaces ``mod.name`` by a wrapper that appends ``name`` to the returned list per call."""
+    calls = []
+    real = getattr(mod, name)
+    monkeypatch.setattr(mod, name, lambda *a, **k: (calls.append(name), real(*a, **k))[1])
+    return calls
+
+
 def light_edges(scene) -> np.ndarray:
     """Pixels partly covered by the (filtered) light: from ``path`` at max_depth 1, 1024 spp."""
     img = np.array(mi.render(scene, integrator=integrator("path", max_depth=1), spp=1024,
@@ -44,14 +52,12 @@ def test_v4_keeps_paths_expectation_under_the_filter(rfilter, spp, monkeypatch):
     adaptive render (pilot + uneven counts, each sample weighted by 1 / its pixel's count).
     Adding the split rays' emission to the camera sample's value instead (the box-filter
     rule) or dropping the 1 / count weight puts the light's edge pixels tens of errors off."""
-    used = []
-    for mod, name in ((ads, "render_adaptive"), (film_splat, "render_uniform")):
-        real = getattr(mod, name)
-        monkeypatch.setattr(mod, name, lambda *a, _r=real, _n=name, **k: (used.append(_n), _r(*a, **k))[1])
+    adaptive, uniform = spy(monkeypatch, ads, "render_adaptive"), spy(monkeypatch, film_splat, "render_uniform")
     scene = cornell(16, rfilter)
     K = 10
     ref = seed_stack(scene, integrator("path", max_depth=4), spp, range(K))
     v4 = seed_stack(scene, integrator("draaw_v4", max_depth=4), spp, range(200, 200 + K))
+    used = adaptive + uniform
     assert set(used) == {"render_uniform" if spp < 64 else "render_adaptive"}, used
     assert np.isfinite(v4).all()
     check_same_expectation(ref, v4)
@@ -119,9 +125,7 @@ def test_the_film_holds_the_rendered_image():
 
 
 def test_the_adaptive_render_runs_under_every_filter(monkeypatch):
-    calls = []
-    real = ads.render_adaptive
-    monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    calls = spy(monkeypatch, ads, "render_adaptive")
     for f in ["box"] + FILTERS:
         img = mi.render(cornell(8, f), integrator=integrator("draaw_v4", max_depth=3), spp=64)
         assert np.isfinite(np.array(img)).all()
@@ -175,9 +179,7 @@ def test_a_crop_window_renders_adaptively_with_paths_expectation(monkeypatch):
     """A film cropped to its lower right 10x8 pixels under a tent filter: adaptive sampling
     renders the window (it used to refuse crop windows) and keeps ``path``'s expectation; a
     sample mapped without the crop offset would render the film's upper left corner."""
-    calls = []
-    real = ads.render_adaptive
-    monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    calls = spy(monkeypatch, ads, "render_adaptive")
     d = rs.cornell_draaw(res=16, spp=4)
     d["sensor"]["film"].update(rfilter={"type": "tent"}, crop_offset_x=6, crop_offset_y=8,
                                crop_width=10, crop_height=8)
@@ -195,9 +197,7 @@ def test_split_rays_in_a_crop_window_with_alpha_keep_paths_expectation(monkeypat
     weights, which sit after alpha (alpha < weight where rays miss). The emission block placed
     at the film's origin, or scaled by the alpha channel, puts the light's edge pixels far off;
     a light projected without the crop offset is not split at all."""
-    calls = []
-    real = film_splat.render_uniform
-    monkeypatch.setattr(film_splat, "render_uniform", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    calls = spy(monkeypatch, film_splat, "render_uniform")
     T = mi.ScalarTransform4f
     scene = mi.load_dict({
         "type": "scene",
@@ -223,14 +223,12 @@ def test_aovs_under_a_filter_with_split_rays(monkeypatch):
     """AOVs beside the split rays' splats: the AOV channels are those of the render without
     splitting (same seed). A split splat that wrote zeros into too few channels would shift
     the AOVs into the weight channel."""
-    calls = []
-    real = film_splat.render_uniform
-    monkeypatch.setattr(film_splat, "render_uniform", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    calls = spy(monkeypatch, film_splat, "render_uniform")
     scene = cornell(24, "gaussian")
     on = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=3, aovs="depth,normal"),
                             spp=16, seed=2))
     off = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=3, aovs="depth,normal",
                                                           emission_split=1), spp=16, seed=2))
-    assert calls == [1] and on.shape == off.shape == (24, 24, 7)
+    assert calls == ["render_uniform"] and on.shape == off.shape == (24, 24, 7)
     np.testing.assert_allclose(on[..., 3:], off[..., 3:], rtol=1e-5, atol=1e-6)   # (atomics order)
     assert np.isfinite(on).all()        # (the colour's expectation: the tests above)
