@@ -47,6 +47,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import suggest
+from ..integrators import guiding
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
 from ..scene.loading import wrap
@@ -135,18 +136,28 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
 
 
 def learning_time(integ, scene, spp: int) -> float:
-    """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide (its decision pilot
-    and training passes; :mod:`draaw_mi.integrators.guiding`), measured on a fresh cache that
-    then replaces the integrator's; 0 for other integrators and ``guiding = "off"``."""
+    """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide
+    (:mod:`draaw_mi.integrators.guiding`), measured on a fresh cache that then replaces the
+    integrator's: where adaptive sampling's pilot decides (its share measured by the warm-up
+    render, the pilot itself being part of every render), the training passes; elsewhere the
+    decision pilot and the training passes. 0 for other integrators and ``guiding = "off"``."""
     guides = getattr(integ, "guides", None)
     if guides is None or guides.mode == "off":
         return 0.0
     fresh = type(guides)(guides.mode)
     sensor = scene.sensors()[0]
-    if not fresh.wanted(sensor, spp):              # a render of spp looks for no guide
+    key = integ.selection_key(scene)
+    piloted = integ.adaptive_applies(scene, sensor, 1, spp) and fresh.wanted(sensor, spp, piloted=True)
+    if not piloted and not fresh.wanted(sensor, spp):   # a render of spp looks for no guide
         return 0.0
     t = time.perf_counter()
-    fresh.for_render(integ, scene, sensor, spp)    # what a render of spp learns
+    if piloted and fresh.pending(key):
+        w, h = (int(v) for v in sensor.film().crop_size())
+        share = guides.share(key)                      # (None: the warm-up did not decide)
+        share = guiding.indirect_share(integ, scene) if share is None else share
+        fresh.decide(integ, scene, key, share, spp * w * h)
+    else:
+        fresh.for_render(integ, scene, sensor, spp)    # what a render of spp learns
     dr.sync_thread()
     integ.guides = fresh
     return time.perf_counter() - t

@@ -208,7 +208,7 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
-               moments: bool, alpha: bool, pilot: bool = False):
+               moments: bool, alpha: bool, pilot: bool = False, first: bool = False):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
@@ -216,7 +216,9 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
     ``pilot`` (uniform ``counts``): what :func:`render_adaptive` reads in as few channels as
     it can: R, G, B, [hits if ``alpha``], path lengths, the sum of R^2 + G^2 + B^2, and of the
     channel sum ``s = R + G + B``: ``s`` and ``s^2`` over the odd samples, ``s^2`` over the
-    even ones. Under a filter other than box the image is the splatted one (``film_splat``)."""
+    even ones; with ``first`` (a ``draaw_v4`` pilot) last, the light gathered at the paths'
+    first vertices, R + G + B. Under a filter other than box the image is the splatted one
+    (``film_splat``)."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     ox, oy = (int(v) for v in film.crop_offset())
@@ -257,6 +259,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         reports_depth = (moments or pilot) and hasattr(integrator, "want_depth")     # draaw_v4
         if reports_depth:
             integrator.want_depth = True
+        if first:
+            integrator.want_first = True
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
         if set_primary is not None:       # each ray's pixel, for its emission splitting
             set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
@@ -266,9 +270,12 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
                                                state_in=None, active=mi.Bool(True))
             depth = integrator.last_depth if reports_depth else None   # segments per path
+            light_first = integrator.last_first if first else None
         finally:
             if reports_depth:
                 integrator.want_depth, integrator.last_depth = False, None
+            if first:
+                integrator.want_first, integrator.last_first = False, None
             if set_primary is not None:
                 set_primary(None)
         value = L * weight
@@ -286,6 +293,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             chans += [hits] if alpha else []
             chans += [lengths, dr.squared_norm(value), dr.select(odd, v, 0.0),
                       dr.select(odd, v * v, 0.0), dr.select(odd, 0.0, v * v)]
+            if first:
+                chans += [light_first * ((weight.x + weight.y + weight.z) / 3.0)]
         elif moments or alpha:
             chans += [hits]
             if moments:
@@ -351,8 +360,12 @@ def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
 
 
 def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
-                    alpha: bool):
+                    alpha: bool, decide=None):
     """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor.
+
+    ``decide`` (``draaw_v4``, guiding's first decision on a scene): called with the pilot's
+    indirect share (:func:`indirect_share`); where it returns true (the main pass is now
+    guided), the main pass samples every pixel alike.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
     (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit."""
@@ -362,12 +375,15 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     a = max(2, spp // PILOT_FRACTION)
     rest = spp - a
     wp = a / spp
-    sums, filtered = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True)
+    sums, filtered = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
+                                first=decide is not None)
+    guided = decide is not None and decide(indirect_share(sums[:3], sums.pop()))
     var, segments, halves = _pilot_maps(sums, a, alpha, h, w)     # (keeps only the image's sums)
     channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
-    if pilot_agreement(halves) < AGREEMENT_MIN:
-        counts = np.full(h * w, rest, np.uint32)     # the pilot cannot tell where the noise is
+    if guided or pilot_agreement(halves) < AGREEMENT_MIN:
+        # guided: measured better uniform; or the pilot cannot tell where the noise is
+        counts = np.full(h * w, rest, np.uint32)
     else:
         # Cost of a sample ~ rays traced: the camera ray, then a shadow ray and a continuation
         # ray per segment (smoothed like the variance: both are estimated from few samples).
@@ -395,6 +411,19 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
         dr.scatter(out, dr.fma(main[c], per, pilot[c]), at + c)
     dr.eval(out)
     return mi.TensorXf(out, (h, w, channels))
+
+
+def indirect_share(rgb: list, first) -> float:
+    """Share of a pilot's light that arrives after the paths' first vertex, from its per-pixel
+    sums of R, G, B and of the light gathered at the first vertex (R + G + B); 0 for a black
+    (or non-finite) image, as :func:`draaw_mi.integrators.guiding.indirect_share`.
+
+    >>> round(indirect_share([mi.Float(1.0, 2.0)] * 3, mi.Float(1.5, 3.0)), 2)
+    0.5
+    """
+    total = float(dr.sum(rgb[0] + rgb[1] + rgb[2])[0])
+    after = total - float(dr.sum(first)[0])
+    return after / total if total > 0 and np.isfinite(total) else 0.0
 
 
 def _pilot_maps(sums: list, n: int, alpha: bool, h: int, w: int):

@@ -28,9 +28,13 @@ for either choice, and the same mixture density enters the MIS weights against n
 estimation, so the estimate stays unbiased whatever the guide learned. Gradient passes (path
 replay) sample the BSDF alone and replay exactly that.
 
-When (:func:`indirect_share`, ``guiding = "auto"``, renders of at least 64 spp and 2^21
-samples): a pilot of :data:`DECIDE_PATHS` camera paths measures the share of the image's
-light that arrives after the first bounce; guiding is on from :data:`SHARE_MIN` up (1.0
+When (``guiding = "auto"``, once per scene): the share of the image's light that arrives
+after the first bounce decides; guiding is on from :data:`SHARE_MIN` up. Adaptive sampling's
+pilot measures it at no extra pass in renders of at least 64 spp and 2^20 samples (its
+spp/16 samples gather the first vertex's light in one more per-pixel sum; the main pass is
+then guided); other renders of at least 64 spp and 2^21 samples run :func:`indirect_share`,
+a pilot of :data:`DECIDE_PATHS` camera paths (20-40 ms at 128^2: 5-8 % of a 64-spp render,
+which is why the piloted decision comes first). The share is 1.0
 behind the glossy panel; 0.67 in the thesis scene, where guiding doubled the error at 256^2,
 its light being point-light glints on a near-mirror floor; 0.45 in the room lit through a
 doorway, 0.25-0.35 in the Cornell box and the open scenes of the speed suite). The training passes
@@ -59,6 +63,7 @@ SHARE_MIN = 0.8                     # indirect share from which "auto" guides
 MAX_RECORD_DEPTH = 16               # vertices recorded per path at most
 AUTO_MIN_SPP = 64                   # "auto" looks for a guide from this many spp ...
 AUTO_MIN_SAMPLES = 1 << 21          # ... and this many samples in the render
+PILOTED_MIN_SAMPLES = 1 << 20       # ... or this many, where adaptive sampling's pilot decides
 TRAIN_SHARE = 48                    # training paths: at most the render's samples / this
 
 
@@ -289,16 +294,18 @@ class GuideCache:
         self.mode = mode
         self._entries = {}        # key -> (emitter array, Guide | None, indirect share)
 
-    def wanted(self, sensor: mi.Sensor, spp: int) -> bool:
+    def wanted(self, sensor: mi.Sensor, spp: int, piloted: bool = False) -> bool:
         """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
         guide: always with ``"on"``; with ``"auto"`` from :data:`AUTO_MIN_SPP` spp and
         :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs at most about
         2 % of the render's time once per scene (previews, fits' iterations and small test
-        renders do not pay it)."""
+        renders do not pay it), or from :data:`PILOTED_MIN_SAMPLES` when the decision comes
+        free with adaptive sampling's pilot (``piloted``: :meth:`decide`)."""
         if self.mode != "auto":
             return self.mode == "on"
         size = sensor.film().crop_size()
-        return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= AUTO_MIN_SAMPLES
+        least = PILOTED_MIN_SAMPLES if piloted else AUTO_MIN_SAMPLES
+        return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= least
 
     def for_render(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int) -> Guide | None:
         """The guide for a primal render of ``spp`` samples per pixel through ``sensor``:
@@ -308,21 +315,55 @@ class GuideCache:
         size = sensor.film().crop_size()
         return self.guide(integrator, scene, integrator.selection_key(scene), spp * int(size[0]) * int(size[1]))
 
+    def for_primal(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int, adaptive: bool):
+        """``(guide | None, decide | None)`` for ``draaw_v4``'s primal render of ``spp``
+        samples per pixel through ``sensor`` (``adaptive``: whether it renders adaptively
+        without a guide). Where adaptive sampling's pilot can decide (:meth:`wanted` with
+        ``piloted``) and ``"auto"`` has not decided on the scene yet, no guide and ``decide``,
+        for :func:`~draaw_mi.integrators.adaptive_sampling.render_adaptive`: given the
+        pilot's indirect share, it learns the guide where the share calls for one
+        (:meth:`decide`), sets it as the integrator's for the main pass and returns whether
+        it did. Otherwise :meth:`guide` (cached, or ``"on"``) or :meth:`for_render`."""
+        if not (adaptive and self.wanted(sensor, spp, piloted=True)):
+            return self.for_render(integrator, scene, sensor, spp), None
+        key = integrator.selection_key(scene)
+        size = sensor.film().crop_size()
+        samples = spp * int(size[0]) * int(size[1])
+        if not self.pending(key):
+            return self.guide(integrator, scene, key, samples), None
+
+        def decide(share: float) -> bool:
+            integrator._guide = self.decide(integrator, scene, key, share, samples)
+            return integrator._guide is not None
+        return None, decide
+
+    def pending(self, key: tuple) -> bool:
+        """Whether ``"auto"`` has yet to decide on the scene of ``key``."""
+        return self.mode == "auto" and key not in self._entries
+
     def guide(self, integrator, scene: mi.Scene, key: tuple, samples: int | None = None) -> Guide | None:
-        """The guide to render ``scene`` with, or ``None`` (learned here on a first call, from
-        :data:`TRAIN_PATHS` paths, or ``samples / TRAIN_SHARE`` for a render of ``samples``
-        samples if fewer: the training stays a small part of the render's time)."""
+        """The guide to render ``scene`` with, or ``None``; decided here on a first call
+        (``"auto"``: by :func:`indirect_share`'s pilot)."""
         if self.mode == "off":
             return None
         entry = self._entries.get(key)
         if entry is None:
             share = indirect_share(integrator, scene) if self.mode == "auto" else 1.0
-            paths = TRAIN_PATHS if samples is None else int(np.clip(samples // TRAIN_SHARE, 1 << 14, TRAIN_PATHS))
-            guide = learn_guide(integrator, scene, paths) if share >= SHARE_MIN else None
-            if len(self._entries) >= 4:
-                self._entries.pop(next(iter(self._entries)))
-            entry = self._entries[key] = (scene.emitters_dr(), guide, share)
+            return self.decide(integrator, scene, key, share, samples)
         return entry[1]
+
+    def decide(self, integrator, scene: mi.Scene, key: tuple, share: float,
+               samples: int | None = None) -> Guide | None:
+        """Record ``share`` (the indirect share of the scene of ``key``) and, from
+        :data:`SHARE_MIN` up (always with ``"on"``), learn its guide from :data:`TRAIN_PATHS`
+        paths, or ``samples / TRAIN_SHARE`` for a render of ``samples`` samples if fewer (the
+        training stays a small part of the render's time); returns the guide or ``None``."""
+        paths = TRAIN_PATHS if samples is None else int(np.clip(samples // TRAIN_SHARE, 1 << 14, TRAIN_PATHS))
+        guide = learn_guide(integrator, scene, paths) if share >= SHARE_MIN or self.mode == "on" else None
+        if len(self._entries) >= 4:
+            self._entries.pop(next(iter(self._entries)))
+        self._entries[key] = (scene.emitters_dr(), guide, share)
+        return guide
 
     def share(self, key: tuple) -> float | None:
         """The indirect share measured for the scene of ``key`` (``None``: not yet)."""

@@ -84,9 +84,11 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
      * - guiding
        - |string|
        - Guided paths in primal renders (:mod:`~draaw_mi.integrators.guiding`): ``auto``
-         guides renders of at least 64 spp and 2^21 samples where a pilot of 2^13 camera paths
+         guides renders of at least 64 spp and 2^20 samples (2^21 without adaptive
+         sampling) where a pilot (adaptive sampling's, or else one of 2^13 camera paths)
          finds most of the light arriving after the first bounce (once per scene); ``on``
-         always; ``off`` never. Gradient passes sample the BSDF alone. (Default: ``auto``)
+         always; ``off`` never. Guided renders sample every pixel alike. Gradient passes
+         sample the BSDF alone. (Default: ``auto``)
 
      * - hide_emitters
        - |bool|
@@ -199,6 +201,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         self.skip_constant_nee = not parse_bool(props, "draaw_v4", "constant_env_nee", False)
         self.want_depth = False        # set by draaw_mi.integrators.adaptive_sampling around its pilot pass
         self.last_depth = None
+        self.want_first = False        # ... and this, where the pilot decides on guiding
+        self.last_first = None
         self.init_emission_split(props)
         self._said_gates = set()         # the film / lens notes already warned (_say_sensor_gates)
         mode = str(props.get("guiding", "auto"))
@@ -310,33 +314,48 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
     # ------------------------------------------------- adaptive sampling (primal renders)
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (no AOVs, a plain
-        seed) the unbiased two-pass adaptive render of
+        seed, no guide) the unbiased two-pass adaptive render of
         :mod:`draaw_mi.integrators.adaptive_sampling`, otherwise ``RBIntegrator.render`` (or,
         under a pixel filter other than box with a light's edges in view,
-        :func:`~draaw_mi.integrators.film_splat.render_uniform`, which splats the split rays)."""
+        :func:`~draaw_mi.integrators.film_splat.render_uniform`, which splats the split rays).
+
+        Guiding (:meth:`GuideCache.for_primal
+        <draaw_mi.integrators.guiding.GuideCache.for_primal>`): where the adaptive pilot runs
+        and ``auto`` has not decided on the scene yet, the pilot measures the indirect share
+        and the main pass is guided if it calls for it. A guided render samples every pixel
+        alike: with the guide, adaptive allocation from a pilot of spp/16 raised the error
+        (glossy panel, 128^2 / 256^2: 0.63 / 0.43x ``path``'s MSE adaptive, 0.46 / 0.33x
+        uniform; speed_suite.md)."""
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         self._say_sensor_gates(sensor)
         n = int(spp) if spp else int(sensor.sampler().sample_count())
+        adaptive = self.adaptive_applies(scene, sensor, seed, n, develop)
+        decide = None
         # (not in recordings: a guide is learned from read-back results; not with media, which
         # V4 hands to volume.py)
         if self.guides.mode != "off" and not dr.flag(dr.JitFlag.FreezingScope) \
                 and not self.features(scene)["media"]:
-            self._guide = self.guides.for_render(self, scene, sensor, n)
+            self._guide, decide = self.guides.for_primal(self, scene, sensor, n, adaptive)
         try:
-            return self._render_primal(scene, sensor, seed, spp, n, develop, evaluate)
+            if adaptive and self._guide is None:
+                alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
+                return ads.render_adaptive(self, scene, sensor, seed, n, alpha, decide)
+            return self._render_uniform(scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._guide = None
 
-    def _render_primal(self, scene, sensor, seed, spp, n, develop, evaluate):
+    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True) -> bool:
+        """Whether a primal render of ``n`` spp with ``seed`` renders adaptively (unless a
+        guide is in use; :meth:`render_primal`)."""
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
-        if (self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
-                and self.max_depth > 1
-                and isinstance(seed, int) and ads.supported(sensor)
-                and not ads.pilot_can_miss(scene)):
-            alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
-            return ads.render_adaptive(self, scene, sensor, seed, n, alpha)
+        return bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
+                    and self.max_depth > 1
+                    and isinstance(seed, int) and ads.supported(sensor)
+                    and not ads.pilot_can_miss(scene))
+
+    def _render_uniform(self, scene, sensor, seed, spp, develop, evaluate):
         try:
             if (develop and not sensor.film().rfilter().is_box_filter()
                     and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
@@ -414,6 +433,10 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
         prev_delta = mi.Bool(True)
 
         sdf = self.sdf_hook(scene, feats)            # SDF objects (feature 'sdf')
+
+        # the light gathered by the first vertex (R + G + B), for adaptive sampling's pilot
+        # where it decides on guiding (guiding.indirect_share's measure, at no extra pass)
+        L_first = mi.Float(0.0) if primal and self.want_first else None
 
         aovs = self.zero_aovs()
         if dr.hint(primal and len(self.aovs) > 0, mode="scalar"):
@@ -509,6 +532,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
                 bs, bsdf_w = guiding.mix_sample(guide, bsdf, ctx, si, bs, bsdf_w, sampler, guidable)
 
             L = (L + Le + Lr_dir) if primal else (L - Le - Lr_dir)
+            if dr.hint(L_first is not None, mode="scalar"):
+                L_first = dr.select(depth == 0, L.x + L.y + L.z, L_first)
             ray_next = si.spawn_ray(si.to_world(bs.wo))
             β *= bsdf_w
             if dr.hint(rec is not None, mode="scalar"):
@@ -549,6 +574,8 @@ class DraawV4Integrator(emission_split.EmissionSplitting):
 
         if dr.hint(primal and self.want_depth, mode="scalar"):
             self.last_depth = depth        # path lengths, for adaptive sampling's cost model
+        if dr.hint(L_first is not None, mode="scalar"):
+            self.last_first = L_first
         return (L if primal else δL), valid, aovs, L
 
 

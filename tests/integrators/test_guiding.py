@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from integrators_helpers import (ad_gradient, check_same_expectation, fd_gradient, integrator, mi, rs,
-                                 seed_stack)
+from integrators_helpers import (ad_gradient, check_same_expectation, fd_gradient, integrator, mi, render_np,
+                                 rs, seed_stack)
 
 from draaw_mi.bench import suite as ss
-from draaw_mi.integrators import guiding
+from draaw_mi.integrators import adaptive_sampling, guiding
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def panel():
 
 
 def test_guided_renders_keep_paths_expectation(panel):
-    """Per pixel over 12 seeds at 256 spp (adaptive: the pilot and the main pass both guided).
+    """Per pixel over 12 seeds at 256 spp ("on": every render guided, every pixel alike).
     Leaving the guide's density out of the MIS weights against next-event estimation (or
     weighting a guided sample by the BSDF's pdf alone) moves the image by many errors."""
     integ = integrator("draaw_v4", max_depth=5, guiding="on")
@@ -70,6 +70,45 @@ def test_guiding_lowers_the_error_behind_the_panel():
 
 
 @pytest.mark.parametrize("name, guided", [("glossy_diffuse", True), ("cornell", False)])
+def test_adaptive_samplings_pilot_decides_on_guiding(name, guided, monkeypatch):
+    """An adaptive "auto" render reads the indirect share from its pilot's extra per-pixel sum
+    (no pilot of its own runs): within 0.05 of :func:`guiding.indirect_share`'s 2^15 paths
+    (measured 0.000 / 0.008 apart: 1.000 / 0.225); the guided main pass samples every pixel
+    alike. Taking the light after the second vertex for the first's (``depth == 1``) puts
+    the panel at 0.15; a pilot that never calls ``decide`` leaves no share."""
+    scene = ss.load(name, 32)
+    monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)         # at 32x32, 64 spp
+    separate = guiding.indirect_share
+    monkeypatch.setattr(guiding, "indirect_share", lambda *a, **k: pytest.fail("a separate pilot ran"))
+    allocations = []
+    allocate = adaptive_sampling.allocate
+    monkeypatch.setattr(adaptive_sampling, "allocate", lambda *a, **k: allocations.append(1) or allocate(*a, **k))
+    integ = integrator("draaw_v4", max_depth=5)
+    img = render_np(scene, integ, 64, 0)
+    key = integ.selection_key(scene)
+    share = integ.guides.share(key)
+    assert share is not None and np.isfinite(img).all()
+    assert abs(share - separate(integ, scene, 1 << 15)) < 0.05, share
+    assert (share >= guiding.SHARE_MIN) == guided
+    assert (integ.guides.guide(integ, scene, key) is not None) == guided
+    if guided:
+        assert allocations == []                 # the guided main pass: uniform
+
+
+def test_a_first_render_decided_by_the_pilot_keeps_paths_expectation(panel, monkeypatch):
+    """Each seed a fresh integrator, so each render is the scene's first: an unguided pilot of
+    spp/16, then (its share 1.0) a guided uniform main pass, mixed with the constant weights
+    1/16 and 15/16. Popping the pilot's first sum for the decision instead of its last
+    (``sums.pop(0)``: the red channel) puts 32 % of pixels beyond 3 sigma."""
+    monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
+    K = 12
+    v4 = np.stack([render_np(panel, integrator("draaw_v4", max_depth=5), 256, s) for s in range(K)])
+    ref = seed_stack(panel, integrator("path", max_depth=5), 256, range(100, 100 + K))
+    assert np.isfinite(v4).all()
+    check_same_expectation(ref, v4, max_frac3=0.03)
+
+
+@pytest.mark.parametrize("name, guided", [("glossy_diffuse", True), ("cornell", False)])
 def test_auto_guides_where_light_arrives_indirectly(name, guided):
     scene = ss.load(name, 16)
     integ = integrator("draaw_v4", max_depth=5)
@@ -81,13 +120,16 @@ def test_auto_guides_where_light_arrives_indirectly(name, guided):
 
 
 def test_auto_looks_for_a_guide_only_in_renders_worth_its_pilot():
-    """From 64 spp and 2^20 samples (the pilot's 2^15 paths at most 3 % of them): a preview,
-    a fit's iteration or a small test render pays no pilot; "on" always guides."""
+    """From 64 spp and 2^21 samples (the decision pilot's 2^13 paths, 20-40 ms, at most ~2 %
+    of the render), or 2^20 where adaptive sampling's pilot decides at no extra pass: a
+    preview, a fit's iteration or a small test render pays no pilot; "on" always guides."""
     small, large = ss.load("glossy_diffuse", 16), ss.load("glossy_diffuse", 96)
     auto = integrator("draaw_v4", max_depth=5)
     wanted = auto.guides.wanted
     assert wanted(large.sensors()[0], 256) and not wanted(large.sensors()[0], 32)   # 2.4M samples
     assert not wanted(large.sensors()[0], 128)                                       # 1.2M
+    assert wanted(large.sensors()[0], 128, piloted=True)
+    assert not wanted(large.sensors()[0], 64, piloted=True)                          # 0.6M
     assert not wanted(small.sensors()[0], 1024)                   # 262144 samples
     mi.render(small, integrator=auto, spp=64, seed=0)
     assert auto.guides.share(auto.selection_key(small)) is None    # no pilot ran
