@@ -233,10 +233,7 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             first = lambda: pixel * dr.opaque(mi.UInt32, counts)             # noqa: E731
             count_of = lambda: dr.opaque(mi.Float, counts)                   # noqa: E731
         else:
-            # pixel of every sample, inside the kernel (no per-sample array: memory does not
-            # grow with spp): the last pixel whose first sample index is <= the sample index
-            starts = mi.UInt32(np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32))
-            pixel = dr.binary_search(0, w * h, lambda i: dr.gather(mi.UInt32, starts, i) <= idx) - 1
+            pixel, starts = _pixel_of_samples(idx, counts)
             first = lambda: dr.gather(mi.UInt32, starts, pixel)              # noqa: E731
             count_of = lambda: dr.gather(mi.Float, mi.Float(counts.astype(np.float32)), pixel)  # noqa: E731
         y = pixel // w
@@ -307,6 +304,36 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
         dr.eval(sums, filtered)      # one kernel traces the paths
     return sums, filtered
+
+
+def _pixel_of_samples(idx: mi.UInt32, counts: np.ndarray):
+    """``(pixel, starts)``: the pixel of every sample index ``idx``, found inside the kernel
+    (no per-sample array: memory does not grow with spp), and the pixels' first sample
+    indices (``counts[p]`` contiguous samples from ``starts[p]``; ``counts`` >= 1).
+
+    A table of the pixel that holds every ``block``-th sample, ``block`` three times the
+    smallest count, leaves each sample at most three pixels past its block's: two bisection
+    steps. A binary search over all pixels (16 dependent gathers at 256^2, 10 % of the
+    monkey's main pass at 128^2) remains where that table would hold more entries than
+    there are pixels (a smallest count under a third of the mean).
+
+    >>> pixel, _ = _pixel_of_samples(dr.arange(mi.UInt32, 12), np.array([2, 5, 1, 4], np.uint32))
+    >>> pixel
+    [0, 0, 1, 1, 1, 1, 1, 2, 3, 3, 3, 3]
+    """
+    n = len(counts)
+    first = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
+    starts = mi.UInt32(first.astype(np.uint32))
+    block = 3 * int(counts.min())
+    if -(-int(first[-1]) // block) > n:
+        return dr.binary_search(0, n, lambda i: dr.gather(mi.UInt32, starts, i) <= idx) - 1, starts
+    table = np.searchsorted(first, np.arange(0, first[-1], block), side="right") - 1
+    pixel = dr.gather(mi.UInt32, mi.UInt32(table.astype(np.uint32)), idx // dr.opaque(mi.UInt32, block))
+    for step in (2, 1):           # the last pixel whose first sample is at or before idx
+        # (starts[n] = the total > idx: a candidate past the last pixel is never taken)
+        later = dr.gather(mi.UInt32, starts, dr.minimum(pixel + step, n)) <= idx
+        pixel = dr.select(later, pixel + step, pixel)
+    return pixel, starts
 
 
 def _box3(a: np.ndarray) -> np.ndarray:

@@ -299,3 +299,26 @@ def test_an_adaptive_render_keeps_its_passes_in_drjit(rfilter):
         tracemalloc.stop()
     assert img.shape == (128, 128, 3) and np.isfinite(np.array(img)).all()
     assert peak / 128 ** 2 < 100, peak / 128 ** 2
+
+
+def test_every_sample_finds_its_pixel(monkeypatch):
+    """``_pixel_of_samples`` against ``np.repeat`` on 200 random count maps, through the block
+    table (smallest count at least a third of the mean) and the full binary search (the
+    rest). A table whose block is four times the smallest count (a sample four pixels past
+    its block's, beyond two bisection steps) or a bisection that stops after one step
+    misplaces samples here."""
+    import drjit as dr
+    rng = np.random.default_rng(0)
+    searched = []
+    search = dr.binary_search
+    monkeypatch.setattr(dr, "binary_search", lambda *a: searched.append(1) or search(*a))
+    tables = 0
+    for _ in range(200):
+        n, lo = int(rng.integers(1, 300)), int(rng.integers(1, 40))
+        counts = rng.integers(lo, lo * int(rng.integers(1, 12)) + 1, n).astype(np.uint32)
+        before = len(searched)
+        pixel, starts = ads._pixel_of_samples(dr.arange(mi.UInt32, int(counts.sum())), counts)
+        tables += len(searched) == before
+        assert (np.array(pixel) == np.repeat(np.arange(n), counts)).all(), counts
+        assert (np.array(starts) == np.concatenate([[0], np.cumsum(counts)])).all()
+    assert 20 < tables < 180, tables          # both ways taken
