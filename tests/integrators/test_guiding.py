@@ -173,7 +173,7 @@ def test_light_gradient_with_guiding_on_matches_finite_differences(panel):
     estimate d(mean image)/d(lamp radiance)."""
     key = "lamp.emitter.radiance.value"
     integ = integrator("draaw_v4", max_depth=4, guiding="on")
-    # the full training (2^18 paths), not the 1/48 of a 16x16 render's samples: a weak guide
+    # the full training (TRAIN_PATHS), not the 1/32 of a 16x16 render's samples: a weak guide
     # gives these heavy-tailed renders a skewed spread that six seeds do not average out
     assert integ.guides.guide(integ, panel, integ.selection_key(panel)) is not None
     n = 6
@@ -194,7 +194,7 @@ def test_training_traces_in_bounded_batches(panel, monkeypatch):
     monkeypatch.setattr(guiding, "_trace", lambda i, s, n, *a: (sizes.append(n), real(i, s, n, *a))[1])
     integ = integrator("draaw_v4", max_depth=5, guiding="on")
     assert guiding.learn_guide(integ, panel, guiding.TRAIN_PATHS) is not None
-    assert max(sizes) <= guiding.CHUNK_PATHS and sum(sizes) == guiding.TRAIN_PATHS // 2 + guiding.TRAIN_PATHS
+    assert max(sizes) <= guiding.CHUNK_PATHS and sum(sizes) == guiding.TRAIN_PATHS
     assert guiding._chunks(100_000) == [50_000, 50_000] and sum(guiding._chunks(65_537)) == 65_537
 
 
