@@ -81,7 +81,10 @@ GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is 
 # where adaptive sampling pays, 0.15 in the room lit through a doorway and 0.09-0.11 on the
 # floor lit by a glossy panel, where it cost 1.8x the error of a uniform render.
 AGREEMENT_MIN = 0.35
-AGREEMENT_PIXELS = 1 << 16  # pixels the agreement is computed on, at most
+# Computed on 2^12 pixels at most: on the speed suite at 128^2 and 256^2 the statistic moves
+# by 0.04 at most from its value on 2^16 (0.65-0.95 and 0.09-0.16, against the 0.35 between),
+# and the ranking takes 1.5 ms instead of 27 ms at 256^2 (3 % of a fast scene's render).
+AGREEMENT_PIXELS = 1 << 12
 
 
 def _ranks(a: np.ndarray) -> np.ndarray:
@@ -118,8 +121,8 @@ def pilot_agreement(halves: np.ndarray) -> float:
     True
     """
     a, b = (np.sqrt(_box3(np.asarray(halves[..., i], np.float32))).ravel() for i in range(2))
-    step = -(-a.size // AGREEMENT_PIXELS)       # every step-th pixel: the statistic's noise
-    a, b = a[::step], b[::step]                 # at 2^16 pixels is ~0.004
+    step = -(-a.size // AGREEMENT_PIXELS)       # every step-th pixel
+    a, b = a[::step], b[::step]
     n = a.size
     if n < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return 1.0
