@@ -136,28 +136,25 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
 
 
 def learning_time(integ, scene, spp: int) -> float:
-    """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide
-    (:mod:`draaw_mi.integrators.guiding`), measured on a fresh cache that then replaces the
-    integrator's: where adaptive sampling's pilot decides (its share measured by the warm-up
-    render, the pilot itself being part of every render), the training passes; elsewhere the
-    decision pilot and the training passes. 0 for other integrators and ``guiding = "off"``."""
+    """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide for a render of
+    ``spp`` (:meth:`GuideCache.for_primal <draaw_mi.integrators.guiding.GuideCache.for_primal>`),
+    measured on a fresh cache that then replaces the integrator's: where adaptive sampling's
+    pilot decides, the training pass (the share is the one the warm-up render's pilot read;
+    the pilot itself is part of every render); elsewhere the decision pilot and the training
+    pass. The timed renders are then the scene's later ones: a guided scene's are guided
+    throughout, where its first render's pilot (1/16 of the samples) was not. 0 for other
+    integrators, ``guiding = "off"`` and scenes with media."""
     guides = getattr(integ, "guides", None)
-    if guides is None or guides.mode == "off":
+    if guides is None or guides.mode == "off" or integ.features(scene)["media"]:
         return 0.0
     fresh = type(guides)(guides.mode)
     sensor = scene.sensors()[0]
-    key = integ.selection_key(scene)
-    piloted = integ.adaptive_applies(scene, sensor, 1, spp) and fresh.wanted(sensor, spp, piloted=True)
-    if not piloted and not fresh.wanted(sensor, spp):   # a render of spp looks for no guide
-        return 0.0
+    share = guides.share(integ.selection_key(scene))       # None: the warm-up did not decide
     t = time.perf_counter()
-    if piloted and fresh.pending(key):
-        w, h = (int(v) for v in sensor.film().crop_size())
-        share = guides.share(key)                      # (None: the warm-up did not decide)
-        share = guiding.indirect_share(integ, scene) if share is None else share
-        fresh.decide(integ, scene, key, share, spp * w * h)
-    else:
-        fresh.for_render(integ, scene, sensor, spp)    # what a render of spp learns
+    _, decide = fresh.for_primal(integ, scene, sensor, spp, integ.adaptive_applies(scene, sensor, 1, spp))
+    if decide is not None:
+        decide(guiding.indirect_share(integ, scene) if share is None else share)
+        integ._guide = None          # (decide sets it for the main pass; none follows here)
     dr.sync_thread()
     integ.guides = fresh
     return time.perf_counter() - t
@@ -179,7 +176,7 @@ def bench(name: str, res: int, args) -> dict | None:
     integs = [mi.load_dict(parse_integrator(s, depth)) for s in specs]
     for it in integs:
         render(scene, it, args.spp, 1)                 # compile
-    # V4's guide (its pilot and training passes) is learned once per scene: counted in every
+    # V4's guide (its decision and training pass) is learned once per scene: counted in every
     # render's time, as if each were the scene's first
     learn = [learning_time(it, scene, args.spp) for it in integs]
     times = [[] for _ in specs]
@@ -232,7 +229,7 @@ def report(results: list[dict], args) -> str:
            f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "
            f"{time.strftime('%Y-%m-%d %H:%M')}  ",
            f"Each scene's own pixel filter (box unless its row says), sampler `{args.sampler}` "
-           f"for every integrator; V4's guide learning (decision pilot, training passes) added to "
+           f"for every integrator; V4's guide learning (its decision, training pass) added to "
            f"each of its render times; reference `path` at "
            f"{args.ref_spp} spp (its own noise subtracted from every MSE); {args.repeats} "
            f"interleaved cycles at {args.spp} spp, one seed per render.", "",

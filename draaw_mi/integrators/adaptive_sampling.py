@@ -23,8 +23,9 @@
 
 Same seed, same image (up to the order of atomic additions into the per-pixel sums): the
 pilot and main passes use seeds derived from ``seed``, and the rounding generator is seeded
-from it too. Memory does not grow with spp: each sample finds its pixel by a binary search
-over the per-pixel start indices inside the kernel and is summed into per-pixel totals.
+from it too. Memory does not grow with spp: each sample finds its pixel inside the kernel
+(:func:`_pixel_of_samples`: a table of every few samples' pixels and two bisection steps
+over the per-pixel start indices) and is summed into per-pixel totals.
 
 >>> import numpy as np
 >>> m = allocate(np.array([0.0, 1.0, 4.0, 0.0]).reshape(1, 4), budget=16, m_min=1, seed=0,
@@ -34,6 +35,8 @@ over the per-pixel start indices inside the kernel and is summed into per-pixel 
 """
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -41,6 +44,7 @@ import numpy as np
 from .emission_split import PrimaryRays, film_mapping
 from .features import sampler_plugin, scene_shapes
 from .film_splat import FilmSplat
+from .guiding import share_after
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
@@ -81,9 +85,10 @@ GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is 
 # where adaptive sampling pays, 0.15 in the room lit through a doorway and 0.09-0.11 on the
 # floor lit by a glossy panel, where it cost 1.8x the error of a uniform render.
 AGREEMENT_MIN = 0.35
-# Computed on 2^12 pixels at most: on the speed suite at 128^2 and 256^2 the statistic moves
-# by 0.04 at most from its value on 2^16 (0.65-0.95 and 0.09-0.16, against the 0.35 between),
-# and the ranking takes 1.5 ms instead of 27 ms at 256^2 (3 % of a fast scene's render).
+# Computed on 2^12 pixels at most (every s-th row and column): on the speed suite at 128^2
+# and 256^2 the statistic moves by 0.04 at most from its value on 2^16 pixels (0.65-0.95 and
+# 0.09-0.16, against the 0.35 between), and the ranking takes 2 ms instead of 27 ms at 256^2
+# (3 % of a fast scene's render).
 AGREEMENT_PIXELS = 1 << 12
 
 
@@ -120,9 +125,9 @@ def pilot_agreement(halves: np.ndarray) -> float:
     >>> pilot_agreement(dark) < 0.35
     True
     """
-    a, b = (np.sqrt(_box3(np.asarray(halves[..., i], np.float32))).ravel() for i in range(2))
-    step = -(-a.size // AGREEMENT_PIXELS)       # every step-th pixel
-    a, b = a[::step], b[::step]
+    a, b = (np.sqrt(_box3(np.asarray(halves[..., i], np.float32))) for i in range(2))
+    s = math.ceil(math.sqrt(a.size / AGREEMENT_PIXELS))    # every s-th row and column
+    a, b = a[::s, ::s].ravel(), b[::s, ::s].ravel()
     n = a.size
     if n < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return 1.0
@@ -211,7 +216,7 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
-               moments: bool, alpha: bool, pilot: bool = False, first: bool = False):
+               moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
@@ -219,8 +224,9 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
     ``pilot`` (uniform ``counts``): what :func:`render_adaptive` reads in as few channels as
     it can: R, G, B, [hits if ``alpha``], path lengths, the sum of R^2 + G^2 + B^2, and of the
     channel sum ``s = R + G + B``: ``s`` and ``s^2`` over the odd samples, ``s^2`` over the
-    even ones; with ``first`` (a ``draaw_v4`` pilot) last, the light gathered at the paths'
-    first vertices, R + G + B. Under a filter other than box the image is the splatted one
+    even ones; with ``gather_first`` (a ``draaw_v4`` pilot) last, the light gathered at the
+    paths' first vertices, R + G + B (all of it where the integrator does not report it:
+    V4's media paths). Under a filter other than box the image is the splatted one
     (``film_splat``)."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
@@ -257,24 +263,25 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             splat = FilmSplat(film)
             share = dr.rcp(count_of())
         reports_depth = (moments or pilot) and hasattr(integrator, "want_depth")     # draaw_v4
-        if reports_depth:
-            integrator.want_depth = True
-        if first:
-            integrator.want_first = True
+        reports_first = pilot and gather_first and hasattr(integrator, "want_first")  # draaw_v4
         set_primary = getattr(integrator, "set_primary_rays", None)      # draaw_v4
-        if set_primary is not None:       # each ray's pixel, for its emission splitting
-            set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
-                                    splat=None if splat is None else (splat, share, pos)))
         try:
+            if reports_depth:
+                integrator.want_depth = True
+            if reports_first:
+                integrator.want_first = True
+            if set_primary is not None:       # each ray's pixel, for its emission splitting
+                set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
+                                        splat=None if splat is None else (splat, share, pos)))
             L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
                                                state_in=None, active=mi.Bool(True))
             depth = integrator.last_depth if reports_depth else None   # segments per path
-            light_first = integrator.last_first if first else None
+            light_first = integrator.last_first if reports_first else None
         finally:
             if reports_depth:
                 integrator.want_depth, integrator.last_depth = False, None
-            if first:
+            if reports_first:
                 integrator.want_first, integrator.last_first = False, None
             if set_primary is not None:
                 set_primary(None)
@@ -293,8 +300,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             chans += [hits] if alpha else []
             chans += [lengths, dr.squared_norm(value), dr.select(odd, v, 0.0),
                       dr.select(odd, v * v, 0.0), dr.select(odd, 0.0, v * v)]
-            if first:
-                chans += [light_first * ((weight.x + weight.y + weight.z) / 3.0)]
+            if gather_first:
+                chans += [v if light_first is None else light_first * ((weight.x + weight.y + weight.z) / 3.0)]
         elif moments or alpha:
             chans += [hits]
             if moments:
@@ -327,8 +334,8 @@ def _pixel_of_samples(idx: mi.UInt32, counts: np.ndarray):
     n = len(counts)
     first = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
     starts = mi.UInt32(first.astype(np.uint32))
-    block = 3 * int(counts.min())
-    if -(-int(first[-1]) // block) > n:
+    block = min(3 * int(counts.min()), int(first[-1])) if n else 0
+    if block == 0 or -(-int(first[-1]) // block) > n:
         return dr.binary_search(0, n, lambda i: dr.gather(mi.UInt32, starts, i) <= idx) - 1, starts
     table = np.searchsorted(first, np.arange(0, first[-1], block), side="right") - 1
     pixel = dr.gather(mi.UInt32, mi.UInt32(table.astype(np.uint32)), idx // dr.opaque(mi.UInt32, block))
@@ -394,7 +401,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor.
 
     ``decide`` (``draaw_v4``, guiding's first decision on a scene): called with the pilot's
-    indirect share (:func:`indirect_share`); where it returns true (the main pass is now
+    indirect share (:func:`pilot_indirect_share`); where it returns true (the main pass is now
     guided), the main pass samples every pixel alike.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
@@ -406,8 +413,8 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     rest = spp - a
     wp = a / spp
     sums, filtered = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
-                                first=decide is not None)
-    guided = decide is not None and decide(indirect_share(sums[:3], sums.pop()))
+                                gather_first=decide is not None)
+    guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
     var, segments, halves = _pilot_maps(sums, a, alpha, h, w)     # (keeps only the image's sums)
     channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
@@ -443,17 +450,18 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     return mi.TensorXf(out, (h, w, channels))
 
 
-def indirect_share(rgb: list, first) -> float:
+def pilot_indirect_share(rgb: list, first) -> float:
     """Share of a pilot's light that arrives after the paths' first vertex, from its per-pixel
-    sums of R, G, B and of the light gathered at the first vertex (R + G + B); 0 for a black
-    (or non-finite) image, as :func:`draaw_mi.integrators.guiding.indirect_share`.
+    sums of R, G, B and of the light gathered at the first vertex (R + G + B), as
+    :func:`~draaw_mi.integrators.guiding.indirect_share` measures it from paths of its own.
+    Under a filter other than box the light seen directly is splatted apart (``film_splat``)
+    and in neither sum, so the share reads a little higher there.
 
-    >>> round(indirect_share([mi.Float(1.0, 2.0)] * 3, mi.Float(1.5, 3.0)), 2)
+    >>> round(pilot_indirect_share([mi.Float(1.0, 2.0)] * 3, mi.Float(1.5, 3.0)), 2)
     0.5
     """
     total = float(dr.sum(rgb[0] + rgb[1] + rgb[2])[0])
-    after = total - float(dr.sum(first)[0])
-    return after / total if total > 0 and np.isfinite(total) else 0.0
+    return share_after(total, total - float(dr.sum(first)[0]))
 
 
 def _pilot_maps(sums: list, n: int, alpha: bool, h: int, w: int):

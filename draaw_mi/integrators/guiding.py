@@ -34,12 +34,13 @@ after the first bounce decides; guiding is on from :data:`SHARE_MIN` up. Adaptiv
 pilot measures it at no extra pass in renders of at least 64 spp and 2^20 samples (its
 spp/16 samples gather the first vertex's light in one more per-pixel sum; the main pass is
 then guided); other renders of at least 64 spp and 2^21 samples run :func:`indirect_share`,
-a pilot of :data:`DECIDE_PATHS` camera paths (20-40 ms at 128^2: 5-8 % of a 64-spp render,
-which is why the piloted decision comes first). The share is 1.0
-behind the glossy panel; 0.67 in the thesis scene, where guiding doubled the error at 256^2,
-its light being point-light glints on a near-mirror floor; 0.45 in the room lit through a
-doorway, 0.25-0.35 in the Cornell box and the open scenes of the speed suite). The training passes
-take at most the render's samples / :data:`TRAIN_SHARE` paths.
+a pilot of :data:`DECIDE_PATHS` camera paths (18-43 ms on the speed suite's scenes: 5-8 %
+of a 64-spp render at 128^2, 2.5-4 % at 2^21 samples, which is why the piloted decision comes
+first). The share is 1.0 behind the glossy panel; 0.67 in the thesis scene, where guiding
+doubled the error at 256^2, its light being point-light glints on a near-mirror floor; 0.42
+in the room lit through a doorway, 0.22-0.35 in the Cornell box and the open scenes of the
+speed suite. The training pass takes at most the render's samples / :data:`TRAIN_SHARE`
+paths (and at least :data:`MIN_TRAIN_PATHS`).
 """
 from __future__ import annotations
 
@@ -187,15 +188,19 @@ def _incident(rec: Records):
     return valid, dr.select(dr.isfinite(val), val, 0.0)
 
 
+def share_after(total: float, after: float) -> float:
+    """The indirect share ``after / total``; 0 for a black (or non-finite) image."""
+    return after / total if total > 0 and math.isfinite(total) else 0.0
+
+
 def indirect_share(integrator, scene: mi.Scene, paths: int = DECIDE_PATHS) -> float:
     """Share of the light of ``paths`` camera paths that arrives after their first vertex
-    (0 for a black image)."""
+    (:func:`share_after`)."""
     rec = _trace(integrator, scene, paths, GUIDE_SEED ^ 0xD)
     first = dr.arange(mi.UInt32, rec.n) * rec.depth
     L0 = dr.select(dr.gather(mi.Float, rec.q, first) > 0, dr.gather(mi.Float, rec.L, first), rec.L_end)
     total = float(dr.sum(rec.L_end)[0]) if dr.width(rec.L_end) else 0.0
-    after = float(dr.sum(rec.L_end - L0)[0])
-    return after / total if total > 0 and math.isfinite(total) else 0.0
+    return share_after(total, float(dr.sum(rec.L_end - L0)[0]))
 
 
 def _histogram(rec: Records, lo: np.ndarray, scale: np.ndarray, res: int) -> np.ndarray:
@@ -285,9 +290,10 @@ def mix_pdf(guide: Guide, p, d, pdf_bsdf, guidable):
 
 class GuideCache:
     """``draaw_v4``'s guides, one per scene (its ``selection_key``), learned before the first
-    guided primal render and kept for the scene's lifetime, as the learned light table.
-    ``mode``: ``"auto"`` (guide where :func:`indirect_share` >= :data:`SHARE_MIN`), ``"on"``
-    or ``"off"``."""
+    guided primal render or between its adaptive pilot and main pass (:meth:`for_primal`),
+    and kept for the scene's lifetime, as the learned light table. ``mode``: ``"auto"``
+    (guide where the indirect share, from adaptive sampling's pilot or
+    :func:`indirect_share`, is at least :data:`SHARE_MIN`), ``"on"`` or ``"off"``."""
 
     def __init__(self, mode: str):
         self.mode = mode
@@ -296,8 +302,8 @@ class GuideCache:
     def wanted(self, sensor: mi.Sensor, spp: int, piloted: bool = False) -> bool:
         """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
         guide: always with ``"on"``; with ``"auto"`` from :data:`AUTO_MIN_SPP` spp and
-        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs at most about
-        2 % of the render's time once per scene (previews, fits' iterations and small test
+        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs 2.5-4 % of the
+        render's time once per scene (previews, fits' iterations and small test
         renders do not pay it), or from :data:`PILOTED_MIN_SAMPLES` when the decision comes
         free with adaptive sampling's pilot (``piloted``: :meth:`decide`)."""
         if self.mode != "auto":

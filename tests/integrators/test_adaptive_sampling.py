@@ -322,3 +322,18 @@ def test_every_sample_finds_its_pixel(monkeypatch):
         assert (np.array(pixel) == np.repeat(np.arange(n), counts)).all(), counts
         assert (np.array(starts) == np.concatenate([[0], np.cumsum(counts)])).all()
     assert 20 < tables < 180, tables          # both ways taken
+
+
+def test_spp_maps_render_with_other_path_replay_integrators():
+    """``render_spp_map`` asks ``draaw_v4`` for path lengths and first-vertex light only where
+    the integrator has them: Mitsuba's ``prb`` renders a map and its moments (lengths 1).
+    Asking every integrator for first-vertex light (as when the flag was shadowed by the
+    pixel-start helper of the same name, so every pass asked) fails here: ``prb`` has no
+    ``last_first``."""
+    scene = mi.load_dict(rs.cornell_draaw(res=8, spp=4))
+    integ = mi.load_dict({"type": "prb", "max_depth": 3})
+    counts = np.full((8, 8), 4)
+    img = ads.render_spp_map(integ, scene, scene.sensors()[0], counts, seed=1)
+    mean, var, alpha, lengths = ads.render_spp_map(integ, scene, scene.sensors()[0], counts, seed=1, moments=True)
+    assert img.shape == (8, 8, 3) and np.isfinite(img).all() and img.mean() > 0
+    assert np.isfinite(var).all() and (lengths == 1).all()

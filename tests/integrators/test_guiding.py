@@ -74,8 +74,10 @@ def test_adaptive_samplings_pilot_decides_on_guiding(name, guided, monkeypatch):
     """An adaptive "auto" render reads the indirect share from its pilot's extra per-pixel sum
     (no pilot of its own runs): within 0.05 of :func:`guiding.indirect_share`'s 2^15 paths
     (measured 0.000 / 0.008 apart: 1.000 / 0.225); the guided main pass samples every pixel
-    alike. Taking the light after the second vertex for the first's (``depth == 1``) puts
-    the panel at 0.15; a pilot that never calls ``decide`` leaves no share."""
+    alike; only that first pilot carries the extra loop variable. Taking the light after the
+    second vertex for the first's (``depth == 1``) puts the panel at 0.15; a pilot that never
+    calls ``decide`` leaves no share; asking every pass (the flag shadowed by a helper of the
+    same name in ``_pass_sums``) fails the list of passes."""
     scene = ss.load(name, 32)
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)         # at 32x32, 64 spp
     separate = guiding.indirect_share
@@ -84,7 +86,14 @@ def test_adaptive_samplings_pilot_decides_on_guiding(name, guided, monkeypatch):
     allocate = adaptive_sampling.allocate
     monkeypatch.setattr(adaptive_sampling, "allocate", lambda *a, **k: allocations.append(1) or allocate(*a, **k))
     integ = integrator("draaw_v4", max_depth=5)
+    asked = []                    # whether each traced pass gathered the first vertex's light
+    sample = integ.sample
+    monkeypatch.setattr(integ, "sample", lambda *a, **k: asked.append(integ.want_first) or sample(*a, **k))
     img = render_np(scene, integ, 64, 0)
+    assert asked[0] and True not in asked[1:]    # the pilot only (then training, main pass)
+    n = len(asked)
+    render_np(scene, integ, 64, 1)
+    assert len(asked) > n and True not in asked[n:]   # decided: no pass asks again
     key = integ.selection_key(scene)
     share = integ.guides.share(key)
     assert share is not None and np.isfinite(img).all()
@@ -102,7 +111,12 @@ def test_a_first_render_decided_by_the_pilot_keeps_paths_expectation(panel, monk
     (``sums.pop(0)``: the red channel) puts 32 % of pixels beyond 3 sigma."""
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
     K = 12
-    v4 = np.stack([render_np(panel, integrator("draaw_v4", max_depth=5), 256, s) for s in range(K)])
+    integs = [integrator("draaw_v4", max_depth=5) for _ in range(K)]
+    v4 = np.stack([render_np(panel, integ, 256, s) for s, integ in enumerate(integs)])
+    for integ in integs:          # each decided by its pilot, and guided
+        key = integ.selection_key(panel)
+        assert integ.guides.share(key) >= guiding.SHARE_MIN
+        assert integ.guides.guide(integ, panel, key) is not None
     ref = seed_stack(panel, integrator("path", max_depth=5), 256, range(100, 100 + K))
     assert np.isfinite(v4).all()
     check_same_expectation(ref, v4, max_frac3=0.03)
