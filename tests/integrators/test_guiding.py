@@ -1,14 +1,21 @@
 """Guided paths in draaw_v4 (``integrators/guiding.py``): a grid of directional histograms
-learned from training passes, sampled in a one-sample mixture with the BSDF. Whatever the
+learned from a training pass, sampled in a one-sample mixture with the BSDF. Whatever the
 guide learned, the image keeps ``path``'s expectation; "auto" guides only where the light
 arrives indirectly; gradient passes sample the BSDF alone and still match finite differences."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from integrators_helpers import (ad_gradient, check_same_expectation, fd_gradient, integrator, mi, render_np,
-                                 rs, seed_stack)
+from integrators_helpers import (
+    ad_gradient,
+    check_same_expectation,
+    fd_gradient,
+    integrator,
+    mi,
+    render_np,
+    rs,
+    seed_stack,
+)
 
 from draaw_mi.bench import suite as ss
 from draaw_mi.integrators import adaptive_sampling, guiding
