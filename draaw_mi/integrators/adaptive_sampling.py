@@ -460,8 +460,9 @@ def pilot_indirect_share(rgb: list, first) -> float:
     >>> round(pilot_indirect_share([mi.Float(1.0, 2.0)] * 3, mi.Float(1.5, 3.0)), 2)
     0.5
     """
-    total = float(dr.sum(rgb[0] + rgb[1] + rgb[2])[0])
-    return share_after(total, total - float(dr.sum(first)[0]))
+    total, at_first = dr.sum(rgb[0] + rgb[1] + rgb[2]), dr.sum(first)
+    dr.eval(total, at_first)          # (one kernel for both sums)
+    return share_after(float(total[0]), float(total[0]) - float(at_first[0]))
 
 
 def _pilot_maps(sums: list, n: int, alpha: bool, h: int, w: int):
