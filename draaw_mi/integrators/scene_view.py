@@ -37,7 +37,7 @@ class SceneView:
 
     ``key``: the light-selection table's key (:func:`emitters_key`, as
     :meth:`DraawV4Integrator.selection_key
-    <draaw_mi.integrators.v4.DraawV4Integrator.selection_key>`); ``emitter_array``: the
+    <draaw_mi.integrators.light_tables.LightTables.selection_key>`); ``emitter_array``: the
     array (a cache entry that holds it keeps its index from going to another scene);
     ``sensor`` / ``film``: the first sensor and its film (``None`` without sensors);
     ``no_aperture``: whether that sensor samples no aperture (emission splitting needs it);
