@@ -9,16 +9,21 @@ Captures: cameras around the object, each photo under an environment map (sky, g
 and two coloured lamps) plus one lamp of its own. References: Mitsuba's ``path`` at
 ``--ref-spp``. Held out: a view none of the captures had, under a lamp none had.
 
-Where the lamps stand (``--layout``): ``ring`` (the recorded table) beside the cameras, so the
+Where the lamps stand (``--layout``): ``ring`` (the default) beside the cameras, so the
 tile never shows a highlight; ``sweep`` where each camera sees the lamp's mirror image, at a
 point that moves over the object; ``flash`` beside the camera; ``pairs`` two captures per
 camera position. ``--lamp softbox`` makes each lamp an area light (a highlight patch, not a
-point). ``--truth constant`` / ``scalar`` fit one material (as maps / as three scalars): can
-the captures tell it apart at all? ``results/svbrdf_fit.md`` has what each gives.
+point). ``patterns``: every lamp off, each capture's environment a pattern of bright bands
+(:func:`pattern_environment`). ``--truth constant`` / ``scalar`` fit one material (as maps /
+as three scalars): can the captures tell it apart at all? ``--capture-spp`` adds how well the
+fitted maps reproduce the captures (against the truth's renders, same seeds): a fit whose
+captures PSNR is low stopped short; one whose maps are wrong at a high captures PSNR met
+what the captures cannot tell apart. ``results/svbrdf_fit.md`` has what each gives.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/svbrdf_fit.py                       # the recorded table
+    .venv/bin/python benchmarks/svbrdf_fit.py --layout sweep --lamp softbox --ref-spp 4096 \
+        --iterations 600 --capture-spp 256                          # the recorded table
     .venv/bin/python benchmarks/svbrdf_fit.py --objects sphere --captures 4 8 16
     .venv/bin/python benchmarks/svbrdf_fit.py --objects tile --layout sweep --lamp softbox
 
@@ -141,7 +146,7 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
     if lamp == "point":
         return {"type": "point", "name": f"L{j}", "position": pos.tolist(), "intensity": 20.0}
     target = np.zeros(3)
-    if layout == "sweep" and obj == "tile":
+    if layout in ("sweep", "patterns") and obj == "tile":
         c = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
         target = np.array([(pos[0] + c[0]) / 2, (pos[1] + c[1]) / 2, 0.0])
     pos = target + SOFTBOX_DISTANCE * (pos - target)
@@ -151,7 +156,7 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
 
 
 #: how the captures' cameras and lamps are placed (``--layout``)
-LAYOUTS = ("flash", "pairs", "ring", "sweep")
+LAYOUTS = ("flash", "pairs", "patterns", "ring", "sweep")
 
 
 def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
@@ -161,7 +166,7 @@ def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
         i, k = i // 2, max(k // 2, 1)
     a = 2 * np.pi * (i + 0.5 * (i >= k)) / k
     if obj == "tile":
-        r = 1.6 if layout in ("ring", "sweep") else (0.5 if i % 2 else 1.0)      # a flash's mirror point on the tile
+        r = 1.6 if layout in ("ring", "sweep", "patterns") else (0.5 if i % 2 else 1.0)      # a flash's mirror point on the tile
         return {"origin": [r * np.cos(a), r * np.sin(a), 2.6 + 0.4 * (i % 2)], "target": [0, 0, 0],
                 "up": [0, 1, 0] if abs(np.cos(a)) > 0.5 else [1, 0, 0], "fov": 40}
     z = 1.2 if i % 2 else -0.4
@@ -175,7 +180,7 @@ def light_position(obj: str, j: int, k: int, layout: str = "ring") -> list:
     """Lamp ``j`` of ``k`` (+1 held out, ``j == k``): on a ring around the object (``ring``, and
     the held-out lamp always); ``flash``: beside capture ``j``'s camera (0.15 above it);
     ``pairs``: even captures a flash, odd ones a lamp on the ring."""
-    if layout == "sweep":
+    if layout in ("sweep", "patterns"):           # patterns: only the held-out lamp shines
         return highlight_lamp(obj, j, k)
     if j < k and (layout == "flash" or (layout == "pairs" and j % 2 == 0)):
         o = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
@@ -210,9 +215,48 @@ def highlight_lamp(obj: str, j: int, k: int) -> list:
     return (n + 3.5 * lamp_dir).tolist()
 
 
+#: ``patterns``: the gratings' spatial frequencies (periods over the sphere of directions,
+#: cycles per radian of the angle to the grating's axis): a lobe as wide as one period
+#: flattens it, a sharp one keeps it, so the contrast each texel reflects measures roughness
+PATTERN_FREQUENCIES = (6.0, 9.0, 13.0)
+PATTERN_SHARPNESS = 4.0
+PATTERN_PEAK = 4.0
+
+
+def pattern_environment(i: int, w: int = 128, h: int = 64) -> np.ndarray:
+    """``patterns``: capture ``i``'s environment (``(h, w, 3)``, lat-long like
+    :func:`environment`): bright bands, ``0.02 + PEAK exp(SHARPNESS (sin(f angle + 1.3 i) - 1))``
+    with ``angle`` the angle to an axis that moves over the sphere from capture to capture
+    (golden-angle spiral) and ``f`` cycling through :data:`PATTERN_FREQUENCIES`: a screen or a
+    lit wall showing stripes, as Aittala et al. (2013) photograph materials under, so that
+    every texel reflects some band in some capture. (Measured: worse than ``sweep``; the
+    environment's bands leave 4096-spp references and the fit's gradients far noisier than
+    softboxes do, results/svbrdf_fit.md.)"""
+    th = (np.arange(h) + .5) / h * np.pi
+    ph = (np.arange(w) + .5) / w * 2 * np.pi
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    d = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
+    golden = np.pi * (3 - np.sqrt(5))
+    z = 1 - 2 * (i + 0.5) / 16
+    axis = np.array([np.sqrt(1 - z * z) * np.cos(i * golden), np.sqrt(1 - z * z) * np.sin(i * golden), z])
+    f = PATTERN_FREQUENCIES[i % len(PATTERN_FREQUENCIES)]
+    angle = np.arccos(np.clip(d @ axis, -1, 1))
+    v = 0.02 + PATTERN_PEAK * np.exp(PATTERN_SHARPNESS * (np.sin(f * angle + 1.3 * i) - 1))
+    return np.repeat(v[..., None], 3, -1).astype(np.float32)
+
+
+def padded(env: np.ndarray):
+    """``env`` as Mitsuba's ``envmap`` holds it (``data``: one wrapped column each side)."""
+    return mi.TensorXf(np.ascontiguousarray(np.concatenate([env[:, -1:], env, env[:, :1]], 1)))
+
+
 def captures(obj: str, k: int, layout: str = "ring") -> list:
     """``k`` captures: camera ``i`` and lamp ``L{i}`` (the environment always on); lamp
-    ``L{k}`` is the held-out one."""
+    ``L{k}`` is the held-out one. ``patterns``: every lamp off and the environment replaced by
+    capture ``i``'s grating (:func:`pattern_environment`)."""
+    if layout == "patterns":
+        return [{"camera": camera(obj, i, k, layout), "lights": {f"L{j}": 0.0 for j in range(k + 1)},
+                 "params": {"env.data": padded(pattern_environment(i))}} for i in range(k)]
     return [{"camera": camera(obj, i, k, layout), "lights": {f"L{j}": float(j == i) for j in range(k + 1)}}
             for i in range(k)]
 
@@ -236,11 +280,12 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     t = time.perf_counter()
     caps = captures(obj, k, args.layout)
     refs = render_captures(ref_scene, caps, args.ref_spp, 1000)
-    held = [{"camera": camera(obj, k, k, "sweep" if args.layout == "sweep" else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
+    held = [{"camera": camera(obj, k, k, "sweep" if args.layout in ("sweep", "patterns") else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
     held_truth = render_captures(ref_scene, held, 256, 77)[0]
     t_ref = time.perf_counter() - t
     rows = []
     observed = None
+    truth_caps = None
     # one material as scalars: the fit is the same whatever the maps' method, so it runs once
     for method in (["scalars"] if args.truth == "scalar" else args.methods):
         start = (np.full((n, n, 3), 0.5, np.float32), np.full((n, n, 1), 0.5, np.float32),
@@ -260,12 +305,20 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
         seen = observed if observed is not None else np.ones((n, n), bool)
         v = {p: np.broadcast_to(r.values[p], t.shape) for p, t in zip(PARAMS, truth)}
         relit = psnr(render_captures(scene, held, 256, 77)[0], held_truth)
+        if args.capture_spp:
+            if truth_caps is None:
+                truth_caps = render_captures(ref_scene, caps, args.capture_spp, 500)
+            # the same seeds as the truth's renders: their noise largely cancels in the difference
+            fitted_caps = render_captures(scene, caps, args.capture_spp, 500)
+            capture_psnr = float(np.mean([psnr(a, b) for a, b in zip(fitted_caps, truth_caps)]))
+        else:
+            capture_psnr = float("nan")
         rows.append({"object": obj, "captures": k, "texture": n, "image": res, "method": method,
                      "albedo_psnr": float(-10 * np.log10(np.mean((v["obj.base_color"] - truth[0])[seen] ** 2))),
                      "rough_mae": float(np.abs(v["obj.roughness"] - truth[1])[seen].mean()),
                      "metal_mae": float(np.abs(v["obj.metallic"] - truth[2])[seen].mean()),
                      "mean_fit": [float(v[p][seen].mean()) for p in PARAMS],
-                     "relit_psnr": relit, "seconds": seconds, "ref_seconds": t_ref,
+                     "relit_psnr": relit, "capture_psnr": capture_psnr, "seconds": seconds, "ref_seconds": t_ref,
                      "observed": float(seen.mean()),
                      "unexplained": [i for i, c in enumerate(r.captures) if not c["explained"]]})
         print(rows[-1], flush=True)
@@ -292,6 +345,12 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=2)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--ref-spp", type=int, default=512)
+    ap.add_argument("--capture-spp", type=int, default=0,
+                    help="spp of the 'captures PSNR' column (0: not measured): the fitted maps' "
+                         "renders of the captures against the truth's, with the same seeds. Low: the "
+                         "optimiser stopped short; high while the maps are wrong: the captures cannot "
+                         "tell them apart. Over whole images: the background, the same in both, raises it, so compare it between "
+                         "fits of one object")
     ap.add_argument("--lr", type=float, default=0.05, help="the pyramid's lr (logit units)")
     ap.add_argument("--lr-texels", type=float, default=0.05, help="the texel-by-texel fit's lr (value units)")
     ap.add_argument("--loss", choices=LOSSES, default="l2", help="fit()'s loss")
@@ -320,11 +379,11 @@ def main(argv=None) -> int:
              "Metrics over the observed texels; relit = a held-out camera and lamp, "
              "256 spp both, clipped to [0, 1]. Time = the whole fit() call.", "",
              "| object | captures | texture | image | method | albedo PSNR (dB) | roughness MAE | metallic MAE "
-             "| relit PSNR (dB) | fitted means (colour, r, m) | fit time (s) | observed | unexplained captures |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| relit PSNR (dB) | captures PSNR (dB) | fitted means (colour, r, m) | fit time (s) | observed | unexplained captures |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['object']} | {r['captures']} | {r['texture']}² | {r['image']}² | {r['method']} | "
-                     f"{r['albedo_psnr']:.1f} | {r['rough_mae']:.3f} | {r['metal_mae']:.3f} | {r['relit_psnr']:.1f} | "
+                     f"{r['albedo_psnr']:.1f} | {r['rough_mae']:.3f} | {r['metal_mae']:.3f} | {r['relit_psnr']:.1f} | {r['capture_psnr']:.1f} | "
                      f"{', '.join(f'{x:.2f}' for x in r['mean_fit'])} | "
                      f"{r['seconds']:.0f} | {r['observed']:.0%} | {r['unexplained'] or '-'} |")
     with open(args.out, "w") as f:

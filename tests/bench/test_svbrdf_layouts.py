@@ -66,3 +66,26 @@ def test_softbox_faces_the_mirror_point_on_the_same_ray_with_the_point_lamps_irr
         irradiance_box = box["intensity"] * area / (box_ray @ box_ray)      # far-field, facing t
         irradiance_point = point["intensity"] / (ray @ ray)
         assert irradiance_box == pytest.approx(irradiance_point, rel=1e-9)
+
+
+def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf, tmp_path):
+    """``patterns`` overrides ``env.data`` per capture: the override must be laid out as the
+    envmap plugin holds an image it loaded (one wrapped column each side). Catches a padding
+    on one side only or the columns' wrap swapped (the sky would turn by a texel and the
+    seam's column would hold the wrong side's values), and a grating that does not change
+    from capture to capture or leaves its range."""
+    import mitsuba as mi
+
+    import draaw_mi
+    env = svbrdf.pattern_environment(3)
+    path = str(tmp_path / "pattern.exr")
+    draaw_mi.write_exr(path, env)
+    plugin = mi.load_dict({"type": "envmap", "filename": path})
+    loaded = np.array(mi.traverse(plugin)["data"])
+    np.testing.assert_allclose(np.array(svbrdf.padded(env)), loaded, rtol=1e-6, atol=1e-6)
+    caps = svbrdf.captures("tile", 4, "patterns")
+    grids = [np.array(c["params"]["env.data"]) for c in caps]
+    assert all(not np.allclose(grids[0], g) for g in grids[1:])
+    assert all(c["lights"] and not any(c["lights"].values()) for c in caps)     # every lamp off
+    lo, hi = env.min(), env.max()
+    assert 0.0 < lo < 0.05 and svbrdf.PATTERN_PEAK * 0.9 < hi <= svbrdf.PATTERN_PEAK + 0.05
