@@ -19,9 +19,10 @@ class LightTables(EmissionSplitting):
     """The tables, by :meth:`selection_key`: ``light_selection`` says which (``auto``,
     ``learned``, ``power``, ``uniform``), ``_tables`` maps the key to ``(emitter array, table |
     None, learned)``, ``_frozen_selection`` holds a pilot's or a recording's table while it
-    runs. The subclass sets those three in its constructor and has ``guides`` (its
+    runs. The subclass sets those three (and ``_light_sums``, which the pilot fills) in its
+    constructor, traces the pilot's paths with its own ``sample``
+    (:func:`~.light_pilot.learn_selection`), and has ``features(scene)`` and ``guides`` (its
     :class:`~.guiding.GuideCache`)."""
-
 
     def emitter_selection(self, scene):
         """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform:
@@ -32,8 +33,9 @@ class LightTables(EmissionSplitting):
     def prepare_selection(self, scene):
         """With ``auto`` / ``learned`` selection, run the light pilot for ``scene`` unless its
         table is learned already (outside any recording: the pilot reads its result back), and
-        return the table. Called before primal renders and by :meth:`freeze_state`; adjoint
-        passes reuse the table of their primal."""
+        return the table. Called before primal renders and by ``draaw_v4``'s
+        :meth:`~draaw_mi.integrators.v4.DraawV4Integrator.freeze_state`; adjoint passes reuse
+        the table of their primal."""
         return self._table(scene, learn=True)
 
     def _table(self, scene, learn: bool, key: tuple | None = None):
@@ -42,7 +44,7 @@ class LightTables(EmissionSplitting):
         if self.light_selection == "uniform":
             return None
         if dr.flag(dr.JitFlag.FreezingScope):
-            # a recording made without :meth:`freeze_state` (emitter values cannot be read
+            # a recording made without ``freeze_state`` (emitter values cannot be read
             # while recording): uniform selection, unbiased too
             return None
         key = self.selection_key(scene) if key is None else key

@@ -30,15 +30,16 @@ def mirror_point(camera, lamp):
     return lamp + s * (below - lamp)
 
 
+@pytest.mark.parametrize("layout", ["sweep", "patterns"])
 @pytest.mark.parametrize("k", [4, 8])
-def test_sweep_puts_each_captures_highlight_on_the_tile_in_view_at_its_own_point(svbrdf, k):
+def test_sweep_puts_each_captures_highlight_on_the_tile_in_view_at_its_own_point(svbrdf, k, layout):
     """Catches a lamp placed by the wrong reflection (e.g. ``2t + c``: its highlight leaves the
     tile), a highlight outside the camera's field of view, and a spiral that repeats a point."""
     points = []
     for j in range(k + 1):                                  # the held-out lamp (j == k) too
-        cam = svbrdf.camera("tile", j, k, "sweep")
+        cam = svbrdf.camera("tile", j, k, layout)
         c = np.array(cam["origin"], dtype=float)
-        lamp = svbrdf.light_position("tile", j, k, "sweep")
+        lamp = svbrdf.light_position("tile", j, k, layout)
         t = mirror_point(c, lamp)
         assert abs(t[0]) < 0.95 and abs(t[1]) < 0.95, (j, t)          # on the 2 x 2 tile
         forward = -c / np.linalg.norm(c)                                # the camera looks at 0
@@ -69,11 +70,12 @@ def test_softbox_faces_the_mirror_point_on_the_same_ray_with_the_point_lamps_irr
 
 
 def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf, tmp_path):
-    """``patterns`` overrides ``env.data`` per capture: the override must be laid out as the
-    envmap plugin holds an image it loaded (one wrapped column each side). Catches a padding
-    on one side only or the columns' wrap swapped (the sky would turn by a texel and the
-    seam's column would hold the wrong side's values), and a grating that does not change
-    from capture to capture or leaves its range."""
+    """``patterns`` overrides ``env.data`` per capture: the override must have the shape and
+    values the envmap plugin holds for an image it loaded (one wrapped column each side; padded
+    on one side only, ``params.update`` would reject it or read the grating shifted). Catches
+    that, a capture that leaves a lamp out of its ``lights`` (a light not named keeps x1: the
+    held-out lamp would shine in every capture), and gratings that repeat or leave their range
+    (a NaN axis past the 16th capture)."""
     import mitsuba as mi
 
     import draaw_mi
@@ -83,9 +85,15 @@ def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf
     plugin = mi.load_dict({"type": "envmap", "filename": path})
     loaded = np.array(mi.traverse(plugin)["data"])
     np.testing.assert_allclose(np.array(svbrdf.padded(env)), loaded, rtol=1e-6, atol=1e-6)
-    caps = svbrdf.captures("tile", 4, "patterns")
+    k = 4
+    caps = svbrdf.captures("tile", k, "patterns")
+    for c in caps:                                          # every lamp named, every one off
+        assert c["lights"] == {f"L{j}": 0.0 for j in range(k + 1)}
     grids = [np.array(c["params"]["env.data"]) for c in caps]
-    assert all(not np.allclose(grids[0], g) for g in grids[1:])
-    assert all(c["lights"] and not any(c["lights"].values()) for c in caps)     # every lamp off
-    lo, hi = env.min(), env.max()
-    assert 0.0 < lo < 0.05 and svbrdf.PATTERN_PEAK * 0.9 < hi <= svbrdf.PATTERN_PEAK + 0.05
+    for a in range(k):
+        for b in range(a):
+            assert not np.allclose(grids[a], grids[b]), (a, b)
+    for i in range(20):
+        e = svbrdf.pattern_environment(i)
+        assert np.all(np.isfinite(e)), i
+        assert 0.0 < e.min() < 0.05 and svbrdf.PATTERN_PEAK * 0.9 < e.max() <= svbrdf.PATTERN_PEAK + 0.05, i
