@@ -362,6 +362,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    if args.capture_spp < 0:
+        ap.error(f"--capture-spp {args.capture_spp}: expected 0 (not measured) or a positive spp")
     if args.layout == "patterns" and args.lamp == "softbox":
         ap.error("--layout patterns takes --lamp point: switched-off softboxes are black panels that "
                  "would stand where each camera sees its highlight")
