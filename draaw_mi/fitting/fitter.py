@@ -34,6 +34,11 @@ benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
 * **One kernel per run.** Resolution, spp and the integrator stay fixed; only the seed (not
   baked into the kernel) and the parameter values (arrays) change, so the render kernels are
   compiled on the first iteration and then reused (``result.kernel_compiles`` tells).
+* **Replayed, not traced.** Each capture's render, loss and backward pass is one
+  :meth:`~draaw_mi.rendering.session.Session.gradient_pass`, which replays a ``dr.freeze``
+  recording after the capture's first passes where the scene can be recorded (not with a post
+  chain, SDF objects or media): the SVBRDF benchmark's iterations take 0.51-0.73x the time
+  they took when every pass was traced (``benchmarks/results/fit_iteration_cost.md``).
 * **Noise-robust estimate.** The reported values are the average of the iterates over the last
   ``average_last`` fraction of the run (Polyak averaging), which removes most of the Monte Carlo
   jitter of the final iterate; the learning rate decays along a cosine to ``lr_final * lr``.
@@ -74,6 +79,7 @@ from .. import post as post_mod
 from ..errors import DraawError, ParameterError
 from ..integrators import is_draaw, resolve_version
 from ..progress import check_mode, progress_bar
+from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from ..scene import DraawScene, load_scene
 from ..scene.schema import shown
@@ -81,11 +87,11 @@ from .captures import CaptureOverrides, capture_references, light_names, parse_c
 from .maps import MapOptions, MapSet
 from .params import FitParam, range_for
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
-from .problem import FitProblem, apply_chain, record
+from .problem import FitProblem, PassLoss, record
 from .report import report
 from .result import FitResult
 from .settings import FitSettings, validate
-from .views import sampler_spp, view_loss, view_sensors
+from .views import sampler_spp, view_sensors
 
 #: iterations after which a parameter that never got a gradient is reported (_warn_unmoved)
 ZERO_GRADIENT_ITERATIONS = 5
@@ -200,7 +206,8 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
         raise ParameterError("fit: references is empty; give one reference image per view")
     refs = [load_reference(r, encoded, who=f"fit: references[{i}]" if len(given) > 1 else "fit")
             for i, r in enumerate(given)]
-    masks = [mi.TensorXf(unclipped_mask(r)) if is_display_reference(g) else None
+    # (owned: the gradient passes' recordings take them as inputs; see owned_tensor)
+    masks = [owned_tensor(unclipped_mask(r)) if is_display_reference(g) else None
              for g, r in zip(given, refs)]
     h, w = refs[0].shape[:2]
     if any(r.shape != refs[0].shape for r in refs):
@@ -229,7 +236,7 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
     maps = MapSet({k: (np.array(initial[k], dtype=np.float64).reshape(prm[k].shape), prm[k].lo, prm[k].hi)
                    for k in keys if prm[k].shape is not None and prm[k].lo is not None
                    and s.maps.parametrisation == "pyramid"}, s.maps)
-    return FitProblem(scene, callers_scene, session, integrator, sensors, [mi.TensorXf(r) for r in refs], masks,
+    return FitProblem(scene, callers_scene, session, integrator, sensors, [owned_tensor(r) for r in refs], masks,
                       chain, keys, names, prm, start, initial, version, spp, spp_grad, smooth, overrides, maps)
 
 
@@ -312,6 +319,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     compiles = 0
     order = np.random.default_rng(s.seed)    # which captures an iteration renders (batch)
     batch = len(sensors) if s.batch is None else min(s.batch, len(sensors))
+    pass_loss = PassLoss(s.loss, s.exposure, 1.0 / batch, problem.chain, problem.smooth)
     history_was_on = dr.flag(dr.JitFlag.KernelHistory)     # a caller's own measurement
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()
@@ -325,25 +333,25 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
             with holding(problem.scene):      # one render at a time (draaw_mi.guard)
                 total = mi.Float(0.0)
                 for v in views:
-                    sensor, ref = sensors[v], problem.refs[v]
                     _push(problem, opt, v)    # fresh AD edges latent -> scene value for this view
                     problem.overrides.select_lights(problem.integrator, problem.scene.mi_scene, v)
-                    img = problem.session.render_pass(
+                    if problem.smooth and means[v] is None:      # (opaque: as later means, one kernel)
+                        means[v] = dr.zeros(mi.TensorXf, problem.refs[v].shape)
+                        dr.make_opaque(means[v])
+                    # render, loss and backward (one view at a time: the gradients accumulate
+                    # in the latents), replayed from a recording where the scene can be recorded
+                    lv, (sv, mean) = problem.session.gradient_pass(
                         problem.integrator, problem.spp, (s.seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF,
-                        params=p, sensor=sensor, spp_grad=problem.spp if problem.spp_grad is None else problem.spp_grad)
+                        pass_loss, params=p, sensor=sensors[v], spp_grad=problem.spp_grad,
+                        inputs=(problem.refs[v], problem.masks[v], means[v], _mean_weight(opt, s.lr) if problem.smooth else None),
+                        freeze=problem.chain is None)
                     problem.overrides.remember_lights(problem.integrator, problem.scene.mi_scene, v)
-                    img = img[:, :, :3] if img.shape[2] > 3 else img
                     if problem.smooth:
-                        img, means[v] = _smoothed(img, means[v], opt, s.lr)
-                    if problem.chain is not None:
-                        img = apply_chain(img, problem.chain)
-                    lv, sv = view_loss(img, ref, s.loss, s.exposure, problem.masks[v])
+                        means[v] = mean
                     if v == 0:
                         scale = sv
-                    lv = lv / len(views)
-                    dr.backward(lv)      # one view at a time; gradients accumulate in the latents
                     maps.collect()
-                    total += dr.detach(lv)
+                    total += lv
                     view_losses[v] = lv
                 for k in keys:
                     if k in maps.latents:
@@ -388,18 +396,12 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     return history, compiles
 
 
-def _smoothed(img, mean, opt, lr: float):
-    """``(image for the loss, new running mean)``: the value of a running mean of the recent
-    renders with the derivative of this one, ``mean + (I - detach(I))``. Its weight is the
-    current learning-rate fraction (1 -> lr_final), so the mean spans more iterations as the
-    parameters slow down."""
-    flat = dr.detach(img)
-    w = dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
-    if mean is None:                           # w = 1 on the first iteration: mean = flat
-        mean = dr.zeros(mi.TensorXf, flat.shape)
-    mean = mean + w * (flat - mean)
-    dr.eval(mean)
-    return mean + (img - flat), mean
+def _mean_weight(opt, lr: float):
+    """The weight of the current render in the running mean that the loss sees with
+    ``smooth`` (:class:`~draaw_mi.fitting.problem.PassLoss`): the current learning-rate fraction
+    (1 -> lr_final), so the mean spans more iterations as the parameters slow down. (1 on the
+    first iteration: the mean starts as the first render.)"""
+    return dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
 
 
 def _history_entry(problem: FitProblem, s: FitSettings, opt, it: int, loss_value: float, scale):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
 import numpy as np
 
 from .. import post as post_mod
@@ -11,6 +12,7 @@ from ..rendering.session import Session
 from ..scene import DraawScene
 from .captures import CaptureOverrides
 from .maps import MapSet
+from .views import view_loss
 
 
 @dataclass
@@ -35,6 +37,51 @@ class FitProblem:
     smooth: bool
     overrides: CaptureOverrides        # per capture: the light and parameter values it sets
     maps: MapSet                       # the textures fitted as maps (empty: none, or "texels")
+
+
+class PassLoss:
+    """The loss of one capture's render within a fit iteration, as
+    :meth:`~draaw_mi.rendering.session.Session.gradient_pass` evaluates it:
+    ``loss(image, ref, mask, mean, w) -> (weight * loss, (exposure scale, new mean))``.
+
+    The render's colour (its first three channels) goes through the running mean of recent
+    renders where ``smooth`` (``mean`` and its weight ``w``: see
+    :func:`~draaw_mi.fitting.fitter._mean_weight`; ``None`` otherwise), the post ``chain``, then
+    :func:`~draaw_mi.fitting.views.view_loss` against ``ref`` (``mask``: its pixels that
+    count, or ``None``). ``weight``: 1 / the captures an iteration renders. Equal losses (same
+    settings, the same chain object) hash alike, so fits of one scene share their recordings.
+
+    >>> import mitsuba as mi
+    >>> ref, image = mi.TensorXf(np.full((2, 2, 3), 0.5)), mi.TensorXf(np.ones((2, 2, 3)))
+    >>> value, (scale, mean) = PassLoss("l2", "fixed", 0.5)(image, ref, None, None, None)
+    >>> round(float(value[0]), 4), mean
+    (0.125, None)
+    """
+    __slots__ = ("kind", "exposure", "weight", "chain", "smooth")
+
+    def __init__(self, kind: str, exposure: str, weight: float, chain=None, smooth: bool = False):
+        self.kind, self.exposure, self.weight = kind, exposure, float(weight)
+        self.chain, self.smooth = chain, bool(smooth)
+
+    def _key(self) -> tuple:
+        return self.kind, self.exposure, self.weight, id(self.chain), self.smooth
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, PassLoss) and self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def __call__(self, image, ref, mask, mean, w):
+        img = image[:, :, :3] if image.shape[2] > 3 else image
+        if self.smooth:
+            flat = dr.detach(img)
+            mean = mean + w * (flat - mean)
+            img = mean + (img - flat)      # the mean's value, the current render's derivative
+        if self.chain is not None:
+            img = apply_chain(img, self.chain)
+        value, scale = view_loss(img, ref, self.kind, self.exposure, mask)
+        return value * self.weight, (scale, mean if self.smooth else None)
 
 
 def apply_chain(img, chain):

@@ -330,18 +330,22 @@ class EmissionSplitting(DraawIntegrator):
         edges = self.edge_map(scene, primary.sensor)
         return (None, None) if edges is None else (primary, edges)
 
-    def frozen_edge_map(self, scene: mi.Scene, view: SceneView | None = None):
-        """The edge map a recording of a render of ``scene`` (its first sensor) takes as input,
-        or ``None`` where the integrator or sensor rules splitting out (then nothing is built).
-        ``view``: the scene's :class:`~.scene_view.SceneView`, if the caller keeps one (fewer
-        calls into Mitsuba on this per-render path). The scene's side (no area light, SDF
-        objects, media) is not walked here (a feature walk costs ~80 us): there ``sample()``
-        ignores the map, which costs one probe pass per camera, or none without an area light."""
+    def frozen_edge_map(self, scene: mi.Scene, view: SceneView | None = None, sensor: mi.Sensor | None = None):
+        """The edge map a recording of a render of ``scene`` from ``sensor`` (default its
+        first) takes as input, or ``None`` where the integrator or sensor rules splitting out
+        (then nothing is built). ``view``: the scene's :class:`~.scene_view.SceneView`, if the
+        caller keeps one (fewer calls into Mitsuba on this per-render path). The scene's side
+        (no area light, SDF objects, media) is not walked here (a feature walk costs ~80 us):
+        there ``sample()`` ignores the map, which costs one probe pass per camera, or none
+        without an area light."""
         view = scene_view(scene) if view is None else view
-        if view.sensor is None or not sensor_allows(self.emission_split, self.hide_emitters,
-                                                    view.sensor, view.no_aperture):
+        if sensor is None or sensor is view.sensor:
+            sensor, no_aperture = view.sensor, view.no_aperture
+        else:
+            no_aperture = None                    # (sensor_allows asks the sensor)
+        if sensor is None or not sensor_allows(self.emission_split, self.hide_emitters, sensor, no_aperture):
             return None
-        return self.edge_map(scene, view.sensor, view)
+        return self.edge_map(scene, sensor, view)
 
     def edge_map(self, scene: mi.Scene, sensor: mi.Sensor, view: SceneView | None = None):
         """Edge pixels of the emitting surfaces that ``sensor`` sees (:func:`edge_map`), or

@@ -214,16 +214,16 @@ class DraawV4Integrator(LightTables):
     def _extra_repr(self) -> str:
         return f", rr_depth={self.rr_depth}, rr_min={self.rr_min}, rr_threshold={self.rr_threshold}"
 
-    def freeze_state(self, scene, memo: dict | None = None):
+    def freeze_state(self, scene, memo: dict | None = None, sensor=None):
         """The scene-dependent state that a ``dr.freeze`` recording of this integrator takes as
         input (:meth:`Session.recording <draaw_mi.rendering.session.Session.recording>`): the light table's arrays (or ``None``)
-        and the first sensor's edge map for emission splitting (or ``None``). Computed here,
-        outside the recording, so frozen and traced renders choose alike. ``memo``: a dict
-        that lives as long as ``scene`` (:func:`~.scene_view.scene_view`), which makes this
-        per-render step cheaper (0.05 ms on the Cornell box, more with many lights)."""
+        and the edge map of ``sensor`` (default the scene's first) for emission splitting (or
+        ``None``). Computed here, outside the recording, so frozen and traced renders choose
+        alike. ``memo``: a dict that lives as long as ``scene`` (:func:`~.scene_view.scene_view`),
+        which makes this per-render step cheaper (0.05 ms on the Cornell box, more with many lights)."""
         view = scene_view(scene, memo)
         sel = self._table(scene, learn=True, key=view.key)
-        return None if sel is None else sel.arrays(), self.frozen_edge_map(scene, view)
+        return None if sel is None else sel.arrays(), self.frozen_edge_map(scene, view, sensor)
 
     @contextlib.contextmanager
     def frozen_state(self, state):

@@ -143,6 +143,28 @@ def other_live_bsdfs(mi_scene, cache=None) -> list:
     return sorted((b for b in LIVE_INSTANCES if id(b) not in own[0]), key=id)
 
 
+def owned_tensor(array) -> mi.TensorXf:
+    """``array`` (numpy) as an ``mi.TensorXf`` in memory of Dr.Jit's own, for a recording's
+    inputs. ``mi.TensorXf(array)`` maps a numpy array's memory without copying on the CPU
+    backend (``dr.copy`` keeps the mapping); a recording of a fit's gradient pass (render,
+    loss, backward) replayed with mapped texture tensors rendered other data than they held,
+    and recorded anew at most calls (measured on the 8x8 tile of
+    tests/fitting/test_fit_captures.py: images off by up to 1.4 from the fourth iteration
+    on; 8 recordings for 4 captures, 3 with owned tensors). An arithmetic kernel with an
+    opaque operand copies.
+
+    >>> import numpy as np
+    >>> a = np.ones((2, 2, 1), np.float32)
+    >>> t = owned_tensor(a)
+    >>> a[:] = 7.0
+    >>> float(t.array[0]), t.shape
+    (1.0, (2, 2, 1))
+    """
+    t = mi.TensorXf(np.asarray(array, dtype=np.float32)) + dr.opaque(mi.Float, 0.0)
+    dr.eval(t)
+    return t
+
+
 #: recordings one frozen render keeps (see freeze_render)
 RECORDINGS_KEPT = 8
 
@@ -179,20 +201,21 @@ class _CollectorPaused:
 _PAUSED = _CollectorPaused()
 
 
-def freeze_render(integrator, body):
-    """``dr.freeze(body)`` for ``body(mi_scene, seed) -> image`` rendering with ``integrator``,
-    with the integrator's scene-dependent state (V4's light-selection table, from its
-    ``freeze_state``) passed to the recording as an input. Without it the recording would run
-    a different sampler than a traced render, or replay a stale table. The preview and the
-    batch executor record their renders through this too."""
+def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
+    """``dr.freeze(body)`` for ``body(mi_scene, seed, *args) -> result`` rendering with
+    ``integrator``, with the integrator's scene-dependent state (V4's light-selection table and
+    the edge map of the sensor rendered, from its ``freeze_state``) passed to the recording as
+    an input. Without it the recording would run a different sampler than a traced render, or
+    replay a stale table. The preview, the batch executor and the fit's gradient passes record
+    their renders through this. ``limit``: the recordings kept (see below)."""
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
-    def recorded(mi_scene, scalars, seed, state, live_bsdfs):
+    def recorded(mi_scene, scalars, seed, state, live_bsdfs, args):
         if use_state is None:
-            return body(mi_scene, seed)
+            return body(mi_scene, seed, *args)
         with use_state(state):
-            return body(mi_scene, seed)
+            return body(mi_scene, seed, *args)
 
     # Every input opaque from the first recording: with literals kept (auto_opaque), a
     # stratifying sampler's state, which the first render changes, makes the second call
@@ -202,30 +225,34 @@ def freeze_render(integrator, body):
     # plain-number parameter (scene_scalars) records anew, on purpose, so an animated light
     # weight or a resized film would otherwise pile up compiled recordings for as long as the
     # integrator lives, and Dr.Jit's "recorded N times" warning would fire on every render.
-    frozen = dr.freeze(recorded, auto_opaque=False, limit=RECORDINGS_KEPT, warn_after=1 << 30)
+    frozen = dr.freeze(recorded, auto_opaque=False, limit=limit, warn_after=1 << 30)
 
     failed = []                      # a recording that failed once: trace from then on
 
-    def call(mi_scene, seed, scene=None, cache=None):
+    def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None):
         """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any, and
         ``cache`` its session (a cheaper read of its plain-number parameters, see
-        :func:`scene_scalars`)."""
+        :func:`scene_scalars`); ``args``: ``body``'s further inputs (PyTrees: a sensor, a
+        reference image); ``sensor``: the sensor ``body`` renders from, when not the scene's
+        first (its edge map is part of the state)."""
         if failed:
-            return body(mi_scene, seed)
+            return body(mi_scene, seed, *args)
         # every live Python BSDF that the scene does not hold itself (those it holds are
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
         live = other_live_bsdfs(mi_scene, cache)
         memo = None if cache is None else cache.memo
+        state = None
+        if state_of is not None:
+            state = state_of(mi_scene, memo) if sensor is None else state_of(mi_scene, memo, sensor)
         try:
             with _PAUSED:
-                return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed,
-                              None if state_of is None else state_of(mi_scene, memo), live)
+                return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live, tuple(args))
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "
                           f"({str(e).splitlines()[0][:200]}); it is traced from now on",
                           RuntimeWarning, stacklevel=2)
-            return body(mi_scene, seed)
+            return body(mi_scene, seed, *args)
     call.frozen = frozen
     return call

@@ -56,6 +56,9 @@ from .plugins import integrator_props, make_plugin
 #: ``freeze="small"`` records renders of at most this many pixels and samples per pixel
 FREEZE_MAX_PIXELS = 128 * 128
 FREEZE_MAX_SPP = 16
+#: recordings one gradient pass keeps: one per sensor (a fit's captures), and a second where a
+#: replay's dry run fails once (measured: 18 recordings for 8 captures' first 32 passes)
+GRADIENT_RECORDINGS = 64
 #: set False to trace every render (debugging)
 FREEZE = True
 #: seconds a worker gets to finish its frame when its session closes
@@ -82,7 +85,7 @@ class Session:
         self.freezable = self.film = self.scalars = self.own_bsdfs = None
         self.memo: dict = {}
         self.passes: dict = {}
-        self.recordings: dict = {}            # (id(integrator), spp) -> a recorded render
+        self.recordings: dict = {}            # (id(integrator), spp) -> a recorded render; gradient passes' too
         self._integrators: dict = {}          # plugin properties -> integrator
         self._integrator_keys: dict = {}      # integrator()'s arguments as given -> properties
         self._workers: weakref.WeakSet = weakref.WeakSet()
@@ -235,6 +238,38 @@ class Session:
             dr.sync_thread()
         return image
 
+    def gradient_pass(self, integrator, spp: int, seed, loss, *, params, sensor, spp_grad=None, inputs=(),
+                      freeze: bool = True):
+        """Render one differentiable pass from ``sensor``, evaluate ``loss(image, *inputs) ->
+        (value, extras)`` on it and backpropagate ``value``: the gradients accumulate on the
+        scene parameters that track them (``params``, ``mi.traverse`` parameters) and on what
+        they were computed from. Returns ``(value, extras)``, ``value`` detached.
+
+        With ``freeze`` (and a scene that can be recorded, :meth:`freezes`) the render, the
+        loss and the adjoint pass replay a recording: nothing is traced after the first passes
+        from each sensor (an iteration of the SVBRDF benchmark's fit in 0.57-0.88x the traced
+        one's time: ``benchmarks/results/fit_iteration_cost.md``). ``loss`` is then part of the recording's key
+        (hashable: equal losses share recordings) and must read nothing but its arguments (a
+        JIT value it closes over would be baked in); ``inputs`` are PyTrees (a reference image,
+        a mask, ``None``). Same gradients either way, to float rounding."""
+        scene = self.scene
+        spp_grad = spp if spp_grad is None else spp_grad
+        with self.lock, RENDER_GUARD:
+            if freeze and self.freezes(spp, True):
+                key = ("gradient", id(integrator), int(spp), int(spp_grad), loss)
+                fn = self.recordings.get(key)
+                if fn is None:
+                    fn = self.recordings[key] = freeze_render(
+                        integrator, _gradient_body(integrator, spp, spp_grad, loss), limit=GRADIENT_RECORDINGS)
+                if isinstance(seed, int):
+                    seed = dr.opaque(mi.UInt32, seed)
+                value, extras = fn(scene.mi_scene, seed, scene, self, args=(sensor, tuple(inputs)), sensor=sensor)
+            else:
+                value, extras = _gradient_body(integrator, spp, spp_grad, loss, params)(
+                    scene.mi_scene, seed, sensor, tuple(inputs))
+            dr.eval(value, extras)
+        return value, extras
+
     def recording(self, integrator, spp: int):
         """``f(mi_scene, seed: mi.UInt32, scene, session) -> image``: ``mi.render`` recorded with
         ``dr.freeze``, one recording per integrator and spp (:func:`.frozen.freeze_render`)."""
@@ -282,6 +317,19 @@ class Session:
     def __repr__(self) -> str:
         return (f"Session[{self.source}, {len(self._integrators)} integrators, {len(self.recordings)} "
                 f"recordings, {len(self._workers)} workers]")
+
+
+def _gradient_body(integrator, spp: int, spp_grad: int, loss, params=None):
+    """``body(mi_scene, seed, sensor, inputs) -> (loss value, extras)`` of
+    :meth:`Session.gradient_pass`: render, loss, backward. Without ``params`` the scene's are
+    traversed inside (a recording's body: its parameters are the scene's, an input)."""
+    def body(mi_scene, seed, sensor, inputs):
+        p = mi.traverse(mi_scene) if params is None else params
+        image = mi.render(mi_scene, p, sensor=sensor, integrator=integrator, seed=seed, spp=spp, spp_grad=spp_grad)
+        value, extras = loss(image, *inputs)
+        dr.backward(value)
+        return dr.detach(value), extras
+    return body
 
 
 _SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session
