@@ -135,7 +135,7 @@ def step_rows(scene, args) -> list:
             state = None if state_of is None else state_of(scene.mi_scene, session.memo)
             t.append(time.perf_counter())
             with F._PAUSED:                        # as freeze_render's call does
-                img = call.frozen(scene.mi_scene, scalars, dr.opaque(mi.UInt32, 5000 + i), state, live)
+                img = call.frozen(scene.mi_scene, scalars, dr.opaque(mi.UInt32, 5000 + i), state, live, ())
             t.append(time.perf_counter())
             dr.eval(img)
             dr.sync_thread()

@@ -27,6 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
+from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from .views import view_sensors
 
@@ -119,6 +120,8 @@ class CaptureOverrides:
                     raise ParameterError(f"fit: captures[{i}].params names {k!r}, which is not a scene "
                                          "parameter (an mi.traverse key)")
                 base.setdefault(k, _copy(params[k]))
+                if dr.is_tensor_v(params[k]):            # (copied: it may map numpy memory,
+                    v = owned_tensor(np.asarray(v))      # which recordings must not take)
                 own[k] = v if not isinstance(v, (list, tuple, int, float)) else type(params[k])(v)
             clash = sorted(set(own) & set(fitted_keys))
             if clash:

@@ -335,7 +335,8 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
                 for v in views:
                     _push(problem, opt, v)    # fresh AD edges latent -> scene value for this view
                     problem.overrides.select_lights(problem.integrator, problem.scene.mi_scene, v)
-                    if problem.smooth and means[v] is None:      # (opaque: as later means, one kernel)
+                    first = problem.smooth and means[v] is None
+                    if first:                 # (opaque: as later means, one kernel)
                         means[v] = dr.zeros(mi.TensorXf, problem.refs[v].shape)
                         dr.make_opaque(means[v])
                     # render, loss and backward (one view at a time: the gradients accumulate
@@ -343,7 +344,8 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
                     lv, (sv, mean) = problem.session.gradient_pass(
                         problem.integrator, problem.spp, (s.seed * 7919 + it * len(sensors) + v) & 0xFFFFFFFF,
                         pass_loss, params=p, sensor=sensors[v], spp_grad=problem.spp_grad,
-                        inputs=(problem.refs[v], problem.masks[v], means[v], _mean_weight(opt, s.lr) if problem.smooth else None),
+                        inputs=(problem.refs[v], problem.masks[v], means[v],
+                                _mean_weight(opt, s.lr, first) if problem.smooth else None),
                         freeze=problem.chain is None)
                     problem.overrides.remember_lights(problem.integrator, problem.scene.mi_scene, v)
                     if problem.smooth:
@@ -389,19 +391,20 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
         if len(history) < s.iterations:      # interrupted: leave the last iterate, detached
             values = maps.values()
             for k in keys:
-                p[k] = mi.TensorXf(values[k]) if k in values else prm[k].from_latent(dr.detach(opt[k]))
+                p[k] = owned_tensor(values[k]) if k in values else prm[k].from_latent(dr.detach(opt[k]))
             problem.overrides.restore(p)
             with holding(problem.scene):
                 p.update()
     return history, compiles
 
 
-def _mean_weight(opt, lr: float):
+def _mean_weight(opt, lr: float, first: bool):
     """The weight of the current render in the running mean that the loss sees with
     ``smooth`` (:class:`~draaw_mi.fitting.problem.PassLoss`): the current learning-rate fraction
-    (1 -> lr_final), so the mean spans more iterations as the parameters slow down. (1 on the
-    first iteration: the mean starts as the first render.)"""
-    return dr.opaque(mi.Float, opt.lr / lr if isinstance(opt.lr, float) else 1.0)
+    (1 -> lr_final), so the mean spans more iterations as the parameters slow down; 1 for a
+    capture's ``first`` render, whose mean starts as that render (with batches a capture is
+    first drawn in a later iteration, when the fraction is below 1)."""
+    return dr.opaque(mi.Float, 1.0 if first or not isinstance(opt.lr, float) else opt.lr / lr)
 
 
 def _history_entry(problem: FitProblem, s: FitSettings, opt, it: int, loss_value: float, scale):

@@ -49,7 +49,8 @@ class PassLoss:
     :func:`~draaw_mi.fitting.fitter._mean_weight`; ``None`` otherwise), the post ``chain``, then
     :func:`~draaw_mi.fitting.views.view_loss` against ``ref`` (``mask``: its pixels that
     count, or ``None``). ``weight``: 1 / the captures an iteration renders. Equal losses (same
-    settings, the same chain object) hash alike, so fits of one scene share their recordings.
+    settings) hash alike, so fits of one scene share their recordings; one with a post chain
+    is traced, not recorded (a chain may close over JIT values).
 
     >>> import mitsuba as mi
     >>> ref, image = mi.TensorXf(np.full((2, 2, 3), 0.5)), mi.TensorXf(np.ones((2, 2, 3)))

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import time
 
+import drjit as dr
 import numpy as np
 
 from ..errors import DraawError
+from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from .maps import fill_unobserved
 from .problem import FitProblem, apply_chain
@@ -44,7 +46,9 @@ def report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: in
         mean = averaged[k]
         if prm[k].shape is not None:         # a texture: back in its own shape
             fitted[names[k]] = mean.astype(np.float32).reshape(prm[k].shape)
-            p[k] = prm[k].type(fitted[names[k]])
+            # (owned: the result's array and the scene's texture share no memory, and later
+            # recordings take the texture as input)
+            p[k] = owned_tensor(fitted[names[k]]) if dr.is_tensor_v(prm[k].type) else prm[k].type(fitted[names[k]])
         else:
             fitted[names[k]] = mean.tolist() if mean.ndim else float(mean)
             p[k] = prm[k].type(fitted[names[k]]) if mean.ndim == 0 else prm[k].type(mean.tolist())

@@ -229,12 +229,13 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
 
     failed = []                      # a recording that failed once: trace from then on
 
-    def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None):
+    def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None):
         """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any, and
         ``cache`` its session (a cheaper read of its plain-number parameters, see
         :func:`scene_scalars`); ``args``: ``body``'s further inputs (PyTrees: a sensor, a
         reference image); ``sensor``: the sensor ``body`` renders from, when not the scene's
-        first (its edge map is part of the state)."""
+        first (its edge map is part of the state); ``before_retry``: called before a failed
+        recording's pass is traced (a gradient pass puts its gradients back)."""
         if failed:
             return body(mi_scene, seed, *args)
         # every live Python BSDF that the scene does not hold itself (those it holds are
@@ -253,6 +254,8 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             warnings.warn(f"freeze_render: dr.freeze could not record this render "
                           f"({str(e).splitlines()[0][:200]}); it is traced from now on",
                           RuntimeWarning, stacklevel=2)
+            if before_retry is not None:
+                before_retry()
             return body(mi_scene, seed, *args)
     call.frozen = frozen
     return call

@@ -9,15 +9,17 @@ makes it on first use and keeps it as long as the scene lives). It owns
   a thread that took it just before the close still excludes the threads that come after;
 * its **integrators** (:meth:`Session.integrator`, one instance per set of options; V4 keeps
   what it learns of the scene in its instance);
-* its **recordings**: ``dr.freeze`` replays of one-pass renders (:mod:`.frozen` says what a
-  recording takes as input) and what is found once per scene for them;
+* its **recordings**: ``dr.freeze`` replays of one-pass renders and of a fit's gradient passes
+  (:mod:`.frozen` says what a recording takes as input) and what is found once per scene for
+  them;
 * its **workers** (the preview's thread): :meth:`Session.close`, the context manager and a
   hook at interpreter exit stop them, so that no thread is inside a Dr.Jit kernel while
   Dr.Jit shuts down (a forgotten tuner would end its script with SIGSEGV or SIGABRT).
 
 :meth:`Session.render_pass` renders one pass -- traced, or replayed from a recording -- and
-:func:`apply_post` applies a post chain to its colour; :func:`draaw_mi.render`, a batch frame,
-the preview and :func:`draaw_mi.fit` all render through them.
+:func:`apply_post` applies a post chain to its colour; :func:`draaw_mi.render`, a batch frame
+and the preview render through them. :meth:`Session.gradient_pass` renders a differentiable
+pass, its loss and its backward pass (:func:`draaw_mi.fit`'s captures), traced or replayed.
 
 Renders of different scenes from different threads are serialised: every pass runs under
 :data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), and so does
@@ -57,8 +59,10 @@ from .plugins import integrator_props, make_plugin
 FREEZE_MAX_PIXELS = 128 * 128
 FREEZE_MAX_SPP = 16
 #: recordings one gradient pass keeps: one per sensor (a fit's captures), and a second where a
-#: replay's dry run fails once (measured: 18 recordings for 8 captures' first 32 passes)
+#: replay's dry run fails once (measured: 8 for 4 captures, 10 with texel maps)
 GRADIENT_RECORDINGS = 64
+#: gradient passes (integrator, spp, loss) whose recordings a session keeps, the oldest dropped
+GRADIENT_KEYS = 4
 #: set False to trace every render (debugging)
 FREEZE = True
 #: seconds a worker gets to finish its frame when its session closes
@@ -216,13 +220,11 @@ class Session:
         w, h = self.film.size()
         return int(w) * int(h) <= FREEZE_MAX_PIXELS
 
-    def render_pass(self, integrator, spp: int, seed: int, *, params=None, sensor=None, spp_grad=None,
-                    freeze="small"):
+    def render_pass(self, integrator, spp: int, seed: int, *, params=None, sensor=None, freeze="small"):
         """Render one pass of ``spp`` samples with ``seed`` (an int, or an opaque ``mi.UInt32``
         that keeps a traced kernel from being compiled anew for each seed) and return the evaluated image
         (``mi.TensorXf`` (H, W, C), as ``mi.render`` gives it). ``params`` (``mi.traverse``
-        parameters) makes it differentiable (traced; ``sensor`` and ``spp_grad`` as in
-        ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
+        parameters) makes it differentiable (traced; ``sensor`` as in ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
         bits either way."""
         scene = self.scene
         with self.lock, RENDER_GUARD:
@@ -232,8 +234,7 @@ class Session:
                 image = self.recording(integrator, spp)(scene.mi_scene, seed, scene, self)
             else:
                 image = mi.render(scene.mi_scene, params, sensor=0 if sensor is None else sensor,
-                                  integrator=integrator, seed=seed, spp=spp,
-                                  spp_grad=0 if spp_grad is None else spp_grad)
+                                  integrator=integrator, seed=seed, spp=spp)
             dr.eval(image)
             dr.sync_thread()
         return image
@@ -242,31 +243,42 @@ class Session:
                       freeze: bool = True):
         """Render one differentiable pass from ``sensor``, evaluate ``loss(image, *inputs) ->
         (value, extras)`` on it and backpropagate ``value``: the gradients accumulate on the
-        scene parameters that track them (``params``, ``mi.traverse`` parameters) and on what
-        they were computed from. Returns ``(value, extras)``, ``value`` detached.
+        scene parameters that track them and on what they were computed from. Returns
+        ``(value, extras)``, ``value`` detached. The caller holds the scene (:func:`holding`)
+        while it reads the results: the pass does not wait for its kernels.
 
         With ``freeze`` (and a scene that can be recorded, :meth:`freezes`) the render, the
         loss and the adjoint pass replay a recording: nothing is traced after the first passes
         from each sensor (an iteration of the SVBRDF benchmark's fit in 0.57-0.88x the traced
-        one's time: ``benchmarks/results/fit_iteration_cost.md``). ``loss`` is then part of the recording's key
-        (hashable: equal losses share recordings) and must read nothing but its arguments (a
-        JIT value it closes over would be baked in); ``inputs`` are PyTrees (a reference image,
-        a mask, ``None``). Same gradients either way, to float rounding."""
+        one's time: ``benchmarks/results/fit_iteration_cost.md``). The recording traverses the
+        scene's parameters itself; ``params`` (``mi.traverse`` parameters) serve the traced
+        pass. ``loss`` is part of the recording's key (hashable: equal losses share recordings)
+        and must read nothing but its arguments (a JIT value it closes over would be baked in);
+        ``inputs`` are PyTrees (a reference image, a mask, ``None``). A pass that V4 renders
+        adaptively (``spp`` >= 64: its pilot is read back) is traced. Same gradients either way,
+        to float rounding."""
         scene = self.scene
         spp_grad = spp if spp_grad is None else spp_grad
+        adaptive = getattr(integrator, "adaptive_applies", None)
         with self.lock, RENDER_GUARD:
-            if freeze and self.freezes(spp, True):
+            if (freeze and self.freezes(spp, True)
+                    and not (adaptive is not None and adaptive(scene.mi_scene, sensor, seed, spp))):
                 key = ("gradient", id(integrator), int(spp), int(spp_grad), loss)
                 fn = self.recordings.get(key)
                 if fn is None:
+                    kept = [k for k in self.recordings if k[0] == "gradient"]    # oldest first
+                    for old in kept[:max(0, len(kept) - GRADIENT_KEYS + 1)]:
+                        del self.recordings[old]           # (a notebook's many fits of one scene)
                     fn = self.recordings[key] = freeze_render(
                         integrator, _gradient_body(integrator, spp, spp_grad, loss), limit=GRADIENT_RECORDINGS)
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
-                value, extras = fn(scene.mi_scene, seed, scene, self, args=(sensor, tuple(inputs)), sensor=sensor)
+                saved = _gradients_of(params)
+                value, extras = fn(scene.mi_scene, seed, scene, self, args=(sensor, _host_key(sensor), tuple(inputs)),
+                                   sensor=sensor, before_retry=lambda: _restore_gradients(saved))
             else:
                 value, extras = _gradient_body(integrator, spp, spp_grad, loss, params)(
-                    scene.mi_scene, seed, sensor, tuple(inputs))
+                    scene.mi_scene, seed, sensor, None, tuple(inputs))
             dr.eval(value, extras)
         return value, extras
 
@@ -320,16 +332,39 @@ class Session:
 
 
 def _gradient_body(integrator, spp: int, spp_grad: int, loss, params=None):
-    """``body(mi_scene, seed, sensor, inputs) -> (loss value, extras)`` of
+    """``body(mi_scene, seed, sensor, host_key, inputs) -> (loss value, extras)`` of
     :meth:`Session.gradient_pass`: render, loss, backward. Without ``params`` the scene's are
-    traversed inside (a recording's body: its parameters are the scene's, an input)."""
-    def body(mi_scene, seed, sensor, inputs):
+    traversed inside (a recording's body: its parameters are the scene's, an input);
+    ``host_key`` (:func:`_host_key`) is there for the recording's key only."""
+    def body(mi_scene, seed, sensor, host_key, inputs):
         p = mi.traverse(mi_scene) if params is None else params
         image = mi.render(mi_scene, p, sensor=sensor, integrator=integrator, seed=seed, spp=spp, spp_grad=spp_grad)
         value, extras = loss(image, *inputs)
         dr.backward(value)
         return dr.detach(value), extras
     return body
+
+
+def _host_key(sensor) -> tuple:
+    """What a recording's key must see of a sensor that ``dr.freeze`` does not: the host-side
+    values its kernels bake in (the film's size and crop window, the shutter). Its JIT values
+    (the camera's transforms) are inputs; a sensor made outside the scene is not part of
+    :func:`~.frozen.scene_scalars`."""
+    film = sensor.film()
+    return (tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
+            float(sensor.shutter_open_time()))
+
+
+def _gradients_of(params) -> list:
+    """``[(value, its gradient now)]`` for the parameters that track gradients."""
+    return [(v, dr.grad(v)) for v in dict(params).values() if dr.is_diff_v(v) and dr.grad_enabled(v)]
+
+
+def _restore_gradients(saved: list) -> None:
+    """Put back the gradients :func:`_gradients_of` saved: a recording that failed after its
+    backward pass began may have added to them, and the traced retry adds its own."""
+    for v, g in saved:
+        dr.set_grad(v, g)
 
 
 _SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session

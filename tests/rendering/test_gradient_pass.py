@@ -80,3 +80,50 @@ def test_a_gradient_pass_is_traced_where_the_scene_cannot_be_recorded(monkeypatc
                                      inputs=(owned_tensor(np.zeros((32, 32, 3), np.float32)), None, None, None))
     assert float(value[0]) > 0 and np.abs(np.array(dr.grad(t))).max() > 0
     assert not any(k[0] == "gradient" for k in session.recordings)
+
+
+def _one_pass(scene, session, seed=3, spp=4, freeze=True):
+    """The base-colour gradient of one pass from the scene's camera (a new texture each call)."""
+    t = owned_tensor(np.full((8, 8, 3), 0.5, np.float32))
+    dr.enable_grad(t)
+    scene.params[scene.key("m.base_color")] = t
+    scene.params.update()
+    value, _ = session.gradient_pass(session.integrator("v4", 3), spp, seed, PassLoss("l2", "fixed", 1.0),
+                                     params=scene.params, sensor=scene.mi_scene.sensors()[0],
+                                     inputs=(owned_tensor(np.zeros((32, 32, 3), np.float32)), None, None, None),
+                                     freeze=freeze)
+    return float(value[0]), np.array(dr.grad(t))
+
+
+def test_a_recording_that_fails_after_its_backward_pass_counts_the_gradient_once(monkeypatch):
+    """A recording that fails once its backward pass has begun is traced again (with a
+    warning); the gradients it left are put back first. Catches the retry adding the pass's
+    gradient a second time (twice the traced gradient)."""
+    from draaw_mi.rendering import frozen as F
+    scene = draaw_mi.load_scene(softbox_tile("box"))
+    session = session_of(scene)
+    _, traced = _one_pass(scene, session, freeze=False)
+
+    def failing(fn, **options):
+        def frozen(*args, **kwargs):
+            fn(*args, **kwargs)                  # the pass, its backward included: then a failure
+            raise RuntimeError("record(): stand-in failure after the backward pass")
+        return frozen
+    monkeypatch.setattr(F.dr, "freeze", failing)
+    with pytest.warns(RuntimeWarning, match="traced from now on"):
+        _, retried = _one_pass(scene, session)
+    assert np.abs(traced).max() > 0
+    np.testing.assert_allclose(retried, traced, rtol=0, atol=1e-5 * np.abs(traced).max())
+
+
+def test_adaptive_passes_are_traced():
+    """V4 renders a pass of 64 spp or more adaptively (its pilot is read back, which a
+    recording cannot hold): such a gradient pass is traced, as the fit traced it before
+    recordings, and makes no recording. Catches a recording that would render those passes
+    uniformly, a different estimator than the traced fit's."""
+    scene = draaw_mi.load_scene(softbox_tile("box"))
+    session = session_of(scene)
+    _one_pass(scene, session, spp=64)
+    assert not any(k[0] == "gradient" for k in session.recordings)
+    _one_pass(scene, session, spp=16)
+    assert any(k[0] == "gradient" for k in session.recordings)
