@@ -88,6 +88,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not 0 < args.short < args.long:
         ap.error(f"--short {args.short} --long {args.long}: expected 0 < short < long")
+    if args.repeats < 1:
+        ap.error(f"--repeats {args.repeats}: expected at least 1")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         env = sv.environment(os.path.join(tmp, "env.exr"))
