@@ -151,6 +151,7 @@ def _tiny_site(tmp_path, body: str):
     return _sphinx(str(src), str(tmp_path / "out"))
 
 
+@pytest.mark.slow          # a second build (9 s): that the check above can fail
 def test_a_broken_cross_reference_fails_the_build(tmp_path):
     """A ``{py:func}`` reference to a draaw-mi name that does not exist fails the build and the
     message names it; the same page with references to a documented function and to a real
@@ -164,6 +165,7 @@ def test_a_broken_cross_reference_fails_the_build(tmp_path):
     assert "draaw_mi.no_such_function" in bad.stderr and "reference target not found" in bad.stderr, bad.stderr[-3000:]
 
 
+@pytest.mark.slow          # the same, for a moved module path (5 s)
 def test_documenting_a_moved_module_path_fails_the_build(tmp_path):
     """The API pages must name the modules' real homes: autodoc of an old flat path such as
     ``draaw_mi.preview`` (served with a DeprecationWarning) fails the build, naming the new one."""

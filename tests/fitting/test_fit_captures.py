@@ -197,7 +197,7 @@ def test_cli_fits_maps_from_a_captures_file_and_writes_them(references, tmp_path
     assert rc != 0 and "--captures carries each capture's reference" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("maps", ["pyramid", "texels"])
+@pytest.mark.parametrize("maps", ["pyramid", pytest.param("texels", marks=pytest.mark.slow)])   # 12 s each
 def test_a_fit_replayed_from_recordings_follows_the_traced_fit(references, monkeypatch, maps):
     """The gradient passes of a fit replay dr.freeze recordings (render, loss, backward); with
     recording off they are traced. Same seeds, so the same losses and maps to float rounding

@@ -148,8 +148,8 @@ CASES = {
 BAND = {"subtraction_radius": 0.25}
 
 
-# two more cases, run by `make test-all`
-SLOW = ("ball_centre_x", "white_ball_sky")
+# three more cases, run by `make test-all` (subtraction_radius: 23 s, V2's every-light loop)
+SLOW = ("ball_centre_x", "white_ball_sky", "subtraction_radius")
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW else c for c in CASES])

@@ -38,7 +38,7 @@ errors, frames = [], []
 tuner.preview.on_error(lambda e: errors.append(repr(e)))
 tuner.preview.on_frame(lambda f: frames.append(f.spp))
 finite = 0
-for i in range(50):
+for i in range(30):
     if i % 3 == 1:                                    # a new integrator: the preview records anew
         tuner.preview.configure(max_depth=2 + (i // 3) % 3)
     if i % 5 == 0:
@@ -59,16 +59,26 @@ def _run(code: str, timeout: float = 300):
     return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
 
 
-def test_a_script_that_builds_a_tuner_and_ends_exits_cleanly_every_time():
-    """Its worker is inside a Dr.Jit kernel when the script ends: the session's exit hook
-    stops it first (without it: SIGSEGV or SIGABRT in two runs of three)."""
+def _builds_a_tuner_and_exits_cleanly(runs: int):
     codes = []
-    for _ in range(20):
+    for _ in range(runs):
         out = _run(BUILD_AND_END)
         codes.append(out.returncode)
         assert out.returncode == 0, (codes, out.stderr[-2000:])
         assert out.stdout.strip() == "refining True"
-    assert codes == [0] * 20
+
+
+def test_a_script_that_builds_a_tuner_and_ends_exits_cleanly():
+    """Its worker is inside a Dr.Jit kernel when the script ends: the session's exit hook
+    stops it first. Without it the script died of SIGSEGV or SIGABRT in two runs of three:
+    six clean runs of that would happen once in 729."""
+    _builds_a_tuner_and_exits_cleanly(6)
+
+
+@pytest.mark.slow
+def test_a_script_that_builds_a_tuner_and_ends_exits_cleanly_every_time():
+    """The same, twenty times (a crash one run in ten would show with probability 0.88)."""
+    _builds_a_tuner_and_exits_cleanly(20)
 
 
 def test_renders_beside_a_refining_tuner_break_nothing_and_closing_stops_it_at_once():
@@ -76,7 +86,7 @@ def test_renders_beside_a_refining_tuner_break_nothing_and_closing_stops_it_at_o
     assert out.returncode == 0, out.stderr[-3000:]
     line = next(x for x in out.stdout.splitlines() if x.startswith("result"))
     _, finite, frames, rest = line.split(" ", 3)
-    assert int(finite) == 50                          # every render of the other scene finite
+    assert int(finite) == 30                          # every render of the other scene finite
     assert int(frames) >= 5                           # the tuner refined meanwhile
     errors, running, still, seconds = rest.rsplit(" ", 3)
     assert errors == "[]"                              # no failed recording, no failed frame
