@@ -78,6 +78,11 @@ def truth_maps(n: int, seed: int = 1):
 CONSTANT_TRUTH = (0.5, 0.25, 0.0)
 
 
+#: ``--start``'s metallic (colour and roughness start at 0.5 in both; the draaw material's defaults
+#: are colour 0.5, roughness 0.5, metallic 0)
+START_METALLIC = {"half": 0.5, "default": 0.0}
+
+
 def as_scalars(desc: dict) -> dict:
     """``desc`` with its material's maps replaced by their means (``--truth scalar``: one base
     colour, roughness and metallic, fitted as three scalars rather than maps)."""
@@ -290,8 +295,9 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     truth_caps = None
     # one material as scalars: the fit is the same whatever the maps' method, so it runs once
     for method in (["scalars"] if args.truth == "scalar" else args.methods):
-        start = (np.full((n, n, 3), 0.5, np.float32), np.full((n, n, 1), 0.5, np.float32),
-                 np.full((n, n, 1), 0.5, np.float32))
+        start = truth if args.start == "truth" else (
+            np.full((n, n, 3), 0.5, np.float32), np.full((n, n, 1), 0.5, np.float32),
+            np.full((n, n, 1), START_METALLIC[args.start], np.float32))
         d = scene_description(obj, start, env, res, k, args.layout, args.lamp)
         scene = draaw_mi.load_scene(as_scalars(d) if args.truth == "scalar" else d)
         t = time.perf_counter()
@@ -343,6 +349,10 @@ def main(argv=None) -> int:
                     help="the ground truth: procedural maps (smooth and sharp features), one material "
                          "as maps (constant), or one material fitted as three scalars (scalar)")
     ap.add_argument("--methods", nargs="+", default=["pyramid", "texels"])
+    ap.add_argument("--start", choices=("half", "default", "truth"), default="half",
+                    help="the fit's first maps: 0.5 everywhere (half), the draaw material's defaults "
+                         "(colour and roughness 0.5, metallic 0: default), or the ground truth (a "
+                         "diagnostic: where the fit drifts from the truth, the captures' optimum is not the truth)")
     ap.add_argument("--iterations", type=int, default=300)
     ap.add_argument("--batch", type=int, default=2)
     ap.add_argument("--spp", type=int, default=16)
@@ -379,7 +389,8 @@ def main(argv=None) -> int:
              "", f"Recorded {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} CPUs, variant "
              f"`{mi.variant()}`. Times are wall clock.", "",
              f"Fit: `draaw_mi.fit(scene, refs, {PARAMS}, captures=..., spp={args.spp}, "
-             f"iterations={args.iterations}, batch={args.batch}, maps=...)` from maps of 0.5: pyramid with "
+             f"iterations={args.iterations}, batch={args.batch}, maps=...)` from "
+             f"{'the truth' if args.start == 'truth' else 'maps of 0.5' if args.start == 'half' else 'the material defaults (0.5, 0.5, 0)'}: pyramid with "
              f"lr {args.lr} (logit units) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
              f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "

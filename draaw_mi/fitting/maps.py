@@ -49,7 +49,8 @@ COARSEST = 4
 #: Huber width of the total-variation prior (value units): below it the prior is quadratic
 TV_DELTA = 0.02
 #: latents are clamped to +-LOGIT_MAX (sigmoid 1e-4 from the bounds): a gradient that keeps
-#: pushing a texel at its bound does not grow the latent without limit
+#: pushing a texel at its bound does not grow the latent without limit; one that pulls it
+#: back inside passes
 LOGIT_MAX = 9.0
 
 
@@ -193,8 +194,11 @@ class MapLatent:
         s = _sigmoid(z)
         if self.tv > 0:
             g = g + self.prior(self.lo + (self.hi - self.lo) * s)[1]
-        # (a latent clamped at +-LOGIT_MAX passes no gradient)
-        gz = g * (self.hi - self.lo) * s * (1 - s) * (np.abs(z) < LOGIT_MAX)
+        # a latent clamped at +-LOGIT_MAX passes only a gradient that moves it back inside: a
+        # texel that starts at a bound (metallic 0, the material's default) or reaches one can
+        # leave it when the images ask
+        inside = (np.abs(z) < LOGIT_MAX) | (np.sign(z) * g > 0)
+        gz = g * (self.hi - self.lo) * s * (1 - s) * inside
         return [_separable(ay.T, gz, ax.T) for ay, ax in self.ups]      # U_l^T gz
 
     def step(self, grad_value: np.ndarray, lr: float) -> None:

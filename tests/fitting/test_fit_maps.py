@@ -69,6 +69,28 @@ def test_a_map_converges_to_its_target_in_range_and_stays_there():
     assert np.abs(m.value() - target).mean() < 0.01
 
 
+@pytest.mark.parametrize("start", [0.0, 1.0])
+def test_a_map_that_starts_at_a_bound_leaves_it_when_the_gradient_points_inside(start):
+    """Metallic's default is 0, a bound: its latent starts clamped at -LOGIT_MAX. A clamped
+    latent passed no gradient at all, so a map started at 0 (or driven to a bound on the way)
+    never left it (a fit from metallic 0 ended with every metal patch at 0). A gradient that
+    points outside moves nothing, not even the latent beyond the clamp: had it grown there, the
+    first inward steps would only walk it back (passing every gradient: no texel moved by 1e-3
+    in 30 inward steps; 0.04 in 20 with the rule)."""
+    m = MapLatent(np.full((16, 16, 1), start), 0.0, 1.0)
+    target = np.full((16, 16, 1), 0.6)
+    outside = np.full((16, 16, 1), -1.0 if start == 1.0 else 1.0)    # descent pushes beyond the bound
+    for _ in range(20):
+        m.step(outside, 0.1)
+    assert np.abs(m.value() - start).max() < 2e-4
+    for _ in range(20):
+        m.step(m.value() - target, 0.1)
+    assert np.abs(m.value() - start).min() > 0.01                   # it answers at once
+    for _ in range(380):
+        m.step(m.value() - target, 0.1)
+    assert np.abs(m.value() - target).mean() < 0.01
+
+
 @pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan, 1e30, -1e30])
 def test_a_map_stays_finite_and_in_range_under_wild_gradients(bad):
     """What a black or saturated photo, or a firefly, can feed the map: infinite, NaN or huge
