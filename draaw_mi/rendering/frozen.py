@@ -151,7 +151,9 @@ def owned_tensor(array) -> mi.TensorXf:
     and recorded anew at most calls (measured on the 8x8 tile of
     tests/fitting/test_fit_captures.py: images off by up to 1.4 from the fourth iteration
     on; 8 recordings for 4 captures, 3 with owned tensors). An arithmetic kernel with an
-    opaque operand copies.
+    opaque operand copies, and the copy is waited for: ``dr.eval`` only queues a kernel on
+    the CPU backend, so behind a render still running the copy read the array after the
+    caller had changed it (20 times in 20).
 
     >>> import numpy as np
     >>> a = np.ones((2, 2, 1), np.float32)
@@ -162,6 +164,7 @@ def owned_tensor(array) -> mi.TensorXf:
     """
     t = mi.TensorXf(np.asarray(array, dtype=np.float32)) + dr.opaque(mi.Float, 0.0)
     dr.eval(t)
+    dr.sync_thread()
     return t
 
 

@@ -127,3 +127,18 @@ def test_adaptive_passes_are_traced():
     assert not any(k[0] == "gradient" for k in session.recordings)
     _one_pass(scene, session, spp=16)
     assert any(k[0] == "gradient" for k in session.recordings)
+
+
+def test_an_owned_tensor_holds_the_array_as_it_was_when_the_call_returned():
+    """``dr.eval`` only queues a kernel on the CPU backend: behind a long kernel still
+    running, ``owned_tensor``'s copy read the numpy array after the caller had changed it
+    (every time without the wait for the copy)."""
+    import mitsuba as mi
+    for i in range(5):
+        x = dr.arange(mi.Float, 4_000_000) + i
+        busy = dr.sin(x) * dr.cos(0.5 * x) + dr.sqrt(x + 1.0)
+        dr.eval(busy)                                   # queued, still running below
+        a = np.ones((32, 32, 1), np.float32)
+        t = owned_tensor(a)
+        a[:] = 7.0
+        assert np.array(t).max() == 1.0, i
