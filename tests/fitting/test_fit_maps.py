@@ -80,9 +80,11 @@ def test_a_map_that_starts_at_a_bound_leaves_it_when_the_gradient_points_inside(
     m = MapLatent(np.full((16, 16, 1), start), 0.0, 1.0)
     target = np.full((16, 16, 1), 0.6)
     outside = np.full((16, 16, 1), -1.0 if start == 1.0 else 1.0)    # descent pushes beyond the bound
+    levels = [lv.copy() for lv in m.levels]
     for _ in range(20):
         m.step(outside, 0.1)
     assert np.abs(m.value() - start).max() < 2e-4
+    assert all(np.array_equal(a, b) for a, b in zip(levels, m.levels))   # not even the latent
     for _ in range(20):
         m.step(m.value() - target, 0.1)
     assert np.abs(m.value() - start).min() > 0.01                   # it answers at once

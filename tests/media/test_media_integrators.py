@@ -131,7 +131,6 @@ def _grads(key_suffix, direction_fn, h, n=4, kind="uniform", spp_ad=32, spp_fd=2
     return info
 
 
-@pytest.mark.slow          # 22 s; the grid's albedo gradient (below) runs in the default suite
 def test_density_block_gradient_matches_fd():
     def block(v0):
         m = np.zeros(v0.shape, np.float32)
@@ -142,6 +141,7 @@ def test_density_block_gradient_matches_fd():
     _grads("sigma_t.data", block, h=0.2, albedo=0.3)
 
 
+@pytest.mark.slow          # 8 s; the grid's density gradient (above) takes the tracking derivatives by default
 def test_albedo_gradient_matches_fd():
     _grads("albedo.data", lambda v0: mi.TensorXf(np.ones(v0.shape, np.float32)), h=0.05)
 
@@ -153,7 +153,7 @@ def test_homogeneous_sigma_t_gradient_matches_fd():
     _grads("sigma_t.value.value", lambda v0: type(v0)(1.0), h=0.1, kind="homogeneous", spp_fd=256)
 
 
-@pytest.mark.slow          # 11 s
+@pytest.mark.slow          # 11 s; by default the phase function's gradient is checked finite only
 def test_g_gradient_matches_fd():
     _grads("phase_function.g", lambda v0: mi.Float(1.0), h=0.1, n=8, spp_fd=512)
 
