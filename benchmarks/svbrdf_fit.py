@@ -78,9 +78,10 @@ def truth_maps(n: int, seed: int = 1):
 CONSTANT_TRUTH = (0.5, 0.25, 0.0)
 
 
-#: ``--start``'s metallic (colour and roughness start at 0.5 in both; the draaw material's defaults
-#: are colour 0.5, roughness 0.5, metallic 0)
-START_METALLIC = {"half": 0.5, "default": 0.0}
+#: ``--start`` (other than ``truth``): the first maps' metallic, and how the table says it
+#: (colour and roughness start at 0.5 in both; the draaw material's defaults are colour 0.5,
+#: roughness 0.5, metallic 0)
+STARTS = {"half": (0.5, "maps of 0.5"), "default": (0.0, "the material defaults (0.5, 0.5, 0)")}
 
 
 def as_scalars(desc: dict) -> dict:
@@ -297,7 +298,7 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     for method in (["scalars"] if args.truth == "scalar" else args.methods):
         start = truth if args.start == "truth" else (
             np.full((n, n, 3), 0.5, np.float32), np.full((n, n, 1), 0.5, np.float32),
-            np.full((n, n, 1), START_METALLIC[args.start], np.float32))
+            np.full((n, n, 1), STARTS[args.start][0], np.float32))
         d = scene_description(obj, start, env, res, k, args.layout, args.lamp)
         scene = draaw_mi.load_scene(as_scalars(d) if args.truth == "scalar" else d)
         t = time.perf_counter()
@@ -349,7 +350,7 @@ def main(argv=None) -> int:
                     help="the ground truth: procedural maps (smooth and sharp features), one material "
                          "as maps (constant), or one material fitted as three scalars (scalar)")
     ap.add_argument("--methods", nargs="+", default=["pyramid", "texels"])
-    ap.add_argument("--start", choices=("half", "default", "truth"), default="half",
+    ap.add_argument("--start", choices=(*STARTS, "truth"), default="half",
                     help="the fit's first maps: 0.5 everywhere (half), the draaw material's defaults "
                          "(colour and roughness 0.5, metallic 0: default), or the ground truth (a "
                          "diagnostic: where the fit drifts from the truth, the captures' optimum is not the truth)")
@@ -390,7 +391,7 @@ def main(argv=None) -> int:
              f"`{mi.variant()}`. Times are wall clock.", "",
              f"Fit: `draaw_mi.fit(scene, refs, {PARAMS}, captures=..., spp={args.spp}, "
              f"iterations={args.iterations}, batch={args.batch}, maps=...)` from "
-             f"{'the truth' if args.start == 'truth' else 'maps of 0.5' if args.start == 'half' else 'the material defaults (0.5, 0.5, 0)'}: pyramid with "
+             f"{'the truth' if args.start == 'truth' else STARTS[args.start][1]}: pyramid with "
              f"lr {args.lr} (logit units) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
              f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "
