@@ -11,8 +11,9 @@ and two coloured lamps) plus one lamp of its own. References: Mitsuba's ``path``
 
 Where the lamps stand (``--layout``): ``ring`` (the default) beside the cameras, so the
 tile never shows a highlight; ``sweep`` where each camera sees the lamp's mirror image, at a
-point that moves over the object; ``flash`` beside the camera; ``pairs`` two captures per
-camera position. ``--lamp softbox`` makes each lamp an area light (a highlight patch, not a
+point that moves over the object; ``globe`` as ``sweep`` with the cameras spread over all
+directions (the sphere's poles in view); ``flash`` beside the camera; ``pairs`` two captures
+per camera position. ``--lamp softbox`` makes each lamp an area light (a highlight patch, not a
 point). ``patterns``: every lamp off, each capture's environment a pattern of bright bands
 (:func:`pattern_environment`). ``--truth constant`` / ``scalar`` fit one material (as maps /
 as three scalars): can the captures tell it apart at all? ``--capture-spp`` adds how well the
@@ -45,6 +46,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import draaw_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402  (its variant is set by draaw_mi)
+from draaw_mi.fitting.maps import LR_SCALES  # noqa: E402
 from draaw_mi.fitting.views import LOSSES  # noqa: E402
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "go-draaw")
@@ -153,7 +155,7 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
     if lamp == "point":
         return {"type": "point", "name": f"L{j}", "position": pos.tolist(), "intensity": 20.0}
     target = np.zeros(3)
-    if layout in ("sweep", "patterns") and obj == "tile":
+    if layout in HIGHLIGHT_LAYOUTS and obj == "tile":
         c = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
         target = np.array([(pos[0] + c[0]) / 2, (pos[1] + c[1]) / 2, 0.0])
     pos = target + SOFTBOX_DISTANCE * (pos - target)
@@ -163,7 +165,29 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
 
 
 #: how the captures' cameras and lamps are placed (``--layout``)
-LAYOUTS = ("flash", "pairs", "patterns", "ring", "sweep")
+LAYOUTS = ("flash", "globe", "pairs", "patterns", "ring", "sweep")
+#: the layouts whose lamps stand where a camera sees their mirror image (:func:`highlight_lamp`)
+HIGHLIGHT_LAYOUTS = ("globe", "patterns", "sweep")
+
+
+def globe_direction(i: int, k: int) -> np.ndarray:
+    """``globe``: capture ``i``'s camera direction from the object, one of ``k`` points spread
+    over the sphere of directions (a Fibonacci lattice: heights ``1 - 2 (i + 1/2) / k``,
+    golden-angle azimuths), so the cameras see the sphere's poles (61 degrees above and below
+    its equator for 8 captures) as well as its equator, where ``sweep``'s stand at 21 and -7
+    degrees. The held-out view (``i == k``) sits on the equator half-way along the lattice,
+    between the captures nearest it.
+
+    >>> d = globe_direction(0, 8); round(float(d[2]), 3), round(float(np.linalg.norm(d)), 6)
+    (0.875, 1.0)
+    >>> round(float(globe_direction(8, 8)[2]), 6)
+    0.0
+    """
+    t = (k - 1) / 2 if i >= k else i
+    h = 1 - 2 * (t + 0.5) / k
+    a = t * np.pi * (3 - np.sqrt(5))
+    r = np.sqrt(1 - h * h)
+    return np.array([r * np.cos(a), r * np.sin(a), h])
 
 
 def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
@@ -173,9 +197,15 @@ def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
         i, k = i // 2, max(k // 2, 1)
     a = 2 * np.pi * (i + 0.5 * (i >= k)) / k
     if obj == "tile":
-        r = 1.6 if layout in ("ring", "sweep", "patterns") else (0.5 if i % 2 else 1.0)      # a flash's mirror point on the tile
+        r = 1.6 if layout in ("ring", *HIGHLIGHT_LAYOUTS) else (0.5 if i % 2 else 1.0)      # a flash's mirror point on the tile
         return {"origin": [r * np.cos(a), r * np.sin(a), 2.6 + 0.4 * (i % 2)], "target": [0, 0, 0],
                 "up": [0, 1, 0] if abs(np.cos(a)) > 0.5 else [1, 0, 0], "fov": 40}
+    if layout == "globe":
+        d = globe_direction(i, k)
+        if obj == "sphere":
+            return {"origin": (3.2 * d).tolist(), "target": [0, 0, 0], "up": [0, 0, 1], "fov": 40}
+        return {"origin": [3.2 * 0.9 * d[1], 3.2 * d[2], 3.2 * 0.9 * d[0] + 0.2], "target": [0, 0, 0],
+                "up": [0, 1, 0], "fov": 40}
     z = 1.2 if i % 2 else -0.4
     if obj == "sphere":
         return {"origin": [3.2 * np.cos(a), 3.2 * np.sin(a), z], "target": [0, 0, 0], "up": [0, 0, 1], "fov": 40}
@@ -186,10 +216,10 @@ def camera(obj: str, i: int, k: int, layout: str = "ring") -> dict:
 def light_position(obj: str, j: int, k: int, layout: str = "ring") -> list:
     """Lamp ``j`` of ``k`` (+1 held out, ``j == k``): on a ring around the object (``ring``, and
     the held-out lamp of ``flash`` and ``pairs``); ``flash``: beside capture ``j``'s camera
-    (0.15 above it); ``pairs``: even captures a flash, odd ones a lamp on the ring; ``sweep``
-    and ``patterns``: :func:`highlight_lamp`."""
-    if layout in ("sweep", "patterns"):           # patterns: only the held-out lamp shines
-        return highlight_lamp(obj, j, k)
+    (0.15 above it); ``pairs``: even captures a flash, odd ones a lamp on the ring; ``sweep``,
+    ``globe`` and ``patterns``: :func:`highlight_lamp`."""
+    if layout in HIGHLIGHT_LAYOUTS:               # patterns: only the held-out lamp shines
+        return highlight_lamp(obj, j, k, layout)
     if j < k and (layout == "flash" or (layout == "pairs" and j % 2 == 0)):
         o = np.array(camera(obj, j, k, layout)["origin"], dtype=float)
         up = np.array([0.0, 1.0, 0.0] if obj == "monkey" else [0.0, 0.0, 1.0])
@@ -203,11 +233,12 @@ def light_position(obj: str, j: int, k: int, layout: str = "ring") -> list:
     return [4 * np.sin(b), height, 4 * np.cos(b)]
 
 
-def highlight_lamp(obj: str, j: int, k: int) -> list:
-    """``sweep``: lamp ``j`` where camera ``j`` sees its mirror reflection, at a point that moves
-    over the object from capture to capture (a golden-angle spiral; the held-out lamp ``j == k``
-    at a point of its own), so each capture shows a highlight somewhere else."""
-    c = np.array(camera(obj, j, k, "sweep")["origin"], dtype=float)
+def highlight_lamp(obj: str, j: int, k: int, layout: str = "sweep") -> list:
+    """``sweep`` (and ``globe``): lamp ``j`` where camera ``j`` sees its mirror reflection, at a
+    point that moves over the object from capture to capture (a golden-angle spiral; the
+    held-out lamp ``j == k`` at a point of its own), so each capture shows a highlight
+    somewhere else."""
+    c = np.array(camera(obj, j, k, "globe" if layout == "globe" else "sweep")["origin"], dtype=float)
     golden = np.pi * (3 - np.sqrt(5))
     rho, phi = np.sqrt((j + 0.5) / (k + 1)), j * golden
     if obj == "tile":                       # the mirror point t on the plane z = 0
@@ -215,6 +246,8 @@ def highlight_lamp(obj: str, j: int, k: int) -> list:
         return [2 * t[0] - c[0], 2 * t[1] - c[1], c[2]]
     v = c / np.linalg.norm(c)               # a normal tilted from the view by up to 50 degrees
     a = np.cross(v, [0.3, 0.2, 1.0])
+    if np.linalg.norm(a) < 0.3:             # (a view along that axis)
+        a = np.cross(v, [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
     b = np.cross(v, a)
     tilt = np.radians(50) * rho
@@ -288,7 +321,8 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     t = time.perf_counter()
     caps = captures(obj, k, args.layout)
     refs = render_captures(ref_scene, caps, args.ref_spp, 1000)
-    held = [{"camera": camera(obj, k, k, "sweep" if args.layout in ("sweep", "patterns") else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
+    held = [{"camera": camera(obj, k, k, args.layout if args.layout == "globe" else
+                              "sweep" if args.layout in HIGHLIGHT_LAYOUTS else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
     held_truth = render_captures(ref_scene, held, 256, 77)[0]
     t_ref = time.perf_counter() - t
     rows = []
@@ -305,7 +339,8 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
         r = draaw_mi.fit(scene, refs, PARAMS, captures=caps, spp=args.spp, iterations=args.iterations,
                          batch=args.batch, loss=args.loss,
                          maps=None if method == "scalars" else
-                         {"parametrisation": method, "tv": args.tv if method == "pyramid" else 0.0},
+                         {"parametrisation": method, "tv": args.tv if method == "pyramid" else 0.0,
+                          "lr_scale": args.lr_scale if method == "pyramid" else None},
                          lr=args.lr_texels if method == "texels" else args.lr,
                          seed=args.seed, progress=not args.no_progress)
         seconds = time.perf_counter() - t
@@ -366,6 +401,9 @@ def main(argv=None) -> int:
                          "fits of one object")
     ap.add_argument("--lr", type=float, default=0.05, help="the pyramid's lr (logit units)")
     ap.add_argument("--lr-texels", type=float, default=0.05, help="the texel-by-texel fit's lr (value units)")
+    ap.add_argument("--lr-scale", nargs="+", default=[], metavar="NAME=X",
+                    help="the pyramid's per-map learning rates, as maps={'lr_scale': ...} takes them "
+                         "(default draaw_mi.fitting.maps.LR_SCALES; metallic=1 gives every map the same)")
     ap.add_argument("--loss", choices=LOSSES, default="l2", help="fit()'s loss")
     ap.add_argument("--tv", type=float, default=0.0)
     ap.add_argument("--seed", type=int, default=0)
@@ -373,6 +411,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    try:
+        args.lr_scale = {k: float(v) for k, v in (item.split("=", 1) for item in args.lr_scale)} or None
+    except ValueError:
+        ap.error(f"--lr-scale {' '.join(args.lr_scale)}: expected NAME=NUMBER items (metallic=5)")
     if args.capture_spp < 0:
         ap.error(f"--capture-spp {args.capture_spp}: expected 0 (not measured) or a positive spp")
     if args.layout == "patterns" and args.lamp == "softbox":
@@ -392,7 +434,7 @@ def main(argv=None) -> int:
              f"Fit: `draaw_mi.fit(scene, refs, {PARAMS}, captures=..., spp={args.spp}, "
              f"iterations={args.iterations}, batch={args.batch}, maps=...)` from "
              f"{'the truth' if args.start == 'truth' else STARTS[args.start][1]}: pyramid with "
-             f"lr {args.lr} (logit units) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
+             f"lr {args.lr} (logit units; per map x{args.lr_scale or LR_SCALES}) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
              f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "
              "Metrics over the observed texels; relit = a held-out camera and lamp, "

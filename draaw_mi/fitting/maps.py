@@ -21,6 +21,11 @@ resolution up to ``H x W``, and ``U_l`` upsamples level ``l`` bilinearly to ``H 
   over many texels (little noise), the finest level's from one texel's. (A second moment
   pooled per level let the few texels under a highlight take steps many times ``lr``:
   measured on the benchmark's sphere it left spots of 0 and 1.)
+* **A learning rate per map** (``lr_scale``): a metallic map's latents take steps
+  :data:`LR_SCALES` times the others'. Metallic is near 0 or 1 in real materials (its texels
+  end at logits of +-3 to +-9, colour and roughness mostly inside +-2), so its latents travel
+  farther; at the maps' common rate the metal patches were still at 0.3-0.8 after 1,200
+  steps.
 * **Total variation** (``tv``, in value units per texel, Huber-smoothed): a prior that keeps
   flat regions flat and sharp edges sharp (metallic patches), weighed against the image loss.
 * **Visibility**: a texel is *observed* when any capture's gradient reached it. Unobserved
@@ -248,6 +253,27 @@ def fill_unobserved(value: np.ndarray, seen: np.ndarray) -> np.ndarray:
     return out
 
 
+#: each map's learning rate as a multiple of the maps' ``lr``, by its material parameter's name
+#: (``fit(maps={"lr_scale": {...}})`` overrides it). Measured on the SVBRDF benchmark's tile
+#: (16² maps, 64² images, 160 iterations, ``sweep`` + softboxes; albedo PSNR / roughness MAE /
+#: metallic MAE): metallic x1 24.4 / 0.144 / 0.232, x3 27.7 / 0.116 / 0.129, x5 28.1 / 0.105 /
+#: 0.101, x8 28.1 / 0.107 / 0.114, x12 26.6 / 0.116 / 0.153; roughness x2 or colour x2 did not help
+#: (benchmarks/results/svbrdf_fit.md)
+LR_SCALES = {"metallic": 5.0}
+
+
+def material_parameter(key: str) -> str:
+    """The material parameter a map's key names: ``"obj.metallic.data"`` -> ``"metallic"``.
+
+    >>> material_parameter("obj.metallic.data"), material_parameter("floor.bsdf.roughness")
+    ('metallic', 'roughness')
+    """
+    parts = key.split(".")
+    if len(parts) > 1 and parts[-1] == "data":
+        parts = parts[:-1]
+    return parts[-1]
+
+
 #: what ``fit(maps=...)`` takes: "pyramid" (the default) or "texels" (each texel its own
 #: coordinate of the fit's Adam, projected onto its range: the texel-by-texel fit)
 PARAMETRISATIONS = ("pyramid", "texels")
@@ -263,12 +289,33 @@ class MapOptions:
       or ``"texels"`` (every texel a coordinate of Adam, clipped to its range).
     * ``tv``: total-variation weight (value units; 0 = none).
     * ``lr``: the maps' learning rate (in logit units; default the fit's ``lr``).
+    * ``lr_scale``: ``{name: multiple of lr}`` per map, by its material parameter
+      (``"metallic"``) or its fit name (``"obj.metallic"``); over :data:`LR_SCALES`
+      (``{"metallic": 1.0}`` gives metallic the common rate).
     * ``fill``: texels no capture observed take their neighbours' values at the end.
+
+    >>> o = MapOptions.parse({"lr_scale": {"obj.roughness": 2.0}})
+    >>> o.scale_for("obj.metallic.data"), o.scale_for("obj.roughness.data"), o.scale_for("obj.base_color.data")
+    (5.0, 2.0, 1.0)
     """
     parametrisation: str = "pyramid"
     tv: float = DEFAULT_TV
     lr: float | None = None
     fill: bool = True
+    lr_scale: dict | None = None
+
+    def scale_for(self, key: str) -> float:
+        """The multiple of ``lr`` for the map with key ``key`` (``"obj.metallic.data"``): a
+        ``lr_scale`` entry for its fit name, else for its material parameter, else
+        :data:`LR_SCALES`', else 1."""
+        own = self.lr_scale or {}
+        name = key[:-len(".data")] if key.endswith(".data") else key
+        param = material_parameter(key)
+        for table in (own, LR_SCALES):
+            for k in (name, param):
+                if k in table:
+                    return float(table[k])
+        return 1.0
 
     @classmethod
     def parse(cls, maps) -> MapOptions:
@@ -277,12 +324,12 @@ class MapOptions:
         if isinstance(maps, str):
             maps = {"parametrisation": maps}
         if not isinstance(maps, dict):
-            raise ParameterError(f"fit: maps={maps!r}; expected a dict (parametrisation, tv, lr, fill) "
-                                 "or one of 'pyramid', 'texels'")
-        unknown = sorted(set(maps) - {"parametrisation", "tv", "lr", "fill"})
+            raise ParameterError(f"fit: maps={maps!r}; expected a dict (parametrisation, tv, lr, lr_scale, "
+                                 "fill) or one of 'pyramid', 'texels'")
+        unknown = sorted(set(maps) - {"parametrisation", "tv", "lr", "lr_scale", "fill"})
         if unknown:
             raise ParameterError(f"fit: maps has the key(s) {', '.join(unknown)}; expected parametrisation, "
-                                 "tv, lr, fill")
+                                 "tv, lr, lr_scale, fill")
         o = cls(**maps)
         if o.parametrisation not in PARAMETRISATIONS:
             raise ParameterError(f"fit: maps parametrisation={o.parametrisation!r}; expected one of "
@@ -294,6 +341,15 @@ class MapOptions:
                     v < 0 if lo is not None else v <= 0):
                 raise ParameterError(f"fit: maps {name}={v!r}; expected a finite number "
                                      f"{'>= 0' if lo is not None else '> 0'}")
+        if o.lr_scale is not None:
+            if not isinstance(o.lr_scale, dict):
+                raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r}; expected a dict "
+                                     "{parameter name: multiple of lr}")
+            for k, v in o.lr_scale.items():
+                if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)) or not (
+                        np.isfinite(v) and v > 0):
+                    raise ParameterError(f"fit: maps lr_scale[{k!r}]={v!r}; expected a parameter name and a "
+                                         "finite number > 0")
         return o
 
 
@@ -307,6 +363,7 @@ class MapSet:
         self.options = options
         self.latents = {k: MapLatent(start, lo, hi, multiscale=True, tv=options.tv, name=k)
                         for k, (start, lo, hi) in params.items()}
+        self.scales = {k: options.scale_for(k) for k in params}
         self.attached: dict = {}
         self.grads = {k: np.zeros(m.shape) for k, m in self.latents.items()}
         self._values: dict | None = None       # values() since the last step (read-only)
@@ -329,8 +386,9 @@ class MapSet:
         self.attached = {}
 
     def step(self, lr: float) -> None:
+        """One Adam step of every map, each at ``lr`` times its ``scale_for``."""
         for k, m in self.latents.items():
-            m.step(self.grads[k], lr)
+            m.step(self.grads[k], lr * self.scales[k])
             self.grads[k][:] = 0.0
         self._values = None
 

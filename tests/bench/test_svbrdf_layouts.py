@@ -97,3 +97,34 @@ def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf
         e = svbrdf.pattern_environment(i)
         assert np.all(np.isfinite(e)), i
         assert 0.0 < e.min() < 0.05 and svbrdf.PATTERN_PEAK * 0.9 < e.max() <= svbrdf.PATTERN_PEAK + 0.05, i
+
+
+def test_globe_cameras_see_both_poles_of_the_sphere_and_no_lamp_blocks_a_view(svbrdf):
+    """``globe``: the 8 captures' cameras spread over the sphere of directions, both poles 29
+    degrees from the nearest camera (``sweep``: 69 and 83) and no direction farther than 55
+    degrees from one (sweep: 82); the held-out view on the equator, not one of the captures'
+    directions; no softbox (all of them stand in every capture, switched off but opaque)
+    between a camera and the unit sphere. Catches the held-out view taking a lattice slot
+    (the lowest camera then 42 degrees below the equator: the south pole 48 from it) and a
+    lattice that bunches the cameras."""
+    k = 8
+    cams = np.array([svbrdf.camera("sphere", i, k, "globe")["origin"] for i in range(k + 1)], dtype=float)
+    dirs = cams / np.linalg.norm(cams, axis=1, keepdims=True)
+    d = np.random.default_rng(0).normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+
+    def gap(points):
+        return np.degrees(np.arccos(np.clip(points @ dirs[:k].T, -1, 1))).min(axis=1)
+
+    assert gap(np.array([[0.0, 0, 1], [0, 0, -1]])).max() < 30
+    assert gap(d).max() < 55
+    assert abs(dirs[k, 2]) < 1e-9 and gap(dirs[k:]).min() > 20          # the held-out view: its own
+    for i, c in enumerate(cams):
+        for j in range(k + 1):
+            box = svbrdf.lamp_light("sphere", j, k, "globe", "softbox")
+            p = np.array(box["position"], dtype=float)
+            forward = -c / np.linalg.norm(c)
+            t = (p - c) @ forward
+            if 0 < t < np.linalg.norm(c):          # between the camera and the sphere's centre
+                reach = t / np.linalg.norm(c) + np.hypot(*box["size"]) / 2
+                assert np.linalg.norm(p - c - t * forward) > reach, (i, j)

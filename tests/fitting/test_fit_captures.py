@@ -121,37 +121,45 @@ def test_views_and_captures_together_are_refused(references):
 
 
 def test_maps_from_captures_beat_the_texel_by_texel_fit(references):
-    """The pyramid parametrisation against texel-by-texel Adam (maps="texels"), the same 4
-    captures, 60 iterations of 2 captures each. Measured over seeds 0-2 (MAE of base colour,
-    roughness, metallic; start 0.20, 0.175, 0.50): pyramid 0.095-0.099, 0.215-0.232,
-    0.215-0.223; texels 0.113-0.125, 0.263-0.283, 0.223-0.250. So: lower colour and roughness
-    error than texels by 10 %, metallic no worse, colour and metallic well below the start.
-    (Roughness ends above the start for both: on a flat tile the 4 % dielectric specular of
-    three of four lamps says little about it; benchmarks/results/svbrdf_fit.md has the
-    objects that constrain it.) Catches a pyramid whose coarse levels get no gradient, a
-    capture rendered under another capture's lights (residual noise 10-100x), and a map fit
-    that does not move."""
+    """The pyramid parametrisation against texel-by-texel Adam (maps="texels") and against the
+    pyramid with every map at one learning rate (``lr_scale`` metallic 1), the same 4 captures,
+    60 iterations of 2 captures each. Measured over seeds 0-2 (MAE of base colour, roughness,
+    metallic; start 0.20, 0.175, 0.50): pyramid 0.045-0.052, 0.222-0.241, 0.050-0.073; one
+    rate 0.095-0.099, 0.215-0.232, 0.215-0.223; texels 0.113-0.125, 0.263-0.283, 0.223-0.250.
+    So: lower colour error than texels by 10 % and roughness error by 5 %, metallic no worse,
+    colour and metallic well below the start, and metallic's own rate halves the colour and
+    metallic errors. (Roughness ends above the start for all three: on a flat tile the 4 %
+    dielectric specular of three of four lamps says little about it;
+    benchmarks/results/svbrdf_fit.md has the objects that constrain it.) Catches a pyramid
+    whose coarse levels get no gradient, a capture rendered under another capture's lights
+    (residual noise 10-100x), a map fit that does not move, and per-map rates that do not
+    reach the fit (metallic at one rate: 0.215 and more)."""
     out = {}
-    for mode, lr in (("pyramid", 0.1), ("texels", 0.05)):
+    for mode, maps, lr in (("pyramid", "pyramid", 0.1), ("one rate", {"lr_scale": {"metallic": 1.0}}, 0.1),
+                           ("texels", "texels", 0.05)):
         res = draaw_mi.fit(start_scene(), references, MAPS, captures=tile_captures(), spp=8, iterations=60,
-                           batch=2, maps=mode, lr=lr, progress=False)
+                           batch=2, maps=maps, lr=lr, progress=False)
         out[mode] = errors(res.values)
         for name in MAPS:
             v = res.values[name]
             assert np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1
         assert all(c["explained"] for c in res.captures), res.captures
-    pyramid, texels = out["pyramid"], out["texels"]
-    assert pyramid[0] < 0.9 * texels[0] and pyramid[1] < 0.9 * texels[1], out
+    pyramid, one_rate, texels = out["pyramid"], out["one rate"], out["texels"]
+    assert pyramid[0] < 0.9 * texels[0] and pyramid[1] < 0.95 * texels[1], out
     assert pyramid[2] < texels[2] + 0.01, out
     assert pyramid[0] < 0.6 * 0.20 and pyramid[2] < 0.5 * 0.50, out
+    assert pyramid[0] < 0.7 * one_rate[0] and pyramid[2] < 0.5 * one_rate[2], out
 
 
 def test_bad_captures_leave_the_maps_finite_in_range_and_are_named(references, tmp_path):
     """The four good captures and four bad ones: a black photo, a saturated PNG (all 255), a
     camera that misses the tile (its photo: the sky), and capture 0's photo (lit by L0) said to
-    be lit by L2. Measured relative misfits: good 0.03-0.08, wrong light 0.17 (limit: 3x the
-    median, 0.135). The fit finishes with finite maps inside [0, 1]; the black, saturated
-    and wrongly lit captures are reported as not explained, the good ones and the miss are not. Catches a
+    be lit by L2. Measured relative misfits after 60 iterations, seeds 0-2: good 0.009-0.073,
+    wrong light 0.129-0.165 (limit: 3x the median, 0.089-0.104). (After 40 iterations, with
+    metallic at its own rate, a good capture still at 0.064 raised the limit over the wrong
+    light's 0.154 at seed 0: the fit must settle before a wrong light stands out.) The fit
+    finishes with finite maps inside [0, 1]; the black, saturated and wrongly lit captures are
+    reported as not explained, the good ones and the miss are not. Catches a
     sanitiser that lets NaN/Inf reach the maps, a residual test that cannot tell a wrong light
     from noise, a saturated photo counted as explained."""
     import matplotlib.image
@@ -164,7 +172,7 @@ def test_bad_captures_leave_the_maps_finite_in_range_and_are_named(references, t
     bad = [dict(c, reference=r) for c, r in zip(caps, references)] + [
         dict(caps[1], reference=np.zeros((32, 32, 3), np.float32)), dict(caps[2], reference=str(white)),
         dict(away, reference=sky), wrong]
-    res = draaw_mi.fit(start_scene(), None, MAPS, captures=bad, spp=8, iterations=40, batch=4, lr=0.1,
+    res = draaw_mi.fit(start_scene(), None, MAPS, captures=bad, spp=8, iterations=60, batch=4, lr=0.1,
                        progress=False)
     for name in MAPS:
         v = res.values[name]

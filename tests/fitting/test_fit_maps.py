@@ -7,7 +7,15 @@ import pytest
 
 from draaw_mi.errors import ParameterError
 from draaw_mi.fitting.map_outputs import map_errors, plot_maps, save_maps
-from draaw_mi.fitting.maps import MapLatent, MapOptions, fill_unobserved, pyramid_sizes, upsample_matrix
+from draaw_mi.fitting.maps import (
+    LR_SCALES,
+    MapLatent,
+    MapOptions,
+    MapSet,
+    fill_unobserved,
+    pyramid_sizes,
+    upsample_matrix,
+)
 
 
 def test_upsampling_reproduces_a_linear_ramp_between_the_edge_texels():
@@ -140,6 +148,33 @@ def test_pyramid_sizes_and_options_are_checked():
         MapOptions.parse({"tv": -1})
     with pytest.raises(ParameterError, match="key\\(s\\) smooth"):
         MapOptions.parse({"smooth": 1})
+    for bad in ({"metallic": 0.0}, {"metallic": float("inf")}, {"metallic": True}, {3: 1.0}, [("metallic", 2.0)]):
+        with pytest.raises(ParameterError, match="lr_scale"):
+            MapOptions.parse({"lr_scale": bad})
+
+
+def test_each_map_steps_at_its_own_scale_of_the_learning_rate():
+    """Adam's first step moves every latent by ``lr`` times its scale, whatever the gradient's
+    size: with one gradient for all three maps, metallic's latents move ``LR_SCALES`` times as
+    far as the colour's, roughness's as far as the colour's, and a user's ``lr_scale`` replaces
+    the default. Catches ``MapSet.step`` dropping the scale (every map at the common rate) or
+    ``scale_for`` not matching the ``.data`` keys (metallic at 1)."""
+    starts = {"obj.base_color.data": np.full((8, 8, 3), 0.5), "obj.roughness.data": np.full((8, 8, 1), 0.5),
+              "obj.metallic.data": np.full((8, 8, 1), 0.5)}
+
+    def moved(options):
+        ms = MapSet({k: (v, 0.0, 1.0) for k, v in starts.items()}, options)
+        for k, v in starts.items():
+            ms.grads[k][:] = 1e-3                        # the same gradient on every texel
+        ms.step(0.01)
+        return {k.split(".")[1]: float(np.abs(ms.latents[k].latent()).mean()) for k in starts}
+
+    d = moved(MapOptions())
+    assert d["base_color"] > 0 and np.isclose(d["roughness"], d["base_color"], rtol=1e-6)
+    assert np.isclose(d["metallic"], LR_SCALES["metallic"] * d["base_color"], rtol=1e-6), d
+    own = moved(MapOptions.parse({"lr_scale": {"metallic": 1.0, "obj.roughness": 3.0}}))
+    assert np.isclose(own["metallic"], own["base_color"], rtol=1e-6), own
+    assert np.isclose(own["roughness"], 3.0 * own["base_color"], rtol=1e-6), own
 
 
 def test_maps_are_saved_as_exr_and_8_and_16_bit_pngs(tmp_path):

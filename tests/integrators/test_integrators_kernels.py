@@ -9,9 +9,9 @@ import subprocess
 import sys
 
 import pytest
+from integrators_helpers import dr, mi, official_scene, rs
 
 from draaw_mi.scene.loading import release_wrapped
-from integrators_helpers import dr, mi, official_scene, rs
 
 ALL_FEATURES = dict(area=True, point=True, spot=True, envmap=True, texture=True,
                     normalmap=True, glass=True, conductor=True, two_sided=True)
