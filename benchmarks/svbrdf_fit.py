@@ -46,7 +46,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import draaw_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402  (its variant is set by draaw_mi)
-from draaw_mi.fitting.maps import LR_SCALES  # noqa: E402
+from draaw_mi.errors import ParameterError  # noqa: E402
+from draaw_mi.fitting.maps import LR_SCALES, MapOptions  # noqa: E402
 from draaw_mi.fitting.views import LOSSES  # noqa: E402
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "go-draaw")
@@ -168,6 +169,8 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
 LAYOUTS = ("flash", "globe", "pairs", "patterns", "ring", "sweep")
 #: the layouts whose lamps stand where a camera sees their mirror image (:func:`highlight_lamp`)
 HIGHLIGHT_LAYOUTS = ("globe", "patterns", "sweep")
+#: where the held-out view stands, by layout (``ring`` for the others)
+HELD_OUT_CAMERA = {"globe": "globe", "patterns": "sweep", "sweep": "sweep"}
 
 
 def globe_direction(i: int, k: int) -> np.ndarray:
@@ -176,7 +179,8 @@ def globe_direction(i: int, k: int) -> np.ndarray:
     golden-angle azimuths), so the cameras see the sphere's poles (61 degrees above and below
     its equator for 8 captures) as well as its equator, where ``sweep``'s stand at 21 and -7
     degrees. The held-out view (``i == k``) sits on the equator half-way along the lattice,
-    between the captures nearest it.
+    between the two captures nearest the equator in height (and 41 degrees from the nearest
+    camera for 8 captures).
 
     >>> d = globe_direction(0, 8); round(float(d[2]), 3), round(float(np.linalg.norm(d)), 6)
     (0.875, 1.0)
@@ -246,7 +250,7 @@ def highlight_lamp(obj: str, j: int, k: int, layout: str = "sweep") -> list:
         return [2 * t[0] - c[0], 2 * t[1] - c[1], c[2]]
     v = c / np.linalg.norm(c)               # a normal tilted from the view by up to 50 degrees
     a = np.cross(v, [0.3, 0.2, 1.0])
-    if np.linalg.norm(a) < 0.3:             # (a view along that axis)
+    if np.linalg.norm(a) < 0.3:             # a view within ~16 degrees of that axis (no sweep camera)
         a = np.cross(v, [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
     b = np.cross(v, a)
@@ -321,8 +325,8 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     t = time.perf_counter()
     caps = captures(obj, k, args.layout)
     refs = render_captures(ref_scene, caps, args.ref_spp, 1000)
-    held = [{"camera": camera(obj, k, k, args.layout if args.layout == "globe" else
-                              "sweep" if args.layout in HIGHLIGHT_LAYOUTS else "ring"), "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
+    held = [{"camera": camera(obj, k, k, HELD_OUT_CAMERA.get(args.layout, "ring")),
+             "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
     held_truth = render_captures(ref_scene, held, 256, 77)[0]
     t_ref = time.perf_counter() - t
     rows = []
@@ -402,8 +406,8 @@ def main(argv=None) -> int:
     ap.add_argument("--lr", type=float, default=0.05, help="the pyramid's lr (logit units)")
     ap.add_argument("--lr-texels", type=float, default=0.05, help="the texel-by-texel fit's lr (value units)")
     ap.add_argument("--lr-scale", nargs="+", default=[], metavar="NAME=X",
-                    help="the pyramid's per-map learning rates, as maps={'lr_scale': ...} takes them "
-                         "(default draaw_mi.fitting.maps.LR_SCALES; metallic=1 gives every map the same)")
+                    help="the pyramid's per-map learning rates, as maps={'lr_scale': ...} takes them, "
+                         "over draaw_mi.fitting.maps.LR_SCALES (metallic=1 gives every map the same rate)")
     ap.add_argument("--loss", choices=LOSSES, default="l2", help="fit()'s loss")
     ap.add_argument("--tv", type=float, default=0.0)
     ap.add_argument("--seed", type=int, default=0)
@@ -411,10 +415,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    given = ""
     try:
+        given = " ".join(args.lr_scale)
         args.lr_scale = {k: float(v) for k, v in (item.split("=", 1) for item in args.lr_scale)} or None
-    except ValueError:
-        ap.error(f"--lr-scale {' '.join(args.lr_scale)}: expected NAME=NUMBER items (metallic=5)")
+        MapOptions.parse({"lr_scale": args.lr_scale})
+    except (ValueError, ParameterError) as e:
+        ap.error(f"--lr-scale {given}: {e} (NAME=NUMBER items: metallic=5)")
     if args.capture_spp < 0:
         ap.error(f"--capture-spp {args.capture_spp}: expected 0 (not measured) or a positive spp")
     if args.layout == "patterns" and args.lamp == "softbox":
@@ -434,7 +441,7 @@ def main(argv=None) -> int:
              f"Fit: `draaw_mi.fit(scene, refs, {PARAMS}, captures=..., spp={args.spp}, "
              f"iterations={args.iterations}, batch={args.batch}, maps=...)` from "
              f"{'the truth' if args.start == 'truth' else STARTS[args.start][1]}: pyramid with "
-             f"lr {args.lr} (logit units; per map x{args.lr_scale or LR_SCALES}) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
+             f"lr {args.lr} (logit units; per map x{ {**LR_SCALES, **(args.lr_scale or {})} }) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
              f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "
              "Metrics over the observed texels; relit = a held-out camera and lamp, "

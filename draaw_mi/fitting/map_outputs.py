@@ -17,13 +17,14 @@ import numpy as np
 from ..errors import ParameterError
 from ..io import atomic_path, srgb_encode, write_exr, write_png
 from ..plotting import save, subplots
+from .maps import material_parameter
 
 #: file kinds :func:`save_maps` writes
 FORMATS = ("exr", "png", "png16")
 
 
 def _is_colour(name: str) -> bool:
-    base = name.removesuffix(".data").split(".")[-1]
+    base = material_parameter(name)
     return base == "base_color" or "reflectance" in base or "transmittance" in base
 
 

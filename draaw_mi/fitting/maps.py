@@ -257,9 +257,20 @@ def fill_unobserved(value: np.ndarray, seen: np.ndarray) -> np.ndarray:
 #: (``fit(maps={"lr_scale": {...}})`` overrides it). Measured on the SVBRDF benchmark's tile
 #: (16² maps, 64² images, 160 iterations, ``sweep`` + softboxes; albedo PSNR / roughness MAE /
 #: metallic MAE): metallic x1 24.4 / 0.144 / 0.232, x3 27.7 / 0.116 / 0.129, x5 28.1 / 0.105 /
-#: 0.101, x8 28.1 / 0.107 / 0.114, x12 26.6 / 0.116 / 0.153; roughness x2 or colour x2 did not help
-#: (benchmarks/results/svbrdf_fit.md)
+#: 0.101, x8 28.1 / 0.107 / 0.114, x12 26.6 / 0.116 / 0.153; roughness x2 (23.3 / 0.149 / 0.230)
+#: and metallic x2 with colour x2 (22.8 / 0.141 / 0.191) did not help
+#: (benchmarks/results/svbrdf_fit.md). The pyramid's maps only (``texels`` has one Adam).
 LR_SCALES = {"metallic": 5.0}
+
+
+def map_names(key: str) -> tuple:
+    """The names ``lr_scale`` knows a map by, most specific first: its scene key, its fit name
+    and its material parameter.
+
+    >>> map_names("obj.metallic.data")
+    ('obj.metallic.data', 'obj.metallic', 'metallic')
+    """
+    return key, key.removesuffix(".data"), material_parameter(key)
 
 
 def material_parameter(key: str) -> str:
@@ -268,10 +279,7 @@ def material_parameter(key: str) -> str:
     >>> material_parameter("obj.metallic.data"), material_parameter("floor.bsdf.roughness")
     ('metallic', 'roughness')
     """
-    parts = key.split(".")
-    if len(parts) > 1 and parts[-1] == "data":
-        parts = parts[:-1]
-    return parts[-1]
+    return key.removesuffix(".data").split(".")[-1]
 
 
 #: what ``fit(maps=...)`` takes: "pyramid" (the default) or "texels" (each texel its own
@@ -289,8 +297,9 @@ class MapOptions:
       or ``"texels"`` (every texel a coordinate of Adam, clipped to its range).
     * ``tv``: total-variation weight (value units; 0 = none).
     * ``lr``: the maps' learning rate (in logit units; default the fit's ``lr``).
-    * ``lr_scale``: ``{name: multiple of lr}`` per map, by its material parameter
-      (``"metallic"``) or its fit name (``"obj.metallic"``); over :data:`LR_SCALES`
+    * ``lr_scale``: ``{name: multiple of lr}`` per map of the pyramid, by its scene key
+      (``"obj.metallic.data"``), its fit name (``"obj.metallic"``) or its material parameter
+      (``"metallic"``), the first that has an entry; over :data:`LR_SCALES`
       (``{"metallic": 1.0}`` gives metallic the common rate).
     * ``fill``: texels no capture observed take their neighbours' values at the end.
 
@@ -305,14 +314,11 @@ class MapOptions:
     lr_scale: dict | None = None
 
     def scale_for(self, key: str) -> float:
-        """The multiple of ``lr`` for the map with key ``key`` (``"obj.metallic.data"``): a
-        ``lr_scale`` entry for its fit name, else for its material parameter, else
-        :data:`LR_SCALES`', else 1."""
-        own = self.lr_scale or {}
-        name = key[:-len(".data")] if key.endswith(".data") else key
-        param = material_parameter(key)
-        for table in (own, LR_SCALES):
-            for k in (name, param):
+        """The multiple of ``lr`` for the map with key ``key`` (``"obj.metallic.data"``): the
+        ``lr_scale`` entry for its key, its fit name or its material parameter, else the
+        :data:`LR_SCALES` entry for those, else 1."""
+        for table in (self.lr_scale or {}, LR_SCALES):
+            for k in map_names(key):
                 if k in table:
                     return float(table[k])
         return 1.0
@@ -342,6 +348,10 @@ class MapOptions:
                 raise ParameterError(f"fit: maps {name}={v!r}; expected a finite number "
                                      f"{'>= 0' if lo is not None else '> 0'}")
         if o.lr_scale is not None:
+            if o.parametrisation != "pyramid":
+                raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r} with parametrisation="
+                                     f"{o.parametrisation!r}; expected it with 'pyramid' only (texels share "
+                                     "the fit's Adam)")
             if not isinstance(o.lr_scale, dict):
                 raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r}; expected a dict "
                                      "{parameter name: multiple of lr}")
@@ -364,6 +374,11 @@ class MapSet:
         self.latents = {k: MapLatent(start, lo, hi, multiscale=True, tv=options.tv, name=k)
                         for k, (start, lo, hi) in params.items()}
         self.scales = {k: options.scale_for(k) for k in params}
+        known = {n for k in params for n in map_names(k)}
+        unknown = sorted(set(options.lr_scale or {}) - known)
+        if unknown and params:
+            raise ParameterError(f"fit: maps lr_scale names {', '.join(map(repr, unknown))}, which no fitted "
+                                 f"map has; expected one of {', '.join(sorted(known))}")
         self.attached: dict = {}
         self.grads = {k: np.zeros(m.shape) for k, m in self.latents.items()}
         self._values: dict | None = None       # values() since the last step (read-only)

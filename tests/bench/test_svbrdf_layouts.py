@@ -102,7 +102,7 @@ def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf
 def test_globe_cameras_see_both_poles_of_the_sphere_and_no_lamp_blocks_a_view(svbrdf):
     """``globe``: the 8 captures' cameras spread over the sphere of directions, both poles 29
     degrees from the nearest camera (``sweep``: 69 and 83) and no direction farther than 55
-    degrees from one (sweep: 82); the held-out view on the equator, not one of the captures'
+    degrees from one (measured 54.3 over 20,000 random directions; sweep: 82.1); the held-out view on the equator, not one of the captures'
     directions; no softbox (all of them stand in every capture, switched off but opaque)
     between a camera and the unit sphere. Catches the held-out view taking a lattice slot
     (the lowest camera then 42 degrees below the equator: the south pole 48 from it) and a
@@ -126,5 +126,6 @@ def test_globe_cameras_see_both_poles_of_the_sphere_and_no_lamp_blocks_a_view(sv
             forward = -c / np.linalg.norm(c)
             t = (p - c) @ forward
             if 0 < t < np.linalg.norm(c):          # between the camera and the sphere's centre
-                reach = t / np.linalg.norm(c) + np.hypot(*box["size"]) / 2
+                # the unit sphere's sight cone at depth t, widened by the box's half diagonal
+                reach = t / np.sqrt(c @ c - 1.0) + np.hypot(*box["size"]) / 2
                 assert np.linalg.norm(p - c - t * forward) > reach, (i, j)

@@ -151,6 +151,12 @@ def test_pyramid_sizes_and_options_are_checked():
     for bad in ({"metallic": 0.0}, {"metallic": float("inf")}, {"metallic": True}, {3: 1.0}, [("metallic", 2.0)]):
         with pytest.raises(ParameterError, match="lr_scale"):
             MapOptions.parse({"lr_scale": bad})
+    with pytest.raises(ParameterError, match="with parametrisation='texels'; expected it with 'pyramid' only"):
+        MapOptions.parse({"parametrisation": "texels", "lr_scale": {"metallic": 2.0}})
+    starts = {"obj.metallic.data": (np.full((4, 4, 1), 0.5), 0.0, 1.0)}
+    with pytest.raises(ParameterError, match="lr_scale names 'metalic', which no fitted map has; expected one of "
+                                             "metallic, obj.metallic, obj.metallic.data"):
+        MapSet(starts, MapOptions.parse({"lr_scale": {"metalic": 1.0}}))
 
 
 def test_each_map_steps_at_its_own_scale_of_the_learning_rate():
@@ -175,6 +181,10 @@ def test_each_map_steps_at_its_own_scale_of_the_learning_rate():
     own = moved(MapOptions.parse({"lr_scale": {"metallic": 1.0, "obj.roughness": 3.0}}))
     assert np.isclose(own["metallic"], own["base_color"], rtol=1e-6), own
     assert np.isclose(own["roughness"], 3.0 * own["base_color"], rtol=1e-6), own
+    # the most specific name wins: the scene key over the fit name over the parameter
+    o = MapOptions.parse({"lr_scale": {"metallic": 2.0, "obj.metallic": 3.0, "obj.roughness.data": 4.0,
+                                       "roughness": 0.5}})
+    assert (o.scale_for("obj.metallic.data"), o.scale_for("obj.roughness.data")) == (3.0, 4.0)
 
 
 def test_maps_are_saved_as_exr_and_8_and_16_bit_pngs(tmp_path):

@@ -73,11 +73,19 @@ def test_each_removed_feature_lowers_v4_kernel():
     the scene without one (measured: 6857 operations, the full scene's, against 6278 with no
     such scene alive; the in-process form failed under another test order)."""
     here = os.path.dirname(os.path.abspath(__file__))
-    script = (f"import json, sys; sys.path[:0] = {[here, os.path.dirname(here)]!r}; "
+    script = (f"import json, sys; sys.path.insert(0, {here!r}); "
               "import test_integrators_kernels as t; print(json.dumps(t.removed_feature_ops()))")
-    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
-    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    try:
+        out = subprocess.run([sys.executable, "-c", script], cwd=os.path.dirname(os.path.dirname(here)),
+                             capture_output=True, text=True, timeout=600)
+    except subprocess.TimeoutExpired as e:
+        pytest.fail(f"the counting process ran past 600 s; its stderr: {str(e.stderr)[-2000:]}")
+    tail = f"stdout {out.stdout[-1000:]!r}, stderr {out.stderr[-2000:]!r}"
+    assert out.returncode == 0, tail
+    try:
+        counts = json.loads(out.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        pytest.fail(f"the counting process printed no counts: {tail}")
     full = counts.pop("full")
     for feature, n in counts.items():
         assert n < full, (feature, n, full)
