@@ -167,10 +167,10 @@ def lamp_light(obj: str, j: int, k: int, layout: str, lamp: str) -> dict:
 
 #: how the captures' cameras and lamps are placed (``--layout``)
 LAYOUTS = ("flash", "globe", "pairs", "patterns", "ring", "sweep")
-#: the layouts whose lamps stand where a camera sees their mirror image (:func:`highlight_lamp`)
-HIGHLIGHT_LAYOUTS = ("globe", "patterns", "sweep")
-#: where the held-out view stands, by layout (``ring`` for the others)
-HELD_OUT_CAMERA = {"globe": "globe", "patterns": "sweep", "sweep": "sweep"}
+#: the layouts whose lamps stand where a camera sees their mirror image (:func:`highlight_lamp`),
+#: and the camera layout their captures' lamps and held-out view are placed from
+HIGHLIGHT_CAMERAS = {"globe": "globe", "patterns": "sweep", "sweep": "sweep"}
+HIGHLIGHT_LAYOUTS = tuple(HIGHLIGHT_CAMERAS)
 
 
 def globe_direction(i: int, k: int) -> np.ndarray:
@@ -242,7 +242,7 @@ def highlight_lamp(obj: str, j: int, k: int, layout: str = "sweep") -> list:
     point that moves over the object from capture to capture (a golden-angle spiral; the
     held-out lamp ``j == k`` at a point of its own), so each capture shows a highlight
     somewhere else."""
-    c = np.array(camera(obj, j, k, "globe" if layout == "globe" else "sweep")["origin"], dtype=float)
+    c = np.array(camera(obj, j, k, HIGHLIGHT_CAMERAS[layout])["origin"], dtype=float)
     golden = np.pi * (3 - np.sqrt(5))
     rho, phi = np.sqrt((j + 0.5) / (k + 1)), j * golden
     if obj == "tile":                       # the mirror point t on the plane z = 0
@@ -325,7 +325,7 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     t = time.perf_counter()
     caps = captures(obj, k, args.layout)
     refs = render_captures(ref_scene, caps, args.ref_spp, 1000)
-    held = [{"camera": camera(obj, k, k, HELD_OUT_CAMERA.get(args.layout, "ring")),
+    held = [{"camera": camera(obj, k, k, HIGHLIGHT_CAMERAS.get(args.layout, "ring")),
              "lights": {f"L{j}": float(j == k) for j in range(k + 1)}}]
     held_truth = render_captures(ref_scene, held, 256, 77)[0]
     t_ref = time.perf_counter() - t
@@ -415,9 +415,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
-    given = ""
+    given = " ".join(args.lr_scale)
     try:
-        given = " ".join(args.lr_scale)
         args.lr_scale = {k: float(v) for k, v in (item.split("=", 1) for item in args.lr_scale)} or None
         MapOptions.parse({"lr_scale": args.lr_scale})
     except (ValueError, ParameterError) as e:

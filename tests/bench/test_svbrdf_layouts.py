@@ -102,8 +102,8 @@ def test_pattern_captures_give_the_envmap_its_data_as_mitsuba_lays_it_out(svbrdf
 def test_globe_cameras_see_both_poles_of_the_sphere_and_no_lamp_blocks_a_view(svbrdf):
     """``globe``: the 8 captures' cameras spread over the sphere of directions, both poles 29
     degrees from the nearest camera (``sweep``: 69 and 83) and no direction farther than 55
-    degrees from one (measured 54.3 over 20,000 random directions; sweep: 82.1); the held-out view on the equator, not one of the captures'
-    directions; no softbox (all of them stand in every capture, switched off but opaque)
+    degrees from one (measured 54.3 over 20,000 random directions; sweep: 82.1); the held-out
+    view on the equator, not one of the captures' directions; no softbox (all of them stand in every capture, switched off but opaque)
     between a camera and the unit sphere. Catches the held-out view taking a lattice slot
     (the lowest camera then 42 degrees below the equator: the south pole 48 from it) and a
     lattice that bunches the cameras."""

@@ -128,9 +128,10 @@ def test_maps_from_captures_beat_the_texel_by_texel_fit(references):
     rate 0.095-0.099, 0.215-0.232, 0.215-0.223; texels 0.113-0.125, 0.263-0.283, 0.223-0.250.
     So: lower colour error than texels by 10 % and roughness error by 5 %, metallic no worse,
     colour and metallic well below the start, and metallic's own rate halves the colour error
-    and cuts metallic's to a third or less. (Three fits: 7.5 s here, 5.8 s with two.) (Roughness ends above the start for all three: on a flat tile the 4 %
-    dielectric specular of three of four lamps says little about it;
-    benchmarks/results/svbrdf_fit.md has the objects that constrain it.) Catches a pyramid
+    and cuts metallic's to a third or less (three fits: 7.5 s here, 5.8 s with two). Roughness
+    ends above the start for all three: on a flat tile the 4 % dielectric specular of three of
+    four lamps says little about it (benchmarks/results/svbrdf_fit.md has the objects that
+    constrain it). Catches a pyramid
     whose coarse levels get no gradient, a capture rendered under another capture's lights
     (residual noise 10-100x), a map fit that does not move, and per-map rates that do not
     reach the fit (metallic at one rate: 0.215 and more)."""

@@ -72,12 +72,12 @@ def test_each_removed_feature_lowers_v4_kernel():
     BSDF that an earlier test leaves alive (a cached scene) puts its code into the kernel of
     the scene without one (measured: 6857 operations, the full scene's, against 6278 with no
     such scene alive; the in-process form failed under another test order)."""
+    from conftest import ROOT          # (here, not at the top: the child imports this module alone)
     here = os.path.dirname(os.path.abspath(__file__))
     script = (f"import json, sys; sys.path.insert(0, {here!r}); "
               "import test_integrators_kernels as t; print(json.dumps(t.removed_feature_ops()))")
     try:
-        out = subprocess.run([sys.executable, "-c", script], cwd=os.path.dirname(os.path.dirname(here)),
-                             capture_output=True, text=True, timeout=600)
+        out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=600)
     except subprocess.TimeoutExpired as e:
         pytest.fail(f"the counting process ran past 600 s; its stderr: {str(e.stderr)[-2000:]}")
     tail = f"stdout {out.stdout[-1000:]!r}, stderr {out.stderr[-2000:]!r}"
