@@ -47,7 +47,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import draaw_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402  (its variant is set by draaw_mi)
 from draaw_mi.errors import ParameterError  # noqa: E402
-from draaw_mi.fitting.maps import LR_SCALES, MapOptions  # noqa: E402
+from draaw_mi.fitting.maps import LR_SCALES, TV_WEIGHTS, MapOptions  # noqa: E402
 from draaw_mi.fitting.views import LOSSES  # noqa: E402
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "go-draaw")
@@ -343,7 +343,7 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
         r = draaw_mi.fit(scene, refs, PARAMS, captures=caps, spp=args.spp, iterations=args.iterations,
                          batch=args.batch, loss=args.loss,
                          maps=None if method == "scalars" else
-                         {"parametrisation": method, "tv": args.tv if method == "pyramid" else 0.0,
+                         {"parametrisation": method, "tv": args.tv if method == "pyramid" else None,
                           "lr_scale": args.lr_scale if method == "pyramid" else None},
                          lr=args.lr_texels if method == "texels" else args.lr,
                          seed=args.seed, progress=not args.no_progress)
@@ -375,6 +375,16 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
             plot_maps(v, dict(zip(PARAMS, truth)), r.losses, r.observed,
                       path=os.path.join(args.plots, f"svbrdf_{obj}_{k}_{n}_{method}.png"))
     return rows
+
+
+def tv_text(tv) -> str:
+    """``--tv`` as the table's header says it: the weight of every map, or per map over
+    :data:`~draaw_mi.fitting.maps.TV_WEIGHTS`.
+
+    >>> tv_text(None), tv_text(0.0)
+    ("{'roughness': 0.003}", '0.0')
+    """
+    return str(tv) if isinstance(tv, float) else str({**TV_WEIGHTS, **(tv or {})})
 
 
 def main(argv=None) -> int:
@@ -409,7 +419,10 @@ def main(argv=None) -> int:
                     help="the pyramid's per-map learning rates, as maps={'lr_scale': ...} takes them, "
                          "over draaw_mi.fitting.maps.LR_SCALES (metallic=1 gives every map the same rate)")
     ap.add_argument("--loss", choices=LOSSES, default="l2", help="fit()'s loss")
-    ap.add_argument("--tv", type=float, default=0.0)
+    ap.add_argument("--tv", nargs="+", default=[], metavar="W | NAME=W",
+                    help="the pyramid's total-variation prior, as maps={'tv': ...} takes it: one weight "
+                         "for every map, or NAME=W items over draaw_mi.fitting.maps.TV_WEIGHTS (default "
+                         "those alone; 0 turns the prior off)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plots", help="folder for a maps/truth/error figure per fit")
     ap.add_argument("--out", default=OUT)
@@ -421,6 +434,13 @@ def main(argv=None) -> int:
         MapOptions.parse({"lr_scale": args.lr_scale})
     except (ValueError, ParameterError) as e:
         ap.error(f"--lr-scale {given}: {e} (NAME=NUMBER items: metallic=5)")
+    given = " ".join(args.tv)
+    try:
+        args.tv = float(args.tv[0]) if len(args.tv) == 1 and "=" not in args.tv[0] else (
+            {k: float(v) for k, v in (item.split("=", 1) for item in args.tv)} or None)
+        MapOptions.parse({"tv": args.tv})
+    except (ValueError, ParameterError) as e:
+        ap.error(f"--tv {given}: {e} (one NUMBER, or NAME=NUMBER items: roughness=0.003)")
     if args.capture_spp < 0:
         ap.error(f"--capture-spp {args.capture_spp}: expected 0 (not measured) or a positive spp")
     if args.layout == "patterns" and args.lamp == "softbox":
@@ -440,7 +460,7 @@ def main(argv=None) -> int:
              f"Fit: `draaw_mi.fit(scene, refs, {PARAMS}, captures=..., spp={args.spp}, "
              f"iterations={args.iterations}, batch={args.batch}, maps=...)` from "
              f"{'the truth' if args.start == 'truth' else STARTS[args.start][1]}: pyramid with "
-             f"lr {args.lr} (logit units; per map x{ {**LR_SCALES, **(args.lr_scale or {})} }) and tv {args.tv}, texels with lr {args.lr_texels} (value units, today's "
+             f"lr {args.lr} (logit units; per map x{ {**LR_SCALES, **(args.lr_scale or {})} }) and tv {tv_text(args.tv)}, texels with lr {args.lr_texels} (value units, today's "
              f"texel-by-texel fit); references `path` at {args.ref_spp} spp, max_depth 2, "
              f"gaussian filter. Captures: layout `{args.layout}`, lamps `{args.lamp}`, truth `{args.truth}`. "
              "Metrics over the observed texels; relit = a held-out camera and lamp, "

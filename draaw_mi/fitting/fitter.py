@@ -152,7 +152,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         maps: how texture parameters (maps of base colour, roughness, ...) are fitted: a dict
             of :class:`~draaw_mi.fitting.maps.MapOptions` (``parametrisation`` "pyramid" or
             "texels", ``tv``, ``lr``, ``lr_scale``, ``fill``); default a multi-scale pyramid in range,
-            its metallic maps at 5x ``lr``.
+            its metallic maps at 5x ``lr``, its roughness maps under a smoothness prior.
         batch: views (captures) rendered per iteration, drawn at random without repetition
             (default all): a fit of many captures then takes more, cheaper iterations.
 

@@ -28,6 +28,9 @@ resolution up to ``H x W``, and ``U_l`` upsamples level ``l`` bilinearly to ``H 
   steps.
 * **Total variation** (``tv``, in value units per texel, Huber-smoothed): a prior that keeps
   flat regions flat and sharp edges sharp (metallic patches), weighed against the image loss.
+  On by default for roughness maps only (:data:`TV_WEIGHTS`): a texel's roughness shows only
+  while a highlight covers it, so between highlights the images leave it to noise, and that
+  noise, through the texel's colour and metallic, also opens the way to false metal.
 * **Visibility**: a texel is *observed* when any capture's gradient reached it. Unobserved
   texels are reported and, at the end, filled from observed neighbours (:func:`fill_unobserved`)
   rather than left at whatever the coarse levels made of them.
@@ -282,11 +285,35 @@ def material_parameter(key: str) -> str:
     return key.removesuffix(".data").split(".")[-1]
 
 
+#: each map's total-variation weight by its material parameter's name, where
+#: ``fit(maps={"tv": ...})`` does not set it (no entry: no prior). Measured on the SVBRDF
+#: benchmark's monkey (32² maps, 64² images, 240 iterations, ``sweep`` + softboxes; albedo
+#: PSNR / roughness MAE / metallic MAE): no prior 25.9 / 0.076 / 0.060 (seed 1: 30.2 / 0.061 /
+#: 0.032), roughness 0.001 27.1 / 0.052 / 0.056, **0.003** 30.2 / 0.035 / 0.032 (seed 1: 33.0
+#: / 0.036 / 0.019), 0.01 29.8 / 0.066 / 0.032, 0.03 29.0 / 0.099 / 0.039
+#: (benchmarks/results/svbrdf_fit.md). The pyramid's maps only (``texels`` has no prior).
+TV_WEIGHTS = {"roughness": 0.003}
+
+
+def _per_map(given: dict | None, defaults: dict, key: str) -> float | None:
+    """The entry of ``given`` for the map with key ``key``, by the first of its
+    :func:`map_names` that has one, else that of ``defaults``, else ``None``.
+
+    >>> _per_map({"obj.roughness": 2.0}, {"roughness": 1.0}, "obj.roughness.data")
+    2.0
+    >>> _per_map(None, {"roughness": 1.0}, "obj.metallic.data") is None
+    True
+    """
+    for table in (given or {}, defaults):
+        for k in map_names(key):
+            if k in table:
+                return float(table[k])
+    return None
+
+
 #: what ``fit(maps=...)`` takes: "pyramid" (the default) or "texels" (each texel its own
 #: coordinate of the fit's Adam, projected onto its range: the texel-by-texel fit)
 PARAMETRISATIONS = ("pyramid", "texels")
-#: default weight of the total-variation prior (``fit(maps={"tv": ...})``)
-DEFAULT_TV = 0.0
 
 
 @dataclass
@@ -295,7 +322,9 @@ class MapOptions:
 
     * ``parametrisation``: ``"pyramid"`` (multi-scale, in range by a sigmoid; module docstring)
       or ``"texels"`` (every texel a coordinate of Adam, clipped to its range).
-    * ``tv``: total-variation weight (value units; 0 = none).
+    * ``tv``: total-variation weight (value units; 0 = none): one number for every map, or
+      ``{name: weight}`` per map, by the names ``lr_scale`` takes, over :data:`TV_WEIGHTS`
+      (``None``, the default: :data:`TV_WEIGHTS` alone, a prior on roughness maps).
     * ``lr``: the maps' learning rate (in logit units; default the fit's ``lr``).
     * ``lr_scale``: ``{name: multiple of lr}`` per map of the pyramid, by its scene key
       (``"obj.metallic.data"``), its fit name (``"obj.metallic"``) or its material parameter
@@ -306,9 +335,13 @@ class MapOptions:
     >>> o = MapOptions.parse({"lr_scale": {"obj.roughness": 2.0}})
     >>> o.scale_for("obj.metallic.data"), o.scale_for("obj.roughness.data"), o.scale_for("obj.base_color.data")
     (5.0, 2.0, 1.0)
+    >>> o.tv_for("obj.roughness.data"), o.tv_for("obj.base_color.data")
+    (0.003, 0.0)
+    >>> MapOptions.parse({"tv": 0.0}).tv_for("obj.roughness.data")
+    0.0
     """
     parametrisation: str = "pyramid"
-    tv: float = DEFAULT_TV
+    tv: float | dict | None = None
     lr: float | None = None
     fill: bool = True
     lr_scale: dict | None = None
@@ -317,11 +350,17 @@ class MapOptions:
         """The multiple of ``lr`` for the map with key ``key`` (``"obj.metallic.data"``): the
         ``lr_scale`` entry for its key, its fit name or its material parameter, else the
         :data:`LR_SCALES` entry for those, else 1."""
-        for table in (self.lr_scale or {}, LR_SCALES):
-            for k in map_names(key):
-                if k in table:
-                    return float(table[k])
-        return 1.0
+        scale = _per_map(self.lr_scale, LR_SCALES, key)
+        return 1.0 if scale is None else scale
+
+    def tv_for(self, key: str) -> float:
+        """The total-variation weight of the map with key ``key``: ``tv`` where it is a number,
+        else its entry (by the names :meth:`scale_for` uses) in ``tv`` or :data:`TV_WEIGHTS`,
+        else 0."""
+        if isinstance(self.tv, (int, float)):
+            return float(self.tv)
+        weight = _per_map(self.tv, TV_WEIGHTS, key)
+        return 0.0 if weight is None else weight
 
     @classmethod
     def parse(cls, maps) -> MapOptions:
@@ -340,27 +379,33 @@ class MapOptions:
         if o.parametrisation not in PARAMETRISATIONS:
             raise ParameterError(f"fit: maps parametrisation={o.parametrisation!r}; expected one of "
                                  f"{', '.join(PARAMETRISATIONS)}")
-        for name, v, lo in (("tv", o.tv, 0.0), ("lr", o.lr, None)):
-            if v is None:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or (
-                    v < 0 if lo is not None else v <= 0):
-                raise ParameterError(f"fit: maps {name}={v!r}; expected a finite number "
-                                     f"{'>= 0' if lo is not None else '> 0'}")
+        if o.lr is not None and (isinstance(o.lr, bool) or not isinstance(o.lr, (int, float))
+                                 or not (np.isfinite(o.lr) and o.lr > 0)):
+            raise ParameterError(f"fit: maps lr={o.lr!r}; expected a finite number > 0")
+        if isinstance(o.tv, (int, float)) and not isinstance(o.tv, bool):
+            if not (np.isfinite(o.tv) and o.tv >= 0):
+                raise ParameterError(f"fit: maps tv={o.tv!r}; expected a finite number >= 0")
+        elif o.tv is not None:
+            _check_table("tv", o.tv, "{parameter name: weight}", lambda v: v >= 0, ">= 0")
+        for name, v in (("lr_scale", o.lr_scale), ("tv", o.tv)):
+            if o.parametrisation != "pyramid" and v is not None and (isinstance(v, dict) or v > 0):
+                raise ParameterError(f"fit: maps {name}={v!r} with parametrisation={o.parametrisation!r}; "
+                                     "expected it with 'pyramid' only (texels share the fit's Adam, "
+                                     "without a prior)")
         if o.lr_scale is not None:
-            if o.parametrisation != "pyramid":
-                raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r} with parametrisation="
-                                     f"{o.parametrisation!r}; expected it with 'pyramid' only (texels share "
-                                     "the fit's Adam)")
-            if not isinstance(o.lr_scale, dict):
-                raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r}; expected a dict "
-                                     "{parameter name: multiple of lr}")
-            for k, v in o.lr_scale.items():
-                if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)) or not (
-                        np.isfinite(v) and v > 0):
-                    raise ParameterError(f"fit: maps lr_scale[{k!r}]={v!r}; expected a parameter name and a "
-                                         "finite number > 0")
+            _check_table("lr_scale", o.lr_scale, "{parameter name: multiple of lr}", lambda v: v > 0, "> 0")
         return o
+
+
+def _check_table(option: str, table, expected: str, ok, bound: str) -> None:
+    """ParameterError unless ``table`` is a dict of parameter names to finite numbers ``ok``."""
+    if not isinstance(table, dict):
+        raise ParameterError(f"fit: maps {option}={table!r}; expected a dict {expected}")
+    for k, v in table.items():
+        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)) or not (
+                np.isfinite(v) and ok(v)):
+            raise ParameterError(f"fit: maps {option}[{k!r}]={v!r}; expected a parameter name and a "
+                                 f"finite number {bound}")
 
 
 class MapSet:
@@ -371,14 +416,15 @@ class MapSet:
     def __init__(self, params: dict, options: MapOptions):
         """``params``: key -> ``(start (H, W, C), lo, hi)``."""
         self.options = options
-        self.latents = {k: MapLatent(start, lo, hi, multiscale=True, tv=options.tv, name=k)
+        self.latents = {k: MapLatent(start, lo, hi, multiscale=True, tv=options.tv_for(k), name=k)
                         for k, (start, lo, hi) in params.items()}
         self.scales = {k: options.scale_for(k) for k in params}
         known = {n for k in params for n in map_names(k)}
-        unknown = sorted(set(options.lr_scale or {}) - known)
-        if unknown and params:
-            raise ParameterError(f"fit: maps lr_scale names {', '.join(map(repr, unknown))}, which no fitted "
-                                 f"map has; expected one of {', '.join(sorted(known))}")
+        for option, table in (("lr_scale", options.lr_scale), ("tv", options.tv)):
+            unknown = sorted(set(table if isinstance(table, dict) else ()) - known)
+            if unknown and params:
+                raise ParameterError(f"fit: maps {option} names {', '.join(map(repr, unknown))}, which no "
+                                     f"fitted map has; expected one of {', '.join(sorted(known))}")
         self.attached: dict = {}
         self.grads = {k: np.zeros(m.shape) for k, m in self.latents.items()}
         self._values: dict | None = None       # values() since the last step (read-only)

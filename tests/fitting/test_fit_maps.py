@@ -9,6 +9,7 @@ from draaw_mi.errors import ParameterError
 from draaw_mi.fitting.map_outputs import map_errors, plot_maps, save_maps
 from draaw_mi.fitting.maps import (
     LR_SCALES,
+    TV_WEIGHTS,
     MapLatent,
     MapOptions,
     MapSet,
@@ -153,10 +154,48 @@ def test_pyramid_sizes_and_options_are_checked():
             MapOptions.parse({"lr_scale": bad})
     with pytest.raises(ParameterError, match="with parametrisation='texels'; expected it with 'pyramid' only"):
         MapOptions.parse({"parametrisation": "texels", "lr_scale": {"metallic": 2.0}})
+    for bad in ({"roughness": -1.0}, {"roughness": float("nan")}, {"roughness": "0.1"}, "0.1", [0.1]):
+        with pytest.raises(ParameterError, match="maps tv"):
+            MapOptions.parse({"tv": bad})
+    with pytest.raises(ParameterError, match="tv=0.1 with parametrisation='texels'; expected it with 'pyramid'"):
+        MapOptions.parse({"parametrisation": "texels", "tv": 0.1})
+    assert MapOptions.parse({"parametrisation": "texels", "tv": 0.0}).tv == 0.0     # no prior: nothing to refuse
     starts = {"obj.metallic.data": (np.full((4, 4, 1), 0.5), 0.0, 1.0)}
     with pytest.raises(ParameterError, match="lr_scale names 'metalic', which no fitted map has; expected one of "
                                              "metallic, obj.metallic, obj.metallic.data"):
         MapSet(starts, MapOptions.parse({"lr_scale": {"metalic": 1.0}}))
+    with pytest.raises(ParameterError, match="tv names 'roughness', which no fitted map has"):
+        MapSet(starts, MapOptions.parse({"tv": {"roughness": 0.01}}))
+
+
+def test_the_smoothness_prior_is_on_for_roughness_maps_only_unless_the_user_says():
+    """Each map's TV weight: by default :data:`TV_WEIGHTS` (roughness), a number for every map,
+    a dict over the defaults (most specific name first, 0 turns one off). And the prior acts
+    through ``MapSet.step``: with no image gradient, one step smooths a noisy roughness map (its
+    TV energy falls) and leaves the colour where it was. Catches ``MapSet`` handing every map
+    the option as given (``None``: no prior anywhere), ``tv_for`` ignoring :data:`TV_WEIGHTS` or
+    a dict's entries, and a step that drops the prior's gradient."""
+    rng = np.random.default_rng(0)
+    starts = {"obj.base_color.data": rng.uniform(0.3, 0.7, (8, 8, 3)),
+              "obj.roughness.data": rng.uniform(0.3, 0.7, (8, 8, 1)),
+              "obj.metallic.data": np.full((8, 8, 1), 0.5)}
+
+    def weights(maps):
+        ms = MapSet({k: (v, 0.0, 1.0) for k, v in starts.items()}, MapOptions.parse(maps))
+        return {k.split(".")[1]: ms.latents[k].tv for k in starts}, ms
+
+    w, ms = weights(None)
+    assert w == {"base_color": 0.0, "roughness": TV_WEIGHTS["roughness"], "metallic": 0.0} and w["roughness"] > 0
+    assert weights({"tv": 0.0})[0] == {"base_color": 0.0, "roughness": 0.0, "metallic": 0.0}
+    assert weights({"tv": 0.01})[0] == {"base_color": 0.01, "roughness": 0.01, "metallic": 0.01}
+    assert weights({"tv": {"metallic": 0.02}})[0] == {"base_color": 0.0, "roughness": TV_WEIGHTS["roughness"],
+                                                     "metallic": 0.02}
+    assert weights({"tv": {"obj.roughness": 0.0, "roughness": 0.5}})[0]["roughness"] == 0.0
+    rough, colour = ms.latents["obj.roughness.data"], ms.latents["obj.base_color.data"]
+    before, colour_before = rough.prior()[0], colour.value()
+    ms.step(0.05)                                  # the gradients are zero: the prior alone
+    assert rough.prior()[0] < 0.9 * before, (rough.prior()[0], before)
+    assert np.array_equal(colour.value(), colour_before)
 
 
 def test_each_map_steps_at_its_own_scale_of_the_learning_rate():
