@@ -378,13 +378,17 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
 
 
 def tv_text(tv) -> str:
-    """``--tv`` as the table's header says it: the weight of every map, or per map over
-    :data:`~draaw_mi.fitting.maps.TV_WEIGHTS`.
+    """``--tv`` as the table's header says it: one weight for every map, or entries per map
+    over :data:`~draaw_mi.fitting.maps.TV_WEIGHTS` (the more specific name wins).
 
     >>> tv_text(None), tv_text(0.0)
     ("{'roughness': 0.003}", '0.0')
+    >>> tv_text({"obj.roughness": 0.01})
+    "{'obj.roughness': 0.01} over {'roughness': 0.003}"
     """
-    return str(tv) if isinstance(tv, float) else str({**TV_WEIGHTS, **(tv or {})})
+    if isinstance(tv, float):
+        return str(tv)
+    return f"{tv} over {TV_WEIGHTS}" if tv else str(TV_WEIGHTS)
 
 
 def main(argv=None) -> int:

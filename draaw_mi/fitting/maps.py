@@ -28,7 +28,8 @@ resolution up to ``H x W``, and ``U_l`` upsamples level ``l`` bilinearly to ``H 
   steps.
 * **Total variation** (``tv``, in value units per texel, Huber-smoothed): a prior that keeps
   flat regions flat and sharp edges sharp (metallic patches), weighed against the image loss.
-  On by default for roughness maps only (:data:`TV_WEIGHTS`): a texel's roughness shows only
+  On by default for the principled material's ``roughness`` maps only (:data:`TV_WEIGHTS`;
+  ``alpha`` maps of Mitsuba's rough BSDFs have none): a texel's roughness shows only
   while a highlight covers it, so between highlights the images leave it to noise, and that
   noise, through the texel's colour and metallic, also opens the way to false metal.
 * **Visibility**: a texel is *observed* when any capture's gradient reached it. Unobserved
@@ -44,6 +45,7 @@ True
 """
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import drjit as dr
@@ -356,8 +358,10 @@ class MapOptions:
     def tv_for(self, key: str) -> float:
         """The total-variation weight of the map with key ``key``: ``tv`` where it is a number,
         else its entry (by the names :meth:`scale_for` uses) in ``tv`` or :data:`TV_WEIGHTS`,
-        else 0."""
-        if isinstance(self.tv, (int, float)):
+        else 0; 0 for ``texels``, which has no prior."""
+        if self.parametrisation != "pyramid":
+            return 0.0
+        if _is_number(self.tv):
             return float(self.tv)
         weight = _per_map(self.tv, TV_WEIGHTS, key)
         return 0.0 if weight is None else weight
@@ -379,22 +383,31 @@ class MapOptions:
         if o.parametrisation not in PARAMETRISATIONS:
             raise ParameterError(f"fit: maps parametrisation={o.parametrisation!r}; expected one of "
                                  f"{', '.join(PARAMETRISATIONS)}")
-        if o.lr is not None and (isinstance(o.lr, bool) or not isinstance(o.lr, (int, float))
-                                 or not (np.isfinite(o.lr) and o.lr > 0)):
+        if o.lr is not None and not (_is_number(o.lr) and np.isfinite(o.lr) and o.lr > 0):
             raise ParameterError(f"fit: maps lr={o.lr!r}; expected a finite number > 0")
-        if isinstance(o.tv, (int, float)) and not isinstance(o.tv, bool):
+        if _is_number(o.tv):
             if not (np.isfinite(o.tv) and o.tv >= 0):
-                raise ParameterError(f"fit: maps tv={o.tv!r}; expected a finite number >= 0")
+                raise ParameterError(f"fit: maps tv={o.tv!r}; expected a finite number >= 0 or a dict "
+                                     "{parameter name: weight >= 0}")
         elif o.tv is not None:
-            _check_table("tv", o.tv, "{parameter name: weight}", lambda v: v >= 0, ">= 0")
-        for name, v in (("lr_scale", o.lr_scale), ("tv", o.tv)):
-            if o.parametrisation != "pyramid" and v is not None and (isinstance(v, dict) or v > 0):
-                raise ParameterError(f"fit: maps {name}={v!r} with parametrisation={o.parametrisation!r}; "
-                                     "expected it with 'pyramid' only (texels share the fit's Adam, "
-                                     "without a prior)")
+            _check_table("tv", o.tv, "{parameter name: weight} (or one finite number >= 0)",
+                         lambda v: v >= 0, ">= 0")
         if o.lr_scale is not None:
+            if o.parametrisation != "pyramid":
+                raise ParameterError(f"fit: maps lr_scale={o.lr_scale!r} with parametrisation="
+                                     f"{o.parametrisation!r}; expected it with 'pyramid' only (texels share "
+                                     "the fit's Adam)")
             _check_table("lr_scale", o.lr_scale, "{parameter name: multiple of lr}", lambda v: v > 0, "> 0")
+        weights = o.tv.values() if isinstance(o.tv, dict) else [o.tv or 0.0]
+        if o.parametrisation != "pyramid" and any(w > 0 for w in weights):
+            raise ParameterError(f"fit: maps tv={o.tv!r} with parametrisation={o.parametrisation!r}; expected "
+                                 "it with 'pyramid' only (texels have no prior)")
         return o
+
+
+def _is_number(v) -> bool:
+    """A real number that is not a bool (NumPy's scalars included)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
 
 
 def _check_table(option: str, table, expected: str, ok, bound: str) -> None:
@@ -402,8 +415,7 @@ def _check_table(option: str, table, expected: str, ok, bound: str) -> None:
     if not isinstance(table, dict):
         raise ParameterError(f"fit: maps {option}={table!r}; expected a dict {expected}")
     for k, v in table.items():
-        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)) or not (
-                np.isfinite(v) and ok(v)):
+        if not isinstance(k, str) or not _is_number(v) or not (np.isfinite(v) and ok(v)):
             raise ParameterError(f"fit: maps {option}[{k!r}]={v!r}; expected a parameter name and a "
                                  f"finite number {bound}")
 

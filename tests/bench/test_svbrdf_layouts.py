@@ -4,6 +4,7 @@ The measured reason it matters (``ring`` leaves even one material unidentifiable
 benchmarks/results/svbrdf_fit.md."""
 from __future__ import annotations
 
+import doctest
 import importlib.util
 import os
 
@@ -129,3 +130,11 @@ def test_globe_cameras_see_both_poles_of_the_sphere_and_no_lamp_blocks_a_view(sv
                 # the unit sphere's sight cone at depth t, widened by the box's half diagonal
                 reach = t / np.sqrt(c @ c - 1.0) + np.hypot(*box["size"]) / 2
                 assert np.linalg.norm(p - c - t * forward) > reach, (i, j)
+
+
+def test_the_scripts_doctests_hold(svbrdf):
+    """The examples in the script's docstrings (``globe_direction``, ``tv_text``): the suite's
+    doctest run covers ``draaw_mi`` only. Catches a header that says the default prior where
+    ``--tv`` set another, and a lattice whose first camera is not at the height it states."""
+    result = doctest.testmod(svbrdf, optionflags=doctest.ELLIPSIS)
+    assert result.attempted >= 4 and result.failed == 0, result

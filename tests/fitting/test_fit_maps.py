@@ -154,12 +154,19 @@ def test_pyramid_sizes_and_options_are_checked():
             MapOptions.parse({"lr_scale": bad})
     with pytest.raises(ParameterError, match="with parametrisation='texels'; expected it with 'pyramid' only"):
         MapOptions.parse({"parametrisation": "texels", "lr_scale": {"metallic": 2.0}})
-    for bad in ({"roughness": -1.0}, {"roughness": float("nan")}, {"roughness": "0.1"}, "0.1", [0.1]):
+    for bad in ({"roughness": -1.0}, {"roughness": float("nan")}, {"roughness": "0.1"}, {"roughness": True},
+                "0.1", [0.1], True, np.bool_(True), -0.5):
         with pytest.raises(ParameterError, match="maps tv"):
             MapOptions.parse({"tv": bad})
-    with pytest.raises(ParameterError, match="tv=0.1 with parametrisation='texels'; expected it with 'pyramid'"):
-        MapOptions.parse({"parametrisation": "texels", "tv": 0.1})
-    assert MapOptions.parse({"parametrisation": "texels", "tv": 0.0}).tv == 0.0     # no prior: nothing to refuse
+    assert MapOptions.parse({"tv": np.float32(0.01)}).tv_for("obj.metallic.data") == pytest.approx(0.01)
+    for bad in ({"roughness": 0.1}, 0.1):
+        with pytest.raises(ParameterError, match="with parametrisation='texels'; expected it with 'pyramid' only"):
+            MapOptions.parse({"parametrisation": "texels", "tv": bad})
+    for bad in ("x", [1.0], {"metallic": 2.0}):
+        with pytest.raises(ParameterError, match="lr_scale=.* with parametrisation='texels'"):
+            MapOptions.parse({"parametrisation": "texels", "lr_scale": bad})
+    for none in (0.0, {"roughness": 0.0}, None):       # no prior asked for: nothing to refuse
+        assert MapOptions.parse({"parametrisation": "texels", "tv": none}).tv_for("obj.roughness.data") == 0.0
     starts = {"obj.metallic.data": (np.full((4, 4, 1), 0.5), 0.0, 1.0)}
     with pytest.raises(ParameterError, match="lr_scale names 'metalic', which no fitted map has; expected one of "
                                              "metallic, obj.metallic, obj.metallic.data"):
