@@ -1,6 +1,8 @@
 """SVBRDF (texture-map) fitting: base colour, roughness and metallic maps recovered from
-captures of synthetic objects, the multi-scale fit (``maps="pyramid"``) beside the
-texel-by-texel one (``maps="texels"``) in the same run.
+captures of synthetic objects, the multi-scale fit (``maps="pyramid"``) and
+:func:`~draaw_mi.fitting.two_starts.fit_two_starts` (``--methods two-starts``: two such fits,
+metallic from the start and from 0, merged region by region) beside the texel-by-texel one
+(``maps="texels"``) in the same run.
 
 Objects: a sphere (Mitsuba's UV sphere), GO-Draaw's monkey (its own UVs, read from
 ``../shared/data/go-draaw``), a flat tile. Ground truth: procedural maps in UV space (smooth
@@ -48,6 +50,7 @@ import draaw_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402  (its variant is set by draaw_mi)
 from draaw_mi.errors import ParameterError  # noqa: E402
 from draaw_mi.fitting.maps import LR_SCALES, TV_WEIGHTS, MapOptions  # noqa: E402
+from draaw_mi.fitting.two_starts import fit_two_starts  # noqa: E402
 from draaw_mi.fitting.views import LOSSES  # noqa: E402
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "go-draaw")
@@ -340,13 +343,15 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
         d = scene_description(obj, start, env, res, k, args.layout, args.lamp)
         scene = draaw_mi.load_scene(as_scalars(d) if args.truth == "scalar" else d)
         t = time.perf_counter()
-        r = draaw_mi.fit(scene, refs, PARAMS, captures=caps, spp=args.spp, iterations=args.iterations,
-                         batch=args.batch, loss=args.loss,
-                         maps=None if method == "scalars" else
-                         {"parametrisation": method, "tv": args.tv if method == "pyramid" else None,
-                          "lr_scale": args.lr_scale if method == "pyramid" else None},
-                         lr=args.lr_texels if method == "texels" else args.lr,
-                         seed=args.seed, progress=not args.no_progress)
+        pyramid = method in ("pyramid", "two-starts")
+        run = fit_two_starts if method == "two-starts" else draaw_mi.fit
+        r = run(scene, refs, PARAMS, captures=caps, spp=args.spp, iterations=args.iterations,
+                batch=args.batch, loss=args.loss,
+                maps=None if method == "scalars" else
+                {"parametrisation": "pyramid" if pyramid else method, "tv": args.tv if pyramid else None,
+                 "lr_scale": args.lr_scale if pyramid else None},
+                lr=args.lr_texels if method == "texels" else args.lr,
+                seed=args.seed, progress=not args.no_progress)
         seconds = time.perf_counter() - t
         if observed is None:
             observed = r.observed.get("obj.base_color")
@@ -402,7 +407,11 @@ def main(argv=None) -> int:
     ap.add_argument("--truth", choices=("procedural", "constant", "scalar"), default="procedural",
                     help="the ground truth: procedural maps (smooth and sharp features), one material "
                          "as maps (constant), or one material fitted as three scalars (scalar)")
-    ap.add_argument("--methods", nargs="+", default=["pyramid", "texels"])
+    ap.add_argument("--methods", nargs="+", default=["pyramid", "texels"],
+                    choices=("pyramid", "two-starts", "texels"),
+                    help="pyramid: fit() with its default maps; two-starts: fit_two_starts() (two fits of "
+                         "--iterations, metallic from the start and from 0, merged, refined); texels: the "
+                         "texel-by-texel fit")
     ap.add_argument("--start", choices=(*STARTS, "truth"), default="half",
                     help="the fit's first maps: 0.5 everywhere (half), the draaw material's defaults "
                          "(colour and roughness 0.5, metallic 0: default), or the ground truth (a "

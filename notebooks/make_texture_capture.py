@@ -155,6 +155,21 @@ for a, img, title in zip(axes, (reference, relit, np.abs(relit - reference)),
     a.set_title(title, fontsize=9)
     a.axis("off")
 print(f"relit PSNR {psnr:.1f} dB")"""),
+    ("md", """## When the metallic map is wrong: two starts
+
+A metallic map is 0 or 1 almost everywhere, and its fit can stop in a local minimum: from
+metallic 0.5 a dark dielectric may turn metal (the fastest way to darken a texel), from 0 part
+of a real metal patch may stay dielectric. `draaw_mi.fitting.fit_two_starts` fits from both,
+keeps each region where they disagree from the fit whose renders match the captures better,
+and refines, for about three times this fit's time:
+
+```python
+res = draaw_mi.fitting.fit_two_starts(scene, photos, list(TRUTH), captures=captures,
+                                      iterations=ITERATIONS, batch=2, spp=16)
+res.stages    # each stage's captures error
+```
+
+`benchmarks/results/svbrdf_fit.md` measures it on a sphere, a monkey and a tile."""),
     ("md", """## Files to take elsewhere
 
 `result.save_maps(folder)` writes each map as a linear EXR, an 8-bit and a 16-bit PNG (colour

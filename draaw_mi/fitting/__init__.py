@@ -4,6 +4,7 @@
 * :mod:`~draaw_mi.fitting.settings` -- its keyword arguments, checked;
 * :mod:`~draaw_mi.fitting.params` -- each parameter's range and the space Adam moves it in;
 * :mod:`~draaw_mi.fitting.maps` -- texture maps as multi-scale latents kept in range;
+* :mod:`~draaw_mi.fitting.two_starts` -- :func:`fit_two_starts`: maps from two starts of their metallic maps, merged;
 * :mod:`~draaw_mi.fitting.captures` -- each reference's camera and lights (:func:`render_capture`);
 * :mod:`~draaw_mi.fitting.reference` -- references from EXR/PNG files or arrays;
 * :mod:`~draaw_mi.fitting.views` -- the views' sensors and each view's loss;
@@ -17,5 +18,6 @@ from .fitter import fit
 from .maps import MapOptions
 from .reference import load_reference
 from .result import FitResult
+from .two_starts import fit_two_starts
 
-__all__ = ["FitResult", "MapOptions", "fit", "load_reference", "render_capture"]
+__all__ = ["FitResult", "MapOptions", "fit", "fit_two_starts", "load_reference", "render_capture"]

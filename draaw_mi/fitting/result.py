@@ -41,6 +41,7 @@ class FitResult:
     version: str = ""                 # the integrator the fit used (the scene's, or v4)
     observed: dict = field(default_factory=dict, repr=False)   # map name -> texels seen (H, W) bool
     captures: list = field(default_factory=list, repr=False)   # per view: explained(...)'s dicts
+    stages: list = field(default_factory=list, repr=False)     # fit_two_starts: per stage, its error
 
     @property
     def losses(self) -> np.ndarray:
