@@ -164,6 +164,7 @@ keeps each region where they disagree from the fit whose renders match the captu
 and refines, for about three times this fit's time:
 
 ```python
+scene = sphere_scene(grey)       # (the fit above left its maps in the scene)
 res = draaw_mi.fitting.fit_two_starts(scene, photos, list(TRUTH), captures=captures,
                                       iterations=ITERATIONS, batch=2, spp=16)
 res.stages    # each stage's captures error

@@ -278,7 +278,7 @@ def test_a_plain_import_leaves_the_heavy_and_optional_parts_unloaded():
     code = ("import sys, draaw_mi\n"
             "print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('trimesh', 'colour', 'matplotlib', 'OpenEXR', 'distributed', 'dask', 'pyoidn', 'ipywidgets', "
-            "'tqdm') or m.startswith(('draaw_mi.batch', 'draaw_mi.bench', 'draaw_mi.cli', 'draaw_mi.media', "
+            "'tqdm', 'scipy') or m.startswith(('draaw_mi.batch', 'draaw_mi.bench', 'draaw_mi.cli', 'draaw_mi.media', "
             "'draaw_mi.widgets', 'draaw_mi.integrators.volume')))))\n")
     out = _python(code)
     assert out.stdout.strip() == "", out.stdout

@@ -300,7 +300,7 @@ def _cmd_fit(args) -> int:
     elif not references:
         raise CliError("fit: give --reference (one per view) or --captures")
     if args.two_starts and not captures:
-        raise CliError("--two-starts merges fits by each capture's error: give it with --captures")
+        raise CliError("fit: --two-starts merges fits by each capture's error: give it with --captures")
     scene = load_for_cli(args)
     if args.output:               # fail before the fit, not after it: can the values be written?
         if scene.description is None and not args.output.lower().endswith(".json"):

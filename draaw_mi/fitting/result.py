@@ -29,6 +29,8 @@ class FitResult:
     ``version``: the integrator it rendered with; ``observed``: per fitted map, which texels
     any capture saw (the others were filled from their neighbours); ``captures``: per view or
     capture, its residual and whether the fit explained it (:func:`explained`).
+    ``stages`` (:func:`~draaw_mi.fitting.two_starts.fit_two_starts` only): per stage, its
+    captures error and seconds.
     """
     values: dict
     history: list = field(default_factory=list, repr=False)      # (repr: no array dumps)

@@ -22,14 +22,13 @@ maps, 128² images, 600 iterations per start; ``benchmarks/results/svbrdf_fit.md
 PSNR / roughness MAE / metallic MAE, one fit against two starts: the sphere 26.5 / 0.033 /
 0.043 against 32.7 / 0.026 / 0.018, the monkey 26.2 / 0.044 / 0.046 against 36.1 / 0.016 /
 0.007, the tile (where both starts agree) 32.3 / 0.036 / 0.023 against 32.0 / 0.033 / 0.022.
-It takes about three fits' time.
+It takes about three fits' time (two fits, the merge's renders and a refine of a third).
 """
 from __future__ import annotations
 
 import time
 
 import numpy as np
-import scipy.ndimage
 
 from ..errors import ParameterError
 from ..rendering.frozen import owned_tensor
@@ -56,18 +55,25 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
 
     Args:
         scene, references, params, captures, lr, seed, ``fit_kwargs``: as
-            :func:`~draaw_mi.fitting.fitter.fit` takes them (``init`` sets the first start;
-            the second is the same with the metallic maps at 0). Captures are required.
+            :func:`~draaw_mi.fitting.fitter.fit` takes them. The first start is the scene's
+            values (``init`` over them; a metallic map that starts at 0 everywhere starts at
+            0.5 here, so that the two starts differ), the second the same with the metallic
+            maps at 0. Captures are required; no post chain (``post=[]`` turns the scene's
+            off) and no ``exposure="fit"``: the merge compares linear renders, at the scene's
+            ``max_depth``, with the references.
         iterations: iterations of each of the two fits.
-        refine: the refining fit's iterations, as a fraction of ``iterations`` (0: none).
-        min_texels: regions smaller than this keep the better fit's maps untested.
+        refine: the refining fit's iterations, as a fraction of ``iterations`` (in (0, 1]).
+        min_texels: regions of disagreement smaller than this (before widening) are not tested.
         eval_spp: spp of the renders that compare candidates.
 
     Returns:
-        The refining fit's :class:`~draaw_mi.fitting.result.FitResult` (the merged maps' when
-        ``refine`` is 0), with ``history`` the three fits' in order, ``iterations`` and
-        ``seconds`` their totals, and ``stages``: per stage its name, error and seconds, and
-        for the merge how many regions it tested and took.
+        The refining fit's :class:`~draaw_mi.fitting.result.FitResult` (its ``values``,
+        ``image``, ``captures``, ``observed`` and ``converged`` are the refine's: the scene
+        holds its values), with ``history`` the three fits' in order (each entry's
+        ``iteration`` counts from 0 within its fit), ``iterations`` and ``seconds`` the
+        totals, and ``stages``: per stage its name, captures error and seconds, and for the
+        merge how many regions it tested and took. The refined maps are returned even where
+        their error is above the merged maps' (``stages`` shows both).
 
     Example::
 
@@ -79,59 +85,80 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
     names = [params] if isinstance(params, str) else list(params)
-    if scene.settings.get("post") or fit_kwargs.get("post"):
-        raise ParameterError("fit_two_starts: the scene has a post chain; expected none (the merge compares "
-                             "linear renders with the references)")
-    if not (isinstance(refine, (int, float)) and 0 <= refine <= 1):
-        raise ParameterError(f"fit_two_starts: refine={refine!r}; expected a fraction of iterations in [0, 1]")
+    _check_options(scene, fit_kwargs, refine, min_texels, eval_spp)
     p = scene.all_params
-    metal = [n for n in names if material_parameter(scene.key(n)) == "metallic"
-             and np.asarray(p[scene.key(n)]).ndim == 3]
-    if not metal:
-        raise ParameterError(f"fit_two_starts: params {names} hold no metallic map; expected at least one "
-                             "(a texture), or use fit()")
-    start = {n: _value(p[scene.key(n)], (fit_kwargs.get("init") or {}).get(n)) for n in names}
-    caps = parse_captures(captures, references)
-    refs = [load_reference(r, who=f"fit_two_starts: captures[{i}]")
-            for i, r in enumerate(references if references is not None else capture_references(caps))]
-    masks = [unclipped_mask(r) if is_display_reference(g) else None
-             for g, r in zip(references if references is not None else capture_references(caps), refs)]
-    kwargs = {k: v for k, v in fit_kwargs.items() if k != "init"}
-    common = dict(captures=captures, lr=lr, seed=seed, **kwargs)
+    keys = {n: scene.key(n) for n in names}
+    metal = [n for n in names if material_parameter(keys[n]) == "metallic"]
+    if not metal or any(np.asarray(p[keys[n]]).ndim != 3 for n in metal):
+        what = "no metallic parameter" if not metal else "a metallic value, not a map"
+        raise ParameterError(f"fit_two_starts: params {names} hold {what}; expected at least one metallic "
+                             "texture (or fit() / the CLI without --two-starts)")
+    init = dict(fit_kwargs.pop("init", None) or {})
+    unknown = sorted(set(init) - set(names) - set(keys.values()))
+    if unknown:
+        raise ParameterError(f"fit_two_starts: init names {unknown}, which are not in params {names}")
+    given = {n: init.get(n, init.get(keys[n])) for n in names}
+    original = {n: _value(p[keys[n]], None) for n in names}
+    start = {n: _value(p[keys[n]], given[n]) for n in names}
+    for n in metal:
+        if not np.any(start[n]):               # already 0: the first start at 0.5
+            start[n] = np.full_like(start[n], 0.5)
+    listed = references if references is None or isinstance(references, (list, tuple)) else [references]
+    caps = parse_captures(captures, listed)
+    sources = listed if listed is not None else capture_references(caps)
+    refs = [load_reference(r, who=f"fit_two_starts: {'references' if listed is not None else 'captures'}[{i}]")
+            for i, r in enumerate(sources)]
+    masks = [unclipped_mask(r) if is_display_reference(g) else None for g, r in zip(sources, refs)]
+    common = dict(captures=captures, seed=seed, **fit_kwargs)
 
-    def run(init, its, rate):
-        r = fit(scene, references, names, iterations=its, init=init, **dict(common, lr=rate))
+    def run(values, its, rate):
+        _set_values(scene, values)
+        r = fit(scene, listed, names, iterations=its, lr=rate, **common)
         return r, {n: np.asarray(r.values[n], dtype=np.float32) for n in names}
 
     def error(values):
         return _captures_error(scene, values, caps, refs, masks, version, eval_spp, seed)
 
-    zero = dict(start, **{n: np.zeros_like(start[n]) for n in metal})
-    a, va = run(start, iterations, lr)
-    version = a.version
-    b, vb = run(zero, iterations, lr)
-    ea, eb = error(va), error(vb)
-    stages = [{"stage": "from the scene's start", "error": ea, "seconds": a.seconds},
-              {"stage": "from metallic 0", "error": eb, "seconds": b.seconds}]
-    t_merge = time.perf_counter()
-    base, err, tested, taken = merge(scene, *((va, vb, ea) if ea <= eb else (vb, va, eb)), metal, error,
-                                     min_texels)
-    stages.append({"stage": "merged", "error": err, "seconds": time.perf_counter() - t_merge,
-                   "regions": tested, "taken": taken})
-    runs = [a, b]
-    if refine > 0:
+    try:
+        a, va = run(start, iterations, lr)
+        version = a.version
+        b, vb = run(dict(start, **{n: np.zeros_like(start[n]) for n in metal}), iterations, lr)
+        ea, eb = error(va), error(vb)
+        stages = [{"stage": "from the scene's start", "error": ea, "seconds": a.seconds},
+                  {"stage": "from metallic 0", "error": eb, "seconds": b.seconds}]
+        t_merge = time.perf_counter()
+        base, err, tested, taken = merge(scene, *((va, vb, ea) if ea <= eb else (vb, va, eb)), metal, error,
+                                         min_texels)
+        stages.append({"stage": "merged", "error": err, "seconds": time.perf_counter() - t_merge,
+                       "regions": tested, "taken": taken})
         r, final = run(base, max(1, int(round(refine * iterations))), REFINE_LR * lr)
-        runs.append(r)
         stages.append({"stage": "refined", "error": error(final), "seconds": r.seconds})
-    else:
-        r = a
-        _set_values(scene, base)
-        r.values = {n: base[n] for n in names}
-    r.history = [h for run_ in runs for h in run_.history]
-    r.iterations = sum(run_.iterations for run_ in runs)
+        _set_values(scene, final)
+    except BaseException:
+        _set_values(scene, original)       # (an interrupted merge leaves no candidate behind)
+        raise
+    r.history = a.history + b.history + r.history
+    r.iterations = a.iterations + b.iterations + r.iterations
     r.seconds = time.perf_counter() - t0
     r.stages = stages
     return r
+
+
+def _check_options(scene, fit_kwargs: dict, refine, min_texels, eval_spp) -> None:
+    """ParameterError for what :func:`fit_two_starts` cannot merge by, before any fit runs."""
+    post = scene.settings.get("post") if fit_kwargs.get("post") is None else fit_kwargs["post"]
+    if post:
+        where = "the scene has" if fit_kwargs.get("post") is None else "post= gives"
+        raise ParameterError(f"fit_two_starts: {where} a post chain; expected none (the merge compares linear "
+                             "renders with the references; post=[] turns the scene's off)")
+    if fit_kwargs.get("exposure", "fixed") == "fit":
+        raise ParameterError("fit_two_starts: exposure='fit'; expected the default (the merge compares "
+                             "unscaled renders with the references)")
+    if isinstance(refine, bool) or not isinstance(refine, (int, float)) or not 0 < refine <= 1:
+        raise ParameterError(f"fit_two_starts: refine={refine!r}; expected a fraction of iterations in (0, 1]")
+    for name, v in (("min_texels", min_texels), ("eval_spp", eval_spp)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ParameterError(f"fit_two_starts: {name}={v!r}; expected a whole number >= 1")
 
 
 def merge(scene, base: dict, other: dict, base_error: float, metal: list, error, min_texels: int = 4):
@@ -165,28 +192,57 @@ def _value(current, given):
 
 
 def _regions(base_metal: np.ndarray, other_metal: np.ndarray, min_texels: int) -> list:
-    """Boolean (H, W) masks of the connected regions where the two maps disagree on metal,
-    each widened by one texel (its four neighbours), largest first; those under ``min_texels``
-    dropped.
+    """Boolean (H, W) masks of the connected regions (four-neighbour) where the two maps
+    disagree on metal, those of fewer than ``min_texels`` texels dropped, each widened by one
+    texel (its four neighbours), largest first.
 
     >>> a = np.zeros((6, 6), bool); b = a.copy(); b[1:3, 1:3] = True; b[5, 5] = True
-    >>> [int(m.sum()) for m in _regions(a, b, 3)], [int(m.sum()) for m in _regions(a, b, 4)]
+    >>> [int(m.sum()) for m in _regions(a, b, 1)], [int(m.sum()) for m in _regions(a, b, 2)]
     ([12, 3], [12])
     """
-    labels, n = scipy.ndimage.label(base_metal != other_metal)
-    out = [scipy.ndimage.binary_dilation(labels == i) for i in range(1, n + 1)]
-    return sorted((m for m in out if m.sum() >= min_texels), key=lambda m: -int(m.sum()))
+    labels = _components(base_metal != other_metal)
+    out = [_widened(labels == i) for i in np.unique(labels[labels > 0]) if (labels == i).sum() >= min_texels]
+    return sorted(out, key=lambda m: -int(m.sum()))
+
+
+def _components(mask: np.ndarray) -> np.ndarray:
+    """Labels (H, W) of ``mask``'s four-neighbour connected components (0 outside the mask):
+    each texel takes the smallest label among its neighbours until none changes.
+
+    >>> _components(np.array([[1, 1, 0, 1], [0, 0, 0, 1]], bool)).tolist()
+    [[1, 1, 0, 4], [0, 0, 0, 4]]
+    """
+    big = mask.size + 1
+    labels = np.where(mask, np.arange(1, mask.size + 1).reshape(mask.shape), big)
+    while True:
+        p = np.pad(labels, 1, constant_values=big)
+        low = np.minimum.reduce([labels, p[:-2, 1:-1], p[2:, 1:-1], p[1:-1, :-2], p[1:-1, 2:]])
+        low = np.where(mask, low, big)
+        if np.array_equal(low, labels):
+            return np.where(mask, labels, 0)
+        labels = low
+
+
+def _widened(region: np.ndarray) -> np.ndarray:
+    """``region`` and its texels' four neighbours."""
+    p = np.pad(region, 1)
+    return region | p[:-2, 1:-1] | p[2:, 1:-1] | p[1:-1, :-2] | p[1:-1, 2:]
 
 
 def _swap(base: dict, other: dict, region: np.ndarray, metal_key: str, scene) -> dict:
     """``base`` with ``other``'s texels inside ``region`` for every map of the metallic map's
     material and size."""
-    material = metal_key.split(".")[0]
+    material = _material(metal_key)
     out = dict(base)
     for n, v in base.items():
-        if v.ndim == 3 and v.shape[:2] == region.shape and scene.key(n).split(".")[0] == material:
+        if v.ndim == 3 and v.shape[:2] == region.shape and _material(scene.key(n)) == material:
             out[n] = np.where(region[..., None], other[n], v)
     return out
+
+
+def _material(key: str) -> str:
+    """The material id of a parameter key: ``"Material.001.metallic.data"`` -> ``"Material.001"``."""
+    return key.removesuffix(".data").removesuffix(".value").rsplit(".", 1)[0]
 
 
 def _set_values(scene, values: dict) -> None:
@@ -195,7 +251,8 @@ def _set_values(scene, values: dict) -> None:
     with holding(scene):
         for n, v in values.items():
             k = scene.key(n)
-            p[k] = owned_tensor(v) if np.ndim(v) == 3 else type(p[k])(v.tolist() if np.ndim(v) else float(v))
+            v = np.asarray(v, dtype=np.float32)
+            p[k] = owned_tensor(v) if v.ndim == 3 else type(p[k])(v.tolist() if v.ndim else float(v))
         p.update()
         session_of(scene).scene_changed()
 
