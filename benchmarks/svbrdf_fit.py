@@ -382,6 +382,18 @@ def run_case(obj: str, k: int, n: int, res: int, args, env: str) -> list:
     return rows
 
 
+def map_option(items: list, number: bool):
+    """``--lr-scale`` / ``--tv`` items as ``fit(maps=...)`` takes them: ``NAME=X`` items as a
+    dict (``None`` for none), or with ``number`` one bare number as itself.
+
+    >>> map_option(["metallic=5", "obj.roughness=2"], False), map_option(["0"], True), map_option([], True)
+    ({'metallic': 5.0, 'obj.roughness': 2.0}, 0.0, None)
+    """
+    if number and len(items) == 1 and "=" not in items[0]:
+        return float(items[0])
+    return {k: float(v) for k, v in (item.split("=", 1) for item in items)} or None
+
+
 def tv_text(tv) -> str:
     """``--tv`` as the table's header says it: one weight for every map, or entries per map
     over :data:`~draaw_mi.fitting.maps.TV_WEIGHTS` (the more specific name wins).
@@ -441,19 +453,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=OUT)
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
-    given = " ".join(args.lr_scale)
-    try:
-        args.lr_scale = {k: float(v) for k, v in (item.split("=", 1) for item in args.lr_scale)} or None
-        MapOptions.parse({"lr_scale": args.lr_scale})
-    except (ValueError, ParameterError) as e:
-        ap.error(f"--lr-scale {given}: {e} (NAME=NUMBER items: metallic=5)")
-    given = " ".join(args.tv)
-    try:
-        args.tv = float(args.tv[0]) if len(args.tv) == 1 and "=" not in args.tv[0] else (
-            {k: float(v) for k, v in (item.split("=", 1) for item in args.tv)} or None)
-        MapOptions.parse({"tv": args.tv})
-    except (ValueError, ParameterError) as e:
-        ap.error(f"--tv {given}: {e} (one NUMBER, or NAME=NUMBER items: roughness=0.003)")
+    for option, flag, number, example in (("lr_scale", "--lr-scale", False, "metallic=5"),
+                                          ("tv", "--tv", True, "roughness=0.003")):
+        items = getattr(args, option)
+        try:
+            setattr(args, option, map_option(items, number))
+            MapOptions.parse({option: getattr(args, option)})
+        except (ValueError, ParameterError) as e:
+            ap.error(f"{flag} {' '.join(items)}: {e} ({'one NUMBER, or ' if number else ''}NAME=NUMBER items: "
+                     f"{example})")
     if args.capture_spp < 0:
         ap.error(f"--capture-spp {args.capture_spp}: expected 0 (not measured) or a positive spp")
     if args.layout == "patterns" and args.lamp == "softbox":

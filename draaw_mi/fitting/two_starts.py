@@ -34,6 +34,7 @@ from ..errors import ParameterError
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from ..scene import DraawScene, load_scene
+from ..scene.values import value_like
 from .captures import capture_references, parse_captures, render_capture
 from .fitter import fit
 from .maps import material_parameter
@@ -116,8 +117,11 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
         r = fit(scene, listed, names, iterations=its, lr=rate, **common)
         return r, {n: np.asarray(r.values[n], dtype=np.float32) for n in names}
 
+    h, w = refs[0].shape[:2]
+    view = scene if scene.resolution == (w, h) else scene.with_resolution(w, h)   # (built once)
+
     def error(values):
-        return _captures_error(scene, values, caps, refs, masks, version, eval_spp, seed)
+        return _captures_error(view, values, caps, refs, masks, version, eval_spp, seed)
 
     try:
         a, va = run(start, iterations, lr)
@@ -201,7 +205,8 @@ def _regions(base_metal: np.ndarray, other_metal: np.ndarray, min_texels: int) -
     ([12, 3], [12])
     """
     labels = _components(base_metal != other_metal)
-    out = [_widened(labels == i) for i in np.unique(labels[labels > 0]) if (labels == i).sum() >= min_texels]
+    sizes = np.bincount(labels.ravel())
+    out = [_widened(labels == i) for i in np.flatnonzero(sizes) if i > 0 and sizes[i] >= min_texels]
     return sorted(out, key=lambda m: -int(m.sum()))
 
 
@@ -252,20 +257,18 @@ def _set_values(scene, values: dict) -> None:
         for n, v in values.items():
             k = scene.key(n)
             v = np.asarray(v, dtype=np.float32)
-            p[k] = owned_tensor(v) if v.ndim == 3 else type(p[k])(v.tolist() if v.ndim else float(v))
+            # (textures owned: see owned_tensor; the rest in the parameter's own type)
+            p[k] = owned_tensor(v) if v.ndim == 3 else value_like(p[k], v.tolist() if v.ndim else float(v), k)
         p.update()
         session_of(scene).scene_changed()
 
 
-def _captures_error(scene, values: dict, caps: list, refs: list, masks: list, version: str, spp: int,
+def _captures_error(view, values: dict, caps: list, refs: list, masks: list, version: str, spp: int,
                     seed: int) -> float:
-    """Mean over the captures of the mean squared difference between a render of ``scene``
-    with ``values`` (capture ``i`` with seed ``seed + i``) and its reference."""
-    _set_values(scene, values)
-    h, w = refs[0].shape[:2]
-    view = scene if scene.resolution == (w, h) else scene.with_resolution(w, h)
-    if view is not scene:
-        _set_values(view, values)
+    """Mean over the captures of the mean squared difference between a render of ``view`` (the
+    scene at the references' size) with ``values`` (capture ``i`` with seed ``seed + i``) and
+    its reference."""
+    _set_values(view, values)
     total = 0.0
     for i, (c, ref, mask) in enumerate(zip(caps, refs, masks)):
         setup = {k: v for k, v in c.items() if k != "reference"}
