@@ -117,6 +117,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--batch", type=int, help="captures rendered per iteration (default all)")
     f.add_argument("--two-starts", action="store_true", help="with --captures: metallic maps from the scene's "
                    "start and from 0, merged by region and refined (draaw_mi.fitting.fit_two_starts; ~3x the time)")
+    f.add_argument("--polish", type=int, default=0, metavar="N", help="N more iterations at 8x --spp and "
+                   "0.4x --lr (fit(polish=N)): settles what a noisy gradient leaves, e.g. near-mirror roughness")
     f.add_argument("--maps", metavar="FOLDER", help="write fitted texture maps into FOLDER as EXR, 8- and "
                    "16-bit PNG")
     f.add_argument("--param", action="append", required=True,
@@ -313,10 +315,11 @@ def _cmd_fit(args) -> int:
         scene, None if captures else references, params=list(args.param), version=args.version,
         spp=args.spp, iterations=args.iterations, lr=args.lr, loss=args.loss, views=views,
         post=post, exposure=args.exposure, seed=args.seed, captures=captures, batch=args.batch,
-        progress=progress_mode(args.no_progress))
+        progress=progress_mode(args.no_progress), polish=args.polish)
     for st in res.stages:
-        print(f"{st['stage']}: captures error {st['error']:.4g}" + (f", {st['taken']} of {st['regions']} region(s) "
-              "taken" if "regions" in st else "") + f" ({st['seconds']:.1f} s)")
+        what = (f"captures error {st['error']:.4g}" if "error" in st else f"{st['iterations']} iterations at "
+                f"{st['spp']} spp") + (f", {st['taken']} of {st['regions']} region(s) taken" if "regions" in st else "")
+        print(f"{st['stage']}: {what} ({st['seconds']:.1f} s)")
     for name, value in res.values.items():
         if hasattr(value, "shape"):        # a texture
             mean = ", ".join(f"{m:.4g}" for m in value.reshape(-1, value.shape[-1]).mean(axis=0))

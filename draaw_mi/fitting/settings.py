@@ -35,7 +35,8 @@ class FitSettings:
     integrator_options: dict | None = None
     maps: object = None                # MapOptions
     batch: int | None = None
-
+    polish: int = 0
+    polish_spp: int | None = None
 
 
 def validate(s: FitSettings) -> FitSettings:
@@ -48,7 +49,8 @@ def validate(s: FitSettings) -> FitSettings:
         raise ParameterError(f"fit: integrator_options={s.integrator_options!r}; expected a dict of "
                              "integrator properties")
     for name, value, lo in (("spp", s.spp, 1), ("iterations", s.iterations, 1),
-                            ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1)):
+                            ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1), ("polish", s.polish, 0),
+                            ("polish_spp", s.spp if s.polish_spp is None else s.polish_spp, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ParameterError(f"fit: {name}={value!r}; expected an integer >= {lo}")
     if isinstance(s.lr, bool) or not (isinstance(s.lr, (int, float)) and 0 < s.lr < float("inf")):

@@ -56,7 +56,8 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
 
     Args:
         scene, references, params, captures, lr, seed, ``fit_kwargs``: as
-            :func:`~draaw_mi.fitting.fitter.fit` takes them. The first start is the scene's
+            :func:`~draaw_mi.fitting.fitter.fit` takes them (``polish`` polishes the refining
+            fit only). The first start is the scene's
             values (``init`` over them; a metallic map that starts at 0 everywhere starts at
             0.5 here, so that the two starts differ), the second the same with the metallic
             maps at 0. Captures are required; no post chain (``post=[]`` turns the scene's
@@ -110,11 +111,12 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
     refs = [load_reference(r, who=f"fit_two_starts: {'references' if listed is not None else 'captures'}[{i}]")
             for i, r in enumerate(sources)]
     masks = [unclipped_mask(r) if is_display_reference(g) else None for g, r in zip(sources, refs)]
+    polish = {k: fit_kwargs.pop(k) for k in ("polish", "polish_spp") if k in fit_kwargs}   # (the refine's)
     common = dict(captures=captures, seed=seed, **fit_kwargs)
 
-    def run(values, its, rate):
+    def run(values, its, rate, **extra):
         _set_values(scene, values)
-        r = fit(scene, listed, names, iterations=its, lr=rate, **common)
+        r = fit(scene, listed, names, iterations=its, lr=rate, **common, **extra)
         return r, {n: np.asarray(r.values[n], dtype=np.float32) for n in names}
 
     h, w = refs[0].shape[:2]
@@ -135,7 +137,7 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
                                          min_texels)
         stages.append({"stage": "merged", "error": err, "seconds": time.perf_counter() - t_merge,
                        "regions": tested, "taken": taken})
-        r, final = run(base, max(1, int(round(refine * iterations))), REFINE_LR * lr)
+        r, final = run(base, max(1, int(round(refine * iterations))), REFINE_LR * lr, **polish)
         stages.append({"stage": "refined", "error": error(final), "seconds": r.seconds})
         _set_values(scene, final)
     except BaseException:

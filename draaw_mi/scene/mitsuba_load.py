@@ -8,6 +8,7 @@ import re
 import tempfile
 import xml.etree.ElementTree as ET
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -114,7 +115,24 @@ def load_mitsuba_dict(d: dict):
     without it too."""
     optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
     with exr_reading_threads():
-        return mi.load_dict(d, optimize=optimize)
+        return mi.load_dict(_tensors_shared(d), optimize=optimize)
+
+
+def _tensors_shared(d):
+    """``d`` with every tensor a new reference to the same data. Mitsuba's ``bitmap`` moves
+    the tensor it is given out of the dict, leaving it empty (shape ``()``), so loading ``d``
+    itself would leave no texture for the next load (:meth:`DraawScene.with_resolution`, a
+    user's dict loaded twice).
+
+    >>> t = mi.TensorXf([1.0, 2.0])
+    >>> _tensors_shared({"a": {"data": t}})["a"]["data"] is t, t.shape
+    (False, (2,))
+    """
+    if isinstance(d, dict):
+        return {k: _tensors_shared(v) for k, v in d.items()}
+    if dr.is_tensor_v(d):
+        return type(d)(d)
+    return d
 
 
 def _xml_shape_bsdfs(path: str) -> set:
