@@ -118,7 +118,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--two-starts", action="store_true", help="with --captures: metallic maps from the scene's "
                    "start and from 0, merged by region and refined (draaw_mi.fitting.fit_two_starts; ~3x the time)")
     f.add_argument("--polish", type=int, default=0, metavar="N", help="N more iterations at 8x --spp and "
-                   "0.4x --lr (fit(polish=N)): settles what a noisy gradient leaves, e.g. near-mirror roughness")
+                   "0.4x the rate of the fit they continue (fit(polish=N); with --two-starts, of the refine): settles "
+                   "what a noisy gradient leaves, e.g. near-mirror roughness")
     f.add_argument("--maps", metavar="FOLDER", help="write fitted texture maps into FOLDER as EXR, 8- and "
                    "16-bit PNG")
     f.add_argument("--param", action="append", required=True,

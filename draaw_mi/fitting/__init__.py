@@ -2,6 +2,7 @@
 
 * :mod:`~draaw_mi.fitting.fitter` -- :func:`fit`, in phases (validate, set up, iterate, report);
 * :mod:`~draaw_mi.fitting.settings` -- its keyword arguments, checked;
+* :mod:`~draaw_mi.fitting.polish` -- ``fit(polish=N)``: its last steps at more samples per pixel;
 * :mod:`~draaw_mi.fitting.params` -- each parameter's range and the space Adam moves it in;
 * :mod:`~draaw_mi.fitting.maps` -- texture maps as multi-scale latents kept in range;
 * :mod:`~draaw_mi.fitting.two_starts` -- :func:`fit_two_starts`: maps from two starts of their metallic maps, merged;

@@ -86,7 +86,7 @@ from ..scene.schema import shown
 from .captures import CaptureOverrides, capture_references, light_names, parse_captures
 from .maps import MapOptions, MapSet
 from .params import FitParam, range_for
-from .polish import POLISH_LR, joined, polish_samples
+from .polish import POLISH_LR, joined, polish_maps, polish_samples
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
 from .problem import FitProblem, PassLoss, record
 from .report import report
@@ -157,10 +157,13 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         batch: views (captures) rendered per iteration, drawn at random without repetition
             (default all): a fit of many captures then takes more, cheaper iterations.
         polish: iterations of a second fit from the first's values at ``polish_spp`` (default
-            8x ``spp``), at 0.4x ``lr`` held constant (:mod:`~draaw_mi.fitting.polish`): where
-            a 16-spp gradient is too noisy to settle the last hundredths (a near-mirror under an
-            environment map stops at roughness 0.064-0.070 for a truth of 0.05; polished,
-            0.055-0.059). The result's ``stages`` give both runs' iterations and seconds.
+            8x ``spp``; ``spp_grad``, where given, 8x too), at 0.4x ``lr`` (and the maps' ``lr``)
+            held constant, every capture in each iteration (:mod:`~draaw_mi.fitting.polish`):
+            where a 16-spp gradient is too noisy to settle the last hundredths (a near-mirror
+            under an environment map stops at roughness 0.064-0.070 for a truth of 0.05;
+            polished, 0.055-0.059). The result's ``stages`` give both runs' iterations, spp and
+            seconds; its ``image``, ``captures``, ``observed`` and ``exposure_stops`` are the
+            polish's, ``converged`` is judged on the joined history.
 
     Maps, for example (one photo per capture; lights by their names in the scene)::
 
@@ -193,13 +196,17 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
     result = report(problem, settings, opt, history, compiles, t0)
     if not polish:
         return result
-    spp_polish = polish_samples(spp, polish_spp)
+    spp_polish = polish_samples(problem.spp, polish_spp)
+    grad_polish = None if problem.spp_grad is None else polish_samples(problem.spp_grad, None)
+    # (maps: their own rate scaled too; every capture in each iteration, so that the polish sees
+    # every texel the fit saw and its fill of unseen texels undoes none of the fit's)
     again = fit(problem.callers_scene, given[0], params, version=result.version, spp=spp_polish, iterations=polish,
                 lr=POLISH_LR * lr, loss=loss, views=given[1], post=post, progress=progress,
                 seed=(seed + 1) & 0xFFFFFFFF, exposure=exposure, max_depth=max_depth, average_last=average_last,
                 tol=tol, resolution=resolution, lr_final=1.0, beta_2=beta_2, smooth=smooth,
-                integrator_options=integrator_options, captures=given[2], maps=maps, batch=batch)
-    return joined(result, again, spp, spp_polish, t0)
+                spp_grad=grad_polish, integrator_options=integrator_options, captures=given[2],
+                maps=polish_maps(maps, settings.maps), batch=None if result.observed else batch)
+    return joined(result, again, (problem.spp, problem.spp_grad), (spp_polish, grad_polish), t0, tol)
 
 
 def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitProblem:

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import time
 
+from .result import settled
+
 #: the polish's learning rate, as a multiple of the fit's (constant over the polish)
 POLISH_LR = 0.4
 #: the polish's spp, as a multiple of the fit's, when ``polish_spp`` is not given
@@ -35,15 +37,33 @@ def polish_samples(spp: int, given: int | None) -> int:
     return POLISH_SPP_FACTOR * spp if given is None else given
 
 
-def joined(first, second, spp: int, spp_polish: int, t0: float):
+def polish_maps(given, options):
+    """The polish's ``maps`` argument: the fit's (``given``, parsed as ``options``), with the
+    maps' own learning rate, where one is set, at :data:`POLISH_LR` times it.
+
+    >>> from draaw_mi.fitting.maps import MapOptions
+    >>> polish_maps({"lr": 0.5, "tv": 0}, MapOptions.parse({"lr": 0.5, "tv": 0})), polish_maps(None, MapOptions())
+    ({'lr': 0.2, 'tv': 0}, None)
+    """
+    if options.lr is None:
+        return given
+    return dict(given if isinstance(given, dict) else {"parametrisation": given}, lr=POLISH_LR * options.lr)
+
+
+def joined(first, second, fit_spp: tuple, polish_spp: tuple, t0: float, tol: float):
     """``second`` (the polish's :class:`~draaw_mi.fitting.result.FitResult`, whose values the
     scene holds) with ``first``'s history before its own, the iterations, kernel compilations
-    and seconds (since ``t0``) of both, and ``stages``: each one's iterations, spp and seconds."""
-    second.stages = [{"stage": "fit", "iterations": first.iterations, "spp": spp, "seconds": first.seconds},
-                     {"stage": "polish", "iterations": second.iterations, "spp": spp_polish,
-                      "seconds": second.seconds}]
+    and seconds (since ``t0``) of both, ``converged`` judged on the joined history
+    (:func:`~draaw_mi.fitting.result.settled`, ``tol``), and ``stages``: each run's
+    iterations, spp and seconds (``fit_spp``, ``polish_spp``: each run's ``(spp, spp_grad)``,
+    ``spp_grad`` None where it is the spp)."""
+    second.stages = []
+    for name, run, (spp, grad) in (("fit", first, fit_spp), ("polish", second, polish_spp)):
+        second.stages.append({"stage": name, "iterations": run.iterations, "spp": spp, "seconds": run.seconds,
+                              **({} if grad is None else {"spp_grad": grad})})
     second.history = first.history + second.history
     second.iterations += first.iterations
     second.kernel_compiles += first.kernel_compiles
     second.seconds = time.perf_counter() - t0
+    second.converged = settled(second.history, tol)
     return second

@@ -29,8 +29,9 @@ class FitResult:
     ``version``: the integrator it rendered with; ``observed``: per fitted map, which texels
     any capture saw (the others were filled from their neighbours); ``captures``: per view or
     capture, its residual and whether the fit explained it (:func:`explained`).
-    ``stages`` (:func:`~draaw_mi.fitting.two_starts.fit_two_starts` only): per stage, its
-    captures error and seconds.
+    ``stages``: per stage of :func:`~draaw_mi.fitting.two_starts.fit_two_starts`, its captures
+    error and seconds; of a fit with ``polish``, each run's iterations, spp and seconds (empty
+    otherwise).
     """
     values: dict
     history: list = field(default_factory=list, repr=False)      # (repr: no array dumps)
@@ -43,7 +44,7 @@ class FitResult:
     version: str = ""                 # the integrator the fit used (the scene's, or v4)
     observed: dict = field(default_factory=dict, repr=False)   # map name -> texels seen (H, W) bool
     captures: list = field(default_factory=list, repr=False)   # per view: explained(...)'s dicts
-    stages: list = field(default_factory=list, repr=False)     # fit_two_starts: per stage, its error
+    stages: list = field(default_factory=list, repr=False)     # fit_two_starts' or a polished fit's
 
     @property
     def losses(self) -> np.ndarray:

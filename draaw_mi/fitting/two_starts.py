@@ -57,7 +57,7 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
     Args:
         scene, references, params, captures, lr, seed, ``fit_kwargs``: as
             :func:`~draaw_mi.fitting.fitter.fit` takes them (``polish`` polishes the refining
-            fit only). The first start is the scene's
+            fit only, at 0.4x its rate; the "refined" stage then holds the polish's). The first start is the scene's
             values (``init`` over them; a metallic map that starts at 0 everywhere starts at
             0.5 here, so that the two starts differ), the second the same with the metallic
             maps at 0. Captures are required; no post chain (``post=[]`` turns the scene's
@@ -71,7 +71,7 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
     Returns:
         The refining fit's :class:`~draaw_mi.fitting.result.FitResult` (its ``values``,
         ``image``, ``captures``, ``observed`` and ``converged`` are the refine's: the scene
-        holds its values), with ``history`` the three fits' in order (each entry's
+        holds its values), with ``history`` the three fits' (and a polish's) in order (each entry's
         ``iteration`` counts from 0 within its fit), ``iterations`` and ``seconds`` the
         totals, and ``stages``: per stage its name, captures error and seconds, and for the
         merge how many regions it tested and took. The refined maps are returned even where
@@ -138,7 +138,8 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
         stages.append({"stage": "merged", "error": err, "seconds": time.perf_counter() - t_merge,
                        "regions": tested, "taken": taken})
         r, final = run(base, max(1, int(round(refine * iterations))), REFINE_LR * lr, **polish)
-        stages.append({"stage": "refined", "error": error(final), "seconds": r.seconds})
+        stages.append({"stage": "refined", "error": error(final), "seconds": r.seconds,
+                       **({"polish": r.stages[-1]} if r.stages else {})})
         _set_values(scene, final)
     except BaseException:
         _set_values(scene, original)       # (an interrupted merge leaves no candidate behind)
@@ -162,9 +163,11 @@ def _check_options(scene, fit_kwargs: dict, refine, min_texels, eval_spp) -> Non
                              "unscaled renders with the references)")
     if isinstance(refine, bool) or not isinstance(refine, (int, float)) or not 0 < refine <= 1:
         raise ParameterError(f"fit_two_starts: refine={refine!r}; expected a fraction of iterations in (0, 1]")
-    for name, v in (("min_texels", min_texels), ("eval_spp", eval_spp)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-            raise ParameterError(f"fit_two_starts: {name}={v!r}; expected a whole number >= 1")
+    polish_spp = fit_kwargs.get("polish_spp")
+    for name, v, lo in (("min_texels", min_texels, 1), ("eval_spp", eval_spp, 1), ("polish", fit_kwargs.get("polish", 0), 0),
+                        ("polish_spp", 1 if polish_spp is None else polish_spp, 1)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+            raise ParameterError(f"fit_two_starts: {name}={v!r}; expected a whole number >= {lo}")
 
 
 def merge(scene, base: dict, other: dict, base_error: float, metal: list, error, min_texels: int = 4):

@@ -11,7 +11,8 @@ import pytest
 import draaw_mi
 from draaw_mi.cli import main
 from draaw_mi.errors import ParameterError
-from draaw_mi.fitting.polish import POLISH_LR
+from draaw_mi.fitting.polish import POLISH_LR, joined
+from draaw_mi.fitting.result import FitResult
 
 from conftest import SCENES
 
@@ -82,3 +83,33 @@ def test_cli_polish_prints_both_stages(tmp_path, scene_and_ref, capsys):
     out = capsys.readouterr().out
     assert "fit: 3 iterations at 2 spp" in out and "polish: 2 iterations at 16 spp" in out, out
     assert "in 5 iterations" in out
+
+
+def _run(n, value, lr, iterations=None):
+    return FitResult(values={"m": value}, iterations=iterations or n, seconds=1.0, converged=False,
+                     history=[{"loss": 1.0, "lr": lr, "values": {"m": value}, "latent": {"m": value}}] * n)
+
+
+def test_joined_runs_judge_convergence_on_the_whole_history_and_name_each_runs_samples():
+    """A settled 40-iteration fit and a 6-iteration polish (too short alone to judge: settled
+    needs 16 iterations) converge together: ``joined`` keeping the polish's own verdict
+    (False) fails. Each stage carries its run's spp, and spp_grad only where one was given."""
+    out = joined(_run(40, 0.3, 0.05), _run(6, 0.3, 0.02), (16, None), (128, 64), 0.0, 5e-3)
+    assert out.converged and out.iterations == 46 and len(out.history) == 46
+    assert out.stages == [{"stage": "fit", "iterations": 40, "spp": 16, "seconds": 1.0},
+                          {"stage": "polish", "iterations": 6, "spp": 128, "seconds": 1.0, "spp_grad": 64}]
+    assert not joined(_run(40, 0.3, 0.05), _run(6, 0.4, 0.02), (16, None), (128, None), 0.0, 5e-3).converged
+
+
+def test_a_polished_map_fit_renders_every_capture_in_each_polish_iteration():
+    """With ``batch=1`` of 4 captures the fit renders one capture an iteration; its polish
+    renders all four (a batched polish could miss a capture, and its fill of the texels it did
+    not see would overwrite what the fit fitted there): ``batch`` passed on to the polish fails."""
+    from test_fit_captures import MAPS, path_renders, start_scene, tile, tile_captures, TRUTH_C, TRUTH_M, TRUTH_R
+    caps = tile_captures()
+    refs = path_renders(draaw_mi.load_scene(tile(TRUTH_C, TRUTH_R, TRUTH_M)), caps, spp=64)
+    res = draaw_mi.fit(start_scene(), refs, MAPS, captures=caps, batch=1, iterations=4, polish=2, spp=2,
+                       progress=False, seed=1)
+    assert [len(h["views"]) for h in res.history] == [1] * 4 + [4] * 2
+    assert [st["spp"] for st in res.stages] == [2, 16]
+    assert all(np.isfinite(np.asarray(v)).all() for v in res.values.values())

@@ -92,13 +92,17 @@ def test_two_starts_fit_merges_refines_and_reports_its_stages(references, monkey
         assert np.allclose(np.array(scene.all_params[scene.key(name)]).reshape(v.shape), v, atol=1e-6), name
 
 
-def test_two_starts_refuses_what_it_cannot_merge(references):
-    """Each refusal comes before any fit runs (``iterations=1`` would otherwise fit)."""
+def test_two_starts_refuses_what_it_cannot_merge(references, monkeypatch):
+    """Each refusal comes before any fit runs (a fit fails the test)."""
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fit_two_starts ran a fit before refusing its arguments")
+    monkeypatch.setattr("draaw_mi.fitting.two_starts.fit", no_fit)
     caps = tile_captures()
     cases = [(dict(params=["m.base_color"]), "hold no metallic parameter"),
              (dict(refine=0), "refine=0"), (dict(refine=2), "refine=2"), (dict(eval_spp=0), "eval_spp=0"),
              (dict(post=[{"type": "tonemap"}]), "post= gives a post chain"),
-             (dict(exposure="fit"), "exposure='fit'"), (dict(init={"m.metalic": 0.0}), "init names")]
+             (dict(exposure="fit"), "exposure='fit'"), (dict(init={"m.metalic": 0.0}), "init names"),
+             (dict(polish=-1), "polish=-1"), (dict(polish=2, polish_spp=0), "polish_spp=0")]
     for kwargs, message in cases:
         kwargs = {"params": MAPS, **kwargs}
         with pytest.raises(ParameterError, match=message):
