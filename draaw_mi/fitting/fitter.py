@@ -180,7 +180,7 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         lr_final=lr_final, spp_grad=spp_grad, beta_2=beta_2, smooth=smooth,
         integrator_options=integrator_options, maps=MapOptions.parse(maps), batch=batch, polish=polish,
         polish_spp=polish_spp))
-    given = (references, views, captures)             # (as the polish takes them again)
+    references_given, views_given, captures_given = references, views, captures   # (for the polish)
     if captures is not None:
         if views is not None:
             raise ParameterError("fit: give views or captures, not both (a capture has its camera)")
@@ -200,11 +200,11 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
     grad_polish = None if problem.spp_grad is None else polish_samples(problem.spp_grad, None)
     # (maps: their own rate scaled too; every capture in each iteration, so that the polish sees
     # every texel the fit saw and its fill of unseen texels undoes none of the fit's)
-    again = fit(problem.callers_scene, given[0], params, version=result.version, spp=spp_polish, iterations=polish,
-                lr=POLISH_LR * lr, loss=loss, views=given[1], post=post, progress=progress,
+    again = fit(problem.callers_scene, references_given, params, version=result.version, spp=spp_polish, iterations=polish,
+                lr=POLISH_LR * lr, loss=loss, views=views_given, post=post, progress=progress,
                 seed=(seed + 1) & 0xFFFFFFFF, exposure=exposure, max_depth=max_depth, average_last=average_last,
                 tol=tol, resolution=resolution, lr_final=1.0, beta_2=beta_2, smooth=smooth,
-                spp_grad=grad_polish, integrator_options=integrator_options, captures=given[2],
+                spp_grad=grad_polish, integrator_options=integrator_options, captures=captures_given,
                 maps=polish_maps(maps, settings.maps), batch=None if result.observed else batch)
     return joined(result, again, (problem.spp, problem.spp_grad), (spp_polish, grad_polish), t0, tol)
 

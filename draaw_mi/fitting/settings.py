@@ -39,6 +39,23 @@ class FitSettings:
     polish_spp: int | None = None
 
 
+def check_counts(who: str, optional: tuple = (), **counts) -> None:
+    """ParameterError naming ``who`` for the first ``name=(value, lowest)`` whose value is not
+    an integer >= lowest (None passes for the names in ``optional``: their default).
+
+    >>> check_counts("fit", ("polish_spp",), spp=(16, 1), polish_spp=(None, 1))
+    >>> check_counts("fit", polish=(-1, 0))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: polish=-1; expected an integer >= 0
+    """
+    for name, (value, lo) in counts.items():
+        if value is None and name in optional:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+            raise ParameterError(f"{who}: {name}={value!r}; expected an integer >= {lo}")
+
+
 def validate(s: FitSettings) -> FitSettings:
     """``s`` with every value checked: a bad one is a :class:`ParameterError` naming it."""
     if s.loss not in LOSSES:
@@ -48,11 +65,8 @@ def validate(s: FitSettings) -> FitSettings:
     if s.integrator_options is not None and not isinstance(s.integrator_options, dict):
         raise ParameterError(f"fit: integrator_options={s.integrator_options!r}; expected a dict of "
                              "integrator properties")
-    for name, value, lo in (("spp", s.spp, 1), ("iterations", s.iterations, 1),
-                            ("spp_grad", s.spp if s.spp_grad is None else s.spp_grad, 1), ("polish", s.polish, 0),
-                            ("polish_spp", s.spp if s.polish_spp is None else s.polish_spp, 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
-            raise ParameterError(f"fit: {name}={value!r}; expected an integer >= {lo}")
+    check_counts("fit", ("spp_grad", "polish_spp"), spp=(s.spp, 1), iterations=(s.iterations, 1),
+                 spp_grad=(s.spp_grad, 1), polish=(s.polish, 0), polish_spp=(s.polish_spp, 1))
     if isinstance(s.lr, bool) or not (isinstance(s.lr, (int, float)) and 0 < s.lr < float("inf")):
         raise ParameterError(f"fit: lr={s.lr!r}; expected a positive finite number")
     if isinstance(s.seed, bool) or not isinstance(s.seed, int) or not 0 <= s.seed <= 0xFFFFFFFF:

@@ -40,6 +40,7 @@ from .fitter import fit
 from .maps import material_parameter
 from .reference import is_display_reference, load_reference, unclipped_mask
 from .result import FitResult
+from .settings import check_counts
 
 #: the refining fit's learning rate, as a multiple of the two fits' (it starts near an optimum)
 REFINE_LR = 0.4
@@ -163,11 +164,8 @@ def _check_options(scene, fit_kwargs: dict, refine, min_texels, eval_spp) -> Non
                              "unscaled renders with the references)")
     if isinstance(refine, bool) or not isinstance(refine, (int, float)) or not 0 < refine <= 1:
         raise ParameterError(f"fit_two_starts: refine={refine!r}; expected a fraction of iterations in (0, 1]")
-    polish_spp = fit_kwargs.get("polish_spp")
-    for name, v, lo in (("min_texels", min_texels, 1), ("eval_spp", eval_spp, 1), ("polish", fit_kwargs.get("polish", 0), 0),
-                        ("polish_spp", 1 if polish_spp is None else polish_spp, 1)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-            raise ParameterError(f"fit_two_starts: {name}={v!r}; expected a whole number >= {lo}")
+    check_counts("fit_two_starts", ("polish_spp",), min_texels=(min_texels, 1), eval_spp=(eval_spp, 1),
+                 polish=(fit_kwargs.get("polish", 0), 0), polish_spp=(fit_kwargs.get("polish_spp"), 1))
 
 
 def merge(scene, base: dict, other: dict, base_error: float, metal: list, error, min_texels: int = 4):

@@ -66,7 +66,13 @@ def test_the_polish_continues_from_the_fit_at_more_spp_and_a_constant_smaller_ra
 @pytest.mark.parametrize("kw,expected", [({"polish": -1}, "polish=-1; expected an integer >= 0"),
                                          ({"polish": 2.5}, "polish=2.5; expected an integer >= 0"),
                                          ({"polish": 3, "polish_spp": 0}, "polish_spp=0; expected an integer >= 1")])
-def test_bad_polish_arguments_are_refused_before_any_render(scene_and_ref, kw, expected):
+def test_bad_polish_arguments_are_refused_before_any_render(scene_and_ref, kw, expected, monkeypatch):
+    """Refused by the settings' check, before the fit is set up (a set-up fails the test); with
+    the check gone, ``polish=-1`` would reach a polish of -1 iterations and fail there, named
+    ``iterations``, after a whole fit."""
+    def no_set_up(*args, **kwargs):
+        raise AssertionError("fit set up (and would render) before refusing its arguments")
+    monkeypatch.setattr("draaw_mi.fitting.fitter._set_up", no_set_up)
     scene, ref = scene_and_ref
     with pytest.raises(ParameterError, match=expected):
         draaw_mi.fit(scene, ref, P, iterations=1, progress=False, **kw)
