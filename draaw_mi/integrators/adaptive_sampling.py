@@ -16,7 +16,10 @@
   rest of the budget with the map, and the image is ``(a / spp) * pilot + (1 - a / spp) *
   main``. The weights are constants and the main pass's counts depend only on the pilot, so
   ``E[main | pilot] = E[pixel]`` and the image is unbiased (a count-weighted mean of both
-  passes would not be: the counts would depend on the pilot's values). Where the pilot's
+  passes would not be: the counts would depend on the pilot's values). Under a filter other
+  than box both passes splat into one image block, each sample weighted by its pass's share
+  (``a / spp``, ``1 - a / spp``) over its pixel's count: the block's sums estimate the same
+  filtered integrals, and the film develops the image once. Where the pilot's
   even and odd samples disagree on where the noise is (:func:`pilot_agreement`: rare bright
   paths, as light that arrives through a doorway or off a glossy panel), the main pass is
   uniform.
@@ -216,18 +219,22 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
-               moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False):
+               moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False,
+               into=None):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
     ``alpha`` the hit count; with ``moments`` the summed path lengths and R^2, G^2, B^2.
     ``pilot`` (uniform ``counts``): what :func:`render_adaptive` reads in as few channels as
-    it can: R, G, B, [hits if ``alpha``], path lengths, the sum of R^2 + G^2 + B^2, and of the
+    it can: R, G, B, [hits if ``alpha`` and the filter is box: otherwise the block holds the
+    alpha], path lengths, the sum of R^2 + G^2 + B^2, and of the
     channel sum ``s = R + G + B``: ``s`` and ``s^2`` over the odd samples, ``s^2`` over the
     even ones; with ``gather_first`` (a ``draaw_v4`` pilot) last, the light gathered at the
     paths' first vertices, R + G + B (all of it where the integrator does not report it:
     V4's media paths). Under a filter other than box the image is the splatted one
-    (``film_splat``)."""
+    (``film_splat``); with ``into``, a ``(FilmSplat, share)`` that several passes fill, this
+    pass's samples go there with their weights ``1 / count`` times ``share`` and the filtered
+    image is left to the caller (None)."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     ox, oy = (int(v) for v in film.crop_offset())
@@ -258,7 +265,9 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         ray, weight = sensor.sample_ray_differential(time=time, sample1=0.0, sample2=sample2,
                                                      sample3=aperture)
         splat = share = None
-        if not film.rfilter().is_box_filter():   # weighted by 1 / the sample's pixel's count
+        if into is not None:
+            splat, share = into[0], dr.rcp(count_of()) * into[1]
+        elif not film.rfilter().is_box_filter():   # weighted by 1 / the sample's pixel's count
             film.prepare([])
             splat = FilmSplat(film)
             share = dr.rcp(count_of())
@@ -289,7 +298,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         filtered = None
         if splat is not None:
             splat.put(pos, value, dr.select(valid, 1.0, 0.0), share)
-            filtered = splat.develop()
+            if into is None:
+                filtered = splat.develop()
         chans = [value.x, value.y, value.z]
         hits = dr.select(valid, 1.0, 0.0) + 0.0 * value.x if moments or alpha or pilot else None
         # (1 per path where the integrator reports no lengths: V4's media paths)
@@ -297,7 +307,7 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         if pilot:
             odd = ((idx - first()) & 1) == 1
             v = value.x + value.y + value.z
-            chans += [hits] if alpha else []
+            chans += [hits] if alpha and splat is None else []    # (filtered: alpha is the block's)
             chans += [lengths, dr.squared_norm(value), dr.select(odd, v, 0.0),
                       dr.select(odd, v * v, 0.0), dr.select(odd, 0.0, v * v)]
             if gather_first:
@@ -312,7 +322,7 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         sums = [dr.zeros(mi.Float, w * h) for _ in chans]
         for acc, v in zip(sums, chans):
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
-        dr.eval(sums, filtered)      # one kernel traces the paths
+        dr.eval(sums, filtered, splat.tensors() if into is not None else None)   # one kernel traces the paths
     return sums, filtered
 
 
@@ -405,17 +415,28 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     guided), the main pass samples every pixel alike.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
-    (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit."""
+    (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit. Under a filter
+    other than box the passes share one :class:`~draaw_mi.integrators.film_splat.FilmSplat`
+    (no pilot image is developed and kept through the main pass) and the film holds the
+    image, as after Mitsuba's own render."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     seed = int(seed)
     a = max(2, spp // PILOT_FRACTION)
     rest = spp - a
     wp = a / spp
-    sums, filtered = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
-                                gather_first=decide is not None)
+    splat = None
+    if not film.rfilter().is_box_filter():   # both passes splat into one block (film_splat)
+        film.prepare([])
+        splat = FilmSplat(film)
+    sums, _ = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
+                         gather_first=decide is not None, into=None if splat is None else (splat, wp))
     guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
-    var, segments, halves = _pilot_maps(sums, a, alpha, h, w)     # (keeps only the image's sums)
+    hits = alpha and splat is None
+    var, segments, halves = _pilot_maps(sums, a, hits, h, w)     # (keeps only the image's sums)
+    if splat is not None:
+        del sums                      # (the image is in the block)
+        dr.flush_malloc_cache()
     channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
     if guided or pilot_agreement(halves) < AGREEMENT_MIN:
@@ -430,11 +451,14 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
                           max(1, int(rest // MIN_FRACTION)), s2, cost=cost,
                           score_cap=SCORE_CAP).reshape(-1)
     del var, segments, halves
-    if filtered is not None:          # both passes' splatted images (film_splat)
-        pilot = filtered
-        del sums
-        _, main = _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False)
-        img = dr.fma(pilot, wp, main * (1.0 - wp))
+    if splat is not None:
+        # Each pass's samples weigh 1 / count times the pass's share of the image (wp, 1 - wp):
+        # both blocks' sums estimate the filtered integrals (film_splat), as one pass would.
+        _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False,
+                   into=(splat, 1.0 - wp))
+        del counts
+        dr.flush_malloc_cache()       # (the passes' per-pixel tables, before the image's blocks)
+        img = splat.develop()
         dr.eval(img)
         return img                    # (H, W, 3|4): the film's own channels
     pilot = [v * (wp / a) for v in sums[:channels]]
@@ -465,20 +489,21 @@ def pilot_indirect_share(rgb: list, first) -> float:
     return share_after(float(total[0]), float(total[0]) - float(at_first[0]))
 
 
-def _pilot_maps(sums: list, n: int, alpha: bool, h: int, w: int):
+def _pilot_maps(sums: list, n: int, hits: bool, h: int, w: int):
     """From a uniform pilot's sums (:func:`_pass_sums` with ``pilot``, ``n`` samples per
-    pixel): the summed per-channel sample variance, the mean path length and the two halves'
-    variances of the channel sum, as (H, W) float32 maps (computed in Dr.Jit). Removes the
-    moments from ``sums`` (the image's channels stay) and frees their memory."""
-    k = 4 if alpha else 3
+    pixel; ``hits``: whether they hold the hit count after R, G, B): the summed per-channel
+    sample variance, the mean path length and the two halves' variances of the channel sum,
+    as (H, W) float32 maps (computed in Dr.Jit). Removes the moments from ``sums`` (the
+    image's channels stay) and frees their memory."""
+    k = 4 if hits else 3
     lengths, squares, odd_s, odd_s2, even_s2 = sums[k:k + 5]
     inv = 1.0 / n
     var = squares * inv
     for c in range(3):
         var -= dr.square(sums[c] * inv)
+    even_s = sums[0] + sums[1] + sums[2] - odd_s
     var = dr.maximum(var, 0.0) * (n / max(n - 1, 1))
     halves = []
-    even_s = sums[0] + sums[1] + sums[2] - odd_s
     for m, s, s2 in ((n - n // 2, even_s, even_s2), (n // 2, odd_s, odd_s2)):
         mean = s * (1.0 / m)
         halves.append(dr.maximum(s2 * (1.0 / m) - mean * mean, 0.0) * (m / max(m - 1, 1)))

@@ -52,7 +52,9 @@ class FilmSplat:
     ``put_emission`` adds a sample of the emission seen at the first hit to the emission's own
     block (value and weight: see the module docstring). ``develop`` divides each block by its
     summed weights (0 where no weight arrived), adds the emission's image to the colour and
-    leaves the sum in the film (``film.bitmap()`` after a render reads the image).
+    leaves the sum in the film (``film.bitmap()`` after a render reads the image); once per
+    FilmSplat, which several passes may fill (V4's adaptive pilot and main pass, each sample
+    weighted by its pass's share over its pixel's count).
 
     >>> import draaw_mi, mitsuba as mi
     >>> scene = mi.load_dict(mi.cornell_box())
@@ -94,13 +96,28 @@ class FilmSplat:
                                           border=b.has_border())
         self.emission.put(pos, [value.x, value.y, value.z, weight + 0.0 * value.x], active)
 
+    def tensors(self) -> list:
+        """The blocks' tensors (to evaluate a pass's splats with the kernel that traced them)."""
+        return [b.tensor() for b in (self.block, self.emission) if b is not None]
+
     def develop(self) -> mi.TensorXf:
-        block = self.block
+        """The film's developed image (once). The blocks are released on the way and Dr.Jit's
+        cache of freed memory is returned to the system (it keeps what is freed for arrays of
+        the same size, which the image's are not), so that no more than the merged block is
+        alive beside the film's own storage when the film develops."""
+        if self.block is None:
+            raise RuntimeError("FilmSplat.develop: already developed; a FilmSplat renders one image")
+        block, self.block = self.block, None
         if self.emission is not None:
-            block = mi.ImageBlock(with_emission(block.tensor(), self.emission.tensor(),
-                                                3 + int(self.alpha)),
-                                  block.offset(), self.film.rfilter(), border=block.has_border())
+            merged = with_emission(block.tensor(), self.emission.tensor(), 3 + int(self.alpha))
+            dr.eval(merged)
+            self.emission = None
+            block = mi.ImageBlock(merged, block.offset(), self.film.rfilter(), border=block.has_border())
+            del merged
+            dr.flush_malloc_cache()
         self.film.put_block(block)
+        del block
+        dr.flush_malloc_cache()
         return self.film.develop()
 
 
