@@ -9,7 +9,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat, guiding, stratify
+from . import emission_split, film_splat, guiding
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .features import sensor_gated_speedups
 from .light_tables import LightTables
@@ -77,17 +77,9 @@ class DraawV4Integrator(LightTables):
      * - adaptive
        - |bool|
        - Unbiased adaptive sampling for primal renders of at least 64 spp (any pixel filter, no
-         AOVs, ``max_depth`` > 1, the independent sampler, not stratified: ``stratify``): a pilot pass of spp/16 estimates
+         AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates
          each pixel's variance and path length, the rest of the budget goes where it lowers
          the error most per unit of cost (:mod:`draaw_mi.integrators.adaptive_sampling`). (Default: |true|)
-
-     * - stratify
-       - |bool|
-       - Where the sensor's sampler is ``independent`` (Mitsuba's default), sample with the
-         ``multijitter`` pattern instead, in passes of counts it takes (128 spp: 2 x 64;
-         :mod:`~draaw_mi.integrators.stratify`); these renders are uniform (no adaptive
-         sampling) except a scene's first render whose adaptive pilot decides on guiding.
-         Same expectation. (Default: |true|)
 
      * - guiding
        - |string|
@@ -122,11 +114,8 @@ class DraawV4Integrator(LightTables):
       still gets the samples its gradient needs);
     - emission splitting: where a light is seen directly, its emission in the pixels on its
       edges comes from 16 stratified extra camera rays (no shading, one intersection each);
-    - stratified samples: Mitsuba's ``multijitter`` pattern where the scene asks for the
-      independent sampler (:mod:`~draaw_mi.integrators.stratify`);
     - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased),
-      under any pixel filter (:mod:`~draaw_mi.integrators.film_splat`), where the samples are
-      not stratified;
+      under any pixel filter (:mod:`~draaw_mi.integrators.film_splat`);
     - guided paths where light arrives indirectly (a learned grid of directional histograms
       in a one-sample MIS mixture with the BSDF);
     - a kernel specialised to the scene: each feature of
@@ -162,17 +151,11 @@ class DraawV4Integrator(LightTables):
     uniform count and no pixel takes more than a capped share, which bounds the loss where a
     small pilot misses rare bright paths. Scenes whose error sits in glints of delta lights on
     near-mirror surfaces (the thesis glass scene) render uniformly: a small pilot misses them
-    (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). Stratified samples
-    (``stratify``) come before adaptive sampling: they take more off the error of every suite
-    scene but two (the pattern gave ``path`` 0.09-0.59x its independent MSE at 64 spp), and
-    adaptive sampling on top of a stratified pattern measured 1.23-1.44x the variance x time
-    of uniform V4 with the same sampler; so V4 renders stratified scenes (its own pattern or
-    the scene's ``multijitter``, ``ldsampler``, ...) uniformly, and samples adaptively where
-    the count splits into no passes the pattern takes, or with ``stratify=False``. The two:
-    delta lights' glints on near-mirror surfaces and guided renders keep the independent
-    sampler (:meth:`stratified`). On the speed suite V4 went from a median 0.51 / 0.53 to
-    0.40 / 0.34 of ``path``'s time to its 64-spp error (128x128 / 256x256), the doorway from
-    1.05 to 0.61. See ``benchmarks/results/speed_suite.md``.
+    (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
+    stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
+    2-10x off the variance of ``path`` (and of V4 on most suite scenes), and adaptive sampling
+    on top measures 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
+    ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with
     respect to BSDF and emitter parameters. Limitations: no geometry / visibility gradients
@@ -208,9 +191,6 @@ class DraawV4Integrator(LightTables):
         if not (self.rr_threshold > 0.0):
             raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
         self.adaptive = parse_bool(props, "draaw_v4", "adaptive", True)
-        self.stratify = parse_bool(props, "draaw_v4", "stratify", True)
-        self._keep_film = False        # true in the later passes of a stratified render
-        self._stratify_scene = None    # the scene being rendered, for prepare() (_sampling)
         self.light_selection = str(props.get("light_selection", LIGHT_SELECTION))
         if self.light_selection not in ("auto", "learned", "power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
@@ -271,10 +251,6 @@ class DraawV4Integrator(LightTables):
         alike: with the guide, adaptive allocation from a pilot of spp/16 raised the error
         (glossy panel, 128^2 / 256^2: 0.63 / 0.43x ``path``'s MSE adaptive, 0.46 / 0.33x
         uniform; speed_suite.md)."""
-        with self._sampling(scene):
-            return self._render_primal(scene, sensor, seed, spp, develop, evaluate)
-
-    def _render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
@@ -295,72 +271,16 @@ class DraawV4Integrator(LightTables):
         finally:
             self._guide = None
 
-    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True, guides=None) -> bool:
+    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True) -> bool:
         """Whether a primal render of ``n`` spp with ``seed`` renders adaptively (unless a
-        guide is in use; :meth:`render_primal`). Where it would render stratified
-        (:meth:`stratified`) only while its pilot is to decide on guiding (``guides``, the
-        integrator's by default: :meth:`GuideCache.pilot_decides
-        <draaw_mi.integrators.guiding.GuideCache.pilot_decides>`)."""
+        guide is in use; :meth:`render_primal`)."""
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
-        possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
-                        and self.max_depth > 1
-                        and isinstance(seed, int) and ads.supported(sensor)
-                        and not ads.pilot_can_miss(scene))
-        if not possible or not self.stratified(scene, sensor, n):
-            return possible
-        guides = self.guides if guides is None else guides
-        return not self.features(scene)["media"] and guides.pilot_decides(self, scene, sensor, n)
-
-    def stratified(self, scene, sensor, n: int) -> bool:
-        """Whether a render of ``scene`` of ``n`` spp through ``sensor`` samples with the
-        stratified pattern: ``stratify``, :func:`~draaw_mi.integrators.stratify.applies`, no
-        guide, and not delta lights' glints on near-mirror surfaces
-        (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`): both measured
-        worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
-        return (self.stratify and self._guide is None and stratify.applies(sensor, n)
-                and not ads.pilot_can_miss(scene))
-
-    @contextlib.contextmanager
-    def _sampling(self, scene):
-        """Within this block :meth:`prepare` may stratify (it is not given the scene)."""
-        previous, self._stratify_scene = self._stratify_scene, scene
-        try:
-            yield
-        finally:
-            self._stratify_scene = previous
-
-    def prepare(self, sensor, seed=0, spp=0, aovs=()):
-        """The sampler of a render or gradient pass (Mitsuba's ``prepare``): the stratified
-        pattern where :meth:`stratified` (inside this integrator's render, forward and
-        backward passes) and it takes the count as it is (a gradient pass of another count
-        keeps the sensor's sampler); a later pass of a stratified render keeps the film,
-        which sums the passes."""
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
-        scene = self._stratify_scene
-        if scene is not None and self.stratified(scene, sensor, n) and stratify.taken(n):
-            return stratify.prepare(sensor, seed, n, list(aovs), clear_film=not self._keep_film)
-        return super().prepare(sensor, seed, spp, list(aovs))
-
-    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        with self._sampling(scene):
-            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
-
-    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
-        with self._sampling(scene):
-            return super().render_forward(scene, params, sensor, seed, spp)
+        return bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
+                    and self.max_depth > 1
+                    and isinstance(seed, int) and ads.supported(sensor)
+                    and not ads.pilot_can_miss(scene))
 
     def _render_uniform(self, scene, sensor, seed, spp, develop, evaluate):
-        """A uniform render; stratified, in the passes :func:`~draaw_mi.integrators.stratify.passes`
-        gives, the film summing them (each pass's image is the film's so far: the last is the
-        render's)."""
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
-        counts = stratify.passes(n) if self.stratified(scene, sensor, n) else None
-        if counts is None or len(counts) == 1:
-            return self._render_pass(scene, sensor, seed, spp, develop, evaluate)
-        return stratify.render_passes(self, counts, seed, evaluate,
-                                      lambda s, c, e: self._render_pass(scene, sensor, s, c, develop, e))
-
-    def _render_pass(self, scene, sensor, seed, spp, develop, evaluate):
         try:
             if (develop and not sensor.film().rfilter().is_box_filter()
                     and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
