@@ -46,7 +46,7 @@ import numpy as np
 
 from .emission_split import PrimaryRays, film_mapping
 from .features import sampler_plugin, scene_shapes
-from .film_splat import FilmSplat
+from .film_splat import FilmSplat, release_cache
 from .guiding import share_after
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
@@ -436,7 +436,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     var, segments, halves = _pilot_maps(sums, a, hits, h, w)     # (keeps only the image's sums)
     if splat is not None:
         del sums                      # (the image is in the block)
-        dr.flush_malloc_cache()
+        release_cache()
     channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
     if guided or pilot_agreement(halves) < AGREEMENT_MIN:
@@ -457,7 +457,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
         _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False,
                    into=(splat, 1.0 - wp))
         del counts
-        dr.flush_malloc_cache()       # (the passes' per-pixel tables, before the image's blocks)
+        release_cache()               # (the passes' per-pixel tables, before the image's blocks)
         img = splat.develop()
         dr.eval(img)
         return img                    # (H, W, 3|4): the film's own channels

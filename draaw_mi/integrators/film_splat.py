@@ -101,24 +101,41 @@ class FilmSplat:
         return [b.tensor() for b in (self.block, self.emission) if b is not None]
 
     def develop(self) -> mi.TensorXf:
-        """The film's developed image (once). The blocks are released on the way and Dr.Jit's
-        cache of freed memory is returned to the system (it keeps what is freed for arrays of
-        the same size, which the image's are not), so that no more than the merged block is
-        alive beside the film's own storage when the film develops."""
+        """The film's developed image (once). The blocks are released on the way and, for
+        large images, Dr.Jit's cache of freed memory is returned to the system (it keeps what
+        is freed for arrays of the same size, which the image's are not:
+        :func:`release_cache`), so that no more than the merged block is alive beside the
+        film's own storage when the film develops."""
         if self.block is None:
             raise RuntimeError("FilmSplat.develop: already developed; a FilmSplat renders one image")
         block, self.block = self.block, None
+        pixels = int(block.size()[0]) * int(block.size()[1])
         if self.emission is not None:
             merged = with_emission(block.tensor(), self.emission.tensor(), 3 + int(self.alpha))
             dr.eval(merged)
             self.emission = None
             block = mi.ImageBlock(merged, block.offset(), self.film.rfilter(), border=block.has_border())
             del merged
-            dr.flush_malloc_cache()
+            release_cache(pixels)
         self.film.put_block(block)
         del block
-        dr.flush_malloc_cache()
+        release_cache(pixels)
         return self.film.develop()
+
+
+#: blocks of at least this many pixels return Dr.Jit's cache of freed buffers on develop
+RELEASE_PIXELS = 1 << 18
+
+
+def release_cache(pixels: int | None = None) -> None:
+    """Dr.Jit's cache of freed buffers back to the system: for an image of ``pixels`` pixels
+    from :data:`RELEASE_PIXELS` up (there the cache's copies of the image's buffers count; a
+    small uniform render, repeated in a fit or a preview, would only pay to allocate them
+    again), always where ``pixels`` is None (V4's adaptive render: 64 spp or more); never
+    while a frozen function records (Dr.Jit refuses to free its cache then, and the
+    recording would fail)."""
+    if (pixels is None or pixels >= RELEASE_PIXELS) and not dr.flag(dr.JitFlag.FreezingScope):
+        dr.flush_malloc_cache()
 
 
 def with_emission(t: mi.TensorXf, e: mi.TensorXf, w: int) -> mi.TensorXf:

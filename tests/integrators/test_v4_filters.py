@@ -275,3 +275,23 @@ def test_aovs_under_a_filter_with_split_rays(monkeypatch):
     assert calls == ["render_uniform"] and on.shape == off.shape == (24, 24, 7)
     np.testing.assert_allclose(on[..., 3:], off[..., 3:], rtol=1e-5, atol=1e-6)   # (atomics order)
     assert np.isfinite(on).all()        # (the colour's expectation: the tests above)
+
+
+def test_a_small_render_under_a_filter_with_split_rays_is_recorded():
+    """A 16x16 render under a tent filter with the light in view (split rays splatted through
+    ``FilmSplat``) replays a ``dr.freeze`` recording: developing the blocks freed Dr.Jit's
+    cache unconditionally, which Dr.Jit refuses while recording, so every such render fell
+    back to tracing with a RuntimeWarning."""
+    import warnings
+    from draaw_mi.rendering.session import session_of
+    d = rs.cornell_draaw(res=16, spp=4)
+    d["sensor"]["film"]["rfilter"] = {"type": "tent"}
+    scene = draaw_mi.load_scene(d)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for s in range(3):
+            img = np.array(draaw_mi.render(scene, version="v4", spp=16, seed=s))
+    assert not [w for w in said if "could not record" in str(w.message)], [str(w.message) for w in said]
+    assert np.isfinite(img).all() and img[..., :3].max() > 1.0        # the light is in view
+    assert any(getattr(getattr(r, "frozen", None), "n_recordings", 0) >= 1
+               for r in session_of(scene).recordings.values())
