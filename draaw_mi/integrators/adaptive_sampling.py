@@ -501,15 +501,15 @@ def _pilot_maps(sums: list, n: int, hits: bool, h: int, w: int):
     var = squares * inv
     for c in range(3):
         var -= dr.square(sums[c] * inv)
-    even_s = sums[0] + sums[1] + sums[2] - odd_s
     var = dr.maximum(var, 0.0) * (n / max(n - 1, 1))
     halves = []
+    even_s = sums[0] + sums[1] + sums[2] - odd_s
     for m, s, s2 in ((n - n // 2, even_s, even_s2), (n // 2, odd_s, odd_s2)):
         mean = s * (1.0 / m)
         halves.append(dr.maximum(s2 * (1.0 / m) - mean * mean, 0.0) * (m / max(m - 1, 1)))
     seg = lengths * inv
     dr.eval(var, seg, halves)
     del sums[k:], lengths, squares, odd_s, odd_s2, even_s2, even_s     # the image's sums stay
-    dr.flush_malloc_cache()           # the moments' memory, before the NumPy copies
+    release_cache()                   # the moments' memory, before the NumPy copies
     as_map = lambda v: np.array(v, dtype=np.float32).reshape(h, w)   # noqa: E731
     return as_map(var), as_map(seg), np.stack([as_map(v) for v in halves], -1)
