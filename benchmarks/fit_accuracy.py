@@ -164,20 +164,25 @@ def write_report(path, rows, args, res, cmd, mi, dr):
         "trials: 0.6-3.0e-5 there, 2.4-4.7e-5 at 0.065, 6.7-8.6e-5 at 0.07, 23-25e-5 at 0.08). Its "
         "minimum is at the truth: the 4096-spp reference's noise moves the linearised optimum by 0.0017. The gradient there is unbiased (path replay against finite "
         "differences at roughness 0.06 and 0.067) but noisy: its signal-to-noise ratio per iteration "
-        "at roughness 0.067 is 0.17 at 16 spp, 0.61 at 64, 2.1 at 256 (variance ~ 1 / (spp * "
+        "at roughness 0.067 is 0.17 at 16 spp, 0.61 at 64, 2.1 at 256 with independent samples (variance ~ 1 / (spp * "
         "spp_grad): both factors of `2 (I - ref) dI` are noise there). At 16 spp the fit stops at "
         "0.064-0.070 (seeds 3, 4, 12); 300 iterations reach 0.060, 64 spp throughout 0.064, "
         "beta_2 0.99 for the whole fit 0.095, lr 0.1 overshoots the studio's near-mirrors into the flat region "
-        "(0.030-0.039 for 0.05). The polish (`fit(polish=...)`) is what settles it: 0.0571 in the "
-        "table (seed 12), 0.0589 with seed 0 (`--lighting environment`); the same schedule as two separate "
-        "fits, seeds 12 / 3 / 4: 0.0554 / 0.0584 / 0.0589 (without it, 150 iterations: 0.0674 in the "
-        "2026-12-02 table, 17 / 18, its one miss).",
-        "* (0.10, 0.05) under the environment, a dielectric whose reflection is 4 % of the light: across "
-        "seeds it ends at 0.104-0.113 with or without the polish (seed 14, the table's: 0.1109 polished, "
-        "0.1037 not; seeds 2 and 5: 0.1057 and 0.1075 polished, 0.1091 and 0.1132 not), above the "
-        "truth by more than its reference's noise explains (+0.002, linearised). The polish at 512 spp "
-        "ends at 0.1041 and 0.1046 (seeds 14 and 2) but takes 146-149 s: less gradient noise, not more "
-        "iterations, is what narrows it.",
+        "(0.030-0.039 for 0.05). The polish (`fit(polish=...)`) is what settles it: with independent "
+        "samples 0.0571 in the 2026-12-04 table (seed 12), 0.0589 with seed 0 (`--lighting environment`); "
+        "the same schedule as two separate fits, seeds 12 / 3 / 4: 0.0554 / 0.0584 / 0.0589 (without it, "
+        "150 iterations: 0.0674 in the 2026-12-02 table, 17 / 18, its one miss); with V4's stratified "
+        "gradient passes 0.0553 in the table.",
+        "* (0.10, 0.05) under the environment, a dielectric whose reflection is 4 % of the light. With "
+        "independent samples (before 2026-12-05) it ended at 0.098-0.113 over nine polished runs (mean "
+        "0.1041, sd 0.0039; the table's seed 14: 0.1109, one miss), the polish at 512 spp at 0.1041 and "
+        "0.1046 but in 146-149 s. Since V4 draws its gradient passes from its own stratified sampler "
+        "(`draaw_mi/integrators/strata_sampler.py`; the gradient's sd at 16 spp, 16 seeds at roughness "
+        "0.115: 2.5e-3 against 12.2e-3 independent; at 128 spp 6.1e-4 against 4.7e-4) it ends at 0.1031 "
+        "in the table and 0.0981-0.1072 over five more seeds (mean 0.1031, sd 0.0035: all six within "
+        "0.01, the largest error 0.0072; an sd of 0.0035 still leaves a miss in some tens of runs). "
+        "(0.08, 0.30): 0.0811-0.0861 over four runs; (0.05, 0.90): 0.0543-0.0553 over three "
+        "(`/tmp`-script: the benchmark's fit and reference, seeds 100 k + the row).",
         "* `converged` is `fit()`'s own plateau test on the averaged iterates (tol 5e-3); it is "
         "informational.",
         "",

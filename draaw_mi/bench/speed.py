@@ -151,7 +151,7 @@ def learning_time(integ, scene, spp: int) -> float:
     sensor = scene.sensors()[0]
     share = guides.share(integ.selection_key(scene))       # None: the warm-up did not decide
     t = time.perf_counter()
-    _, decide = fresh.for_primal(integ, scene, sensor, spp, integ.adaptive_applies(scene, sensor, 1, spp))
+    _, decide = fresh.for_primal(integ, scene, sensor, spp, integ.adaptive_applies(scene, sensor, 1, spp, guides=fresh))
     if decide is not None:
         decide(guiding.indirect_share(integ, scene) if share is None else share)
         integ._guide = None          # (decide sets it for the main pass; none follows here)

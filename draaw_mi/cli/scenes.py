@@ -15,6 +15,7 @@ import mitsuba as mi
 from .. import __version__, integrators, materials
 from ..errors import RenderError, SceneError
 from ..integrators import SCENE_VERSION, resolve_version
+from ..integrators import stratify
 from ..integrators.features import sensor_gated_speedups
 from ..rendering.session import session_of
 from ..scene import load_scene
@@ -178,10 +179,13 @@ def cmd_info(args) -> int:
     if args.scene:
         loaded = load_for_cli(args)
         out["scene"] = loaded.summary()
-        gated = None
+        gated = samples = None
         if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
-            gated = sensor_gated_speedups(loaded.mi_scene.sensors()[0])
+            sensor = loaded.mi_scene.sensors()[0]
+            gated = sensor_gated_speedups(sensor)
+            samples = stratify.describe(sensor)
         out["scene"]["v4_gated"] = gated
+        out["scene"]["v4_samples"] = samples
     if args.json:
         print(json.dumps(out, indent=2, default=str))
         return 0
@@ -218,6 +222,8 @@ def cmd_info(args) -> int:
         on = [k for k, v in s["features"].items() if v]
         off = [k for k, v in s["features"].items() if not v]
         print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
+        if s.get("v4_samples"):
+            print(f"v4 samples: {s['v4_samples']}")
         if s.get("v4_gated"):
             print(f"   v4 note: {s['v4_gated']}")
     return 0

@@ -328,12 +328,17 @@ class GuideCache:
         for :func:`~draaw_mi.integrators.adaptive_sampling.render_adaptive`: given the
         pilot's indirect share, it learns the guide where the share calls for one
         (:meth:`decide`), sets it as the integrator's for the main pass and returns whether
-        it did. Otherwise :meth:`guide` (cached, or ``"on"``) or :meth:`for_render`."""
-        if not (adaptive and self.wanted(sensor, spp, piloted=True)):
-            return self.for_render(integrator, scene, sensor, spp), None
+        it did. A scene ``"auto"`` has decided on keeps its guide (or none) from
+        :data:`PILOTED_MIN_SAMPLES` up, however it renders now (``draaw_v4`` renders a decided
+        scene stratified, not adaptively). Otherwise :meth:`guide` (cached, or ``"on"``) or
+        :meth:`for_render`."""
         key = integrator.selection_key(scene)
         size = sensor.film().crop_size()
         samples = spp * int(size[0]) * int(size[1])
+        if self.mode == "auto" and not self.pending(key) and self.wanted(sensor, spp, piloted=True):
+            return self.guide(integrator, scene, key, samples), None   # decided: its guide, or none
+        if not (adaptive and self.wanted(sensor, spp, piloted=True)):
+            return self.for_render(integrator, scene, sensor, spp), None
         if not self.pending(key):
             return self.guide(integrator, scene, key, samples), None
 
@@ -341,6 +346,13 @@ class GuideCache:
             integrator._guide = self.decide(integrator, scene, key, share, samples)
             return integrator._guide is not None
         return None, decide
+
+    def pilot_decides(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int) -> bool:
+        """Whether adaptive sampling's pilot is to decide on guiding for a primal render of
+        ``spp`` samples per pixel through ``sensor`` (``"auto"``, the scene undecided, and
+        :meth:`wanted` with ``piloted``): ``draaw_v4`` then renders it adaptively, not
+        stratified."""
+        return self.pending(integrator.selection_key(scene)) and self.wanted(sensor, spp, piloted=True)
 
     def pending(self, key: tuple) -> bool:
         """Whether ``"auto"`` has yet to decide on the scene of ``key``."""

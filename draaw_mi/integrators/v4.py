@@ -9,7 +9,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat, guiding
+from . import emission_split, film_splat, guiding, stratify
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .features import sensor_gated_speedups
 from .light_tables import LightTables
@@ -77,9 +77,18 @@ class DraawV4Integrator(LightTables):
      * - adaptive
        - |bool|
        - Unbiased adaptive sampling for primal renders of at least 64 spp (any pixel filter, no
-         AOVs, ``max_depth`` > 1, the independent sampler): a pilot pass of spp/16 estimates
+         AOVs, ``max_depth`` > 1, the independent sampler, not stratified: ``stratify``): a pilot pass of spp/16 estimates
          each pixel's variance and path length, the rest of the budget goes where it lowers
          the error most per unit of cost (:mod:`draaw_mi.integrators.adaptive_sampling`). (Default: |true|)
+
+     * - stratify
+       - |bool|
+       - Where the sensor's sampler is ``independent`` (Mitsuba's default), draw the
+         samples of renders and gradient passes from V4's own stratified sampler instead (correlated
+         multi-jittered, permuted per pixel and dimension by a hash:
+         :mod:`~draaw_mi.integrators.strata_sampler`, :mod:`~draaw_mi.integrators.stratify`);
+         these renders are uniform (no adaptive sampling) except a scene's first render whose
+         adaptive pilot decides on guiding. Same expectation. (Default: |true|)
 
      * - guiding
        - |string|
@@ -114,8 +123,11 @@ class DraawV4Integrator(LightTables):
       still gets the samples its gradient needs);
     - emission splitting: where a light is seen directly, its emission in the pixels on its
       edges comes from 16 stratified extra camera rays (no shading, one intersection each);
+    - stratified samples where the scene asks for the independent sampler (V4's own
+      correlated multi-jittered sampler: :mod:`~draaw_mi.integrators.stratify`);
     - adaptive sampling (per-pixel spp map from a pilot pass; the estimator stays unbiased),
-      under any pixel filter (:mod:`~draaw_mi.integrators.film_splat`);
+      under any pixel filter (:mod:`~draaw_mi.integrators.film_splat`), where the samples are
+      not stratified;
     - guided paths where light arrives indirectly (a learned grid of directional histograms
       in a one-sample MIS mixture with the BSDF);
     - a kernel specialised to the scene: each feature of
@@ -151,10 +163,13 @@ class DraawV4Integrator(LightTables):
     uniform count and no pixel takes more than a capped share, which bounds the loss where a
     small pilot misses rare bright paths. Scenes whose error sits in glints of delta lights on
     near-mirror surfaces (the thesis glass scene) render uniformly: a small pilot misses them
-    (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). So do scenes whose sensor has a
-    stratifying sampler (``multijitter``, ``ldsampler``, ...): stratification already takes
-    2-10x off the variance of ``path`` (and of V4 on most suite scenes), and adaptive sampling
-    on top measures 1.23-1.44x the variance x time of uniform V4 with the same sampler. See
+    (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`). Stratified samples
+    (``stratify``) come before adaptive sampling: they take more off the error of most suite
+    scenes, and adaptive sampling on top of a stratified pattern measured 1.23-1.44x the
+    variance x time of uniform V4 with the same sampler; so V4 renders stratified scenes
+    (its own sampler or the scene's ``multijitter``, ``ldsampler``, ...) uniformly, and
+    samples adaptively with ``stratify=False`` or where guiding or glints keep the
+    independent sampler (:meth:`~draaw_mi.integrators.v4.DraawV4Integrator.stratified`). See
     ``benchmarks/results/speed_suite.md``.
 
     Differentiable by path replay (``RBIntegrator``: primal, forward and backward modes) with
@@ -191,6 +206,8 @@ class DraawV4Integrator(LightTables):
         if not (self.rr_threshold > 0.0):
             raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
         self.adaptive = parse_bool(props, "draaw_v4", "adaptive", True)
+        self.stratify = parse_bool(props, "draaw_v4", "stratify", True)
+        self._stratify_scene = None    # the scene of the primal render, for prepare() (_sampling)
         self.light_selection = str(props.get("light_selection", LIGHT_SELECTION))
         if self.light_selection not in ("auto", "learned", "power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "
@@ -251,6 +268,10 @@ class DraawV4Integrator(LightTables):
         alike: with the guide, adaptive allocation from a pilot of spp/16 raised the error
         (glossy panel, 128^2 / 256^2: 0.63 / 0.43x ``path``'s MSE adaptive, 0.46 / 0.33x
         uniform; speed_suite.md)."""
+        with self._sampling(scene):
+            return self._render_primal(scene, sensor, seed, spp, develop, evaluate)
+
+    def _render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         self.prepare_selection(scene)
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
@@ -271,14 +292,60 @@ class DraawV4Integrator(LightTables):
         finally:
             self._guide = None
 
-    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True) -> bool:
+    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True, guides=None) -> bool:
         """Whether a primal render of ``n`` spp with ``seed`` renders adaptively (unless a
-        guide is in use; :meth:`render_primal`)."""
+        guide is in use; :meth:`render_primal`). Where it would render stratified
+        (:meth:`stratified`) only while its pilot is to decide on guiding (``guides``, the
+        integrator's by default: :meth:`GuideCache.pilot_decides
+        <draaw_mi.integrators.guiding.GuideCache.pilot_decides>`)."""
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
-        return bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
-                    and self.max_depth > 1
-                    and isinstance(seed, int) and ads.supported(sensor)
-                    and not ads.pilot_can_miss(scene))
+        possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
+                        and self.max_depth > 1
+                        and isinstance(seed, int) and ads.supported(sensor)
+                        and not ads.pilot_can_miss(scene))
+        if not possible or not self.stratified(scene, sensor, n):
+            return possible
+        guides = self.guides if guides is None else guides
+        return guides.pilot_decides(self, scene, sensor, n)
+
+    def stratified(self, scene, sensor, n: int) -> bool:
+        """Whether a render or gradient pass of ``scene`` of ``n`` spp through ``sensor``
+        samples with V4's stratified sampler: ``stratify``, :func:`~draaw_mi.integrators.stratify.applies`
+        (the independent sampler), no guide, no participating media, and not delta lights'
+        glints on near-mirror surfaces
+        (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`); guided renders and
+        glints measured worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
+        return (self.stratify and self._guide is None and stratify.applies(sensor, n)
+                and not self.features(scene)["media"] and not ads.pilot_can_miss(scene))
+
+    @contextlib.contextmanager
+    def _sampling(self, scene):
+        """Within this block (a render or gradient pass) :meth:`prepare` may stratify (it is
+        not given the scene)."""
+        previous, self._stratify_scene = self._stratify_scene, scene
+        try:
+            yield
+        finally:
+            self._stratify_scene = previous
+
+    def prepare(self, sensor, seed=0, spp=0, aovs=()):
+        """The sampler of a render or gradient pass (Mitsuba's ``prepare``): V4's stratified
+        sampler inside this integrator's passes where :meth:`stratified`, except while a
+        gradient pass adds the boundary terms of SDF shapes (they reseed their sampler for
+        the rays of a band); else the sensor's."""
+        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        scene = self._stratify_scene
+        if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):
+            return stratify.prepare(sensor, seed, n, list(aovs))
+        return super().prepare(sensor, seed, spp, list(aovs))
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        with self._sampling(scene):
+            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
+
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        with self._sampling(scene):
+            return super().render_forward(scene, params, sensor, seed, spp)
 
     def _render_uniform(self, scene, sensor, seed, spp, develop, evaluate):
         try:

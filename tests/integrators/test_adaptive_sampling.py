@@ -1,4 +1,8 @@
-"""Unbiased adaptive sampling (draaw_mi/integrators/adaptive_sampling.py) and its use by draaw_v4."""
+"""Unbiased adaptive sampling (draaw_mi/integrators/adaptive_sampling.py) and its use by draaw_v4.
+
+V4 renders an independent-sampler scene stratified by default, uniformly
+(``integrators/stratify.py``, ``test_stratify.py``); here its adaptive renders are asked for
+with ``stratify`` off (a scene's first render that decides on guiding renders adaptively too)."""
 from __future__ import annotations
 
 import numpy as np
@@ -41,7 +45,7 @@ def test_spp_map_counts_set_the_variance():
     maps with the halves swapped, so each pixel is compared with itself)."""
     scene = _scene(8)
     sensor = scene.sensors()[0]
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
     counts = np.ones((8, 8), np.int64)
     counts[:, 4:] = 16
     n = 80                              # 8x8 renders: cheap; 40 left the z-test fragile
@@ -76,7 +80,7 @@ def test_v4_adaptive_keeps_every_pixels_expectation_on_a_wide_film(monkeypatch):
     real = ads.render_adaptive
     monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
     scene = mi.load_dict(rs.feature_scene(res=(12, 8), spp=4, constant=True))
-    v4 = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    v4 = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
     path = mi.load_dict({"type": "path", "max_depth": 3})
     a = seed_stack(scene, v4, 64, range(8))
     assert len(calls) == 8 and a.shape == (8, 8, 12, 3)        # adaptive was used, (H, W) kept
@@ -93,11 +97,11 @@ def test_v4_uses_adaptive_sampling_from_64_spp(monkeypatch):
 
     monkeypatch.setattr(ads, "render_adaptive", spy)
     scene = _scene(8)
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
     img = mi.render(scene, integrator=integ, spp=64, seed=1)
     assert calls == [64] and img.shape == (8, 8, 3)
     mi.render(scene, integrator=integ, spp=16, seed=1)
-    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False})
+    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False, "stratify": False})
     mi.render(scene, integrator=off, spp=64, seed=1)
     assert calls == [64]
     a = np.array(mi.render(scene, integrator=integ, spp=64, seed=4))
@@ -117,8 +121,8 @@ def test_stratifying_samplers_render_uniformly(monkeypatch, sampler):
     d["sensor"]["sampler"] = {"type": sampler, "sample_count": 64}
     scene = mi.load_dict(d)
     assert not ads.supported(scene.sensors()[0])
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
-    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
+    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False, "stratify": False})
     a = np.array(mi.render(scene, integrator=integ, spp=64, seed=2))
     b = np.array(mi.render(scene, integrator=off, spp=64, seed=2))
     assert calls == [] and np.array_equal(a, b) and a.mean() > 0
@@ -148,8 +152,8 @@ def test_adaptive_lowers_the_error_where_noise_is_uneven():
     scene = mi.load_dict(d)
     ref = np.array(mi.render(scene, integrator=mi.load_dict({"type": "path", "max_depth": 4}),
                              spp=4096, seed=99))
-    on = mi.load_dict({"type": "draaw_v4", "max_depth": 4})
-    off = mi.load_dict({"type": "draaw_v4", "max_depth": 4, "adaptive": False})
+    on = mi.load_dict({"type": "draaw_v4", "max_depth": 4, "stratify": False})
+    off = mi.load_dict({"type": "draaw_v4", "max_depth": 4, "adaptive": False, "stratify": False})
     e_on = np.mean([np.mean((np.array(mi.render(scene, integrator=on, spp=64, seed=s)) - ref) ** 2)
                     for s in range(6)])
     e_off = np.mean([np.mean((np.array(mi.render(scene, integrator=off, spp=64, seed=s)) - ref) ** 2)
@@ -177,7 +181,7 @@ def test_glint_scenes_render_without_adaptive_sampling(monkeypatch, light, bsdf,
     calls = []
     real = ads.render_adaptive
     monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
-    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3}), spp=64, seed=1)
+    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False}), spp=64, seed=1)
     assert np.isfinite(np.array(img)).all()
     assert (len(calls) == 1) is (not expected)
 
@@ -200,7 +204,7 @@ def test_a_spp_map_of_another_shape_or_of_fractions_is_refused(spp_map, what):
     d = rs.feature_scene(res=8, spp=4, constant=True)
     d["sensor"]["film"].update(width=8, height=6)
     scene = mi.load_dict(d)
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
     with pytest.raises(ValueError, match=rf"render_spp_map: spp_map has {what}.*; expected \(6, 8\) whole counts"):
         ads.render_spp_map(integ, scene, scene.sensors()[0], spp_map, 0)
 
@@ -211,7 +215,7 @@ def test_the_per_pixel_variance_is_unbiased():
     pixels over seeds (without the n/(n - 1) factor: half of it)."""
     scene = _scene(8)
     sensor = scene.sensors()[0]
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
     est = np.mean([ads.render_spp_map(integ, scene, sensor, np.full((8, 8), 2), seed=s, moments=True)[1]
                    for s in range(150)], axis=0)
     pop = np.stack([ads.render_spp_map(integ, scene, sensor, np.ones((8, 8), np.int64), seed=1000 + s)
@@ -250,8 +254,8 @@ def test_v4_adaptive_renders_what_the_uniform_render_does(change):
         d["sensor"]["film"]["pixel_format"] = "rgba"
         d["sensor"]["to_world"] = mi.ScalarTransform4f().look_at([0.0, 1.0, 4.0], [0.0, 1.2, 0.0], [0, 1, 0])
     scene = mi.load_dict(d)
-    on = mi.load_dict({"type": "draaw_v4", "max_depth": 3})
-    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False})
+    on = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "stratify": False})
+    off = mi.load_dict({"type": "draaw_v4", "max_depth": 3, "adaptive": False, "stratify": False})
     a, b = seed_stack(scene, on, 64, range(10)), seed_stack(scene, off, 64, range(100, 110))
     check_same_expectation(a, b)
     if change == "rgba":
@@ -274,7 +278,7 @@ def test_a_pilot_whose_halves_disagree_renders_uniformly(monkeypatch, name, adap
     real = ads.allocate
     monkeypatch.setattr(ads, "allocate", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
     scene = ss.load(name, 32)
-    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 5}), spp=64, seed=3)
+    img = mi.render(scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 5, "stratify": False}), spp=64, seed=3)
     assert np.isfinite(np.array(img)).all()
     assert bool(calls) == adapts, calls
 
@@ -289,7 +293,7 @@ def test_an_adaptive_render_keeps_its_passes_in_drjit(rfilter):
     d = rs.cornell_draaw(res=128, spp=4)
     d["sensor"]["film"]["rfilter"] = {"type": rfilter}
     scene = mi.load_dict(d)
-    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 4})
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 4, "stratify": False})
     mi.render(scene, integrator=integ, spp=64, seed=0)          # (the edge map, compiled kernels)
     tracemalloc.start()
     try:

@@ -84,7 +84,9 @@ def test_adaptive_samplings_pilot_decides_on_guiding(name, guided, monkeypatch):
     alike; only that first pilot carries the extra loop variable. Taking the light after the
     second vertex for the first's (``depth == 1``) puts the panel at 0.15; a pilot that never
     calls ``decide`` leaves no share; asking every pass (the flag shadowed by a helper of the
-    same name in ``_pass_sums``) fails the list of passes."""
+    same name in ``_pass_sums``) fails the list of passes. The scene's second render (V4 now
+    renders it stratified, not adaptively) is guided where the first decided so: a decided
+    scene looked up only from the separate pilot's 2^21 samples rendered the panel unguided."""
     scene = ss.load(name, 32)
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)         # at 32x32, 64 spp
     separate = guiding.indirect_share
@@ -94,13 +96,16 @@ def test_adaptive_samplings_pilot_decides_on_guiding(name, guided, monkeypatch):
     monkeypatch.setattr(adaptive_sampling, "allocate", lambda *a, **k: allocations.append(1) or allocate(*a, **k))
     integ = integrator("draaw_v4", max_depth=5)
     asked = []                    # whether each traced pass gathered the first vertex's light
+    with_guide = []               # ... and whether it had a guide
     sample = integ.sample
-    monkeypatch.setattr(integ, "sample", lambda *a, **k: asked.append(integ.want_first) or sample(*a, **k))
+    monkeypatch.setattr(integ, "sample", lambda *a, **k: asked.append(integ.want_first)
+                        or with_guide.append(integ._guide is not None) or sample(*a, **k))
     img = render_np(scene, integ, 64, 0)
     assert asked[0] and True not in asked[1:]    # the pilot only (then training, main pass)
     n = len(asked)
     render_np(scene, integ, 64, 1)
     assert len(asked) > n and True not in asked[n:]   # decided: no pass asks again
+    assert set(with_guide[n:]) == {guided}, with_guide[n:]
     key = integ.selection_key(scene)
     share = integ.guides.share(key)
     assert share is not None and np.isfinite(img).all()

@@ -1,7 +1,8 @@
 """Every scene of the speed suite (``draaw_mi.bench.suite``): ``draaw_v4`` with its default
-variance reduction (roulette threshold, adaptive sampling at >= 64 spp) keeps ``path``'s
+variance reduction (roulette threshold, stratified samples, adaptive sampling at >= 64 spp
+where not stratified) keeps ``path``'s
 expectation, per pixel (z-scores of the seed-stack means, as in
-test_integrators_expectation.py; 10x10 pixels, 12 seeds x 512 spp per integrator)."""
+test_integrators_expectation.py; 10x10 pixels, 24 seeds x 512 spp per integrator)."""
 from __future__ import annotations
 
 import numpy as np
@@ -23,7 +24,12 @@ def test_v4_same_expectation_as_path(name):
     if scene is None:
         pytest.skip("GO-Draaw data absent (../shared/data/go-draaw)")
     depth = ss.max_depth(name)
-    K, spp = 12, 512
+    # The mean z of 100 pixels (x 3 channels, which move together) has an sd of about 0.1
+    # when both estimate the same image, more with 12-render stacks of heavy-tailed pixels
+    # (V4 stratified, cornell_tent: mean z 0.25 from 12 renders, -0.03 from 480, no pixel
+    # beyond 3 sigma). So 24 renders and a 3.5-sigma limit on the mean: 17 scenes at 0.25
+    # (2.5 sigma) would fail one in five changes of the sampler by chance alone.
+    K, spp = 24, 512
     # Emitters seen directly are hidden in both: their edge pixels are 0 or very bright
     # (a 600x radiance bulb), whose few-seed z-scores are far from normal; what is tested is
     # the light transport estimator, identical with and without them.
@@ -31,4 +37,4 @@ def test_v4_same_expectation_as_path(name):
     st = seed_stack(scene, integrator("draaw_v4", max_depth=depth, hide_emitters=True), spp,
                     range(300, 300 + K))
     assert np.isfinite(st).all()
-    check_same_expectation(ref, st, max_frac3=0.03)
+    check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)

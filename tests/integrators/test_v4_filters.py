@@ -44,21 +44,25 @@ def light_edges(scene) -> np.ndarray:
     return (img > 0.03 * img.max()) & (img < 0.97 * img.max())
 
 
-@pytest.mark.parametrize("spp", [16, 128], ids=["uniform+split", "adaptive+split"])
+@pytest.mark.parametrize("spp, stratify, passes", [(16, True, ["render_uniform"]),
+                                                   (128, True, ["render_uniform"]),
+                                                   (128, False, ["render_adaptive"])],
+                         ids=["stratified+split", "stratified128+split", "adaptive+split"])
 @pytest.mark.parametrize("rfilter", FILTERS)
-def test_v4_keeps_paths_expectation_under_the_filter(rfilter, spp, monkeypatch):
-    """The Cornell box with its light in view, per pixel over 10 seeds: at 16 spp the
-    uniform render whose split rays are splatted at their own positions, at 128 spp the
-    adaptive render (pilot + uneven counts, each sample weighted by 1 / its pixel's count).
+def test_v4_keeps_paths_expectation_under_the_filter(rfilter, spp, stratify, passes, monkeypatch):
+    """The Cornell box with its light in view, per pixel over 10 seeds: the uniform
+    (stratified) render whose split rays are splatted at their own positions, at 16 and 128
+    spp; and (``stratify`` off) the adaptive
+    render at 128 spp (pilot + uneven counts, each sample weighted by 1 / its pixel's count).
     Adding the split rays' emission to the camera sample's value instead (the box-filter
     rule) or dropping the 1 / count weight puts the light's edge pixels tens of errors off."""
     adaptive, uniform = spy(monkeypatch, ads, "render_adaptive"), spy(monkeypatch, film_splat, "render_uniform")
     scene = cornell(16, rfilter)
     K = 10
     ref = seed_stack(scene, integrator("path", max_depth=4), spp, range(K))
-    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=4), spp, range(200, 200 + K))
+    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=4, stratify=stratify), spp, range(200, 200 + K))
     used = adaptive + uniform
-    assert set(used) == {"render_uniform" if spp < 64 else "render_adaptive"}, used
+    assert used == passes * K, used
     assert np.isfinite(v4).all()
     check_same_expectation(ref, v4)
     # the light's edge pixels alone (where the split rays land), summed: within 4 errors
@@ -141,7 +145,8 @@ def test_an_adaptive_render_under_a_filter_fills_one_block_and_the_film(monkeypa
     develops = spy(monkeypatch, Counted, "develop")
     adaptive = spy(monkeypatch, ads, "render_adaptive")
     scene = cornell(16, "tent")
-    img = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=2), spp=64, seed=3))
+    img = np.array(mi.render(scene, integrator=integrator("draaw_v4", max_depth=2, stratify=False),
+                             spp=64, seed=3))
     assert adaptive and len(made) == 1 and len(develops) == 1, (adaptive, made, develops)
     held = np.array(scene.sensors()[0].film().bitmap(), dtype=np.float64)
     np.testing.assert_allclose(held[..., :3], img[..., :3], rtol=1e-5, atol=1e-6)
@@ -157,7 +162,7 @@ def test_an_adaptive_render_under_a_filter_peaks_near_paths_memory():
     scene = cornell(256, "tent")
     peaks = {}
     for name in ("path", "draaw_v4"):
-        integ = integrator(name, max_depth=3)
+        integ = integrator(name, max_depth=3, **({"stratify": False} if name == "draaw_v4" else {}))
         mi.render(scene, integrator=integ, spp=64, seed=0)      # (compiled kernels, edge map)
         dr.flush_malloc_cache()
         dr.detail.malloc_clear_statistics()
@@ -170,7 +175,7 @@ def test_an_adaptive_render_under_a_filter_peaks_near_paths_memory():
 def test_the_adaptive_render_runs_under_every_filter(monkeypatch):
     calls = spy(monkeypatch, ads, "render_adaptive")
     for f in ["box"] + FILTERS:
-        img = mi.render(cornell(8, f), integrator=integrator("draaw_v4", max_depth=3), spp=64)
+        img = mi.render(cornell(8, f), integrator=integrator("draaw_v4", max_depth=3, stratify=False), spp=64)
         assert np.isfinite(np.array(img)).all()
     assert len(calls) == 5
 
@@ -228,7 +233,7 @@ def test_a_crop_window_renders_adaptively_with_paths_expectation(monkeypatch):
                                crop_width=10, crop_height=8)
     scene = mi.load_dict(d)
     ref = seed_stack(scene, integrator("path", max_depth=3), 64, range(8))
-    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=3), 64, range(50, 58))
+    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=3, stratify=False), 64, range(50, 58))
     assert len(calls) == 8 and v4.shape == ref.shape == (8, 8, 10, 3)
     check_same_expectation(ref, v4)
 

@@ -92,13 +92,14 @@ def test_a_gradient_pass_is_traced_where_the_scene_cannot_be_recorded(monkeypatc
     assert not any(k[0] == "gradient" for k in session.recordings)
 
 
-def _one_pass(scene, session, seed=3, spp=4, freeze=True):
-    """The base-colour gradient of one pass from the scene's camera (a new texture each call)."""
+def _one_pass(scene, session, seed=3, spp=4, freeze=True, **options):
+    """The base-colour gradient of one pass from the scene's camera (a new texture each call;
+    ``options``: V4's)."""
     t = owned_tensor(np.full((8, 8, 3), 0.5, np.float32))
     dr.enable_grad(t)
     scene.params[scene.key("m.base_color")] = t
     scene.params.update()
-    value, _ = session.gradient_pass(session.integrator("v4", 3), spp, seed, PassLoss("l2", "fixed", 1.0),
+    value, _ = session.gradient_pass(session.integrator("v4", 3, **options), spp, seed, PassLoss("l2", "fixed", 1.0),
                                      params=scene.params, sensor=scene.mi_scene.sensors()[0],
                                      inputs=(owned_tensor(np.zeros((32, 32, 3), np.float32)), None, None, None),
                                      freeze=freeze)
@@ -127,16 +128,20 @@ def test_a_recording_that_fails_after_its_backward_pass_counts_the_gradient_once
 
 
 def test_adaptive_passes_are_traced():
-    """V4 renders a pass of 64 spp or more adaptively (its pilot is read back, which a
-    recording cannot hold): such a gradient pass is traced, as the fit traced it before
-    recordings, and makes no recording. Catches a recording that would render those passes
-    uniformly, a different estimator than the traced fit's."""
+    """V4 without ``stratify`` renders a pass of 64 spp or more adaptively (its pilot is read
+    back, which a recording cannot hold): such a gradient pass is traced, as the fit traced
+    it before recordings, and makes no recording. Catches a recording that would render
+    those passes uniformly, a different estimator than the traced fit's. Stratified (V4's
+    default on this independent-sampler scene) the 64-spp pass is uniform and recorded."""
     scene = draaw_mi.load_scene(softbox_tile("box"))
     session = session_of(scene)
-    _one_pass(scene, session, spp=64)
+    _one_pass(scene, session, spp=64, stratify=False)
     assert not any(k[0] == "gradient" for k in session.recordings)
-    _one_pass(scene, session, spp=16)
+    _one_pass(scene, session, spp=16, stratify=False)
     assert any(k[0] == "gradient" for k in session.recordings)
+    stratified = session.integrator("v4", 3)
+    _one_pass(scene, session, spp=64)
+    assert any(k[0] == "gradient" and k[1] == id(stratified) and k[2] == 64 for k in session.recordings)
 
 
 def test_an_owned_tensor_holds_the_array_as_it_was_when_the_call_returned():

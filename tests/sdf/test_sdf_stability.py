@@ -115,12 +115,15 @@ def test_far_object_is_visible_and_shaded():
     expected image, pixel by pixel: normals at 1e4 need a difference step above float32's
     spacing there (0.001). Seed stacks of 8 renders a side, z-scores of the pixel means.
     Measured: 6 % of |z| above 3 and a mean z of 0.5 (float32 rounding of the positions moves
-    the silhouette a little); with the step fixed at 1e-4 (below the spacing), 72 % and -5.5."""
+    the silhouette a little); with the step fixed at 1e-4 (below the spacing), 72 % and -5.5.
+    (V4 with the independent sampler, as measured: its stratified default has about half the
+    variance, which makes that small silhouette shift 20 % of |z| above 3.)"""
     stacks = []
     for k, offset in enumerate((0.0, 1e4)):
         scene = draaw_mi.load_scene(_far_description(offset))
-        stacks.append(np.stack([np.array(draaw_mi.render(scene, version="v4", spp=16, seed=100 * k + s,
-                                                         post=[]), dtype=np.float64) for s in range(8)]))
+        stacks.append(np.stack([np.array(draaw_mi.render(scene, version="v4", spp=16, seed=100 * k + s, post=[],
+                                                         integrator_options={"stratify": False}), dtype=np.float64)
+                                for s in range(8)]))
     assert np.all(np.isfinite(stacks[1]))
     z = z_summary(zscores(*stacks))
     assert z["n"] > 100 and z["frac_gt3"] < 0.2 and abs(z["mean"]) < 2.0, z

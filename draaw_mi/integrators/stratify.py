@@ -1,0 +1,66 @@
+"""When V4 stratifies: its own sampler (:mod:`~draaw_mi.integrators.strata_sampler`) in
+place of the scene's ``independent`` sampler (Mitsuba's default), in renders and gradient
+passes.
+
+The independent sampler draws each dimension of each sample at random. A stratified pattern
+spreads a pixel's samples evenly over the pixel and over each dimension its paths use (lens,
+each bounce's BSDF and light samples), which removes much of the variance of the smooth parts
+of the integrand, at every sample count and in one pass. Each sample stays jointly uniform
+over the dimensions it uses, so every pixel's expectation is the independent sampler's, and
+``path``'s. Mitsuba's own stratifying samplers do not serve: ``multijitter``, ``stratified``
+and ``ldsampler`` correlate dimensions below 256 spp (a biased estimate), ``orthogonal``
+takes only squares of primes and costs 1.5x ``path``'s time per sample
+(``benchmarks/results/speed_suite.md``, 2026-12-05).
+
+Where V4 keeps the scene's sampler: a sampler other than ``independent`` (the user chose
+it); one sample per pixel; gradient passes that add the boundary terms of SDF shapes (they
+reseed their sampler for the rays of a band); guided renders and delta lights' glints
+on near-mirror surfaces (both measured worse stratified; see ``draaw_v4``'s
+:meth:`~draaw_mi.integrators.v4.DraawV4Integrator.stratified`); participating media. Adaptive
+sampling on top of a stratified pattern measured 1.23-1.44x the variance x time of uniform V4
+with the same sampler (its pilot's sample variance no longer measures a stratified mean's
+error), so V4 renders stratified scenes uniformly.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .features import sampler_plugin
+from .strata_sampler import strata_sampler
+
+
+def applies(sensor: mi.Sensor, n: int) -> bool:
+    """Whether a render of ``n`` spp through ``sensor`` may render stratified: its sampler is
+    ``independent`` and ``n`` is at least 2 (one sample per pixel has nothing to stratify:
+    such a render keeps Mitsuba's samples, the ones its ``aov`` integrator draws)."""
+    return n > 1 and sampler_plugin(sensor.sampler()) == "independent"
+
+
+def prepare(sensor: mi.Sensor, seed, spp: int, aovs):
+    """:meth:`mitsuba.ad.integrators.common.ADIntegrator.prepare` with a
+    :class:`~draaw_mi.integrators.strata_sampler.StrataSampler` of ``spp`` in place of the
+    sensor's sampler: ``(sampler, spp)``, the film prepared."""
+    film = sensor.film()
+    size = film.crop_size()
+    if film.sample_border():
+        size += 2 * film.rfilter().border_size()
+    wavefront = int(dr.prod(size)) * int(spp)
+    if wavefront > 2 ** 32:
+        raise RuntimeError(f"draaw_v4: {wavefront} samples in one pass exceed 2^32; render in passes")
+    film.prepare(aovs)
+    return strata_sampler(int(spp), seed, wavefront), int(spp)
+
+
+def describe(sensor: mi.Sensor) -> str:
+    """How ``draaw_v4`` (``stratify`` on) samples a primal render through ``sensor``, in a
+    few words (``draaw-mi info``).
+
+    >>> describe(mi.load_dict({"type": "perspective"}))
+    'stratified (its own correlated multi-jittered samples in place of the independent sampler; stratify=false: independent)'
+    """
+    kind = sampler_plugin(sensor.sampler())
+    if kind != "independent":
+        return f"the scene's {kind} sampler, every pixel alike"
+    return ("stratified (its own correlated multi-jittered samples in place of the independent "
+            "sampler; stratify=false: independent)")
