@@ -181,7 +181,7 @@ def write_report(path, rows, args, res, cmd, mi, dr):
         "0.115: 2.5e-3 against 12.2e-3 independent; at 128 spp 6.1e-4 against 4.7e-4) it ends at 0.1031 "
         "in the table and 0.0981-0.1072 over five more seeds (mean 0.1031, sd 0.0035: all six within "
         "0.01, the largest error 0.0072; an sd of 0.0035 still leaves a miss in some tens of runs). "
-        "(0.08, 0.30): 0.0811-0.0861 over four runs; (0.05, 0.90): 0.0543-0.0553 over three "
+        "(0.08, 0.30): 0.0810-0.0861 over four runs; (0.05, 0.90): 0.0543-0.0553 over three "
         "(`/tmp`-script: the benchmark's fit and reference, seeds 100 k + the row).",
         "* `converged` is `fit()`'s own plateau test on the averaged iterates (tol 5e-3); it is "
         "informational.",

@@ -92,8 +92,12 @@ class StrataSampler:
         idx = dr.arange(mi.UInt32, wavefront)
         pixel = idx >> self.bits if spp == 1 << self.bits else idx // spp
         self.index = idx - pixel * spp
-        # (opaque: a literal seed would compile a new kernel for every seed)
-        seed = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF) if isinstance(seed, int) else mi.UInt32(seed)
+        # (opaque: a literal seed, a Python or a Dr.Jit one, would compile a kernel per seed)
+        if isinstance(seed, int):
+            seed = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
+        else:
+            seed = mi.UInt32(seed)
+            dr.make_opaque(seed)
         self.key = mix32(pixel ^ mix32(seed ^ SEED_SALT))
         self.dim = mi.UInt32(0)
         v0, v1 = mi.sample_tea_32(seed, idx)

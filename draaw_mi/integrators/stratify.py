@@ -13,8 +13,8 @@ takes only squares of primes and costs 1.5x ``path``'s time per sample
 (``benchmarks/results/speed_suite.md``, 2026-12-05).
 
 Where V4 keeps the scene's sampler: a sampler other than ``independent`` (the user chose
-it); one sample per pixel; gradient passes that add the boundary terms of SDF shapes (they
-reseed their sampler for the rays of a band); guided renders and delta lights' glints
+it); one sample per pixel; the gradient passes of scenes whose SDF shapes get boundary terms
+(the whole pass: ``silhouettes.py`` reseeds its sampler for the rays of a band); guided renders and delta lights' glints
 on near-mirror surfaces (both measured worse stratified; see ``draaw_v4``'s
 :meth:`~draaw_mi.integrators.v4.DraawV4Integrator.stratified`); participating media. Adaptive
 sampling on top of a stratified pattern measured 1.23-1.44x the variance x time of uniform V4

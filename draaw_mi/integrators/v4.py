@@ -330,9 +330,9 @@ class DraawV4Integrator(LightTables):
 
     def prepare(self, sensor, seed=0, spp=0, aovs=()):
         """The sampler of a render or gradient pass (Mitsuba's ``prepare``): V4's stratified
-        sampler inside this integrator's passes where :meth:`stratified`, except while a
-        gradient pass adds the boundary terms of SDF shapes (they reseed their sampler for
-        the rays of a band); else the sensor's."""
+        sampler inside this integrator's passes where :meth:`stratified`, except in a gradient
+        pass that adds the boundary terms of SDF shapes (all of it: they reseed their sampler
+        for the rays of a band); else the sensor's."""
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         scene = self._stratify_scene
         if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):

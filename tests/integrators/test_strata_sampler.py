@@ -137,3 +137,19 @@ def test_a_clone_draws_the_same_numbers():
         assert np.array_equal(np.array(a), np.array(b)), draw
     s.next_1d()
     assert not np.array_equal(np.array(s.next_1d()), np.array(twin.next_1d()))
+
+
+@pytest.mark.parametrize("make", [lambda s: s, lambda s: mi.UInt32(s), lambda s: np.uint32(s)],
+                         ids=["int", "UInt32", "numpy"])
+def test_a_new_seed_compiles_no_new_kernel(make):
+    """Seeds as Python ints, Dr.Jit literals or numpy integers: two seeds run the same kernel
+    (a literal seed baked into the kernel compiled one per render: 0.374 s against 0.222 s
+    for a 128x128 64-spp Cornell box)."""
+    def kernels(seed) -> set:
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            u = strata_sampler(4, make(seed), 64).next_1d()
+            dr.eval(u)
+            hist = dr.kernel_history()
+        return {k["hash"] for k in hist if k.get("type") == dr.KernelType.JIT}
+    a, b = kernels(2), kernels(3)
+    assert a and a == b, (a, b)
