@@ -2,26 +2,23 @@
 from __future__ import annotations
 
 import contextlib
-import warnings
 
 import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from . import adaptive_sampling as ads
-from . import emission_split, film_splat, guiding, stratify
+from . import emission_split, guiding
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
-from .features import sensor_gated_speedups
-from .light_tables import LightTables
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import scene_view
+from .v4_passes import ADAPTIVE_MIN_SPP, V4Passes
 
 RR_THRESHOLD = 0.25     # throughput below which roulette may stop a path (see sampling.py)
-ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
 LIGHT_SELECTION = "auto"
+__all__ = ["DraawV4Integrator", "ADAPTIVE_MIN_SPP", "RR_THRESHOLD"]
 
 
-class DraawV4Integrator(LightTables):
+class DraawV4Integrator(V4Passes):
     r"""
     .. _integrator-draaw_v4:
 
@@ -252,121 +249,6 @@ class DraawV4Integrator(LightTables):
             yield
         finally:
             self._frozen_selection = self._frozen_edges = None
-
-    # ------------------------------------------------- adaptive sampling (primal renders)
-    def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
-        """Primal render; with ``adaptive`` and ``spp >= ADAPTIVE_MIN_SPP`` (no AOVs, a plain
-        seed, no guide) the unbiased two-pass adaptive render of
-        :mod:`draaw_mi.integrators.adaptive_sampling`, otherwise ``RBIntegrator.render`` (or,
-        under a pixel filter other than box with a light's edges in view,
-        :func:`~draaw_mi.integrators.film_splat.render_uniform`, which splats the split rays).
-
-        Guiding (:meth:`GuideCache.for_primal
-        <draaw_mi.integrators.guiding.GuideCache.for_primal>`): where the adaptive pilot runs
-        and ``auto`` has not decided on the scene yet, the pilot measures the indirect share
-        and the main pass is guided if it calls for it. A guided render samples every pixel
-        alike: with the guide, adaptive allocation from a pilot of spp/16 raised the error
-        (glossy panel, 128^2 / 256^2: 0.63 / 0.43x ``path``'s MSE adaptive, 0.46 / 0.33x
-        uniform; speed_suite.md)."""
-        with self._sampling(scene):
-            return self._render_primal(scene, sensor, seed, spp, develop, evaluate)
-
-    def _render_primal(self, scene, sensor, seed, spp, develop, evaluate):
-        self.prepare_selection(scene)
-        if isinstance(sensor, int):
-            sensor = scene.sensors()[sensor]
-        self._say_sensor_gates(sensor)
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
-        adaptive = self.adaptive_applies(scene, sensor, seed, n, develop)
-        decide = None
-        # (not in recordings: a guide is learned from read-back results; not with media, which
-        # V4 hands to volume.py)
-        if self.guides.mode != "off" and not dr.flag(dr.JitFlag.FreezingScope) \
-                and not self.features(scene)["media"]:
-            self._guide, decide = self.guides.for_primal(self, scene, sensor, n, adaptive)
-        try:
-            if adaptive and self._guide is None:
-                alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
-                return ads.render_adaptive(self, scene, sensor, seed, n, alpha, decide)
-            return self._render_uniform(scene, sensor, seed, spp, develop, evaluate)
-        finally:
-            self._guide = None
-
-    def adaptive_applies(self, scene, sensor, seed, n: int, develop: bool = True, guides=None) -> bool:
-        """Whether a primal render of ``n`` spp with ``seed`` renders adaptively (unless a
-        guide is in use; :meth:`render_primal`). Where it would render stratified
-        (:meth:`stratified`) only while its pilot is to decide on guiding (``guides``, the
-        integrator's by default: :meth:`GuideCache.pilot_decides
-        <draaw_mi.integrators.guiding.GuideCache.pilot_decides>`)."""
-        # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
-        possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
-                        and self.max_depth > 1
-                        and isinstance(seed, int) and ads.supported(sensor)
-                        and not ads.pilot_can_miss(scene))
-        if not possible or not self.stratified(scene, sensor, n):
-            return possible
-        guides = self.guides if guides is None else guides
-        return guides.pilot_decides(self, scene, sensor, n)
-
-    def stratified(self, scene, sensor, n: int) -> bool:
-        """Whether a render or gradient pass of ``scene`` of ``n`` spp through ``sensor``
-        samples with V4's stratified sampler: ``stratify``, :func:`~draaw_mi.integrators.stratify.applies`
-        (the independent sampler), no guide, no participating media, and not delta lights'
-        glints on near-mirror surfaces
-        (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`); guided renders and
-        glints measured worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
-        return (self.stratify and self._guide is None and stratify.applies(sensor, n)
-                and not self.features(scene)["media"] and not ads.pilot_can_miss(scene))
-
-    @contextlib.contextmanager
-    def _sampling(self, scene):
-        """Within this block (a render or gradient pass) :meth:`prepare` may stratify (it is
-        not given the scene)."""
-        previous, self._stratify_scene = self._stratify_scene, scene
-        try:
-            yield
-        finally:
-            self._stratify_scene = previous
-
-    def prepare(self, sensor, seed=0, spp=0, aovs=()):
-        """The sampler of a render or gradient pass (Mitsuba's ``prepare``): V4's stratified
-        sampler inside this integrator's passes where :meth:`stratified`, except in a gradient
-        pass that adds the boundary terms of SDF shapes (all of it: they reseed their sampler
-        for the rays of a band); else the sensor's."""
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
-        scene = self._stratify_scene
-        if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):
-            return stratify.prepare(sensor, seed, n, list(aovs))
-        return super().prepare(sensor, seed, spp, list(aovs))
-
-    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        with self._sampling(scene):
-            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
-
-    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
-        with self._sampling(scene):
-            return super().render_forward(scene, params, sensor, seed, spp)
-
-    def _render_uniform(self, scene, sensor, seed, spp, develop, evaluate):
-        try:
-            if (develop and not sensor.film().rfilter().is_box_filter()
-                    and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
-                                               self.features(scene))
-                    and self.edge_map(scene, sensor) is not None):
-                return film_splat.render_uniform(self, scene, sensor, seed, spp, develop, evaluate)
-            return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
-        finally:
-            self._primary = None
-
-    def _say_sensor_gates(self, sensor) -> None:
-        """A ``RuntimeWarning``, once per integrator and reason, when the film or the lens
-        turns adaptive sampling or emission splitting off (both on by default)."""
-        if not (self.adaptive or self.emission_split > 1):
-            return
-        gated = sensor_gated_speedups(sensor)
-        if gated is not None and gated not in self._said_gates:
-            self._said_gates.add(gated)
-            warnings.warn(f"draaw_v4: {gated}", RuntimeWarning, stacklevel=2)
 
     @dr.syntax
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
