@@ -174,7 +174,7 @@ def write_report(path, rows, args, res, cmd, mi, dr):
         "150 iterations: 0.0674 in the 2026-12-02 table, 17 / 18, its one miss); with V4's stratified "
         "gradient passes 0.0553 in the table.",
         "* (0.10, 0.05) under the environment, a dielectric whose reflection is 4 % of the light. With "
-        "independent samples (before 2026-12-05) it ended at 0.098-0.113 over nine polished runs (mean "
+        "independent samples (before 2026-12-05) it ended at 0.098-0.111 over nine polished runs (mean "
         "0.1041, sd 0.0039; the table's seed 14: 0.1109, one miss), the polish at 512 spp at 0.1041 and "
         "0.1046 but in 146-149 s. Since V4 draws its gradient passes from its own stratified sampler "
         "(`draaw_mi/integrators/strata_sampler.py`; the gradient's sd at 16 spp, 16 seeds at roughness "
