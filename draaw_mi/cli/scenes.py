@@ -183,7 +183,8 @@ def cmd_info(args) -> int:
         if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
             sensor = loaded.mi_scene.sensors()[0]
             gated = sensor_gated_speedups(sensor)
-            samples = stratify.describe(sensor)
+            v4 = mi.load_dict({"type": "draaw_v4"})
+            samples = stratify.describe(v4, loaded.mi_scene, sensor, int(out["scene"]["settings"]["spp"]))
         out["scene"]["v4_gated"] = gated
         out["scene"]["v4_samples"] = samples
     if args.json:

@@ -23,11 +23,9 @@ error), so V4 renders stratified scenes uniformly.
 """
 from __future__ import annotations
 
-import drjit as dr
 import mitsuba as mi
 
 from .features import sampler_plugin
-from .strata_sampler import strata_sampler
 
 
 def applies(sensor: mi.Sensor, n: int) -> bool:
@@ -37,30 +35,20 @@ def applies(sensor: mi.Sensor, n: int) -> bool:
     return n > 1 and sampler_plugin(sensor.sampler()) == "independent"
 
 
-def prepare(sensor: mi.Sensor, seed, spp: int, aovs):
-    """:meth:`mitsuba.ad.integrators.common.ADIntegrator.prepare` with a
-    :class:`~draaw_mi.integrators.strata_sampler.StrataSampler` of ``spp`` in place of the
-    sensor's sampler: ``(sampler, spp)``, the film prepared."""
-    film = sensor.film()
-    size = film.crop_size()
-    if film.sample_border():
-        size += 2 * film.rfilter().border_size()
-    wavefront = int(dr.prod(size)) * int(spp)
-    if wavefront > 2 ** 32:
-        raise RuntimeError(f"draaw_v4: {wavefront} samples in one pass exceed 2^32; render in passes")
-    film.prepare(aovs)
-    return strata_sampler(int(spp), seed, wavefront), int(spp)
+def describe(integrator, scene: mi.Scene, sensor: mi.Sensor, n: int) -> str:
+    """How ``integrator`` (a ``draaw_v4``) samples a render of ``scene`` of ``n`` spp through
+    ``sensor``, in a few words (``draaw-mi info``).
 
-
-def describe(sensor: mi.Sensor) -> str:
-    """How ``draaw_v4`` (``stratify`` on) samples a primal render through ``sensor``, in a
-    few words (``draaw-mi info``).
-
-    >>> describe(mi.load_dict({"type": "perspective"}))
-    'stratified (its own correlated multi-jittered samples in place of the independent sampler; stratify=false: independent)'
+    >>> scene = mi.load_dict(mi.cornell_box())
+    >>> v4 = mi.load_dict({"type": "draaw_v4"})
+    >>> describe(v4, scene, scene.sensors()[0], 64)
+    'stratified (its own correlated multi-jittered samples in place of the independent sampler, unless a guide is learned; stratify=false: independent)'
     """
     kind = sampler_plugin(sensor.sampler())
     if kind != "independent":
         return f"the scene's {kind} sampler, every pixel alike"
+    if not integrator.stratified(scene, sensor, n):
+        return ("independent (stratify=false, one sample per pixel, participating media or glints "
+                "of delta lights on near-mirrors)")
     return ("stratified (its own correlated multi-jittered samples in place of the independent "
-            "sampler; stratify=false: independent)")
+            "sampler, unless a guide is learned; stratify=false: independent)")

@@ -24,6 +24,7 @@ from . import adaptive_sampling as ads
 from . import emission_split, film_splat, stratify
 from .features import sensor_gated_speedups
 from .light_tables import LightTables
+from .strata_sampler import strata_sampler
 
 ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates variances too poorly
 
@@ -113,11 +114,11 @@ class V4Passes(LightTables):
         sampler inside this integrator's passes where :meth:`stratified`, except in a gradient
         pass that adds the boundary terms of SDF shapes (all of it: they reseed their sampler
         for the rays of a band); else the sensor's."""
-        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        sampler, n = super().prepare(sensor, seed, spp, list(aovs))   # (the film prepared)
         scene = self._stratify_scene
         if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):
-            return stratify.prepare(sensor, seed, n, list(aovs))
-        return super().prepare(sensor, seed, spp, list(aovs))
+            return strata_sampler(n, seed, sampler.wavefront_size()), n
+        return sampler, n
 
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
         with self._sampling(scene):

@@ -115,10 +115,12 @@ def test_a_scenes_first_render_decides_on_guiding_by_the_adaptive_pilot(monkeypa
 @pytest.mark.parametrize("spp, sampler, said", [
     (64, "independent", "stratified (its own correlated multi-jittered samples"),
     (64, "ldsampler", "the scene's ldsampler sampler"),
+    (1, "independent", "independent (stratify=false, one sample per pixel"),
 ])
 def test_info_says_how_v4_samples(tmp_path, capsys, spp, sampler, said):
     """``draaw-mi info`` names V4's sampling of the scene's render: stratified in place of
-    the independent sampler, or the scene's own."""
+    the independent sampler, independent where V4 keeps it (one sample per pixel: its answer
+    is V4's own ``stratified``), or the scene's own."""
     import json
     from conftest import tiny_description
     from draaw_mi.cli import main
