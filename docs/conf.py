@@ -24,7 +24,7 @@ extensions = [
     "myst_nb",                     # MyST markdown pages and the stored notebooks
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",         # the package's numpy/Google-style sections
-    "sphinxarg.ext",               # the CLI reference from draaw_mi.cli.commands._parser()
+    "sphinxarg.ext",               # the CLI reference from draaw_mi.cli.parser.build_parser()
     "draaw_docs",                  # docs/_ext: plugin tables, API pages from __all__, reference checks
 ]
 

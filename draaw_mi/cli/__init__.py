@@ -1,7 +1,8 @@
 """The ``draaw-mi`` command line: :func:`main` and its subcommands.
 
-* :mod:`~draaw_mi.cli.commands` -- the parser and the ``render``, ``post``, ``fit`` and
+* :mod:`~draaw_mi.cli.commands` -- :func:`main` and the ``render``, ``post``, ``fit`` and
   ``batch`` subcommands;
+* :mod:`~draaw_mi.cli.parser` -- every subcommand's arguments;
 * :mod:`~draaw_mi.cli.scenes` -- what the commands that read a scene share (``-D NAME=VALUE``
   for a Mitsuba XML file, a manifest told from a scene, the note on an XML scene's own
   integrator) and the ``info`` subcommand;

@@ -45,7 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 from .emission_split import PrimaryRays, film_mapping
-from .features import sampler_plugin, scene_shapes
+from .features import sampler_plugin
 from .film_splat import FilmSplat, release_cache
 from .guiding import share_after
 
@@ -81,7 +81,6 @@ def supported(sensor: mi.Sensor) -> bool:
     return not film.sample_border()
 
 
-GLINT_ROUGHNESS = 0.1       # below this roughness a delta light's highlight is a rare event
 # Below this rank correlation the pilot's two halves disagree on where the noise is: its map
 # would be noise. Measured (Spearman of the 3x3-smoothed per-pixel deviations of even and odd
 # pilot samples, 4 samples per pixel, 128^2 and 256^2): 0.58-0.95 on the speed suite's scenes
@@ -139,41 +138,6 @@ def pilot_agreement(halves: np.ndarray) -> float:
     rb -= (n - 1) / 2.0
     den = np.sqrt((ra * ra).sum() * (rb * rb).sum())
     return float((ra * rb).sum() / den) if den > 0 else 1.0   # (no BLAS: see allocate)
-
-
-def _min_roughness(bsdf: mi.BSDF) -> float:
-    """Smallest roughness (draaw) or alpha (Mitsuba's rough BSDFs) of ``bsdf``; 1 when it has
-    none (delta or diffuse lobes cannot make a delta light's glint)."""
-    p = mi.traverse(bsdf)
-    vals = []
-    for key in p.keys():
-        leaf = key.split(".")[-2] if key.endswith((".value", ".data")) else key.split(".")[-1]
-        if leaf in ("roughness", "alpha", "alpha_u", "alpha_v"):
-            v = np.array(p[key], dtype=np.float64).ravel()
-            if v.size:
-                vals.append(float(v.min()))
-    return min(vals) if vals else 1.0
-
-
-def pilot_can_miss(scene: mi.Scene) -> bool:
-    """Whether the scene's error may sit in events too rare for a pilot of a few samples:
-    the highlights of delta lights (point, spot, sun) on near-mirror surfaces. There the
-    pilot misses most of the pixels that carry the variance, and every pixel it judged quiet
-    loses samples: measured on the thesis scene (a point light over a floor of roughness
-    0.05), adaptive sampling costs 2.0x ``path``'s variance x time at 256x256 (24 renders)
-    where V4 without it costs 1.15x. Such scenes render with uniform sampling."""
-    delta = any(mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in scene.emitters())
-    if not delta:
-        return False
-    seen = set()
-    for shape in scene_shapes(scene):
-        b = shape.bsdf()
-        if b is None or id(b) in seen:
-            continue
-        seen.add(id(b))
-        if _min_roughness(b) < GLINT_ROUGHNESS:
-            return True
-    return False
 
 
 def render_spp_map(integrator, scene: mi.Scene, sensor: mi.Sensor, spp_map: np.ndarray,

@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat, stratify
+from . import emission_split, film_splat, glints, stratify
 from .features import sensor_gated_speedups
 from .light_tables import LightTables
 from .strata_sampler import strata_sampler
@@ -83,7 +83,7 @@ class V4Passes(LightTables):
         possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
                         and self.max_depth > 1
                         and isinstance(seed, int) and ads.supported(sensor)
-                        and not ads.pilot_can_miss(scene))
+                        and not glints.has_glints(scene))
         if not possible or not self.stratified(scene, sensor, n):
             return possible
         guides = self.guides if guides is None else guides
@@ -94,10 +94,10 @@ class V4Passes(LightTables):
         samples with V4's stratified sampler: ``stratify``, :func:`~draaw_mi.integrators.stratify.applies`
         (the independent sampler), no guide, no participating media, and not delta lights'
         glints on near-mirror surfaces
-        (:func:`~draaw_mi.integrators.adaptive_sampling.pilot_can_miss`); guided renders and
+        (:func:`~draaw_mi.integrators.glints.has_glints`); guided renders and
         glints measured worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
         return (self.stratify and self._guide is None and stratify.applies(sensor, n)
-                and not self.features(scene)["media"] and not ads.pilot_can_miss(scene))
+                and not self.features(scene)["media"] and not glints.has_glints(scene))
 
     @contextlib.contextmanager
     def _sampling(self, scene):
