@@ -214,7 +214,8 @@ def test_light_gradient_with_guiding_on_matches_finite_differences(panel):
 def test_training_traces_in_bounded_batches(panel, monkeypatch):
     """The records of a training pass take 32 bytes a vertex: 2^18 paths at once held 48 MiB
     (106 MiB of resident memory while learning, against issue 45's 64); batches of at most
-    2^16 paths (53 MiB in all, measured at 256x256)."""
+    2^16 camera paths, and of light paths (``benchmarks/guide_memory.py``: a peak of 36 MiB
+    over the resident at 256x256, 38 MiB at 1024x1024)."""
     sizes = []
     real = guiding._trace
     monkeypatch.setattr(guiding, "_trace", lambda i, s, n, *a: (sizes.append(n), real(i, s, n, *a))[1])
