@@ -204,6 +204,28 @@ class _CollectorPaused:
 _PAUSED = _CollectorPaused()
 
 
+def _first_cause(e: BaseException) -> str:
+    """The first line of the innermost exception ``e`` was raised from (Dr.Jit's recorder
+    wraps the error that stopped it in "error encountered while recording ... (see above)"),
+    with the type of that exception; 200 characters at most.
+
+    >>> try:
+    ...     try:
+    ...         raise RuntimeError("validate(): a virtual call on an object not in the inputs")
+    ...     except RuntimeError as inner:
+    ...         raise RuntimeError("record(): error encountered (see above)") from inner
+    ... except RuntimeError as e:
+    ...     print(_first_cause(e))
+    RuntimeError: validate(): a virtual call on an object not in the inputs
+    """
+    seen = {id(e)}
+    while (e.__cause__ or e.__context__) is not None and id(e.__cause__ or e.__context__) not in seen:
+        e = e.__cause__ or e.__context__
+        seen.add(id(e))
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[0] if lines else ''}"[:200]
+
+
 def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     """``dr.freeze(body)`` for ``body(mi_scene, seed, *args) -> result`` rendering with
     ``integrator``, with the integrator's scene-dependent state (V4's light-selection table and
@@ -255,7 +277,7 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "
-                          f"({str(e).splitlines()[0][:200]}); it is traced from now on",
+                          f"({_first_cause(e)}); it is traced from now on",
                           RuntimeWarning, stacklevel=2)
             if before_retry is not None:
                 before_retry()
