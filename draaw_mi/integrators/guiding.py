@@ -253,20 +253,24 @@ def _light_trace(scene: mi.Scene, paths: int, seed: int):
         ray, w, _ = scene.sample_emitter_ray(0.0, sampler.next_1d(), sampler.next_2d(), sampler.next_2d(), True)
         active = dr.all(dr.isfinite(w)) & (dr.max(w) > 0)
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
-        for k in range(LIGHT_HITS):
+
+        def hit(ray, w, active, k, sampler):
+            """One surface hit: recorded from the second on, then the BSDF sampled."""
             si = scene.ray_intersect(ray, active)
             active &= si.is_valid()
             bsdf = si.bsdf(ray)
-            if k >= 1:
-                keep = active & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-                idx = lane + (k - 1)
-                for arr, v in ((p, si.p), (d, -ray.d), (power, (w.x + w.y + w.z) / 3.0), (valid, keep)):
-                    dr.scatter(arr, v, idx, keep)
-            if k + 1 < LIGHT_HITS:
-                bs, bw = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active)
-                w = w * bw
-                active &= (bs.pdf > 0) & dr.all(dr.isfinite(w)) & (dr.max(w) > 0)
-                ray = si.spawn_ray(si.to_world(bs.wo))
+            keep = active & (k >= 1) & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+            idx = lane + k - 1
+            for arr, v in ((p, si.p), (d, -ray.d), (power, (w.x + w.y + w.z) / 3.0), (valid, keep)):
+                dr.scatter(arr, v, idx, keep)
+            bs, bw = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active & (k + 1 < LIGHT_HITS))
+            w = w * bw
+            active &= (k + 1 < LIGHT_HITS) & (bs.pdf > 0) & dr.all(dr.isfinite(w)) & (dr.max(w) > 0)
+            return si.spawn_ray(si.to_world(bs.wo)), w, active, k + 1, sampler
+
+        # one symbolic loop: the BSDFs' (Python) code is traced once, not once per hit
+        dr.while_loop((ray, w, active, mi.UInt32(0), sampler), lambda ray, w, active, k, s: active, hit,
+                      labels=("ray", "w", "active", "k", "sampler"), label="guiding light paths")
         dr.eval(p, d, power, valid)
     return p, d, power, valid
 
@@ -316,7 +320,8 @@ def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS) -> Guide 
     # the grid spans where the paths' vertices are (1st-99th percentile), not the scene's
     # bounds: a large floor or a far lamp would leave most cells empty
     pts = np.array(first.p, dtype=np.float64).T[valid]
-    lo, hi = np.percentile(pts, 1, axis=0), np.percentile(pts, 99, axis=0)
+    sub = pts[::max(1, len(pts) // 16384)]             # (quantiles of 2^14 points: enough)
+    lo, hi = np.percentile(sub, 1, axis=0), np.percentile(sub, 99, axis=0)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return None
     ext = np.maximum(hi - lo, 1e-3 * max(float(np.max(hi - lo)), 1e-3))
