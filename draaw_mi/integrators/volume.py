@@ -136,6 +136,19 @@ _TABLES: dict[int, tuple] = {}
 _TABLES_MAX = 4          # a few scenes at most (each entry holds its media alive)
 
 
+def held_media() -> list:
+    """The media that :func:`media_table`'s tables hold alive (ordered by ``id``). A
+    ``dr.freeze`` recording must take them as inputs (``rendering.frozen``): a medium call
+    traced over registered media of which none is an input fails to record ("a virtual
+    function call ... no such object instance was found in the function's inputs"), as
+    volpath's did after a smoke scene had rendered with V4."""
+    seen = {}
+    for _, table in _TABLES.values():
+        for m in table.media:
+            seen[id(m)] = m
+    return [seen[k] for k in sorted(seen)]
+
+
 def media_table(scene: mi.Scene) -> MediaTable:
     """The scene's :class:`MediaTable`, rebuilt when medium parameters changed."""
     key = id(scene)

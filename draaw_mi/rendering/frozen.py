@@ -5,14 +5,16 @@ of re-tracing the Python integrator (:meth:`Session.recording <draaw_mi.renderin
 sees the types of its inputs, not the host constants that Mitsuba's kernels bake in, so
 everything a replay must follow is handed to it here (:func:`freeze_render`): the scene, its
 host-side parameters and tensor shapes (:func:`scene_scalars`), the integrator's
-scene-dependent state (V4's light table and edge map), and the live Python BSDFs that the
-scene does not hold (:func:`other_live_bsdfs`). What is found once per scene is kept in
+scene-dependent state (V4's light table and edge map), the live Python BSDFs that the
+scene does not hold (:func:`other_live_bsdfs`) and the media V3 / V4 keep alive
+(:func:`~draaw_mi.integrators.volume.held_media`). What is found once per scene is kept in
 the scene's :class:`~draaw_mi.rendering.session.Session` (``cache`` below: its ``scalars``,
 ``own_bsdfs`` and ``memo``).
 """
 from __future__ import annotations
 
 import gc
+import sys
 import threading
 import warnings
 
@@ -123,6 +125,14 @@ def _matrix_entries(value) -> tuple:
     """A host-side matrix or transform's entries as a flat tuple of Python numbers (not
     ``getattr(value, "matrix")`` on an array: Dr.Jit reads that as a swizzle)."""
     return tuple(np.asarray(value if dr.is_array_v(value) else value.matrix).ravel().tolist())
+
+
+def held_media() -> list:
+    """The media V3 / V4's majorant tables hold alive
+    (:func:`draaw_mi.integrators.volume.held_media`); none while no scene with media has
+    rendered (the media code, loaded with the first such scene, is not imported here)."""
+    volume = sys.modules.get("draaw_mi.integrators.volume")
+    return [] if volume is None else volume.held_media()
 
 
 def other_live_bsdfs(mi_scene, cache=None) -> list:
@@ -267,6 +277,12 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
         live = other_live_bsdfs(mi_scene, cache)
+        # and the media V3 / V4 keep alive for their majorant tables (a few scenes'): a medium
+        # call (volpath's, even in a scene without media) traced over them fails to record
+        # when none is an input
+        held = held_media()
+        if held:
+            live = live + held
         memo = None if cache is None else cache.memo
         state = None
         if state_of is not None:

@@ -262,3 +262,37 @@ def test_replay_follows_moved_geometry(scene, monkeypatch):
     monkeypatch.setattr(S, "FREEZE", True)
     again = np.array(draaw_mi.render(scene, version="v1", spp=4, seed=2, post=[]))
     assert np.allclose(again, before, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")     # a fallback to tracing fails it
+def test_volpath_records_after_a_smoke_scene_rendered_with_v4(monkeypatch):
+    """V4's majorant tables keep a smoke scene's medium alive after the scene is gone; a
+    volpath render of a scene without media then traces medium calls over it, and its
+    recording failed ("no such object instance was found in the function's inputs") and fell
+    back to tracing with a RuntimeWarning, until the held media became the recording's
+    inputs (``volume.held_media``). The replay equals a traced render."""
+    import gc
+    from draaw_mi.integrators import volume
+    monkeypatch.setattr(S, "FREEZE", True)
+    T = mi.ScalarTransform4f
+    smoke = mi.load_dict({
+        "type": "scene", "integrator": {"type": "draaw_v4", "max_depth": 4},
+        "sensor": {"type": "perspective", "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "sky": {"type": "constant"},
+        "box": {"type": "cube", "bsdf": {"type": "null"},
+                "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.9}}})
+    mi.render(smoke, spp=4)
+    del smoke
+    gc.collect()
+    assert volume.held_media()                     # the table holds the smoke's medium
+    d = rs.cornell_draaw(res=16, spp=4)
+    d["integrator"] = {"type": "volpath", "max_depth": 4}
+    plain = draaw_mi.load_scene(d)
+    calls = []
+    real = F.freeze_render
+    monkeypatch.setattr(S, "freeze_render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    frozen = [np.array(draaw_mi.render(plain, spp=4, seed=s, post=[])) for s in (1, 1)]
+    traced = np.array(mi.render(plain.mi_scene, integrator=mi.load_dict({"type": "volpath", "max_depth": 4}),
+                                spp=4, seed=1))
+    assert calls and np.allclose(frozen[0], traced, atol=1e-6) and np.array_equal(frozen[0], frozen[1])
