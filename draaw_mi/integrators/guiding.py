@@ -215,12 +215,21 @@ def indirect_share(integrator, scene: mi.Scene, paths: int = DECIDE_PATHS) -> fl
     return share_after(total, float(dr.sum(rec.L_end - L0)[0]))
 
 
-def _histogram(rec: Records, lo: np.ndarray, scale: np.ndarray, res: int) -> np.ndarray:
-    valid, val = _incident(rec)
-    key = cell_of(rec.p, mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res) * BINS + bin_of(rec.d)
+def _binned(p: mi.Point3f, d: mi.Vector3f, value: mi.Float, active: mi.Bool, lo: np.ndarray,
+            scale: np.ndarray, res: int) -> np.ndarray:
+    """``value`` summed per grid cell of ``p`` and bin of direction ``d`` where ``active``
+    (and positive): a (res, res, res, BINS) numpy histogram."""
+    key = cell_of(p, mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res) * BINS + bin_of(d)
     hist = dr.zeros(mi.Float, res ** 3 * BINS)
-    dr.scatter_reduce(dr.ReduceOp.Add, hist, val, key, valid & (val > 0))
+    dr.scatter_reduce(dr.ReduceOp.Add, hist, value, key, active & (value > 0))
     return np.array(hist, dtype=np.float64).reshape(res, res, res, BINS)
+
+
+def _histogram(rec: Records, lo: np.ndarray, scale: np.ndarray, res: int) -> np.ndarray:
+    """The camera records' estimates of incident radiance per cell and bin (a record outside
+    the grid counts in its nearest cell)."""
+    valid, val = _incident(rec)
+    return _binned(rec.p, rec.d, val, valid, lo, scale, res)
 
 
 def _distribution(hist: np.ndarray) -> np.ndarray:
@@ -284,10 +293,7 @@ def _light_histogram(rec, lo: np.ndarray, scale: np.ndarray, res: int) -> np.nda
     """Per cell and bin: the power of the light paths' hits in the cell arriving from the bin
     (hits outside the grid dropped)."""
     p, d, power, valid = rec
-    key = cell_of(p, mi.ScalarPoint3f(lo), mi.ScalarVector3f(scale), res) * BINS + bin_of(d)
-    hist = dr.zeros(mi.Float, res ** 3 * BINS)
-    dr.scatter_reduce(dr.ReduceOp.Add, hist, power, key, valid & (power > 0) & _inside(p, lo, scale, res))
-    return np.array(hist, dtype=np.float64).reshape(res, res, res, BINS)
+    return _binned(p, d, power, valid & _inside(p, lo, scale, res), lo, scale, res)
 
 
 def _combined(camera: np.ndarray, light: np.ndarray) -> np.ndarray:

@@ -127,7 +127,7 @@ def _matrix_entries(value) -> tuple:
     return tuple(np.asarray(value if dr.is_array_v(value) else value.matrix).ravel().tolist())
 
 
-def held_media() -> list:
+def _held_media() -> list:
     """The media V3 / V4's majorant tables hold alive
     (:func:`draaw_mi.integrators.volume.held_media`); none while no scene with media has
     rendered (the media code, loaded with the first such scene, is not imported here)."""
@@ -276,13 +276,10 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         # every live Python BSDF that the scene does not hold itself (those it holds are
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
-        live = other_live_bsdfs(mi_scene, cache)
         # and the media V3 / V4 keep alive for their majorant tables (a few scenes'): a medium
         # call (volpath's, even in a scene without media) traced over them fails to record
         # when none is an input
-        held = held_media()
-        if held:
-            live = live + held
+        live = other_live_bsdfs(mi_scene, cache) + _held_media()
         memo = None if cache is None else cache.memo
         state = None
         if state_of is not None:
