@@ -136,7 +136,7 @@ def run(res, spp, repeats, seed=0):
             dr.eval(img)
             dr.sync_thread()
             if rep == 0:
-                stats[kind] = kernel_stats(lambda: dr.eval(mi.render(scene, spp=spp, seed=seed)))
+                stats[kind] = kernel_stats(lambda s=scene: dr.eval(mi.render(s, spp=spp, seed=seed)))
                 means[kind] = np.array(img).mean(axis=(0, 1))
                 assert np.all(np.isfinite(np.array(img))), kind
             else:

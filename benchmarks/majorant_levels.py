@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-import draaw_mi
+import draaw_mi  # noqa: F401  (variant + plugins)
 import drjit as dr
 import mitsuba as mi
 
