@@ -15,14 +15,24 @@ fail in different places. :func:`fit_two_starts`:
 3. **refines** the merged maps with a shorter fit (``refine`` times ``iterations``, at a
    smaller learning rate), which settles the seams between regions.
 
-The error is the mean squared difference between renders of every capture (fixed seeds, so
-the candidates share their noise) and its reference, with saturated pixels of display
-references masked as the fit masks them. Measured on the SVBRDF benchmark (8 captures, 64²
-maps, 128² images, 600 iterations per start; ``benchmarks/results/svbrdf_fit.md``), albedo
+The error estimates the squared difference between each capture's expected render and its
+reference, with saturated pixels of display references masked as the fit masks them: the
+product of two renders' differences from the reference, with independent seeds (their noise
+cancels in its expectation; fixed seeds, so the candidates share their noise), at
+:data:`EVAL_SPP`. One render's squared difference adds that render's variance, which is
+larger where a region is metal (its highlights are noisier): on the benchmark's sphere at 64
+spp it was 72 % noise and took a dielectric hole into a metal patch (3 dB of albedo PSNR
+lost). The regions' swaps change the error by 2-5 %, so the renders need spp: on that
+sphere's two fits the two-render estimate at 64 spp took 5 of 8 regions (merged albedo PSNR
+27.8 dB, metallic MAE 0.035), at 256 spp 6 (33.9 dB, 0.021), deciding as 512-spp renders do
+on the two largest regions (``benchmarks/results/svbrdf_fit.md``, 2026-12-05).
+
+Measured on the SVBRDF benchmark (8 captures, 64² maps, 128² images, 600 iterations per start; ``benchmarks/results/svbrdf_fit.md``), albedo
 PSNR / roughness MAE / metallic MAE, one fit against two starts: the sphere 26.5 / 0.033 /
 0.043 against 32.7 / 0.026 / 0.018, the monkey 26.2 / 0.044 / 0.046 against 36.1 / 0.016 /
-0.007, the tile (where both starts agree) 32.3 / 0.036 / 0.023 against 32.0 / 0.033 / 0.022.
-It takes about three fits' time (two fits, the merge's renders and a refine of a third).
+0.007, the tile (where both starts agree) 32.3 / 0.036 / 0.023 against 32.0 / 0.033 / 0.022
+(2026-12-04); with the merge as now, two starts give 34.5 / 0.023 / 0.015, 37.1 / 0.017 /
+0.007 and 33.0 / 0.028 / 0.020 in 320-440 s. It takes about three fits' time (two fits, the merge's renders and a refine of a third).
 """
 from __future__ import annotations
 
@@ -45,7 +55,7 @@ from .settings import check_counts
 #: the refining fit's learning rate, as a multiple of the two fits' (it starts near an optimum)
 REFINE_LR = 0.4
 #: spp of the renders that compare candidate maps
-EVAL_SPP = 64
+EVAL_SPP = 256
 
 
 def fit_two_starts(scene, references=None, params=(), *, captures: list, iterations: int = 300,
@@ -67,7 +77,7 @@ def fit_two_starts(scene, references=None, params=(), *, captures: list, iterati
         iterations: iterations of each of the two fits.
         refine: the refining fit's iterations, as a fraction of ``iterations`` (in (0, 1]).
         min_texels: regions of disagreement smaller than this (before widening) are not tested.
-        eval_spp: spp of the renders that compare candidates.
+        eval_spp: spp of the renders that compare candidates (two per capture and candidate).
 
     Returns:
         The refining fit's :class:`~draaw_mi.fitting.result.FitResult` (its ``values``,
@@ -266,17 +276,27 @@ def _set_values(scene, values: dict) -> None:
         session_of(scene).scene_changed()
 
 
+#: seed offset of the second render of each capture in :func:`_captures_error`
+SECOND_RENDER = 0x5EC0D
+
+
 def _captures_error(view, values: dict, caps: list, refs: list, masks: list, version: str, spp: int,
                     seed: int) -> float:
-    """Mean over the captures of the mean squared difference between a render of ``view`` (the
-    scene at the references' size) with ``values`` (capture ``i`` with seed ``seed + i``) and
-    its reference."""
+    """Mean over the captures of an unbiased estimate of the squared difference between the
+    expected render of ``view`` (the scene at the references' size) with ``values`` and the
+    capture's reference: the product of two renders' differences from it (capture ``i`` with
+    seeds ``seed + i`` and ``seed + i +`` :data:`SECOND_RENDER`), whose noise cancels in
+    expectation (module docstring). Slightly negative where the maps render the references
+    within the noise."""
     _set_values(view, values)
     total = 0.0
     for i, (c, ref, mask) in enumerate(zip(caps, refs, masks)):
         setup = {k: v for k, v in c.items() if k != "reference"}
-        d = render_capture(view, setup, spp=spp, version=version, seed=seed + i).astype(np.float64) - np.asarray(ref)[..., :3]
+        target = np.asarray(ref)[..., :3]
+        a, b = (render_capture(view, setup, spp=spp, version=version, seed=seed + i + k).astype(np.float64) - target
+                for k in (0, SECOND_RENDER))
         if mask is not None:
-            d = d * np.asarray(mask)[..., :d.shape[2]]
-        total += float(np.mean(d * d))
+            m = np.asarray(mask)[..., :a.shape[2]]
+            a, b = a * m, b * m
+        total += float(np.mean(a * b))
     return total / len(caps)
