@@ -27,12 +27,13 @@ sphere's two fits the two-render estimate at 64 spp took 5 of 8 regions (merged 
 27.8 dB, metallic MAE 0.035), at 256 spp 6 (33.9 dB, 0.021), deciding as 512-spp renders do
 on the two largest regions (``benchmarks/results/svbrdf_fit.md``, 2026-12-05).
 
-Measured on the SVBRDF benchmark (8 captures, 64² maps, 128² images, 600 iterations per start; ``benchmarks/results/svbrdf_fit.md``), albedo
-PSNR / roughness MAE / metallic MAE, one fit against two starts: the sphere 26.5 / 0.033 /
-0.043 against 32.7 / 0.026 / 0.018, the monkey 26.2 / 0.044 / 0.046 against 36.1 / 0.016 /
-0.007, the tile (where both starts agree) 32.3 / 0.036 / 0.023 against 32.0 / 0.033 / 0.022
-(2026-12-04); with the merge as now, two starts give 34.5 / 0.023 / 0.015, 37.1 / 0.017 /
-0.007 and 33.0 / 0.028 / 0.020 in 320-440 s. It takes about three fits' time (two fits, the merge's renders and a refine of a third).
+Measured on the SVBRDF benchmark (8 captures, 64² maps, 128² images, 600 iterations per
+start; ``benchmarks/results/svbrdf_fit.md``), albedo PSNR / roughness MAE / metallic MAE, one
+fit against two starts: the sphere 26.5 / 0.033 / 0.043 against 32.7 / 0.026 / 0.018, the
+monkey 26.2 / 0.044 / 0.046 against 36.1 / 0.016 / 0.007, the tile (where both starts agree)
+32.3 / 0.036 / 0.023 against 32.0 / 0.033 / 0.022 (2026-12-04); with the merge as now, two
+starts give 34.5 / 0.023 / 0.015, 37.1 / 0.017 / 0.007 and 33.0 / 0.028 / 0.020 in 320-440 s.
+It takes about three fits' time (two fits, the merge's renders and a refine of a third).
 """
 from __future__ import annotations
 
@@ -56,6 +57,8 @@ from .settings import check_counts
 REFINE_LR = 0.4
 #: spp of the renders that compare candidate maps
 EVAL_SPP = 256
+#: seed offset of the second render of each capture in :func:`_captures_error`
+SECOND_RENDER = 0x5EC0D
 
 
 def fit_two_starts(scene, references=None, params=(), *, captures: list, iterations: int = 300,
@@ -274,10 +277,6 @@ def _set_values(scene, values: dict) -> None:
             p[k] = owned_tensor(v) if v.ndim == 3 else value_like(p[k], v.tolist() if v.ndim else float(v), k)
         p.update()
         session_of(scene).scene_changed()
-
-
-#: seed offset of the second render of each capture in :func:`_captures_error`
-SECOND_RENDER = 0x5EC0D
 
 
 def _captures_error(view, values: dict, caps: list, refs: list, masks: list, version: str, spp: int,
