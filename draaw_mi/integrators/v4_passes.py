@@ -32,7 +32,7 @@ ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates varian
 class V4Passes(LightTables):
     """``draaw_v4``'s render and gradient passes (see the module docstring). Needs the
     integrator's ``adaptive``, ``stratify``, ``guides``, ``aovs``, ``max_depth``,
-    ``emission_split``, ``hide_emitters``, ``sdf_band``, ``_guide``, ``_stratify_scene``,
+    ``emission_split``, ``hide_emitters``, ``sdf_band``, ``_guide``, ``_stratify_scene``, ``_glints_memo``,
     ``_said_gates`` and its ``features``, ``prepare_selection`` and ``edge_map``."""
 
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
@@ -83,7 +83,7 @@ class V4Passes(LightTables):
         possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
                         and self.max_depth > 1
                         and isinstance(seed, int) and ads.supported(sensor)
-                        and not glints.has_glints(scene))
+                        and not self._has_glints(scene))
         if not possible or not self.stratified(scene, sensor, n):
             return possible
         guides = self.guides if guides is None else guides
@@ -97,17 +97,30 @@ class V4Passes(LightTables):
         (:func:`~draaw_mi.integrators.glints.has_glints`); guided renders and
         glints measured worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
         return (self.stratify and self._guide is None and stratify.applies(sensor, n)
-                and not self.features(scene)["media"] and not glints.has_glints(scene))
+                and not self.features(scene)["media"] and not self._has_glints(scene))
+
+    def _has_glints(self, scene) -> bool:
+        """:func:`~draaw_mi.integrators.glints.has_glints`, read once per render or gradient
+        pass of ``scene`` (:meth:`_sampling`): it reads the BSDFs' roughness values back (0.8 ms
+        for a 1024^2 roughness map), and a render asks up to three times."""
+        memo = self._glints_memo
+        if memo is not None and memo[0] is scene:
+            return memo[1]
+        value = glints.has_glints(scene)
+        if self._stratify_scene is scene:
+            self._glints_memo = (scene, value)
+        return value
 
     @contextlib.contextmanager
     def _sampling(self, scene):
         """Within this block (a render or gradient pass) :meth:`prepare` may stratify (it is
-        not given the scene)."""
-        previous, self._stratify_scene = self._stratify_scene, scene
+        not given the scene), and :meth:`_has_glints` answers once."""
+        previous = self._stratify_scene, self._glints_memo
+        self._stratify_scene, self._glints_memo = scene, None
         try:
             yield
         finally:
-            self._stratify_scene = previous
+            self._stratify_scene, self._glints_memo = previous
 
     def prepare(self, sensor, seed=0, spp=0, aovs=()):
         """The sampler of a render or gradient pass (Mitsuba's ``prepare``): V4's stratified

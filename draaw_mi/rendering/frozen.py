@@ -228,10 +228,10 @@ def _first_cause(e: BaseException) -> str:
     ...     print(_first_cause(e))
     RuntimeError: validate(): a virtual call on an object not in the inputs
     """
-    seen = {id(e)}
-    while (e.__cause__ or e.__context__) is not None and id(e.__cause__ or e.__context__) not in seen:
-        e = e.__cause__ or e.__context__
+    seen = set()
+    while id(e) not in seen and (e.__cause__ or e.__context__) is not None:   # (a cycle ends it)
         seen.add(id(e))
+        e = e.__cause__ or e.__context__
     lines = str(e).strip().splitlines()
     return f"{type(e).__name__}: {lines[0] if lines else ''}"[:200]
 

@@ -20,13 +20,14 @@ def references():
     return path_renders(draaw_mi.load_scene(tile(TRUTH_C, TRUTH_R, TRUTH_M)), tile_captures())
 
 
-def test_the_merge_takes_each_region_from_the_maps_the_captures_prefer(references):
+def test_the_merge_takes_each_region_from_the_maps_the_captures_prefer(references, capsys):
     """Two sets of maps, each the truth with one region wrong: ``base`` a false metal patch
     (metallic 1, a pale colour, rough) in the dielectric corner, ``other`` the metal patch's
     lower half dielectric. The merge tests both regions and takes only ``other``'s corner:
     the result is the truth, texel for texel, its error below both inputs'. Catches a merge
     that takes every region (the patch's hole comes in), takes none, swaps the metallic map
-    alone (the corner keeps a pale colour), or compares errors of different renders."""
+    alone (the corner keeps a pale colour), or compares errors of different renders. Its
+    progress, as lines, ends at both regions."""
     base = {k: v.copy() for k, v in TRUTH.items()}
     base["m.metallic"][6:8, 0:2] = 1.0
     base["m.base_color"][6:8, 0:2] = 0.9
@@ -42,8 +43,9 @@ def test_the_merge_takes_each_region_from_the_maps_the_captures_prefer(reference
         return _captures_error(scene, values, caps, references, masks, "v4", 64, 0)
 
     e_base, e_other = error(base), error(other)
-    merged, e, tested, taken = merge(scene, base, other, e_base, ["m.metallic"], error)
+    merged, e, tested, taken = merge(scene, base, other, e_base, ["m.metallic"], error, progress="lines")
     assert (tested, taken) == (2, 1)
+    assert "two starts: merge: 2/2 region (100 %)" in capsys.readouterr().err
     for k, v in TRUTH.items():
         assert np.array_equal(merged[k], v), k
     assert e < min(e_base, e_other), (e, e_base, e_other)
