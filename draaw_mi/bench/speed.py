@@ -47,7 +47,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import suggest
-from ..integrators import guiding
+from ..integrators import adaptive_sampling as ads
+from ..integrators import guide_cache, guiding
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
 from ..scene.loading import wrap
@@ -137,13 +138,14 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
 
 def learning_time(integ, scene, spp: int) -> float:
     """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide for a render of
-    ``spp`` (:meth:`GuideCache.for_primal <draaw_mi.integrators.guiding.GuideCache.for_primal>`),
+    ``spp`` (:meth:`GuideCache.for_primal <draaw_mi.integrators.guide_cache.GuideCache.for_primal>`),
     measured on a fresh cache that then replaces the integrator's: where adaptive sampling's
     pilot decides, the training pass (the share is the one the warm-up render's pilot read;
-    the pilot itself is part of every render); elsewhere the decision pilot and the training
-    pass. The timed renders are then the scene's later ones: a guided scene's are guided
-    throughout, where its first render's pilot (1/16 of the samples) was not. 0 for other
-    integrators, ``guiding = "off"`` and scenes with media."""
+    the pilot itself is part of every render) from the pilot's recorded paths, plus what
+    recording them adds to the pilot (:func:`recording_cost`); elsewhere the decision pilot
+    and the training pass. The timed renders are then the scene's later ones: a guided
+    scene's are guided throughout, where its first render's pilot (1/16 of the samples) was
+    not. 0 for other integrators, ``guiding = "off"`` and scenes with media."""
     guides = getattr(integ, "guides", None)
     if guides is None or guides.mode == "off" or integ.features(scene)["media"]:
         return 0.0
@@ -152,12 +154,39 @@ def learning_time(integ, scene, spp: int) -> float:
     share = guides.share(integ.selection_key(scene))       # None: the warm-up did not decide
     t = time.perf_counter()
     _, decide = fresh.for_primal(integ, scene, sensor, spp, integ.adaptive_applies(scene, sensor, 1, spp, guides=fresh))
+    extra = 0.0
+    if isinstance(decide, guide_cache.PilotDecision):    # (its records, made by pilots timed apart)
+        paused = time.perf_counter()
+        extra = recording_cost(integ, scene, spp, decide)
+        t += time.perf_counter() - paused
     if decide is not None:
         decide(guiding.indirect_share(integ, scene) if share is None else share)
         integ._guide = None          # (decide sets it for the main pass; none follows here)
     dr.sync_thread()
     integ.guides = fresh
-    return time.perf_counter() - t
+    return time.perf_counter() - t + extra
+
+
+def recording_cost(integ, scene, spp: int, decide, repeats: int = 3) -> float:
+    """Seconds that recording its paths for ``decide`` (a
+    :class:`~draaw_mi.integrators.guide_cache.PilotDecision`) adds to the adaptive pilot of a
+    render of ``spp`` (the median of ``repeats`` pilots with and without, after a warm-up of
+    each); leaves ``decide`` holding the last records, as a render's pilot would."""
+    sensor = scene.sensors()[0]
+    w, h = (int(v) for v in sensor.film().crop_size())
+    a = max(2, spp // ads.PILOT_FRACTION)
+    times = {True: [], False: []}
+    for k in range(repeats + 1):
+        for record in (False, True):
+            rec = decide.records(a * w * h) if record else None
+            dr.sync_thread()
+            t = time.perf_counter()
+            ads._pass_sums(integ, scene, sensor, a, 1 + k, False, False, pilot=True,
+                           gather_first=True, record=rec)
+            dr.sync_thread()
+            if k:
+                times[record].append(time.perf_counter() - t)
+    return max(statistics.median(times[True]) - statistics.median(times[False]), 0.0)
 
 
 def bench(name: str, res: int, args) -> dict | None:

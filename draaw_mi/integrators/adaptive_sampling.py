@@ -38,6 +38,7 @@ over the per-pixel start indices) and is summed into per-pixel totals.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 
 import drjit as dr
@@ -47,7 +48,7 @@ import numpy as np
 from .emission_split import PrimaryRays, film_mapping
 from .features import sampler_plugin
 from .film_splat import FilmSplat, release_cache
-from .guiding import share_after
+from .guiding import recording, share_after
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
@@ -184,7 +185,7 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
                moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False,
-               into=None):
+               into=None, record=None):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
@@ -198,7 +199,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
     V4's media paths). Under a filter other than box the image is the splatted one
     (``film_splat``); with ``into``, a ``(FilmSplat, share)`` that several passes fill, this
     pass's samples go there with their weights ``1 / count`` times ``share`` and the filtered
-    image is left to the caller (None)."""
+    image is left to the caller (None). ``record``: :class:`~draaw_mi.integrators.guiding.Records`
+    the paths fill for a guide's training (``draaw_v4``), evaluated by the same kernel."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     ox, oy = (int(v) for v in film.crop_offset())
@@ -246,9 +248,12 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
             if set_primary is not None:       # each ray's pixel, for its emission splitting
                 set_primary(PrimaryRays(ray, sensor, corner, scale, offset, weight,
                                         splat=None if splat is None else (splat, share, pos)))
-            L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
-                                               ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
-                                               state_in=None, active=mi.Bool(True))
+            with contextlib.nullcontext() if record is None else recording(integrator, record):
+                L, valid, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
+                                                   ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
+                                                   state_in=None, active=mi.Bool(True))
+            if record is not None:
+                record.finish(L)
             depth = integrator.last_depth if reports_depth else None   # segments per path
             light_first = integrator.last_first if reports_first else None
         finally:
@@ -286,7 +291,8 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
         sums = [dr.zeros(mi.Float, w * h) for _ in chans]
         for acc, v in zip(sums, chans):
             dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel, mode=dr.ReduceMode.Local)
-        dr.eval(sums, filtered, splat.tensors() if into is not None else None)   # one kernel traces the paths
+        dr.eval(sums, filtered, splat.tensors() if into is not None else None,   # one kernel traces the paths
+                None if record is None else record.arrays())
     return sums, filtered
 
 
@@ -374,9 +380,11 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
                     alpha: bool, decide=None):
     """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor.
 
-    ``decide`` (``draaw_v4``, guiding's first decision on a scene): called with the pilot's
-    indirect share (:func:`pilot_indirect_share`); where it returns true (the main pass is now
-    guided), the main pass samples every pixel alike.
+    ``decide`` (``draaw_v4``, guiding's first decision on a scene,
+    :class:`~draaw_mi.integrators.guide_cache.PilotDecision`): the pilot's paths fill its
+    ``records(lanes)`` (where it has them), and it is called with the pilot's indirect share
+    (:func:`pilot_indirect_share`); where it returns true (the main pass is now guided), the
+    main pass samples every pixel alike.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
     (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit. Under a filter
@@ -393,8 +401,11 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     if not film.rfilter().is_box_filter():   # both passes splat into one block (film_splat)
         film.prepare([])
         splat = FilmSplat(film)
+    records = decide.records(a * w * h) if hasattr(decide, "records") else None   # guide_cache.PilotDecision
     sums, _ = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
-                         gather_first=decide is not None, into=None if splat is None else (splat, wp))
+                         gather_first=decide is not None, into=None if splat is None else (splat, wp),
+                         record=records)
+    del records                       # (decide holds them until it has learned)
     guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
     hits = alpha and splat is None
     var, segments, halves = _pilot_maps(sums, a, hits, h, w)     # (keeps only the image's sums)

@@ -13,7 +13,8 @@ bytes per recorded vertex of a batch of :data:`CHUNK_PATHS` paths, 12 MiB at 6 v
 and 29 bytes per light-path hit, 5.4 MiB a batch, whatever the image's size).
 
 Learning (:func:`learn_guide`, once per scene, cached by ``draaw_v4``): a pass of at most
-:data:`TRAIN_PATHS` camera paths records, at each vertex whose BSDF has no delta lobe, the
+:data:`TRAIN_PATHS` camera paths (where adaptive sampling's pilot decides, the pilot's own
+paths first: :class:`~.guide_cache.PilotDecision`) records, at each vertex whose BSDF has no delta lobe, the
 cell, the direction sampled and the radiance that came back along it, ``(L_end - L_k) /
 beta_k``; each record adds ``luminance / pdf`` (an estimate of the incident radiance's
 integral over its bin) to its cell's bin. Few of those records carry light where it arrives
@@ -39,7 +40,7 @@ uniform share of 0.1 took the glossy panel to 0.29 / 0.44x ``path``'s time to it
 16 / 24 renders); a BSDF-sampled direction the guide missed then weighs at most 4x what it
 would unguided. Gradient passes (path replay) sample the BSDF alone and replay exactly that.
 
-When (``guiding = "auto"``, once per scene): the share of the image's light that arrives
+When (``guiding = "auto"``, once per scene; :mod:`~draaw_mi.integrators.guide_cache`): the share of the image's light that arrives
 after the first bounce decides; guiding is on from :data:`SHARE_MIN` up. Adaptive sampling's
 pilot measures it at no extra pass in renders of at least 64 spp and 2^20 samples (its
 spp/16 samples gather the first vertex's light in one more per-pixel sum; the main pass is
@@ -141,11 +142,13 @@ class Records:
     :func:`recording`): the vertex's point and sampled direction, the path's radiance so far
     ``L`` and ``q = beta * pdf`` (throughput after the vertex times the direction's density;
     0 where nothing was recorded); ``L_end`` the paths' final radiance. 32 bytes a vertex:
-    a batch of 2^16 paths of 6 vertices takes 12 MiB."""
-    __slots__ = ("n", "depth", "p", "d", "L", "q", "L_end")
+    a batch of 2^16 paths of 6 vertices takes 12 MiB. ``stride``: of a wavefront's lanes,
+    every ``stride``-th is recorded (adaptive sampling's pilot, :class:`~.guide_cache.PilotDecision`), the
+    ``n`` recorded paths in lane order."""
+    __slots__ = ("n", "depth", "stride", "p", "d", "L", "q", "L_end")
 
-    def __init__(self, n: int, depth: int):
-        self.n, self.depth = n, depth
+    def __init__(self, n: int, depth: int, stride: int = 1):
+        self.n, self.depth, self.stride = n, depth, int(stride)
         m = n * depth
         self.p = dr.zeros(mi.Point3f, m)
         self.d = dr.zeros(mi.Vector3f, m)
@@ -155,11 +158,32 @@ class Records:
     def valid(self) -> mi.Bool:
         return self.q > 0
 
+    def _kept(self, lane: mi.UInt32):
+        """``(index of the recorded path, whether the lane is recorded)``."""
+        if self.stride == 1:
+            return lane, mi.Bool(True)
+        return lane // self.stride, (lane % self.stride) == 0
+
     def put(self, lane: mi.UInt32, depth: mi.UInt32, p, d, L, beta, pdf, active) -> None:
-        active = active & (depth < self.depth)
-        idx = lane * self.depth + depth
+        path, kept = self._kept(lane)
+        active = active & kept & (path < self.n) & (depth < self.depth)
+        idx = path * self.depth + depth
         for arr, v in ((self.p, p), (self.d, d), (self.L, L), (self.q, beta * pdf)):
             dr.scatter(arr, v, idx, active)
+
+    def finish(self, L: mi.Spectrum) -> None:
+        """Keep the recorded lanes' final radiance (luminance) from the wavefront's ``L``."""
+        value = (L.x + L.y + L.z) / 3.0
+        if self.stride == 1 and dr.width(value) == self.n:
+            self.L_end = value
+            return
+        path, kept = self._kept(dr.arange(mi.UInt32, dr.width(value)))
+        self.L_end = dr.zeros(mi.Float, self.n)
+        dr.scatter(self.L_end, value, path, kept & (path < self.n))
+
+    def arrays(self) -> tuple:
+        """What to evaluate with the pass that records."""
+        return self.p, self.d, self.L, self.q, self.L_end
 
 
 @contextlib.contextmanager
@@ -173,10 +197,15 @@ def recording(integrator, records: Records):
         integrator._guide_records, integrator._guide = None, None
 
 
+def _record_depth(integrator) -> int:
+    """Vertices recorded per path: the integrator's ``max_depth``, at most :data:`MAX_RECORD_DEPTH`."""
+    depth = integrator.max_depth if integrator.max_depth <= MAX_RECORD_DEPTH else MAX_RECORD_DEPTH
+    return max(int(depth), 1)
+
+
 def _trace(integrator, scene: mi.Scene, paths: int, seed: int) -> Records:
     sensor = scene.sensors()[0]
-    depth = integrator.max_depth if integrator.max_depth <= MAX_RECORD_DEPTH else MAX_RECORD_DEPTH
-    rec = Records(paths, max(int(depth), 1))
+    rec = Records(paths, _record_depth(integrator))
     with dr.suspend_grad():
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, paths)
@@ -186,8 +215,8 @@ def _trace(integrator, scene: mi.Scene, paths: int, seed: int) -> Records:
             L, _, _, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                            ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
                                            state_in=None, active=mi.Bool(True))
-        rec.L_end = (L.x + L.y + L.z) / 3.0
-        dr.eval(rec.p, rec.d, rec.L, rec.q, rec.L_end)
+        rec.finish(L)
+        dr.eval(rec.arrays())
     return rec
 
 
@@ -313,12 +342,17 @@ def _chunks(paths: int) -> list[int]:
     return [paths // n + (k < paths % n) for k in range(n)]
 
 
-def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS) -> Guide | None:
+def learn_guide(integrator, scene: mi.Scene, paths: int = TRAIN_PATHS,
+                first: Records | None = None) -> Guide | None:
     """The guide learned from one pass of ``paths`` camera paths, traced in batches of at
     most :data:`CHUNK_PATHS` paths so that the records stay small; ``None`` when they saw no
-    indirect light."""
-    sizes = _chunks(max(int(paths), 1))
-    first = _trace(integrator, scene, sizes[0], GUIDE_SEED)
+    indirect light. ``first``: paths already recorded (adaptive sampling's pilot's,
+    :class:`~.guide_cache.PilotDecision`), the first batch; only the rest of ``paths`` is traced."""
+    if first is None:
+        sizes = _chunks(max(int(paths), 1))
+        first = _trace(integrator, scene, sizes[0], GUIDE_SEED)
+    else:
+        sizes = [first.n] + (_chunks(int(paths) - first.n) if paths > first.n else [])
     valid = np.array(first.valid())
     n_valid = int(np.count_nonzero(valid))
     if n_valid < 64:
@@ -378,108 +412,3 @@ def mix_pdf(guide: Guide, p, d, pdf_bsdf, guidable):
     """The mixture's density of direction ``d`` (world) at ``p``, where ``guidable``."""
     return dr.select(guidable, GUIDE_PROB * guide.pdf(p, d, guidable) + (1.0 - GUIDE_PROB) * pdf_bsdf,
                      pdf_bsdf)
-
-
-class GuideCache:
-    """``draaw_v4``'s guides, one per scene (its ``selection_key``), learned before the first
-    guided primal render or between its adaptive pilot and main pass (:meth:`for_primal`),
-    and kept for the scene's lifetime, as the learned light table. ``mode``: ``"auto"``
-    (guide where the indirect share, from adaptive sampling's pilot or
-    :func:`indirect_share`, is at least :data:`SHARE_MIN`), ``"on"`` or ``"off"``."""
-
-    def __init__(self, mode: str):
-        self.mode = mode
-        self._entries = {}        # key -> (emitter array, Guide | None, indirect share)
-
-    def wanted(self, sensor: mi.Sensor, spp: int, piloted: bool = False) -> bool:
-        """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
-        guide: always with ``"on"``; with ``"auto"`` from :data:`AUTO_MIN_SPP` spp and
-        :data:`AUTO_MIN_SAMPLES` samples in all, where the decision pilot costs 2.5-4 % of the
-        render's time once per scene (previews, fits' iterations and small test
-        renders do not pay it), or from :data:`PILOTED_MIN_SAMPLES` when the decision comes
-        free with adaptive sampling's pilot (``piloted``: :meth:`decide`)."""
-        if self.mode != "auto":
-            return self.mode == "on"
-        size = sensor.film().crop_size()
-        least = PILOTED_MIN_SAMPLES if piloted else AUTO_MIN_SAMPLES
-        return spp >= AUTO_MIN_SPP and spp * int(size[0]) * int(size[1]) >= least
-
-    def for_render(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int) -> Guide | None:
-        """The guide for a primal render of ``spp`` samples per pixel through ``sensor``:
-        :meth:`guide` where :meth:`wanted`, else ``None``."""
-        if not self.wanted(sensor, spp):
-            return None
-        size = sensor.film().crop_size()
-        return self.guide(integrator, scene, integrator.selection_key(scene), spp * int(size[0]) * int(size[1]))
-
-    def for_primal(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int, adaptive: bool):
-        """``(guide | None, decide | None)`` for ``draaw_v4``'s primal render of ``spp``
-        samples per pixel through ``sensor`` (``adaptive``: whether it renders adaptively
-        without a guide). Where adaptive sampling's pilot can decide (:meth:`wanted` with
-        ``piloted``) and ``"auto"`` has not decided on the scene yet, no guide and ``decide``,
-        for :func:`~draaw_mi.integrators.adaptive_sampling.render_adaptive`: given the
-        pilot's indirect share, it learns the guide where the share calls for one
-        (:meth:`decide`), sets it as the integrator's for the main pass and returns whether
-        it did. A scene ``"auto"`` has decided on keeps its guide (or none) from
-        :data:`PILOTED_MIN_SAMPLES` up, however it renders now (``draaw_v4`` renders a decided
-        scene stratified, not adaptively). Otherwise :meth:`guide` (cached, or ``"on"``) or
-        :meth:`for_render`."""
-        key = integrator.selection_key(scene)
-        size = sensor.film().crop_size()
-        samples = spp * int(size[0]) * int(size[1])
-        if self.mode == "auto" and not self.pending(key) and self.wanted(sensor, spp, piloted=True):
-            return self.guide(integrator, scene, key, samples), None   # decided: its guide, or none
-        if not (adaptive and self.wanted(sensor, spp, piloted=True)):
-            return self.for_render(integrator, scene, sensor, spp), None
-        if not self.pending(key):
-            return self.guide(integrator, scene, key, samples), None
-
-        def decide(share: float) -> bool:
-            integrator._guide = self.decide(integrator, scene, key, share, samples)
-            return integrator._guide is not None
-        return None, decide
-
-    def pilot_decides(self, integrator, scene: mi.Scene, sensor: mi.Sensor, spp: int) -> bool:
-        """Whether adaptive sampling's pilot is to decide on guiding for a primal render of
-        ``spp`` samples per pixel through ``sensor`` (``"auto"``, the scene undecided, and
-        :meth:`wanted` with ``piloted``): ``draaw_v4`` then renders it adaptively, not
-        stratified."""
-        return self.pending(integrator.selection_key(scene)) and self.wanted(sensor, spp, piloted=True)
-
-    def pending(self, key: tuple) -> bool:
-        """Whether ``"auto"`` has yet to decide on the scene of ``key``."""
-        return self.mode == "auto" and key not in self._entries
-
-    def guide(self, integrator, scene: mi.Scene, key: tuple, samples: int | None = None) -> Guide | None:
-        """The guide to render ``scene`` with, or ``None``; decided here on a first call
-        (``"auto"``: by :func:`indirect_share`'s pilot)."""
-        if self.mode == "off":
-            return None
-        entry = self._entries.get(key)
-        if entry is None:
-            share = indirect_share(integrator, scene) if self.mode == "auto" else 1.0
-            return self.decide(integrator, scene, key, share, samples)
-        return entry[1]
-
-    def decide(self, integrator, scene: mi.Scene, key: tuple, share: float,
-               samples: int | None = None) -> Guide | None:
-        """Record ``share`` (the indirect share of the scene of ``key``) and, from
-        :data:`SHARE_MIN` up (always with ``"on"``), learn its guide from :data:`TRAIN_PATHS`
-        paths, or ``samples / TRAIN_SHARE`` for a render of ``samples`` samples if fewer (the
-        training stays a small part of the render's time); returns the guide or ``None``."""
-        paths = TRAIN_PATHS if samples is None else \
-            int(np.clip(samples // TRAIN_SHARE, MIN_TRAIN_PATHS, TRAIN_PATHS))
-        guide = learn_guide(integrator, scene, paths) if share >= SHARE_MIN or self.mode == "on" else None
-        if len(self._entries) >= 4:
-            self._entries.pop(next(iter(self._entries)))
-        self._entries[key] = (scene.emitters_dr(), guide, share)
-        return guide
-
-    def share(self, key: tuple) -> float | None:
-        """The indirect share measured for the scene of ``key`` (``None``: not yet)."""
-        entry = self._entries.get(key)
-        return None if entry is None else entry[2]
-
-    def forget(self, scene_id: int) -> None:
-        for key in [k for k in self._entries if k[0] == scene_id]:
-            del self._entries[key]

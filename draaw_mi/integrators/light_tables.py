@@ -22,7 +22,7 @@ class LightTables(EmissionSplitting):
     runs. The subclass sets those three (and ``_light_sums``, which the pilot fills) in its
     constructor, traces the pilot's paths with its own ``sample``
     (:func:`~.light_pilot.learn_selection`), and has ``features(scene)`` and ``guides`` (its
-    :class:`~.guiding.GuideCache`)."""
+    :class:`~.guide_cache.GuideCache`)."""
 
     def emitter_selection(self, scene):
         """:class:`~.sampling.PowerSelection` of ``scene`` (cached), or ``None`` for uniform:

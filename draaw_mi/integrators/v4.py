@@ -7,7 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from . import emission_split, guiding
+from . import emission_split, guide_cache, guiding
 from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import scene_view
@@ -223,7 +223,7 @@ class DraawV4Integrator(V4Passes):
         mode = str(props.get("guiding", "auto"))
         if mode not in ("auto", "on", "off"):
             raise ParameterError(f"draaw_v4: guiding={mode!r}; expected 'auto', 'on' or 'off'")
-        self.guides = guiding.GuideCache(mode)
+        self.guides = guide_cache.GuideCache(mode)
         self._guide = self._guide_records = None    # set around guided primal renders (guiding.py)
 
     def _extra_repr(self) -> str:

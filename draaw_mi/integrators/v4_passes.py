@@ -43,7 +43,7 @@ class V4Passes(LightTables):
         :func:`~draaw_mi.integrators.film_splat.render_uniform`, which splats the split rays).
 
         Guiding (:meth:`GuideCache.for_primal
-        <draaw_mi.integrators.guiding.GuideCache.for_primal>`): where the adaptive pilot runs
+        <draaw_mi.integrators.guide_cache.GuideCache.for_primal>`): where the adaptive pilot runs
         and ``auto`` has not decided on the scene yet, the pilot measures the indirect share
         and the main pass is guided if it calls for it. A guided render samples every pixel
         alike: with the guide, adaptive allocation from a pilot of spp/16 raised the error
@@ -78,7 +78,7 @@ class V4Passes(LightTables):
         guide is in use; :meth:`render_primal`). Where it would render stratified
         (:meth:`stratified`) only while its pilot is to decide on guiding (``guides``, the
         integrator's by default: :meth:`GuideCache.pilot_decides
-        <draaw_mi.integrators.guiding.GuideCache.pilot_decides>`)."""
+        <draaw_mi.integrators.guide_cache.GuideCache.pilot_decides>`)."""
         # max_depth 1 (emitters seen directly): only pixel jitter is noisy, nothing to adapt
         possible = bool(self.adaptive and develop and not self.aovs and n >= ADAPTIVE_MIN_SPP
                         and self.max_depth > 1

@@ -103,3 +103,29 @@ def test_main_does_not_overwrite_the_curated_results_by_default(monkeypatch, tmp
     results = os.path.join(ROOT, "benchmarks", "results")           # the repository's, found by the test
     assert len(written) == 1 and os.path.abspath(written[0]) != os.path.join(results, "speed_suite.md")
     assert os.path.abspath(written[0]) == os.path.join(results, "speed_suite_latest.md")
+
+
+def test_learning_time_trains_from_the_pilots_records_and_counts_their_cost(monkeypatch):
+    """Where adaptive sampling's pilot decides (here forced at 32x32, 64 spp, the training
+    taking 2,048 paths), the benchmark's learning time is the training from the pilot's
+    records plus what recording them costs the pilot, as a first render pays it: no camera
+    pass of its own runs, and the recording's cost is measured. Timing the decision with no
+    records (the training's own camera pass) fails. (As in the suite, a warm-up render has
+    read the share.)"""
+    import mitsuba as mi
+
+    from draaw_mi.integrators import guiding
+    monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
+    monkeypatch.setattr(guiding, "MIN_TRAIN_PATHS", 1)
+    scene = ss.load("glossy_diffuse", 32)
+    integ = mi.load_dict({"type": "draaw_v4", "max_depth": 5})
+    mi.render(scene, integrator=integ, spp=64)      # the warm-up: its pilot reads the share
+    traced, costs = [], []
+    trace = guiding._trace
+    monkeypatch.setattr(guiding, "_trace", lambda *a, **k: traced.append(a[2]) or trace(*a, **k))
+    cost = sb.recording_cost
+    monkeypatch.setattr(sb, "recording_cost", lambda *a, **k: costs.append(cost(*a, **k)) or costs[-1])
+    seconds = sb.learning_time(integ, scene, 64)
+    assert traced == [] and len(costs) == 1 and costs[0] >= 0.0
+    assert seconds >= costs[0] and np.isfinite(seconds)
+    assert integ.guides.guide(integ, scene, integ.selection_key(scene)) is not None
