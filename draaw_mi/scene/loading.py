@@ -13,7 +13,9 @@ from __future__ import annotations
 import copy
 import os
 import re
+import shutil
 import tempfile
+import weakref
 
 import mitsuba as mi
 
@@ -174,8 +176,34 @@ def _wrapped(mi_scene) -> DraawScene:
     return entry[1]
 
 
+class ScratchFolder:
+    """The folder a scene's generated files go to (meshes, textures its description makes),
+    removed once no scene holds it: the scenes derived from a scene (``with_resolution``,
+    edits) load those files again and share it. Unlike :class:`tempfile.TemporaryDirectory`,
+    whose finaliser warns (``ResourceWarning: Implicitly cleaning up``) when it is collected
+    uncleaned, collection is how this one is meant to go; it also goes at exit.
+
+    >>> folder = ScratchFolder()
+    >>> path = folder.name
+    >>> os.path.isdir(path)
+    True
+    >>> del folder
+    >>> import gc; _ = gc.collect(); os.path.exists(path)
+    False
+    """
+    __slots__ = ("name", "_remove", "__weakref__")
+
+    def __init__(self, prefix: str = "draaw-mi-"):
+        self.name = tempfile.mkdtemp(prefix=prefix)
+        self._remove = weakref.finalize(self, shutil.rmtree, self.name, ignore_errors=True)
+
+    def cleanup(self) -> None:
+        """Remove the folder now."""
+        self._remove()
+
+
 def from_description(desc: dict, source: str, base_dir: str, overrides: dict) -> DraawScene:
-    tmp = tempfile.TemporaryDirectory(prefix="draaw-mi-")
+    tmp = ScratchFolder()
     mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
     scene = load_dict_or_error(mi_dict, source)
     return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))

@@ -195,6 +195,34 @@ def test_with_resolution_keeps_texture_maps_and_their_edits():
     np.testing.assert_allclose(np.array(draaw_mi.render(resized, version="path")), ref, atol=1e-6)
 
 
+def test_the_scratch_folder_outlives_the_scene_while_a_derived_scene_holds_it(tmp_path):
+    """A described scene's generated files (here a mesh's PLY) go to a scratch folder that
+    the scenes derived from it share: it stays while the resized copy lives (and that copy
+    reloads from it), then goes once both are collected, without the ``ResourceWarning`` a
+    collected ``tempfile.TemporaryDirectory`` gives. A folder per scene removed with its
+    scene fails the reload; a ``TemporaryDirectory`` warns."""
+    import gc
+    import warnings
+    obj = tmp_path / "tri.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    desc = tiny_description(resolution=[16, 12])
+    desc["shapes"].append({"type": "mesh", "name": "tri", "material": "ground", "file": str(obj)})
+    scene = draaw_mi.load_scene(desc)
+    folder = scene._tmp.name
+    assert os.listdir(folder)                                    # the mesh's PLY
+    resized = scene.with_resolution(12, 8)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always", ResourceWarning)
+        del scene
+        gc.collect()
+        assert os.path.isdir(folder)
+        assert resized.with_resolution(8, 6).resolution == (8, 6)   # loads its files again
+        del resized
+        gc.collect()
+    assert not os.path.exists(folder)
+    assert not [w for w in said if issubclass(w.category, ResourceWarning)], [str(w.message) for w in said]
+
+
 def test_with_resolution_keeps_edited_vertices_and_only_those():
     """Mesh buffers are written over only where edited (each write rebuilds the BVH): a
     moved box arrives moved, the untouched one as loaded."""
