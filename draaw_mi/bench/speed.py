@@ -35,6 +35,7 @@ The machine is usually shared: times are medians of back-to-back ratios, never s
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import platform
@@ -51,7 +52,7 @@ from ..integrators import adaptive_sampling as ads
 from ..integrators import guide_cache, guiding
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
-from ..scene.loading import wrap
+from ..scene.loading import release_wrapped, wrap
 from . import suite as ss
 from .code_digest import code_digest
 from .study import load_note
@@ -136,6 +137,9 @@ def reference(name: str, res: int, scene, depth: int, spp: int, cache: str, dige
     return mean, var, time.perf_counter() - t0
 
 
+LEARN_REPEATS = 3                   # learnings timed per scene and integrator (the median counts)
+
+
 def learning_time(integ, scene, spp: int) -> float:
     """Seconds ``draaw_v4`` takes to decide on and learn ``scene``'s guide for a render of
     ``spp`` (:meth:`GuideCache.for_primal <draaw_mi.integrators.guide_cache.GuideCache.for_primal>`),
@@ -206,8 +210,10 @@ def bench(name: str, res: int, args) -> dict | None:
     for it in integs:
         render(scene, it, args.spp, 1)                 # compile
     # V4's guide (its decision and training pass) is learned once per scene: counted in every
-    # render's time, as if each were the scene's first
-    learn = [learning_time(it, scene, args.spp) for it in integs]
+    # render's time, as if each were the scene's first (the median of LEARN_REPEATS learnings:
+    # one measurement of 10-20 ms swung the glossy panel's 128^2 time ratio by 0.06)
+    learn = [statistics.median(learning_time(it, scene, args.spp) for _ in range(LEARN_REPEATS))
+             for it in integs]
     times = [[] for _ in specs]
     errs = [[] for _ in specs]
     for c in range(args.repeats):
@@ -258,8 +264,8 @@ def report(results: list[dict], args) -> str:
            f"Dr.Jit threads {dr.thread_count()}, Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}; "
            f"{time.strftime('%Y-%m-%d %H:%M')}  ",
            f"Each scene's own pixel filter (box unless its row says), sampler `{args.sampler}` "
-           f"for every integrator; V4's guide learning (its decision, training pass) added to "
-           f"each of its render times; reference `path` at "
+           f"for every integrator; V4's guide learning (its decision, training pass; the median "
+           f"of {LEARN_REPEATS}) added to each of its render times; reference `path` at "
            f"{args.ref_spp} spp (its own noise subtracted from every MSE); {args.repeats} "
            f"interleaved cycles at {args.spp} spp, one seed per render.", "",
            "Cells: **time to reach `path`'s {0}-spp RMSE, relative to `path`** = median over "
@@ -324,6 +330,11 @@ def main(argv=None, command: str | None = None) -> int:
             r = bench(name, res, args)
             if r is not None:
                 results.append(r)
+            # each scene measured as the only one loaded: the bare scenes that draaw_mi.render
+            # keeps to replay, and cycles, let go (live scenes' BSDFs are traced into every
+            # loop: six scenes kept alive took the glossy panel's guide learning from 11 to 41 ms)
+            release_wrapped()
+            gc.collect()
     if not results:          # (an empty table and exit 0 would look like a finished run)
         raise SystemExit("speed suite: every requested scene was skipped; nothing was measured")
     text = report(results, args)
