@@ -31,10 +31,10 @@ class PilotDecision:
     by the BSDF alone, as :func:`~.guiding.learn_guide`'s own (spread over the image by pixel
     rather than at random: any spread learns a guide, and the mixture keeps the render unbiased
     whatever it learned; on the glossy panel at 128^2, guides from either read 0.291x
-    ``path``'s MSE, eight guides each). Recording them saves the training its camera pass: on
-    the glossy panel, learning took 10 ms against 26.5 ms at 128^2 and 43-47 ms against
-    57-64 ms at 256^2, the records adding 1-5 ms to the pilot; 1-8 ms (0.3-1 % of a render)
-    in scenes the decision leaves unguided (``benchmarks/results/speed_suite.md``).
+    ``path``'s MSE, eight guides each). Where they are the whole training (:meth:`records`)
+    they save it its camera pass: on the glossy panel at 128^2, learning took 10 ms against
+    26.5 ms, the records adding 1.2 ms to the pilot; 0.3-2.3 ms (0.2-1 % of a render) in
+    scenes the decision leaves unguided (``benchmarks/results/speed_suite.md``).
     """
 
     def __init__(self, cache: "GuideCache", integrator, scene: mi.Scene, key: tuple, samples: int):
@@ -42,11 +42,18 @@ class PilotDecision:
         self.samples = samples
         self._records = None
 
-    def records(self, lanes: int) -> guiding.Records:
-        """Records for a pilot of ``lanes`` paths: every ``stride``-th lane, as many paths as
-        the training takes and at most :data:`~.guiding.CHUNK_PATHS` (12 MiB at 6 vertices)."""
-        want = min(train_paths(self.samples), guiding.CHUNK_PATHS, int(lanes))
-        stride = -(-int(lanes) // max(want, 1))
+    def records(self, lanes: int) -> guiding.Records | None:
+        """Records for a pilot of ``lanes`` paths, every ``stride``-th lane, as many paths as
+        the training takes; ``None`` (the training traces its own) unless they are the whole
+        training, one batch of at most :data:`~.guiding.CHUNK_PATHS` (12 MiB at 6 vertices):
+        renders of up to about 2^21 samples. In larger ones the pass they would shorten is a
+        small share of the render, and they add to the pilot's peak memory (a 1024^2, 256-spp
+        render of ``scenes/cornell.toml``: 235 against 223 MiB, 1.27x ``path``'s)."""
+        want = train_paths(self.samples)
+        if want > min(guiding.CHUNK_PATHS, int(lanes)):
+            return None
+        # at least the paths the training takes (no pass for a remainder), at most a batch
+        stride = max(int(lanes) // want, -(-int(lanes) // guiding.CHUNK_PATHS))
         self._records = guiding.Records(-(-int(lanes) // stride), guiding._record_depth(self.integrator), stride)
         return self._records
 

@@ -13,8 +13,8 @@ bytes per recorded vertex of a batch of :data:`CHUNK_PATHS` paths, 12 MiB at 6 v
 and 29 bytes per light-path hit, 5.4 MiB a batch, whatever the image's size).
 
 Learning (:func:`learn_guide`, once per scene, cached by ``draaw_v4``): a pass of at most
-:data:`TRAIN_PATHS` camera paths (where adaptive sampling's pilot decides, the pilot's own
-paths first: :class:`~.guide_cache.PilotDecision`) records, at each vertex whose BSDF has no delta lobe, the
+:data:`TRAIN_PATHS` camera paths (where adaptive sampling's pilot decides and has them all, the
+pilot's own: :class:`~.guide_cache.PilotDecision`) records, at each vertex whose BSDF has no delta lobe, the
 cell, the direction sampled and the radiance that came back along it, ``(L_end - L_k) /
 beta_k``; each record adds ``luminance / pdf`` (an estimate of the incident radiance's
 integral over its bin) to its cell's bin. Few of those records carry light where it arrives

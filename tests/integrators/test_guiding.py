@@ -167,6 +167,27 @@ def test_the_pilots_paths_train_the_guide_without_a_pass_of_their_own(monkeypatc
     assert camera[1] > 0.2 and np.abs(pilot - camera).max() < 0.04, (pilot, camera)
 
 
+def test_the_pilot_records_only_a_whole_training():
+    """The pilot's paths are recorded only where they are the whole training (one batch of
+    at most 2^16 paths, no more than the pilot has), every stride-th lane: at 128^2 and
+    64 spp the training's 32,768 of the pilot's 65,536 lanes; at 256^2 (131,072, two
+    batches) and at 1024^2 none, where their 12 MiB raised a 256-spp render's peak to 1.27x
+    ``path``'s for a training pass 1/6 shorter. Recording a first batch at any size fails."""
+    from draaw_mi.integrators.guide_cache import PilotDecision
+    scene = ss.load("glossy_diffuse", 16)
+    integ = integrator("draaw_v4", max_depth=5)
+
+    def records(res, spp):
+        d = PilotDecision(integ.guides, integ, scene, integ.selection_key(scene), spp * res * res)
+        return d.records(max(2, spp // 16) * res * res)
+    rec = records(128, 64)
+    assert rec.n == 32768 and rec.stride == 2 and rec.depth == 5
+    assert records(256, 64) is None and records(1024, 256) is None
+    assert records(64, 64) is None              # the training's floor: more paths than the pilot has
+    assert records(181, 64).n == 65522          # all the training's paths, one lane in two
+    assert records(128, 100).n == 49152         # 6 spp of 98,304 lanes for 51,200: one batch at most
+
+
 def test_a_first_render_decided_by_the_pilot_keeps_paths_expectation(panel, monkeypatch):
     """Each seed a fresh integrator, so each render is the scene's first: an unguided pilot of
     spp/16, then (its share 1.0) a guided uniform main pass, mixed with the constant weights
