@@ -22,8 +22,8 @@ def train_paths(samples: int | None) -> int:
 
 class PilotDecision:
     """Guiding's first decision on a scene, taken on adaptive sampling's pilot
-    (:meth:`GuideCache.for_primal`): :meth:`records` are the pilot's paths to record, the
-    training pass's first batch; called with the pilot's indirect share, it learns the guide
+    (:meth:`GuideCache.for_primal`): :meth:`records` are the pilot's paths to record, where
+    they can be the training's camera paths; called with the pilot's indirect share, it learns the guide
     where the share calls for one, sets it as ``integrator``'s for the main pass and returns
     whether it did.
 
