@@ -377,14 +377,17 @@ def allocate(variance: np.ndarray, budget: float, m_min: int, seed: int,
 
 
 def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
-                    alpha: bool, decide=None):
+                    alpha: bool, decide=None, rest_render=None):
     """Two-pass adaptive render (see the module docstring); returns an (H, W, 3|4) tensor.
 
     ``decide`` (``draaw_v4``, guiding's first decision on a scene,
     :class:`~draaw_mi.integrators.guide_cache.PilotDecision`): the pilot's paths fill its
     ``records(lanes)`` (where it has them), and it is called with the pilot's indirect share
     (:func:`pilot_indirect_share`); where it returns true (the main pass is now guided), the
-    main pass samples every pixel alike.
+    main pass samples every pixel alike. ``rest_render(count, seed)`` (``draaw_v4`` where it would
+    otherwise render stratified: the pilot only decides): where ``decide`` returns false,
+    the main pass is that uniform render of the remaining samples, and the image is
+    ``(a / spp) * pilot + (1 - a / spp) * rest_render(spp - a, ...)``.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
     (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit. Under a filter
@@ -407,13 +410,23 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
                          record=records)
     del records                       # (decide holds them until it has learned)
     guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
+    s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
+    if rest_render is not None and not guided:
+        # the pilot's image and the rest's, weighted a / spp and 1 - a / spp: constants, so
+        # each part keeps its expectation (under other filters the ratio estimate, as path's)
+        pilot = _pilot_image(sums, splat, a, 4 if alpha else 3, h, w)
+        dr.eval(pilot)
+        del sums, splat
+        release_cache()
+        img = pilot * wp + rest_render(spp - a, s2 ^ 0x5BD1E995) * (1.0 - wp)
+        dr.eval(img)
+        return img
     hits = alpha and splat is None
     var, segments, halves = _pilot_maps(sums, a, hits, h, w)     # (keeps only the image's sums)
     if splat is not None:
         del sums                      # (the image is in the block)
         release_cache()
     channels = 4 if alpha else 3      # (alpha: whether the film has an alpha channel)
-    s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
     if guided or pilot_agreement(halves) < AGREEMENT_MIN:
         # guided: measured better uniform; or the pilot cannot tell where the noise is
         counts = np.full(h * w, rest, np.uint32)
@@ -446,6 +459,18 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     for c in range(channels):
         dr.scatter(out, dr.fma(main[c], per, pilot[c]), at + c)
     dr.eval(out)
+    return mi.TensorXf(out, (h, w, channels))
+
+
+def _pilot_image(sums: list, splat, a: int, channels: int, h: int, w: int) -> mi.TensorXf:
+    """The developed image of a pilot of ``a`` samples per pixel: its per-pixel ``sums`` over
+    ``a`` (box filter), or the block ``splat`` that holds its samples alone, developed."""
+    if splat is not None:
+        return splat.develop()
+    out = dr.zeros(mi.Float, h * w * channels)
+    at = dr.arange(mi.UInt32, h * w) * channels
+    for c in range(channels):
+        dr.scatter(out, sums[c] * (1.0 / a), at + c)
     return mi.TensorXf(out, (h, w, channels))
 
 

@@ -68,7 +68,13 @@ class V4Passes(LightTables):
         try:
             if adaptive and self._guide is None:
                 alpha = mi.has_flag(sensor.film().flags(), mi.FilmFlags.Alpha)
-                return ads.render_adaptive(self, scene, sensor, seed, n, alpha, decide)
+                rest = None
+                if decide is not None and self.stratified(scene, sensor, n):
+                    # adaptive only for the pilot's decision: left unguided, the rest of the
+                    # samples render stratified, as the scene's later renders do
+                    def rest(count, rest_seed):
+                        return self._render_uniform(scene, sensor, rest_seed, count, develop, evaluate)
+                return ads.render_adaptive(self, scene, sensor, seed, n, alpha, decide, rest)
             return self._render_uniform(scene, sensor, seed, spp, develop, evaluate)
         finally:
             self._guide = None

@@ -351,3 +351,31 @@ def test_a_bad_guiding_value_is_refused_in_one_line():
     # (Mitsuba's plugin loader wraps the error in a RuntimeError that quotes it)
     with pytest.raises((ParameterError, RuntimeError), match=r"draaw_v4: guiding='maybe'; expected 'auto', 'on' or 'off'"):
         integrator("draaw_v4", guiding="maybe")
+
+
+def test_a_new_guide_renders_with_the_kernels_already_compiled(panel):
+    """Two guides over different grids (the second learned from other paths) render through
+    the same kernels: the grid's corner, scale and size are opaque values, not literals. As
+    literals each new guide compiled its guided render anew, which took a first guided render
+    of the glossy panel at 128^2 from 1.1x to 2.1x ``path``'s time."""
+    import drjit as dr
+    integ = integrator("draaw_v4", max_depth=5, guiding="on")
+    key = integ.selection_key(panel)
+    render_np(panel, integ, 64, 0)                       # learns a guide, compiles
+    first = integ.guides.guide(integ, panel, key)
+    integ.guides = type(integ.guides)("on")
+    old = guiding.GUIDE_SEED
+    try:
+        guiding.GUIDE_SEED = old + 12345                 # other training paths: another grid
+        second = integ.guides.guide(integ, panel, key)
+    finally:
+        guiding.GUIDE_SEED = old
+    assert not np.allclose(np.ravel(np.array(first.lo, float)), np.ravel(np.array(second.lo, float)))
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()                              # (cleared)
+        render_np(panel, integ, 64, 1)
+        compiled = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT and not k.get("cache_hit")]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert compiled == [], [k.get("operation_count") for k in compiled]
