@@ -49,6 +49,7 @@ from .emission_split import PrimaryRays, film_mapping
 from .features import sampler_plugin
 from .film_splat import FilmSplat, release_cache
 from .guiding import recording, share_after
+from .strata_sampler import strata_sampler
 
 PILOT_FRACTION = 16         # pilot = spp / 16 samples per pixel (at least 2)
 MIN_FRACTION = 2            # every pixel keeps at least (spp - pilot) / 2 main samples
@@ -185,7 +186,7 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
                moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False,
-               into=None, record=None):
+               into=None, record=None, stratified: bool = False):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
@@ -200,15 +201,20 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
     (``film_splat``); with ``into``, a ``(FilmSplat, share)`` that several passes fill, this
     pass's samples go there with their weights ``1 / count`` times ``share`` and the filtered
     image is left to the caller (None). ``record``: :class:`~draaw_mi.integrators.guiding.Records`
-    the paths fill for a guide's training (``draaw_v4``), evaluated by the same kernel."""
+    the paths fill for a guide's training (``draaw_v4``), evaluated by the same kernel.
+    ``stratified`` (uniform ``counts``): V4's stratified samples, not independent ones (a pilot
+    whose variance maps go unused: :func:`render_adaptive` with ``rest_render``)."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     ox, oy = (int(v) for v in film.crop_offset())
     uniform = isinstance(counts, int)
     total = counts * w * h if uniform else int(counts.sum(dtype=np.int64))
     with dr.suspend_grad():
-        sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed, total)
+        if stratified and uniform:
+            sampler = strata_sampler(counts, seed, total)
+        else:
+            sampler = mi.load_dict({"type": "independent"})
+            sampler.seed(seed, total)
         idx = dr.arange(mi.UInt32, total)
         if uniform:        # (opaque: one kernel for every pilot size)
             pixel = idx // dr.opaque(mi.UInt32, counts)
@@ -385,7 +391,8 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     ``records(lanes)`` (where it has them), and it is called with the pilot's indirect share
     (:func:`pilot_indirect_share`); where it returns true (the main pass is now guided), the
     main pass samples every pixel alike. ``rest_render(count, seed)`` (``draaw_v4`` where it would
-    otherwise render stratified: the pilot only decides): where ``decide`` returns false,
+    otherwise render stratified: the pilot only decides, and its samples are stratified too,
+    its variance maps unused): where ``decide`` returns false,
     the main pass is that uniform render of the remaining samples, and the image is
     ``(a / spp) * pilot + (1 - a / spp) * rest_render(spp - a, ...)``.
 
@@ -407,7 +414,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     records = decide.records(a * w * h) if hasattr(decide, "records") else None   # guide_cache.PilotDecision
     sums, _ = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
                          gather_first=decide is not None, into=None if splat is None else (splat, wp),
-                         record=records)
+                         record=records, stratified=rest_render is not None)
     del records                       # (decide holds them until it has learned)
     guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF

@@ -114,11 +114,11 @@ def test_a_scenes_first_render_decides_on_guiding_by_the_adaptive_pilot(monkeypa
 
 
 def test_a_first_render_left_unguided_renders_the_rest_stratified(monkeypatch):
-    """The first render's adaptive pilot only decides on guiding: where it leaves the scene
-    unguided, the other 60 of 64 samples render as the scene's later renders do (V4's
-    stratified sampler, every pixel alike), not adaptively with independent samples: a
-    first CLI render of Mitsuba's Cornell box read 0.16x ``path``'s MSE at 128^2 that way,
-    0.06x now, later renders 0.05x. Passing no stratified rest fails."""
+    """The first render's adaptive pilot only decides on guiding: its 4 samples are V4's
+    stratified ones, and where it leaves the scene unguided the other 60 of 64 render as the
+    scene's later renders do (stratified, every pixel alike), not adaptively with independent
+    samples: a first CLI render of Mitsuba's Cornell box read 0.16x ``path``'s MSE at 128^2
+    that way, 0.06x now, later renders 0.05x. Passing no stratified rest fails."""
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
     allocations = []
     allocate = ads.allocate
@@ -126,11 +126,14 @@ def test_a_first_render_left_unguided_renders_the_rest_stratified(monkeypatch):
     scene = mi.load_dict(rs.cornell_draaw(res=16, spp=4))
     integ = integrator("draaw_v4", max_depth=3)
     kinds = _sampler_kinds(monkeypatch, integ)
-    counts = []
+    counts, pilots = [], []
     real = ads.render_adaptive
     monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (counts.append(a[4]), real(*a, **k))[1])
+    made = ads.strata_sampler
+    monkeypatch.setattr(ads, "strata_sampler", lambda spp, *a: pilots.append(spp) or made(spp, *a))
     img = np.array(mi.render(scene, integrator=integ, spp=64, seed=1))
-    assert counts == [64] and allocations == [] and kinds == ["strata"] and np.isfinite(img).all()
+    assert counts == [64] and allocations == [] and np.isfinite(img).all()
+    assert pilots == [4] and kinds == ["strata"]            # the pilot's 4, then the other 60
     assert integ.guides.share(integ.selection_key(scene)) < guiding.SHARE_MIN
 
 
