@@ -186,7 +186,7 @@ def _check_map(spp_map, h: int, w: int) -> np.ndarray:
 
 def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int,
                moments: bool, alpha: bool, pilot: bool = False, gather_first: bool = False,
-               into=None, record=None, stratified: bool = False):
+               into=None, record=None, stratified: tuple | None = None):
     """``(per-pixel sums, filtered image | None)`` of one wavefront, both in Dr.Jit and
     evaluated by one kernel. ``counts``: flat uint32 counts per pixel, or an int (the same
     count everywhere: no per-pixel table). The sums' channels: R, G, B; with ``moments`` or
@@ -202,16 +202,18 @@ def _pass_sums(integrator, scene: mi.Scene, sensor: mi.Sensor, counts, seed: int
     pass's samples go there with their weights ``1 / count`` times ``share`` and the filtered
     image is left to the caller (None). ``record``: :class:`~draaw_mi.integrators.guiding.Records`
     the paths fill for a guide's training (``draaw_v4``), evaluated by the same kernel.
-    ``stratified`` (uniform ``counts``): V4's stratified samples, not independent ones (a pilot
-    whose variance maps go unused: :func:`render_adaptive` with ``rest_render``)."""
+    ``stratified`` (uniform ``counts``), a ``(pattern, offset)``: V4's stratified samples, these
+    samples of each pixel's pattern (:func:`~draaw_mi.integrators.strata_sampler.strata_sampler`),
+    not independent ones (a pilot whose variance maps go unused: :func:`render_adaptive`
+    with ``rest_render``)."""
     film = sensor.film()
     w, h = (int(v) for v in film.crop_size())
     ox, oy = (int(v) for v in film.crop_offset())
     uniform = isinstance(counts, int)
     total = counts * w * h if uniform else int(counts.sum(dtype=np.int64))
     with dr.suspend_grad():
-        if stratified and uniform:
-            sampler = strata_sampler(counts, seed, total)
+        if stratified is not None and uniform:
+            sampler = strata_sampler(counts, seed, total, stratified)
         else:
             sampler = mi.load_dict({"type": "independent"})
             sampler.seed(seed, total)
@@ -391,10 +393,11 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     ``records(lanes)`` (where it has them), and it is called with the pilot's indirect share
     (:func:`pilot_indirect_share`); where it returns true (the main pass is now guided), the
     main pass samples every pixel alike. ``rest_render(count, seed)`` (``draaw_v4`` where it would
-    otherwise render stratified: the pilot only decides, and its samples are stratified too,
-    its variance maps unused): where ``decide`` returns false,
-    the main pass is that uniform render of the remaining samples, and the image is
-    ``(a / spp) * pilot + (1 - a / spp) * rest_render(spp - a, ...)``.
+    otherwise render stratified: the pilot only decides, and its samples are the first ``a``
+    of each pixel's stratified pattern of ``spp``, its variance maps unused): where ``decide``
+    returns false, the main pass is that uniform render of the rest of the pattern (with the
+    pilot's seed), and the image is ``(a / spp) * pilot + (1 - a / spp) * rest_render(spp - a,
+    seed)``: with a box filter, one stratified render's.
 
     Memory: both passes' per-pixel sums stay in Dr.Jit (float32); what the allocation needs
     (four (H, W) float32 maps) is read back, and the image is formed in Dr.Jit. Under a filter
@@ -414,7 +417,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     records = decide.records(a * w * h) if hasattr(decide, "records") else None   # guide_cache.PilotDecision
     sums, _ = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
                          gather_first=decide is not None, into=None if splat is None else (splat, wp),
-                         record=records, stratified=rest_render is not None)
+                         record=records, stratified=None if rest_render is None else (spp, 0))
     del records                       # (decide holds them until it has learned)
     guided = decide is not None and decide(pilot_indirect_share(sums[:3], sums.pop()))
     s2 = (seed * 0x9E3779B1 + 0x7F4A7C15) & 0xFFFFFFFF
@@ -425,7 +428,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
         dr.eval(pilot)
         del sums, splat
         release_cache()
-        img = pilot * wp + rest_render(spp - a, s2 ^ 0x5BD1E995) * (1.0 - wp)
+        img = pilot * wp + rest_render(spp - a, seed) * (1.0 - wp)
         dr.eval(img)
         return img
     hits = alpha and splat is None

@@ -78,7 +78,9 @@ class StrataSampler:
     """
     DRJIT_STRUCT = {"index": mi.UInt32, "key": mi.UInt32, "dim": mi.UInt32, "rng": mi.PCG32}
     spp = 0                    # samples per pixel
-    bits = 0                   # N = 2^bits strata >= spp
+    bits = 0                   # N = 2^bits strata >= the pattern's samples
+    pattern = 0                # samples of the pixel's whole pattern (spp, or more: a part)
+    offset = 0                 # this pass's first sample of the pattern
 
     def __init__(self, seed=None, wavefront: int = 0):
         """Seeded for ``wavefront`` lanes (a multiple of :attr:`spp`), or empty (no ``seed``:
@@ -90,8 +92,8 @@ class StrataSampler:
             raise ValueError(f"StrataSampler: spp={spp}, wavefront={wavefront}; expected spp >= 1 "
                              "dividing the wavefront")
         idx = dr.arange(mi.UInt32, wavefront)
-        pixel = idx >> self.bits if spp == 1 << self.bits else idx // spp
-        self.index = idx - pixel * spp
+        pixel = idx >> self.bits if spp == 1 << self.bits and not self.offset else idx // spp
+        self.index = idx - pixel * spp + self.offset
         # (opaque: a literal seed, a Python or a Dr.Jit one, would compile a kernel per seed)
         if isinstance(seed, int):
             seed = dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
@@ -100,7 +102,8 @@ class StrataSampler:
             dr.make_opaque(seed)
         self.key = mix32(pixel ^ mix32(seed ^ SEED_SALT))
         self.dim = mi.UInt32(0)
-        v0, v1 = mi.sample_tea_32(seed, idx)
+        # (the sample's place in its pixel's pattern: two parts of one pattern draw apart)
+        v0, v1 = mi.sample_tea_32(seed, idx if spp == self.pattern else pixel * self.pattern + self.index)
         self.rng = mi.PCG32(wavefront, v0, v1)
 
     def sample_count(self) -> int:
@@ -147,12 +150,25 @@ class StrataSampler:
 
 
 @functools.lru_cache(maxsize=None)
-def _sampler_class(spp: int) -> type:
-    return type(f"StrataSampler{spp}", (StrataSampler,), {"spp": spp, "bits": (spp - 1).bit_length()})
+def _sampler_class(spp: int, pattern: int, offset: int) -> type:
+    return type(f"StrataSampler{spp}_{pattern}_{offset}", (StrataSampler,),
+                {"spp": spp, "bits": (pattern - 1).bit_length(), "pattern": pattern, "offset": offset})
 
 
-def strata_sampler(spp: int, seed, wavefront: int) -> StrataSampler:
-    """A :class:`StrataSampler` of ``spp`` samples per pixel over ``wavefront`` lanes."""
-    if int(spp) < 1:
-        raise ValueError(f"strata_sampler: spp={spp}; expected a count >= 1")
-    return _sampler_class(int(spp))(seed, wavefront)
+def strata_sampler(spp: int, seed, wavefront: int, part: tuple | None = None) -> StrataSampler:
+    """A :class:`StrataSampler` of ``spp`` samples per pixel over ``wavefront`` lanes.
+    ``part = (pattern, offset)``: these are samples ``offset`` to ``offset + spp`` of each
+    pixel's pattern of ``pattern`` (with the same ``seed``): passes over the parts of a
+    pattern draw what one pass over all of it would, strata and all (each with its own
+    jitter).
+
+    >>> a = strata_sampler(1, seed=3, wavefront=1, part=(4, 0)).next_1d()
+    >>> b = strata_sampler(3, seed=3, wavefront=3, part=(4, 1)).next_1d()
+    >>> sorted(int(x * 4) for x in list(a) + list(b))      # one sample per quarter
+    [0, 1, 2, 3]
+    """
+    pattern, offset = part if part is not None else (spp, 0)
+    if int(spp) < 1 or not 0 <= int(offset) <= int(pattern) - int(spp):
+        raise ValueError(f"strata_sampler: spp={spp}, part={part}; expected a count >= 1 "
+                         "within its pattern")
+    return _sampler_class(int(spp), int(pattern), int(offset))(seed, wavefront)

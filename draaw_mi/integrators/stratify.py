@@ -20,8 +20,9 @@ on near-mirror surfaces (both measured worse stratified; see ``draaw_v4``'s
 sampling on top of a stratified pattern measured 1.23-1.44x the variance x time of uniform V4
 with the same sampler (its pilot's sample variance no longer measures a stratified mean's
 error), so V4 renders stratified scenes uniformly. (A scene's first render from 2^20 samples
-runs the adaptive pilot to decide on guiding; left unguided, its other samples render
-stratified and uniformly: ``adaptive_sampling.render_adaptive``'s ``rest_render``.)
+runs the adaptive pilot, the first 1/16 of each pixel's stratified pattern, to decide on
+guiding; left unguided, the rest of the pattern renders uniformly:
+``adaptive_sampling.render_adaptive``'s ``rest_render``.)
 """
 from __future__ import annotations
 

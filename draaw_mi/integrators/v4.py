@@ -206,6 +206,7 @@ class DraawV4Integrator(V4Passes):
         self.stratify = parse_bool(props, "draaw_v4", "stratify", True)
         self._stratify_scene = None    # the scene of the primal render, for prepare() (_sampling)
         self._glints_memo = None       # (scene, has_glints) within one pass (_sampling)
+        self._strata_part = None       # (pattern, offset): a render of part of a pattern (prepare)
         self.light_selection = str(props.get("light_selection", LIGHT_SELECTION))
         if self.light_selection not in ("auto", "learned", "power", "uniform"):
             raise ParameterError(f"draaw_v4: light_selection={self.light_selection!r}; expected "

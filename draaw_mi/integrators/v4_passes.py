@@ -32,7 +32,7 @@ ADAPTIVE_MIN_SPP = 64   # below, the pilot (spp/16 < 4 samples) estimates varian
 class V4Passes(LightTables):
     """``draaw_v4``'s render and gradient passes (see the module docstring). Needs the
     integrator's ``adaptive``, ``stratify``, ``guides``, ``aovs``, ``max_depth``,
-    ``emission_split``, ``hide_emitters``, ``sdf_band``, ``_guide``, ``_stratify_scene``, ``_glints_memo``,
+    ``emission_split``, ``hide_emitters``, ``sdf_band``, ``_guide``, ``_stratify_scene``, ``_glints_memo``, ``_strata_part``,
     ``_said_gates`` and its ``features``, ``prepare_selection`` and ``edge_map``."""
 
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
@@ -71,9 +71,13 @@ class V4Passes(LightTables):
                 rest = None
                 if decide is not None and self.stratified(scene, sensor, n):
                     # adaptive only for the pilot's decision: left unguided, the rest of the
-                    # samples render stratified, as the scene's later renders do
-                    def rest(count, rest_seed):
-                        return self._render_uniform(scene, sensor, rest_seed, count, develop, evaluate)
+                    # samples render stratified, the rest of the pilot's pattern of n
+                    def rest(count, pilot_seed):
+                        self._strata_part = (n, n - count)
+                        try:
+                            return self._render_uniform(scene, sensor, pilot_seed, count, develop, evaluate)
+                        finally:
+                            self._strata_part = None
                 return ads.render_adaptive(self, scene, sensor, seed, n, alpha, decide, rest)
             return self._render_uniform(scene, sensor, seed, spp, develop, evaluate)
         finally:
@@ -136,7 +140,7 @@ class V4Passes(LightTables):
         sampler, n = super().prepare(sensor, seed, spp, list(aovs))   # (the film prepared)
         scene = self._stratify_scene
         if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):
-            return strata_sampler(n, seed, sampler.wavefront_size()), n
+            return strata_sampler(n, seed, sampler.wavefront_size(), self._strata_part), n
         return sampler, n
 
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):

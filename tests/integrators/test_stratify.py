@@ -12,7 +12,7 @@ import pytest
 from integrators_helpers import check_same_expectation, integrator, mi, rs, seed_stack
 
 from draaw_mi.integrators import adaptive_sampling as ads
-from draaw_mi.integrators import guiding
+from draaw_mi.integrators import guiding, v4_passes
 from draaw_mi.integrators.features import sampler_plugin
 from draaw_mi.integrators.strata_sampler import StrataSampler
 
@@ -114,11 +114,13 @@ def test_a_scenes_first_render_decides_on_guiding_by_the_adaptive_pilot(monkeypa
 
 
 def test_a_first_render_left_unguided_renders_the_rest_stratified(monkeypatch):
-    """The first render's adaptive pilot only decides on guiding: its 4 samples are V4's
-    stratified ones, and where it leaves the scene unguided the other 60 of 64 render as the
-    scene's later renders do (stratified, every pixel alike), not adaptively with independent
+    """The first render's adaptive pilot only decides on guiding: its 4 samples are the first
+    of each pixel's stratified pattern of 64, and where it leaves the scene unguided the
+    other 60 of that pattern render uniformly (same seed), not adaptively with independent
     samples: a first CLI render of Mitsuba's Cornell box read 0.16x ``path``'s MSE at 128^2
-    that way, 0.06x now, later renders 0.05x. Passing no stratified rest fails."""
+    that way, 0.05x now, as later renders (``benchmarks/first_render.py``). Passing no
+    stratified rest, independent pilot samples, or the rest with a seed of its own (a
+    pattern of its own) fails."""
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
     allocations = []
     allocate = ads.allocate
@@ -129,11 +131,17 @@ def test_a_first_render_left_unguided_renders_the_rest_stratified(monkeypatch):
     counts, pilots = [], []
     real = ads.render_adaptive
     monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (counts.append(a[4]), real(*a, **k))[1])
+    rests = []
     made = ads.strata_sampler
-    monkeypatch.setattr(ads, "strata_sampler", lambda spp, *a: pilots.append(spp) or made(spp, *a))
+    monkeypatch.setattr(ads, "strata_sampler", lambda spp, seed, w, part: pilots.append((spp, int(seed), part))
+                        or made(spp, seed, w, part))
+    monkeypatch.setattr(v4_passes, "strata_sampler", lambda spp, seed, w, part: rests.append((spp, int(seed), part))
+                        or made(spp, seed, w, part))
     img = np.array(mi.render(scene, integrator=integ, spp=64, seed=1))
     assert counts == [64] and allocations == [] and np.isfinite(img).all()
-    assert pilots == [4] and kinds == ["strata"]            # the pilot's 4, then the other 60
+    # one pattern of 64 per pixel, one seed: the pilot's first 4 samples, the rest's 60
+    assert kinds == ["strata"] and pilots == [(4, 1, (64, 0))] and rests == [(60, 1, (64, 4))]
+    assert integ._strata_part is None
     assert integ.guides.share(integ.selection_key(scene)) < guiding.SHARE_MIN
 
 
