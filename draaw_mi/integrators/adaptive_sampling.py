@@ -414,7 +414,7 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     if not film.rfilter().is_box_filter():   # both passes splat into one block (film_splat)
         film.prepare([])
         splat = FilmSplat(film)
-    records = decide.records(a * w * h) if hasattr(decide, "records") else None   # guide_cache.PilotDecision
+    records = None if decide is None else decide.records(a * w * h)
     sums, _ = _pass_sums(integrator, scene, sensor, a, seed, False, alpha, pilot=True,
                          gather_first=decide is not None, into=None if splat is None else (splat, wp),
                          record=records, stratified=None if rest_render is None else (spp, 0))
@@ -464,12 +464,18 @@ def render_adaptive(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     main, _ = _pass_sums(integrator, scene, sensor, counts, s2 ^ 0x5BD1E995, False, alpha, False)
     per = (1.0 - wp) * dr.rcp(mi.Float(counts.astype(np.float32)))
     del counts
-    out = dr.zeros(mi.Float, h * w * channels)
-    at = dr.arange(mi.UInt32, h * w) * channels
-    for c in range(channels):
-        dr.scatter(out, dr.fma(main[c], per, pilot[c]), at + c)
-    dr.eval(out)
-    return mi.TensorXf(out, (h, w, channels))
+    img = _image([dr.fma(main[c], per, pilot[c]) for c in range(channels)], h, w)
+    dr.eval(img)
+    return img
+
+
+def _image(chans: list, h: int, w: int) -> mi.TensorXf:
+    """An (h, w, len(chans)) tensor of per-pixel channel arrays."""
+    out = dr.zeros(mi.Float, h * w * len(chans))
+    at = dr.arange(mi.UInt32, h * w) * len(chans)
+    for c, v in enumerate(chans):
+        dr.scatter(out, v, at + c)
+    return mi.TensorXf(out, (h, w, len(chans)))
 
 
 def _pilot_image(sums: list, splat, a: int, channels: int, h: int, w: int) -> mi.TensorXf:
@@ -477,11 +483,7 @@ def _pilot_image(sums: list, splat, a: int, channels: int, h: int, w: int) -> mi
     ``a`` (box filter), or the block ``splat`` that holds its samples alone, developed."""
     if splat is not None:
         return splat.develop()
-    out = dr.zeros(mi.Float, h * w * channels)
-    at = dr.arange(mi.UInt32, h * w) * channels
-    for c in range(channels):
-        dr.scatter(out, sums[c] * (1.0 / a), at + c)
-    return mi.TensorXf(out, (h, w, channels))
+    return _image([sums[c] * (1.0 / a) for c in range(channels)], h, w)
 
 
 def pilot_indirect_share(rgb: list, first) -> float:

@@ -92,7 +92,7 @@ class StrataSampler:
             raise ValueError(f"StrataSampler: spp={spp}, wavefront={wavefront}; expected spp >= 1 "
                              "dividing the wavefront")
         idx = dr.arange(mi.UInt32, wavefront)
-        pixel = idx >> self.bits if spp == 1 << self.bits and not self.offset else idx // spp
+        pixel = idx >> self.bits if spp == 1 << self.bits else idx // spp
         self.index = idx - pixel * spp + self.offset
         # (opaque: a literal seed, a Python or a Dr.Jit one, would compile a kernel per seed)
         if isinstance(seed, int):
@@ -102,8 +102,9 @@ class StrataSampler:
             dr.make_opaque(seed)
         self.key = mix32(pixel ^ mix32(seed ^ SEED_SALT))
         self.dim = mi.UInt32(0)
-        # (the sample's place in its pixel's pattern: two parts of one pattern draw apart)
-        v0, v1 = mi.sample_tea_32(seed, idx if spp == self.pattern else pixel * self.pattern + self.index)
+        # (keyed by the sample's place in its pixel's pattern, ``idx`` for a whole pattern:
+        # two parts of one pattern draw apart)
+        v0, v1 = mi.sample_tea_32(seed, pixel * self.pattern + self.index)
         self.rng = mi.PCG32(wavefront, v0, v1)
 
     def sample_count(self) -> int:
