@@ -25,7 +25,6 @@ interactively.
 Set `DRAAW_MI_NOTEBOOK_SMALL=1` to run a tiny study live instead (32x32, seconds) - CI does."""),
     ("code", """import json
 import os
-import tempfile
 
 import numpy as np
 import matplotlib.pyplot as plt
@@ -38,7 +37,8 @@ SMALL = os.environ.get("DRAAW_MI_NOTEBOOK_SMALL") == "1"
 ROOT = os.path.abspath(os.path.join(os.getcwd(), "..")) if os.path.basename(os.getcwd()) == "notebooks" else os.getcwd()
 rows = []
 if SMALL:
-    out = tempfile.mkdtemp(prefix="draaw-mi-study-")
+    # the small study's files: out/accuracy_vs_time beside this notebook (DRAAW_MI_NOTEBOOK_OUT names another folder)
+    out = os.path.join(os.environ.get("DRAAW_MI_NOTEBOOK_OUT", "out"), "accuracy_vs_time")
     study = bench.run_study([os.path.join(ROOT, "scenes", "cornell.toml")], versions=("v4", "path"),
                             spps=(1, 4, 16), adaptive=(None,), repeats=2, resolution=(32, 32), gt_spp=256,
                             out_dir=out, progress=False, denoise_spp=(1, 4) if denoiser_available() else ())

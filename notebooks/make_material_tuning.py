@@ -37,6 +37,8 @@ SMALL = os.environ.get("DRAAW_MI_NOTEBOOK_SMALL") == "1"
 RES = 48 if SMALL else 256                 # preview size (square)
 BUDGET = 16 if SMALL else 256              # refinement budget, samples per pixel
 ROOT = os.path.abspath(os.path.join(os.getcwd(), "..")) if os.path.basename(os.getcwd()) == "notebooks" else os.getcwd()
+# this notebook's files: out/material_tuning beside it (DRAAW_MI_NOTEBOOK_OUT names another folder)
+OUT = os.path.join(os.environ.get("DRAAW_MI_NOTEBOOK_OUT", "out"), "material_tuning")
 scene = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "cornell.toml"), resolution=(RES, RES))
 print(f"{RES}x{RES} preview, budget {BUDGET} spp; materials:", ", ".join(scene.info["materials"]))"""),
     ("md", """## The panel
@@ -45,7 +47,7 @@ Drag a slider: the first frame after a change is rendered at half resolution (se
 then full-resolution frames accumulate; after half a second at rest frames are sent as PNG.
 *Render* switches version, depth, budget, resolution and OIDN denoising (biased), *Camera*
 orbits, *Post* edits the shader chain, *Save* writes a TOML scene and shows a Python snippet."""),
-    ("code", """tuner = MaterialTuner(scene, max_spp=BUDGET, save_path=os.path.join(ROOT, "out", "cornell_tuned.toml"))
+    ("code", """tuner = MaterialTuner(scene, max_spp=BUDGET, save_path=os.path.join(OUT, "cornell_tuned.toml"))
 tuner"""),
     ("md", """## Driving the panel from Python
 
@@ -85,7 +87,7 @@ for ax, (title, img) in zip(axes, images):
     ax.axis("off")
 plt.tight_layout()"""),
     ("md", "## Save the tuned scene and get the Python code"),
-    ("code", """path = tuner.save(os.path.join(ROOT, "out", "cornell_tuned.toml"))
+    ("code", """path = tuner.save(os.path.join(OUT, "cornell_tuned.toml"))
 again = draaw_mi.load_scene(path)
 print("saved", path, "- metal roughness in the file:", float(again.params[again.key("metal.roughness")][0]))
 print(tuner.snippet())"""),

@@ -32,7 +32,6 @@ sphere whose material varies over its surface, then recovers its **maps** with
 How well this works today, against the texel-by-texel fit, is measured in
 `benchmarks/results/svbrdf_fit.md`."""),
     ("code", """import os
-import tempfile
 import time
 
 import matplotlib.pyplot as plt
@@ -47,7 +46,9 @@ N = 8 if SMALL else 64                # texels per side of each map
 CAPTURES = 4 if SMALL else 8
 ITERATIONS = 60 if SMALL else 800
 REF_SPP = 128 if SMALL else 512
-OUT = tempfile.mkdtemp(prefix="texture_capture-")
+# this notebook's files: out/texture_capture beside it (DRAAW_MI_NOTEBOOK_OUT names another folder)
+OUT = os.path.join(os.environ.get("DRAAW_MI_NOTEBOOK_OUT", "out"), "texture_capture")
+os.makedirs(OUT, exist_ok=True)
 print(f"{RES}x{RES} images, {N}x{N} maps, {CAPTURES} captures, {ITERATIONS} iterations; files in {OUT}")"""),
     ("md", """## Ground truth
 

@@ -24,7 +24,6 @@ medium's albedo and density are ordinary `mi.traverse` parameters.
 
 Set `DRAAW_MI_NOTEBOOK_SMALL=1` to run a tiny version (48x36) - CI does."""),
     ("code", """import os
-import tempfile
 import time
 
 import numpy as np
@@ -40,7 +39,9 @@ RES = (48, 36) if SMALL else (320, 240)
 SPP = 8 if SMALL else 64
 VOX = 24 if SMALL else 64                       # voxelisation resolution
 ROOT = os.path.abspath(os.path.join(os.getcwd(), "..")) if os.path.basename(os.getcwd()) == "notebooks" else os.getcwd()
-TMP = tempfile.mkdtemp(prefix="draaw_voxels_")
+# this notebook's files: out/voxels_smoke beside it (DRAAW_MI_NOTEBOOK_OUT names another folder)
+TMP = os.path.join(os.environ.get("DRAAW_MI_NOTEBOOK_OUT", "out"), "voxels_smoke")
+os.makedirs(TMP, exist_ok=True)
 print(f"{RES[0]}x{RES[1]}, {SPP} spp per seed, voxels {VOX}^3")"""),
     ("md", """## Editing and picking
 

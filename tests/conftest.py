@@ -20,6 +20,23 @@ for _folder in ("batch", "integrators", "materials", "media", "post", "sdf", "st
 GO_DRAAW = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "go-draaw"))
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _temporary_files_stay_in_this_runs_folder(tmp_path_factory):
+    """What the code under test puts in the system's temporary folder (``tempfile.mkdtemp`` in
+    doctests, notebook kernels, CLI and worker subprocesses) goes under this run's pytest folder,
+    which pytest prunes (it keeps the last three runs), not into ``/tmp`` run after run."""
+    import tempfile
+    folder = str(tmp_path_factory.mktemp("tempfile"))
+    before = tempfile.tempdir, os.environ.get("TMPDIR")
+    tempfile.tempdir = os.environ["TMPDIR"] = folder
+    yield folder
+    tempfile.tempdir = before[0]
+    if before[1] is None:
+        os.environ.pop("TMPDIR", None)
+    else:
+        os.environ["TMPDIR"] = before[1]
+
+
 @pytest.fixture(autouse=True)
 def _batch_tests_run_in_their_folder(request, monkeypatch):
     """A batch writes under its output folder, by default the current one: the batch tests run

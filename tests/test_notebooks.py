@@ -50,8 +50,9 @@ def test_notebook_is_generated_and_has_no_outputs(name):
 # cold kernels) runs with `make test-all`; its stored full run is docs/tutorials/sdf_csg.ipynb
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "sdf_csg" else n
                                   for n in sorted(CASES)])
-def test_notebook_executes_small(name, monkeypatch):
+def test_notebook_executes_small(name, monkeypatch, tmp_path):
     monkeypatch.setenv("DRAAW_MI_NOTEBOOK_SMALL", "1")
+    monkeypatch.setenv("DRAAW_MI_NOTEBOOK_OUT", str(tmp_path))       # the folder its files go to
     nb = nbformat.read(os.path.join(NOTEBOOKS, f"{name}.ipynb"), as_version=4)
     client = nbclient.NotebookClient(nb, kernel_name="python3", timeout=120,
                                      resources={"metadata": {"path": NOTEBOOKS}})
@@ -69,6 +70,15 @@ def test_notebook_executes_small(name, monkeypatch):
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
     assert len(images) >= min_images                           # e.g. side by side + convergence
+    written = {os.path.relpath(os.path.join(d, f), tmp_path) for d, _, fs in os.walk(tmp_path) for f in fs}
+    assert written >= WRITES.get(name, set()) and all(p.startswith(name + os.sep) for p in written), \
+        sorted(written)
+
+
+# name -> files the small configuration writes (under DRAAW_MI_NOTEBOOK_OUT, not the system's
+# temporary folder, where every run left a folder)
+WRITES = {"voxels_smoke": {"voxels_smoke/solid.npz", "voxels_smoke/smoke.npz"},
+          "texture_capture": {"texture_capture/env.exr", "texture_capture/maps/obj.roughness.exr"}}
 
 
 # The notebook's ground truth (scenes/fit_two_spheres.toml), typed here independently of it.
