@@ -3,12 +3,14 @@ their time, for `path` at full depth and at depth 2 (direct light), Mitsuba's `d
 2 and 4 emitter samples, and V4 without adaptive sampling. Two questions it answered for
 issue 45 (results/speed_suite.md, "Measured, not pursued"): would filter importance sampling
 (each sample in one pixel) keep V4's gains under a gaussian filter, and would more shadow rays
-at the first hit pay?
+at the first hit pay? And (the doorway) would light tracing's strategies, bidirectional path
+tracing's addition, sample what V4 misses?
 
 Run from the repository root (128x128, 16 spp, 8 renders each)::
 
     .venv/bin/python benchmarks/variance_parts.py spheres_gauss
     .venv/bin/python benchmarks/variance_parts.py spheres path6,path2
+    .venv/bin/python benchmarks/variance_parts.py doorway path6,path2,v4_6,v4_2,ptracer6,ptracer2
 """
 from __future__ import annotations
 
@@ -32,6 +34,11 @@ INTEGRATORS = {
     "direct_e2": {"type": "direct", "emitter_samples": 2, "bsdf_samples": 1},
     "direct_e4": {"type": "direct", "emitter_samples": 4, "bsdf_samples": 1},
     "v4_6": {"type": "draaw_v4", "max_depth": 6, "adaptive": False},
+    "v4_2": {"type": "draaw_v4", "max_depth": 2, "adaptive": False},
+    # light tracing (paths from the lights, each vertex connected to the camera): the
+    # strategies bidirectional path tracing would add to V4's
+    "ptracer6": {"type": "ptracer", "max_depth": 6},
+    "ptracer2": {"type": "ptracer", "max_depth": 2},
 }
 
 

@@ -50,6 +50,7 @@ import numpy as np
 from ..errors import suggest
 from ..integrators import adaptive_sampling as ads
 from ..integrators import guide_cache, guiding
+from ..integrators.spp_map import pass_sums
 from ..io import print_report, read_exr, write_exr
 from ..rendering.session import session_of
 from ..scene.loading import release_wrapped, wrap
@@ -187,7 +188,7 @@ def recording_cost(integ, scene, spp: int, decide, repeats: int = 3) -> float:
             rec = decide.records(a * w * h) if record else None
             dr.sync_thread()
             t = time.perf_counter()
-            ads._pass_sums(integ, scene, sensor, a, 1 + k, False, False, pilot=True,
+            pass_sums(integ, scene, sensor, a, 1 + k, False, False, pilot=True,
                            gather_first=True, record=rec)
             dr.sync_thread()
             if k:

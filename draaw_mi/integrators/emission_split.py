@@ -42,7 +42,7 @@ none); otherwise the kernels are exactly those without splitting.
 The extra rays need the camera sample's pixel, which Mitsuba's ``sample()`` interface does
 not carry: the ray generator records it in a :class:`PrimaryRays` beside the rays
 (:meth:`DraawV4Integrator.sample_rays <draaw_mi.integrators.v4.DraawV4Integrator.sample_rays>`,
-:func:`draaw_mi.integrators.adaptive_sampling.render_spp_map`) and ``sample()`` uses it only for those
+:func:`draaw_mi.integrators.spp_map.render_spp_map`) and ``sample()`` uses it only for those
 same ray objects.
 
 Measured: see the V4 docstring and ``benchmarks/results/speed_suite.md``.

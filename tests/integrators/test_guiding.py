@@ -18,7 +18,7 @@ from integrators_helpers import (
 )
 
 from draaw_mi.bench import suite as ss
-from draaw_mi.integrators import adaptive_sampling, guiding
+from draaw_mi.integrators import adaptive_sampling, guiding, spp_map
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_the_pilot_records_every_strideth_path_with_its_own_radiance():
     sensor = scene.sensors()[0]
     h, w = sensor.film().crop_size()[::-1]
     rec = guiding.Records(h * w, 5, stride=2)
-    sums, _ = adaptive_sampling._pass_sums(integ, scene, sensor, 2, 5, False, False, pilot=True,
+    sums, _ = spp_map.pass_sums(integ, scene, sensor, 2, 5, False, False, pilot=True,
                                            record=rec)
     rgb, odd = sum(np.array(c, np.float64) for c in sums[:3]), np.array(sums[-3], np.float64)
     L_end = np.array(rec.L_end, np.float64)

@@ -12,7 +12,7 @@ import pytest
 from integrators_helpers import check_same_expectation, integrator, mi, rs, seed_stack
 
 from draaw_mi.integrators import adaptive_sampling as ads
-from draaw_mi.integrators import guiding, v4_passes
+from draaw_mi.integrators import guiding, spp_map, v4_passes
 from draaw_mi.integrators.features import sampler_plugin
 from draaw_mi.integrators.strata_sampler import StrataSampler
 
@@ -132,8 +132,8 @@ def test_a_first_render_left_unguided_renders_the_rest_stratified(monkeypatch):
     real = ads.render_adaptive
     monkeypatch.setattr(ads, "render_adaptive", lambda *a, **k: (counts.append(a[4]), real(*a, **k))[1])
     rests = []
-    made = ads.strata_sampler
-    monkeypatch.setattr(ads, "strata_sampler", lambda spp, seed, w, part: pilots.append((spp, int(seed), part))
+    made = spp_map.strata_sampler
+    monkeypatch.setattr(spp_map, "strata_sampler", lambda spp, seed, w, part: pilots.append((spp, int(seed), part))
                         or made(spp, seed, w, part))
     monkeypatch.setattr(v4_passes, "strata_sampler", lambda spp, seed, w, part: rests.append((spp, int(seed), part))
                         or made(spp, seed, w, part))
