@@ -176,6 +176,9 @@ def measure(scene, s: Setting, gt: np.ndarray, repeats: int = 3, seed: int = 1) 
     return measure_group(scene, [s], gt, repeats, seed)[0]
 
 
+# a render with inf pixels has an infinite error, without NumPy's overflow warnings: the row's
+# "finite" column says why
+@np.errstate(over="ignore", invalid="ignore")
 def measure_group(scene, settings: list, gt: np.ndarray, repeats: int = 3,
                   seed: int = 1) -> list[tuple[dict, np.ndarray]]:
     """:func:`measure` for settings that are compared with each other (the versions at one

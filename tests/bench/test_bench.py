@@ -407,8 +407,11 @@ def test_finite_is_read_from_the_raw_renders(monkeypatch):
     inf = np.where(np.arange(48).reshape(4, 4, 3) == 5, np.inf, 0.5)
     monkeypatch.setattr(bench, "_timed_render",
                         lambda sc, s, seed: (inf if seed == 1 else np.full((4, 4, 3), 0.5), 0.01))
-    row, _ = bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5), repeats=3)
-    assert row["finite"] is False
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)     # an inf's error: inf, said quietly
+        row, _ = bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5), repeats=3)
+    assert row["finite"] is False and row["mse"] == np.inf
     monkeypatch.setattr(bench, "_timed_render", lambda sc, s, seed: (np.full((4, 4, 3), 0.5), 0.01))
     assert bench.measure(None, bench.Setting("v4", 1, 3), np.full((4, 4, 3), 0.5))[0]["finite"] is True
 
