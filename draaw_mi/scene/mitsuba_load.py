@@ -17,6 +17,7 @@ from ..guard import RENDER_GUARD, exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
 from ..sdf.scene import PROXY_PREFIX
 from .xml_film import film_sized_xml
+from .xml_text import parse_xml_file
 
 
 def _unreferenced_message(text: str) -> str | None:
@@ -140,8 +141,8 @@ def _xml_shape_bsdfs(path: str) -> set:
     with ``<ref id=...>`` (best effort: an unreadable file gives none; Mitsuba reports its
     errors itself)."""
     try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError):
+        root = parse_xml_file(path)
+    except (ET.ParseError, OSError, ValueError):
         return set()
     declared = {b.get("id") for b in root.findall("bsdf") if b.get("id")}
     return {r.get("id") for shape in root.iter("shape") for r in shape.findall("ref")} & declared

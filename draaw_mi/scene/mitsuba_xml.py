@@ -39,6 +39,8 @@ import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 
+from .xml_text import parse_xml_file
+
 #: includes deeper than this are not followed (Mitsuba's own limit is 15)
 MAX_INCLUDE_DEPTH = 15
 
@@ -92,7 +94,7 @@ def xml_references(path: str, defines: dict | None = None) -> tuple[list[str], b
 
 def _parse(file: str):
     try:
-        return ET.parse(file).getroot()
+        return parse_xml_file(file)
     except (ET.ParseError, OSError, ValueError):
         return None
 

@@ -26,6 +26,7 @@ import re
 import xml.etree.ElementTree as ET
 
 from ..errors import SceneError
+from .xml_text import parse_xml_file, parse_xml_text
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -54,7 +55,7 @@ def check_defines(defines, source: str) -> dict:
 def declared_defaults(path: str) -> list[str]:
     """The names of the ``<default>`` parameters ``path`` declares (best effort)."""
     try:
-        root = ET.parse(path).getroot()
+        root = parse_xml_file(path)
     except (ET.ParseError, OSError, ValueError):
         return []
     return [n.get("name") for n in root.iter("default") if n.get("name")]
@@ -77,7 +78,7 @@ def film_sized_xml_text(text: str, folder: str, width: int, height: int, defines
                         source: str = "<xml>") -> tuple[str, dict]:
     """:func:`film_sized_xml` of the XML ``text`` of a file in ``folder``."""
     try:
-        root = ET.fromstring(text)
+        root = parse_xml_text(text)
     except ET.ParseError as e:
         raise SceneError(f"{source}: cannot set its film size: the XML does not parse ({e})") from None
     sensor = root.find("sensor")
