@@ -48,3 +48,22 @@ def suggest(name: str, valid: Iterable[str]) -> str:
     if close:
         return f"; did you mean {close[0]!r}?"
     return "; valid: " + ", ".join(valid)
+
+
+def caused_by_interrupt(error: BaseException) -> bool:
+    """Whether ``error`` was raised because of a ``KeyboardInterrupt``: Dr.Jit's custom
+    operations (``mi.render`` is one) and frozen functions raise Ctrl-C in their kernels again
+    as a ``RuntimeError`` caused by it.
+
+    >>> try:
+    ...     raise RuntimeError("drjit.custom(): error (see above)") from KeyboardInterrupt()
+    ... except RuntimeError as e:
+    ...     caused_by_interrupt(e), caused_by_interrupt(RuntimeError("other"))
+    (True, False)
+    """
+    cause, seen = error, 0
+    while cause is not None and seen < 16:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        cause, seen = cause.__cause__ or cause.__context__, seen + 1
+    return False

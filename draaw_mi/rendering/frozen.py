@@ -22,6 +22,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..errors import caused_by_interrupt
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
 from ..sdf.scene import PROXY_PREFIX
@@ -288,6 +289,8 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             with _PAUSED:
                 return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live, tuple(args))
         except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
+            if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
+                raise KeyboardInterrupt from None
             failed.append(str(e))
             warnings.warn(f"freeze_render: dr.freeze could not record this render "
                           f"({_first_cause(e)}); it is traced from now on",

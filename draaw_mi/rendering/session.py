@@ -47,7 +47,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import post
-from ..errors import RenderError
+from ..errors import RenderError, caused_by_interrupt
 from ..guard import RENDER_GUARD
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
@@ -227,7 +227,7 @@ class Session:
         parameters) makes it differentiable (traced; ``sensor`` as in ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
         bits either way."""
         scene = self.scene
-        with self.lock, RENDER_GUARD:
+        with self.lock, RENDER_GUARD, interrupts_raised_as_such():
             if params is None and sensor is None and self.freezes(spp, freeze):
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
@@ -260,7 +260,7 @@ class Session:
         scene = self.scene
         spp_grad = spp if spp_grad is None else spp_grad
         adaptive = getattr(integrator, "adaptive_applies", None)
-        with self.lock, RENDER_GUARD:
+        with self.lock, RENDER_GUARD, interrupts_raised_as_such():
             if (freeze and self.freezes(spp, True)
                     and not (adaptive is not None and adaptive(scene.mi_scene, sensor, seed, spp))):
                 key = ("gradient", id(integrator), int(spp), int(spp_grad), loss)
@@ -329,6 +329,27 @@ class Session:
     def __repr__(self) -> str:
         return (f"Session[{self.source}, {len(self._integrators)} integrators, {len(self.recordings)} "
                 f"recordings, {len(self._workers)} workers]")
+
+
+@contextlib.contextmanager
+def interrupts_raised_as_such():
+    """Ctrl-C while a pass runs leaves as the ``KeyboardInterrupt`` it is (a notebook's
+    interrupt, the CLI's "interrupted" and exit status 130), not as the ``RuntimeError`` that
+    Dr.Jit raises again for it (:func:`~draaw_mi.errors.caused_by_interrupt`).
+
+    >>> try:
+    ...     with interrupts_raised_as_such():
+    ...         raise RuntimeError("drjit.custom(): error (see above)") from KeyboardInterrupt()
+    ... except KeyboardInterrupt:
+    ...     print("interrupted")
+    interrupted
+    """
+    try:
+        yield
+    except RuntimeError as e:
+        if caused_by_interrupt(e):
+            raise KeyboardInterrupt from None
+        raise
 
 
 def _gradient_body(integrator, spp: int, spp_grad: int, loss, params=None):

@@ -210,3 +210,37 @@ def test_closing_a_session_beside_a_refining_preview_never_deadlocks():
     out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=180)
     assert out.returncode == 0 and out.stdout.startswith("ok"), (out.stdout, out.stderr[-2000:])
     assert int(out.stdout.split()[1]) > 50          # it closed the copy's session many times
+
+
+def _interrupted_in_a_kernel(*a, **k):
+    """What ``mi.render`` raises when Ctrl-C reaches its ``dr.custom`` operation."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as e:
+        raise RuntimeError("drjit.custom(<_RenderOp>): error while performing a custom "
+                           "differentiable operation. (see above).") from e
+
+
+@pytest.mark.parametrize("freeze", [False, True])
+def test_ctrl_c_during_a_pass_leaves_as_a_keyboard_interrupt(scene, monkeypatch, freeze):
+    """Ctrl-C in a render's kernel reached the user as Dr.Jit's RuntimeError (the CLI printed
+    two tracebacks and exited 1, not "interrupted" and 130); other errors stay as they are."""
+    session = session_of(scene)
+    integ = session.integrator("v4", 4)
+    monkeypatch.setattr(S.mi, "render", _interrupted_in_a_kernel)
+    with pytest.raises(KeyboardInterrupt):
+        session.render_pass(integ, 4, 1, freeze=freeze)
+    monkeypatch.setattr(S.mi, "render", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("other")))
+    with pytest.raises(RuntimeError, match="other"):
+        session.render_pass(integ, 4, 1, freeze=False)
+
+
+def test_the_cli_says_interrupted_and_exits_130_when_a_render_is_interrupted(tmp_path, monkeypatch, capsys):
+    import tomli_w
+    from draaw_mi.cli import main
+    path = tmp_path / "s.toml"
+    path.write_text(tomli_w.dumps(tiny_description()))
+    monkeypatch.setattr(S.mi, "render", _interrupted_in_a_kernel)
+    assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "--no-progress"]) == 130
+    err = capsys.readouterr().err
+    assert err == "draaw-mi: interrupted\n" and not (tmp_path / "a.exr").exists()
