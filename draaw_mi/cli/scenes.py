@@ -13,7 +13,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import __version__, integrators, materials
-from ..errors import RenderError, SceneError
+from ..errors import DraawError
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators import stratify
 from ..integrators.features import sensor_gated_speedups
@@ -101,8 +101,17 @@ def apply_sets(scene, given) -> dict:
                            "numbers")
         try:
             key = scene.key(name)
+        except DraawError as e:
+            raise CliError(f"--set {item}: {e}") from None
+        try:
+            # the ranges a scene file keeps to (roughness in [0, 1], colours >= 0, an SDF
+            # object's radius > 0, ...), as the batch planner and the preview check theirs
+            scene.check_values("--set", {name: (key, value)})     # ("--set: name=value; expected ...")
+        except DraawError as e:
+            raise CliError(str(e)) from None
+        try:
             params[key] = value_like(params[key], value, key)
-        except (SceneError, RenderError) as e:
+        except DraawError as e:
             raise CliError(f"--set {item}: {e}") from None
         done[name] = value
     params.update()

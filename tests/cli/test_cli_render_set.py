@@ -54,11 +54,15 @@ def test_set_renders_the_scene_with_those_values_and_says_so_in_the_header(tmp_p
     ("target.roughness=true", "is not a finite number"),
     ("target.base_color=[]", "is not a finite number"),
     ("target.roughness", "expected NAME=VALUE"),
-    ("target.base_color=[0.1,0.2]", "cannot convert to Color3f"),
+    ("target.base_color=[0.1,0.2]", "target.base_color=[0.1, 0.2]; expected 3 numbers"),
+    # the ranges a scene file keeps to (a TOML roughness of -3 is refused): they rendered
+    ("target.roughness=-3", "target.roughness=-3; expected a number in [0.0, 1.0]"),
+    ("target.metallic=1.5", "target.metallic=1.5; expected a number in [0.0, 1.0]"),
+    ("target.base_color=[0.5,-2,0.5]", "target.base_color=[0.5, -2, 0.5]; expected values >= 0"),
 ])
 def test_a_bad_set_is_one_line_and_status_2(tmp_path, capsys, given, says):
     out = tmp_path / "x.exr"
     assert main(["render", SCENE, "-o", str(out), *SMALL, "--set", given]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("draaw-mi: error: --set ") and says in err[0], err
+    assert len(err) == 1 and err[0].startswith("draaw-mi: error: --set") and says in err[0], err
     assert not out.exists()
