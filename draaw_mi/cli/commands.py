@@ -124,6 +124,8 @@ def _cmd_render(args) -> int:
           f"{info['spp']} spp, {info['integrator']}{', denoised' if info.get('denoised') else ''}, "
           f"{info['seconds']:.2f} s"
           + ("" if finite else ", WARNING: non-finite pixels") + ")" + raw_note)
+    if args.png and args.png != args.output:
+        print(f"wrote {args.png}")
     return 0
 
 

@@ -154,6 +154,8 @@ def integrator_note(args, scene) -> str | None:
             return (f"{args.scene} renders with its own integrator {own!r} (Mitsuba's, with the "
                     "file's settings); --version picks another")
         return None
+    if resolve_version(args.version) == SCENE_VERSION:
+        return None                  # (asked for the file's own integrator, and rendered with it)
     if resolve_version(args.version) != resolve_version(scene.settings["version"]):
         return (f"{args.scene} declares integrator {own!r}; rendered with --version "
                 f"{args.version} ({resolve_version(args.version)}) instead")
@@ -220,9 +222,9 @@ def cmd_info(args) -> int:
             print("    volume: " + _volume_line(v))
         print("  settings: " + ", ".join(f"{k}={v}" for k, v in s["settings"].items()))
         if s.get("integrator"):
-            used = ("its own, as version 'scene'" if s["settings"]["version"] == SCENE_VERSION
+            used = ("with it (version 'scene')" if s["settings"]["version"] == SCENE_VERSION
                     else f"as version {s['settings']['version']!r}")
-            print(f"integrator: {s['integrator']} (declared by the file; renders with {used})")
+            print(f"integrator: {s['integrator']} (declared by the file; renders {used})")
         if s["post"]:
             print(f"      post: {' -> '.join(map(str, s['post']))}")
         if s.get("sdf"):

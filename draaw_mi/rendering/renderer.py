@@ -148,8 +148,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             done += count
             passes += 1
             if bar is not None:
-                bar.set_postfix(seconds=f"{time.perf_counter() - t0:.1f}")
-                bar.update(count)
+                bar.update(count)              # (the bar shows the time itself)
             if time_budget is not None and time.perf_counter() - t0 >= time_budget:
                 break
     if bar is not None:

@@ -233,7 +233,7 @@ class DraawScene:
             # file says of it ("merged mesh of 3 shapes: ..."; mitsuba_xml.shape_names)
             "shapes": self.info.get("shapes") or [sh.id() or "unnamed" for sh in s.shapes()
                                                   if not sh.id().startswith("__sdf_")],
-            "lights": self.info.get("lights") or [em.id() or str(em).split("[", 1)[0] for em in s.emitters()],
+            "lights": self.info.get("lights") or [_emitter_name(em) for em in s.emitters()],
             "materials": self.info.get("materials", []),
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
             "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
@@ -262,3 +262,13 @@ def _rebased(node, files: dict, folder: str):
     return node
 
 
+def _emitter_name(em) -> str:
+    """An emitter's id; an area light without one is named by its shape's id (an XML file
+    gives the ``<shape>`` the id, not the ``<emitter>`` inside it); else its class name."""
+    if em.id():
+        return em.id()
+    kind = str(em).split("[", 1)[0]
+    shape = em.get_shape()                     # (None but for area lights)
+    if shape is not None and shape.id():
+        return f"{shape.id()} ({kind})"
+    return kind

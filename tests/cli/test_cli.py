@@ -24,6 +24,9 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     rc = main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(exr), "--png", str(png),
                "--spp", "4", "--resolution", "24x16", "--version", "path", "--seed", "3", "--max-depth", "3"])
     assert rc == 0
+    said = capsys.readouterr()
+    assert said.out.splitlines()[-2:] == [said.out.splitlines()[-2], f"wrote {png}"]    # both files said
+    assert said.out.splitlines()[-2].startswith(f"wrote {exr} (24x16, 3 channels, 4 spp, path")
     img = draaw_mi.read_exr(str(exr))
     assert img.shape == (16, 24, 3) and np.isfinite(img).all()
     scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=(24, 16))
@@ -48,7 +51,6 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     assert header["draaw:integrator"] == "path"
     assert header["draaw:scene_sha256"] == digest and header["draaw:mitsuba"] == mi.__version__
     assert header["draaw:sampler"] == "independent" and "draaw:post" not in header   # no chain ran
-    assert "wrote" in capsys.readouterr().out
 
 
 def test_render_records_the_post_chain_it_applied(tmp_path):

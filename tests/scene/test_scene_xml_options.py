@@ -136,6 +136,13 @@ def test_the_cli_says_which_integrator_rendered_an_xml_scene(tmp_path, capsys):
     std = capsys.readouterr()
     assert ", path," in std.out and "unless a version is given" not in std.err
     assert "declares integrator 'direct'; rendered with --version path" in std.err
+    # --version scene asks for the file's own integrator: nothing to note (it said "rendered
+    # with --version scene (scene) instead")
+    assert main(base + ["--version", "scene"]) == 0
+    std = capsys.readouterr()
+    assert ", direct," in std.out and "note:" not in std.err
+    assert main(["info", path, "-D", "res=8"]) == 0
+    assert "integrator: direct (declared by the file; renders with it (version 'scene'))" in capsys.readouterr().out
     assert main(base + ["--max-depth", "3"]) == 2
     assert "--max-depth 3: " in capsys.readouterr().err
 
@@ -145,6 +152,8 @@ def test_info_names_merged_meshes_by_the_shapes_in_them(capsys):
     assert "unnamed" not in " ".join(names)
     assert "merged mesh of 5 shapes: floor, ceiling, back, cube, cube (material white)" in names
     assert {"light", "left_wall", "right_wall"} <= set(names)
+    # the area light by its shape's id (the <emitter> inside <shape id="light"> has none)
+    assert draaw_mi.load_scene(CBOX, defines={"res": 8}).summary()["lights"] == ["light (AreaLight)"]
     assert main(["info", CBOX]) == 0
     assert "merged mesh of 5 shapes" in capsys.readouterr().out
 
