@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from .. import __version__
 from .common import PROGRESS_HELP, CliError
 from .scenes import add_define_option, add_set_option
 
@@ -19,6 +20,9 @@ class OneLineParser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The ``draaw-mi`` parser and its subcommands' arguments."""
     p = OneLineParser(prog="draaw-mi", description="Differentiable GO-Draaw-style renderer on Mitsuba 3.")
+    # (the tool's version; a command's --version is the render version it uses)
+    p.add_argument("-V", "--version", action="version", version=f"draaw-mi {__version__}",
+                   help="print draaw-mi's version and exit (`draaw-mi info` says more)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     r = sub.add_parser("render", help="render a scene to EXR (and PNG)")

@@ -15,6 +15,7 @@ import pytest
 
 import draaw_mi
 from draaw_mi.cli import main
+from draaw_mi.cli.parser import build_parser
 
 from conftest import SCENES, tiny_description
 
@@ -416,3 +417,14 @@ def test_a_library_warning_is_one_draaw_mi_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "draaw-mi: warning: render: version 'V4-Log' renders linear light" in err
     assert "RuntimeWarning" not in err and "cli.py" not in err
+
+
+@pytest.mark.parametrize("flag", ["--version", "-V"])
+def test_the_tool_says_its_version(flag, capsys):
+    """``draaw-mi --version`` said "the following arguments are required: command"; a
+    command's ``--version`` stays the render version it takes."""
+    with pytest.raises(SystemExit) as stop:
+        main([flag])
+    assert stop.value.code == 0 and capsys.readouterr().out == f"draaw-mi {draaw_mi.__version__}\n"
+    args = build_parser().parse_args(["render", "s.toml", "-o", "x.exr", "--version", "v4"])
+    assert args.version == "v4"
