@@ -127,11 +127,25 @@ class FitResult:
                 written.append(file)
                 value = os.path.relpath(file, os.path.dirname(os.path.abspath(path)))
                 name = base
-            values[name] = value
+            values[name] = _shortest(value)
         # (a TOML scene keeps its comments and layout: only the fitted values' lines change)
         text = scene.updated_text(values, dest=path) if described else json.dumps({"fitted": values}, indent=2)
         write_text(path, text)
         return written + [path]
+
+
+def _shortest(value):
+    """A fitted number (or list of them) as the shortest decimal that is the same float32, the
+    precision the scene holds it in: 0.3808233, not 0.3808232992887497.
+
+    >>> _shortest(0.3808232992887497), _shortest([0.1, 0.5]), _shortest("a.exr")
+    (0.3808233, [0.1, 0.5], 'a.exr')
+    """
+    if isinstance(value, (list, tuple)):
+        return [_shortest(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(np.format_float_positional(np.float32(value), unique=True, trim="0"))
+    return value
 
 
 def settled(history: list, tol: float, drift_ratio: float = 0.35) -> bool:

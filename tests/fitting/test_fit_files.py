@@ -169,3 +169,23 @@ def test_plots_written_to_files_leave_the_session_backend_alone(tmp_path):
         assert (tmp_path / "fit.png").stat().st_size > 1000 and fig.axes[1].get_ylabel() == "value"
     finally:
         matplotlib.use(before)
+
+
+def test_fitted_values_are_written_as_the_float32_the_scene_holds(tmp_path):
+    """The saved TOML said ``roughness = 0.3808232992887497`` (a fit's value as a Python float)
+    where the scene holds the float32 0.3808233: the shortest decimal of the same float32 is
+    written, and loads back to the same float32."""
+    import tomllib
+    from draaw_mi.fitting.result import FitResult
+    fitted = {"target.roughness": 0.3808232992887497, "target.base_color": [float(np.float32(0.1))] * 3}
+    out = str(tmp_path / "fitted.toml")
+    FitResult(values=fitted).save(out, os.path.join(SCENES, "fit_sphere.toml"))
+    text = open(out).read()
+    assert "roughness = 0.3808233\n" in text and "0.3808232992887497" not in text
+    mat = tomllib.loads(text)["materials"]["target"]
+    assert mat["base_color"] == [0.1, 0.1, 0.1]
+    again = draaw_mi.load_scene(out)
+    assert np.float32(again.params[again.key("target.roughness")][0]) == np.float32(0.3808232992887497)
+    json_out = str(tmp_path / "fitted.json")
+    FitResult(values={"a.roughness": 0.7718944549560547}).save(json_out)
+    assert open(json_out).read().split() == ['{', '"fitted":', '{', '"a.roughness":', '0.77189445', '}', '}']
