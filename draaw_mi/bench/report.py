@@ -50,9 +50,10 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
     for r in rows:
         if r["scene"] == scene and r["max_depth"] == depth and not r["adaptive"] and not r.get("denoise"):
             by_label.setdefault(r["label"], []).append((r["time_s"], r["rmse"]))
-    if subject not in by_label:
+    rivals = [lab for lab in rivals if lab in by_label]          # (the ones measured)
+    if subject not in by_label or not rivals:
         return {}
-    levels = sorted({e for lab in rivals for _, e in by_label.get(lab, [])})
+    levels = sorted({e for lab in rivals for _, e in by_label[lab]})
     won, details = 0, []
     for e in levels:
         times = {lab: time_to_error(pts, e) for lab, pts in by_label.items()}
@@ -68,7 +69,7 @@ def pareto_check(rows: list[dict], scene: str, depth: int, subject: str = "v4",
         details.append({"rmse": e, "fastest": fastest, "subject_s": times[subject],
                         "fastest_s": times[fastest], "extrapolated": extrapolated,
                         "rival": rival, "rival_s": times[rival]})
-    return {"levels": len(levels), "subject_fastest": won, "details": details}
+    return {"levels": len(levels), "subject_fastest": won, "details": details, "rivals": rivals}
 
 
 FIREFLY_NOTE = ("hollow: firefly-dominated (its repeats' RMSEs differ 2x or more: a few samples worth thousands "
@@ -173,7 +174,8 @@ def summary_markdown(result: dict) -> str:
              f"Ground truth: Mitsuba `path` (`volpath` for scenes with media, V4 for scenes with "
              f"SDF objects), {result['ground_truth_spp']} spp, same materials, at the deepest "
              "max_depth studied (-1: unbounded). "
-             f"Times: median of {result['repeats']} renders after warm-up (compile time separate). "
+             + (f"Times: median of {result['repeats']} renders" if result["repeats"] > 1 else "Times: one render")
+             + " after warm-up (compile time separate). "
              f"Machine: {result['machine']}" + (f"; {result['load']}." if result.get("load") else "."), "",
              _bias_note(result), "",
              "*Fireflies* (†): settings whose repeats' RMSEs differ by 2x or more: their error is "
@@ -201,8 +203,10 @@ def summary_markdown(result: dict) -> str:
                              f"{r['relmse']:.4f} | {r['ciede2000']:.3f} | {bias} |")
             chk = pareto_check(rows, sc, d)
             if chk:
+                named = " and ".join("`path`" if lab == "path" else lab.upper() for lab in chk["rivals"])
                 lines += ["", f"V4 is the fastest to reach {chk['subject_fastest']} of the {chk['levels']} "
-                              "error levels that V3 and `path` reach (time to reach a level is interpolated "
+                              f"error levels that {named} reach{'es' if len(chk['rivals']) == 1 else ''} "
+                              "(time to reach a level is interpolated "
                               "in log-log between measured spp; * = below V4's lowest measured error, "
                               "extrapolated with time ∝ RMSE⁻²):", "",
                           "| RMSE level | fastest | its time [s] | V4 time [s] | V4 / fastest "

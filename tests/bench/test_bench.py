@@ -449,3 +449,18 @@ def test_version_scene_is_left_out_for_a_scene_without_an_integrator_of_its_own(
     xml = os.path.join(os.path.dirname(__file__), "..", "scene", "data", "cbox.xml")
     own = draaw_mi.load_scene(xml, defines={"res": 8})
     assert own.info.get("integrator") and scene_versions(own, ["scene", "v4"]) == ["scene", "v4"]
+
+
+def test_the_summary_names_only_the_versions_measured():
+    """With V4 and `path` alone the summary said "V4 is the fastest to reach 2 of the 2
+    error levels that V3 and `path` reach", and "median of 1 renders"."""
+    from draaw_mi.bench.report import summary_markdown
+    rows = [{"scene": "s", "max_depth": 3, "adaptive": None, "label": lab, "spp": spp, "time_s": t, "rmse": e,
+             "compile_s": 0.0, "relmse": e, "ciede2000": 1.0, "bias_rmse": None, "resolution": [8, 8]}
+            for lab, pts in {"v4": [(1, 4, 0.4), (4, 16, 0.1)], "path": [(1.5, 4, 0.4), (6, 16, 0.1)]}.items()
+            for t, spp, e in pts]
+    assert pareto_check(rows, "s", 3)["rivals"] == ["path"]
+    md = summary_markdown({"rows": rows, "ground_truth_spp": 64, "repeats": 1, "machine": {}})
+    assert "2 of the 2 error levels that `path` reaches" in md and "V3" not in md
+    assert "Times: one render after warm-up" in md and "median of 1" not in md
+    assert pareto_check([r for r in rows if r["label"] == "v4"], "s", 3) == {}     # no rival measured
