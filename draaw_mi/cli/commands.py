@@ -27,12 +27,14 @@ import numpy as np
 
 from .. import batch, post
 from ..batch.exr import HASH_ATTR, MANIFEST_ATTR, read_header, render_metadata
-from ..errors import DraawError
+from ..errors import DraawError, SceneError
 from ..fitting import fit, fit_two_starts
 from ..io import read_exr, write_exr, write_png
 from ..post import display_encoded
 from ..rendering import render
 from ..scene import OVERRIDE_MINIMA
+from ..scene.description import SAMPLERS
+from ..scene.schema import Where, resolution, string
 from .bench import cmd_bench
 from .common import EXIT_BAD_INPUT, PROGRESS_HELP, CliError, progress_mode, read_json  # noqa: F401 (re-exported)
 from .parser import build_parser
@@ -82,6 +84,15 @@ def _cmd_render(args) -> int:
         value = getattr(args, key)
         if value is not None and value < lo:
             raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer >= {lo}")
+    try:                                         # (named as the flags, not "override.resolution.width")
+        if args.resolution is not None:
+            resolution(args.resolution, Where("--resolution"))
+        if args.sampler is not None:
+            string(args.sampler, Where("--sampler"), SAMPLERS)
+    except SceneError as e:
+        raise CliError(str(e)) from None
+    if args.time_budget is not None and not args.time_budget > 0:
+        raise CliError(f"--time-budget {args.time_budget:g}: expected seconds > 0")
     overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
                  "sampler": args.sampler}
     scene = load_for_cli(args, **{k: v for k, v in overrides.items() if v is not None})

@@ -252,3 +252,17 @@ def test_fit_output_keeps_the_scene_files_comments_and_layout(tmp_path, capsys):
     assert all(line in after for line in before if line.lstrip().startswith("#"))
     fitted = draaw_mi.load_scene(str(out))
     assert fitted.description["materials"]["ball"]["roughness"] != 0.4
+
+
+@pytest.mark.parametrize("flags, says", [
+    (["--resolution", "0x0"], "--resolution: width: 0 is out of range; expected a value in [1, 16384]"),
+    (["--sampler", "foo"], "--sampler: 'foo' is not one of independent, multijitter"),
+    (["--time-budget", "-1"], "--time-budget -1: expected seconds > 0"),
+])
+def test_a_bad_render_flag_is_named_as_the_flag(tmp_path, tiny_file, capsys, flags, says):
+    """They were named as the scene loader's overrides ("override.resolution.width: ...",
+    "override.sampler") or as the Python call ("render: time_budget=-1.0")."""
+    assert main(["render", tiny_file, "-o", str(tmp_path / "x.exr"), *flags]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert says in line and "override" not in line, line
+    assert not (tmp_path / "x.exr").exists()
