@@ -7,7 +7,8 @@ carriage returns. There :class:`LineProgress` writes a whole line now and then i
     batch: 6/24 frames (25 %), 12.4 s, ETA 37 s, done=6 failed=0
 
 Every long-running function of draaw-mi takes ``progress``, read by :func:`progress_bar`:
-``False``/``None`` for none, ``True`` or ``"bar"`` for a tqdm bar, ``"lines"`` for these lines.
+``False``/``None`` for none, ``"bar"`` for a tqdm bar, ``"lines"`` for these lines, ``True``
+for a bar where someone watches it (a terminal, a notebook) and lines elsewhere (a log file).
 
 >>> import io
 >>> out = io.StringIO()
@@ -51,17 +52,35 @@ def progress_bar(total: int, desc: str, unit: str, mode, *, leave: bool = True, 
                  every: float = LINE_INTERVAL, where: str = "progress_bar"):
     """A progress report over ``total`` steps, or ``None`` when ``mode`` asks for none.
 
-    ``mode``: ``True``/``"bar"`` a tqdm bar (``leave``: whether it stays when closed);
-    ``"lines"`` a :class:`LineProgress` on ``file`` (standard error by default) at most every
-    ``every`` seconds. Both have ``update``, ``set_postfix``, ``set_postfix_str``, ``close``.
-    A bad ``mode`` raises :class:`ParameterError` naming ``where`` (the caller)."""
+    ``mode``: ``"bar"`` a tqdm bar (``leave``: whether it stays when closed); ``"lines"`` a
+    :class:`LineProgress` on ``file`` (standard error by default) at most every ``every``
+    seconds; ``True`` the bar on a terminal or in a notebook, the lines elsewhere (a script's
+    log got tqdm's carriage returns). Both have ``update``, ``set_postfix``,
+    ``set_postfix_str``, ``close``. A bad ``mode`` raises :class:`ParameterError` naming
+    ``where`` (the caller)."""
     check_mode(mode, where)
     if not mode:
         return None
+    if mode is True:
+        mode = "bar" if watched(sys.stderr if file is None else file) else "lines"
     if mode == "lines":
         return LineProgress(total, desc, unit, file=file, every=every)
     from tqdm.auto import tqdm  # (27 ms, and it probes for ipywidgets: paid by bars only)
     return tqdm(total=total, desc=desc, unit=unit, leave=leave, dynamic_ncols=True, file=file)
+
+
+def watched(stream) -> bool:
+    """Whether someone watches ``stream`` as it is written: a terminal, or a notebook's
+    output (an IPython kernel's stream, where tqdm draws a widget).
+
+    >>> import io
+    >>> watched(io.StringIO())
+    False
+    """
+    isatty = getattr(stream, "isatty", None)
+    if isatty is not None and isatty():
+        return True
+    return type(stream).__module__.split(".")[0] == "ipykernel"
 
 
 class LineProgress:

@@ -99,3 +99,18 @@ def test_render_refuses_a_bad_mode_before_it_loads_anything():
     with pytest.raises(ParameterError, match="render: progress=2"):
         draaw_mi.render("no-such-scene.toml", progress=2)
 
+
+
+def test_true_is_a_bar_where_someone_watches_and_lines_in_a_log(monkeypatch):
+    """``fit(...)``'s default ``progress=True`` wrote tqdm's carriage-return bars into a
+    script's log; there it writes lines, and a bar on a terminal or in a notebook."""
+    import tqdm.auto
+    from draaw_mi import progress as P
+    log = io.StringIO()
+    assert isinstance(progress_bar(3, "fit", "it", True, file=log), LineProgress)
+    bars = []
+    monkeypatch.setattr(tqdm.auto, "tqdm", lambda **k: bars.append(k) or "bar")
+    assert progress_bar(3, "fit", "it", True, file=Stream(True)) == "bar"          # a terminal
+    OutStream = type("OutStream", (io.StringIO,), {"__module__": "ipykernel.iostream"})
+    assert P.watched(OutStream()) and progress_bar(3, "fit", "it", True, file=OutStream()) == "bar"
+    assert progress_bar(3, "fit", "it", "bar", file=log) == "bar" and len(bars) == 3   # asked for

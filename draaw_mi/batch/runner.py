@@ -22,7 +22,8 @@ Parameter          Meaning
 ``allow_outside_out``  let the manifest put files outside ``out`` (absolute or ``..`` patterns)
 ``dry_run``        plan and report, render nothing
 ``overwrite``      replace frames that another manifest file made (default: refuse the run)
-``progress``       tqdm bar with frames done / failed and ETA; ``"lines"``: a line every 10 s (logs)
+``progress``       tqdm bar with frames done / failed and ETA (``True``: in a log, lines instead);
+                   ``"lines"``: a line every 10 s (logs)
 ``on_result``      callback called with every frame's result record (tests, UIs)
 =================  ================================================================
 

@@ -142,7 +142,8 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
         smooth: feed the loss a running mean of recent renders carrying the current render's
             derivative; default on with ``post`` or ``loss="l1"`` (non-linear in the image).
         tol: plateau tolerance of ``converged`` (see :func:`~draaw_mi.fitting.result.settled`).
-        progress: a tqdm bar (``True``), a line every 10 s (``"lines"``, for logs) or none.
+        progress: a tqdm bar (``"bar"``), a line every 10 s (``"lines"``, for logs), either as
+            the stream suits (``True``: the bar on a terminal or in a notebook) or none.
         integrator_options: further integrator properties, as :func:`draaw_mi.render` takes
             them (e.g. ``{"sdf_silhouettes": False}``).
         captures: instead of ``views``, one dict per reference with its ``camera`` and the

@@ -82,8 +82,9 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         spp, seed, max_depth, resolution: override the scene's render settings (``resolution``
             as ``(W, H)``).
         params: ``mi.traverse`` parameters, for differentiable renders (``dr.backward`` works).
-        progress: ``True``/``"bar"`` a tqdm bar over passes, ``"lines"`` a line now and then
-            (for logs, :mod:`draaw_mi.progress`).
+        progress: ``"bar"`` a tqdm bar over passes, ``"lines"`` a line now and then (for logs),
+            ``True`` the bar on a terminal or in a notebook and the lines elsewhere
+            (:mod:`draaw_mi.progress`).
         time_budget: seconds; stop after the pass that reaches it (at least one pass runs); the
             image is the mean of the passes done (``return_info`` tells how many samples).
         pass_spp: samples per pass (default: all at once up to 256, 16 with a time budget). The

@@ -324,7 +324,7 @@ def test_the_bar_counts_agree_with_its_position(tmp_path, monkeypatch, capsys):
     import re
     from tqdm import tqdm
     monkeypatch.setattr(tqdm, "__init__", _no_rate_limit(tqdm.__init__))
-    batch.run(manifest(tmp_path, frames=4), progress=True)
+    batch.run(manifest(tmp_path, frames=4), progress="bar")
     err = capsys.readouterr().err
     states = re.findall(r"(\d)/4 \[[^\]]*done=(\d)", err)
     assert len(states) >= 4, err
