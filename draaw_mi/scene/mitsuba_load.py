@@ -57,7 +57,8 @@ def mitsuba_error_message(err: Exception) -> str:
         return unknown
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     msg = lines[-1] if lines else type(err).__name__
-    return re.sub(r"^\[[^\]]*\]\s*", "", msg)
+    # (Mitsuba's source locations, "[properties.h:868] ", wherever they are in the line)
+    return re.sub(r"\[[A-Za-z0-9_]+\.(?:h|cpp|py):\d+\]\s*", "", re.sub(r"^\[[^\]]*\]\s*", "", msg))
 
 
 # Mitsuba's scene optimisation merges meshes through a hash table keyed by object addresses

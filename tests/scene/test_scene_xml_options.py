@@ -179,3 +179,11 @@ def test_an_xml_scene_with_double_hyphens_in_a_comment_resizes_as_mitsuba_loads_
     assert draaw_mi.load_scene(shipped, resolution=(20, 12), spp=1).resolution == (20, 12)
     with pytest.raises(draaw_mi.SceneError, match=r"no \$rez; its <default>s: spp, res, max_depth"):
         draaw_mi.load_scene(shipped, defines={"rez": 32})
+
+
+def test_mitsubas_load_error_is_one_line_without_its_source_location(tmp_path, capsys):
+    """``-D res=-4`` ended in Mitsuba's "[properties.h:868] Property "height": ..."."""
+    assert main(["render", CBOX, "-o", str(tmp_path / "x.exr"), "-D", "res=-4"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'Property "height": value -4 is out of bounds' in err[0], err
+    assert ".h:" not in err[0] and "properties.h" not in err[0]
