@@ -296,17 +296,26 @@ def _parameters(scene, params, init):
         prm[k] = FitParam(k, names[k], p[k], scene)
         if prm[k].space == "log" and dr.width(p[k]) != 1:
             prm[k].space = "linear"            # textures: optimise texels linearly
-    if init:
-        for k in keys:
-            if names[k] in init or k in init:
-                value = init.get(names[k], init.get(k))
-                lo, hi = range_for(k, scene)
-                v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
-                if not np.all(np.isfinite(v)) or (lo is not None and np.any(v < lo)) or (
-                        hi is not None and np.any(v > hi)):
-                    raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected values in "
-                                         f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]")
-                initial[k] = value
+    for k in keys:
+        given = bool(init) and (names[k] in init or k in init)
+        value = init.get(names[k], init.get(k)) if given else p[k]
+        lo, hi = range_for(k, scene)
+        v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
+        texture = not given and v.size > 4          # (its texels are projected, as a step's)
+        if not np.all(np.isfinite(v)) or (not texture and lo is not None and np.any(v < lo)) or (
+                not texture and hi is not None and np.any(v > hi)):
+            expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+            if given:
+                raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected {expected}")
+            # (a value set through scene.params is not checked when set: it diverged to NaN, or
+            # was taken as a zero gradient, a few iterations later)
+            flat = v.ravel()
+            at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
+                  else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
+            raise ParameterError(f"fit: {names[k]} starts at {at} (its value in the scene); expected "
+                                 f"{expected}, or give init={{{names[k]!r}: ...}}")
+        if given:
+            initial[k] = value
     return keys, names, prm, start, initial
 
 

@@ -154,7 +154,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 break
     if bar is not None:
         bar.close()
-    image, names, bad = _finish(rs, integrator, acc, done, n_passes, return_info)
+    image, names, bad = _finish(rs, integrator, acc, done, n_passes)
+    _warn_non_finite(bad, rs)
     if return_info:
         return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                        "channels": names, "version": rs.version, "integrator": session_of(rs.scene).plugin_name(rs.version),
@@ -169,6 +170,10 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
     if not isinstance(scene, DraawScene):
         scene = load_scene(scene)
     s = scene.settings
+    if params is not None and not isinstance(params, mi.SceneParameters):
+        raise RenderError(f"render: params of type {type(params).__name__}; expected the scene's "
+                          "parameters (scene.params, or mi.traverse(scene.mi_scene)) with gradients "
+                          "enabled on some")
     if resolution is not None:
         size = tuple(parse_res(resolution, Where("render") / "resolution"))
         if params is not None and size != scene.resolution:
@@ -210,6 +215,11 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
             aovs = []
     elif isinstance(aovs, str):
         aovs = [aovs]                          # "depth" or "all", not its characters
+    if params is not None and aovs:
+        # (Mitsuba's adjoint pass splats AOVs with a Python float among them: a TypeError
+        # from ImageBlock.put inside dr.backward)
+        raise RenderError(f"render: AOVs ({', '.join(aovs)}) are not differentiable; drop params= or "
+                          "pass aovs=[] (render the AOVs apart, without params=)")
     session_of(scene).check_version_sees(version)
     if callable(post) and not isinstance(post, post_mod.Chain):
         raise RenderError(f"render: post={post!r}; expected a chain (a list of filter tables, a Chain "
@@ -228,7 +238,19 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
                           dict(integrator_options or {}), chain, loaded, bool(denoise), guides)
 
 
-def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int, count_bad: bool):
+def _warn_non_finite(bad: int, rs: RenderSettings) -> None:
+    """Say that an image holds NaN / inf values (``info["non_finite"]`` counts them too): a
+    value set through ``scene.params`` that a scene file would refuse (a NaN colour, a negative
+    roughness) renders them, and a post chain or denoiser reads them as 0 and hides them."""
+    if bad:
+        why = rs.scene.out_of_range(1)         # (read back only now: a render with none is not slowed)
+        warnings.warn(f"render: {bad} value(s) of the {rs.version} render of {rs.scene.source} are NaN "
+                      "or inf" + (f"; {why[0].removeprefix('out_of_range: ')} (set through scene.params: "
+                                  "scene.out_of_range() lists what a scene file would refuse)" if why else ""),
+                      RuntimeWarning, stacklevel=3)
+
+
+def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
     """``(image, channel names, non-finite values)``: the mean of the passes, named by the
     film's colour channels as its pixel_format stores them (R, G, B[, A], X, Y, Z[, A] or
     Y[, A]) and the AOVs', denoised and post-processed as asked. The non-finite values are
@@ -243,7 +265,7 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int, count
             image = acc / done
             dr.eval(image)
             dr.sync_thread()
-    bad = non_finite_count(image) if count_bad else 0
+    bad = non_finite_count(image)              # (one small kernel: said, and in the info)
     if rs.denoise or rs.chain:
         with RENDER_GUARD:                     # denoising, post: their kernels and reads back
             if rs.denoise:
@@ -327,7 +349,8 @@ def _render_adaptive(rs: RenderSettings, session, block, params, return_info, pr
     if bar is not None:                        # one launch: the bar fills at once
         bar.update(rs.spp)
         bar.close()
-    bad = non_finite_count(image) if return_info else 0      # before the chain: see _finish
+    bad = non_finite_count(image)                            # before the chain: see _finish
+    _warn_non_finite(bad, rs)
     if rs.chain:
         image = apply_post(image, rs.loaded)
     if return_info:

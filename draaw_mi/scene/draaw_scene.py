@@ -13,7 +13,9 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+import drjit as dr
 import mitsuba as mi
+import numpy as np
 import tomli_w
 
 from ..errors import ParameterError, SceneError, suggest
@@ -84,6 +86,31 @@ class DraawScene:
         an SDF object's range (radius > 0, ...), else the materials' ranges
         (:func:`draaw_mi.materials.check_value`). Nothing changes."""
         self.check_values(who, {name: (key, value)})
+
+    def out_of_range(self, limit: int = 3) -> list[str]:
+        """What is wrong with the scene's current parameter values, as :meth:`check_value` says
+        it (at most ``limit`` messages): values set through :attr:`params` are not checked when
+        they are set, and one out of its range (a NaN colour, a negative roughness) renders
+        NaN or clamped pixels. Single values and colours are read back; textures are not.
+
+        >>> # scene.params["white.base_color.value"] = mi.Color3f(float("nan")); scene.params.update()
+        >>> # scene.out_of_range() -> ["out_of_range: white.base_color.value=[nan, nan, nan]; expected ..."]
+        """
+        found = []
+        params = self.params
+        for key in params.keys():
+            value = params[key]
+            if not (dr.is_array_v(value) and dr.is_float_v(value)) or dr.is_tensor_v(value) \
+                    or dr.width(value) != 1 or "Transform" in type(value).__name__:
+                continue                               # (textures, transforms, film sizes)
+            v = np.array(value, dtype=np.float64).ravel()
+            try:
+                self.check_value("out_of_range", key, key, v.tolist() if v.size > 1 else float(v[0]))
+            except ParameterError as e:
+                found.append(str(e))
+                if len(found) >= limit:
+                    break
+        return found
 
     def check_values(self, who: str, values: dict) -> None:
         """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are

@@ -189,3 +189,22 @@ def test_fitted_values_are_written_as_the_float32_the_scene_holds(tmp_path):
     json_out = str(tmp_path / "fitted.json")
     FitResult(values={"a.roughness": 0.7718944549560547}).save(json_out)
     assert open(json_out).read().split() == ['{', '"fitted":', '{', '"a.roughness":', '0.77189445', '}', '}']
+
+
+def test_a_start_value_out_of_range_is_refused_before_the_fit(tiny_scene):
+    """A roughness of NaN set through scene.params went on to "got a zero gradient", then
+    "diverged to NaN/Inf ... try a smaller lr"; it is refused as an init of NaN is."""
+    import mitsuba as mi
+    ref = np.full((24, 32, 3), 0.2, np.float32)
+    p = tiny_scene.params
+    key = tiny_scene.key("ball.roughness")
+    for bad, shown in ((float("nan"), "nan"), (-0.5, "-0.5")):
+        p[key] = mi.Float(bad)
+        p.update()
+        with pytest.raises(draaw_mi.ParameterError, match=rf"fit: ball.roughness starts at {shown} \(its value "
+                                                         r"in the scene\); expected values in \[0.0, 1.0\]"):
+            draaw_mi.fit(tiny_scene, ref, params=["ball.roughness"], iterations=1, progress=False)
+    # an init in range is the start instead: no refusal
+    res = draaw_mi.fit(tiny_scene, ref, params=["ball.roughness"], iterations=1, progress=False,
+                       init={"ball.roughness": 0.4})
+    assert np.isfinite(res.values["ball.roughness"])

@@ -7,6 +7,7 @@ integrators built directly with ``mi.load_dict``.
 from __future__ import annotations
 
 import math
+import re
 import os
 
 import mitsuba as mi
@@ -204,3 +205,49 @@ def test_a_graded_go_draaw_version_without_its_grade_says_so():
         warnings.simplefilter("error")
         draaw_mi.render(scene, version="V4-Log", spp=1, post=[{"type": "log"}])
         draaw_mi.render(scene, version="V4-Optim-V2", spp=1)           # not a graded name
+
+
+def test_a_differentiable_render_refuses_aovs_and_other_params(tiny_scene):
+    """``render(scene, params=p, aovs=["depth"])`` then ``dr.backward`` died in Mitsuba's
+    adjoint pass (ImageBlock.put: incompatible arguments); a dict of values for ``params``
+    died in mi.render ("should be an instance of mi.SceneParameters")."""
+    import drjit as dr
+    p = tiny_scene.params
+    with pytest.raises(draaw_mi.RenderError, match=r"render: AOVs \(depth\) are not differentiable; drop "
+                                                   r"params= or pass aovs=\[\]"):
+        draaw_mi.render(tiny_scene, spp=1, params=p, aovs=["depth"])
+    with pytest.raises(draaw_mi.RenderError, match=r"render: params of type dict; expected the scene's parameters"):
+        draaw_mi.render(tiny_scene, spp=1, params={"ball.roughness.value": 0.5})
+    key = tiny_scene.key("ball.roughness")
+    x = type(p[key])(p[key])
+    dr.enable_grad(x)
+    p[key] = x
+    p.update()
+    img = draaw_mi.render(tiny_scene, spp=2, params=p, aovs=[])        # what the message says works
+    dr.backward(dr.mean(img, axis=None))
+    assert np.isfinite(dr.grad(x)).all() and dr.grad(x)[0] != 0
+    dr.disable_grad(x)
+
+
+def test_a_render_with_nan_values_says_which_parameter_made_them(tiny_scene):
+    """A NaN colour set through scene.params rendered 2,541 NaN values without a word (only
+    ``info["non_finite"]`` counted them); the warning names the value a scene file refuses."""
+    p = tiny_scene.params
+    key = tiny_scene.key("ball.base_color")
+    assert tiny_scene.out_of_range() == []
+    old = type(p[key])(p[key])
+    p[key] = mi.Color3f(float("nan"))
+    p.update()
+    try:
+        assert tiny_scene.out_of_range() == [f"out_of_range: {key}=[nan, nan, nan]; expected finite "
+                                             "numbers (in float32, |x| <= 3.4e38)"]
+        with pytest.warns(RuntimeWarning, match=rf"are NaN or inf; {re.escape(key)}=\[nan, nan, nan\]"):
+            _, info = draaw_mi.render(tiny_scene, spp=1, return_info=True)
+        assert info["non_finite"] > 0
+        p[tiny_scene.key("ground.roughness")] = mi.Float(-0.5)              # a range, not NaN
+        assert any("ground.roughness.value=-0.5; expected a number in [0.0, 1.0]" in m
+                   for m in tiny_scene.out_of_range())
+    finally:
+        p[key] = old
+        p[tiny_scene.key("ground.roughness")] = mi.Float(0.9)
+        p.update()
