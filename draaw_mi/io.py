@@ -33,7 +33,11 @@ DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B",
 def to_numpy(image, where: str = "to_numpy") -> np.ndarray:
     """An (H, W, C) float32 numpy copy of a TensorXf, Bitmap or array (2-D gets C = 1);
     ``where`` names the caller in the error."""
-    arr = np.array(image, dtype=np.float32)
+    try:
+        arr = np.array(image, dtype=np.float32)
+    except (TypeError, ValueError) as e:    # a string, a list of lists of different lengths
+        raise IOFailure(f"{where}: image of type {type(image).__name__} is not an array of numbers "
+                        f"({e}); expected (H, W) or (H, W, C) values") from None
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim != 3 or arr.shape[0] < 1 or arr.shape[1] < 1 or arr.shape[2] < 1:
@@ -268,7 +272,8 @@ def read_exr(path: str, with_names: bool = False):
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise IOFailure(f"read_exr: {path!r} does not exist")
+        raise IOFailure(f"read_exr: {path!r} " + ("is a folder; expected an EXR file" if os.path.isdir(path)
+                                                  else "does not exist"))
     try:
         with open(path, "rb") as fh:
             magic = fh.read(4)

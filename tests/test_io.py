@@ -281,3 +281,15 @@ def test_a_png_of_xyz_channels_is_the_colour_they_describe(tmp_path):
     back = np.asarray(Image.open(str(tmp_path / "x.png")).convert("RGB")).astype(int)
     want = np.round(255 * srgb_encode(rgb)).astype(int)
     assert np.abs(back - want).max() <= 1, (back[0, 0], want)
+
+
+def test_what_is_not_an_image_or_not_a_file_is_said_so(tmp_path):
+    """``write_exr(path, "hello")`` raised NumPy's ValueError; ``read_exr`` of a folder said it
+    did not exist."""
+    with pytest.raises(draaw_mi.IOFailure, match=r"write_exr\(.*\): image of type str is not an array of numbers"):
+        draaw_mi.write_exr(str(tmp_path / "x.exr"), "hello")
+    assert not (tmp_path / "x.exr").exists()
+    with pytest.raises(draaw_mi.IOFailure, match=r"read_exr: .* is a folder; expected an EXR file"):
+        draaw_mi.read_exr(str(tmp_path))
+    with pytest.raises(draaw_mi.IOFailure, match=r"read_exr: .* does not exist"):
+        draaw_mi.read_exr(str(tmp_path / "nothing.exr"))

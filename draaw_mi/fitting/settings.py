@@ -2,6 +2,8 @@
 (:func:`validate`): a bad value is a :class:`~draaw_mi.errors.ParameterError` that names it."""
 from __future__ import annotations
 
+import numbers
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +54,7 @@ def check_counts(who: str, optional: tuple = (), **counts) -> None:
     for name, (value, lo) in counts.items():
         if value is None and name in optional:
             continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
             raise ParameterError(f"{who}: {name}={value!r}; expected an integer >= {lo}")
 
 
@@ -67,20 +69,20 @@ def validate(s: FitSettings) -> FitSettings:
                              "integrator properties")
     check_counts("fit", ("spp_grad", "polish_spp"), spp=(s.spp, 1), iterations=(s.iterations, 1),
                  spp_grad=(s.spp_grad, 1), polish=(s.polish, 0), polish_spp=(s.polish_spp, 1))
-    if isinstance(s.lr, bool) or not (isinstance(s.lr, (int, float)) and 0 < s.lr < float("inf")):
+    if isinstance(s.lr, bool) or not (isinstance(s.lr, numbers.Real) and 0 < s.lr < float("inf")):
         raise ParameterError(f"fit: lr={s.lr!r}; expected a positive finite number")
-    if isinstance(s.seed, bool) or not isinstance(s.seed, int) or not 0 <= s.seed <= 0xFFFFFFFF:
+    if isinstance(s.seed, bool) or not isinstance(s.seed, numbers.Integral) or not 0 <= s.seed <= 0xFFFFFFFF:
         raise ParameterError(f"fit: seed={s.seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
-    if not (isinstance(s.average_last, (int, float)) and 0 < s.average_last <= 1):
+    if not (isinstance(s.average_last, numbers.Real) and 0 < s.average_last <= 1):
         raise ParameterError(f"fit: average_last={s.average_last!r}; expected a fraction in (0, 1]")
     # lr_final in [0, 1] (below 0 the averaged iterations climb the loss), beta_2 in [0, 1)
     for name, value, hi_open in (("lr_final", s.lr_final, False), ("beta_2", s.beta_2, True)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (
                 0 <= value < 1 if hi_open else 0 <= value <= 1):
             raise ParameterError(f"fit: {name}={value!r}; expected a number in [0, 1{')' if hi_open else ']'}")
-    if isinstance(s.tol, bool) or not isinstance(s.tol, (int, float)) or not s.tol >= 0:
+    if isinstance(s.tol, bool) or not isinstance(s.tol, numbers.Real) or not s.tol >= 0:
         raise ParameterError(f"fit: tol={s.tol!r}; expected a number >= 0")
-    if s.batch is not None and (isinstance(s.batch, bool) or not isinstance(s.batch, int) or s.batch < 1):
+    if s.batch is not None and (isinstance(s.batch, bool) or not isinstance(s.batch, numbers.Integral) or s.batch < 1):
         raise ParameterError(f"fit: batch={s.batch!r}; expected an integer >= 1 (views per iteration) or None")
     if s.smooth is not None and not isinstance(s.smooth, (bool, np.bool_)):
         raise ParameterError(f"fit: smooth={s.smooth!r}; expected True, False or None")

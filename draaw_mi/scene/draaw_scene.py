@@ -25,6 +25,7 @@ from ..sdf.params import PREFIX, SDFParameters
 from .carry import carry_values
 from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file
+from .schema import Where, resolution
 from .sdf_dicts import write_back
 from .toml_edit import edited_toml
 
@@ -46,6 +47,16 @@ class DraawScene:
     description: dict | None = None
     _params: Any = None
     _all_params: Any = None
+
+    def __repr__(self) -> str:
+        """One line (a notebook cell that shows a scene printed its whole Mitsuba scene and
+        description: 200 lines); ``summary()`` and ``draaw-mi info`` say more."""
+        w, h = self.resolution
+        s = self.settings
+        materials = self.info.get("materials") or []
+        return (f"DraawScene({self.source!r}, {w}x{h}, version {s.get('version')!r}, spp {s.get('spp')}, "
+                f"{len(self.mi_scene.shapes())} shapes, {len(self.mi_scene.emitters())} emitters"
+                + (f", materials {', '.join(materials)}" if materials else "") + ")")
 
     @property
     def resolution(self) -> tuple[int, int]:
@@ -136,6 +147,9 @@ class DraawScene:
 
         >>> # scene.key("gold.roughness") -> "gold.roughness.value"
         """
+        if not isinstance(name, str):
+            raise ParameterError(f"{self.source}: parameter name {name!r}; expected a string such as "
+                                 "'metal.roughness'")
         keys = list(self.all_params.keys())
         for cand in (name, f"{name}.value", f"{name}.data"):
             if cand in keys:
@@ -163,6 +177,7 @@ class DraawScene:
         """The same scene with another film size. It reloads the Mitsuba scene and carries the
         current parameter values over (:func:`~draaw_mi.scene.carry.carry_values`): edits
         made through :attr:`params` stay; the copy has its own ``mi.traverse``."""
+        width, height = resolution([width, height], Where("with_resolution") / "resolution")
         if (width, height) == self.resolution:
             return self
         settings = dict(self.settings, resolution=(int(width), int(height)))

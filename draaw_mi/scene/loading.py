@@ -19,9 +19,9 @@ import weakref
 
 import mitsuba as mi
 
-from ..errors import SceneError, suggest
+from ..errors import DraawError, SceneError, suggest
 from ..guard import RENDER_GUARD
-from ..integrators import SCENE_VERSION
+from ..integrators import SCENE_VERSION, resolve_version
 from .camera import auto_camera, filter_plugin, sampler_plugin
 from .description import DEFAULT_SETTINGS, SAMPLERS, TOP_KEYS, build_mitsuba_dict
 from .draaw_scene import DraawScene
@@ -224,6 +224,11 @@ def _checked(overrides: dict, source: str) -> dict:
             out[key] = number(out[key], where / key, lo=lo, integer=True)
     if out.get("sampler") is not None:
         out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
+    if out.get("version") is not None:       # (refused now, not at the first render)
+        try:
+            resolve_version(out["version"])
+        except DraawError as e:
+            raise (where / "version").error(str(e)) from None
     return out
 
 

@@ -12,6 +12,8 @@ from typing import Any, Iterable
 
 import tomllib
 
+import numpy as np
+
 from ..errors import SceneError, suggest
 from ..limits import FLOAT32_MAX
 
@@ -145,6 +147,8 @@ def resolution(value: Any, where: Where) -> tuple[int, int]:
             raise where.error(f"{shown(value)} is not a resolution; expected 'WxH' such as '256x256'") from None
     if isinstance(value, numbers.Integral) and not isinstance(value, bool):
         value = [value, value]
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()             # np.array([640, 480])
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise where.error(f"{shown(value)} is not a resolution; expected [width, height] or 'WxH'")
     w = number(value[0], where / "width", lo=1, hi=16384, integer=True)

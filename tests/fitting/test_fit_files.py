@@ -208,3 +208,13 @@ def test_a_start_value_out_of_range_is_refused_before_the_fit(tiny_scene):
     res = draaw_mi.fit(tiny_scene, ref, params=["ball.roughness"], iterations=1, progress=False,
                        init={"ball.roughness": 0.4})
     assert np.isfinite(res.values["ball.roughness"])
+
+
+def test_numpy_integers_are_counts_and_floats_are_not():
+    """``fit(iterations=np.int64(2))`` was refused ("expected an integer >= 1") where render,
+    load_scene and with_resolution take NumPy integers."""
+    from draaw_mi.fitting.settings import check_counts
+    check_counts("fit", iterations=(np.int64(2), 1), spp=(np.uint32(4), 1))
+    for bad in (2.0, True, np.float64(2.0)):
+        with pytest.raises(draaw_mi.ParameterError, match=r"fit: iterations=.*; expected an integer >= 1"):
+            check_counts("fit", iterations=(bad, 1))

@@ -494,3 +494,24 @@ def test_a_parameter_name_without_its_material_lists_the_materials_that_have_it(
         scene.key("r0m0.metalic")
     with pytest.raises(SceneError, match=r"`draaw-mi info` lists the scene's materials$"):
         scene.key("zzz")
+
+
+def test_a_scene_shows_in_one_line_and_checks_what_it_is_given():
+    """A notebook cell showing a scene printed 200 lines (the Mitsuba scene and the
+    description); ``with_resolution(0, 32)`` made a scene that failed in its render,
+    ``(32.7, 32)`` was cut to 32; ``load_scene(version="v9")`` loaded, the first render refused
+    it; a parameter name that is not a string failed with "can only concatenate str"."""
+    import numpy as np
+    scene = draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), resolution=np.array([16, 12]))
+    assert repr(scene) == ("DraawScene('" + os.path.join(SCENES, "cornell.toml") + "', 16x12, version 'v4', "
+                           "spp 64, 6 shapes, 1 emitters, materials white, red, green, metal, plastic)")
+    for size, says in (((0, 32), r"resolution.width: 0 is out of range; expected a value in \[1, 16384\]"),
+                       ((32.7, 32), r"resolution.width: 32.7 is not an integer"),
+                       (("32", 32), r"resolution.width: '32' is not a number")):
+        with pytest.raises(draaw_mi.SceneError, match=r"with_resolution: " + says):
+            scene.with_resolution(*size)
+    assert scene.with_resolution(np.int64(8), 8).resolution == (8, 8)
+    with pytest.raises(draaw_mi.SceneError, match=r"override.version: render version 'v9' is unknown"):
+        draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), version="v9")
+    with pytest.raises(draaw_mi.ParameterError, match=r"parameter name 123; expected a string"):
+        scene.key(123)
