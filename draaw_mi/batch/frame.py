@@ -12,6 +12,7 @@ import os
 import re
 import threading
 import time
+import warnings
 
 import drjit as dr
 import numpy as np
@@ -64,8 +65,12 @@ class CachedScene:
         self._prepare(integrator, spec)
         if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not session.freezes(spp, True)
                 or session.sample_passes(spp, MAX_PASS_SPP) != [spp]):
-            return render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
-                          max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"], return_info=True)
+            with warnings.catch_warnings():      # (the NaN guard below says it, failing the frame)
+                warnings.filterwarnings("ignore", r"render: \d+ value\(s\) of the .* are NaN or inf",
+                                        RuntimeWarning)
+                return render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
+                              max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
+                              return_info=True)
         # the film's colour checked and named as render() does it
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:

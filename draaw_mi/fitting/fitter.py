@@ -76,7 +76,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import post as post_mod
-from ..errors import DraawError, ParameterError
+from ..errors import ParameterError
 from ..integrators import is_draaw, resolve_version
 from ..progress import check_mode, progress_bar
 from ..rendering.frozen import owned_tensor
@@ -237,24 +237,24 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
              for g, r in zip(given, refs)]
     h, w = refs[0].shape[:2]
     if any(r.shape != refs[0].shape for r in refs):
-        raise DraawError(f"fit: references differ in shape: {[r.shape for r in refs]}")
+        raise ParameterError(f"fit: references differ in shape: {[r.shape for r in refs]}")
     callers_scene = scene
     if s.resolution is not None or scene.resolution != (w, h):
         if s.resolution is not None and tuple(s.resolution) != (w, h):
-            raise DraawError(f"fit: resolution {tuple(s.resolution)} differs from the references' {w}x{h}")
+            raise ParameterError(f"fit: resolution {tuple(s.resolution)} differs from the references' {w}x{h}")
         check_reference_size(scene, w, h, given[0])
         scene = scene.with_resolution(w, h)
     sensors = view_sensors(scene, views)
     spp = sampler_spp(scene, s.spp, "spp")
     spp_grad = None if s.spp_grad is None else sampler_spp(scene, s.spp_grad, "spp_grad")
     if len(sensors) != len(refs):
-        raise DraawError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
+        raise ParameterError(f"fit: {len(refs)} reference(s) for {len(sensors)} view(s); give one per view")
     session = session_of(scene)
     session.check_version_sees(version)      # prb would fit a smoke scene as if it had no smoke
     integrator = session.integrator(version, scene.settings["max_depth"] if s.max_depth is None else s.max_depth,
                                     scene.settings.get("hide_emitters", False), **(s.integrator_options or {}))
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
-        raise DraawError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
+        raise ParameterError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
     keys, names, prm, start, initial = _parameters(scene, params, s.init)
     smooth = (chain is not None or s.loss == "l1") if s.smooth is None else bool(s.smooth)
     overrides = CaptureOverrides.build(scene.params, captures or [{"lights": {}, "params": {}}] * len(sensors),
@@ -283,15 +283,15 @@ def _parameters(scene, params, init):
     prm: dict[str, FitParam] = {}
     for k in keys:
         if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
-            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
                              "Mitsuba stores as integers (not differentiable); give the texture as a "
                              "float image (EXR) to fit it")
         if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
-            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
         # what the plugin declares non-differentiable (a point light's position: its samples
         # are taken without gradients) would get a zero gradient and keep its start
         if k in scene.params and scene.params.flags(k) & int(mi.ParamFlags.NonDifferentiable):
-            raise DraawError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
                              "its Mitsuba plugin (it would keep its starting value)")
         prm[k] = FitParam(k, names[k], p[k], scene)
         if prm[k].space == "log" and dr.width(p[k]) != 1:

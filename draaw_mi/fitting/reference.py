@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import mitsuba as mi
 import numpy as np
 
-from ..errors import DraawError, ParameterError
+from ..errors import IOFailure, ParameterError
 from ..io import read_exr, srgb_decode, to_numpy
 from ..post import display_encoded
 from ..post.chain import Chain
@@ -69,14 +69,14 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
             try:
                 arr = matplotlib.image.imread(ref)
             except Exception as e:  # noqa: BLE001
-                raise DraawError(f"{who}: cannot read reference {ref!r}: {e}") from None
+                raise IOFailure(f"{who}: cannot read reference {ref!r}: {e}") from None
             arr = arr.astype(np.float32) / (255.0 if np.issubdtype(arr.dtype, np.integer) else 1.0)
             if arr.ndim == 3 and arr.shape[2] in (2, 4):
                 arr = arr[..., :-1]                    # (grey or colour) + alpha
             if not encoded:
                 arr = srgb_decode(arr)
         else:
-            raise DraawError(f"{who}: reference {ref!r} must be an .exr or .png file")
+            raise IOFailure(f"{who}: reference {ref!r} must be an .exr or .png file")
     else:
         arr = _array_reference(ref, who)
     if arr.ndim == 2:
@@ -89,7 +89,7 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
         bad = int(np.count_nonzero(bad_px))
         y, x = np.argwhere(bad_px)[0]
         what = f"reference {ref!r}" if isinstance(ref, str) else "a reference image"
-        raise DraawError(f"{who}: {what} has {bad} pixel(s) with NaN or Inf (first at x={x}, y={y})")
+        raise ParameterError(f"{who}: {what} has {bad} pixel(s) with NaN or Inf (first at x={x}, y={y})")
     return arr
 
 
@@ -145,9 +145,9 @@ def check_reference_size(scene: DraawScene, w: int, h: int, reference) -> None:
     sw, sh = scene.resolution
     what = reference if isinstance(reference, (str, os.PathLike)) else "the reference"
     if abs(w * sh - h * sw) > 0.02 * max(w * sh, h * sw):
-        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}: another aspect "
+        raise ParameterError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}: another aspect "
                          "ratio; render the reference with the scene's camera and film")
     if not scene.resizable:
-        raise DraawError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}; a scene given as "
+        raise ParameterError(f"fit: {what} is {w}x{h}, the scene renders {sw}x{sh}; a scene given as "
                          "mi.Scene keeps its film's size: give a reference of that size (or "
                          "load the scene from its file)")

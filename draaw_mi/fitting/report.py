@@ -8,7 +8,7 @@ import time
 import drjit as dr
 import numpy as np
 
-from ..errors import DraawError
+from ..errors import RenderError
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from .maps import fill_unobserved
@@ -38,7 +38,7 @@ def report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: in
                 p[k] = problem.start[k]
             p.update()
             problem.session.scene_changed()
-        raise DraawError(f"fit: {', '.join(bad)} diverged to NaN/Inf (last loss "
+        raise RenderError(f"fit: {', '.join(bad)} diverged to NaN/Inf (last loss "
                          f"{history[-1]['loss']:.3g}); the scene keeps its starting values: "
                          f"try a smaller lr (now {s.lr:g})")
     fitted = {}

@@ -9,7 +9,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import DraawError
+from ..errors import ParameterError
 from ..rendering.passes import sample_passes
 from ..scene.camera import camera_to_look_at, sampler_plugin, sensor_dict
 from ..scene.schema import Where
@@ -26,7 +26,7 @@ def view_sensors(scene: DraawScene, views):
     if views is None:
         return [scene.mi_scene.sensors()[0]]
     if not isinstance(views, (list, tuple)) or not views:
-        raise DraawError("fit: views must be a non-empty list of camera tables or mi.Sensor objects")
+        raise ParameterError("fit: views must be a non-empty list of camera tables or mi.Sensor objects")
     w, h = scene.resolution
     # a view without a field of view has the scene camera's, not [camera]'s default of 40
     # degrees (its references would be fitted through another lens)
@@ -43,13 +43,13 @@ def view_sensors(scene: DraawScene, views):
         if isinstance(v, mi.Sensor):
             size = tuple(int(c) for c in v.film().crop_size())
             if size != (w, h):     # (else a raw Dr.Jit size error, or pixels compared scrambled)
-                raise DraawError(f"fit: views[{i}] is a sensor of {size[0]}x{size[1]} pixels; "
+                raise ParameterError(f"fit: views[{i}] is a sensor of {size[0]}x{size[1]} pixels; "
                                  f"expected the references' {w}x{h}")
             out.append(v)
             continue
         if isinstance(v, dict) and "fov" not in v:
             if "fov_axis" in v:
-                raise DraawError(f"fit: views[{i}] has fov_axis but no fov; give both, or neither "
+                raise ParameterError(f"fit: views[{i}] has fov_axis but no fov; give both, or neither "
                                  "for the scene camera's")
             v = {**v, "fov": x_fov, "fov_axis": "x"}
         look = camera_to_look_at(v, Where("fit") / "views" / i)

@@ -218,3 +218,20 @@ def test_numpy_integers_are_counts_and_floats_are_not():
     for bad in (2.0, True, np.float64(2.0)):
         with pytest.raises(draaw_mi.ParameterError, match=r"fit: iterations=.*; expected an integer >= 1"):
             check_counts("fit", iterations=(bad, 1))
+
+
+def test_bad_fit_input_raises_the_typed_errors(tiny_scene, tmp_path):
+    """A reference of another aspect ratio, a NaN in it, a version that is not differentiable,
+    two references for one view and an unreadable reference raised the bare DraawError, which
+    ``except draaw_mi.ParameterError`` (or IOFailure) let through."""
+    good = np.full((24, 32, 3), 0.2, np.float32)
+    nan = good.copy()
+    nan[1, 2, 0] = np.nan
+    cases = [(dict(references=np.full((17, 32, 3), 0.2, np.float32)), draaw_mi.ParameterError, "another aspect"),
+             (dict(references=nan), draaw_mi.ParameterError, r"NaN or Inf \(first at x=2, y=1\)"),
+             (dict(references=good, version="path"), draaw_mi.ParameterError, "not differentiable"),
+             (dict(references=[good, good]), draaw_mi.ParameterError, r"2 reference\(s\) for 1 view"),
+             (dict(references=str(tmp_path / "nothing.exr")), draaw_mi.IOFailure, "nothing.exr.* does not exist")]
+    for kwargs, error, says in cases:
+        with pytest.raises(error, match=says):
+            draaw_mi.fit(tiny_scene, params=["ball.roughness"], iterations=1, progress=False, **kwargs)
