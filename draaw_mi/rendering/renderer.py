@@ -36,6 +36,7 @@ from ..progress import check_mode, progress_bar
 from ..scene import DraawScene, load_scene
 from ..scene.schema import Where
 from ..scene.schema import resolution as parse_res
+from ..sdf.params import SDFParameters
 from .denoiser import AUX_AOVS, denoise_aovs, load_pyoidn
 from .film_colour import check_film_colour, scene_colour_names
 from .passes import pass_seeds
@@ -174,6 +175,9 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
         raise RenderError(f"render: params of type {type(params).__name__}; expected the scene's "
                           "parameters (scene.params, or mi.traverse(scene.mi_scene)) with gradients "
                           "enabled on some")
+    if params is not None and not _parameters_of(scene, params):
+        raise RenderError(f"render: params belong to another scene than {scene.source} (a scene loaded "
+                          "again, say): gradients would not reach them; pass this scene's scene.params")
     if resolution is not None:
         size = tuple(parse_res(resolution, Where("render") / "resolution"))
         if params is not None and size != scene.resolution:
@@ -236,6 +240,19 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
         aovs, guides = _denoise_aovs(params, adaptive, aovs, version)
     return RenderSettings(scene, version, spp, seed, max_depth, pass_spp, bool(hide), list(aovs),
                           dict(integrator_options or {}), chain, loaded, bool(denoise), guides)
+
+
+def _parameters_of(scene: DraawScene, params) -> bool:
+    """Whether ``params`` (``mi.SceneParameters``) are ``scene``'s: its own, or a traversal of
+    its objects (``mi.traverse(scene.mi_scene)``: the same plugin objects behind the keys)."""
+    if params is scene.params or params is scene.all_params:
+        return True
+    props = (params.base if isinstance(params, SDFParameters) else params).properties
+    own = scene.params.properties
+    for key, entry in props.items():
+        if key in own and entry[2] is not None:
+            return own[key][2] is entry[2]
+    return not props                           # (nothing to tell by)
 
 
 def _warn_non_finite(bad: int, rs: RenderSettings) -> None:

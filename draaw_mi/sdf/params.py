@@ -29,6 +29,11 @@ class SDFParameters(mi.SceneParameters):
         self._sdf = scene.sdf
         self._pending: dict = {}        # SDF values set, applied together by update()
 
+    @property
+    def base(self) -> mi.SceneParameters:
+        """The ``mi.traverse`` parameters under the SDF objects' keys."""
+        return self._base
+
     def _sdf_keys(self):
         return [PREFIX + k for k in self._sdf.params()] if self._sdf is not None else []
 

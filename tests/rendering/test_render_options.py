@@ -218,6 +218,11 @@ def test_a_differentiable_render_refuses_aovs_and_other_params(tiny_scene):
         draaw_mi.render(tiny_scene, spp=1, params=p, aovs=["depth"])
     with pytest.raises(draaw_mi.RenderError, match=r"render: params of type dict; expected the scene's parameters"):
         draaw_mi.render(tiny_scene, spp=1, params={"ball.roughness.value": 0.5})
+    # another scene's parameters (the scene loaded again) took no gradient, without a word
+    again = draaw_mi.load_scene(tiny_description())
+    with pytest.raises(draaw_mi.RenderError, match=r"render: params belong to another scene"):
+        draaw_mi.render(tiny_scene, spp=1, params=again.params)
+    draaw_mi.render(tiny_scene, spp=1, params=mi.traverse(tiny_scene.mi_scene))     # its own objects
     key = tiny_scene.key("ball.roughness")
     x = type(p[key])(p[key])
     dr.enable_grad(x)
