@@ -316,6 +316,13 @@ def _parameters(scene, params, init):
                                  f"{expected}, or give init={{{names[k]!r}: ...}}")
         if given:
             initial[k] = value
+        if prm[k].space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm[k].lo:
+            # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
+            # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
+            warnings.warn(f"fit: {names[k]} starts at {float(v.ravel()[0]):g}, near {prm[k].lo:.3g}, below "
+                          "which every value renders alike (the BSDF's alpha clamp): its gradient is "
+                          f"small there and the fit may stay near it; start it higher, e.g. "
+                          f"init={{{names[k]!r}: 0.3}}", RuntimeWarning, stacklevel=4)
     return keys, names, prm, start, initial
 
 
