@@ -23,6 +23,10 @@ Keys (always present, in this order):
 ``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...)
 ``other_glossy``        some BSDF other than ``draaw`` has a glossy lobe (``roughconductor``,
                         ``principled``, ``roughdielectric``, ...)
+``anisotropic``         some BSDF is anisotropic (``roughconductor`` with ``alpha_u`` !=
+                        ``alpha_v``, ``principled`` with ``anisotropic`` > 0): its lobes need
+                        the shading frame's tangent along dp/du, which only full surface
+                        interactions carry
 ``media``               a shape or sensor references a participating medium
 ``aovs``                the scene's integrator outputs AOVs
 ``sdf``                 the scene has SDF objects (``[[sdf]]``; ``draaw_mi.sdf``)
@@ -47,7 +51,7 @@ FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
     "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "other_glossy",
-    "media", "aovs", "sdf",
+    "anisotropic", "media", "aovs", "sdf",
 )
 
 _EMITTER_CLASSES = {
@@ -70,6 +74,8 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
     flags = bsdf.flags()
     if mi.has_flag(flags, mi.BSDFFlags.Delta):
         f["delta_bsdfs"] = True
+    if mi.has_flag(flags, mi.BSDFFlags.Anisotropic):
+        f["anisotropic"] = True
     if _is_draaw(bsdf):
         f["draaw_materials"] = True
         if bsdf.normalmap is not None:

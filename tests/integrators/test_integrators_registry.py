@@ -99,8 +99,8 @@ def test_detect_features_cornell():
     assert all(isinstance(v, bool) for v in f.values())
     assert f["area_lights"] and f["hittable_lights"] and f["draaw_materials"]
     for k in ("point_lights", "spot_lights", "envmap", "constant_env", "environment",
-              "delta_lights", "textures", "normal_maps", "delta_bsdfs", "other_glossy", "media",
-              "aovs"):
+              "delta_lights", "textures", "normal_maps", "delta_bsdfs", "other_glossy", "anisotropic",
+              "media", "aovs"):
         assert not f[k], k
 
 
@@ -117,7 +117,7 @@ def test_detect_features_emitters_and_materials():
         sky={"type": "envmap", "bitmap": env},
         glass={"type": "sphere", "radius": 0.1, "bsdf": {"type": "dielectric"}},
         metal={"type": "sphere", "radius": 0.1, "center": [0, -0.5, 0],
-               "bsdf": {"type": "roughconductor", "alpha": 0.1}},
+               "bsdf": {"type": "roughconductor", "alpha_u": 0.1, "alpha_v": 0.3}},
         tex={"type": "sphere", "radius": 0.1, "center": [0.5, 0, 0],
              "bsdf": {"type": "diffuse", "reflectance": {"type": "bitmap", "data": tex()}}},
         nm={"type": "sphere", "radius": 0.1, "center": [-0.5, 0, 0],
