@@ -31,7 +31,7 @@ import os as _os
 import sys as _sys
 
 from ._llvm import check_llvm
-from .errors import DraawError, IOFailure, ParameterError, RenderError, SceneError
+from .errors import DraawError, IOFailure, NonFiniteWarning, ParameterError, RenderError, SceneError
 
 __version__ = "0.1.0"
 DEFAULT_VARIANT = "llvm_ad_rgb"
@@ -91,7 +91,7 @@ from .rendering import denoise, render  # noqa: E402  (denoise imports pyoidn wh
 from .scene import load_scene  # noqa: E402
 
 __all__ = [
-    "DraawError", "SceneError", "ParameterError", "RenderError", "IOFailure", "VARIANT",
+    "DraawError", "SceneError", "ParameterError", "RenderError", "IOFailure", "NonFiniteWarning", "VARIANT",
     "register_plugins", "load_scene", "render", "write_exr", "read_exr", "write_png", "fit", "FitResult", "post",
     "denoise",
 ]

@@ -33,6 +33,11 @@ class BusyError(DraawError, RuntimeError):
     """A resource is held by another draaw-mi process (a batch output folder)."""
 
 
+class NonFiniteWarning(RuntimeWarning):
+    """A render holds NaN or inf values (:func:`draaw_mi.render` says which parameter made them
+    where it can); callers that report them their own way filter this category."""
+
+
 def suggest(name: str, valid: Iterable[str]) -> str:
     """A ``"; did you mean 'x'?"`` suffix for an unknown ``name``, or a list of valid names.
 

@@ -144,8 +144,8 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     """Write an (H, W, C) image as a float32 (or half) scanline EXR, atomically.
 
     ``channels`` names every channel (default ``R, G, B[, A]`` then error); values that overflow
-    float32 (or half: 65504) become ``inf`` as in any EXR writer, with a ``RuntimeWarning`` —
-    they are not clipped silently. ``metadata``:
+    float32 become ``inf`` as in any EXR writer, and with ``half`` those beyond 65504 too, with a
+    ``RuntimeWarning`` — they are not clipped silently. ``metadata``:
     extra header attributes (str, int or float values), e.g. draaw-mi's ``draaw:*`` keys. An
     EXR attribute holds a 32-bit int or float: an int outside int32 is stored as its decimal
     string (as an int, a seed of 3000000000 reads back as -1294967296), a float is rounded to float32.
@@ -164,14 +164,13 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     if len(set(names)) != len(names):
         raise IOFailure(f"write_exr({path!r}): duplicate channel names {names}")
     dtype = np.float16 if half else np.float32
-    top = float(np.finfo(dtype).max)
-    over = int(np.count_nonzero(np.isfinite(arr) & (np.abs(arr) > top)))
+    # (the array is float32 already: only half can overflow here)
+    over = half and bool(np.any(np.isfinite(arr) & (np.abs(arr) > float(np.finfo(np.float16).max))))
     with np.errstate(over="ignore"):                     # (said once below, in our words)
         chans = {n: np.ascontiguousarray(arr[..., i].astype(dtype)) for i, n in enumerate(names)}
     if over:      # (one message for every file: Python shows it once per calling line)
-        warnings.warn(f"write_exr: values beyond {'half' if half else 'float32'}'s range (+-{top:.6g}) "
-                      "are stored as +-inf" + ("; half=False keeps them" if half else ""),
-                      RuntimeWarning, stacklevel=2)
+        warnings.warn("write_exr: values beyond half's range (+-65504) are stored as +-inf; half=False "
+                      "keeps them", RuntimeWarning, stacklevel=2)
     import OpenEXR  # (15 ms to import: paid by EXR files only)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():

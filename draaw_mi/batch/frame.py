@@ -17,7 +17,7 @@ import warnings
 import drjit as dr
 import numpy as np
 
-from ..errors import DraawError, RenderError
+from ..errors import DraawError, NonFiniteWarning, RenderError
 from ..rendering.film_colour import check_film_colour, scene_colour_names
 from ..rendering.renderer import MAX_PASS_SPP, render
 from ..rendering.session import apply_post, holding, non_finite_count, session_of
@@ -66,8 +66,7 @@ class CachedScene:
         if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not session.freezes(spp, True)
                 or session.sample_passes(spp, MAX_PASS_SPP) != [spp]):
             with warnings.catch_warnings():      # (the NaN guard below says it, failing the frame)
-                warnings.filterwarnings("ignore", r"render: \d+ value\(s\) of the .* are NaN or inf",
-                                        RuntimeWarning)
+                warnings.simplefilter("ignore", NonFiniteWarning)
                 return render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                               max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
                               return_info=True)

@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import post as post_mod
-from ..errors import RenderError
+from ..errors import NonFiniteWarning, RenderError
 from ..guard import RENDER_GUARD
 from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version
 from ..integrators.common import AOV_CHANNELS
@@ -264,7 +264,7 @@ def _warn_non_finite(bad: int, rs: RenderSettings) -> None:
         warnings.warn(f"render: {bad} value(s) of the {rs.version} render of {rs.scene.source} are NaN "
                       "or inf" + (f"; {why[0].removeprefix('out_of_range: ')} (set through scene.params: "
                                   "scene.out_of_range() lists what a scene file would refuse)" if why else ""),
-                      RuntimeWarning, stacklevel=3)
+                      NonFiniteWarning, stacklevel=3)
 
 
 def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):

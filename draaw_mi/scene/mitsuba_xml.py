@@ -39,7 +39,7 @@ import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 
-from .xml_text import parse_xml_file
+from .xml_text import parse_xml_file, without_comments
 
 #: includes deeper than this are not followed (Mitsuba's own limit is 15)
 MAX_INCLUDE_DEPTH = 15
@@ -103,7 +103,7 @@ def _names_integrator_text(file: str) -> bool:
     """The text test for a file ElementTree cannot parse (comments dropped)."""
     try:
         with open(file, encoding="utf-8", errors="replace") as fh:
-            text = re.sub(r"<!--.*?-->", "", fh.read(), flags=re.S)
+            text = without_comments(fh.read())
     except OSError:
         return False
     return re.search(r"<integrator\b", text) is not None

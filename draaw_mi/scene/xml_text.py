@@ -18,13 +18,18 @@ import xml.etree.ElementTree as ET
 _COMMENT = re.compile(r"<!--.*?-->", re.S)
 
 
+def without_comments(text: str) -> str:
+    """``text`` with its ``<!-- ... -->`` comments removed."""
+    return _COMMENT.sub("", text)
+
+
 def parse_xml_text(text: str) -> ET.Element:
     """The root element of the XML ``text``; :class:`xml.etree.ElementTree.ParseError` where
     neither the text nor the text without its comments parses (the error of the text as it is)."""
     try:
         return ET.fromstring(text)
     except ET.ParseError as first:
-        stripped = _COMMENT.sub("", text)
+        stripped = without_comments(text)
         if stripped == text:
             raise
         try:
@@ -40,4 +45,4 @@ def parse_xml_file(path: str) -> ET.Element:
         return parse_xml_text(fh.read())
 
 
-__all__ = ["parse_xml_file", "parse_xml_text"]
+__all__ = ["parse_xml_file", "parse_xml_text", "without_comments"]

@@ -246,7 +246,7 @@ def test_a_render_with_nan_values_says_which_parameter_made_them(tiny_scene):
     try:
         assert tiny_scene.out_of_range() == [f"out_of_range: {key}=[nan, nan, nan]; expected finite "
                                              "numbers (in float32, |x| <= 3.4e38)"]
-        with pytest.warns(RuntimeWarning, match=rf"are NaN or inf; {re.escape(key)}=\[nan, nan, nan\]"):
+        with pytest.warns(draaw_mi.NonFiniteWarning, match=rf"are NaN or inf; {re.escape(key)}=\[nan, nan, nan\]"):
             _, info = draaw_mi.render(tiny_scene, spp=1, return_info=True)
         assert info["non_finite"] > 0
         p[tiny_scene.key("ground.roughness")] = mi.Float(-0.5)              # a range, not NaN
