@@ -299,31 +299,37 @@ def _parameters(scene, params, init):
     for k in keys:
         given = bool(init) and (names[k] in init or k in init)
         value = init.get(names[k], init.get(k)) if given else p[k]
-        lo, hi = range_for(k, scene)
-        v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
-        texture = not given and v.size > 4          # (its texels are projected, as a step's)
-        if not np.all(np.isfinite(v)) or (not texture and lo is not None and np.any(v < lo)) or (
-                not texture and hi is not None and np.any(v > hi)):
-            expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-            if given:
-                raise ParameterError(f"fit: init {names[k]}={shown(value)}; expected {expected}")
-            # (a value set through scene.params is not checked when set: it diverged to NaN, or
-            # was taken as a zero gradient, a few iterations later)
-            flat = v.ravel()
-            at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
-                  else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
-            raise ParameterError(f"fit: {names[k]} starts at {at} (its value in the scene); expected "
-                                 f"{expected}, or give init={{{names[k]!r}: ...}}")
+        _check_start(scene, k, names[k], prm[k], value, given)
         if given:
             initial[k] = value
-        if prm[k].space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm[k].lo:
-            # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
-            # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
-            warnings.warn(f"fit: {names[k]} starts at {float(v.ravel()[0]):g}, near {prm[k].lo:.3g}, below "
-                          "which every value renders alike (the BSDF's alpha clamp): its gradient is "
-                          f"small there and the fit may stay near it; start it higher, e.g. "
-                          f"init={{{names[k]!r}: 0.3}}", RuntimeWarning, stacklevel=4)
     return keys, names, prm, start, initial
+
+
+def _check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -> None:
+    """A parameter's start (its ``init``, where ``given``, else its value in the scene) within
+    its range and finite, else a :class:`ParameterError`; a warning where a log-space one
+    starts near its floor. A value set through ``scene.params`` is not checked when it is set:
+    a NaN one went on to a zero gradient, then "diverged to NaN"."""
+    lo, hi = range_for(key, scene)
+    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
+    texture = not given and v.size > 4              # (its texels are projected, as a step's)
+    if not np.all(np.isfinite(v)) or (not texture and lo is not None and np.any(v < lo)) or (
+            not texture and hi is not None and np.any(v > hi)):
+        expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        if given:
+            raise ParameterError(f"fit: init {name}={shown(value)}; expected {expected}")
+        flat = v.ravel()
+        at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
+              else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
+        raise ParameterError(f"fit: {name} starts at {at} (its value in the scene); expected {expected}, "
+                             f"or give init={{{name!r}: ...}}")
+    if prm.space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm.lo:
+        # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
+        # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
+        warnings.warn(f"fit: {name} starts at {float(v.ravel()[0]):g}, near {prm.lo:.3g}, below which every "
+                      "value renders alike (the BSDF's alpha clamp): its gradient is small there and the "
+                      f"fit may stay near it; start it higher, e.g. init={{{name!r}: 0.3}}",
+                      RuntimeWarning, stacklevel=5)
 
 
 def _optimiser(problem: FitProblem, s: FitSettings):
