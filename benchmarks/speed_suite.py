@@ -1,4 +1,4 @@
-"""Speed suite: time to reach ``path``'s 64-spp error on ten kinds of scene.
+"""Speed suite: time to reach ``path``'s 64-spp error on the suite's eighteen scenes.
 
 The measurement lives in :mod:`draaw_mi.bench.speed` (also ``draaw-mi bench --suite speed``);
 see its docstring for the method. Usage::

@@ -4,8 +4,8 @@
   cached ground truth) and :func:`frame_times` (GO-Draaw's frame-time statistics);
 * :mod:`~draaw_mi.bench.bias` -- bias told apart from noise; :mod:`~draaw_mi.bench.metrics` --
   RMSE, relative MSE, CIEDE2000; :mod:`~draaw_mi.bench.report` -- JSON, CSV, Markdown, plots;
-* :mod:`~draaw_mi.bench.suite` and :mod:`~draaw_mi.bench.speed` -- the speed suite (scenes of
-  ten kinds, time to ``path``'s error); :mod:`~draaw_mi.bench.reference_scenes` -- small
+* :mod:`~draaw_mi.bench.suite` and :mod:`~draaw_mi.bench.speed` -- the speed suite (eighteen
+  scenes of different kinds, time to ``path``'s error); :mod:`~draaw_mi.bench.reference_scenes` -- small
   reference scenes of the integrator tests;
 * :mod:`~draaw_mi.bench.sdf_study` -- the sphere tracer's accuracy against its cost;
 * :mod:`~draaw_mi.bench.code_digest` -- a hash of the render code, naming cached references.

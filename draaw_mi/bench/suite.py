@@ -25,6 +25,8 @@ scene               kind
 ``doorway``         a closed room lit only through a doorway by a lamp outside
 ``glossy_diffuse``  a floor lit only through a glossy metal panel (the lamp behind a wall)
 ``lights_2000``     2,000 small area lights of different powers (1:40) over objects
+``spot_and_area``   a spot and an area light on Mitsuba's own BSDFs (a bump-mapped box, a
+                    normal-mapped panel) under a gaussian filter
 ==================  =============================================================================
 
 Every scene renders with a box pixel filter unless its entry names another (the ``_tent`` /
@@ -227,6 +229,32 @@ def glossy_diffuse(res):
     return d
 
 
+def spot_and_area(res):
+    """A spot aimed at a bump-mapped box and a normal-mapped panel, beside an area light over
+    the floor: two kinds of light whose powers say little about what each gives the surfaces
+    in view; Mitsuba's own BSDFs, as a user's scene has them."""
+    d = _base(res, origin=(0.0, 1.6, 5.0), target=(0.0, 0.6, 0.0),
+              floor={"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}})
+    d["light"] = _area([0.0, 3.0, 1.0], 0.7, [10.0, 10.0, 10.0])
+    d["spot"] = {"type": "spot", "intensity": {"type": "rgb", "value": [30.0, 30.0, 30.0]},
+                 "cutoff_angle": 25.0,
+                 "to_world": T().look_at(origin=[2, 3, 2], target=[0, 0.5, 0], up=[0, 1, 0])}
+    rows = np.mgrid[0:32, 0:32][0] / 32.0
+    height = (0.5 + 0.5 * np.sin(20.0 * rows))[..., None].astype(np.float32)
+    d["box"] = {"type": "cube", "to_world": T().translate([-0.7, 0.5, 0]).rotate([0, 1, 0], 30).scale(0.45),
+                "bsdf": {"type": "bumpmap", "scale": 0.5,
+                         "arg": {"type": "bitmap", "raw": True, "bitmap": mi.Bitmap(height)},
+                         "bsdf": {"type": "roughplastic", "alpha": 0.3}}}
+    y, x = np.mgrid[0:32, 0:32] / 32.0
+    n = np.stack([0.3 * np.sin(12.0 * x), 0.3 * np.cos(9.0 * y), np.ones_like(x)], -1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    d["panel"] = {"type": "rectangle", "to_world": T().translate([0.8, 0.6, 0]).scale(0.6),
+                  "bsdf": {"type": "normalmap", "bsdf": {"type": "diffuse"},
+                           "normalmap": {"type": "bitmap", "raw": True,
+                                         "bitmap": mi.Bitmap((0.5 * n + 0.5).astype(np.float32))}}}
+    return d
+
+
 def lights_2000(res):
     """2,000 small lights on a 50 x 40 grid, one in twenty 40x brighter (at random)."""
     d = _ball_under_lights(res)
@@ -257,6 +285,7 @@ SCENES = {
     "doorway": ("room lit through a doorway", doorway, 6, "box"),
     "glossy_diffuse": ("floor lit via a glossy panel", glossy_diffuse, 6, "box"),
     "lights_2000": ("2,000 small lights, powers 1:40", lights_2000, 5, "box"),
+    "spot_and_area": ("spot + area light, Mitsuba BSDFs, gaussian", spot_and_area, 5, "gaussian"),
 }
 
 

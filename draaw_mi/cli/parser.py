@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="measure what accuracy costs in time (error vs time study)")
     b.add_argument("scenes", nargs="*", help="scene files (default: the sample scenes); with "
-                   "--suite speed: suite scene names (default: all ten)")
+                   "--suite speed: suite scene names (default: all of them)")
     b.add_argument("--suite", choices=["speed"], help="speed: V4 (or --versions) against path on "
                    "the speed suite's scenes, time to reach path's error (draaw_mi.bench.speed); "
                    "--spp is one spp (default 64), --gt-spp the reference spp "

@@ -95,6 +95,30 @@ def test_auto_learns_where_power_does_not_apply_and_keeps_power_where_it_does():
     assert off.emitter_selection(sky_and_area) is None           # 'power' never learns
 
 
+def test_auto_learns_among_lights_of_different_kinds():
+    """A spot aimed at the objects in view beside a wide area light: their powers differ
+    (a power table exists), but a spot's power says little about what the surfaces in view
+    get next to an area light's, so ``auto`` learns the table (the speed suite's
+    ``spot_and_area``: 0.53x ``path``'s time to its error with the power table, 0.23x with the
+    learned one; benchmarks/results/speed_suite.md, session 67). Among area lights alone it
+    keeps the power table (the test above)."""
+    T = mi.ScalarTransform4f
+    d = two_point_lights(1.0, 1.0)
+    del d["left"], d["right"]
+    d["spot"] = {"type": "spot", "intensity": 30.0, "cutoff_angle": 25.0,
+                 "to_world": T().look_at(origin=[1, 2, 0], target=[0, 0, 0], up=[0, 0, 1])}
+    d["panel"] = {"type": "rectangle", "emitter": {"type": "area", "radiance": 10.0},
+                  "to_world": T().translate([0, 3, 3]).rotate([1, 0, 0], 90).scale(0.7)}
+    scene = mi.load_dict(d)
+    power = PowerSelection.of(scene)
+    assert power is not None                                     # the powers differ
+    auto = integrator("draaw_v4", max_depth=3)
+    auto.prepare_selection(scene)
+    state = auto.selection_state(scene)
+    assert state[2], "auto kept the power table"                 # learned
+    assert not np.allclose(state[1].pmf_np, power.pmf_np, atol=0.02)
+
+
 def test_learned_table_is_deterministic_and_relearns_only_when_asked():
     scene = draaw_mi.load_scene(two_point_lights(1.0, 1.0))
     tables = []

@@ -72,6 +72,40 @@ def test_power_selection_follows_the_emitters_power():
     assert PowerSelection.of(ss.load("metal_018", 8)) is None  # one emitter: uniform is exact
 
 
+def test_emitter_powers_match_closed_forms():
+    """``emitter_powers`` (the mean of ``sample_ray``'s weights) against each light's power:
+    a point light's 4 pi I; a spot's I times the integral of Mitsuba's falloff (1 inside the
+    beam, linear in the angle out to the cutoff) over its cone, by scipy; an area light's
+    pi L A, and pi A times the mean of its radiance texture; an environment is inf. Counting
+    a spot as a point light (4 pi I, as before) reads it 25x too bright."""
+    from scipy.integrate import quad
+    from draaw_mi.integrators.sampling import emitter_powers
+    T = mi.ScalarTransform4f
+    texture = np.random.default_rng(3).uniform(0.0, 4.0, (8, 8, 3)).astype(np.float32)
+    scene = mi.load_dict({
+        "type": "scene",
+        "point": {"type": "point", "position": [0, 2, 0], "intensity": 3.0},
+        "spot": {"type": "spot", "intensity": 5.0, "cutoff_angle": 30.0, "beam_width": 10.0,
+                 "to_world": T().look_at(origin=[1, 2, 0], target=[0, 0, 0], up=[0, 0, 1])},
+        "panel": {"type": "rectangle", "to_world": T().translate([0, 3, 0]).scale([0.5, 2.0, 1.0]),
+                  "emitter": {"type": "area", "radiance": 7.0}},
+        "poster": {"type": "rectangle", "to_world": T().translate([3, 0, 0]),
+                   "emitter": {"type": "area", "radiance": {"type": "bitmap", "raw": True,
+                                                             "bitmap": mi.Bitmap(texture)}}},
+        "sky": {"type": "constant", "radiance": 1.0}})
+    names = [e.get_shape().id() if e.get_shape() else e.id() for e in scene.emitters()]
+    got = dict(zip(names, emitter_powers(scene)))
+    c, b = np.radians(30.0), np.radians(10.0)
+    falloff = lambda t: (1.0 if t <= b else (c - t) / (c - b)) * np.sin(t)  # noqa: E731
+    cone = 2 * np.pi * quad(falloff, 0.0, c, points=[b])[0]
+    lum = texture @ np.array([0.2126, 0.7152, 0.0722])
+    want = {"point": 4 * np.pi * 3.0, "spot": 5.0 * cone, "panel": np.pi * 7.0 * 4.0,
+            "poster": np.pi * 4.0 * lum.mean()}
+    for name, w in want.items():
+        assert got[name] == pytest.approx(w, rel=0.02), name
+    assert got["sky"] == np.inf
+
+
 def test_power_selection_samples_its_pmf_and_reuses_the_sample():
     """sample_index (a CDF search on the table's own arrays, so a dr.freeze recording can take
     them as inputs) against numpy's searchsorted: same index for every x, and the reused

@@ -27,7 +27,7 @@ def test_v4_same_expectation_as_path(name):
     # The mean z of 100 pixels (x 3 channels, which move together) has an sd of about 0.1
     # when both estimate the same image, more with 12-render stacks of heavy-tailed pixels
     # (V4 stratified, cornell_tent: mean z 0.25 from 12 renders, -0.03 from 480, no pixel
-    # beyond 3 sigma). So 24 renders and a 3.5-sigma limit on the mean: 17 scenes at 0.25
+    # beyond 3 sigma). So 24 renders and a 3.5-sigma limit on the mean: 18 scenes at 0.25
     # (2.5 sigma) would fail one in five changes of the sampler by chance alone.
     K, spp = 24, 512
     # Emitters seen directly are hidden in both: their edge pixels are 0 or very bright
