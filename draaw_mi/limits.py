@@ -13,3 +13,9 @@ FLOAT32_MAX = 3.4028234663852886e38
 #: shows and parameter updates (``sensor.x_fov``) are checked against (one range, so a scene saved
 #: from the slider's end loads again)
 FOV_RANGE = (0.1, 179.0)
+
+#: the largest |g| of a Henyey-Greenstein phase function that scene files, the preview and
+#: parameter checks take: nearer +-1 the lobe is all but a delta (at g = 0.9999999, 1 in float32
+#: just short, a 16-spp render's dL/dg read -3.4e4 against -0.15 at g = 0.999), and past it the
+#: phase function is negative and so are the pixels
+HG_G_MAX = 0.999

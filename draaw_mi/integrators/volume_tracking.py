@@ -72,9 +72,11 @@ def medium_interaction(ray: mi.Ray3f, t: mi.Float, medium: mi.MediumPtr) -> mi.M
 
 
 def coefficients(medium, mei, active):
-    """(sigma_s, sigma_t) with sigma_t grey (channel 0)."""
+    """(sigma_s, sigma_t) with sigma_t grey (channel 0), both at least 0: a density an
+    optimiser step took below 0 is no medium there, not a transmittance above 1 or negative
+    scattering (the march of V1/V2 read pixels of -3.5 at a density of -0.5)."""
     sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, active)
-    return sigma_s, sigma_t.x
+    return dr.maximum(sigma_s, 0.0), dr.maximum(sigma_t.x, 0.0)
 
 
 # ---------------------------------------------------------------------------------------

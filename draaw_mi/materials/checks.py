@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from ..errors import ParameterError
-from ..limits import FLOAT32_MAX, FOV_RANGE
+from ..limits import FLOAT32_MAX, FOV_RANGE, HG_G_MAX
 from .draaw_bsdf import SCALAR_PARAMS
 
 
@@ -15,7 +15,7 @@ def check_value(who: str, name: str, key: str, v) -> None:
     """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
     wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
     parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
-    as a scene file's ``[[volumes]]`` table has them (``phase_function.g``: |g| < 1 in float32,
+    as a scene file's ``[[volumes]]`` table has them (``phase_function.g``: |g| <= 0.999,
     ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 would render negative pixels). Raises
     :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
     range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
@@ -105,9 +105,9 @@ def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None
     """:func:`check_value` for a participating medium's parameter (``parts``: its key split
     at the dots, e.g. ``plume.interior_medium.phase_function.g``)."""
     if parts[-2:] == ["phase_function", "g"]:
-        if not all(abs(float(np.float32(x))) < 1.0 for x in nums):
-            raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g with |g| < 1 "
-                                 "(in float32)")
+        if not all(abs(x) <= HG_G_MAX for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g in "
+                                 f"[-{HG_G_MAX}, {HG_G_MAX}]")
     elif parts[-1] == "scale":
         if not all(0.0 <= x <= FLOAT32_MAX for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a density scale >= 0 (finite in float32)")

@@ -173,7 +173,7 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     mei.p = mi.Point3f(*[float(v) for v in (inside if inside is not None else (0.0, 0.0, 0.0))])
     if medium.is_homogeneous():
         return Majorant("homogeneous", np.zeros((1, 1, 1)), np.full(3, -GLOBAL_BOX), np.full(3, GLOBAL_BOX))
-    glob = float(np.max(np.array(medium.get_majorant(mei))))
+    glob = max(float(np.max(np.array(medium.get_majorant(mei)))), 0.0)
     fallback = Majorant("global", np.full((1, 1, 1), glob), np.full(3, -GLOBAL_BOX), np.full(3, GLOBAL_BOX))
     params = mi.traverse(medium)
     if "sigma_t.data" not in params.keys() or "scale" not in params.keys():
@@ -184,7 +184,9 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     if raw.ndim != 4 or raw.shape[3] != 1:
         fallback.note = f"sigma_t grid of shape {raw.shape} (spectral data)"
         return fallback
-    data = scale * raw[..., 0].transpose(2, 1, 0)                 # -> [ix, iy, iz]
+    # at least 0, as the trackers read sigma_t (volume_tracking.coefficients): a density
+    # set below 0 through the parameters is no medium
+    data = scale * np.maximum(raw[..., 0], 0.0).transpose(2, 1, 0)   # -> [ix, iy, iz]
     box = None
     for p in ([inside] if inside is not None else []) + [np.zeros(3)]:
         box = _probe_box(medium, np.asarray(p, float))
@@ -223,7 +225,7 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     m.p = mi.Point3f(*[mi.Float(centres[:, k].astype(np.float32)) for k in range(3)])
     m.medium = mi.MediumPtr(medium)
     _, _, sigma_t = medium.get_scattering_coefficients(m)
-    got = np.array(sigma_t)[0]
+    got = np.maximum(np.array(sigma_t)[0], 0.0)
     want = data[idx[:, 0], idx[:, 1], idx[:, 2]]
     # Mitsuba's float32 lookup puts a centre off by ~1.5 n 2^-23 voxels (n voxels per axis:
     # measured 1.4e-7 n to 1.8e-7 n for n = 64..512), so a trilinear lookup there blends that

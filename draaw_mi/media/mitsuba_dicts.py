@@ -28,7 +28,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
-from ..limits import FLOAT32_MAX
+from ..limits import FLOAT32_MAX, HG_G_MAX
 
 FILTERS = ("nearest", "trilinear")
 
@@ -41,12 +41,12 @@ def unit_cube_to_box(bbox_min, bbox_max):
 
 
 def check_g(g_phase, where: str = "smoke") -> float:
-    """The Henyey-Greenstein g, which must be finite with |g| < 1."""
-    # numpy scalars are numbers (np.float32(0.5) too); |g| < 1 in float32, as Mitsuba
-    # stores it (0.99999999 is 1 there, and the hg plugin fails to load)
+    """The Henyey-Greenstein g, which must be finite with |g| <= :data:`~draaw_mi.limits.HG_G_MAX`."""
+    # numpy scalars are numbers (np.float32(0.5) too)
     if isinstance(g_phase, bool) or not isinstance(g_phase, numbers.Real)\
-            or not math.isfinite(g_phase) or abs(float(np.float32(g_phase))) >= 1.0:
-        raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
+            or not math.isfinite(g_phase) or abs(float(g_phase)) > HG_G_MAX:
+        raise ParameterError(f"{where}: g={g_phase!r}; expected a Henyey-Greenstein g in "
+                             f"[-{HG_G_MAX}, {HG_G_MAX}]")
     return float(g_phase)
 
 

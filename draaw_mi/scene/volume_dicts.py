@@ -14,7 +14,7 @@ One entry is one voxel grid, rendered as solid voxels or as smoke::
     # smoke keys
     density_scale = 8.0                  # sigma_t = density_scale * density  (1/world units)
     albedo = [0.9, 0.9, 0.9]             # constant smoke colour (default: the grid's)
-    g = 0.3                              # Henyey-Greenstein |g| < 1
+    g = 0.3                              # Henyey-Greenstein, |g| <= 0.999
     filter = "trilinear"                 # "nearest" | "trilinear"
     # solid keys
     material = "clay"                    # a [materials] entry of type draaw (colours from voxels)
@@ -30,7 +30,7 @@ import os
 import numpy as np
 
 from ..errors import DraawError, ParameterError
-from ..limits import FLOAT32_MAX
+from ..limits import FLOAT32_MAX, HG_G_MAX
 from ..media.faces import solid_meshes
 from ..media.mitsuba_dicts import FILTERS, smoke_shape
 from ..media.procedural import plume
@@ -150,9 +150,9 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
     try:
         if mode == "smoke":
             g_phase = number(entry.get("g", 0.0), where / "g")
-            # (|g| < 1 checked in float32, as Mitsuba reads it: 0.99999999 is 1 there)
-            if not abs(float(np.float32(g_phase))) < 1.0:
-                raise (where / "g").error(f"{g_phase!r}; expected a Henyey-Greenstein g with |g| < 1")
+            if not abs(g_phase) <= HG_G_MAX:
+                raise (where / "g").error(f"{g_phase!r}; expected a Henyey-Greenstein g in "
+                                          f"[-{HG_G_MAX}, {HG_G_MAX}]")
             scale = number(entry.get("density_scale", 1.0), where / "density_scale", lo=0)
             filt = string(entry.get("filter", "trilinear"), where / "filter", FILTERS)
             albedo = vector(entry["albedo"], where / "albedo", lo=0) if "albedo" in entry else None

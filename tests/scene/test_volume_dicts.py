@@ -78,9 +78,10 @@ def base_desc(**vol):
 
 
 @pytest.mark.parametrize("vol, match", [
-    ({"g": 1.0}, r"volumes\[0\]\.g.*\|g\| < 1"),
-    ({"g": -1.5}, r"\|g\| < 1"),
-    ({"g": 0.99999999}, r"volumes\[0\]\.g: 0\.99999999; .*\|g\| < 1"),   # 1 in float32
+    ({"g": 1.0}, r"volumes\[0\]\.g.*g in \[-0\.999, 0\.999\]"),
+    ({"g": -1.5}, r"g in \[-0\.999, 0\.999\]"),
+    ({"g": 0.99999999}, r"volumes\[0\]\.g: 0\.99999999; .*g in \[-0\.999, 0\.999\]"),   # 1 in float32
+    ({"g": 0.9999}, r"volumes\[0\]\.g: 0\.9999; .*g in \[-0\.999, 0\.999\]"),  # a near-delta lobe
     ({"density_scale": 1e39}, r"volumes\[0\]\.density_scale: 1e\+39 is beyond float32"),
     ({"density": [[[1e38, 1.0]]], "density_scale": 10.0}, r"density 1e\+38 is 1e\+39, beyond float32"),
     ({"density": [[[1.0, -2.0]]]}, r"volumes\[0\].*density\[0, 0, 1\] = -2"),
@@ -178,7 +179,7 @@ def test_a_mesh_as_smoke_is_its_voxels_at_density_scale(tmp_path):
 
 
 @pytest.mark.parametrize("key,good,bad,match", [
-    ("plume.interior_medium.phase_function.g", 0.3, 1.5, r"\|g\| < 1"),
+    ("plume.interior_medium.phase_function.g", 0.3, 1.5, r"g in \[-0\.999, 0\.999\]"),
     ("plume.interior_medium.scale", 2.0, -5.0, r"density scale >= 0"),
     ("plume.interior_medium.albedo.value.value", [0.9, 0.9, 0.9], [1.2, 0.5, 0.5], r"values in \[0, 1\]"),
 ])
