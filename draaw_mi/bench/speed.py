@@ -323,8 +323,7 @@ def main(argv=None, command: str | None = None) -> int:
     args.command = command or ("python benchmarks/speed_suite.py " + " ".join(sys.argv[1:] if argv is None else argv))
     unknown = [n for n in args.scenes.split(",") if n not in ss.SCENES]
     if unknown:
-        raise SystemExit(f"speed suite: unknown scene {unknown[0]!r}{suggest(unknown[0], list(ss.SCENES))} "
-                         f"(the suite's scenes: {', '.join(ss.SCENES)})")
+        raise SystemExit(f"speed suite: unknown scene {unknown[0]!r}{suggest(unknown[0], list(ss.SCENES))}")
     if args.threads:
         dr.set_thread_count(args.threads)
     results = []

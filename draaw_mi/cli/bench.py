@@ -70,8 +70,7 @@ def _cmd_speed_suite(args) -> int:
     """``draaw-mi bench --suite speed``: the speed suite (draaw_mi.bench.speed) with bench's options."""
     for name in args.scenes:
         if name not in speed_suite.SCENES:
-            raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))} "
-                           f"(the suite's scenes: {', '.join(speed_suite.SCENES)})")
+            raise CliError(f"bench --suite speed: unknown scene {name!r}{suggest(name, list(speed_suite.SCENES))}")
     ignored = _given(args, ["max_depth", "adaptive", "quick", "denoise", "camera_path", "frames"])
     if ignored:                                     # (refused, not dropped silently)
         raise CliError(f"bench --suite speed: {', '.join(ignored)} {'does' if len(ignored) == 1 else 'do'} "

@@ -38,8 +38,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_define_option(r)
     add_set_option(r)
     r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
-    r.add_argument("--sampler", help="Mitsuba sampler: independent (default), multijitter (up to 10x less "
-                   "variance at the same time), stratified, ldsampler, orthogonal")
+    r.add_argument("--sampler", help="Mitsuba sampler: independent (default; V4 stratifies it itself), "
+                   "multijitter (up to 10x less variance for path and V1-V3, but correlated below 256 "
+                   "spp: not for references), stratified, ldsampler, orthogonal")
     r.add_argument("--max-depth", type=int, help="maximum path depth (-1: unbounded)")
     r.add_argument("--time-budget", type=float, help="stop after this many seconds (at least one pass)")
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")

@@ -146,6 +146,68 @@ def parse_aovs(plugin: str, spec) -> tuple[str, ...]:
     return tuple(n for n in AOV_CHANNELS if n in out)
 
 
+SHARED_PARAMETERS = """
+     * - sdf_epsilon
+       - |float|
+       - SDF scenes: the sphere tracer's relative hit tolerance, in (0, 5e-5]
+         (:mod:`draaw_mi.sdf.tracer`). (Default: 1e-5)
+
+     * - sdf_max_steps
+       - |int|
+       - SDF scenes: the sphere tracer's iteration cap; a ray not converged by then is a
+         miss. (Default: 256)
+
+     * - sdf_relaxation
+       - |float|
+       - SDF scenes: over-relaxation factor of the sphere tracer, in [1, 2). (Default: 1.0)
+
+     * - sdf_silhouettes
+       - |bool|
+       - SDF scenes: gradient passes add the boundary terms of outlines and shadow edges
+         (:mod:`~draaw_mi.integrators.silhouettes`); |false| keeps the interior terms only.
+         (Default: |true|)
+
+     * - sdf_band
+       - |float|
+       - SDF scenes: width in pixels of the boundary terms' band, in (0, 8]. (Default: 1.0)
+
+     * - sdf_creases
+       - |bool|
+       - SDF scenes: gradient passes add the shading jump at creases (sharp edges, sharp
+         operators): unbiased but noisy. (Default: |false|)
+"""
+
+
+def with_shared_parameters(cls):
+    """Class decorator of the draaw integrators: adds the rows of :data:`SHARED_PARAMETERS`
+    (the options :class:`DraawIntegrator` parses for all four) to the end of the class
+    docstring's ``pluginparameters`` table, so the plugin reference lists every option.
+
+    >>> @with_shared_parameters
+    ... class Demo:
+    ...     \"\"\"Title.
+    ...
+    ...     .. pluginparameters::
+    ...
+    ...      * - max_depth
+    ...        - |int|
+    ...        - Longest path.
+    ...
+    ...     Text.\"\"\"
+    >>> doc = Demo.__doc__; doc.index("max_depth") < doc.index("sdf_band") < doc.index("Text.")
+    True
+    """
+    lines = cls.__doc__.split("\n")
+    start = next(i for i, line in enumerate(lines) if ".. pluginparameters::" in line)
+    end = start + 1
+    while end < len(lines) and (not lines[end].strip() or lines[end].startswith("     ")):
+        end += 1
+    while not lines[end - 1].strip():
+        end -= 1
+    cls.__doc__ = "\n".join(lines[:end] + SHARED_PARAMETERS.rstrip("\n").split("\n") + lines[end:])
+    return cls
+
+
 class DraawIntegrator(RBIntegrator):
     """Base class of the draaw render versions (not registered itself)."""
     PLUGIN = "draaw"

@@ -13,6 +13,7 @@ from .common import (
     relative,
     sample_emitter,
     side_sign,
+    with_shared_parameters,
 )
 from .phong import mirror_dir, phong_eval, phong_material
 
@@ -20,6 +21,7 @@ from .phong import mirror_dir, phong_eval, phong_material
 MAX_UNROLLED_EMITTERS = 8
 
 
+@with_shared_parameters
 class DraawV1Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v1:
@@ -41,6 +43,11 @@ class DraawV1Integrator(DraawIntegrator):
          the direct light reflected by the surface it hits. 0 disables indirect light.
          (Default: 4)
 
+     * - rr_depth
+       - |int|
+       - Accepted as Mitsuba's integrators take it (a scene's ``rr_depth`` loads), and
+         checked (>= 1); this version has no Russian roulette. (Default: 5)
+
      * - hide_emitters
        - |bool|
        - Do not show directly visible emitters (area emitters are skipped, the environment
@@ -50,6 +57,12 @@ class DraawV1Integrator(DraawIntegrator):
        - |string|
        - Comma-separated AOVs: ``depth``, ``depth_log``, ``normal``, ``albedo`` or ``all``
          (see ``draaw_mi.integrators.common``). (Default: none)
+
+     * - medium_steps
+       - |int|
+       - Scenes with media: march steps per medium segment, at a random offset
+         (:mod:`~draaw_mi.integrators.volume_march`: single scattering, biased by design;
+         more steps, less bias). (Default: 12)
 
     The cheap rung of the ladder. At every shading point of a Whitted-style mirror chain
     (camera ray, then perfect mirror reflections):

@@ -14,10 +14,12 @@ from .common import (
     sample_emitter,
     separate_adjoints,
     side_sign,
+    with_shared_parameters,
 )
 from .phong import phong_eval, phong_material, phong_sample
 
 
+@with_shared_parameters
 class DraawV2Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v2:
@@ -38,6 +40,11 @@ class DraawV2Integrator(DraawIntegrator):
          (GO-Draaw "scatter"); 0 renders direct light only. Each extra path unrolls one more
          copy of the bounce loop into the kernel, so keep it small. (Default: 1)
 
+     * - rr_depth
+       - |int|
+       - Accepted as Mitsuba's integrators take it (a scene's ``rr_depth`` loads), and
+         checked (>= 1); this version has no Russian roulette. (Default: 5)
+
      * - hide_emitters
        - |bool|
        - Do not show directly visible emitters (area emitters are skipped, the environment
@@ -47,6 +54,12 @@ class DraawV2Integrator(DraawIntegrator):
        - |string|
        - Comma-separated AOVs: ``depth``, ``depth_log``, ``normal``, ``albedo`` or ``all``
          (see ``draaw_mi.integrators.common``). (Default: none)
+
+     * - medium_steps
+       - |int|
+       - Scenes with media: march steps per medium segment, at a random offset
+         (:mod:`~draaw_mi.integrators.volume_march`: single scattering, biased by design;
+         more steps, less bias). (Default: 12)
 
     A path tracer with next-event estimation (one emitter sample and a shadow ray per vertex,
     no MIS, no Russian roulette), unbiased for its own *legacy* model, a Phong family built

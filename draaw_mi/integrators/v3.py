@@ -14,12 +14,14 @@ from .common import (
     safe_div,
     sample_emitter,
     side_sign,
+    with_shared_parameters,
 )
 from .draaw_lobes import draaw_ndf_sample, draaw_params, draaw_spec_eval
 
 DISTRIBUTIONS = {"ggx": mi.MicrofacetType.GGX, "beckmann": mi.MicrofacetType.Beckmann}
 
 
+@with_shared_parameters
 class DraawV3Integrator(DraawIntegrator):
     r"""
     .. _integrator-draaw_v3:
@@ -49,6 +51,11 @@ class DraawV3Integrator(DraawIntegrator):
          where its pdf in the mirror direction exceeds that of a GGX lobe of this alpha
          (:func:`near_specular`). 0 gives the textbook NEE-only estimator. (Default: 0.25,
          i.e. roughness < 0.5)
+
+     * - rr_depth
+       - |int|
+       - Accepted as Mitsuba's integrators take it (a scene's ``rr_depth`` loads), and
+         checked (>= 1); this version has no Russian roulette. (Default: 5)
 
      * - hide_emitters
        - |bool|

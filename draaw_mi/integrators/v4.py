@@ -8,7 +8,7 @@ import mitsuba as mi
 
 from ..errors import ParameterError
 from . import emission_split, guide_cache, guiding
-from .common import mis_weight, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
+from .common import mis_weight, with_shared_parameters, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import scene_view
 from .v4_passes import ADAPTIVE_MIN_SPP, V4Passes
@@ -18,6 +18,7 @@ LIGHT_SELECTION = "auto"
 __all__ = ["DraawV4Integrator", "ADAPTIVE_MIN_SPP", "RR_THRESHOLD"]
 
 
+@with_shared_parameters
 class DraawV4Integrator(V4Passes):
     r"""
     .. _integrator-draaw_v4:
