@@ -26,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import IOFailure
+from .limits import HALF_MAX
 
 DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}
 
@@ -165,7 +166,7 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
         raise IOFailure(f"write_exr({path!r}): duplicate channel names {names}")
     dtype = np.float16 if half else np.float32
     # (the array is float32 already: only half can overflow here)
-    over = half and bool(np.any(np.isfinite(arr) & (np.abs(arr) > float(np.finfo(np.float16).max))))
+    over = half and bool(np.any(np.isfinite(arr) & (np.abs(arr) > HALF_MAX)))
     with np.errstate(over="ignore"):                     # (said once below, in our words)
         chans = {n: np.ascontiguousarray(arr[..., i].astype(dtype)) for i, n in enumerate(names)}
     if over:      # (one message for every file: Python shows it once per calling line)

@@ -4,10 +4,13 @@ Mitsuba stores scene values in float32: a number beyond its range (a colour of 1
 scale of 1e39) becomes Inf there, and NaN pixels at render.
 
 >>> import numpy as np
->>> FLOAT32_MAX == float(np.finfo(np.float32).max)
-True
+>>> FLOAT32_MAX == float(np.finfo(np.float32).max), HALF_MAX == float(np.finfo(np.float16).max)
+(True, True)
 """
 FLOAT32_MAX = 3.4028234663852886e38
+
+#: the largest finite half-float value: an EXR written as half stores anything beyond it as inf
+HALF_MAX = 65504.0
 
 #: a camera's field of view in degrees: what scene files take ([camera] fov), the tuner's slider
 #: shows and parameter updates (``sensor.x_fov``) are checked against (one range, so a scene saved

@@ -18,6 +18,7 @@ import drjit as dr
 import numpy as np
 
 from ..errors import DraawError, NonFiniteWarning, RenderError
+from ..limits import HALF_MAX
 from ..rendering.film_colour import check_film_colour, scene_colour_names
 from ..rendering.renderer import MAX_PASS_SPP, render
 from ..rendering.session import apply_post, holding, non_finite_count, session_of
@@ -198,6 +199,13 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     if bad:
         raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {bad} non-finite pixel values "
                           "(NaN guard); frame not written")
+    if spec["half"]:            # (values beyond half's range would be stored as inf: the same guard)
+        over = int(np.count_nonzero(np.abs(arr) > HALF_MAX))
+        if over:
+            raise RenderError(f"job {spec['job']!r} frame {spec['frame']}: {over} pixel values beyond "
+                              f"half's range (+-{HALF_MAX:g}, the largest {float(np.abs(arr).max()):.4g}) would "
+                              "be stored as inf (NaN guard); frame not written: set half = false, or "
+                              "darken the scene")
     seconds = time.perf_counter() - t0
     # still under the output folder: a symbolic link made there since planning is not followed
     check_inside(spec["output"], spec.get("root"), f"job {spec['job']!r} frame {spec['frame']}", "its EXR")

@@ -49,7 +49,7 @@ import os
 import string as _string
 from dataclasses import dataclass, field
 
-from ..errors import SceneError, suggest
+from ..errors import ParameterError, SceneError, suggest
 from ..integrators import resolve_version
 from ..post import load_chain
 from ..scene.camera import check_look_at
@@ -102,6 +102,8 @@ class Manifest:
 def read_manifest_file(path: str) -> dict:
     """Parse a TOML or JSON manifest into a dict (errors name the file and line)."""
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise SceneError(f"{path}: is a folder; expected a manifest file (.toml or .json)")
     if not os.path.isfile(path):
         raise SceneError(f"{path}: manifest does not exist")
     if not path.lower().endswith((".toml", ".json")):
@@ -116,6 +118,11 @@ def parse_manifest(source, out_dir: str | None = None, allow_outside_out: bool =
     the log against ``out_dir`` when given, else against the current folder, and they must lie
     under it (:mod:`~draaw_mi.batch.confine`) unless ``allow_outside_out``.
     """
+    if not isinstance(source, (dict, str, os.PathLike)) or isinstance(source, bytes):
+        raise ParameterError(f"batch: manifest={source!r}; expected a manifest file's path or a dict")
+    if out_dir is not None and (not isinstance(out_dir, (str, os.PathLike)) or not os.fspath(out_dir)):
+        raise ParameterError(f"batch: out={out_dir!r}; expected an output folder's path (None: the "
+                             "current folder)")
     if isinstance(source, dict):
         doc, name, base = source, "<manifest>", os.getcwd()
     else:
@@ -123,7 +130,7 @@ def parse_manifest(source, out_dir: str | None = None, allow_outside_out: bool =
         doc, base = read_manifest_file(name), os.path.dirname(os.path.abspath(name))
     where = Where(name)
     check_keys(doc, TOP_KEYS, where, required=("jobs",))
-    out_base = os.path.abspath(out_dir) if out_dir else os.getcwd()
+    out_base = os.path.abspath(out_dir) if out_dir is not None else os.getcwd()
     confined = not allow_outside_out
     pattern = doc.get("output", DEFAULT_OUTPUT)
     half = boolean(doc.get("half", False), where / "half")
@@ -183,6 +190,8 @@ def _tag(key, value):
 def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: bool) -> Job:
     scene = string(jd["scene"], where / "scene")
     scene = scene if os.path.isabs(scene) else os.path.normpath(os.path.join(base, scene))
+    if os.path.isdir(scene):
+        raise (where / "scene").error(f"{scene!r} is a folder; expected a scene file")
     if not os.path.isfile(scene):
         raise (where / "scene").error(f"scene file {scene!r} does not exist")
     job = Job(name=name, scene=scene, frames=1, output="")

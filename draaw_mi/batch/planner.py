@@ -32,6 +32,7 @@ from ..scene.smoke_boxes import check_camera_outside_smoke
 from .digests import file_hash, files_hash, versions  # noqa: F401 (re-exported)
 from .frame import SceneCache
 from .manifest import Manifest, format_output
+from .sheet import sheet_path
 
 
 def frame_seed(job_seed: int, frame: int) -> int:
@@ -210,6 +211,9 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 raise SceneError(f"{loc}: camera: {e}") from None
         for f in range(job.frames):
             out = format_output(job.output, job, f, version, spp)
+            if any(ord(c) < 32 or ord(c) == 127 for c in out):     # ({frame:c} of a small number)
+                raise SceneError(f"{where}: output pattern gives {out!r} for job {job.name!r} frame {f}, "
+                                 "a name with a control character; expected printable file names")
             # a frame's files (its EXR, and its PNG with previews), told apart without case:
             # x/0001.exr and x/0001.EXR share a preview, and are one file on macOS or Windows
             files = [out] + ([os.path.splitext(out)[0] + ".png"] if job.previews else [])
@@ -239,6 +243,13 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             }
             spec["hash"] = frame_hash(spec)
             specs.append(spec)
+    if manifest.contact_sheet:
+        for spec in (sp for sp in specs if sp["frame"] == 0):
+            path = sheet_path(spec)
+            if path.casefold() in seen:
+                raise SceneError(f"{where}: job {spec['job']!r}'s contact sheet {path!r} is the file of "
+                                 f"{seen[path.casefold()]}; rename the job or change the output pattern")
+            seen[path.casefold()] = f"job {spec['job']!r}'s contact sheet"
     return specs
 
 

@@ -272,6 +272,10 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     dask = _dask_options(executor, workers, scheduler, client, retries, dashboard, tls)
     # (the string "false" is true: another manifest's frames would be replaced)
     _check_flag("batch.run", "overwrite", overwrite)
+    _check_flag("batch.run", "dry_run", dry_run)
+    if on_result is not None and not callable(on_result):      # (else it fails after frame 0)
+        raise ParameterError(f"batch.run: on_result={on_result!r}; expected a function of a frame's "
+                             "result record, or None")
     if executor == "dask" and client is None:
         if importlib.util.find_spec("distributed") is None:     # fail before planning, in one line
             raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'")

@@ -10,6 +10,16 @@ from ..io import read_exr, write_png
 from .exr import frame_status
 
 
+def sheet_path(first_frame: dict) -> str:
+    """The contact sheet of a job: ``<job>_contact.png`` beside the frame spec
+    ``first_frame``'s file (its frame 0).
+
+    >>> sheet_path({"job": "turn", "output": "/o/turn/0000.exr"})
+    '/o/turn/turn_contact.png'
+    """
+    return os.path.join(os.path.dirname(first_frame["output"]), f"{first_frame['job']}_contact.png")
+
+
 def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
     """Write ``<first frame's folder>/<job>_contact.png`` for each job; return the paths."""
     jobs: dict = {}
@@ -34,7 +44,7 @@ def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
         for i, t in enumerate(tiles):
             r, c = divmod(i, cols)
             sheet[r * h:r * h + t.shape[0], c * w:c * w + t.shape[1]] = t
-        path = os.path.join(os.path.dirname(frames[0]["output"]), f"{job}_contact.png")
+        path = sheet_path(frames[0])
         write_png(path, sheet, encoded=bool(frames[0].get("encoded")))
         written.append(path)
     return written

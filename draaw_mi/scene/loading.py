@@ -176,6 +176,44 @@ def _wrapped(mi_scene) -> DraawScene:
     return entry[1]
 
 
+def sweep_scratch_folders(folder: str, prefix: str = "draaw-mi-") -> list[str]:
+    """Remove the scratch folders (:class:`ScratchFolder`) that killed processes left in
+    ``folder``: ``<prefix><pid>-*`` of this user whose process no longer runs (a process
+    killed by ``kill -9`` or SIGTERM runs no finaliser). Returns the removed paths; called once
+    per process and temporary folder, by the first scratch folder made there.
+
+    >>> import subprocess, sys, tempfile
+    >>> root = tempfile.mkdtemp()
+    >>> dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+    ...                       capture_output=True, text=True).stdout.strip()
+    >>> for pid in (dead, os.getpid()):
+    ...     os.mkdir(os.path.join(root, f"draaw-mi-{pid}-x"))
+    >>> [os.path.basename(p) for p in sweep_scratch_folders(root)] == [f"draaw-mi-{dead}-x"]
+    True
+    >>> os.listdir(root) == [f"draaw-mi-{os.getpid()}-x"]
+    True
+    >>> shutil.rmtree(root)
+    """
+    removed = []
+    pattern = re.compile(re.escape(prefix) + r"(\d+)-")
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        try:
+            if not m or not entry.is_dir(follow_symlinks=False) or entry.stat().st_uid != os.getuid():
+                continue
+            os.kill(int(m.group(1)), 0)            # (raises when no such process runs)
+        except ProcessLookupError:
+            shutil.rmtree(entry.path, ignore_errors=True)
+            removed.append(entry.path)
+        except (OSError, ValueError, OverflowError):
+            continue                               # (another user's process, or unreadable)
+    return removed
+
+
 class ScratchFolder:
     """The folder a scene's generated files go to (meshes, textures its description makes),
     removed once no scene holds it: the scenes derived from a scene (``with_resolution``,
@@ -192,9 +230,14 @@ class ScratchFolder:
     False
     """
     __slots__ = ("name", "_remove", "__weakref__")
+    _swept: set = set()            # temporary folders already swept by this process
 
     def __init__(self, prefix: str = "draaw-mi-"):
-        self.name = tempfile.mkdtemp(prefix=prefix)
+        folder = tempfile.gettempdir()
+        if folder not in ScratchFolder._swept:
+            ScratchFolder._swept.add(folder)
+            sweep_scratch_folders(folder, prefix)
+        self.name = tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-")
         self._remove = weakref.finalize(self, shutil.rmtree, self.name, ignore_errors=True)
 
     def cleanup(self) -> None:

@@ -102,8 +102,20 @@ def vector(value: Any, where: Where, n: int = 3, lo: float | None = None) -> lis
 
 
 def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> str:
+    """A string value of a scene or manifest table: no control characters (a NUL or a tab in
+    a name or a path is a typo, and a NUL makes every path function raise).
+
+    >>> string("a\\x00b", Where("m.toml") / "jobs" / 0 / "name")
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.SceneError: m.toml: jobs[0].name: 'a\\x00b' holds a control character (\\x00); expected printable text
+    """
     if not isinstance(value, str):
         raise where.error(f"{shown(value)} is not a string")
+    bad = next((c for c in value if ord(c) < 32 or ord(c) == 127), None)
+    if bad is not None:
+        raise where.error(f"{value!r} holds a control character ({repr(bad)[1:-1]}); expected "
+                          "printable text")
     if choices is not None:
         choices = list(choices)
         if value not in choices:

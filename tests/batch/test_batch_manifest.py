@@ -1,6 +1,7 @@
 """Bad manifests: one line on stderr, exit 2, and nothing rendered or written."""
 from __future__ import annotations
 
+import copy
 import os
 
 import pytest
@@ -241,3 +242,67 @@ def test_outputs_that_differ_in_case_only_are_refused(tmp_path, capsys):
         d["previews"] = True
         d["jobs"].append(dict(d["jobs"][0], name="other", output="out/orbit/{frame:04d}.EXR"))
     _bad(tmp_path, capsys, two_jobs, ["same file", "0000.EXR", "job 'orbit' frame 0"])
+
+
+def test_control_characters_in_names_and_file_names_are_refused(tmp_path):
+    """A NUL in a job name made every path function raise (a traceback, exit 1); a
+    ``{frame:c}`` pattern names frame 0's file ``f\\x00.exr`` (and frame 1's ``f\\x01.exr``,
+    which had been written)."""
+    from draaw_mi.batch import runner as batch
+    from draaw_mi.errors import SceneError
+    doc = manifest(tmp_path, frames=2)
+    bad = copy.deepcopy(doc)
+    bad["jobs"][0]["name"] = "a\x00b"
+    with pytest.raises(SceneError, match=r"jobs\[0\]\.name: 'a\\x00b' holds a control character \(\\x00\)"):
+        batch.load(bad)
+    bad = copy.deepcopy(doc)
+    bad["output"] = "f{frame:c}.exr"
+    with pytest.raises(SceneError, match=r"gives '.*f\\x00\.exr' for job 'orbit' frame 0, a name with a control"):
+        batch.load(bad, out=str(tmp_path / "o"))
+
+
+def test_a_contact_sheet_may_not_take_another_jobs_file(tmp_path):
+    """Job ``a``'s contact sheet is ``a_contact.png``: a job named ``a_contact`` whose preview
+    is that file is refused at planning (it had been overwritten by the sheet, and counted as
+    the preview)."""
+    from draaw_mi.batch import runner as batch
+    from draaw_mi.errors import SceneError
+    doc = manifest(tmp_path, frames=1)
+    doc.update(output="{job}.exr", previews=True, contact_sheet=True)
+    second = copy.deepcopy(doc["jobs"][0])
+    doc["jobs"][0]["name"], second["name"] = "a", "a_contact"
+    doc["jobs"].append(second)
+    with pytest.raises(SceneError, match=r"job 'a'.s contact sheet .*a_contact\.png' is the file of job 'a_contact' frame 0"):
+        batch.load(doc, out=str(tmp_path / "o"))
+    doc["contact_sheet"] = False
+    batch.load(doc, out=str(tmp_path / "o"))                 # (no sheet, no clash)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(out=123), r"batch: out=123; expected an output folder's path"),
+    (dict(out=""), r"batch: out=''; expected an output folder's path"),
+    (dict(on_result=5), r"batch.run: on_result=5; expected a function"),
+    (dict(dry_run="yes"), r"batch.run: dry_run='yes'; expected True or False"),
+])
+def test_batch_run_refuses_bad_arguments_before_rendering(tmp_path, kw, match):
+    from draaw_mi.batch import runner as batch
+    from draaw_mi.errors import ParameterError
+    doc = manifest(tmp_path, frames=2)
+    with pytest.raises(ParameterError, match=match):
+        batch.run(doc, **{"out": str(tmp_path / "o"), "progress": False, **kw})
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ParameterError, match=r"batch: manifest=None; expected a manifest file's path or a dict"):
+        batch.run(None, out=str(tmp_path / "o"), progress=False)
+
+
+def test_a_folder_is_no_manifest_and_no_scene(tmp_path):
+    from draaw_mi.batch import runner as batch
+    from draaw_mi.errors import SceneError
+    folder = tmp_path / "a.toml"
+    folder.mkdir()
+    with pytest.raises(SceneError, match=r"a\.toml: is a folder; expected a manifest file"):
+        batch.load(str(folder))
+    doc = manifest(tmp_path, frames=1)
+    doc["jobs"][0]["scene"] = str(tmp_path)
+    with pytest.raises(SceneError, match=r"jobs\[0\]\.scene: .* is a folder; expected a scene file"):
+        batch.load(doc)
