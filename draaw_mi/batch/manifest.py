@@ -121,8 +121,8 @@ def parse_manifest(source, out_dir: str | None = None, allow_outside_out: bool =
     if not isinstance(source, (dict, str, os.PathLike)) or isinstance(source, bytes):
         raise ParameterError(f"batch: manifest={source!r}; expected a manifest file's path or a dict")
     if out_dir is not None and (not isinstance(out_dir, (str, os.PathLike)) or not os.fspath(out_dir)):
-        raise ParameterError(f"batch: out={out_dir!r}; expected an output folder's path (None: the "
-                             "current folder)")
+        raise ParameterError(f"batch: out={out_dir!r}; expected an output folder's path (leave it out "
+                             "for the current folder)")
     if isinstance(source, dict):
         doc, name, base = source, "<manifest>", os.getcwd()
     else:
