@@ -88,8 +88,8 @@ from .maps import MapOptions, MapSet
 from .params import FitParam, range_for
 from .polish import POLISH_LR, joined, polish_maps, polish_samples
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
-from .problem import FitProblem, PassLoss, record
-from .report import report
+from .problem import FitProblem, PassLoss, record, texture_summary
+from .report import averaged_count, report
 from .result import FitResult
 from .settings import FitSettings, validate
 from .views import sampler_spp, view_sensors
@@ -299,10 +299,35 @@ def _parameters(scene, params, init):
     for k in keys:
         given = bool(init) and (names[k] in init or k in init)
         value = init.get(names[k], init.get(k)) if given else p[k]
+        if given and prm[k].shape is not None:
+            value = _texture_start(names[k], value, prm[k].shape)
         _check_start(scene, k, names[k], prm[k], value, given)
         if given:
             initial[k] = value
     return keys, names, prm, start, initial
+
+
+def _texture_start(name: str, value, shape: tuple) -> np.ndarray:
+    """A texture's ``init`` as a float32 array of its ``shape`` (H x W x C): one number for
+    every texel, C numbers (a colour) for every texel, or an array of that shape; else a
+    :class:`ParameterError` naming the shape (a wrong one had raised numpy's reshape error, or
+    Mitsuba's in the middle of the fit).
+
+    >>> _texture_start("m.base_color", [0.2, 0.5, 0.7], (2, 2, 3))[1, 1].tolist()
+    [0.20000000298023224, 0.5, 0.699999988079071]
+    >>> _texture_start("m.base_color", np.zeros((4, 4, 3)), (2, 2, 3))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: init m.base_color: an array of shape (4, 4, 3); expected one number, 3 (a value per channel) or an array of the texture's shape (2, 2, 3)
+    """
+    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=np.float32)
+    if v.size == 1 or (v.ndim == 1 and v.size == shape[-1]):
+        return np.broadcast_to(v.reshape(-1), shape).copy()
+    if v.size == int(np.prod(shape)) and v.ndim >= 2:
+        return v.reshape(shape)
+    what = f"an array of shape {tuple(v.shape)}" if v.ndim else "a value"
+    raise ParameterError(f"fit: init {name}: {what}; expected one number, {shape[-1]} (a value per "
+                         f"channel) or an array of the texture's shape {tuple(shape)}")
 
 
 def _check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -> None:
@@ -312,9 +337,12 @@ def _check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) 
     a NaN one went on to a zero gradient, then "diverged to NaN"."""
     lo, hi = range_for(key, scene)
     v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
-    texture = not given and v.size > 4              # (its texels are projected, as a step's)
-    if not np.all(np.isfinite(v)) or (not texture and lo is not None and np.any(v < lo)) or (
-            not texture and hi is not None and np.any(v > hi)):
+    # projected as a step's are: a texture's texels, and an SDF object's own values (valid, as
+    # the object checks them together; a round box's size at twice its radius sits just under
+    # the optimiser's open range)
+    projected = not given and (v.size > 4 or scene.sdf_param(key) is not None)
+    if not np.all(np.isfinite(v)) or (not projected and lo is not None and np.any(v < lo)) or (
+            not projected and hi is not None and np.any(v > hi)):
         expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
         if given:
             raise ParameterError(f"fit: init {name}={shown(value)}; expected {expected}")
@@ -362,6 +390,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     means: list = [None] * len(sensors)
     bar = progress_bar(s.iterations, "fit", "it", s.progress, where="fit")
     history: list = []
+    problem.texture_sums.clear()             # (the averaged iterates of this run's textures)
     moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
@@ -421,6 +450,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
                 for k in keys:
                     if k not in maps.latents:
                         opt[k] = prm[k].clip(opt[k])
+                _project_sdf_nodes(problem, opt)
             entry, new = _history_entry(problem, s, opt, it, float(total[0]), scale)
             entry["views"] = {v: float(lv[0]) * len(views) for v, lv in view_losses.items()}
             history.append(entry)
@@ -446,6 +476,30 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     return history, compiles
 
 
+def _project_sdf_nodes(problem: FitProblem, opt) -> None:
+    """Move the fitted parameters of each SDF object into their joint range
+    (:meth:`SDFNode.project <draaw_mi.sdf.node.SDFNode.project>`: a round box's radius at most
+    half its new size): each was clipped to a range that held the others at their start."""
+    by_node: dict = {}
+    for k in problem.keys:
+        node_param = problem.scene.sdf_param(k)
+        if node_param is not None:
+            node, _, param = node_param.partition(".")
+            by_node.setdefault(node, {})[param] = k
+    for node, keys in by_node.items():
+        if len(keys) < 2:
+            continue
+        prm = problem.prm
+        values = {param: np.array(dr.detach(prm[k].from_latent(opt[k])), dtype=np.float64).ravel()
+                  for param, k in keys.items()}
+        projected = problem.scene.sdf.nodes[node].project(values)
+        for param, k in keys.items():
+            new = np.asarray(projected[param], dtype=np.float64).ravel()
+            if not np.array_equal(new, values[param]):
+                opt[k] = prm[k].to_latent(prm[k].type(*[float(x) for x in new]) if new.size > 1
+                                          else prm[k].type(float(new[0])))
+
+
 def _mean_weight(opt, lr: float, first: bool):
     """The weight of the current render in the running mean that the loss sees with
     ``smooth`` (:class:`~draaw_mi.fitting.problem.PassLoss`): the current learning-rate fraction
@@ -455,16 +509,38 @@ def _mean_weight(opt, lr: float, first: bool):
     return dr.opaque(mi.Float, 1.0 if first or not isinstance(opt.lr, float) else opt.lr / lr)
 
 
+def _iterates(problem: FitProblem, opt) -> dict:
+    """The current value of every fitted texture (a map's, or a texture fitted texel by
+    texel), as a float32 array of its shape."""
+    maps = problem.maps.values()
+    return {k: maps[k] if k in maps else record(problem.prm[k].from_latent(dr.detach(opt[k])), problem.prm[k].shape)
+            for k in problem.keys if k in maps or problem.prm[k].shape is not None}
+
+
 def _history_entry(problem: FitProblem, s: FitSettings, opt, it: int, loss_value: float, scale):
     """``(one iteration's history entry, kernels compiled in it)``."""
     keys, names, prm = problem.keys, problem.names, problem.prm
-    maps = problem.maps.values()
-    values = {names[k]: maps[k] if k in maps else record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape)
-              for k in keys}
+    full = _iterates(problem, opt)
+    # a texture's summary, not a copy per iteration; its iterates are summed for the average
+    # over the run's last part (report) while they fall in it
+    values = {names[k]: texture_summary(full[k]) if k in full else
+              record(prm[k].from_latent(dr.detach(opt[k])), prm[k].shape) for k in keys}
+    if it >= s.iterations - averaged_count(s):
+        for k, v in full.items():
+            total, count = problem.texture_sums.get(k, (0.0, 0))
+            problem.texture_sums[k] = (total + v.astype(np.float64), count + 1)
     new = sum(1 for kk in dr.kernel_history() if kk["type"] == dr.KernelType.JIT and not kk["cache_hit"])
-    # linear space: the latent is the value (one record, not a second copy of a texture)
-    latent = {names[k]: values[names[k]] if prm[k].space == "linear" or k in maps
-              else record(dr.detach(opt[k]), prm[k].shape) for k in keys}
+    # the optimiser's coordinate: a map's logits, a texture's latent, or (linear) the value
+    latent = {}
+    for k in keys:
+        if k in problem.maps.latents:
+            latent[names[k]] = texture_summary(problem.maps.latents[k].latent())
+        elif prm[k].space == "linear":
+            latent[names[k]] = values[names[k]]
+        elif k in full:
+            latent[names[k]] = texture_summary(record(dr.detach(opt[k]), prm[k].shape))
+        else:
+            latent[names[k]] = record(dr.detach(opt[k]), prm[k].shape)
     entry = {"iteration": it, "loss": loss_value, "values": values, "kernel_compiles": new,
              "lr": float(opt.lr) if isinstance(opt.lr, (int, float)) else s.lr, "latent": latent}
     if s.exposure == "fit":

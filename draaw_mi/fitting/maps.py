@@ -434,7 +434,10 @@ class MapSet:
         known = {n for k in params for n in map_names(k)}
         for option, table in (("lr_scale", options.lr_scale), ("tv", options.tv)):
             unknown = sorted(set(table if isinstance(table, dict) else ()) - known)
-            if unknown and params:
+            if unknown and not params:           # (texels, or no texture among the parameters)
+                raise ParameterError(f"fit: maps {option} names {', '.join(map(repr, unknown))}, but no "
+                                     "texture is fitted as a map of the pyramid here")
+            if unknown:
                 raise ParameterError(f"fit: maps {option} names {', '.join(map(repr, unknown))}, which no "
                                      f"fitted map has; expected one of {', '.join(sorted(known))}")
         self.attached: dict = {}

@@ -17,13 +17,20 @@ from .result import FitResult, explained, settled
 from .settings import FitSettings
 
 
+def averaged_count(s: FitSettings) -> int:
+    """How many of the last iterates the reported values average (``average_last`` of the run)."""
+    return max(1, int(round(s.iterations * s.average_last)))
+
+
 def report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: int, t0: float) -> FitResult:
     """The iterates averaged over the last ``average_last`` of the run, set in the scene (and
     in the caller's, when the fit rendered a copy), a final render and the result."""
     keys, names, prm, scene = problem.keys, problem.names, problem.prm, problem.scene
     p = scene.all_params
-    n_avg = max(1, int(round(s.iterations * s.average_last)))
-    averaged = {k: prm[k].project_value(np.array([h["values"][names[k]] for h in history[-n_avg:]],
+    n_avg = averaged_count(s)
+    averaged = {k: prm[k].project_value(problem.texture_sums[k][0] / problem.texture_sums[k][1]
+                                        if k in problem.texture_sums else
+                                        np.array([h["values"][names[k]] for h in history[-n_avg:]],
                                                  dtype=float).mean(axis=0)) for k in keys}
     observed = {}
     for k in problem.maps.latents:       # texels no capture saw: continued from those seen

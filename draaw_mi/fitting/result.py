@@ -22,7 +22,8 @@ class FitResult:
     ``values``: fitted value per parameter (float, list for colours, float32 array of the
     texture's shape for textures); ``history``: one dict
     per iteration (``loss``, every parameter's value, the learning rate ``lr`` and the
-    optimiser's coordinates ``latent``); ``image``: the final render of the
+    optimiser's coordinates ``latent``; of a texture, its channel means and mean deviations
+    from them, :func:`~draaw_mi.fitting.problem.texture_summary`); ``image``: the final render of the
     first view (numpy, post chain applied); ``converged``: whether the parameters settled
     (their averaged iterates moved less than ``tol``, and not steadily in one direction: see
     :func:`settled`); ``exposure_stops``: the fitted exposure (0 unless ``exposure="fit"``);
@@ -65,13 +66,12 @@ class FitResult:
             v = np.array([h["values"][name] for h in self.history], dtype=float)
             if v.ndim == 1:
                 b.plot(v, label=name)
-            elif v.ndim == 2:
+            elif np.ndim(self.values[name]) >= 2:     # a texture: its summary's channel means
+                for c in range(v.shape[1] // 2):
+                    b.plot(v[:, c], label=f"mean {name}[{c}]")
+            else:
                 for c in range(v.shape[1]):
                     b.plot(v[:, c], label=f"{name}[{c}]")
-            else:              # a texture: the mean of each channel over its texels
-                v = v.reshape(len(v), -1, v.shape[-1]).mean(axis=1)
-                for c in range(v.shape[1]):
-                    b.plot(v[:, c], label=f"mean {name}[{c}]")
         b.set_xlabel("iteration")
         b.set_ylabel("value")
         b.set_title("parameters")

@@ -186,6 +186,23 @@ class SDFNode:
         lo = getattr(self, "_lower_bounds", {}).get(key)
         return (None if lo is None else lo + OPEN_MARGIN, None)
 
+    def project(self, values: dict) -> dict:
+        """``values`` (parameter -> new value, numbers or sequences) moved into the ranges an
+        optimiser may take them to, the new values counted together where they bound each
+        other (:class:`~draaw_mi.sdf.primitives.RoundBox`: its radius and size); here each is
+        clipped to :meth:`param_range`.
+
+        >>> from draaw_mi.sdf import Sphere
+        >>> Sphere(radius=1.0).project({"radius": -0.5})["radius"].tolist()
+        0.0001
+        """
+        out = {}
+        for key, value in values.items():
+            lo, hi = self.param_range(key)
+            out[key] = np.clip(np.asarray(value, dtype=np.float64), -np.inf if lo is None else lo,
+                               np.inf if hi is None else hi)
+        return out
+
     def _assign(self, key: str, new) -> None:
         self._params[key] = new
         setattr(self, key, new)

@@ -29,6 +29,7 @@ import math
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from ..errors import ParameterError
 from .node import OPEN_MARGIN, SDFNode, _scalar, _vec3, box, infinite_box, safe_norm, scalar_of, vec_of
@@ -122,6 +123,26 @@ class RoundBox(Box):
         if key == "size":
             return (2.0 * scalar_of(self.radius) + OPEN_MARGIN, None)
         return super().param_range(key)
+
+    def project(self, values):
+        """Radius and size moved together: the radius at most half the new smallest side, then
+        every side at least twice the new radius (each bound of :meth:`param_range` held the
+        other at its present value: a fit moving both stepped out of range and stopped).
+
+        >>> box = RoundBox(size=(0.9, 0.9, 0.9), radius=0.1)
+        >>> out = box.project({"size": [0.5, 0.6, 0.7], "radius": 0.34})
+        >>> round(float(out["radius"]), 6), [round(float(x), 6) for x in out["size"]]
+        (0.25, [0.5001, 0.6, 0.7])
+        """
+        out = super().project({k: v for k, v in values.items() if k not in ("size", "radius")})
+        size = np.maximum(np.asarray(values.get("size", vec_of(self.size)), dtype=np.float64), OPEN_MARGIN)
+        radius = float(np.clip(np.asarray(values.get("radius", scalar_of(self.radius)),
+                                          dtype=np.float64).ravel()[0], 0.0, 0.5 * size.min()))
+        if "radius" in values:
+            out["radius"] = np.asarray(radius)
+        if "size" in values:
+            out["size"] = np.maximum(size, 2.0 * radius + OPEN_MARGIN)
+        return out
 
     def distance(self, p):
         return self._rounded(p, self.radius)
