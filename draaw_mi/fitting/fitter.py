@@ -457,7 +457,8 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
             if it > 0:
                 compiles += new
             if bar is not None:
-                shown_values = {n.split(".")[-1][:5]: _short(v) for n, v in entry["values"].items()}
+                shown_values = _progress_values(entry["values"], {names[k] for k in keys
+                                                                  if prm[k].shape is not None})
                 if s.loss == "l2" and entry["loss"] > 0:      # the image's PSNR (peak 1)
                     shown_values = {"psnr": f"{-10 * np.log10(entry['loss']):.1f}", **shown_values}
                 bar.set_postfix(loss=f"{entry['loss']:.3g}", **shown_values)
@@ -560,6 +561,22 @@ def _warn_unmoved(names: list, iterations: int) -> None:
                       RuntimeWarning, stacklevel=4)
 
 
+def _progress_values(values: dict, textures: set) -> dict:
+    """The progress bar's ``{short name: value}``: each parameter by the first 5 letters of
+    its last part, or of its last two parts where two would share one (two materials'
+    ``roughness``); a texture (named in ``textures``) by its channel means.
+
+    >>> _progress_values({"a.roughness": 0.5, "b.roughness": 0.25, "a.base_color": [0.5, 0.2, 0.1, 0, 0, 0]},
+    ...                  {"a.base_color"})
+    {'a.roug': '0.500', 'b.roug': '0.250', 'base_': '[0.50,0.20,0.10]'}
+    """
+    base = {n: n.split(".")[-1][:5] for n in values}
+    taken = list(base.values())
+    short = {n: ".".join(p[:4] for p in n.split(".")[-2:]) if taken.count(base[n]) > 1 else base[n]
+             for n in values}
+    return {short[n]: _short(v[:len(v) // 2] if n in textures else v) for n, v in values.items()}
+
+
 def _short(v):
     """A parameter's value for the progress report: a number, a colour, or a texture's mean.
 
@@ -567,8 +584,8 @@ def _short(v):
     ('0.250', '[0.50,0.25,1.00]', 'mean 0.500')
     """
     arr = np.asarray(v, dtype=np.float64)
-    if arr.ndim == 0:
-        return f"{float(arr):.3f}"
+    if arr.size == 1:
+        return f"{float(arr.ravel()[0]):.3f}"
     if arr.size <= 4:
         return "[" + ",".join(f"{x:.2f}" for x in arr.ravel()) + "]"
     return f"mean {arr.mean():.3f}"
