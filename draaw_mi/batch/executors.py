@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import sys
 import uuid
 
@@ -52,7 +53,7 @@ TLS_KEYS = {"ca_file": "tls_ca_file", "cert": "tls_client_cert", "key": "tls_cli
 
 
 def dask_client(workers: int | None = None, scheduler: str | None = None, tls: dict | None = None,
-                dashboard: bool = False, retries: int = DEFAULT_RETRIES):
+                dashboard: bool = False, retries: int = DEFAULT_RETRIES, scratch: str | None = None):
     """A Dask client: to ``scheduler``, or to a new LocalCluster of ``workers`` processes.
 
     ``tls``: ``{"ca_file", "cert", "key"}`` files for a ``tls://`` scheduler (without them,
@@ -62,6 +63,8 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     ``allowed-failures``; a remote scheduler's own setting applies to it), and a worker holds
     one task at a time (``worker-saturation`` 1: a task queued behind a crash would count as a
     failure too; a remote scheduler's should say the same).
+    ``scratch``: the folder a new LocalCluster's workers keep their scratch space in (Dask's
+    default is ``dask-scratch-space`` in the temporary folder, outside a batch's ``--out``).
     Returns ``(client, cluster, drjit_threads)``; ``cluster`` is None for a remote scheduler.
     """
     try:
@@ -88,24 +91,28 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
                           "distributed.scheduler.worker-saturation": 1.0}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0" if dashboard else None,
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.ERROR,
+                               **({"local_directory": scratch} if scratch else {}))
     client = Client(cluster)
     client.draaw_drjit_threads = threads      # run_dask passes it to each worker's first task
     return client, cluster, threads
 
 
 def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None = None,
-             client=None, retries: int = DEFAULT_RETRIES, dashboard: bool = False, tls: dict | None = None) -> None:
+             client=None, retries: int = DEFAULT_RETRIES, dashboard: bool = False, tls: dict | None = None,
+             scratch: str | None = None) -> None:
     """Render ``specs`` as Dask tasks; results arrive in completion order. A frame whose
     worker died on every try is a failed frame (``KilledWorker``), as is any other task error;
-    the run goes on with the other frames."""
+    the run goes on with the other frames. ``scratch``: the workers' scratch folder of a
+    LocalCluster this run starts (removed after it)."""
     from distributed import as_completed  # (optional: the batch extra)
     from distributed.scheduler import KilledWorker
 
     own = client is None
     cluster, threads = None, getattr(client, "draaw_drjit_threads", None)
     if own:
-        client, cluster, threads = dask_client(workers, scheduler, tls=tls, dashboard=dashboard, retries=retries)
+        client, cluster, threads = dask_client(workers, scheduler, tls=tls, dashboard=dashboard, retries=retries,
+                                               scratch=scratch)
         if dashboard and cluster is not None:
             print(f"batch: Dask dashboard at {client.dashboard_link}", file=sys.stderr, flush=True)
     # task keys unique to this run: a key that names only the frame's content (its hash) is
@@ -136,6 +143,8 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
             client.close()
             if cluster is not None:
                 cluster.close()
+                if scratch:
+                    shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _first_line(e: Exception) -> str:

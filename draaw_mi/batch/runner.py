@@ -427,7 +427,8 @@ def _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_r
         if executor == "inprocess":
             run_inprocess(todo, cache, handle)
         else:
-            run_dask(todo, handle, **dask)
+            # (the workers' scratch under the output folder, as every file of the run)
+            run_dask(todo, handle, scratch=os.path.join(os.path.dirname(res.log), ".draaw-dask-scratch"), **dask)
     finally:
         if bar is not None:
             bar.close()

@@ -101,3 +101,22 @@ def test_two_runs_into_other_folders_share_no_task_key(tmp_path, client, monkeyp
         assert res.complete and res.rendered == 2
         runs.append(set(keys))
     assert len(runs[0]) == 2 and not runs[0] & runs[1]
+
+
+def test_a_runs_own_cluster_keeps_its_scratch_under_the_output_folder(tmp_path):
+    """A LocalCluster's workers keep Dask's scratch space beside the run's log, under
+    ``--out`` (Dask's default, ``dask-scratch-space`` in the temporary folder, left lock files
+    outside it), and the folder goes with the cluster."""
+    doc = manifest(tmp_path, frames=2)
+    scratch_seen = []
+    log = {}
+
+    def during(r):
+        scratch_seen.append(os.path.isdir(os.path.join(log["dir"], ".draaw-dask-scratch")))
+
+    _, specs, _ = batch.load(doc)
+    log["dir"] = os.path.dirname(batch.run(doc, dry_run=True, progress=False).log)
+    res = batch.run(doc, executor="dask", workers=1, progress=False, on_result=during)
+    assert res.complete and scratch_seen == [True, True]
+    assert os.path.dirname(res.log) == log["dir"] and str(tmp_path) in log["dir"]
+    assert not os.path.exists(os.path.join(log["dir"], ".draaw-dask-scratch"))
