@@ -89,8 +89,11 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     # then takes no innocent frame with it (each task on a dying worker counts one failure)
     with dask.config.set({"distributed.scheduler.allowed-failures": int(retries),
                           "distributed.scheduler.worker-saturation": 1.0}):
+        # the scheduler's HTTP routes (health, metrics; the dashboard only with ``dashboard``)
+        # on a free port of 127.0.0.1: without an address they took 8787, and a second
+        # cluster on the machine warned that the port was in use
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0" if dashboard else None,
+                               dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": bool(dashboard)},
                                silence_logs=logging.ERROR,
                                **({"local_directory": scratch} if scratch else {}))
     client = Client(cluster)
