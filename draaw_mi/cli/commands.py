@@ -18,7 +18,9 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import sys
+import threading
 import tempfile
 import warnings
 
@@ -335,7 +337,34 @@ def _warnings_as_lines():
         yield
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill PID``), raised where the program is, as Ctrl-C's interrupt is: a batch
+    then writes its log's end record and releases its locks (the default action ended the
+    process on the spot), and a render stops between passes."""
+
+
+def _on_sigterm(signum, frame):
+    _TERMINATED.append(signum)
+    raise Terminated()
+
+
+_TERMINATED: list = []
+
+
 def main(argv=None) -> int:
+    """``draaw-mi``: the exit status of the command ``argv`` (default: the process's arguments);
+    SIGTERM ends it as Ctrl-C does, with status 143 (128 + 15)."""
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
+    _TERMINATED.clear()
+    try:
+        return _main(argv)
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if not argv:                         # the commands, not "the following arguments are required"
         build_parser().print_help(sys.stderr)
@@ -362,6 +391,9 @@ def main(argv=None) -> int:
             return EXIT_BAD_INPUT
         raise
     except KeyboardInterrupt:
+        if _TERMINATED:
+            print("draaw-mi: terminated", file=sys.stderr)
+            return 128 + signal.SIGTERM
         print("draaw-mi: interrupted", file=sys.stderr)
         return 130
 

@@ -112,3 +112,32 @@ def test_sigkill_during_exr_writes_never_leaves_a_partial_frame(tmp_path):
     assert temps, "no kill landed inside a write; the test did not exercise the rename"
     removed = batch.remove_temp_files([{"output": str(target)}])
     assert set(removed) == temps and not glob.glob(str(tmp_path / "job" / ".draaw-*"))
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGTERM"), reason="needs POSIX signals")
+def test_sigterm_ends_a_batch_as_ctrl_c_does(tmp_path):
+    """``kill PID`` (SIGTERM) during a batch: one line, status 143, the log's end record written
+    and the output folders' locks released (the default action had ended the process on the
+    spot: no end record, lock files left); a resumed run finishes the rest."""
+    doc = manifest(tmp_path, frames=40, spp=8)
+    doc["output"] = "{job}/{frame:04d}.exr"
+    path = write_manifest(tmp_path, doc)
+    run_dir = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-c", CLI, "batch", path, "--out", str(run_dir), "--no-progress"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while len(_finished(run_dir)) < 2 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert proc.poll() is None, "the batch ended before the signal"
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 143
+    err = proc.stderr.read().decode()
+    proc.stderr.close()
+    assert err.strip().splitlines()[-1] == "draaw-mi: terminated", err
+    res = batch.status(path, out=str(run_dir))
+    log = batch.read_log(res["log"])
+    assert log[-1]["event"] == "end" and 0 < log[-1]["rendered"] < 40
+    from draaw_mi.batch.lock import LOCK_NAME
+    assert not [d for d, _, files in os.walk(run_dir) if LOCK_NAME in files]   # (a normal end deletes it)
+    again = batch.run(path, out=str(run_dir), progress=False)
+    assert again.complete and again.rendered == 40 - log[-1]["rendered"]
