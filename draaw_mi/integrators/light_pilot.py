@@ -11,15 +11,16 @@ moment of emitter ``i``'s contribution; it is smallest for ``p_i`` proportional 
 ``sqrt(M_i)``.
 
 :func:`learn_selection` measures the ``M_i`` with a pilot of camera paths traced by the
-integrator itself (uniform selection, a fixed seed, :data:`PILOT_PATHS` = 2^18 paths, 4 per
-pixel at 256x256 and about 0.2 s on two cores, whatever the render's size) and returns a
+integrator itself (uniform selection, a fixed seed, :data:`PILOT_PATHS` = 2^18 paths in scenes
+with glints, 4 per pixel at 256x256, and 2^16 elsewhere: 0.03-0.1 s and 0.01-0.03 s on two
+cores after compilation, whatever the render's size) and returns a
 :class:`~.sampling.PowerSelection` with
 ``p_i = (1 - UNIFORM_SHARE) * sqrt(M_i) / sum_j sqrt(M_j) + UNIFORM_SHARE / n``. The
 probabilities are fixed before the render, so the render stays unbiased; an emitter whose
 contribution the pilot misses keeps the uniform share, which bounds what a poor pilot costs.
 On the thesis glass scene the learned table takes V4 from 0.93x to 0.60x ``path``'s variance
 x time at 256x256; rare contributions are what a pilot can miss (there, 2^16 paths give the
-point light 0.34 with one seed and 0.86 with another), hence 2^18
+point light 0.34 with one seed and 0.86 with another), hence 2^18 where the scene has glints
 (``benchmarks/results/speed_suite.md``).
 
 ``draaw_v4`` (``light_selection = "auto"`` or ``"learned"``) learns the table before its first
@@ -38,9 +39,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .glints import has_glints
 from .sampling import PowerSelection
 
-PILOT_PATHS = 1 << 18       # camera paths of the pilot (uniform over the film)
+PILOT_PATHS = 1 << 18       # camera paths of the pilot where the scene has glints (uniform over the film)
+PILOT_PATHS_PLAIN = 1 << 16     # ... and elsewhere, where no rare path carries the variance
 PILOT_SEED = 0x5EED1        # fixed: the same scene learns the same table in every process
 UNIFORM_SHARE = 0.2         # part of the probability spread uniformly (a floor per emitter)
 
@@ -95,10 +98,16 @@ def light_moments(integrator, scene: mi.Scene, paths: int = PILOT_PATHS,
 
 
 def learn_selection(integrator, scene: mi.Scene) -> PowerSelection | None:
-    """:func:`selection_from_moments` of :func:`light_moments`; ``None`` below two emitters."""
+    """:func:`selection_from_moments` of :func:`light_moments`; ``None`` below two emitters.
+    The pilot traces :data:`PILOT_PATHS` paths where the scene has glints (delta lights on
+    near-mirrors, :func:`~.glints.has_glints`: rare paths that a smaller pilot misses), else
+    :data:`PILOT_PATHS_PLAIN`: a quarter of the time for the same table (the material spheres
+    and the speed suite's spot and area light: 2^16 and 2^18 paths give tables within 0.002
+    over four seeds each)."""
     if len(scene.emitters()) < 2:
         return None
-    return selection_from_moments(scene, light_moments(integrator, scene))
+    paths = PILOT_PATHS if has_glints(scene) else PILOT_PATHS_PLAIN
+    return selection_from_moments(scene, light_moments(integrator, scene, paths=paths))
 
 
 @contextlib.contextmanager

@@ -147,7 +147,8 @@ class DraawV4Integrator(V4Passes):
     on the thesis scene a power table starves the point light, whose glints carry most of the
     variance; or lights of different kinds: a spot aimed at the objects in view beside an
     area light over the floor, ``spot_and_area``, reads 0.53x ``path``'s time to its error
-    with the power table and 0.23x with the learned one) selection learned by a pilot of 2^18 camera paths (about 0.2 s once per scene,
+    with the power table and 0.23x with the learned one) selection learned by a pilot of 2^16
+    camera paths (2^18 where delta lights meet near-mirrors; once per scene,
     :mod:`~draaw_mi.integrators.light_pilot`), which takes the thesis glass scene from 0.90x to
     0.59x ``path``'s variance x time at 256x256 and the material spheres (sky and area light)
     to 0.76x of uniform selection's; it loses 10 % to the power table on the 24-light scene,
