@@ -15,6 +15,24 @@ from .sampling import PowerSelection
 from .scene_view import emitters_key
 
 
+#: the emitter plugins whose powers ``auto`` compares: lights of one of these kinds alone
+POWER_KINDS = ({"AreaLight"}, {"PointLight"})
+
+
+def one_kind_of_light(scene) -> bool:
+    """Whether ``scene``'s emitters are all area lights or all point lights (their powers then
+    rank what they give the scene; a spot's cone or a sun's direction would not).
+
+    >>> import mitsuba as mi
+    >>> pts = {f"p{i}": {"type": "point", "position": [i, 1, 0]} for i in range(2)}
+    >>> one_kind_of_light(mi.load_dict({"type": "scene", **pts}))
+    True
+    >>> one_kind_of_light(mi.load_dict({"type": "scene", **pts, "s": {"type": "spot"}}))
+    False
+    """
+    return {e.class_name() for e in scene.emitters()} in POWER_KINDS
+
+
 class LightTables(EmissionSplitting):
     """The tables, by :meth:`selection_key`: ``light_selection`` says which (``auto``,
     ``learned``, ``power``, ``uniform``), ``_tables`` maps the key to ``(emitter array, table |
@@ -50,11 +68,12 @@ class LightTables(EmissionSplitting):
         key = self.selection_key(scene) if key is None else key
         entry = self._tables.get(key)
         learns = learn and self.light_selection in ("auto", "learned")
-        # ``auto`` keeps a power table only among area lights: a point's or a spot's power
-        # says little about what it gives the surfaces in view next to an area light's (a
-        # spot aimed at the objects in view, an area light over a wide floor: power
-        # selection 2.4x uniform selection's variance, learned 1x; see light_pilot)
-        keeps_power = self.light_selection == "auto" and not self.features(scene)["delta_lights"]
+        # ``auto`` keeps a power table only among lights of one kind that emit alike (all area
+        # lights, or all point lights): a spot's power, or a point's beside an area light's,
+        # says little about what each gives the surfaces in view (a spot aimed at the objects
+        # in view, an area light over a wide floor: power selection 2.4x uniform selection's
+        # variance, learned 1x; see light_pilot)
+        keeps_power = self.light_selection == "auto" and one_kind_of_light(scene)
         if entry is not None and (entry[2] or not learns or (keeps_power and entry[1] is not None)):
             return entry[1]                            # learned, or no reason to learn
         power = PowerSelection.of(scene) if entry is None else entry[1]

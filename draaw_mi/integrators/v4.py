@@ -50,7 +50,8 @@ class DraawV4Integrator(V4Passes):
 
      * - light_selection
        - |string|
-       - ``auto``: ``power`` where that applies and every emitter is an area light, else
+       - ``auto``: ``power`` where that applies and the emitters are all area lights or all
+         point lights, else
          ``learned`` (two or more emitters);
          ``learned``: next-event estimation picks an emitter in proportion to the square root
          of its contribution's second moment, measured by a pilot of camera paths before the

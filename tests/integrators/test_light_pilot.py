@@ -174,6 +174,18 @@ def test_doctests():
     assert doctest.testmod(lp).failed == 0
 
 
+def test_auto_keeps_power_among_point_lights_alone():
+    """Point lights alone emit alike (their power ranks them, as area lights'): ``auto`` keeps
+    the power table there and runs no pilot (on three point lights of intensities 5 : 40 : 12,
+    power 0.12 against learned 0.14 of ``path``'s time to its error, 128^2, 7 cycles)."""
+    scene = mi.load_dict(two_point_lights(1.0, 10.0))
+    auto = integrator("draaw_v4", max_depth=3)
+    auto.prepare_selection(scene)
+    state = auto.selection_state(scene)
+    assert not state[2]
+    np.testing.assert_array_equal(state[1].pmf_np, PowerSelection.of(scene).pmf_np)
+
+
 def test_the_pilot_is_large_only_where_glints_need_it(monkeypatch):
     """2^18 paths where delta lights meet near-mirrors (the thesis scene's glints, which 2^16
     paths missed with some seeds), 2^16 elsewhere (the same table in a quarter of the time)."""
