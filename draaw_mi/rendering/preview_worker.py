@@ -76,8 +76,10 @@ class PreviewWorker:
     def _supersede(self):
         """Stop: another preview of this scene started (see :meth:`start`)."""
         self.stop()
-        error = PreviewSuperseded("stopped: a newer preview of this scene is running "
-                                  "(start() this one again to take the scene back)")
+        # (what takes the scene back: a new panel; start() again would render here while the
+        # panel's controls, which may disagree with the scene the newer panel changed, stay off)
+        error = PreviewSuperseded("stopped: a newer preview of this scene is running (run this "
+                                  "panel's cell again to take the scene back)")
         with self._lock:
             self.error = error
             callbacks = list(self._error_callbacks)

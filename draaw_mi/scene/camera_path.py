@@ -20,6 +20,7 @@ import numbers
 import numpy as np
 
 from ..errors import ParameterError
+from ..limits import FLOAT32_MAX
 
 # GO-Draaw's hard-coded benchmark path (go-draaw-spec.md §7.1), for monkey.obj scaled ×75.
 GO_DRAAW_BENCHMARK_PATH = [
@@ -54,6 +55,9 @@ def as_keyframes(keys) -> np.ndarray:
         if arr.shape != (5,) or not np.all(np.isfinite(arr)):
             raise ParameterError(f"camera path: keyframe {i} = {k!r}; expected 5 finite numbers "
                                  "(x, y, z, theta, phi)")
+        if np.any(np.abs(arr) > FLOAT32_MAX):          # (Mitsuba's float32: inf, a black frame)
+            raise ParameterError(f"camera path: keyframe {i} = {k!r}; expected numbers within "
+                                 f"float32 (|x| <= {FLOAT32_MAX:.2g})")
         rows.append(arr)
     if not rows:
         raise ParameterError("camera path: no keyframes")

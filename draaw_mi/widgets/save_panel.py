@@ -94,7 +94,9 @@ class SavePanel:
                 if k in self._file_values and not np.allclose(v, self._file_values[k], rtol=1e-6, atol=0)}
 
     def save(self, path: str) -> str:
-        """Write the tuned scene to a TOML file (atomically) and return its path."""
+        """Write the tuned scene to a TOML file (atomically) and return its path (``~`` is the
+        home folder, as in a shell: it had made a folder named ``~``)."""
+        path = os.path.expanduser(path)
         tuning.save_toml(path, self.document(dest=path))
         self._say(f"saved {_html(path)}")
         return path

@@ -394,13 +394,21 @@ class MaterialTuner:
 
     def _reload(self, scale: float | None = None):
         """Rebuild the scene (textures, resolution): the only changes that recompile."""
-        doc = self.document()
-        for m, files in self._textures.items():
-            doc["materials"][m].update(files)
-        base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
         scale = self.controls_render["scale"].value if scale is None else scale
-        doc["render"]["resolution"] = list(scaled_resolution(self.base_scene.resolution, scale))
-        scene = from_description(doc, self.scene.source, base, {})
+        size = scaled_resolution(self.base_scene.resolution, scale)
+        if self.scene.description is None:
+            # an XML scene has no description to rebuild: loaded again at the new size, its
+            # current values carried over (its resolution had failed with "only TOML/JSON/dict
+            # scenes can be written back")
+            scene = self.scene.with_resolution(*size)
+        else:
+            doc = self.document()
+            for m, files in self._textures.items():
+                doc["materials"][m].update(files)
+            base = (os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source)
+                    else os.getcwd())
+            doc["render"]["resolution"] = list(size)
+            scene = from_description(doc, self.scene.source, base, {})
         for m, files in self._textures.items():
             if "base_color" in files:                   # a texture now: no single colour
                 self.materials[m].pop("base_color", None)
@@ -422,7 +430,7 @@ class MaterialTuner:
             # -1: unbounded (Mitsuba's convention), 0: nothing is seen; a scene's 40 stays 40
             "max_depth": W.IntSlider(value=self.preview.max_depth, min=-1, max=max(16, self.preview.max_depth),
                                      description="max depth", tooltip="-1: no limit"),
-            "max_spp": W.BoundedIntText(value=o["max_spp"], min=1, max=1 << 16, description="spp budget"),
+            "max_spp": W.BoundedIntText(value=o["max_spp"], min=1, max=max(1 << 16, int(o["max_spp"])), description="spp budget"),
             "scale": W.FloatSlider(value=1.0, min=0.25, max=1.0, step=0.25, description="resolution",
                                    continuous_update=False),
             "denoise": W.Checkbox(value=o["denoise"], description="OIDN denoise (biased)"),

@@ -225,3 +225,39 @@ def test_a_camera_near_the_pole_stays_where_it_is(tmp_path):
         np.testing.assert_allclose(t.document()["camera"]["origin"], [0.0, 6.0, 0.06], atol=1e-9)
     finally:
         t.close()
+
+
+def test_the_resolution_slider_resizes_an_xml_scene(tmp_path):
+    """An XML scene has no description to rebuild: the slider loads it again at the new size,
+    as ``with_resolution`` does (it had failed with "only TOML/JSON/dict scenes can be written
+    back" and snapped back)."""
+    path = tmp_path / "s.xml"
+    path.write_text(XML.format(sid=""))
+    t = _tuner(draaw_mi.load_scene(str(path), resolution=(32, 24)), version="path")
+    try:
+        t.controls_render["scale"].value = 0.5
+        assert t.message.value == "" and t.scene.resolution == (16, 12)
+        assert np.isfinite(np.asarray(draaw_mi.render(t.scene, version="path", spp=2))).all()
+    finally:
+        t.close()
+
+
+def test_review_inputs_of_the_panels(tmp_path, monkeypatch):
+    """The save box's ``~`` is the home folder (it made a folder named ``~``); the spp budget
+    box shows a budget above 2^16 as given (it showed 65536); a camera path beyond float32 is
+    refused (it rendered black, then could not be saved)."""
+    from draaw_mi.errors import ParameterError
+    from draaw_mi.scene.camera_path import as_keyframes
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(tmp_path)
+    t = _tuner(tiny_description(), max_spp=100000)
+    try:
+        assert t.controls_render["max_spp"].value == 100000
+        assert t.save("~/tuned.toml") == str(home / "tuned.toml")
+        assert (home / "tuned.toml").is_file() and not (tmp_path / "~").exists()
+    finally:
+        t.close()
+    with pytest.raises(ParameterError, match=r"keyframe 1 .*within float32"):
+        as_keyframes([[0, 0, 5, 0, 0], [1e308, 0, 5, 0, 0]])
