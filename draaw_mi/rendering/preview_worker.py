@@ -75,16 +75,10 @@ class PreviewWorker:
 
     def _supersede(self):
         """Stop: another preview of this scene started (see :meth:`start`)."""
-        self.stop()
         # (what takes the scene back: a new panel; start() again would render here while the
         # panel's controls, which may disagree with the scene the newer panel changed, stay off)
-        error = PreviewSuperseded("stopped: a newer preview of this scene is running (run this "
-                                  "panel's cell again to take the scene back)")
-        with self._lock:
-            self.error = error
-            callbacks = list(self._error_callbacks)
-        for cb in callbacks:
-            cb(error)
+        self.stop(why="stopped: a newer preview of this scene is running (run this panel's cell "
+                      "again to take the scene back)")
 
     def _idle(self) -> bool:
         return self._spp >= self.max_spp and not self._pending and self._shown_generation == self._generation
@@ -112,9 +106,12 @@ class PreviewWorker:
                 for cb in callbacks:
                     cb(e)
 
-    def stop(self, timeout: float = 10.0):
+    def stop(self, timeout: float = 10.0, why: str | None = None):
         """Ask the worker to stop after its current frame and wait for it (at most
-        ``timeout`` seconds)."""
+        ``timeout`` seconds). ``why``: a running worker's error callbacks get it as a
+        :class:`PreviewSuperseded` (a panel then says why it stopped, and takes no more
+        changes); nothing is said for a worker that was not running."""
+        was_running = self.running
         self._stop.set()
         with self._lock:
             self._wake.notify_all()
@@ -122,6 +119,17 @@ class PreviewWorker:
             self._thread.join(timeout)
             if not self._thread.is_alive():       # (a worker still in its frame stays known:
                 self._thread = None               # start() must not run a second one)
+        if why is None or not was_running:
+            return
+        error = PreviewSuperseded(why)
+        with self._lock:
+            self.error = error
+            callbacks = list(self._error_callbacks)
+        for cb in callbacks:
+            try:
+                cb(error)
+            except Exception:  # noqa: BLE001 - a panel gone (a closed comm) must not stop the others
+                pass
 
     @property
     def running(self) -> bool:

@@ -73,6 +73,11 @@ WORKER_STOP_S = 10.0
 BLIND = {"path": ("sdf", "media"), "prb": ("sdf", "media"), "volpath": ("sdf",), "prbvolpath": ("sdf",)}
 
 
+#: what a running preview's panel says when its scene's session is closed
+CLOSED_NOTICE = ("stopped: the scene's session was closed (rendering.close_all(), or a with "
+                 "block on it); run this panel's cell again for a new one")
+
+
 class Session:
     """Everything draaw-mi keeps to render one scene (see the module docstring).
 
@@ -303,12 +308,12 @@ class Session:
         """The registered workers (:meth:`add_worker`) that are still alive."""
         return list(self._workers)
 
-    def close(self, timeout: float = WORKER_STOP_S) -> None:
-        """Stop the workers (each finishes its frame, at most ``timeout`` seconds) and let go of
-        the recordings and integrators. The scene renders again afterwards, through a new
-        session."""
+    def close(self, timeout: float = WORKER_STOP_S, why: str | None = CLOSED_NOTICE) -> None:
+        """Stop the workers (each finishes its frame, at most ``timeout`` seconds; a running
+        one's panel is told ``why``) and let go of the recordings and integrators. The scene
+        renders again afterwards, through a new session."""
         for worker in list(self._workers):
-            worker.stop(timeout)
+            worker.stop(timeout, why=why)
         self._workers.clear()
         with self.lock, RENDER_GUARD:
             self.recordings.clear()
@@ -435,16 +440,17 @@ def holding(*scenes):
         yield
 
 
-def close_all(timeout: float = WORKER_STOP_S) -> None:
-    """Close every open session: their workers stop. Runs at interpreter exit, before Dr.Jit
-    shuts down (a worker still inside a kernel would crash the process)."""
+def close_all(timeout: float = WORKER_STOP_S, why: str | None = CLOSED_NOTICE) -> None:
+    """Close every open session: their workers stop (their panels told ``why``). Runs at
+    interpreter exit, before Dr.Jit shuts down (a worker still inside a kernel would crash the
+    process), telling no panel."""
     with _SESSIONS_GUARD:
         sessions = list(_SESSIONS.values())      # (a closed session has left it)
     for session in sessions:
-        session.close(timeout)
+        session.close(timeout, why=why)
 
 
-atexit.register(close_all)
+atexit.register(close_all, why=None)
 
 
 def apply_post(image, chain):

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import hashlib
+import json
 import os
 import threading
 import time
@@ -125,14 +127,20 @@ class MaterialTuner:
 
     # ------------------------------------------------------------------ plumbing
     def _take_over_file(self):
-        """Stop the running panel of the same scene file: a notebook cell run again with a
-        file name makes a second panel on a second scene, and the old one would go on rendering
-        (a sixth of the new one's frame rate) with nothing left to close it. Panels on one
-        :class:`~draaw_mi.scene.DraawScene` are handled by :meth:`Preview.start`."""
+        """Stop the running panel of the same scene file, or of a scene description of the
+        same content: a notebook cell run again makes a second panel on a second scene, and the
+        old one would go on rendering (a sixth of the new one's frame rate) with nothing left to
+        close it. Panels on one :class:`~draaw_mi.scene.DraawScene` are handled by
+        :meth:`Preview.start`."""
         src = self.base_scene.source
-        if not os.path.isfile(src):
+        if os.path.isfile(src):
+            key = os.path.realpath(src)
+        elif self.base_scene.description is not None:    # a dict: its content is its name
+            key = "description:" + hashlib.sha1(json.dumps(
+                self.base_scene.description, sort_keys=True,
+                default=lambda o: np.asarray(o).tolist()).encode()).hexdigest()
+        else:
             return
-        key = os.path.realpath(src)
         with _PANELS_GUARD:
             ref = _PANELS.get(key)
             _PANELS[key] = weakref.ref(self)

@@ -261,3 +261,41 @@ def test_review_inputs_of_the_panels(tmp_path, monkeypatch):
         t.close()
     with pytest.raises(ParameterError, match=r"keyframe 1 .*within float32"):
         as_keyframes([[0, 0, 5, 0, 0], [1e308, 0, 5, 0, 0]])
+
+
+def test_a_panel_made_again_from_the_same_dict_stops_the_old_one():
+    """A cell ``MaterialTuner({...})`` run again: the old panel went on refining beside the new
+    one (two preview threads); a dict's content now names it as a file's path does. Another
+    dict runs beside it."""
+    from draaw_mi.rendering.preview import PreviewSuperseded
+    first = _tuner(tiny_description(), autostart=True, max_spp=100000)
+    second = third = None
+    try:
+        second = _tuner(tiny_description(), autostart=True, max_spp=100000)
+        assert second.preview.running and not first.preview.running
+        assert isinstance(first.preview.error, PreviewSuperseded)
+        other = tiny_description()
+        other["render"]["spp"] = 3
+        third = _tuner(other, autostart=True, max_spp=100000)
+        assert second.preview.running and third.preview.running
+    finally:
+        for t in (first, second, third):
+            if t is not None:
+                t.close()
+
+
+def test_a_closed_session_is_said_by_the_panel():
+    """Closing the scene's session (``close_all()``, a ``with`` block) stopped the panel without
+    a word, and its controls went on taking changes that nothing rendered."""
+    from draaw_mi.rendering.session import close_all
+    t = _tuner(tiny_description(), autostart=True, max_spp=100000)
+    try:
+        assert t.preview.running
+        close_all()
+        assert not t.preview.running
+        assert "session was closed" in t.message.value
+        t.controls["ball"]["roughness"].value = 0.77
+        assert "no longer changes the scene" in t.message.value
+        assert float(np.asarray(t.scene.params["ball.roughness.value"]).ravel()[0]) != pytest.approx(0.77)
+    finally:
+        t.close()
