@@ -17,6 +17,7 @@ from ..errors import DraawError
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators import stratify
 from ..integrators.features import sensor_gated_speedups
+from ..integrators.light_tables import describe_selection
 from ..rendering.session import session_of
 from ..scene import load_scene
 from ..scene.description import TOP_KEYS
@@ -190,14 +191,16 @@ def cmd_info(args) -> int:
     if args.scene:
         loaded = load_for_cli(args)
         out["scene"] = loaded.summary()
-        gated = samples = None
+        gated = samples = lights = None
         if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
             sensor = loaded.mi_scene.sensors()[0]
             gated = sensor_gated_speedups(sensor)
             v4 = mi.load_dict({"type": "draaw_v4"})
             samples = stratify.describe(v4, loaded.mi_scene, sensor, int(out["scene"]["settings"]["spp"]))
+            lights = describe_selection(loaded.mi_scene, v4.light_selection)
         out["scene"]["v4_gated"] = gated
         out["scene"]["v4_samples"] = samples
+        out["scene"]["v4_lights"] = lights
     if args.json:
         print(json.dumps(out, indent=2, default=str))
         return 0
@@ -236,6 +239,8 @@ def cmd_info(args) -> int:
         print(f"  features: on: {', '.join(on) or 'none'}; off: {', '.join(off) or 'none'}")
         if s.get("v4_samples"):
             print(f"v4 samples: {s['v4_samples']}")
+        if s.get("v4_lights"):
+            print(f" v4 lights: {s['v4_lights']}")
         if s.get("v4_gated"):
             print(f"   v4 note: {s['v4_gated']}")
     return 0

@@ -8,9 +8,11 @@ derives from it, it from :class:`~.emission_split.EmissionSplitting`.
 from __future__ import annotations
 
 import drjit as dr
+import mitsuba as mi
 
 from .emission_split import EmissionSplitting
-from .light_pilot import learn_selection
+from .glints import has_glints
+from .light_pilot import PILOT_PATHS, PILOT_PATHS_PLAIN, learn_selection
 from .sampling import PowerSelection
 from .scene_view import emitters_key
 
@@ -31,6 +33,39 @@ def one_kind_of_light(scene) -> bool:
     False
     """
     return {e.class_name() for e in scene.emitters()} in POWER_KINDS
+
+
+def describe_selection(scene, light_selection: str = "auto") -> str:
+    """How ``draaw_v4`` with ``light_selection`` picks the light its next-event estimation
+    samples in ``scene``, in words (``draaw-mi info``).
+
+    >>> import mitsuba as mi
+    >>> pts = {f"p{i}": {"type": "point", "position": [i, 1, 0], "intensity": 1.0 + 9 * i} for i in range(2)}
+    >>> describe_selection(mi.load_dict({"type": "scene", **pts}))
+    'by power (2 point lights of different powers)'
+    >>> describe_selection(mi.load_dict({"type": "scene", **pts, "s": {"type": "spot"}}))
+    'by a table a pilot of 2^16 camera paths learns before the first render (3 lights of different kinds)'
+    """
+    emitters = scene.emitters()
+    n = len(emitters)
+    if n < 2:
+        return "one light: nothing to choose"
+    if light_selection == "uniform":
+        return "uniformly (light_selection=uniform)"
+    power = PowerSelection.of(scene)
+    kinds = {e.class_name() for e in emitters}
+    lights = f"{n} {'area lights' if kinds == {'AreaLight'} else 'point lights' if kinds == {'PointLight'} else 'lights'}"
+    if any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in emitters):
+        why = "an environment among them"
+    elif kinds not in POWER_KINDS:
+        why = "of different kinds"
+    else:
+        why = "of different powers" if power is not None else "of similar powers"
+    if light_selection == "power" or (light_selection == "auto" and power is not None and kinds in POWER_KINDS):
+        return f"by power ({lights} {why})" if power is not None else f"uniformly ({lights}, {why})"
+    paths = PILOT_PATHS if has_glints(scene) else PILOT_PATHS_PLAIN
+    return (f"by a table a pilot of 2^{paths.bit_length() - 1} camera paths learns before the first "
+            f"render ({lights}{', ' if why.startswith('an') else ' '}{why})")
 
 
 class LightTables(EmissionSplitting):

@@ -198,3 +198,28 @@ def test_the_pilot_is_large_only_where_glints_need_it(monkeypatch):
     for d in (plain, mi.load_dict(glinting)):
         lp.learn_selection(integrator("draaw_v4", max_depth=3), d)
     assert seen == [lp.PILOT_PATHS_PLAIN, lp.PILOT_PATHS] == [1 << 16, 1 << 18]
+
+
+@pytest.mark.parametrize("scene_name, said", [
+    ("many_lights", "by power (24 area lights of different powers)"),
+    ("spot_and_area", "by a table a pilot of 2^16 camera paths learns before the first render (2 lights of different kinds)"),
+    ("glass", "by a table a pilot of 2^18 camera paths learns before the first render (3 lights, an environment among them)"),
+    ("metal_018", "one light: nothing to choose"),
+])
+def test_info_says_how_v4_picks_its_lights(scene_name, said):
+    """``draaw-mi info``'s ``v4 lights`` line names what ``auto`` does with the scene's lights:
+    the power table, a pilot's table (2^18 paths where glints need them), or nothing to choose;
+    it follows the integrator's own decision."""
+    from draaw_mi.bench import suite as ss
+    from draaw_mi.integrators.light_tables import describe_selection
+    scene = ss.load(scene_name, 8)
+    assert describe_selection(scene) == said
+    auto = integrator("draaw_v4", max_depth=3)
+    auto.prepare_selection(scene)
+    _, table, learned = auto.selection_state(scene)
+    if "pilot" in said:
+        assert learned and table is not None
+    elif said.startswith("by power"):
+        assert not learned and table is not None
+    else:
+        assert table is None                                   # uniform: nothing to choose
