@@ -17,6 +17,11 @@ import shutil
 import tempfile
 import weakref
 
+try:
+    import fcntl                 # (POSIX: scratch folders' owner locks)
+except ImportError:              # pragma: no cover - Windows
+    fcntl = None
+
 import mitsuba as mi
 
 from ..errors import DraawError, SceneError, suggest
@@ -176,41 +181,79 @@ def _wrapped(mi_scene) -> DraawScene:
     return entry[1]
 
 
+#: the file a scratch folder's process holds locked (``flock``) for as long as the folder is
+#: its: the kernel lets go of the lock when the process ends, however it ends
+OWNER_FILE = ".owner"
+
+
+def _hold(folder: str) -> int | None:
+    """Lock ``folder``'s owner file for this process (made under another name and renamed once
+    locked, so a sweep never finds it unlocked); the descriptor, or None where locks fail."""
+    if fcntl is None:
+        return None
+    tmp = os.path.join(folder, OWNER_FILE + ".new")
+    try:
+        fd = os.open(tmp, os.O_CREAT | os.O_RDWR, 0o600)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.replace(tmp, os.path.join(folder, OWNER_FILE))
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def _remove_folder(path: str, fd: int | None) -> None:
+    shutil.rmtree(path, ignore_errors=True)
+    if fd is not None:
+        os.close(fd)                                   # (the lock goes with it)
+
+
 def sweep_scratch_folders(folder: str, prefix: str = "draaw-mi-") -> list[str]:
     """Remove the scratch folders (:class:`ScratchFolder`) that killed processes left in
-    ``folder``: ``<prefix><pid>-*`` of this user whose process no longer runs (a process
-    killed by ``kill -9`` or SIGTERM runs no finaliser). Returns the removed paths; called once
-    per process and temporary folder, by the first scratch folder made there.
+    ``folder`` (a process killed by ``kill -9`` or SIGTERM runs no finaliser): this user's
+    ``<prefix>*`` folders whose owner file no process holds locked (a lock, unlike a process
+    id, is not fooled by another machine's or container's processes sharing the folder).
+    Returns the removed paths; called once per process and temporary folder, by the first
+    scratch folder made there.
 
-    >>> import subprocess, sys, tempfile
+    >>> import tempfile
     >>> root = tempfile.mkdtemp()
-    >>> dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-    ...                       capture_output=True, text=True).stdout.strip()
-    >>> for pid in (dead, os.getpid()):
-    ...     os.mkdir(os.path.join(root, f"draaw-mi-{pid}-x"))
-    >>> [os.path.basename(p) for p in sweep_scratch_folders(root)] == [f"draaw-mi-{dead}-x"]
-    True
-    >>> os.listdir(root) == [f"draaw-mi-{os.getpid()}-x"]
-    True
-    >>> shutil.rmtree(root)
+    >>> left = os.path.join(root, "draaw-mi-1-x"); os.mkdir(left)
+    >>> open(os.path.join(left, OWNER_FILE), "w").close()            # its process has gone
+    >>> held = os.path.join(root, "draaw-mi-2-y"); os.mkdir(held); fd = _hold(held)
+    >>> [os.path.basename(p) for p in sweep_scratch_folders(root)]
+    ['draaw-mi-1-x']
+    >>> sorted(os.listdir(root))
+    ['draaw-mi-2-y']
+    >>> _remove_folder(held, fd); shutil.rmtree(root)
     """
-    removed = []
-    pattern = re.compile(re.escape(prefix) + r"(\d+)-")
+    removed: list[str] = []
+    if fcntl is None:
+        return removed
     try:
         entries = list(os.scandir(folder))
     except OSError:
         return removed
     for entry in entries:
-        m = pattern.match(entry.name)
+        if not entry.name.startswith(prefix):
+            continue
         try:
-            if not m or not entry.is_dir(follow_symlinks=False) or entry.stat().st_uid != os.getuid():
+            if not entry.is_dir(follow_symlinks=False) or entry.stat().st_uid != os.getuid():
                 continue
-            os.kill(int(m.group(1)), 0)            # (raises when no such process runs)
-        except ProcessLookupError:
-            shutil.rmtree(entry.path, ignore_errors=True)
-            removed.append(entry.path)
-        except (OSError, ValueError, OverflowError):
-            continue                               # (another user's process, or unreadable)
+            fd = os.open(os.path.join(entry.path, OWNER_FILE), os.O_RDWR)
+        except OSError:
+            continue                                   # (no owner file: not ours to judge)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)                               # held: its process runs
+            continue
+        shutil.rmtree(entry.path, ignore_errors=True)
+        os.close(fd)
+        removed.append(entry.path)
     return removed
 
 
@@ -219,7 +262,9 @@ class ScratchFolder:
     removed once no scene holds it: the scenes derived from a scene (``with_resolution``,
     edits) load those files again and share it. Unlike :class:`tempfile.TemporaryDirectory`,
     whose finaliser warns (``ResourceWarning: Implicitly cleaning up``) when it is collected
-    uncleaned, collection is how this one is meant to go; it also goes at exit.
+    uncleaned, collection is how this one is meant to go; it also goes at exit. Its process
+    holds its owner file locked, so a later process removes it if this one is killed
+    (:func:`sweep_scratch_folders`).
 
     >>> folder = ScratchFolder()
     >>> path = folder.name
@@ -238,7 +283,7 @@ class ScratchFolder:
             ScratchFolder._swept.add(folder)
             sweep_scratch_folders(folder, prefix)
         self.name = tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-")
-        self._remove = weakref.finalize(self, shutil.rmtree, self.name, ignore_errors=True)
+        self._remove = weakref.finalize(self, _remove_folder, self.name, _hold(self.name))
 
     def cleanup(self) -> None:
         """Remove the folder now."""
