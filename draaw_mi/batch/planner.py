@@ -27,7 +27,7 @@ from ..rendering.session import session_of
 from ..scene import value_like
 from ..scene.camera import check_look_at, go_draaw_look_at, sensor_reach, x_fov
 from ..scene.camera_path import interpolate
-from ..scene.schema import Where
+from ..scene.schema import Where, control_character
 from ..scene.smoke_boxes import check_camera_outside_smoke
 from .digests import file_hash, files_hash, versions  # noqa: F401 (re-exported)
 from .frame import SceneCache
@@ -211,7 +211,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 raise SceneError(f"{loc}: camera: {e}") from None
         for f in range(job.frames):
             out = format_output(job.output, job, f, version, spp)
-            if any(ord(c) < 32 or ord(c) == 127 for c in out):     # ({frame:c} of a small number)
+            if control_character(out) is not None:                  # ({frame:c} of a small number)
                 raise SceneError(f"{where}: output pattern gives {out!r} for job {job.name!r} frame {f}, "
                                  "a name with a control character; expected printable file names")
             # a frame's files (its EXR, and its PNG with previews), told apart without case:

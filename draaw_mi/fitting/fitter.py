@@ -391,6 +391,8 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     bar = progress_bar(s.iterations, "fit", "it", s.progress, where="fit")
     history: list = []
     problem.texture_sums.clear()             # (the averaged iterates of this run's textures)
+    sdf_groups = _sdf_groups(problem)        # SDF objects with two or more fitted values
+    textures = {names[k] for k in keys if prm[k].shape is not None}
     moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
@@ -450,15 +452,14 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
                 for k in keys:
                     if k not in maps.latents:
                         opt[k] = prm[k].clip(opt[k])
-                _project_sdf_nodes(problem, opt)
+                _project_sdf_nodes(problem, opt, sdf_groups)
             entry, new = _history_entry(problem, s, opt, it, float(total[0]), scale)
             entry["views"] = {v: float(lv[0]) * len(views) for v, lv in view_losses.items()}
             history.append(entry)
             if it > 0:
                 compiles += new
             if bar is not None:
-                shown_values = _progress_values(entry["values"], {names[k] for k in keys
-                                                                  if prm[k].shape is not None})
+                shown_values = _progress_values(entry["values"], textures)
                 if s.loss == "l2" and entry["loss"] > 0:      # the image's PSNR (peak 1)
                     shown_values = {"psnr": f"{-10 * np.log10(entry['loss']):.1f}", **shown_values}
                 bar.set_postfix(loss=f"{entry['loss']:.3g}", **shown_values)
@@ -477,20 +478,25 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     return history, compiles
 
 
-def _project_sdf_nodes(problem: FitProblem, opt) -> None:
-    """Move the fitted parameters of each SDF object into their joint range
-    (:meth:`SDFNode.project <draaw_mi.sdf.node.SDFNode.project>`: a round box's radius at most
-    half its new size): each was clipped to a range that held the others at their start."""
+def _sdf_groups(problem: FitProblem) -> dict:
+    """``{SDF object's name: {parameter: fitted key}}`` for the objects with two or more fitted
+    values (those :func:`_project_sdf_nodes` moves together)."""
     by_node: dict = {}
     for k in problem.keys:
         node_param = problem.scene.sdf_param(k)
         if node_param is not None:
             node, _, param = node_param.partition(".")
             by_node.setdefault(node, {})[param] = k
-    for node, keys in by_node.items():
-        if len(keys) < 2:
-            continue
-        prm = problem.prm
+    return {node: keys for node, keys in by_node.items() if len(keys) >= 2}
+
+
+def _project_sdf_nodes(problem: FitProblem, opt, groups: dict) -> None:
+    """Move the fitted parameters of each SDF object of ``groups`` (:func:`_sdf_groups`) into
+    their joint range (:meth:`SDFNode.project <draaw_mi.sdf.node.SDFNode.project>`: a round
+    box's radius at most half its new size): each was clipped to a range that held the others
+    at their start."""
+    prm = problem.prm
+    for node, keys in groups.items():
         values = {param: np.array(dr.detach(prm[k].from_latent(opt[k])), dtype=np.float64).ravel()
                   for param, k in keys.items()}
         projected = problem.scene.sdf.nodes[node].project(values)

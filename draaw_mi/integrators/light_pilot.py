@@ -106,8 +106,13 @@ def learn_selection(integrator, scene: mi.Scene) -> PowerSelection | None:
     over four seeds each)."""
     if len(scene.emitters()) < 2:
         return None
-    paths = PILOT_PATHS if has_glints(scene) else PILOT_PATHS_PLAIN
-    return selection_from_moments(scene, light_moments(integrator, scene, paths=paths))
+    return selection_from_moments(scene, light_moments(integrator, scene, paths=pilot_paths(scene)))
+
+
+def pilot_paths(scene: mi.Scene) -> int:
+    """The pilot's camera paths for ``scene``: :data:`PILOT_PATHS` where it has glints, else
+    :data:`PILOT_PATHS_PLAIN` (see :func:`learn_selection`)."""
+    return PILOT_PATHS if has_glints(scene) else PILOT_PATHS_PLAIN
 
 
 @contextlib.contextmanager

@@ -11,8 +11,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .emission_split import EmissionSplitting
-from .glints import has_glints
-from .light_pilot import PILOT_PATHS, PILOT_PATHS_PLAIN, learn_selection
+from .light_pilot import learn_selection, pilot_paths
 from .sampling import PowerSelection
 from .scene_view import emitters_key
 
@@ -53,19 +52,25 @@ def describe_selection(scene, light_selection: str = "auto") -> str:
     if light_selection == "uniform":
         return "uniformly (light_selection=uniform)"
     power = PowerSelection.of(scene)
-    kinds = {e.class_name() for e in emitters}
-    lights = f"{n} {'area lights' if kinds == {'AreaLight'} else 'point lights' if kinds == {'PointLight'} else 'lights'}"
+    one_kind = one_kind_of_light(scene)
+    kind = emitters[0].class_name() if one_kind else None
+    lights = f"{n} {'area lights' if kind == 'AreaLight' else 'point lights' if kind == 'PointLight' else 'lights'}"
     if any(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) for e in emitters):
-        why = "an environment among them"
-    elif kinds not in POWER_KINDS:
-        why = "of different kinds"
+        why = ", an environment among them"
+    elif not one_kind:
+        why = " of different kinds"
     else:
-        why = "of different powers" if power is not None else "of similar powers"
-    if light_selection == "power" or (light_selection == "auto" and power is not None and kinds in POWER_KINDS):
-        return f"by power ({lights} {why})" if power is not None else f"uniformly ({lights}, {why})"
-    paths = PILOT_PATHS if has_glints(scene) else PILOT_PATHS_PLAIN
-    return (f"by a table a pilot of 2^{paths.bit_length() - 1} camera paths learns before the first "
-            f"render ({lights}{', ' if why.startswith('an') else ' '}{why})")
+        why = " of different powers" if power is not None else " of similar powers"
+    if light_selection == "power" or (light_selection == "auto" and _keeps_power(one_kind, power)):
+        return f"by power ({lights}{why})" if power is not None else f"uniformly ({lights}{why})"
+    return (f"by a table a pilot of 2^{pilot_paths(scene).bit_length() - 1} camera paths learns "
+            f"before the first render ({lights}{why})")
+
+
+def _keeps_power(one_kind: bool, power) -> bool:
+    """``auto``'s rule: the power table where it exists (the powers differ, no environment)
+    and the lights are of one kind (:func:`one_kind_of_light`)."""
+    return one_kind and power is not None
 
 
 class LightTables(EmissionSplitting):
@@ -103,16 +108,17 @@ class LightTables(EmissionSplitting):
         key = self.selection_key(scene) if key is None else key
         entry = self._tables.get(key)
         learns = learn and self.light_selection in ("auto", "learned")
+        if entry is not None and (entry[2] or not learns):
+            return entry[1]                            # learned, or not asked to learn
+        power = PowerSelection.of(scene) if entry is None else entry[1]
         # ``auto`` keeps a power table only among lights of one kind that emit alike (all area
         # lights, or all point lights): a spot's power, or a point's beside an area light's,
         # says little about what each gives the surfaces in view (a spot aimed at the objects
         # in view, an area light over a wide floor: power selection 2.4x uniform selection's
         # variance, learned 1x; see light_pilot)
-        keeps_power = self.light_selection == "auto" and one_kind_of_light(scene)
-        if entry is not None and (entry[2] or not learns or (keeps_power and entry[1] is not None)):
-            return entry[1]                            # learned, or no reason to learn
-        power = PowerSelection.of(scene) if entry is None else entry[1]
-        if not learns or (keeps_power and power is not None):
+        if not learns or (self.light_selection == "auto" and _keeps_power(one_kind_of_light(scene), power)):
+            if entry is not None:
+                return entry[1]                        # (the power table stored before)
             return self._store(key, scene, power, learned=False)
         sel = None if self.features(scene)["media"] else learn_selection(self, scene)
         return self._store(key, scene, sel if sel is not None else power, learned=True)

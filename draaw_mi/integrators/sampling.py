@@ -17,7 +17,6 @@ argument; ``tests/integrators/test_integrators_expectation.py`` checks it per pi
 """
 from __future__ import annotations
 
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -83,7 +82,9 @@ def emitter_powers(scene: mi.Scene) -> np.ndarray:
     over the ray's density, whose expectation is the power) on a fixed stratified pattern, for
     every emitter in one vectorised call. So a spot's cone and falloff, a textured area light's
     texture and a mesh light's area all count as the emitter's own ``sample_ray`` sees them.
-    Only steers selection: any positive value keeps the estimate unbiased.
+    Only steers selection: any positive value keeps the estimate unbiased. Where an emitter
+    cannot sample rays, every power is ``inf`` (unknown: :meth:`PowerSelection.of` then
+    leaves the choice uniform).
 
     >>> import mitsuba as mi; from draaw_mi.integrators.sampling import emitter_powers
     >>> scene = mi.load_dict({"type": "scene", "p": {"type": "point", "intensity": 2.0},
@@ -105,8 +106,11 @@ def emitter_powers(scene: mi.Scene) -> np.ndarray:
         ptr = dr.gather(mi.EmitterPtr, scene.emitters_dr(), mi.UInt32(ids))
         uv = mi.Point2f(np.tile(u, len(finite)), np.tile(v, len(finite)))
         vu = mi.Point2f(np.tile(v, len(finite)), np.tile(u, len(finite)))
-        _, weight = ptr.sample_ray(0.0, 0.5, uv, vu, True)
-        rgb = np.array(mi.Color3f(weight), dtype=np.float64)        # (3, lanes)
+        try:
+            _, weight = ptr.sample_ray(0.0, 0.5, uv, vu, True)
+            rgb = np.array(mi.Color3f(weight), dtype=np.float64)    # (3, lanes)
+        except (RuntimeError, NotImplementedError, TypeError):
+            return power          # an emitter without sample_ray (a plugin of one's own): unknown
     lum = np.array([0.2126, 0.7152, 0.0722]) @ rgb
     lum = np.where(np.isfinite(lum), np.maximum(lum, 0.0), 0.0)
     power[finite] = lum.reshape(len(finite), m).mean(1)

@@ -114,6 +114,16 @@ def vector(value: Any, where: Where, n: int = 3, lo: float | None = None) -> lis
     return [number(v, where / i, lo=lo) for i, v in enumerate(value)]
 
 
+def control_character(text: str) -> str | None:
+    """The first control character of ``text`` (a NUL, a tab, a newline, DEL), or None: names
+    and file names hold none (a NUL makes every path function raise).
+
+    >>> control_character("frame_001.exr"), control_character("f\\x01.exr")
+    (None, '\\x01')
+    """
+    return next((c for c in text if ord(c) < 32 or ord(c) == 127), None)
+
+
 def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> str:
     """A string value of a scene or manifest table: no control characters (a NUL or a tab in
     a name or a path is a typo, and a NUL makes every path function raise).
@@ -125,7 +135,7 @@ def string(value: Any, where: Where, choices: Iterable[str] | None = None) -> st
     """
     if not isinstance(value, str):
         raise where.error(f"{shown(value)} is not a string")
-    bad = next((c for c in value if ord(c) < 32 or ord(c) == 127), None)
+    bad = control_character(value)
     if bad is not None:
         raise where.error(f"{value!r} holds a control character ({repr(bad)[1:-1]}); expected "
                           "printable text")

@@ -138,7 +138,7 @@ class MaterialTuner:
         elif self.base_scene.description is not None:    # a dict: its content is its name
             key = "description:" + hashlib.sha1(json.dumps(
                 self.base_scene.description, sort_keys=True,
-                default=lambda o: np.asarray(o).tolist()).encode()).hexdigest()
+                default=lambda o: o.tolist() if isinstance(o, np.ndarray) else repr(o)).encode()).hexdigest()
         else:
             return
         with _PANELS_GUARD:

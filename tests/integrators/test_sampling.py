@@ -234,3 +234,20 @@ def test_v3s_own_draaw_lobe_is_schlick_cook_torrance_of_the_draaw_parameters():
     ref = F * (dg / (4 * wi[:, 2]))[:, None]
     np.testing.assert_allclose(value, ref, rtol=2e-4, atol=1e-6)
     assert (m ** 5).max() > 0.3                      # grazing: f90 decides much of F
+
+
+def test_a_light_that_cannot_sample_rays_leaves_selection_uniform(monkeypatch):
+    """An emitter plugin without ``sample_ray`` (one's own, in Python) made the power estimate,
+    and so every V4 render of its scene, raise; its powers are now unknown (inf) and the
+    choice uniform, as for an environment."""
+    from draaw_mi.integrators.sampling import PowerSelection, emitter_powers
+
+    def no_rays(*args, **kwargs):
+        raise RuntimeError("Emitter::sample_ray(): not implemented!")
+    scene = mi.load_dict({"type": "scene",
+                          **{f"p{i}": {"type": "point", "position": [i, 3, 0], "intensity": 1.0 + 9 * i}
+                             for i in range(2)}})
+    assert PowerSelection.of(scene) is not None
+    monkeypatch.setattr(mi.EmitterPtr, "sample_ray", no_rays)
+    assert np.isinf(emitter_powers(scene)).all()
+    assert PowerSelection.of(scene) is None
