@@ -77,7 +77,7 @@ of the iterates. The scene keeps the fitted values afterwards."""),
 result = draaw_mi.fit(scene, reference, PARAMS, version="v4", spp=SPP, iterations=ITERATIONS,
                       init=START, seed=1, progress=False)
 print(f"{result.iterations} iterations in {time.perf_counter() - t0:.1f} s; "
-      f"kernels compiled after the first iteration: {result.kernel_compiles}")
+      f"kernels compiled after the first two iterations: {result.kernel_compiles}")
 for name in PARAMS:
     print(f"{name:16s} truth {TRUTH[name]:.3f}  fit {result.values[name]:.4f}  "
           f"error {result.values[name] - TRUTH[name]:+.4f}")

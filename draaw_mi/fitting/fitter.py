@@ -33,7 +33,8 @@ benchmarks/fit_accuracy.md, benchmarks/fit_cases.md for the measurements):
   so one bad sample cannot poison Adam's moments for the rest of the run.
 * **One kernel per run.** Resolution, spp and the integrator stay fixed; only the seed (not
   baked into the kernel) and the parameter values (arrays) change, so the render kernels are
-  compiled on the first iteration and then reused (``result.kernel_compiles`` tells).
+  compiled in a view's first two passes (the second records the replay) and then reused
+  (``result.kernel_compiles`` counts those compiled later).
 * **Replayed, not traced.** Each capture's render, loss and backward pass is one
   :meth:`~draaw_mi.rendering.session.Session.gradient_pass`, which replays a ``dr.freeze``
   recording after the capture's first passes where the scene can be recorded (not with a post
@@ -82,16 +83,15 @@ from ..progress import check_mode, progress_bar
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from ..scene import DraawScene, load_scene
-from ..scene.schema import shown
 from .captures import CaptureOverrides, capture_references, light_names, parse_captures
 from .maps import MapOptions, MapSet
-from .params import FitParam, range_for
 from .polish import POLISH_LR, joined, polish_maps, polish_samples
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
 from .problem import FitProblem, PassLoss, record, texture_summary
 from .report import averaged_count, report
 from .result import FitResult
 from .settings import FitSettings, validate
+from .start import fit_parameters
 from .views import sampler_spp, view_sensors
 
 #: iterations after which a parameter that never got a gradient is reported (_warn_unmoved)
@@ -255,7 +255,7 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
                                     scene.settings.get("hide_emitters", False), **(s.integrator_options or {}))
     if not isinstance(integrator, mi.ad.integrators.common.ADIntegrator):
         raise ParameterError(f"fit: version {version!r} is not differentiable; use v1..v4 or 'prb'")
-    keys, names, prm, start, initial = _parameters(scene, params, s.init)
+    keys, names, prm, start, initial = fit_parameters(scene, params, s.init)
     smooth = (chain is not None or s.loss == "l1") if s.smooth is None else bool(s.smooth)
     overrides = CaptureOverrides.build(scene.params, captures or [{"lights": {}, "params": {}}] * len(sensors),
                                        keys, light_names(scene.params))
@@ -264,100 +264,6 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
                    and s.maps.parametrisation == "pyramid"}, s.maps)
     return FitProblem(scene, callers_scene, session, integrator, sensors, [owned_tensor(r) for r in refs], masks,
                       chain, keys, names, prm, start, initial, version, spp, spp_grad, smooth, overrides, maps)
-
-
-def _parameters(scene, params, init):
-    """``(keys, names, FitParams, the scene's values, the values to start from)`` of the
-    parameters named ``params`` (``init`` overrides the scene's)."""
-    p = scene.all_params                 # mi.traverse plus the SDF objects' "sdf.NODE.PARAM"
-    keys = [scene.key(name) for name in params]
-    if len(set(keys)) != len(keys):
-        raise ParameterError(f"fit: params name a parameter twice: {params}")
-    names = dict(zip(keys, params))
-    if init:
-        unknown = sorted(set(init) - set(params) - set(keys))
-        if unknown:
-            raise ParameterError(f"fit: init names {unknown}, which are not in params {list(params)}")
-    start = {k: type(p[k])(p[k]) for k in keys}
-    initial = {k: p[k] for k in keys}
-    prm: dict[str, FitParam] = {}
-    for k in keys:
-        if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
-            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
-                             "Mitsuba stores as integers (not differentiable); give the texture as a "
-                             "float image (EXR) to fit it")
-        if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
-            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
-        # what the plugin declares non-differentiable (a point light's position: its samples
-        # are taken without gradients) would get a zero gradient and keep its start
-        if k in scene.params and scene.params.flags(k) & int(mi.ParamFlags.NonDifferentiable):
-            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
-                             "its Mitsuba plugin (it would keep its starting value)")
-        prm[k] = FitParam(k, names[k], p[k], scene)
-        if prm[k].space == "log" and dr.width(p[k]) != 1:
-            prm[k].space = "linear"            # textures: optimise texels linearly
-    for k in keys:
-        given = bool(init) and (names[k] in init or k in init)
-        value = init.get(names[k], init.get(k)) if given else p[k]
-        if given and prm[k].shape is not None:
-            value = _texture_start(names[k], value, prm[k].shape)
-        _check_start(scene, k, names[k], prm[k], value, given)
-        if given:
-            initial[k] = value
-    return keys, names, prm, start, initial
-
-
-def _texture_start(name: str, value, shape: tuple) -> np.ndarray:
-    """A texture's ``init`` as a float32 array of its ``shape`` (H x W x C): one number for
-    every texel, C numbers (a colour) for every texel, or an array of that shape; else a
-    :class:`ParameterError` naming the shape (a wrong one had raised numpy's reshape error, or
-    Mitsuba's in the middle of the fit).
-
-    >>> _texture_start("m.base_color", [0.2, 0.5, 0.7], (2, 2, 3))[1, 1].tolist()
-    [0.20000000298023224, 0.5, 0.699999988079071]
-    >>> _texture_start("m.base_color", np.zeros((4, 4, 3)), (2, 2, 3))
-    Traceback (most recent call last):
-    ...
-    draaw_mi.errors.ParameterError: fit: init m.base_color: an array of shape (4, 4, 3); expected one number, 3 (a value per channel) or an array of the texture's shape (2, 2, 3)
-    """
-    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=np.float32)
-    if v.size == 1 or (v.ndim == 1 and v.size == shape[-1]):
-        return np.broadcast_to(v.reshape(-1), shape).copy()
-    if v.size == int(np.prod(shape)) and v.ndim >= 2:
-        return v.reshape(shape)
-    what = f"an array of shape {tuple(v.shape)}" if v.ndim else "a value"
-    raise ParameterError(f"fit: init {name}: {what}; expected one number, {shape[-1]} (a value per "
-                         f"channel) or an array of the texture's shape {tuple(shape)}")
-
-
-def _check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -> None:
-    """A parameter's start (its ``init``, where ``given``, else its value in the scene) within
-    its range and finite, else a :class:`ParameterError`; a warning where a log-space one
-    starts near its floor. A value set through ``scene.params`` is not checked when it is set:
-    a NaN one went on to a zero gradient, then "diverged to NaN"."""
-    lo, hi = range_for(key, scene)
-    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
-    # projected as a step's are: a texture's texels, and an SDF object's own values (valid, as
-    # the object checks them together; a round box's size at twice its radius sits just under
-    # the optimiser's open range)
-    projected = not given and (v.size > 4 or scene.sdf_param(key) is not None)
-    if not np.all(np.isfinite(v)) or (not projected and lo is not None and np.any(v < lo)) or (
-            not projected and hi is not None and np.any(v > hi)):
-        expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-        if given:
-            raise ParameterError(f"fit: init {name}={shown(value)}; expected {expected}")
-        flat = v.ravel()
-        at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
-              else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
-        raise ParameterError(f"fit: {name} starts at {at} (its value in the scene); expected {expected}, "
-                             f"or give init={{{name!r}: ...}}")
-    if prm.space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm.lo:
-        # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
-        # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
-        warnings.warn(f"fit: {name} starts at {float(v.ravel()[0]):g}, near {prm.lo:.3g}, below which every "
-                      "value renders alike (the BSDF's alpha clamp): its gradient is small there and the "
-                      f"fit may stay near it; start it higher, e.g. init={{{name!r}: 0.3}}",
-                      RuntimeWarning, stacklevel=5)
 
 
 def _optimiser(problem: FitProblem, s: FitSettings):
@@ -383,7 +289,8 @@ def _push(problem: FitProblem, opt, view: int) -> None:
 
 
 def _iterate(problem: FitProblem, s: FitSettings, opt):
-    """Run the Adam iterations; returns ``(history, kernels compiled after the first)``.
+    """Run the Adam iterations; returns ``(history, kernels compiled once every view rendered
+    had had two passes)``.
     Interrupted, the scene keeps the last iterate (detached)."""
     keys, names, prm, sensors, maps = problem.keys, problem.names, problem.prm, problem.sensors, problem.maps
     p = problem.scene.all_params
@@ -396,6 +303,10 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
     moved: set = set()                       # parameters that got a non-zero gradient
     scale = mi.Float(1.0)
     compiles = 0
+    # a view's gradient pass is recorded at its first pass and once more at its second (its
+    # inputs then hold what the first iteration's step made: dr.freeze records anew); its
+    # later passes replay, and an iteration of only such passes should compile nothing
+    view_passes = [0] * len(sensors)
     order = np.random.default_rng(s.seed)    # which captures an iteration renders (batch)
     batch = len(sensors) if s.batch is None else min(s.batch, len(sensors))
     pass_loss = PassLoss(s.loss, s.exposure, 1.0 / batch, problem.chain, problem.smooth)
@@ -409,6 +320,9 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
             opt.set_learning_rate(s.lr * decay)
             views = range(len(sensors)) if batch == len(sensors) else sorted(int(v) for v in order.choice(len(sensors), batch, replace=False))
             view_losses = {}
+            settled = all(view_passes[v] >= 2 for v in views)
+            for v in views:
+                view_passes[v] += 1
             with holding(problem.scene):      # one render at a time (draaw_mi.guard)
                 total = mi.Float(0.0)
                 for v in views:
@@ -456,7 +370,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
             entry, new = _history_entry(problem, s, opt, it, float(total[0]), scale)
             entry["views"] = {v: float(lv[0]) * len(views) for v, lv in view_losses.items()}
             history.append(entry)
-            if it > 0:
+            if settled:
                 compiles += new
             if bar is not None:
                 shown_values = _progress_values(entry["values"], textures)

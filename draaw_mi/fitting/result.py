@@ -40,7 +40,7 @@ class FitResult:
     converged: bool = False
     iterations: int = 0
     seconds: float = 0.0
-    kernel_compiles: int = 0          # JIT kernels compiled after the first iteration (0 = none)
+    kernel_compiles: int = 0          # JIT kernels compiled after each view's first two passes (0 = none)
     exposure_stops: float = 0.0
     version: str = ""                 # the integrator the fit used (the scene's, or v4)
     observed: dict = field(default_factory=dict, repr=False)   # map name -> texels seen (H, W) bool

@@ -1,0 +1,113 @@
+"""The parameters a fit moves and the values it starts from.
+
+:func:`fit_parameters` resolves the names given to :func:`~draaw_mi.fitting.fit` into the
+scene's keys, refuses what cannot be fitted (an 8-bit texture, a non-differentiable or
+plugin-declared non-differentiable parameter) and checks each start: ``init``'s value where
+given (:func:`texture_start` shapes a texture's), else the scene's, finite and in range
+(:func:`check_start`).
+"""
+from __future__ import annotations
+
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import ParameterError
+from ..scene.schema import shown
+from .params import FitParam, range_for
+
+
+def fit_parameters(scene, params, init):
+    """``(keys, names, FitParams, the scene's values, the values to start from)`` of the
+    parameters named ``params`` (``init`` overrides the scene's)."""
+    p = scene.all_params                 # mi.traverse plus the SDF objects' "sdf.NODE.PARAM"
+    keys = [scene.key(name) for name in params]
+    if len(set(keys)) != len(keys):
+        raise ParameterError(f"fit: params name a parameter twice: {params}")
+    names = dict(zip(keys, params))
+    if init:
+        unknown = sorted(set(init) - set(params) - set(keys))
+        if unknown:
+            raise ParameterError(f"fit: init names {unknown}, which are not in params {list(params)}")
+    start = {k: type(p[k])(p[k]) for k in keys}
+    initial = {k: p[k] for k in keys}
+    prm: dict[str, FitParam] = {}
+    for k in keys:
+        if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
+                             "Mitsuba stores as integers (not differentiable); give the texture as a "
+                             "float image (EXR) to fit it")
+        if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
+        # what the plugin declares non-differentiable (a point light's position: its samples
+        # are taken without gradients) would get a zero gradient and keep its start
+        if k in scene.params and scene.params.flags(k) & int(mi.ParamFlags.NonDifferentiable):
+            raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is declared non-differentiable by "
+                             "its Mitsuba plugin (it would keep its starting value)")
+        prm[k] = FitParam(k, names[k], p[k], scene)
+        if prm[k].space == "log" and dr.width(p[k]) != 1:
+            prm[k].space = "linear"            # textures: optimise texels linearly
+    for k in keys:
+        given = bool(init) and (names[k] in init or k in init)
+        value = init.get(names[k], init.get(k)) if given else p[k]
+        if given and prm[k].shape is not None:
+            value = texture_start(names[k], value, prm[k].shape)
+        check_start(scene, k, names[k], prm[k], value, given)
+        if given:
+            initial[k] = value
+    return keys, names, prm, start, initial
+
+
+def texture_start(name: str, value, shape: tuple) -> np.ndarray:
+    """A texture's ``init`` as a float32 array of its ``shape`` (H x W x C): one number for
+    every texel, C numbers (a colour) for every texel, or an array of that shape; else a
+    :class:`ParameterError` naming the shape (a wrong one had raised numpy's reshape error, or
+    Mitsuba's in the middle of the fit).
+
+    >>> texture_start("m.base_color", [0.2, 0.5, 0.7], (2, 2, 3))[1, 1].tolist()
+    [0.20000000298023224, 0.5, 0.699999988079071]
+    >>> texture_start("m.base_color", np.zeros((4, 4, 3)), (2, 2, 3))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: init m.base_color: an array of shape (4, 4, 3); expected one number, 3 (a value per channel) or an array of the texture's shape (2, 2, 3)
+    """
+    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=np.float32)
+    if v.size == 1 or (v.ndim == 1 and v.size == shape[-1]):
+        return np.broadcast_to(v.reshape(-1), shape).copy()
+    if v.size == int(np.prod(shape)) and v.ndim >= 2:
+        return v.reshape(shape)
+    what = f"an array of shape {tuple(v.shape)}" if v.ndim else "a value"
+    raise ParameterError(f"fit: init {name}: {what}; expected one number, {shape[-1]} (a value per "
+                         f"channel) or an array of the texture's shape {tuple(shape)}")
+
+
+def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -> None:
+    """A parameter's start (its ``init``, where ``given``, else its value in the scene) within
+    its range and finite, else a :class:`ParameterError`; a warning where a log-space one
+    starts near its floor. A value set through ``scene.params`` is not checked when it is set:
+    a NaN one went on to a zero gradient, then "diverged to NaN"."""
+    lo, hi = range_for(key, scene)
+    v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
+    # projected as a step's are: a texture's texels, and an SDF object's own values (valid, as
+    # the object checks them together; a round box's size at twice its radius sits just under
+    # the optimiser's open range)
+    projected = not given and (v.size > 4 or scene.sdf_param(key) is not None)
+    if not np.all(np.isfinite(v)) or (not projected and lo is not None and np.any(v < lo)) or (
+            not projected and hi is not None and np.any(v > hi)):
+        expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        if given:
+            raise ParameterError(f"fit: init {name}={shown(value)}; expected {expected}")
+        flat = v.ravel()
+        at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
+              else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
+        raise ParameterError(f"fit: {name} starts at {at} (its value in the scene); expected {expected}, "
+                             f"or give init={{{name!r}: ...}}")
+    if prm.space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm.lo:
+        # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
+        # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
+        warnings.warn(f"fit: {name} starts at {float(v.ravel()[0]):g}, near {prm.lo:.3g}, below which every "
+                      "value renders alike (the BSDF's alpha clamp): its gradient is small there and the "
+                      f"fit may stay near it; start it higher, e.g. init={{{name!r}: 0.3}}",
+                      RuntimeWarning, stacklevel=5)
