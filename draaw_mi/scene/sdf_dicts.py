@@ -29,13 +29,12 @@ Entries that no operator names as a child are the *roots*; the scene's SDF is th
 from __future__ import annotations
 
 import os
-import re
 
 import mitsuba as mi
 import numpy as np
 
 from ..errors import DraawError, suggest
-from ..sdf.node import SDFNode, is_infinite
+from ..sdf.node import NAME_PATTERN, SDFNode, is_infinite
 from ..sdf.operators import OPERATORS
 from ..sdf.primitives import PRIMITIVE_KEYS, PRIMITIVES
 from ..sdf.scene import SDFScene
@@ -45,8 +44,6 @@ from .material_dicts import material_dict
 from .meshes import write_ply
 from .schema import check_keys, number, rotations, string, vector
 
-#: what an [[sdf]] entry's name may be (it is part of the keys ``sdf.NAME.PARAM``)
-NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 COMMON_KEYS = ("type", "name", "material", "translate", "rotate", "scale")
 OPERATOR_KEYS = ("children", "k")
 

@@ -10,9 +10,14 @@
 The scene loader builds its own nodes from the tables (with the same names, so the keys of
 :func:`draaw_mi.sdf.parameters` are ``"sdf.ball.radius"`` etc.); the tree passed in is not
 modified. Transforms fold into the ``translate`` / ``rotate`` / ``scale`` keys of the node they
-wrap (nested transforms are composed). Nodes with the same name get ``_1``, ``_2``... suffixes.
+wrap (nested transforms are composed), so a transform's own name is not kept: in the scene its
+keys are ``"sdf.NAME_xf.translate"`` and ``"sdf.NAME_xf.scale"`` after the node it wraps (a
+``RuntimeWarning`` says so where it was named otherwise). Nodes with the same name get ``_1``,
+``_2``... suffixes.
 """
 from __future__ import annotations
+
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -59,12 +64,15 @@ def to_entries(*roots: SDFNode) -> list[dict]:
     def emit(node: SDFNode) -> str:
         s, R, t = 1.0, np.eye(3), np.zeros(3)
         material = None
+        renamed = []                               # transforms named otherwise than NAME_xf
         while isinstance(node, Transform):         # compose: outer(s1,R1,t1) o inner(s2,R2,t2)
             material = material or node.material
             s2, R2, t2 = scalar_of(node.scale), node.rotation, np.array(vec_of(node.translate))
             t = t + s * (R @ t2)
             R = R @ R2
             s = s * s2
+            if isinstance(node.child, SDFNode) and node.name != f"{node.child.name}_xf":
+                renamed.append(node.name)
             node = node.child
         if not isinstance(node, SDFNode):
             raise ParameterError(f"sdf.export: {node!r} is not an SDF node")
@@ -80,6 +88,10 @@ def to_entries(*roots: SDFNode) -> list[dict]:
         else:
             raise ParameterError(f"sdf.export: node {node.name!r} of kind {node.kind!r} has no table form")
         e["name"] = unique(node.name)
+        if renamed:
+            warnings.warn(f"to_entries: the transform {renamed[0]!r} becomes the translate/rotate/scale of "
+                          f"{e['name']!r}; its keys in the scene are sdf.{e['name']}_xf.translate and "
+                          f"sdf.{e['name']}_xf.scale", RuntimeWarning, stacklevel=3)
         if node.material or material:
             e["material"] = node.material or material
         if np.any(t != 0):

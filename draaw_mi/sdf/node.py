@@ -22,12 +22,16 @@ from __future__ import annotations
 import copy
 import math
 import numbers
+import re
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError, suggest
+
+#: what a node's name may be (it is part of the keys ``sdf.NAME.PARAM``)
+NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
 INF = float("inf")
 # how far inside an open lower bound (radius > 0) an optimiser's projection stays
@@ -117,6 +121,12 @@ class SDFNode:
     kind = "node"
 
     def __init__(self, name: str | None = None, material: str | None = None):
+        if name is not None and not (isinstance(name, str) and NAME_PATTERN.fullmatch(name)):
+            raise ParameterError(f"sdf.{self.kind}: name={name!r}; expected letters, digits, '_' or '-', "
+                                 "starting with a letter or '_' (a name is part of the keys sdf.NAME.PARAM)")
+        if material is not None and not isinstance(material, str):
+            raise ParameterError(f"sdf.{self.kind}: material={material!r}; expected a material's name "
+                                 "(a string) or None to inherit")
         self.name = name or self.kind
         self.material = material
         self.slot = 0                      # material slot; set when a scene resolves materials
@@ -248,12 +258,18 @@ class SDFNode:
         return dict(self._params)
 
     def params(self) -> dict:
-        """``{"NAME.PARAM": array}`` for this node and its subtree."""
-        out = {f"{self.name}.{k}": v for k, v in self._params.items()}
-        for c in self.children():
-            for k, v in c.params().items():
-                out.setdefault(k, v)
-        return out
+        """``{"NAME.PARAM": array}`` for this node and its subtree; two nodes of one name
+        (``union(Sphere(), Sphere())``: both ``sphere``) are refused, as one would hide the
+        other's values (a scene made of the tree, :func:`~draaw_mi.sdf.export.to_entries`,
+        names them ``sphere``, ``sphere_1``)."""
+        owners: dict[str, SDFNode] = {}
+        for node in self.nodes():
+            other = owners.setdefault(node.name, node)
+            if other is not node and node._params and other._params:
+                raise ParameterError(f"sdf.{self.kind} {self.name!r}: two nodes are named {node.name!r} "
+                                     f"({other.describe()}; {node.describe()}); give them distinct names "
+                                     "(name=...) to tell their parameters apart")
+        return {f"{n.name}.{k}": v for n in owners.values() for k, v in n._params.items()}
 
     # ------------------------------------------------------------------ tree
     def children(self) -> tuple["SDFNode", ...]:

@@ -77,10 +77,16 @@ class Operator(SDFNode):
     """A binary operator node (``a`` first operand, ``b`` second)."""
     smooth = False
 
-    def __init__(self, a: SDFNode, b: SDFNode, k=None, name=None, material=None):
+    def __init__(self, a: SDFNode, b: SDFNode, k=None, *, name=None, material=None):
         if not isinstance(a, SDFNode) or not isinstance(b, SDFNode):
             raise ParameterError(f"sdf.{self.kind}: operands must be SDF nodes, got "
                                  f"{type(a).__name__} and {type(b).__name__}")
+        if isinstance(k, SDFNode):
+            raise ParameterError(f"sdf.{self.kind}: a third operand ({k.kind} {k.name!r}); an operator "
+                                 "takes two: nest them, e.g. union(union(a, b), c)")
+        if k is not None and not self.smooth:
+            raise ParameterError(f"sdf.{self.kind}: k={k!r}; a sharp operator has no blend radius "
+                                 "(smooth_union and the other smooth operators take one)")
         super().__init__(name, material)
         self.a, self.b = a, b
         if self.smooth:
@@ -250,37 +256,37 @@ class SmoothLSEIntersection(LSEIntersection):
     smooth = True
 
 
-def union(a, b, name=None, material=None):
+def union(a, b, *, name=None, material=None):
     """Sharp union ``min(a, b)``."""
     return Union(a, b, name=name, material=material)
 
 
-def intersection(a, b, name=None, material=None):
+def intersection(a, b, *, name=None, material=None):
     """Sharp intersection ``max(a, b)``."""
     return Intersection(a, b, name=name, material=material)
 
 
-def subtraction(a, b, name=None, material=None):
+def subtraction(a, b, *, name=None, material=None):
     """``a`` with ``b`` cut away: ``max(a, -b)``."""
     return Subtraction(a, b, name=name, material=material)
 
 
-def smooth_union(a, b, k=0.1, name=None, material=None):
+def smooth_union(a, b, k=0.1, *, name=None, material=None):
     """Polynomial smooth union with blend radius ``k`` >= 0 (k = 0: ``union``)."""
     return SmoothUnion(a, b, k, name=name, material=material)
 
 
-def smooth_intersection(a, b, k=0.1, name=None, material=None):
+def smooth_intersection(a, b, k=0.1, *, name=None, material=None):
     """Polynomial smooth intersection (k = 0: ``intersection``)."""
     return SmoothIntersection(a, b, k, name=name, material=material)
 
 
-def smooth_subtraction(a, b, k=0.1, name=None, material=None):
+def smooth_subtraction(a, b, k=0.1, *, name=None, material=None):
     """``a`` with ``b`` cut away, smoothed (k = 0: ``subtraction``)."""
     return SmoothSubtraction(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_union(a, b, k=0.1, name=None, material=None):
+def cubic_smooth_union(a, b, k=0.1, *, name=None, material=None):
     """GO-Draaw's cubic smooth union, ``min(a, b) - h^3 k / 6`` with ``h = max(k - |a - b|,
     0) / k`` (k = 0: ``union``).
 
@@ -293,22 +299,22 @@ def cubic_smooth_union(a, b, k=0.1, name=None, material=None):
     return CubicSmoothUnion(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_intersection(a, b, k=0.1, name=None, material=None):
+def cubic_smooth_intersection(a, b, k=0.1, *, name=None, material=None):
     """GO-Draaw's smoothIntersection with its sign fixed, ``max(a, b) + h^3 k / 6``."""
     return CubicSmoothIntersection(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_subtraction(a, b, k=0.1, name=None, material=None):
+def cubic_smooth_subtraction(a, b, k=0.1, *, name=None, material=None):
     """``a`` with ``b`` cut away, cubic-smoothed (GO-Draaw's smoothSubtraction, fixed)."""
     return CubicSmoothSubtraction(a, b, k, name=name, material=material)
 
 
-def lse_intersection(a, b, name=None, material=None):
+def lse_intersection(a, b, *, name=None, material=None):
     """GO-Draaw's "addition": ``log(e^a + e^b)``, a soft intersection."""
     return LSEIntersection(a, b, name=name, material=material)
 
 
-def smooth_lse_intersection(a, b, k=1.0, name=None, material=None):
+def smooth_lse_intersection(a, b, k=1.0, *, name=None, material=None):
     """GO-Draaw's "smoothAddition": ``k log(e^(a/k) + e^(b/k))`` (k -> 0: ``intersection``)."""
     return SmoothLSEIntersection(a, b, k, name=name, material=material)
 

@@ -44,6 +44,14 @@ class SDFParameters(mi.SceneParameters):
         name = key[len(PREFIX):]
         return name if name in self._sdf.params() else None
 
+    def _refuse_unknown(self, key: str) -> None:
+        """Raise a :class:`ParameterError` naming the unknown node or parameter (and the
+        closest known one) when ``key`` is an ``"sdf."`` key of neither the SDF objects nor
+        ``mi.traverse``; a bare ``KeyError`` said nothing of what exists."""
+        if self._sdf is not None and isinstance(key, str) and key.startswith(PREFIX) and key not in self._base:
+            node, param = self._sdf._node(key[len(PREFIX):])      # (an unknown node raises here)
+            node._checked_value(param, 0.0)                       # (an unknown parameter here)
+
     def keys(self):
         return list(self._base.keys()) + self._sdf_keys()
 
@@ -62,6 +70,7 @@ class SDFParameters(mi.SceneParameters):
     def __getitem__(self, key):
         name = self.sdf_name(key)
         if name is None:
+            self._refuse_unknown(key)
             return self._base[key]
         return self._pending[name] if name in self._pending else self._sdf.params()[name]
 
@@ -80,6 +89,7 @@ class SDFParameters(mi.SceneParameters):
                 node._checked_value(param, value)        # out of range on its own: the error
                 self._pending[name] = value
         else:
+            self._refuse_unknown(key)
             self._base[key] = value
 
     def update(self, values=None):

@@ -25,7 +25,8 @@ exceeded the band once, and steps at least ``epsilon / 2`` meanwhile, so it neit
 own surface nor stalls. Rays are clipped to the union of the roots' bounding boxes first:
 rays that miss every box do not march, the others start at the first box entry.
 
-Normals are central differences on a tetrahedron (4 evaluations, ``h = 1e-4 + 4e-6 max|p|``;
+Normals are central differences on a tetrahedron (4 evaluations, ``h = 1e-4 L + 4e-6 max|p|``
+with the hit band's ``L``, so objects a millimetre across in metre units keep their shading;
 Quilez' tetrahedral stencil), which are differentiable with respect to the SDF parameters
 and the point, so the same code gives the primal normal and the normal's derivative in the
 adjoint phase. A zero gradient (e.g. the centre of a sphere) falls back to ``-ray.d``.
@@ -215,8 +216,10 @@ def march(sdf, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
 
 def gradient(sdf, p: mi.Point3f, scale: float = 1.0) -> mi.Vector3f:
     """Tetrahedral central-difference gradient of ``sdf`` at ``p`` (differentiable), the
-    step ``scale`` times the default."""
-    h = scale * (1e-4 + 4e-6 * dr.detach(_max_abs(p)))
+    step ``scale`` times the default, ``1e-4 L + 4e-6 max|p|`` (``L``: :func:`length_scale`,
+    as the hit band's; a fixed 1e-4 turned the normals of a sphere of radius 2e-4 by 6 degrees
+    on average). Opaque, so a growing object compiles no new kernel."""
+    h = scale * (1e-4 * dr.opaque(mi.Float, length_scale(sdf)) + 4e-6 * dr.detach(_max_abs(p)))
     g = mi.Vector3f(0.0)
     for k in _TETRA:
         kv = mi.Vector3f(*k)

@@ -85,10 +85,10 @@ class Transform(SDFNode):
         self.child = child
         self.translate = self._vec_param("translate", translate)
         s = scale
-        if isinstance(scale, (list, tuple)):
-            v = _vec3(scale, f"sdf {self.name!r}", "scale")
+        if isinstance(scale, (list, tuple)) or (isinstance(scale, np.ndarray) and scale.size == 3):
+            v = _vec3(list(np.ravel(scale)) if isinstance(scale, np.ndarray) else scale, f"sdf {self.name!r}", "scale")
             if max(v) - min(v) > 1e-9 * max(abs(x) for x in v):
-                raise ParameterError(f"sdf {self.name!r}: scale={list(scale)!r}; only uniform scale "
+                raise ParameterError(f"sdf {self.name!r}: scale={[float(x) for x in np.ravel(scale)]!r}; only uniform scale "
                                      "keeps distances exact (give one number)")
             s = v[0]
         self.scale = self._scalar_param("scale", s, lo=0.0, lo_open=True)

@@ -54,3 +54,18 @@ def test_axis_angle_round_trip(axis, angle):
 def test_duplicate_names_are_made_unique():
     names = [e["name"] for e in to_entries(smooth_union(Sphere(), Sphere((1, 0, 0)), k=0.1))]
     assert names == ["sphere", "sphere_1", "smooth_union"]
+
+
+def test_a_named_transform_is_said_to_take_its_childs_name():
+    """A transform folds into its child's table, so its own name is not kept: the scene's
+    keys are ``NAME_xf.*`` (the docstring said names were kept)."""
+    tree = Transform(Sphere(name="ball"), translate=(1, 0, 0), name="mover")
+    with pytest.warns(RuntimeWarning, match=r"'mover' becomes .* of 'ball'.*sdf.ball_xf.translate"):
+        entries = to_entries(tree)
+    d = base_description((8, 8))
+    d["sdf"] = entries
+    assert "sdf.ball_xf.translate" in draaw_mi.sdf.parameters(draaw_mi.load_scene(d))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        to_entries(Transform(Sphere(name="ball"), translate=(1, 0, 0)))      # NAME_xf: nothing said

@@ -409,3 +409,38 @@ def test_cubic_subtraction_gives_the_cut_face_the_cut_materials_weight():
     da, nb = dist(a, pts), -dist(b, pts)
     h3 = (np.maximum(0.3 - np.abs(da - nb), 0) / 0.3) ** 3
     np.testing.assert_allclose(np.array(w[0]), np.where(da >= nb, 1 - h3 / 2, h3 / 2), atol=1e-6)
+
+
+def test_an_operators_third_operand_and_bad_names_are_refused():
+    """``union(a, b, c)`` took ``c`` as the node's name (and ``smooth_union(a, b, c)`` as its
+    k): ``c`` was silently left out of the tree. A name that cannot be part of a key
+    (``sdf.NAME.PARAM``) failed only later, at ``load_scene``."""
+    from draaw_mi.sdf import union
+    from draaw_mi.sdf.operators import Union
+    c = Sphere((2, 0, 0), 0.5, name="c")
+    with pytest.raises(TypeError):
+        union(A, B, c)
+    with pytest.raises(ParameterError, match=r"third operand \(sphere 'c'\).*union\(union\(a, b\), c\)"):
+        smooth_union(A, B, c)
+    with pytest.raises(ParameterError, match="k=0.3; a sharp operator has no blend radius"):
+        Union(A, B, 0.3)
+    for bad in ("my ball", "1ball", 3):
+        with pytest.raises(ParameterError, match=r"sdf.sphere: name=.*expected letters, digits"):
+            Sphere(name=bad)
+    with pytest.raises(ParameterError, match="material=1; expected a material's name"):
+        Sphere(material=1)
+    d = union(union(A, B, name="ab"), c, name="abc")          # nested: three operands
+    assert float(d.distance(mi.Point3f(2, 0, 0))[0]) == pytest.approx(-0.5)
+
+
+def test_two_nodes_of_one_name_are_refused_by_params():
+    """``union(Sphere(), Sphere())`` (both named ``sphere``): ``params()`` held the first's
+    values only, the second's could be neither set nor fitted through it."""
+    from draaw_mi.sdf import union
+    with pytest.raises(ParameterError, match=r"two nodes are named 'sphere'.*distinct names"):
+        union(Sphere(), Sphere((1, 0, 0))).params()
+    keys = union(Sphere(name="s1"), Sphere((1, 0, 0), name="s2")).params()
+    assert sorted(keys) == ["s1.center", "s1.radius", "s2.center", "s2.radius"]
+    # three operators named 'union': they hold no values, nothing is hidden
+    keys = union(union(A, B), union(Sphere(name="c1"), Sphere(name="c2"))).params()
+    assert {k.split(".")[0] for k in keys} == {"sphere", "box", "c1", "c2"}

@@ -171,3 +171,24 @@ def test_a_small_sphere_is_hit_where_the_analytic_one_is(radius):
     r = np.hypot(x.astype(np.float64), y) / radius
     clear = np.abs(r - 1.0) > 1e-3
     assert np.array_equal(np.array(hit)[clear], (r < 1.0)[clear])
+
+
+@pytest.mark.parametrize("radius", [1.0, 1e-3, 2e-4])
+def test_normals_of_small_objects_match_the_closed_form(radius):
+    """The stencil's step follows the objects' size (the hit band's ``L``): with a fixed 1e-4
+    a sphere of radius 2e-4 shaded with normals 6.4 degrees off on average (9.6 at most)."""
+    from draaw_mi.sdf import RoundBox
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(2000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    sdf = SDFScene([Sphere((0, 0, 0), radius)], ["m"])
+    p = radius * u
+    n = np.array(normal(sdf, mi.Point3f(*(mi.Float(p[:, i]) for i in range(3))), mi.Vector3f(0, 0, 1))).T
+    angle = np.degrees(np.arccos(np.clip(np.sum(n * u, axis=1), -1.0, 1.0)))
+    assert angle.max() < 0.05, angle.max()
+    # a round box's flat faces (points at the centre of each face: normal = the axis)
+    box = SDFScene([RoundBox((0, 0, 0), (2 * radius,) * 3, 0.5 * radius)], ["m"])
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    q = axes * radius
+    nb = np.array(normal(box, mi.Point3f(*(mi.Float(q[:, i]) for i in range(3))), mi.Vector3f(0, 0, 1))).T
+    assert np.allclose(nb, axes, atol=1e-3), nb
