@@ -341,7 +341,9 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
-    :func:`draaw_mi.post.display_encoded`) and is stored as it is;
+    :func:`draaw_mi.post.display_encoded`; a render of a scene whose ``[[post]]`` does:
+    ``encoded=display_encoded(info["post"])`` with ``render(..., return_info=True)``) and is
+    stored as it is;
     ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as
     ``PIL.Image.open(path).text``).
     """
@@ -366,10 +368,11 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
             arr[..., :3] = arr[..., :3] @ xyz_to_srgb_matrix().T
     c = arr.shape[2]
     rgb = np.repeat(arr[..., :1], 3, axis=2) if c in (1, 2) else arr[..., :3]
-    if c in (2, 4) and not encoded:
+    if c in (2, 4):
         # a film's colour is premultiplied by its alpha (what EXR stores), a PNG's is not:
         # stored as it comes, partly covered pixels would be dark fringes (as in Mitsuba's own
-        # film.write); alpha-0 pixels keep their colour (a visible sky)
+        # film.write); alpha-0 pixels keep their colour (a visible sky). An encoded image from
+        # a post chain is premultiplied too: its curves act on c / a and multiply a back
         a = np.clip(np.nan_to_num(arr[..., c - 1:c]), 0.0, 1.0)      # (as stored below)
         rgb = np.where(a > 0, rgb / np.where(a > 0, a, 1.0), rgb)
     if encoded and exposure:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any, Callable, Mapping, Sequence
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -159,6 +160,8 @@ class FilterSpec:
     effect: Effect
     aliases: tuple[str, ...] = ()
     multipass: int = 1
+    #: a per-pixel curve, applied to the colour itself where the image has alpha (:meth:`run`)
+    straight: bool = False
 
     def __post_init__(self) -> None:
         self.params = tuple(self.params) + (AMOUNT, multipass_param(self.multipass))
@@ -241,11 +244,24 @@ class FilterSpec:
         params = self.validate(where, values)
         return self.apply_validated(image, params, where)
 
+    def run(self, rgb: mi.TensorXf, alpha: mi.TensorXf | None, params: Mapping[str, Any]
+            ) -> mi.TensorXf:
+        """:meth:`run_rgb` of an image whose colour is premultiplied by ``alpha`` (a film's
+        RGBA, as EXR stores it): a ``straight`` effect (the sRGB curve, a display encoding) acts
+        on the colour itself, ``c / a``, and the result is multiplied
+        by ``a`` again; an encoding of ``c a`` had stored ``srgb(0.125 c)`` for a pixel an
+        eighth covered (dark fringes). Alpha-0 pixels keep their colour as it is."""
+        if alpha is None or not self.straight or params["amount"] == 0.0:
+            return self.run_rgb(rgb, params)
+        a = dr.select(alpha.array > 0.0, alpha.array, 1.0)
+        a3 = mi.TensorXf(dr.repeat(a, 3), rgb.shape)       # (one alpha per colour value)
+        return self.run_rgb(rgb / a3, params) * a3
+
     def apply_validated(self, image: Any, params: Mapping[str, Any], where: str
                         ) -> mi.TensorXf:
         t = as_image(image, where)
         rgb, alpha = split_alpha(t)
-        return join_alpha(self.run_rgb(finite_rgb(rgb), params), alpha)
+        return join_alpha(self.run(finite_rgb(rgb), alpha, params), alpha)
 
 
 class Filter:

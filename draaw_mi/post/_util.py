@@ -27,25 +27,27 @@ def as_image(image: Any, where: str) -> mi.TensorXf:
     """Return ``image`` as an (H, W, 3|4) ``mi.TensorXf``; numpy/lists are converted (float32)."""
     if isinstance(image, mi.TensorXf):
         t = image
-    elif dr.is_tensor_v(image):
+    elif image is not None and dr.is_tensor_v(image):
         try:
             t = mi.TensorXf(image)
         except Exception as exc:  # noqa: BLE001 - report any conversion failure the same way
             raise ParameterError(f"{where}: cannot convert image of type "
                                  f"{type(image).__name__} to mi.TensorXf ({exc})") from None
     else:
-        if isinstance(image, np.ndarray):
-            a = image
-            if a.dtype.kind != "f":
-                raise ParameterError(
-                    f"{where}: image must be a float array (linear RGB, 1.0 = white), got dtype "
-                    f"{a.dtype}; convert 8-bit images with img.astype(np.float32) / 255")
-        else:
-            try:
-                a = np.asarray(image, dtype=np.float32)
-            except (TypeError, ValueError):
-                raise ParameterError(f"{where}: image must be an mi.TensorXf or a float numpy "
-                                     f"array, got {type(image).__name__}") from None
+        # (the dtype is read before any conversion: an 8-bit mi.Bitmap or PIL image had been
+        # taken as values up to 255)
+        try:
+            a = np.asarray(image) if image is not None else None
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.dtype == object:
+            raise ParameterError(f"{where}: image must be an mi.TensorXf or a float numpy "
+                                 f"array, got {type(image).__name__}") from None
+        if a.dtype.kind not in "fiu" or (a.dtype.kind in "iu" and not isinstance(image, list)):
+            raise ParameterError(
+                f"{where}: image must be a float array (linear RGB, 1.0 = white), got dtype "
+                f"{a.dtype}; convert 8-bit images with img.astype(np.float32) / 255 (and "
+                "draaw_mi.io.srgb_decode if they are sRGB-encoded)")
         t = mi.TensorXf(np.ascontiguousarray(a, dtype=np.float32))
     shape = tuple(t.shape)
     if len(shape) != 3 or shape[2] not in (3, 4) or shape[0] < 1 or shape[1] < 1:

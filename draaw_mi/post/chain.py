@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from typing import Any, Iterable, Iterator, Mapping
 
 import mitsuba as mi
@@ -94,7 +95,7 @@ class Chain:
         rgb, alpha = split_alpha(as_image(image, "apply()"))
         rgb = finite_rgb(rgb)               # (NaN/inf read as 0: a blur would spread them)
         for f in self.filters:
-            rgb = f.spec.run_rgb(rgb, f.params)
+            rgb = f.spec.run(rgb, alpha, f.params)
         return join_alpha(rgb, alpha)
 
     def __len__(self) -> int:
@@ -123,20 +124,31 @@ class Chain:
 
 
 def display_encoded(chain: Iterable[Any] | Chain | None) -> bool:
-    """Whether ``chain``'s output is display-encoded: its last ``srgb`` filter encodes (an
-    ``inverse=True`` one decodes, and no ``srgb`` leaves the image linear). What writes 8-bit
-    images (PNG files, the Jupyter preview) then stores the values as they are instead of
-    encoding them a second time, which would wash them out.
+    """Whether ``chain``'s output is display-encoded: its last display curve decides, an
+    ``srgb`` filter (an ``inverse=True`` one decodes) or one of GO-Draaw's grades ``linear``
+    and ``log``, whose values GO-Draaw stores as its 8-bit pixels (white through ``log``: 128);
+    no such filter leaves the image linear. A filter at ``amount`` 0 does nothing and is not
+    counted; one between 0 and 1 leaves values neither linear nor encoded (a
+    ``RuntimeWarning`` says so; they are taken as encoded). What writes 8-bit images (PNG
+    files, the Jupyter preview) then stores the values as they are instead of encoding them a
+    second time, which would wash them out.
 
     >>> display_encoded([{"type": "bloom"}, {"type": "srgb"}]), display_encoded([])
     (True, False)
     >>> display_encoded([{"type": "srgb"}, {"type": "srgb", "inverse": True}])
     False
+    >>> display_encoded([{"type": "log"}]), display_encoded([{"type": "srgb", "amount": 0}])
+    (True, False)
     """
-    encoded = False
+    encoded, partial = False, None
     for f in load_chain(chain or []):
-        if isinstance(f, SRGB):
-            encoded = not f.params["inverse"]
+        if isinstance(f, (SRGB, Linear, Log)) and f.params["amount"] > 0.0:
+            encoded = not (isinstance(f, SRGB) and f.params["inverse"])
+            partial = f if f.params["amount"] < 1.0 else None
+    if partial is not None:
+        warnings.warn(f"display_encoded: {partial.spec.name} at amount={partial.params['amount']:g} leaves "
+                      "values between linear and display-encoded; they are stored as encoded",
+                      RuntimeWarning, stacklevel=2)
     return encoded
 
 

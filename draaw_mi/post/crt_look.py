@@ -60,8 +60,9 @@ def _crt(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     blur *= 1.0 / WEIGHT_SUM
 
     # ---- glow, curve, vignette, tint, scan lines ----
-    clr = dr.lerp(blur * p.glow, centre, p.base)
-    out = dr.lerp(clr, clr * clr, 0.4)
+    # (lerp's a + (b - a) t would read inf - inf = NaN where blur * glow overflows float32)
+    clr = blur * (p.glow * (1.0 - p.base)) + centre * p.base
+    out = clr * 0.6 + clr * clr * 0.4           # (lerp(clr, clr^2, 0.4), finite where clr^2 overflows)
     if p.clamp:
         out = dr.clip(out, 0.0, 1.0)
     u = (mi.Float(x) + 0.5) * (1.0 / W)

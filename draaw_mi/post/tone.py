@@ -160,7 +160,7 @@ def _srgb(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     return mi.TensorXf(dr.select(hi, curve, x * 12.92), rgb.shape)
 
 
-SRGB_SPEC = FilterSpec("srgb", (Param("inverse", False, "bool"),), _srgb)
+SRGB_SPEC = FilterSpec("srgb", (Param("inverse", False, "bool"),), _srgb, straight=True)
 
 
 def srgb(image: Any, *, inverse: bool = False, amount: float = 1.0,

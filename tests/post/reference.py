@@ -222,7 +222,15 @@ def srgb(img, inverse=False, amount=1.0, multipass=1):
                             ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
         return np.where(c <= 0.0031308, c * 12.92,
                         1.055 * np.maximum(c, 0.0031308) ** (1 / 2.4) - 0.055)
-    return passes(img, effect, amount, multipass)
+    img = np.asarray(img)
+    if img.shape[-1] != 4:
+        return passes(img, effect, amount, multipass)
+    # RGBA: the colour is premultiplied by alpha; the curve encodes c / a, then times a again
+    # (alpha-0 pixels as they are)
+    a = np.where(img[..., 3:] > 0, img[..., 3:], 1.0)
+    out = passes(np.concatenate([img[..., :3] / a, img[..., 3:]], axis=-1), effect, amount, multipass)
+    out[..., :3] *= a
+    return out
 
 
 FUNCTIONS = {f.__name__: f for f in (contrast, tint, bloom, bloom_v2, sharpen, color_mapping,

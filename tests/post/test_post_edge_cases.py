@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import draaw_mi.post as post
+from draaw_mi.errors import ParameterError
 from post_helpers import CASES, FILTER_NAMES, hdr_image
 
 BOUNDARY_FILTERS = ["bloom", "bloom_v2", "sharpen", "chromatic_aberration", "edge_detection",
@@ -125,14 +126,15 @@ def test_non_finite_input_values_read_as_zero(name):
     13 x 13 pixels."""
     img = _with_bad_pixels(channels=4)
     img[0, 0, 3] = np.nan                                  # alpha passes through as it is
-    clean = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
-    want = getattr(post, name)(clean).numpy()
+    clean = img.copy()                                     # (the colour's bad values only)
+    clean[..., :3] = np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
+    want = getattr(post, name)(clean).numpy()[..., :3]
     params = CASES[name][-1]
     got = getattr(post, name)(img).numpy()
     np.testing.assert_array_equal(got[..., :3], want)
     np.testing.assert_array_equal(got[..., 3], img[..., 3])
     chain = post.apply(img, [{"type": name, **params}]).numpy()
-    np.testing.assert_array_equal(chain[..., :3], getattr(post, name)(clean, **params).numpy())
+    np.testing.assert_array_equal(chain[..., :3], getattr(post, name)(clean, **params).numpy()[..., :3])
     assert np.all(np.isfinite(chain[..., :3]))
 
 
@@ -146,3 +148,52 @@ def test_non_finite_input_values_get_zero_gradient():
     assert np.all(np.isfinite(g))
     assert g[6, 8, 0] == 0 and g[2, 3, 1] == 0 and g[11, 15, 2] == 0
     assert np.count_nonzero(g) > 0.9 * g.size
+
+
+def test_an_encoded_rgba_png_stores_the_colour_not_the_premultiplied_one(tmp_path):
+    """A chain ending in ``srgb`` on a film's RGBA (colour premultiplied by alpha): its PNG
+    equals the linear image's PNG (which write_png encodes itself). The curve had encoded
+    ``c a``: a pixel an eighth covered was stored 34 where it is 101."""
+    import matplotlib.image
+    from draaw_mi.io import write_png
+    img = np.zeros((4, 5, 4), np.float32)
+    img[..., :3] = 0.35
+    img[..., 3] = np.linspace(0.0, 1.0, 20).reshape(4, 5)
+    img[..., :3] *= img[..., 3:]                      # premultiplied, as a film holds it
+    write_png(str(tmp_path / "linear.png"), img)
+    write_png(str(tmp_path / "encoded.png"), post.apply(img, [{"type": "srgb"}]), encoded=True)
+    a = np.round(matplotlib.image.imread(str(tmp_path / "linear.png")) * 255)
+    b = np.round(matplotlib.image.imread(str(tmp_path / "encoded.png")) * 255)
+    assert np.abs(a - b).max() <= 1, np.abs(a - b).max()
+    assert b[0, 1, 0] > 150                           # 0.35 encoded: 160, however little covered
+
+
+def test_eight_bit_images_of_any_kind_are_refused():
+    """An 8-bit ``mi.Bitmap`` or PIL image was read as values up to 255 (a numpy uint8 array
+    was refused); ``None`` raised Dr.Jit's own TypeError."""
+    from PIL import Image
+    for img in (mi.Bitmap(np.full((2, 2, 3), 200, np.uint8)), Image.new("RGB", (2, 2), (200, 200, 200)),
+                np.full((2, 2, 3), 200, np.uint8)):
+        with pytest.raises(ParameterError, match="must be a float array.*got dtype uint8"):
+            post.srgb(img)
+    with pytest.raises(ParameterError, match="must be an mi.TensorXf or a float numpy array, got NoneType"):
+        post.apply(None, [{"type": "srgb"}])
+    assert post.srgb(mi.Bitmap(np.full((2, 2, 3), 0.5, np.float32))).shape == (2, 2, 3)
+
+
+def test_crt_of_values_near_float_max_is_finite():
+    """``lerp(blur * glow, centre, base)`` read inf - inf = NaN where blur * glow overflowed."""
+    img = np.full((5, 5, 3), 0.5, np.float32)
+    img[2, 2] = 3e38
+    assert np.all(np.isfinite(post.crt(img, radius=3.0).numpy()))
+    assert np.all(np.isfinite(post.crt(np.full((3, 3, 3), 3e38, np.float32)).numpy()))
+
+
+def test_display_encoded_counts_the_grades_and_not_a_zero_amount():
+    """GO-Draaw stores the ``log`` grade's values as its 8-bit pixels (white: 128): a PNG
+    encoded them again (188). An ``srgb`` at amount 0 does nothing and was counted."""
+    assert post.display_encoded([{"type": "log"}]) and post.display_encoded([{"type": "linear"}])
+    assert not post.display_encoded([{"type": "srgb", "amount": 0.0}])
+    assert not post.display_encoded([{"type": "log"}, {"type": "srgb", "inverse": True}])
+    with pytest.warns(RuntimeWarning, match="srgb at amount=0.5 leaves values between"):
+        assert post.display_encoded([{"type": "srgb", "amount": 0.5}])
