@@ -20,7 +20,8 @@ from __future__ import annotations
 from .._lazy import old_names
 from . import v1, v2, v3, v4
 from .features import FEATURE_NAMES, detect_features
-from .versions import MAIN_VERSIONS, PLUGINS, SCENE_VERSION, VERSION_ALIASES, VERSION_GRADES, is_draaw, resolve_version
+from .versions import (MAIN_VERSIONS, PLUGINS, SCENE_VERSION, VERSION_ALIASES, VERSION_GRADES, is_draaw,
+                       resolve_version, version_key)
 
 _REGISTERED = False
 
@@ -36,7 +37,7 @@ def register() -> None:
 
 
 __all__ = ["FEATURE_NAMES", "MAIN_VERSIONS", "PLUGINS", "SCENE_VERSION", "VERSION_ALIASES", "VERSION_GRADES", "detect_features",
-           "is_draaw", "register", "resolve_version"]
+           "is_draaw", "register", "resolve_version", "version_key"]
 
 # names the earlier release had here, served from their new modules with a DeprecationWarning
 __getattr__ = old_names(__name__, dict.fromkeys(("RenderError", "suggest"), "draaw_mi.errors"))

@@ -44,6 +44,17 @@ VERSION_GRADES: dict[str, str] = {
     name: ("log" if "-log" in name else "linear")
     for name in VERSION_ALIASES if name.startswith(("v2-", "v4-")) and ("-log" in name or "-linear" in name)}
 
+def version_key(name: str) -> str:
+    """``name`` as :data:`VERSION_ALIASES` and :data:`VERSION_GRADES` spell it: lower case;
+    plugin names with ``_`` (draaw_v4), GO-Draaw's with ``-`` (V4-Log-Optim), either accepted.
+
+    >>> version_key(" V4_Log "), version_key("draaw-v4")
+    ('v4-log', 'draaw_v4')
+    """
+    key = str(name).strip().lower()
+    return key.replace("-", "_") if key.startswith("draaw") else key.replace("_", "-")
+
+
 def resolve_version(name: str) -> str:
     """Mitsuba integrator plugin name for a render version name (case-insensitive).
 
@@ -54,9 +65,7 @@ def resolve_version(name: str) -> str:
     """
     if not isinstance(name, str):
         raise RenderError(f"render version {name!r} must be a string; {MAIN_VERSIONS}")
-    key = name.strip().lower()
-    # plugin names use '_' (draaw_v4), GO-Draaw's names '-' (V4-Log-Optim): accept either
-    key = key.replace("-", "_") if key.startswith("draaw") else key.replace("_", "-")
+    key = version_key(name)
     if key in VERSION_ALIASES:
         return VERSION_ALIASES[key]
     hint = suggest(key, VERSION_ALIASES)

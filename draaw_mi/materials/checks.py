@@ -105,7 +105,8 @@ def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None
     """:func:`check_value` for a participating medium's parameter (``parts``: its key split
     at the dots, e.g. ``plume.interior_medium.phase_function.g``)."""
     if parts[-2:] == ["phase_function", "g"]:
-        if not all(abs(x) <= HG_G_MAX for x in nums):
+        # (read back from Mitsuba as float32: a scene's 0.999 is 0.9990000128746033)
+        if not all(abs(x) <= float(np.float32(HG_G_MAX)) for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a Henyey-Greenstein g in "
                                  f"[-{HG_G_MAX}, {HG_G_MAX}]")
     elif parts[-1] == "scale":

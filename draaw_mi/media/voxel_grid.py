@@ -147,8 +147,9 @@ class VoxelGrid:
     def go_draaw(cls, mesh_path: str, scale: float = 75.0, resolution: int = 96,
                  seed: int | None = 0) -> "VoxelGrid":
         """GO-Draaw's start-up grid (``go-draaw-spec.md`` §4.1): the mesh scaled by ``scale``
-        (GO-Draaw loads scenes x75), box = the object box x0.75 *about the world origin*,
-        ``resolution ** 3`` cells, each triangle voxelised, filled cells with a random colour,
+        (GO-Draaw loads scenes x75), box = the object box x0.75 *about the world origin*
+        (the object box starts as the zero box, so it always holds the origin: §2.1's quirk,
+        kept, as it sets the cells' size), ``resolution ** 3`` cells, each triangle voxelised, filled cells with a random colour,
         smoke colour (0, 0, 0) and density 0.001 everywhere.
 
         Fixed quirks: GO-Draaw stores the per-cell centre positions transposed (x<->z), which only
@@ -158,7 +159,7 @@ class VoxelGrid:
         """
         tris = load_triangles(mesh_path) * float(scale)
         pts = tris.reshape(-1, 3)
-        lo, hi = pts.min(0) * 0.75, pts.max(0) * 0.75
+        lo, hi = np.minimum(pts.min(0), 0.0) * 0.75, np.maximum(pts.max(0), 0.0) * 0.75
         g = cls.empty(resolution, lo, hi, seed)
         g.occupied = voxelize(tris, g.shape, g.bbox_min, g.bbox_max, "surface")
         n = int(g.occupied.sum())

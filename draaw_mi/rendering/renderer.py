@@ -29,7 +29,7 @@ import numpy as np
 from .. import post as post_mod
 from ..errors import NonFiniteWarning, RenderError
 from ..guard import RENDER_GUARD
-from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version
+from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version, version_key
 from ..integrators.common import AOV_CHANNELS
 from ..integrators.features import detect_features
 from ..io import channel_names
@@ -349,7 +349,7 @@ def _render_denoised_apart(rs: RenderSettings, progress, return_info):
 def _warn_grade_left_out(version: str, chain) -> None:
     """Warn when a GO-Draaw graded version name (``V4-Log``) comes without its grade's post
     filter: the name renders linear light, as ``V4`` does."""
-    grade = VERSION_GRADES.get(str(version).strip().lower())
+    grade = VERSION_GRADES.get(version_key(version))         # (V4_Log as V4-Log)
     if grade is None or (chain is not None and any(e.get("type") == grade for e in chain.to_list())):
         return
     warnings.warn(f"render: version {version!r} renders linear light, as {resolve_version(version)!r} "

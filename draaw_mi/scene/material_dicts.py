@@ -4,6 +4,7 @@ non-negative values)."""
 from __future__ import annotations
 
 import os
+import warnings
 from typing import TYPE_CHECKING
 
 import mitsuba as mi
@@ -132,7 +133,15 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             elif key in COLOR_PARAMS:
                 if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool)\
                         and not is_nested(value):
-                    out[key] = {"type": "rgb", "value": vector(value, wk, lo=0.0)}
+                    rgb = vector(value, wk, lo=0.0)
+                    if max(rgb) > 1.0:
+                        # (reflecting more than arrives: allowed, as Mitsuba allows it, yet it is
+                        # what GO-Draaw's 0-255 colours give when copied over)
+                        warnings.warn(f"{wk}: {shown(value)} reflects more light than arrives (above 1); "
+                                      "GO-Draaw's 0-255 colours are divided by 255 here, and light is "
+                                      "given off by a light or a shape's emission = [r, g, b]",
+                                      RuntimeWarning, stacklevel=2)
+                    out[key] = {"type": "rgb", "value": rgb}
                 else:
                     out[key] = texture_value(value, key, ctx, wk)
             elif key == "normalmap":

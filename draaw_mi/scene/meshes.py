@@ -14,6 +14,7 @@ import json
 import logging
 import mmap
 import os
+import warnings
 from dataclasses import dataclass, field
 from urllib.parse import unquote
 
@@ -101,6 +102,7 @@ def load_mesh_parts(path: str, where) -> list[MeshPart]:
         loaded = trimesh.load(path, force="scene", process=False)
     except Exception as e:  # noqa: BLE001 - trimesh raises many kinds of errors on bad files
         raise where.error(f"cannot read mesh {path!r}: {type(e).__name__}: {e}") from None
+    kd = _obj_diffuse_colours(path, where) if path.lower().endswith(".obj") else {}
     parts = []
     try:
         items = loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded]
@@ -118,6 +120,8 @@ def load_mesh_parts(path: str, where) -> list[MeshPart]:
         uv = getattr(getattr(geom, "visual", None), "uv", None)
         uv = np.asarray(uv, dtype=np.float32) if uv is not None and len(uv) == len(verts) else None
         mat_name, mat = _material_of(geom)
+        if mat_name in kd and isinstance(mat.get("base_color"), list):
+            mat["base_color"] = kd[mat_name]         # (trimesh's are rounded to 1/255)
         if "base_color" not in mat:
             mat["base_color"] = [GO_DRAAW_GREY] * 3
         if not isinstance(mat.get("base_color"), list):
@@ -128,6 +132,56 @@ def load_mesh_parts(path: str, where) -> list[MeshPart]:
     if not parts:
         raise where.error(f"mesh {path!r} contains no triangles")
     return parts
+
+
+def _obj_diffuse_colours(path: str, where) -> dict[str, list[float]]:
+    """``{material: Kd}`` of an OBJ's material libraries, as the MTL files write them (trimesh
+    rounds them to 1/255 and clips them: Kd 0.020 read 0.0196). A ``RuntimeWarning`` names a
+    library that is missing, a ``usemtl`` no library defines (GO-Draaw stops at either; both
+    render grey 178 here) and a Kd outside [0, 1] (GO-Draaw's emission trick; clipped here).
+
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> _ = open(os.path.join(d, "m.obj"), "w").write("mtllib m.mtl\\nusemtl red\\n")
+    >>> _ = open(os.path.join(d, "m.mtl"), "w").write("newmtl red\\nKd 0.02 0.5 1\\n")
+    >>> _obj_diffuse_colours(os.path.join(d, "m.obj"), "m.obj")
+    {'red': [0.02, 0.5, 1.0]}
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    kd: dict[str, list[float]] = {}
+    defined: set[str] = set()
+    libraries = _lines_starting(path, ("mtllib",))
+    for libs in libraries:
+        for name in [libs] if os.path.isfile(os.path.join(folder, libs)) else libs.split():
+            mtl = os.path.join(folder, name)
+            if not os.path.isfile(mtl):
+                warnings.warn(f"{where}: material library {name!r} not found; "
+                              "its materials render grey", RuntimeWarning, stacklevel=4)
+                continue
+            current = None
+            with open(mtl, encoding="utf-8", errors="replace") as fh:
+                for line in fh:
+                    words = line.split()
+                    if len(words) >= 2 and words[0] == "newmtl":
+                        current = line.strip()[len("newmtl"):].strip()
+                        defined.add(current)
+                    elif len(words) == 4 and words[0] == "Kd" and current is not None:
+                        try:
+                            rgb = [float(w) for w in words[1:]]
+                        except ValueError:
+                            continue
+                        if not all(0.0 <= c <= 1.0 for c in rgb):
+                            warnings.warn(f"{where}: {name}: material {current!r} has Kd {' '.join(words[1:])}; "
+                                          "expected values in [0, 1] (clipped; light is given off by a "
+                                          "light or a shape's emission)", RuntimeWarning, stacklevel=4)
+                        kd[current] = [float(np.clip(c, 0.0, 1.0)) for c in rgb]
+    # ("(null)": Blender's name for no material)
+    undefined = sorted({u.strip() for u in _lines_starting(path, ("usemtl",))} - defined - {"", "(null)"})
+    if undefined:
+        warnings.warn(f"{where}: usemtl {', '.join(map(repr, undefined[:3]))}"
+                      f"{' ...' if len(undefined) > 3 else ''}: no material library defines it; "
+                      "it renders grey", RuntimeWarning, stacklevel=4)
+    return kd
 
 
 def write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None,

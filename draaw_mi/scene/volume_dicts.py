@@ -36,7 +36,7 @@ from ..media.mitsuba_dicts import FILTERS, smoke_shape
 from ..media.procedural import plume
 from ..media.voxel_grid import VoxelGrid
 from .context import safe_id
-from .schema import check_keys, number, string, vector
+from .schema import check_keys, number, shown, string, vector
 
 VOLUME_KEYS = ("name", "mode", "file", "procedural", "density", "occupied", "bounds", "resolution", "fill",
                "density_scale", "albedo", "g", "filter", "material", "color", "seed")
@@ -185,7 +185,11 @@ def volume_dicts(entry: dict, index: int, raw_materials: dict, ctx, where) -> tu
             table.pop("base_color", None)
             mat_params = table
         if "color" in entry:
-            grid.color[:] = vector(entry["color"], where / "color", lo=0)
+            color = vector(entry["color"], where / "color", lo=0)
+            if max(color) > 1.0:       # (a solid colour above 1 amplifies light: GO-Draaw's 0-255?)
+                raise (where / "color").error(f"{shown(entry['color'])}; expected values in [0, 1] (GO-Draaw's "
+                                              "0-255 colours divided by 255)")
+            grid.color[:] = color
         if not grid.occupied.any():
             raise where.error("the grid has no solid voxels (mode = 'solid')")
         meshes = solid_meshes(grid, mat_params, name=name)

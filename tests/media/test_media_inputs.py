@@ -155,11 +155,12 @@ def test_a_phase_g_set_past_its_bound_through_params_is_said_by_the_render():
     import warnings
     scene = draaw_mi.load_scene(SMOKE, resolution=(12, 9))
     key = next(k for k in scene.params.keys() if k.endswith("phase_function.g"))
-    scene.params[key] = 0.5
-    scene.params.update()
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        draaw_mi.render(scene, version="v4", spp=2, post=[])
+    for g in (0.5, -0.999, 0.999):      # (the bound itself, read back as float32 0.99900001)
+        scene.params[key] = g
+        scene.params.update()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            draaw_mi.render(scene, version="v4", spp=2, post=[])
     scene.params[key] = 1.2
     scene.params.update()
     with pytest.warns(RuntimeWarning, match=rf"render: the v4 render of .* used {key}=1\.2.*g in "

@@ -307,6 +307,16 @@ def test_go_draaw_start_up_grid_on_monkey():
     assert np.array_equal(g.color, g2.color)
 
 
+@pytest.mark.skipif(not os.path.isfile(os.path.join(GO_DRAAW, "cubes.obj")), reason="GO-Draaw's cubes.obj not found")
+def test_go_draaw_grid_box_holds_the_origin():
+    """GO-Draaw's object box starts as the zero box (go-draaw-spec.md §2.1): the cubes, at
+    y 4.28..13.44, get a grid from y = 0 (its cells 7.87 high, not 5.36)."""
+    g = VoxelGrid.go_draaw(os.path.join(GO_DRAAW, "cubes.obj"), resolution=16, seed=1)
+    s = 75.0 * 0.75
+    assert np.allclose(g.bbox_min, (-5.01 * s, 0.0, -3.68 * s), atol=1.0)
+    assert np.allclose(g.bbox_max, (2.47 * s, 13.44 * s, 3.66 * s), atol=1.0)
+
+
 # --------------------------------------------------------------------------- files
 def test_npz_round_trip_and_atomic_save(tmp_path, monkeypatch):
     g = random_grid(seed=2)

@@ -201,6 +201,8 @@ def test_a_graded_go_draaw_version_without_its_grade_says_so():
     assert np.array_equal(graded, np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1)))
     with pytest.warns(RuntimeWarning, match="post filter 'linear'"):
         draaw_mi.render(scene, version="v2-linear-texture", spp=1)
+    with pytest.warns(RuntimeWarning, match="post filter 'log'"):      # (resolved as V4-Log: said too)
+        draaw_mi.render(scene, version="V4_Log", spp=1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         draaw_mi.render(scene, version="V4-Log", spp=1, post=[{"type": "log"}])

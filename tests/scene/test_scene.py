@@ -274,6 +274,23 @@ def test_mesh_with_mtl_materials(tmp_path):
     assert np.isfinite(np.array(draaw_mi.render(scene, version="path"))).all()
 
 
+def test_mtl_colours_are_read_as_written_and_missing_materials_said(tmp_path):
+    """trimesh rounds an MTL's Kd to 1/255 (0.020 read 0.0196) and clips it without a word; a
+    missing library or an undefined usemtl rendered grey silently (GO-Draaw stops there)."""
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.020 0.5 0.3\nnewmtl hot\nKd 2.5 -1 0.3\n")
+    (tmp_path / "m.obj").write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                                    "usemtl red\nf 1 2 3\nusemtl hot\nf 1 2 4\n")
+    with pytest.warns(RuntimeWarning, match=r"material 'hot' has Kd 2.5 -1 0.3; expected values in \[0, 1\]"):
+        scene = draaw_mi.load_scene(str(tmp_path / "m.obj"), resolution=(8, 8))
+    colors = sorted(tuple(np.array(scene.params[f"{m}.base_color.value"]).ravel().tolist()) for m in scene.info["materials"])
+    np.testing.assert_allclose(colors, [(0.02, 0.5, 0.3), (1.0, 0.0, 0.3)], atol=1e-7)
+    (tmp_path / "n.obj").write_text("mtllib gone.mtl\nusemtl foo\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.warns(RuntimeWarning) as said:
+        draaw_mi.load_scene(str(tmp_path / "n.obj"), resolution=(8, 8))
+    text = " | ".join(str(w.message) for w in said)
+    assert "material library 'gone.mtl' not found" in text and "usemtl 'foo': no material library defines it" in text
+
+
 def test_go_draaw_scenes_load_and_render(go_draaw_dir):
     for name in ("monkey.obj", "cubes.obj", "Room.obj", "t90.obj"):
         scene = draaw_mi.load_scene(os.path.join(go_draaw_dir, name), resolution=(24, 16), spp=2)

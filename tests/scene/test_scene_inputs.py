@@ -83,3 +83,19 @@ def test_numpy_numbers_are_numbers():
     assert scene.resolution == (8, 8) and np.array(img).shape == (8, 8, 3)
     a = np.array(draaw_mi.render(scene, spp=4, seed=3, max_depth=3))
     assert np.array_equal(np.array(img), a)
+
+
+def test_a_base_colour_above_one_is_said_at_load():
+    """GO-Draaw's 0-255 colours copied into a scene file (base_color = [178, 178, 178]) were
+    taken without a word and rendered a sphere 179 times as bright as the sky lighting it."""
+    import warnings
+    d = {"render": {"resolution": [8, 8], "spp": 1}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+         "materials": {"m": {"base_color": [178, 178, 178]}},
+         "shapes": [{"type": "sphere", "material": "m"}], "lights": [{"type": "constant", "intensity": 1.0}]}
+    with pytest.warns(RuntimeWarning, match=r"materials\.m\.base_color: \[178, 178, 178\] reflects more light "
+                                            r"than arrives.*divided by 255"):
+        draaw_mi.load_scene(d)
+    d["materials"]["m"]["base_color"] = [1.0, 0.7, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        draaw_mi.load_scene(d)

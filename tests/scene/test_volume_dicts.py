@@ -89,6 +89,9 @@ def base_desc(**vol):
     ({"bounds": [[0, 0, 0], [1, 0, 1]]}, r"volumes\[0\]\.bounds.*empty"),
     ({"density": [[[1.0, 2.0]]], "occupied": [[[1], [1]]]}, r"shape"),
     ({"mode": "fog"}, r"mode.*solid, smoke"),
+    # GO-Draaw's 0-255 colour copied over: a solid voxel reflected 256x the light arriving
+    ({"mode": "solid", "density": None, "occupied": [[[1, 1]]], "color": [255, 128, 0]},
+     r"volumes\[0\]\.color: \[255, 128, 0\]; expected values in \[0, 1\] \(GO-Draaw's 0-255"),
     ({"material": "x"}, r"mode = solid volumes only"),
     ({"densty": 1}, r"did you mean 'density'"),
     ({"density": None, "procedural": {"type": "plume", "seed": "x"}}, r"procedural\.seed: 'x' is not a number"),
