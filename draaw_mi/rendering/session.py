@@ -45,6 +45,7 @@ import weakref
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from .. import post
 from ..errors import RenderError, caused_by_interrupt
@@ -71,6 +72,11 @@ WORKER_STOP_S = 10.0
 # What Mitsuba's own integrators cannot show: draaw-mi traces SDF objects inside v1..v4 only,
 # and path / prb pass through media as if they were empty
 BLIND = {"path": ("sdf", "media"), "prb": ("sdf", "media"), "volpath": ("sdf",), "prbvolpath": ("sdf",)}
+#: the most null collisions a ray crossing a smoke box may expect (its largest sigma_t times the
+#: box's diagonal) in Mitsuba's volpath, whose delta tracking steps by one global majorant: a
+#: voxel of sigma_t 1e30 took more than 10 minutes at 8x8 pixels, past SIGTERM (V4's
+#: majorant grid: 0.29 s)
+VOLPATH_MAX_STEPS = 1e6
 
 
 #: what a running preview's panel says when its scene's session is closed
@@ -189,6 +195,14 @@ class Session:
         if "media" in blind and holds["media"]:
             raise RenderError(f"render: {self.source} has participating media, which Mitsuba's "
                               f"{plugin!r} passes through as empty; pick v1..v4 or volpath")
+        for v in getattr(self.scene, "info", {}).get("volumes", []) if plugin in ("volpath", "prbvolpath") else ():
+            if v.get("mode") == "smoke":
+                steps = v["max_sigma_t"] * float(np.linalg.norm(np.subtract(v["bounds"][1], v["bounds"][0])))
+                if steps > VOLPATH_MAX_STEPS:
+                    raise RenderError(f"render: the smoke {v['name']!r} of {self.source} (largest sigma_t "
+                                      f"{v['max_sigma_t']:g}) takes Mitsuba's {plugin!r} about {steps:.2g} "
+                                      f"steps a ray (at most {VOLPATH_MAX_STEPS:g}); pick v1..v4, whose "
+                                      "majorant grid steps over it")
 
     def sample_passes(self, spp: int, pass_spp: int) -> list[int]:
         """:func:`~draaw_mi.rendering.passes.sample_passes` of the scene, remembered where its

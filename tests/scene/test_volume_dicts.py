@@ -376,3 +376,15 @@ def test_plume_is_seeded():
     np.testing.assert_array_equal(a, plume(16, seed=1))
     largest_change = float(np.abs(a - plume(16, seed=2)).max())
     assert largest_change > 0.1, largest_change
+
+
+def test_volpath_is_refused_a_smoke_it_would_not_finish():
+    """One voxel of sigma_t 1e30: Mitsuba's volpath steps by one global majorant and ran for
+    more than 10 minutes at 8x8 pixels (SIGTERM did not stop it); v1..v4 render it at once."""
+    desc = base_desc(density=[[[0.0, 0.0]], [[0.0, 1e30]]])
+    scene = draaw_mi.load_scene(desc)
+    with pytest.raises(draaw_mi.RenderError, match=r"'volpath' about 3.5e\+30 steps a ray \(at most 1e\+06\); pick v1..v4"):
+        draaw_mi.render(scene, version="volpath", spp=1)
+    assert np.isfinite(np.array(draaw_mi.render(scene, version="v4", spp=1))).all()
+    ok = draaw_mi.load_scene(base_desc())                      # sigma_t 2: about 7 steps a ray
+    assert np.isfinite(np.array(draaw_mi.render(ok, version="volpath", spp=1))).all()
