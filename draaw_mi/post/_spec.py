@@ -48,7 +48,7 @@ def unknown_name_message(what: str, name: str, valid: Sequence[str]) -> str:
 def _fmt_bound(v: float) -> str:
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
-    return f"{v:g}"
+    return str(int(v)) if float(v).is_integer() else f"{v:g}"     # (2147483647, not 2.14748e+09)
 
 
 @dataclass(frozen=True)
@@ -76,6 +76,10 @@ class Param:
             return "one of " + ", ".join(repr(c) for c in self.choices)
         if self.kind == "bool":
             return "true or false"
+        if self.kind == "color":
+            return (f"a colour: 3 numbers in [{_fmt_bound(self.lo)}, {_fmt_bound(self.hi)}"
+                    f"{']' if not math.isinf(self.hi) else ')'}, one number, '#rrggbb' or "
+                    "{'r': .., 'g': .., 'b': ..}")
         left = "(" if self.lo_open else "["
         right = ")" if math.isinf(self.hi) else "]"
         kind = "an integer" if self.kind in ("int", "levels") else "a number"
@@ -117,9 +121,9 @@ class Param:
         if k == "choice":
             if isinstance(value, str) and value.lower() in self.choices:
                 return value.lower()
+            hint = suggest(value, self.choices) if isinstance(value, str) else ""
             raise ParameterError(f"{where}: parameter {self.name!r} must be {self.range_text()}, "
-                                 f"got {value!r}" + (suggest(value, self.choices)
-                                                     if isinstance(value, str) else ""))
+                                 f"got {value!r}" + (hint if hint.startswith("; did you mean") else ""))
         if k in ("color", "levels"):
             integer = k == "levels"
             comps: Any = value

@@ -197,3 +197,16 @@ def test_display_encoded_counts_the_grades_and_not_a_zero_amount():
     assert not post.display_encoded([{"type": "log"}, {"type": "srgb", "inverse": True}])
     with pytest.warns(RuntimeWarning, match="srgb at amount=0.5 leaves values between"):
         assert post.display_encoded([{"type": "srgb", "amount": 0.5}])
+
+
+def test_parameter_messages_say_what_a_colour_may_be():
+    """A bad colour said "a number in [0, inf) (each component)" (not that 3 numbers, one,
+    '#rrggbb' or {r, g, b} are taken); a seed's bound read 2.14748e+09; a choice listed the
+    valid names twice."""
+    with pytest.raises(ParameterError, match=r"'color' must be a colour: 3 numbers in \[0, inf\), one number, "
+                                             r"'#rrggbb' or \{'r': .., 'g': .., 'b': ..\}, got 'red'"):
+        post.load_chain([{"type": "tint", "color": "red"}])
+    with pytest.raises(ParameterError, match=r"'seed' must be an integer in \[0, 2147483647\], got -1$"):
+        post.load_chain([{"type": "crt", "seed": -1}])
+    with pytest.raises(ParameterError, match=r"must be one of 'reflect', .*'zero', got 'x'$"):
+        post.load_chain([{"type": "bloom", "boundary": "x"}])
