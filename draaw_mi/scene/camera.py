@@ -178,8 +178,8 @@ def camera_to_look_at(cam: dict, where: Where):
         try:
             origin, target, up, mirror = go_draaw_look_at(pos, theta, phi, fov)
         except ValueError:
-            raise (where / "angles").error(f"{[theta, phi]} gives a degenerate view "
-                                           "(phi = 0 or pi makes every column identical)") from None
+            raise (where / "angles").error(f"{[theta, phi]} with fov {fov:g} gives a degenerate view "
+                                           "(GO-Draaw's image patch has no centre or no height)") from None
     else:
         origin = np.array(vector(cam.get("origin", [0.0, 0.0, 5.0]), where / "origin"))
         target = np.array(vector(cam.get("target", [0.0, 0.0, 0.0]), where / "target"))

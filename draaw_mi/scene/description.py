@@ -183,7 +183,10 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
         for part, smoothed_part in zip(parts, smoothed):
             own = None
             if mat_id is None:      # take the file's material (MTL Kd / texture / glTF PBR)
-                own = safe_id(f"{name}_{part.material_name or part.name}")
+                # a part without a material of its own: "NAME_PARTn", or "NAME_PARTn_material"
+                # where the file has several parts ("NAME_PARTn" is then the part's shape)
+                own = safe_id(f"{name}_{part.material_name}" if part.material_name else
+                              f"{name}_{part.name}" + ("_material" if len(parts) > 1 else ""))
                 if own not in materials:
                     materials[own] = material_dict(own, {"type": "draaw", **part.material}, ctx, where / "file")
             ply = os.path.join(ctx.tmp_dir, ctx.unique("mesh") + ".ply")

@@ -137,8 +137,9 @@ def load_mesh_parts(path: str, where) -> list[MeshPart]:
 def _obj_diffuse_colours(path: str, where) -> dict[str, list[float]]:
     """``{material: Kd}`` of an OBJ's material libraries, as the MTL files write them (trimesh
     rounds them to 1/255 and clips them: Kd 0.020 read 0.0196). A ``RuntimeWarning`` names a
-    library that is missing, a ``usemtl`` no library defines (GO-Draaw stops at either; both
-    render grey 178 here) and a Kd outside [0, 1] (GO-Draaw's emission trick; clipped here).
+    library that is missing (GO-Draaw stops there; its materials render grey 178 here), a
+    ``usemtl`` no library defines (grey 178, as in GO-Draaw: a misspelt name, say) and a Kd
+    outside [0, 1] (GO-Draaw's emission trick; clipped here).
 
     >>> import os, tempfile
     >>> d = tempfile.mkdtemp()

@@ -289,6 +289,13 @@ def test_mtl_colours_are_read_as_written_and_missing_materials_said(tmp_path):
         draaw_mi.load_scene(str(tmp_path / "n.obj"), resolution=(8, 8))
     text = " | ".join(str(w.message) for w in said)
     assert "material library 'gone.mtl' not found" in text and "usemtl 'foo': no material library defines it" in text
+    # faces without a material beside faces with one: the grey part's material had the id of
+    # the part's shape ("duplicate name 'mesh0_part1' (already used by a material)")
+    (tmp_path / "o.obj").write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n"
+                                    "usemtl red\nf 1 2 4\n")
+    with pytest.warns(RuntimeWarning, match="material 'hot' has Kd"):
+        mixed = draaw_mi.load_scene(str(tmp_path / "o.obj"), resolution=(8, 8))
+    assert len(mixed.info["materials"]) == 2 and np.isfinite(np.array(draaw_mi.render(mixed, spp=1))).all()
 
 
 def test_go_draaw_scenes_load_and_render(go_draaw_dir):

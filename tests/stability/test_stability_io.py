@@ -45,11 +45,10 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
     a NaN in the render's adjoint would be dropped by Mitsuba's image block before it reaches
     the parameters, so the loss is not the place to inject it. Without the guard, Adam's moments
     turn NaN and every later iterate is projected onto a bound of the roughness range."""
-    import sys
-    fit_mod = sys.modules["draaw_mi.fitting.fitter"]
+    from draaw_mi.fitting.params import FitParam
     ref = np.array(draaw_mi.render(tiny_scene, version="path", spp=16))     # truth: roughness 0.4
     calls = {"n": 0}
-    real = fit_mod.FitParam.from_latent
+    real = FitParam.from_latent
 
     def poisoned(self, u):
         v = real(self, u)
@@ -59,7 +58,7 @@ def test_one_nan_gradient_does_not_poison_the_fit(tiny_scene, monkeypatch):
         if calls["n"] == 2:                        # second iteration: a NaN derivative
             return dr.replace_grad(v, v * dr.select(mi.Bool(True), mi.Float(np.nan), 1.0))
         return v
-    monkeypatch.setattr(fit_mod.FitParam, "from_latent", poisoned)
+    monkeypatch.setattr(FitParam, "from_latent", poisoned)
     res = draaw_mi.fit(tiny_scene, ref, ["ball.roughness"], version="v4", spp=2, iterations=5, progress=False)
     assert calls["n"] == 5, "fit() must map its latents through FitParam.from_latent (patched here)"
     vals = np.array([h["values"]["ball.roughness"] for h in res.history])
