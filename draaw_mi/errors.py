@@ -2,7 +2,20 @@
 from __future__ import annotations
 
 import difflib
+import os
+import sys
 from typing import Iterable
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` that points a ``warnings.warn`` made by this function's caller at the
+    first frame outside draaw-mi (the user's line, however deep the loader's calls)."""
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 class DraawError(Exception):

@@ -340,8 +340,8 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     for RGBA, and X, Y, Z for R, G, B.
 
     ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
-    ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb``,
-    :func:`draaw_mi.post.display_encoded`; a render of a scene whose ``[[post]]`` does:
+    ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb`` or a
+    GO-Draaw grade, :func:`draaw_mi.post.display_encoded`; a render of a scene whose ``[[post]]`` does:
     ``encoded=display_encoded(info["post"])`` with ``render(..., return_info=True)``) and is
     stored as it is;
     ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as

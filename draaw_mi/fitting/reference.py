@@ -47,7 +47,7 @@ def unclipped_mask(ref: np.ndarray) -> np.ndarray:
 def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
     """An (H, W, 3) float32 reference from an EXR/PNG path or an (H, W[, 1 | 3 | 4]) float
     array/tensor. A PNG/JPEG is decoded from sRGB to linear, unless ``encoded`` (the fit's
-    post chain ends in ``srgb``, :func:`draaw_mi.post.display_encoded`: its renders are
+    post chain ends in a display curve, ``srgb`` or a grade, :func:`draaw_mi.post.display_encoded`: its renders are
     compared display-encoded, as ``draaw-mi render --post ... --png`` stored them). An EXR's
     colour is its R, G, B channels, a grey Y, or the R, G, B of its one layer
     (``ViewLayer.Combined.R``, ...). ``who``: the caller, as errors name it.

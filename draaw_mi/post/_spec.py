@@ -251,13 +251,14 @@ class FilterSpec:
     def run(self, rgb: mi.TensorXf, alpha: mi.TensorXf | None, params: Mapping[str, Any]
             ) -> mi.TensorXf:
         """:meth:`run_rgb` of an image whose colour is premultiplied by ``alpha`` (a film's
-        RGBA, as EXR stores it): a ``straight`` effect (the sRGB curve, a display encoding) acts
-        on the colour itself, ``c / a``, and the result is multiplied
+        RGBA, as EXR stores it): a ``straight`` effect (a display curve: sRGB, GO-Draaw's grades)
+        acts on the colour itself, ``c / a``, and the result is multiplied
         by ``a`` again; an encoding of ``c a`` had stored ``srgb(0.125 c)`` for a pixel an
         eighth covered (dark fringes). Alpha-0 pixels keep their colour as it is."""
         if alpha is None or not self.straight or params["amount"] == 0.0:
             return self.run_rgb(rgb, params)
-        a = dr.select(alpha.array > 0.0, alpha.array, 1.0)
+        # (alpha as write_png reads it: in [0, 1]; an infinite one had made 0 * inf = NaN)
+        a = dr.select((alpha.array > 0.0) & dr.isfinite(alpha.array), dr.minimum(alpha.array, 1.0), 1.0)
         a3 = mi.TensorXf(dr.repeat(a, 3), rgb.shape)       # (one alpha per colour value)
         return self.run_rgb(rgb / a3, params) * a3
 

@@ -43,7 +43,7 @@ def as_image(image: Any, where: str) -> mi.TensorXf:
         if a is None or a.dtype == object:
             raise ParameterError(f"{where}: image must be an mi.TensorXf or a float numpy "
                                  f"array, got {type(image).__name__}") from None
-        if a.dtype.kind not in "fiu" or (a.dtype.kind in "iu" and not isinstance(image, list)):
+        if a.dtype.kind not in "fiu" or (a.dtype.kind in "iu" and not isinstance(image, (list, tuple))):
             raise ParameterError(
                 f"{where}: image must be a float array (linear RGB, 1.0 = white), got dtype "
                 f"{a.dtype}; convert 8-bit images with img.astype(np.float32) / 255 (and "

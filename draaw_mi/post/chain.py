@@ -16,7 +16,7 @@ from typing import Any, Iterable, Iterator, Mapping
 
 import mitsuba as mi
 
-from ..errors import IOFailure, ParameterError
+from ..errors import IOFailure, ParameterError, user_stacklevel
 from ..io import write_text
 from ._spec import Filter, norm_name, unknown_name_message
 from ._util import as_image, finite_rgb, join_alpha, split_alpha
@@ -147,8 +147,8 @@ def display_encoded(chain: Iterable[Any] | Chain | None) -> bool:
             partial = f if f.params["amount"] < 1.0 else None
     if partial is not None:
         warnings.warn(f"display_encoded: {partial.spec.name} at amount={partial.params['amount']:g} leaves "
-                      "values between linear and display-encoded; they are stored as encoded",
-                      RuntimeWarning, stacklevel=2)
+                      "values between linear and display-encoded; they are taken as "
+                      f"{'encoded' if encoded else 'linear'}", RuntimeWarning, stacklevel=user_stacklevel())
     return encoded
 
 

@@ -44,7 +44,7 @@ _GAMMA = Param("gamma", 0.25, lo=0.0, hi=1.0, lo_open=True, aliases=("Gamma",))
 _SCALE = Param("scale", 255.0, lo=0.0, lo_open=True)
 _CLAMP = Param("clamp", True, "bool")
 
-LINEAR = FilterSpec("linear", (_GAMMA, _SCALE, _CLAMP), _linear, aliases=("lin", "gamma"))
+LINEAR = FilterSpec("linear", (_GAMMA, _SCALE, _CLAMP), _linear, aliases=("lin", "gamma"), straight=True)
 
 
 def linear(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = True,
@@ -102,7 +102,7 @@ def _log(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     return mi.TensorXf(dr.minimum(out, 1.0) if p.clamp else out, rgb.shape)
 
 
-LOG = FilterSpec("log", (_GAMMA, _SCALE, _CLAMP), _log, aliases=("logarithmic",))
+LOG = FilterSpec("log", (_GAMMA, _SCALE, _CLAMP), _log, aliases=("logarithmic",), straight=True)
 
 
 def log(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = True,

@@ -32,7 +32,7 @@ class PreviewFrame:
     denoised: bool
     render_s: float            # seconds spent rendering this frame
     t_ready: float             # time.perf_counter() when it became available
-    encoded: bool = False      # image is display-encoded (the post chain ends in srgb)
+    encoded: bool = False      # image is display-encoded (post.display_encoded of its chain)
 
 
 class PreviewSuperseded(DraawError):

@@ -15,6 +15,7 @@ import os
 import re
 import shutil
 import tempfile
+import warnings
 import weakref
 
 try:
@@ -42,7 +43,9 @@ SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
 
 def _bare_mesh_description(path: str) -> dict:
     """A description for a mesh file alone: camera and lights placed from its bounds."""
-    parts = load_mesh_parts(path, Where(path))
+    with warnings.catch_warnings():            # (the scene's own load of the file says them)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        parts = load_mesh_parts(path, Where(path))
     lo, hi = bounds(parts)
     camera = auto_camera(lo, hi)
     return {"shapes": [{"type": "mesh", "file": os.path.abspath(path)}], "camera": camera,

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import mitsuba as mi
 import numpy as np
 
+from ..errors import user_stacklevel
 from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
@@ -140,7 +141,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                         warnings.warn(f"{wk}: {shown(value)} reflects more light than arrives (above 1); "
                                       "GO-Draaw's 0-255 colours are divided by 255 here, and light is "
                                       "given off by a light or a shape's emission = [r, g, b]",
-                                      RuntimeWarning, stacklevel=2)
+                                      RuntimeWarning, stacklevel=user_stacklevel())
                     out[key] = {"type": "rgb", "value": rgb}
                 else:
                     out[key] = texture_value(value, key, ctx, wk)

@@ -20,6 +20,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from ..errors import user_stacklevel
 from ..io import srgb_decode
 
 GO_DRAAW_GREY = 178.0 / 255.0
@@ -157,7 +158,7 @@ def _obj_diffuse_colours(path: str, where) -> dict[str, list[float]]:
             mtl = os.path.join(folder, name)
             if not os.path.isfile(mtl):
                 warnings.warn(f"{where}: material library {name!r} not found; "
-                              "its materials render grey", RuntimeWarning, stacklevel=4)
+                              "its materials render grey", RuntimeWarning, stacklevel=user_stacklevel())
                 continue
             current = None
             with open(mtl, encoding="utf-8", errors="replace") as fh:
@@ -174,14 +175,14 @@ def _obj_diffuse_colours(path: str, where) -> dict[str, list[float]]:
                         if not all(0.0 <= c <= 1.0 for c in rgb):
                             warnings.warn(f"{where}: {name}: material {current!r} has Kd {' '.join(words[1:])}; "
                                           "expected values in [0, 1] (clipped; light is given off by a "
-                                          "light or a shape's emission)", RuntimeWarning, stacklevel=4)
+                                          "light or a shape's emission)", RuntimeWarning, stacklevel=user_stacklevel())
                         kd[current] = [float(np.clip(c, 0.0, 1.0)) for c in rgb]
     # ("(null)": Blender's name for no material)
     undefined = sorted({u.strip() for u in _lines_starting(path, ("usemtl",))} - defined - {"", "(null)"})
     if undefined:
         warnings.warn(f"{where}: usemtl {', '.join(map(repr, undefined[:3]))}"
                       f"{' ...' if len(undefined) > 3 else ''}: no material library defines it; "
-                      "it renders grey", RuntimeWarning, stacklevel=4)
+                      "it renders grey", RuntimeWarning, stacklevel=user_stacklevel())
     return kd
 
 

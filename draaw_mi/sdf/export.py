@@ -55,6 +55,7 @@ def to_entries(*roots: SDFNode) -> list[dict]:
     """
     entries: list[dict] = []
     used: dict[str, int] = {}
+    renamed: list[tuple[str, str]] = []          # (a transform's own name, the node it folds into)
 
     def unique(name: str) -> str:
         n = used.get(name, 0)
@@ -64,7 +65,7 @@ def to_entries(*roots: SDFNode) -> list[dict]:
     def emit(node: SDFNode) -> str:
         s, R, t = 1.0, np.eye(3), np.zeros(3)
         material = None
-        renamed = []                               # transforms named otherwise than NAME_xf
+        names = []                                 # transforms named otherwise than NAME_xf
         while isinstance(node, Transform):         # compose: outer(s1,R1,t1) o inner(s2,R2,t2)
             material = material or node.material
             s2, R2, t2 = scalar_of(node.scale), node.rotation, np.array(vec_of(node.translate))
@@ -72,7 +73,7 @@ def to_entries(*roots: SDFNode) -> list[dict]:
             R = R @ R2
             s = s * s2
             if isinstance(node.child, SDFNode) and node.name != f"{node.child.name}_xf":
-                renamed.append(node.name)
+                names.append(node.name)
             node = node.child
         if not isinstance(node, SDFNode):
             raise ParameterError(f"sdf.export: {node!r} is not an SDF node")
@@ -88,10 +89,9 @@ def to_entries(*roots: SDFNode) -> list[dict]:
         else:
             raise ParameterError(f"sdf.export: node {node.name!r} of kind {node.kind!r} has no table form")
         e["name"] = unique(node.name)
-        if renamed:
-            warnings.warn(f"to_entries: the transform {renamed[0]!r} becomes the translate/rotate/scale of "
-                          f"{e['name']!r}; its keys in the scene are sdf.{e['name']}_xf.translate and "
-                          f"sdf.{e['name']}_xf.scale", RuntimeWarning, stacklevel=3)
+        moves = np.any(t != 0) or not np.allclose(R, np.eye(3)) or s != 1.0
+        if names and moves:                        # (an identity transform makes no keys at all)
+            renamed.append((names[0], e["name"]))
         if node.material or material:
             e["material"] = node.material or material
         if np.any(t != 0):
@@ -106,4 +106,9 @@ def to_entries(*roots: SDFNode) -> list[dict]:
 
     for r in roots:
         emit(r)
+    for own, name in renamed[:1]:
+        more = f" (and {len(renamed) - 1} more)" if len(renamed) > 1 else ""
+        warnings.warn(f"to_entries: the transform {own!r} becomes the translate/rotate/scale of {name!r}{more}; "
+                      f"its keys in the scene are sdf.{name}_xf.translate and sdf.{name}_xf.scale",
+                      RuntimeWarning, stacklevel=2)
     return entries

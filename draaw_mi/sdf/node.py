@@ -264,8 +264,10 @@ class SDFNode:
         names them ``sphere``, ``sphere_1``)."""
         owners: dict[str, SDFNode] = {}
         for node in self.nodes():
+            if not node._params:               # (a sharp operator: no keys to hide or lose)
+                continue
             other = owners.setdefault(node.name, node)
-            if other is not node and node._params and other._params:
+            if other is not node:
                 raise ParameterError(f"sdf.{self.kind} {self.name!r}: two nodes are named {node.name!r} "
                                      f"({other.describe()}; {node.describe()}); give them distinct names "
                                      "(name=...) to tell their parameters apart")

@@ -49,8 +49,16 @@ class SDFParameters(mi.SceneParameters):
         closest known one) when ``key`` is an ``"sdf."`` key of neither the SDF objects nor
         ``mi.traverse``; a bare ``KeyError`` said nothing of what exists."""
         if self._sdf is not None and isinstance(key, str) and key.startswith(PREFIX) and key not in self._base:
-            node, param = self._sdf._node(key[len(PREFIX):])      # (an unknown node raises here)
-            node._checked_value(param, 0.0)                       # (an unknown parameter here)
+            try:
+                node, param = self._sdf._node(key[len(PREFIX):])  # (an unknown node raises here)
+                node._checked_value(param, 0.0)                   # (an unknown parameter here)
+            except ParameterError as e:
+                raise ParameterError(f"parameters[{key!r}]: {e}") from None
+
+    def get(self, key, default=None):
+        """``self[key]``, or ``default`` for a key it does not hold (an unknown ``"sdf."`` key
+        too: ``Mapping.get`` catches only ``KeyError``)."""
+        return self[key] if key in self else default
 
     def keys(self):
         return list(self._base.keys()) + self._sdf_keys()

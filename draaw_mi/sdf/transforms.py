@@ -84,11 +84,12 @@ class Transform(SDFNode):
         super().__init__(name or f"{child.name}_xf", material)
         self.child = child
         self.translate = self._vec_param("translate", translate)
-        s = scale
+        s = float(scale) if isinstance(scale, np.ndarray) and scale.size == 1 else scale
         if isinstance(scale, (list, tuple)) or (isinstance(scale, np.ndarray) and scale.size == 3):
-            v = _vec3(list(np.ravel(scale)) if isinstance(scale, np.ndarray) else scale, f"sdf {self.name!r}", "scale")
+            given = [float(x) for x in np.ravel(scale)] if isinstance(scale, np.ndarray) else scale
+            v = _vec3(given, f"sdf {self.name!r}", "scale")
             if max(v) - min(v) > 1e-9 * max(abs(x) for x in v):
-                raise ParameterError(f"sdf {self.name!r}: scale={[float(x) for x in np.ravel(scale)]!r}; only uniform scale "
+                raise ParameterError(f"sdf {self.name!r}: scale={list(given)!r}; only uniform scale "
                                      "keeps distances exact (give one number)")
             s = v[0]
         self.scale = self._scalar_param("scale", s, lo=0.0, lo_open=True)

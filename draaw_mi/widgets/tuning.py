@@ -190,7 +190,8 @@ def orbit(camera: dict, yaw: float = 0.0, pitch: float = 0.0, distance: float = 
 # --------------------------------------------------------------------------- frames and errors
 def to_uint8(image: np.ndarray, encoded: bool = False) -> np.ndarray:
     """Linear HDR -> sRGB-encoded, clipped, uint8 (H, W, 3); ``encoded``: the image is
-    display-encoded already (a post chain that ends in ``srgb``), only clipped."""
+    display-encoded already (a post chain that ends in a display curve:
+    :func:`draaw_mi.post.display_encoded`), only clipped."""
     x = np.nan_to_num(np.asarray(image, dtype=np.float32)[..., :3], nan=0.0, posinf=1.0, neginf=0.0)
     return (np.clip(x if encoded else srgb_encode(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 

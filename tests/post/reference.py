@@ -205,14 +205,14 @@ def linear(img, gamma=0.25, scale=255.0, clamp=True, amount=1.0, multipass=1):
     def effect(c):
         out = (scale * np.maximum(c, 0)) ** (1 / (3 * gamma)) / scale
         return np.minimum(out, 1.0) if clamp else out
-    return passes(img, effect, amount, multipass)
+    return straight_passes(img, effect, amount, multipass)
 
 
 def log(img, gamma=0.25, scale=255.0, clamp=True, amount=1.0, multipass=1):
     def effect(c):
         out = np.log2(scale * np.maximum(c, 0) + 1) ** ((3 * gamma + 1) / (3 * gamma)) / scale
         return np.minimum(out, 1.0) if clamp else out
-    return passes(img, effect, amount, multipass)
+    return straight_passes(img, effect, amount, multipass)
 
 
 def srgb(img, inverse=False, amount=1.0, multipass=1):
@@ -222,13 +222,19 @@ def srgb(img, inverse=False, amount=1.0, multipass=1):
                             ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
         return np.where(c <= 0.0031308, c * 12.92,
                         1.055 * np.maximum(c, 0.0031308) ** (1 / 2.4) - 0.055)
+    return straight_passes(img, effect, amount, multipass)
+
+
+def straight_passes(img, effect, amount, multipass):
+    """:func:`passes` of a display curve: on RGBA (colour premultiplied by alpha) it acts on
+    c / a and multiplies a back, a taken in (0, 1] (alpha 0 or not finite: the colour as it is)."""
     img = np.asarray(img)
     if img.shape[-1] != 4:
         return passes(img, effect, amount, multipass)
-    # RGBA: the colour is premultiplied by alpha; the curve encodes c / a, then times a again
-    # (alpha-0 pixels as they are)
-    a = np.where(img[..., 3:] > 0, img[..., 3:], 1.0)
-    out = passes(np.concatenate([img[..., :3] / a, img[..., 3:]], axis=-1), effect, amount, multipass)
+    alpha = img[..., 3:]
+    with np.errstate(invalid="ignore"):
+        a = np.where((alpha > 0) & np.isfinite(alpha), np.minimum(alpha, 1.0), 1.0)
+    out = passes(np.concatenate([img[..., :3] / a, alpha], axis=-1), effect, amount, multipass)
     out[..., :3] *= a
     return out
 

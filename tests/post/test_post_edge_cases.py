@@ -210,3 +210,19 @@ def test_parameter_messages_say_what_a_colour_may_be():
         post.load_chain([{"type": "crt", "seed": -1}])
     with pytest.raises(ParameterError, match=r"must be one of 'reflect', .*'zero', got 'x'$"):
         post.load_chain([{"type": "bloom", "boundary": "x"}])
+
+
+
+def test_display_curves_of_rgba_stay_finite_and_agree_with_opaque_pixels():
+    """An infinite alpha made srgb's c / a * a read 0 * inf = NaN, which a bloom then spread
+    over the image; the grades, counted as display curves, act on the colour itself as srgb
+    does (a pixel an eighth covered was stored 4 where the opaque one is 9)."""
+    img = np.full((3, 3, 4), 0.5, np.float32)
+    img[1, 1, 3] = np.inf
+    out = post.apply(img, [{"type": "srgb"}, {"type": "bloom", "threshold": 0.0}]).numpy()
+    assert np.all(np.isfinite(out[..., :3]))
+    for name in ("srgb", "linear", "log"):
+        px = np.array([[[0.02, 0.02, 0.02, 1.0], [0.02 * 0.125, 0.02 * 0.125, 0.02 * 0.125, 0.125]]], np.float32)
+        got = getattr(post, name)(px).numpy()
+        straight = got[0, 1, :3] / 0.125
+        np.testing.assert_allclose(straight, got[0, 0, :3], rtol=1e-5, err_msg=name)

@@ -539,3 +539,16 @@ def test_a_scene_shows_in_one_line_and_checks_what_it_is_given():
         draaw_mi.load_scene(os.path.join(SCENES, "cornell.toml"), version="v9")
     with pytest.raises(draaw_mi.ParameterError, match=r"parameter name 123; expected a string"):
         scene.key(123)
+
+
+
+def test_a_bare_objs_material_warnings_are_said_once_at_the_callers_line(tmp_path):
+    """A mesh file loaded alone is read twice (its bounds place the camera): each MTL warning
+    came twice, pointing into the loader."""
+    import warnings
+    (tmp_path / "b.obj").write_text("usemtl foo\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        draaw_mi.load_scene(str(tmp_path / "b.obj"), resolution=(8, 8))
+    ours = [w for w in said if "usemtl 'foo'" in str(w.message)]
+    assert len(ours) == 1 and ours[0].filename == __file__, [(w.filename, str(w.message)) for w in said]

@@ -444,3 +444,12 @@ def test_two_nodes_of_one_name_are_refused_by_params():
     # three operators named 'union': they hold no values, nothing is hidden
     keys = union(union(A, B), union(Sphere(name="c1"), Sphere(name="c2"))).params()
     assert {k.split(".")[0] for k in keys} == {"sphere", "box", "c1", "c2"}
+
+
+
+def test_an_operator_of_a_childs_name_hides_none_of_its_values():
+    """A sharp operator (no values) named as its child: params() had kept the operator as the
+    name's owner and dropped the child's keys (a review of the duplicate check)."""
+    from draaw_mi.sdf import union
+    keys = union(Sphere(name="ball"), Sphere((1, 0, 0), name="other"), name="ball").params()
+    assert sorted(keys) == ["ball.center", "ball.radius", "other.center", "other.radius"]

@@ -242,3 +242,14 @@ def test_an_unknown_sdf_key_names_what_exists():
             with pytest.raises(ParameterError, match=said):
                 params[key] = 0.4
         assert "sdf.bal.radius" not in params and params["sdf.ball.radius"][0] == pytest.approx(0.5)
+
+
+
+def test_get_of_an_unknown_sdf_key_gives_the_default():
+    """``Mapping.get`` catches KeyError only: the unknown-key error (a ParameterError) escaped
+    it; the message names the key as written."""
+    scene, _ = _scene()
+    params = draaw_mi.sdf.parameters(scene)
+    assert params.get("sdf.bal.radius") is None and params.get("sdf.ball.radius")[0] == pytest.approx(0.5)
+    with pytest.raises(ParameterError, match=r"parameters\['sdf\.'\]: sdf: no node ''"):
+        params["sdf."]
