@@ -52,14 +52,15 @@ def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.
     lines += ["", "Summary: " + "; ".join(f"{dict(METRICS)[k]}: OIDN {few} spp lower in {sum(w)} of {len(w)}"
                                           for k, w in wins.items()) + ".", "",
               "Reading it: on the Cornell box the linear RMSE is dominated by a few pixels on the edge "
-              "of the ceiling light, whose low-spp value is 0 or ~18 depending on one sample; OIDN does "
-              "not lower that error there (a side check at 128x128, 4 spp: excluding pixels brighter "
-              "than 2 in a 256-spp V4 reference, RMSE fell from 0.094 to 0.020 with OIDN). relMSE weighs errors "
-              "relative to the pixel's value and CIEDE2000 compares the clipped sRGB images, i.e. what "
-              "a viewer sees: there OIDN at 4 spp beats 64 raw spp on the Cornell box but not on the "
-              "glossy material spheres (why was not investigated; the error images of the study show "
-              "where the errors are). Denoised images are biased by construction; this study does not separate "
-              "that bias from the remaining noise.", ""]
+              "of the ceiling light, whose low-spp value is 0 or ~18 depending on one sample. With V4 "
+              "(a draaw version), `denoise` renders the emitters the camera sees apart and adds them back "
+              "undenoised (`rendering.renderer._render_denoised_apart`), so OIDN at 4 spp beats 64 raw spp "
+              "there on all three metrics; `path` is denoised whole, OIDN smears the light's edge, and its "
+              "linear RMSE stays above 64 raw spp's. relMSE weighs errors relative to the pixel's value and "
+              "CIEDE2000 compares the clipped sRGB images, i.e. what a viewer sees. On the glossy material "
+              "spheres 64 raw spp win on every metric with either version (why was not investigated; the "
+              "error images of the study show where the errors are). Denoised images are biased by "
+              "construction; this study does not separate that bias from the remaining noise.", ""]
     text = "\n".join(lines)
     sys.path.insert(0, os.path.dirname(HERE))
     from draaw_mi.io import write_text

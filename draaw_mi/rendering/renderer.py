@@ -109,8 +109,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             guided by albedo and normal AOVs rendered for it (returned only if asked for in
             ``aovs``); applied before the post chain. Biased, not differentiable. With a draaw
             version and emitters shown, the emitters seen directly are rendered apart and
-            added undenoised (OIDN smears a bright emitter's edge); ``return_info`` then holds
-            the undenoised image as ``info["raw"]``.
+            added undenoised (OIDN smears a bright emitter's edge); ``return_info`` holds
+            the undenoised colour as ``info["raw"]`` (with any version).
 
     Example::
 
@@ -156,12 +156,15 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 break
     if bar is not None:
         bar.close()
-    image, names, bad = _finish(rs, integrator, acc, done, n_passes)
+    image, names, bad, raw = _finish(rs, integrator, acc, done, n_passes)
     _warn_non_finite(bad, rs)
     if return_info:
-        return image, {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
-                       "channels": names, "version": rs.version, "integrator": session_of(rs.scene).plugin_name(rs.version),
-                       "denoised": rs.denoise, "non_finite": bad, "post": rs.chain}
+        info = {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
+                "channels": names, "version": rs.version, "integrator": session_of(rs.scene).plugin_name(rs.version),
+                "denoised": rs.denoise, "non_finite": bad, "post": rs.chain}
+        if raw is not None:
+            info["raw"] = raw
+        return image, info
     return image
 
 
@@ -278,10 +281,12 @@ def _warn_non_finite(bad: int, rs: RenderSettings) -> None:
 
 
 def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
-    """``(image, channel names, non-finite values)``: the mean of the passes, named by the
-    film's colour channels as its pixel_format stores them (R, G, B[, A], X, Y, Z[, A] or
-    Y[, A]) and the AOVs', denoised and post-processed as asked. The non-finite values are
-    counted before denoising and the chain, which read NaN/inf as 0 and would hide them."""
+    """``(image, channel names, non-finite values, the undenoised colour or None)``: the mean
+    of the passes, named by the film's colour channels as its pixel_format stores them (R, G,
+    B[, A], X, Y, Z[, A] or Y[, A]) and the AOVs', denoised and post-processed as asked. The
+    non-finite values are counted before denoising and the chain, which read NaN/inf as 0 and
+    would hide them; the undenoised colour (H, W, 3) is kept where denoising was asked for (any
+    version: ``info["raw"]``, the CLI's ``raw.R/G/B``)."""
     aov_names = integrator.aov_names()
     colour = scene_colour_names(rs.scene)
     names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
@@ -293,13 +298,15 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
             dr.eval(image)
             dr.sync_thread()
     bad = non_finite_count(image)              # (one small kernel: said, and in the info)
+    raw = None
     if rs.denoise or rs.chain:
         with RENDER_GUARD:                     # denoising, post: their kernels and reads back
             if rs.denoise:
+                raw = np.array(image)[..., :3].copy()
                 image, names = _denoised(image, names, rs.guide_aovs)
             if rs.chain:
                 image = apply_post(image, rs.loaded)
-    return image, names, bad
+    return image, names, bad, raw
 
 
 def _emission_apart(rs: RenderSettings, session, time_budget) -> bool:

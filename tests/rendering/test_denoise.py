@@ -120,6 +120,7 @@ def test_render_denoise_channels_and_errors(cornell):
     raw = np.array(draaw_mi.render(cornell, version="path", spp=2, seed=1))
     ref = pyoidn.denoise(np.ascontiguousarray(np.maximum(raw, 0)), hdr=True, quality="high")
     np.testing.assert_allclose(np.array(img), np.asarray(ref), rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(info["raw"], raw)      # the undenoised colour, with path too
     with pytest.raises(RenderError, match="not differentiable"):
         draaw_mi.render(cornell, spp=1, denoise=True, params=cornell.params)
     with pytest.raises(RenderError, match="adaptive"):
