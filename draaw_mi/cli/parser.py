@@ -32,12 +32,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--png", help="also write an sRGB PNG")
     r.add_argument("--version", dest="version", help="render version: v1..v4 (GO-Draaw names accepted), "
                    "path, prb; volpath, prbvolpath for media; scene: the integrator an XML scene "
-                   "declares (its default when it declares one that is not a version)")
-    r.add_argument("--spp", type=int, help="samples per pixel")
+                   "declares (its default when it declares one that is not a version); default: the "
+                   "scene's render.version")
+    r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
     r.add_argument("--resolution", help="WxH, e.g. 640x480 (an XML scene's film too)")
     add_define_option(r)
     add_set_option(r)
-    r.add_argument("--seed", type=int, help="random seed (same seed, same image)")
+    r.add_argument("--seed", type=int, help="random seed (same seed, same image; default: the scene's render.seed)")
     r.add_argument("--sampler", help="Mitsuba sampler: independent (default; V4 stratifies it itself), "
                    "multijitter (up to 10x less variance for path and V1-V3, but correlated below 256 "
                    "spp: not for references), stratified, ldsampler, orthogonal")
@@ -82,12 +83,16 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--spp", type=int, default=16, help="samples per pixel per iteration (default 16)")
     f.add_argument("--iterations", type=int, default=100, help="Adam iterations (default 100)")
     f.add_argument("--lr", type=float, default=0.05, help="learning rate (default 0.05)")
-    f.add_argument("--loss", default="l2", choices=["l2", "l1", "relative_l2"])
+    f.add_argument("--loss", default="l2", choices=["l2", "l1", "relative_l2"],
+                   help="image loss: l2 (default), l1 (robust to a few bright pixels), relative_l2 "
+                   "(each pixel's error relative to its brightness)")
     f.add_argument("--exposure", default="fixed", choices=["fixed", "fit"],
-                   help="'fit' makes the loss insensitive to a global exposure difference")
+                   help="fixed (default): compare the render as it is; fit: the loss is insensitive to "
+                   "a global exposure difference (the scale is reported in stops)")
     f.add_argument("--post", help="post-processing chain (JSON) applied inside the loss (default: the "
                    "scene's [[post]], as `draaw-mi render` applies it)")
-    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--seed", type=int, default=0, help="random seed of the renders (default 0: the same "
+                   "seed, the same run, noise included)")
     add_define_option(f)
     f.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
 
