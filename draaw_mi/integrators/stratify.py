@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from . import glints
 from .features import sampler_plugin
 
 
@@ -51,7 +52,12 @@ def describe(integrator, scene: mi.Scene, sensor: mi.Sensor, n: int) -> str:
     if kind != "independent":
         return f"the scene's {kind} sampler, every pixel alike"
     if not integrator.stratified(scene, sensor, n):
-        return ("independent (stratify=false, one sample per pixel, participating media or glints "
-                "of delta lights on near-mirrors)")
+        # (the reason that holds, in stratified()'s order; a guide is learned at render time)
+        why = ("stratify=false" if not integrator.stratify else
+               "one sample per pixel" if n < 2 else
+               "participating media" if integrator.features(scene)["media"] else
+               "glints of delta lights on near-mirrors" if glints.has_glints(scene) else
+               "a guide is learned")
+        return f"independent ({why})"
     return ("stratified (its own correlated multi-jittered samples in place of the independent "
             "sampler, unless a guide is learned; stratify=false: independent)")

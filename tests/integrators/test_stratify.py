@@ -166,7 +166,7 @@ def test_a_first_render_of_pilot_and_stratified_rest_keeps_paths_expectation(mon
 @pytest.mark.parametrize("spp, sampler, said", [
     (64, "independent", "stratified (its own correlated multi-jittered samples"),
     (64, "ldsampler", "the scene's ldsampler sampler"),
-    (1, "independent", "independent (stratify=false, one sample per pixel"),
+    (1, "independent", "independent (one sample per pixel)"),        # (its reason alone, not every one)
 ])
 def test_info_says_how_v4_samples(tmp_path, capsys, spp, sampler, said):
     """``draaw-mi info`` names V4's sampling of the scene's render: stratified in place of
