@@ -111,8 +111,16 @@ def _cmd_speed_suite(args) -> int:
     if not any(speed_suite.build(n, 8) is not None for n in (args.scenes or speed_suite.SCENES)):
         raise CliError("bench --suite speed: every requested scene was skipped (the GO-Draaw data "
                        f"is absent: looked for {speed_suite.GO_DRAAW}/monkey.obj); nothing to measure")
+    _check_out_folder(args.out)
     os.makedirs(args.out, exist_ok=True)
     return speed_bench.main(argv, command="draaw-mi " + shlex.join(args.argv))
+
+
+def _check_out_folder(out: str) -> None:
+    """``--out`` names a folder (made if missing), not a file: ``os.makedirs`` had raised a
+    FileExistsError traceback."""
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise CliError(f"bench --out {out!r}: exists and is not a folder; name a folder (made if missing)")
 
 
 def cmd_bench(args) -> int:
@@ -124,7 +132,21 @@ def cmd_bench(args) -> int:
                                                                          "sdf_csg.toml")]
     versions = args.versions.split(",") if args.versions else list(bench.DEFAULT_VERSIONS)
     for v in versions:
-        resolve_version(v)
+        try:
+            resolve_version(v)
+        except DraawError as e:
+            raise CliError(f"bench --versions: {e}") from None
+    _check_out_folder(args.out)
+    names: dict[str, str] = {}
+    for path in scenes:
+        if not os.path.isfile(path):              # (before --out is made: nothing left behind)
+            raise CliError(f"bench: scene file {path!r} does not exist")
+        # (the study keys its ground truths, rows and plots by the file's name)
+        base = os.path.splitext(os.path.basename(path))[0]
+        if base in names and os.path.abspath(names[base]) != os.path.abspath(path):
+            raise CliError(f"bench: two scenes named {base!r} ({names[base]}, {path}); the study keys its "
+                           "ground truths and results by the file name: rename one")
+        names[base] = path
     if args.repeats is not None and args.repeats < 1:
         raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
     res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None
@@ -154,6 +176,8 @@ def cmd_bench(args) -> int:
     if adaptive and (adaptive < 2 or adaptive & (adaptive - 1)):
         raise CliError(f"bench: --adaptive {adaptive}; expected a power of two >= 2 (block size "
                        "in pixels) or 0 (none)")
+    if args.frames is not None and not args.camera_path:
+        raise CliError(f"bench: --frames {args.frames} times the frames of a --camera-path; give one")
     keys = read_json(args.camera_path, "--camera-path") if args.camera_path else None
     if keys is not None:              # checked before the study, which runs for minutes
         as_keyframes(keys)

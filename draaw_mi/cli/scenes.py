@@ -195,7 +195,9 @@ def cmd_info(args) -> int:
         if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
             sensor = loaded.mi_scene.sensors()[0]
             gated = sensor_gated_speedups(sensor)
-            v4 = mi.load_dict({"type": "draaw_v4"})
+            st = out["scene"]["settings"]
+            # (the one a render uses: an XML scene's own draaw_v4, its stratify and light selection)
+            v4 = session_of(loaded).integrator("v4", int(st["max_depth"]), bool(st.get("hide_emitters", False)), [])
             samples = stratify.describe(v4, loaded.mi_scene, sensor, int(out["scene"]["settings"]["spp"]))
             lights = describe_selection(loaded.mi_scene, v4.light_selection)
         out["scene"]["v4_gated"] = gated

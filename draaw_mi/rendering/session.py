@@ -126,6 +126,12 @@ class Session:
             return integrator
         if resolve_version(version) == SCENE_VERSION:
             return self._own_integrator(aovs, options)
+        declared = self._declared_draaw(version, max_depth, hide_emitters, aovs, options)
+        if declared is not None:
+            if fast is not None:
+                self._integrators[("declared",)] = declared
+                self._integrator_keys[fast] = ("declared",)
+            return declared
         props = integrator_props(version, max_depth, hide_emitters, aovs, **options)
         key = tuple(sorted((k, str(v)) for k, v in props.items()))
         if key not in self._integrators:
@@ -135,6 +141,21 @@ class Session:
         if fast is not None:
             self._integrator_keys[fast] = key
         return self._integrators[key]
+
+    def _declared_draaw(self, version: str, max_depth: int, hide_emitters: bool, aovs, options):
+        """An XML scene's own ``draaw_v*`` integrator where a render asks for that version with
+        the file's ``max_depth`` and ``hide_emitters`` and nothing else, so that the file's
+        other properties (``stratify``, ``light_selection``, ...) hold; a new default plugin had
+        rendered it. ``None`` otherwise."""
+        if aovs or options or not self.scene.info.get("xml"):
+            return None
+        declared = self.scene.mi_scene.integrator()
+        plugin = resolve_version(version)
+        if declared is None or not plugin.startswith("draaw_v") or \
+                type(declared).__name__ != f"DraawV{plugin[-1]}Integrator":
+            return None
+        depth = -1 if declared.max_depth == 0xFFFFFFFF else int(declared.max_depth)
+        return declared if depth == max_depth and bool(declared.hide_emitters) == bool(hide_emitters) else None
 
     def _own_integrator(self, aovs, options):
         """Version ``"scene"``: the integrator object the scene declares, with its file's

@@ -148,6 +148,9 @@ def integrator_name(integrator) -> str:
     """The plugin name of a loaded Mitsuba integrator, from its class (``DirectIntegrator``
     -> ``direct``)."""
     kind = str(integrator).split("[", 1)[0].strip()
+    draaw = re.fullmatch(r"DraawV(\d)Integrator", kind)
+    if draaw:                                   # (draaw_v4, as --version and the XML spell it)
+        return f"draaw_v{draaw.group(1)}"
     return kind.removesuffix("Integrator").lower() or kind
 
 

@@ -428,3 +428,25 @@ def test_the_tool_says_its_version(flag, capsys):
     assert stop.value.code == 0 and capsys.readouterr().out == f"draaw-mi {draaw_mi.__version__}\n"
     args = build_parser().parse_args(["render", "s.toml", "-o", "x.exr", "--version", "v4"])
     assert args.version == "v4"
+
+
+def test_bench_refuses_what_it_would_measure_wrongly_before_anything_runs(tmp_path, tiny_file, capsys, monkeypatch):
+    """Two scenes of one file name were measured against one ground truth (the study keys
+    them by name: 2.26 for a scene whose own run reads 0.289); --out naming a file raised a
+    FileExistsError traceback; a missing scene left an empty out folder; --frames without a
+    --camera-path was ignored; an unknown --versions entry did not name the option."""
+    from draaw_mi.bench import study as bench
+    monkeypatch.setattr(bench, "run_study", lambda *a, **k: pytest.fail("the study ran"))
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "s.json").write_text(open(tiny_file).read())
+    (tmp_path / "afile").write_text("")
+    for argv, said in (([str(tmp_path / "a" / "s.json"), str(tmp_path / "b" / "s.json")], "two scenes named 's'"),
+                       ([tiny_file, "--out", str(tmp_path / "afile")], "--out '" + str(tmp_path / "afile") + "': exists and is not a folder"),
+                       ([str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")], "does not exist"),
+                       ([tiny_file, "--frames", "5"], "--frames 5 times the frames of a --camera-path"),
+                       ([tiny_file, "--versions", "v4,v9"], "bench --versions: render version 'v9' is unknown")):
+        rc = main(["bench", *argv, "--quick", "--no-progress"] + ([] if "--out" in argv else ["--out", str(tmp_path / "o")]))
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and said in err, err
+    assert not (tmp_path / "o").exists()

@@ -253,3 +253,27 @@ def test_a_misspelt_parameter_of_a_mitsuba_material_in_a_description_names_the_m
                                                   r"of Mitsuba's 'dielectric' bsdf"):
         draaw_mi.load_scene({"materials": {"glass": {"type": "dielectric", "int_iro": 1.5, "ext_iro": 1.0}},
                              "shapes": [{"type": "sphere", "material": "glass"}]})
+
+
+def test_an_xml_scenes_own_draaw_v4_renders_it_with_its_properties(tmp_path, capsys):
+    """An XML file declaring ``draaw_v4`` with ``stratify = false`` and a uniform light
+    selection was rendered by a new default V4 (stratified, auto), and ``draaw-mi info`` named
+    it 'draawv4' and described the default's sampling."""
+    from draaw_mi.cli import main
+    from draaw_mi.rendering.session import session_of
+    path = tmp_path / "v4.xml"
+    path.write_text(
+        '<scene version="3.0.0"><integrator type="draaw_v4"><boolean name="stratify" value="false"/>'
+        '<string name="light_selection" value="uniform"/><integer name="max_depth" value="4"/></integrator>'
+        '<shape type="sphere"><bsdf type="diffuse"/></shape>'
+        '<emitter type="constant"><rgb name="radiance" value="1"/></emitter>'
+        + SENSOR.replace('value="1"/></sampler>', 'value="16"/></sampler>') + '</scene>')
+    scene = draaw_mi.load_scene(str(path))
+    st = scene.settings
+    used = session_of(scene).integrator(st["version"], st["max_depth"], st["hide_emitters"], [])
+    assert used is scene.mi_scene.integrator() and not used.stratify and used.light_selection == "uniform"
+    other = session_of(scene).integrator("v4", 2, False, [])        # another depth: a plugin of its own
+    assert other is not used and other.stratify
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: draaw_v4 (declared by the file" in out and "v4 samples: independent (stratify=false)" in out
