@@ -106,6 +106,10 @@ def _scene_key(scene, spp: int, max_depth: int) -> str:
             h.update(f.read())
     elif scene.description is not None:
         h.update(json.dumps(scene.description, sort_keys=True, default=str).encode())
+    for path in sorted(scene.info.get("files", [])):     # meshes, textures, includes it reads
+        if os.path.isfile(path):                          # (a scene that reads none: key as before)
+            with open(path, "rb") as f:
+                h.update(path.encode() + b"\0" + hashlib.sha256(f.read()).digest())
     h.update(repr((scene.resolution, spp, max_depth)).encode())
     h.update(code_digest().encode())        # a fixed BSDF or integrator renders it anew
     version = reference_version(scene)

@@ -149,7 +149,10 @@ def cmd_bench(args) -> int:
         names[base] = path
     if args.repeats is not None and args.repeats < 1:
         raise CliError(f"--repeats {args.repeats}: expected an integer >= 1")
-    res = parse_res(args.resolution, Where("bench") / "--resolution") if args.resolution else None
+    given = args.resolution
+    if given and given.strip().isdigit():              # N: N x N, as --suite speed takes it
+        given = f"{given.strip()}x{given.strip()}"
+    res = parse_res(given, Where("bench") / "--resolution") if given else None
     if args.quick:
         spps = int_list(args.spp, "--spp") if args.spp else [1, 4, 16]
         res = res or (64, 64)

@@ -465,3 +465,17 @@ def test_the_summary_names_only_the_versions_measured():
     assert "2 of the 2 error levels that `path` reaches" in md and "V3" not in md
     assert "Times: one render after warm-up" in md and "median of 1" not in md
     assert pareto_check([r for r in rows if r["label"] == "v4"], "s", 3) == {}     # no rival measured
+
+
+def test_the_ground_truth_key_follows_the_files_a_scene_reads(tmp_path):
+    """The key of a cached ground truth hashed the scene file alone: an edited mesh it reads
+    reused the old ground truth."""
+    from draaw_mi.bench.study import _scene_key
+    mesh = tmp_path / "tri.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    d = tiny_description()
+    d["shapes"].append({"type": "mesh", "file": str(mesh)})
+    (tmp_path / "s.json").write_text(json.dumps(d))
+    before = _scene_key(draaw_mi.load_scene(str(tmp_path / "s.json")), 16, 3)
+    mesh.write_text("v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n")
+    assert _scene_key(draaw_mi.load_scene(str(tmp_path / "s.json")), 16, 3) != before
