@@ -192,7 +192,9 @@ def cmd_info(args) -> int:
         loaded = load_for_cli(args)
         out["scene"] = loaded.summary()
         gated = samples = lights = None
-        if resolve_version(out["scene"]["settings"]["version"]) == "draaw_v4" and loaded.mi_scene.sensors():
+        # (for any scene, not only one whose version is v4: a Mitsuba XML scene's is its own
+        # integrator's, and --version v4 renders it)
+        if loaded.mi_scene.sensors():
             sensor = loaded.mi_scene.sensors()[0]
             gated = sensor_gated_speedups(sensor)
             st = out["scene"]["settings"]

@@ -277,3 +277,9 @@ def test_an_xml_scenes_own_draaw_v4_renders_it_with_its_properties(tmp_path, cap
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "integrator: draaw_v4 (declared by the file" in out and "v4 samples: independent (stratify=false)" in out
+    # a scene that declares path: info still says how --version v4 would sample it
+    path.write_text(path.read_text().replace('<integrator type="draaw_v4"><boolean name="stratify" value="false"/>'
+                                             '<string name="light_selection" value="uniform"/>', '<integrator type="path">'))
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: path (declared" in out and "v4 samples: stratified" in out and "v4 lights:" in out
