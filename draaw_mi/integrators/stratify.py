@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from . import glints
 from .features import sampler_plugin
 
 
@@ -51,13 +50,8 @@ def describe(integrator, scene: mi.Scene, sensor: mi.Sensor, n: int) -> str:
     kind = sampler_plugin(sensor.sampler())
     if kind != "independent":
         return f"the scene's {kind} sampler, every pixel alike"
-    if not integrator.stratified(scene, sensor, n):
-        # (the reason that holds, in stratified()'s order; a guide is learned at render time)
-        why = ("stratify=false" if not integrator.stratify else
-               "one sample per pixel" if n < 2 else
-               "participating media" if integrator.features(scene)["media"] else
-               "glints of delta lights on near-mirrors" if glints.has_glints(scene) else
-               "a guide is learned")
+    why = integrator.independent_because(scene, sensor, n)
+    if why is not None:
         return f"independent ({why})"
     return ("stratified (its own correlated multi-jittered samples in place of the independent "
             "sampler, unless a guide is learned; stratify=false: independent)")

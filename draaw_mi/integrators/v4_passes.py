@@ -106,8 +106,22 @@ class V4Passes(LightTables):
         glints on near-mirror surfaces
         (:func:`~draaw_mi.integrators.glints.has_glints`); guided renders and
         glints measured worse stratified (:mod:`~draaw_mi.integrators.stratify`)."""
-        return (self.stratify and self._guide is None and stratify.applies(sensor, n)
-                and not self.features(scene)["media"] and not self._has_glints(scene))
+        return self.independent_because(scene, sensor, n) is None
+
+    def independent_because(self, scene, sensor, n: int) -> str | None:
+        """Why a pass of ``n`` spp keeps independent samples, in a few words (``draaw-mi
+        info``), or ``None`` where it stratifies (:meth:`stratified`)."""
+        if not self.stratify:
+            return "stratify=false"
+        if self._guide is not None:
+            return "a guide is learned"
+        if not stratify.applies(sensor, n):
+            return "one sample per pixel" if n < 2 else "the scene's own sampler"
+        if self.features(scene)["media"]:
+            return "participating media"
+        if self._has_glints(scene):
+            return "glints of delta lights on near-mirrors"
+        return None
 
     def _has_glints(self, scene) -> bool:
         """:func:`~draaw_mi.integrators.glints.has_glints`, read once per render or gradient

@@ -142,7 +142,7 @@ def display_encoded(chain: Iterable[Any] | Chain | None) -> bool:
     """
     encoded, partial = False, None
     for f in load_chain(chain or []):
-        if isinstance(f, (SRGB, Linear, Log)) and f.params["amount"] > 0.0:
+        if f.spec.straight and f.params["amount"] > 0.0:        # (the display curves)
             encoded = not (isinstance(f, SRGB) and f.params["inverse"])
             partial = f if f.params["amount"] < 1.0 else None
     if partial is not None:

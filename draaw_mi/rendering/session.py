@@ -216,14 +216,14 @@ class Session:
         if "media" in blind and holds["media"]:
             raise RenderError(f"render: {self.source} has participating media, which Mitsuba's "
                               f"{plugin!r} passes through as empty; pick v1..v4 or volpath")
-        for v in getattr(self.scene, "info", {}).get("volumes", []) if plugin in ("volpath", "prbvolpath") else ():
-            if v.get("mode") == "smoke":
-                steps = v["max_sigma_t"] * float(np.linalg.norm(np.subtract(v["bounds"][1], v["bounds"][0])))
-                if steps > VOLPATH_MAX_STEPS:
-                    raise RenderError(f"render: the smoke {v['name']!r} of {self.source} (largest sigma_t "
-                                      f"{v['max_sigma_t']:g}) takes Mitsuba's {plugin!r} about {steps:.2g} "
-                                      f"steps a ray (at most {VOLPATH_MAX_STEPS:g}); pick v1..v4, whose "
-                                      "majorant grid steps over it")
+        smokes = [v for v in self.scene.info.get("volumes", []) if v.get("mode") == "smoke"]
+        for v in smokes if plugin in ("volpath", "prbvolpath") else ():
+            steps = v["max_sigma_t"] * float(np.linalg.norm(np.subtract(v["bounds"][1], v["bounds"][0])))
+            if steps > VOLPATH_MAX_STEPS:
+                raise RenderError(f"render: the smoke {v['name']!r} of {self.source} (largest sigma_t "
+                                  f"{v['max_sigma_t']:g}) takes Mitsuba's {plugin!r} about {steps:.2g} "
+                                  f"steps a ray (at most {VOLPATH_MAX_STEPS:g}); pick v1..v4, whose "
+                                  "majorant grid steps over it")
 
     def sample_passes(self, spp: int, pass_spp: int) -> list[int]:
         """:func:`~draaw_mi.rendering.passes.sample_passes` of the scene, remembered where its

@@ -149,34 +149,30 @@ def _obj_diffuse_colours(path: str, where) -> dict[str, list[float]]:
     >>> _obj_diffuse_colours(os.path.join(d, "m.obj"), "m.obj")
     {'red': [0.02, 0.5, 1.0]}
     """
-    folder = os.path.dirname(os.path.abspath(path))
     kd: dict[str, list[float]] = {}
     defined: set[str] = set()
-    libraries = _lines_starting(path, ("mtllib",))
-    for libs in libraries:
-        for name in [libs] if os.path.isfile(os.path.join(folder, libs)) else libs.split():
-            mtl = os.path.join(folder, name)
-            if not os.path.isfile(mtl):
-                warnings.warn(f"{where}: material library {name!r} not found; "
-                              "its materials render grey", RuntimeWarning, stacklevel=user_stacklevel())
-                continue
-            current = None
-            with open(mtl, encoding="utf-8", errors="replace") as fh:
-                for line in fh:
-                    words = line.split()
-                    if len(words) >= 2 and words[0] == "newmtl":
-                        current = line.strip()[len("newmtl"):].strip()
-                        defined.add(current)
-                    elif len(words) == 4 and words[0] == "Kd" and current is not None:
-                        try:
-                            rgb = [float(w) for w in words[1:]]
-                        except ValueError:
-                            continue
-                        if not all(0.0 <= c <= 1.0 for c in rgb):
-                            warnings.warn(f"{where}: {name}: material {current!r} has Kd {' '.join(words[1:])}; "
-                                          "expected values in [0, 1] (clipped; light is given off by a "
-                                          "light or a shape's emission)", RuntimeWarning, stacklevel=user_stacklevel())
-                        kd[current] = [float(np.clip(c, 0.0, 1.0)) for c in rgb]
+    for name, mtl in _material_libraries(path):
+        if not os.path.isfile(mtl):
+            warnings.warn(f"{where}: material library {name!r} not found; "
+                          "its materials render grey", RuntimeWarning, stacklevel=user_stacklevel())
+            continue
+        current = None
+        with open(mtl, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                words = line.split()
+                if len(words) >= 2 and words[0] == "newmtl":
+                    current = line.strip()[len("newmtl"):].strip()
+                    defined.add(current)
+                elif len(words) == 4 and words[0] == "Kd" and current is not None:
+                    try:
+                        rgb = [float(w) for w in words[1:]]
+                    except ValueError:
+                        continue
+                    if not all(0.0 <= c <= 1.0 for c in rgb):
+                        warnings.warn(f"{where}: {name}: material {current!r} has Kd {' '.join(words[1:])}; "
+                                      "expected values in [0, 1] (clipped; light is given off by a "
+                                      "light or a shape's emission)", RuntimeWarning, stacklevel=user_stacklevel())
+                    kd[current] = [float(np.clip(c, 0.0, 1.0)) for c in rgb]
     # ("(null)": Blender's name for no material)
     undefined = sorted({u.strip() for u in _lines_starting(path, ("usemtl",))} - defined - {"", "(null)"})
     if undefined:
@@ -248,12 +244,10 @@ def mesh_side_files(path: str) -> list[str]:
 
     lower = path.lower()
     if lower.endswith(".obj"):
-        for libs in _lines_starting(path, ("mtllib",)):
-            # one name with spaces, or several names
-            names = [libs] if os.path.isfile(os.path.join(folder, libs)) else libs.split()
-            for mtl in filter(None, (add(name, folder) for name in names)):
-                for image in _lines_starting(mtl, ("map_", "bump", "norm", "disp")):
-                    add(image.split()[-1], os.path.dirname(mtl))     # options come first
+        for name, _ in _material_libraries(path):
+            mtl = add(name, folder)
+            for image in _lines_starting(mtl, ("map_", "bump", "norm", "disp")) if mtl else ():
+                add(image.split()[-1], os.path.dirname(mtl))     # options come first
     elif lower.endswith(".gltf"):
         try:
             with open(path, encoding="utf-8") as fh:
@@ -265,6 +259,17 @@ def mesh_side_files(path: str) -> list[str]:
             if isinstance(uri, str) and not uri.startswith("data:"):
                 add(unquote(uri), folder)
     return found
+
+
+def _material_libraries(path: str) -> list[tuple[str, str]]:
+    """``(name, path)`` of each material library an OBJ's ``mtllib`` lines name (one name with
+    spaces, or several names), beside the OBJ; the paths may not exist."""
+    folder = os.path.dirname(os.path.abspath(path))
+    out = []
+    for libs in _lines_starting(path, ("mtllib",)):
+        names = [libs] if os.path.isfile(os.path.join(folder, libs)) else libs.split()
+        out += [(name, os.path.normpath(os.path.join(folder, name.strip()))) for name in names]
+    return out
 
 
 def _lines_starting(path: str, keywords: tuple) -> list[str]:

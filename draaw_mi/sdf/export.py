@@ -106,8 +106,8 @@ def to_entries(*roots: SDFNode) -> list[dict]:
 
     for r in roots:
         emit(r)
-    for own, name in renamed[:1]:
-        more = f" (and {len(renamed) - 1} more)" if len(renamed) > 1 else ""
+    if renamed:
+        (own, name), more = renamed[0], f" (and {len(renamed) - 1} more)" if len(renamed) > 1 else ""
         warnings.warn(f"to_entries: the transform {own!r} becomes the translate/rotate/scale of {name!r}{more}; "
                       f"its keys in the scene are sdf.{name}_xf.translate and sdf.{name}_xf.scale",
                       RuntimeWarning, stacklevel=2)
