@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from integrators_helpers import check_same_expectation, integrator, mi, rs, seed_stack
+from integrators_helpers import check_same_expectation, integrator, mi, rs, seed_stack, z_summary, zscores
 
 import draaw_mi
 from draaw_mi.cli import main
@@ -265,6 +265,47 @@ def test_split_rays_in_a_crop_window_with_alpha_keep_paths_expectation(monkeypat
     alpha = ref[..., 3].mean(0)
     assert ref[..., :3].max() > 5.0 and alpha.min() < 0.5 < alpha.max()   # light, misses, hits
     check_same_expectation(ref, v4)
+
+
+def test_an_adaptive_rgba_render_of_a_light_in_view_keeps_paths_expectation(monkeypatch):
+    """A square light about 8 pixels wide before an empty background (a tent-filtered RGBA
+    film, 24x24), rendered adaptively (samples weighted 1 / their pixel's count): every
+    channel, alpha too, keeps ``path``'s expectation pixel by pixel. The light's inner pixels
+    split no rays, so their emission is splatted with the sample's weight, and alpha with
+    it; at the weight 1 of a uniform render neither weight shows (the emission unweighted
+    made the light 27x too bright, alpha unweighted reached 137)."""
+    calls = spy(monkeypatch, ads, "render_adaptive")
+    T = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "pixel_format": "rgba",
+                            "rfilter": {"type": "tent"}}},
+        "light": {"type": "rectangle", "to_world": T().scale(0.5),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [10.0, 10.0, 10.0]}}},
+        "panel": {"type": "rectangle", "to_world": T().translate([-0.6, -0.6, -1.0]).scale(0.5),
+                  "bsdf": {"type": "diffuse"}}})
+    K = 8
+    ref = seed_stack(scene, integrator("path", max_depth=3), 64, range(K))
+    v4 = seed_stack(scene, integrator("draaw_v4", max_depth=3, stratify=False), 64, range(400, 400 + K))
+    assert len(calls) == K and v4.shape == ref.shape == (K, 24, 24, 4)
+    inner = (ref[..., :3].mean(-1).min(0) > 9.9)          # every seed of every sample saw the light
+    assert inner.sum() >= 16, inner.sum()
+    assert np.isfinite(v4).all() and v4[..., 3].max() <= 1.0 + 1e-5
+    # the noisy entries (the light's edges, alpha there, the panel) by their z-scores; the
+    # background (0) and the light's inner pixels (its radiance, 10; alpha 1) have no noise
+    # (float rounding apart: 1e-4 relative); the scene is grey, so R, G and B are one channel
+    # counted once (three equal z-scores would triple each pixel's weight in their mean)
+    quiet = np.maximum(ref.std(0), v4.std(0)) <= 1e-4 * np.maximum(1.0, np.abs(ref.mean(0)))
+    assert np.array_equal(ref[..., 0], ref[..., 2]) and np.array_equal(v4[..., 0], v4[..., 2])
+    grey = [0, 3]
+    s = z_summary(zscores(ref[..., grey][:, ~quiet[..., grey]], v4[..., grey][:, ~quiet[..., grey]]))
+    # (a tent sample lands in 4 pixels, so their z-scores are correlated: their mean's
+    # spread over seed sets, 0.15, is about 2x that of independent ones; bound at 4 of it)
+    assert s["n"] >= 100 and s["frac_gt3"] <= 0.02 and abs(s["mean"]) <= 0.6 and 0.7 <= s["std"] <= 1.4, s
+    np.testing.assert_allclose(v4.mean(0)[quiet], ref.mean(0)[quiet], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(v4[:, inner, :3], 10.0, rtol=1e-4)
 
 
 def test_aovs_under_a_filter_with_split_rays(monkeypatch):
