@@ -287,13 +287,17 @@ class DraawIntegrator(RBIntegrator):
         return ""
 
     # ------------------------------------------------------------------ helpers
-    @staticmethod
-    def ray_flags(feats: dict[str, bool]) -> mi.RayFlags:
+    #: whether the version shades with normal maps (V1 and V2 read the draaw parameters and
+    #: other BSDFs' diffuse reflectance, which Mitsuba's normalmap / bumpmap pass by)
+    READS_NORMAL_MAPS = True
+
+    def ray_flags(self, feats: dict[str, bool]) -> mi.RayFlags:
         """Surface-interaction fields the scene needs: all of them for textures / normal maps
-        (uv, dp/du) and anisotropic BSDFs (a shading frame whose tangent follows dp/du: without
-        it the tangent is arbitrary and every anisotropic lobe turns, 14 % of a sphere's pixels
+        (uv, dp/du; normal maps only for versions that read them, :attr:`READS_NORMAL_MAPS`)
+        and anisotropic BSDFs (a shading frame whose tangent follows dp/du: without it the
+        tangent is arbitrary and every anisotropic lobe turns, 14 % of a sphere's pixels
         beyond 3 sigma of ``path``'s); otherwise position, normals and shading frame."""
-        if feats["textures"] or feats["normal_maps"] or feats["anisotropic"]:
+        if feats["textures"] or feats["anisotropic"] or (feats["normal_maps"] and self.READS_NORMAL_MAPS):
             return mi.RayFlags.All
         return mi.RayFlags.ShadingFrame
 

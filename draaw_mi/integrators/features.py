@@ -16,11 +16,13 @@ Keys (always present, in this order):
 ``environment``         the scene has an environment emitter (``scene.environment()``)
 ``delta_lights``        some emitter is a delta light (point, spot, directional, ...)
 ``hittable_lights``     some emitter can be hit by a BSDF-sampled ray (area or environment)
-``textures``            some BSDF or area emitter reads a bitmap or procedural texture (uv)
+``textures``            some BSDF or area emitter reads a bitmap or procedural texture (uv);
+                        a normal map alone is ``normal_maps``
 ``normal_maps``         some BSDF applies a normal or bump map
 ``draaw_materials``     some shape uses the ``draaw`` BSDF
 ``other_materials``     some shape uses another BSDF
-``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...)
+``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...) or
+                        is ``null`` (below)
 ``other_glossy``        some BSDF other than ``draaw`` has a glossy lobe (``roughconductor``,
                         ``principled``, ``roughdielectric``, ...)
 ``anisotropic``         some BSDF is anisotropic (``roughconductor`` with ``alpha_u`` !=
@@ -30,6 +32,10 @@ Keys (always present, in this order):
 ``media``               a shape or sensor references a participating medium
 ``aovs``                the scene's integrator outputs AOVs
 ``sdf``                 the scene has SDF objects (``[[sdf]]``; ``draaw_mi.sdf``)
+``null_surfaces``       some shape has a ``null`` BSDF (a medium's index-matched boundary, a
+                        smoke box): it also turns ``delta_bsdfs`` and ``other_materials`` on,
+                        since V3 and V4 cross such a surface outside media as a delta event
+                        of another BSDF (without them a null sphere's pixels render 22 % dark)
 ======================  =====================================================================
 
 Example::
@@ -44,14 +50,15 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from ..materials.draaw_bsdf import DraawBSDF
+from ..materials.draaw_bsdf import ALL_PARAMS, DraawBSDF
+from ..materials.textures import is_spatially_varying
 from ..sdf.scene import find as _find_sdf
 
 FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
     "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "other_glossy",
-    "anisotropic", "media", "aovs", "sdf",
+    "anisotropic", "media", "aovs", "sdf", "null_surfaces",
 )
 
 _EMITTER_CLASSES = {
@@ -80,10 +87,14 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
         f["draaw_materials"] = True
         if bsdf.normalmap is not None:
             f["normal_maps"] = True
-        if mi.has_flag(flags, mi.BSDFFlags.SpatiallyVarying):
+        # (not the BSDF's SpatiallyVarying flag: a normal map sets it too, and V1 / V2, which
+        # ignore normal maps, would trace uv and dp/du for it)
+        if any(is_spatially_varying(getattr(bsdf, n)) for n in ALL_PARAMS):
             f["textures"] = True
         return
     f["other_materials"] = True
+    if bsdf.class_name() == "Null":
+        f["null_surfaces"] = True
     if mi.has_flag(flags, mi.BSDFFlags.Glossy):
         f["other_glossy"] = True
     if bsdf.class_name() in _NORMALMAP_CLASSES:
@@ -94,6 +105,28 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
             f["normal_maps"] = True
         elif parts[-1] in ("data", "to_uv"):
             f["textures"] = True
+
+
+def textured_parameters(bsdf) -> list[str]:
+    """The parameters of ``bsdf`` that vary over the surface, read at the hit's uv: textured
+    ones (``"base_color"``) and normal or bump maps (``"normalmap"``).
+
+    >>> textured_parameters(mi.load_dict({"type": "diffuse", "reflectance": {"type": "checkerboard"}}))
+    ['reflectance']
+    >>> textured_parameters(mi.load_dict({"type": "draaw", "roughness": 0.3}))
+    []
+    """
+    if _is_draaw(bsdf):
+        return [n for n in ALL_PARAMS if is_spatially_varying(getattr(bsdf, n))] +\
+            (["normalmap"] if bsdf.normalmap is not None else [])
+    found = ["normalmap"] if bsdf.class_name() in _NORMALMAP_CLASSES else []
+    for key in mi.traverse(bsdf).keys():
+        parts = key.split(".")
+        if parts[-1] in ("data", "to_uv") or any(p in _NORMALMAP_KEYS for p in parts):
+            name = ".".join(parts[:-1])
+            if name not in found:
+                found.append(name)
+    return found
 
 
 def scene_shapes(scene: mi.Scene) -> list:

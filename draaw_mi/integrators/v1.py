@@ -103,6 +103,7 @@ class DraawV1Integrator(DraawIntegrator):
             'max_depth': 4,
             'scatter': 8
     """
+    READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
     PLUGIN = "draaw_v1"
 
     def __init__(self, props: mi.Properties):

@@ -102,6 +102,7 @@ class DraawV2Integrator(DraawIntegrator):
             'max_depth': 6,
             'scatter': 2
     """
+    READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
     PLUGIN = "draaw_v2"
 
     def __init__(self, props: mi.Properties):

@@ -75,7 +75,6 @@ def test_anisotropic_bsdfs_without_textures_keep_paths_expectation(bsdf):
     so the frame's tangent was arbitrary and every anisotropic lobe turned (a sphere's
     highlight 12-16 % of pixels beyond 3 sigma of ``path``'s, mean z up to +12). The scene's
     anisotropic BSDF now asks for full surface interactions; an isotropic one does not."""
-    from draaw_mi.integrators.common import DraawIntegrator
     from draaw_mi.integrators.features import detect_features
     T = mi.ScalarTransform4f
     d = {"type": "scene",
@@ -89,10 +88,10 @@ def test_anisotropic_bsdfs_without_textures_keep_paths_expectation(bsdf):
     scene = mi.load_dict(d)
     f = detect_features(scene)
     assert f["anisotropic"] and not f["textures"] and not f["normal_maps"]
-    assert DraawIntegrator.ray_flags(f) == mi.RayFlags.All
+    assert mi.load_dict({"type": "draaw_v4"}).ray_flags(f) == mi.RayFlags.All
     d["obj"]["bsdf"] = {"type": "roughconductor", "material": "Al", "alpha": 0.2}
     iso = detect_features(mi.load_dict(d))
-    assert not iso["anisotropic"] and DraawIntegrator.ray_flags(iso) == mi.RayFlags.ShadingFrame
+    assert not iso["anisotropic"] and mi.load_dict({"type": "draaw_v4"}).ray_flags(iso) == mi.RayFlags.ShadingFrame
     K, spp = 16, 256
     ref = seed_stack(scene, integrator("path", max_depth=5), spp, range(K))
     check_same_expectation(ref, seed_stack(scene, integrator("draaw_v4", max_depth=5), spp, range(100, 100 + K)))

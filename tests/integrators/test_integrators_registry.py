@@ -100,7 +100,7 @@ def test_detect_features_cornell():
     assert f["area_lights"] and f["hittable_lights"] and f["draaw_materials"]
     for k in ("point_lights", "spot_lights", "envmap", "constant_env", "environment",
               "delta_lights", "textures", "normal_maps", "delta_bsdfs", "other_glossy", "anisotropic",
-              "media", "aovs"):
+              "media", "aovs", "null_surfaces"):
         assert not f[k], k
 
 
@@ -151,3 +151,16 @@ def test_detect_features_constant_env_only():
 def test_detect_other_glossy(bsdf, glossy):
     f = detect_features(mi.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": bsdf}}))
     assert f["other_glossy"] is glossy
+
+
+def test_a_normal_map_alone_is_no_texture_and_a_null_surface_is_named():
+    """A draaw BSDF with only a normal map is SpatiallyVarying, and ``textures`` was on with
+    it (V1 and V2, which ignore normal maps, then traced uv and dp/du). A ``null`` BSDF keeps
+    ``delta_bsdfs`` and ``other_materials`` on (V3 and V4 cross it as a delta event of another
+    BSDF: without them a null sphere renders 22 % dark) and is named ``null_surfaces``."""
+    nm = mi.TensorXf(np.full((2, 2, 3), 0.5, np.float32))
+    f = detect_features(_scene(nm={"type": "sphere", "radius": 0.1, "bsdf": {
+        "type": "draaw", "normalmap": {"type": "bitmap", "data": nm, "raw": True}}}))
+    assert f["normal_maps"] and not f["textures"]
+    f = detect_features(_scene(veil={"type": "sphere", "radius": 0.1, "bsdf": {"type": "null"}}))
+    assert f["null_surfaces"] and f["delta_bsdfs"] and f["other_materials"]
