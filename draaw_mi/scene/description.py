@@ -12,7 +12,9 @@ The description has these top-level tables (all optional but ``shapes``)::
     [[volumes]]  voxel grids as solid voxels or smoke (see draaw_mi.scene.volume_dicts)
 
 Materials are declared once at the top of the Mitsuba dict under their own names, so their
-parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on.
+parameters appear in ``mi.traverse`` as ``NAME.roughness.value`` and so on; a material that
+no shape, SDF object or light uses is left out (``info["unused_materials"]``), parameters and
+all.
 """
 from __future__ import annotations
 
@@ -215,6 +217,25 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
 # --------------------------------------------------------------------------- lights
 
 # --------------------------------------------------------------------------- whole scene
+def _referenced_ids(entries) -> set[str]:
+    """The ids of every ``{"type": "ref", "id": ...}`` inside ``entries`` (Mitsuba dicts).
+
+    >>> sorted(_referenced_ids({"a": {"type": "sphere", "bsdf": {"type": "ref", "id": "red"}}}))
+    ['red']
+    """
+    found: set[str] = set()
+    stack = [entries]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            if node.get("type") == "ref" and isinstance(node.get("id"), str):
+                found.add(node["id"])
+            stack.extend(node.values())
+        elif isinstance(node, (list, tuple)):
+            stack.extend(node)
+    return found
+
+
 def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, overrides: dict | None = None):
     """Validate ``desc`` and return (mitsuba_dict, settings, info) where ``info`` lists names."""
     where = Where(source)
@@ -295,6 +316,13 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
                                                             "shapes and lights share one namespace)")
             light_entries[key] = d
 
+    # a material no shape, SDF object or light references stays out of the Mitsuba scene:
+    # Dr.Jit's BSDF calls trace every live BSDF, so its textures and lobes would enter every
+    # kernel (a [[volumes]] material is copied into its voxel meshes, not referenced)
+    used = _referenced_ids(shape_entries) | _referenced_ids(light_entries)
+    copied = {v.get("material") for v in volumes if isinstance(v, dict)}      # (not unused)
+    unused = [m for m in materials if m not in used and m not in copied]
+    materials = {m: d for m, d in materials.items() if m in used}
     scene = {"type": "scene"}
     scene.update(materials)
     scene.update(shape_entries)
@@ -310,7 +338,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         except DraawError as e:
             raise (where / "post").error(str(e)) from None
     settings["post"] = post or []
-    info = {"materials": list(materials), "shapes": list(shape_entries), "lights": list(light_entries),
+    info = {"materials": list(materials), "unused_materials": unused, "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),
                        "up": list(map(float, look_at[2])), "fov": look_at[3], "fov_axis": look_at[4],
                        "mirror": look_at[7]}}

@@ -277,6 +277,9 @@ class DraawScene:
                                                   if not sh.id().startswith("__sdf_")],
             "lights": self.info.get("lights") or [_emitter_name(em) for em in s.emitters()],
             "materials": self.info.get("materials", []),
+            # materials no shape uses, left out of the Mitsuba scene (their code would enter
+            # every kernel)
+            "unused_materials": self.info.get("unused_materials", []),
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
             "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
             "features": self.features(),

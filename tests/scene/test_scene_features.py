@@ -329,3 +329,32 @@ def test_light_defaults_follow_mitsuba_and_point_down():
     (area,) = [s for s in scene.mi_scene.shapes() if s.emitter() is not None]
     ps = area.sample_position(0.0, mi.Point2f(0.5, 0.5))
     assert np.allclose(np.array(ps.n).ravel(), [0.0, -1.0, 0.0], atol=1e-6)
+
+
+def test_a_material_no_shape_uses_is_left_out_and_info_says_so(tmp_path, capsys):
+    """Dr.Jit's BSDF calls trace every live BSDF: an unused textured, normal-mapped material
+    put its code into every kernel (tests/integrators/test_integrators_kernels.py counts it)
+    while info said textures and normal maps were off. It is left out, and info names it."""
+    import json
+
+    from conftest import tiny_description
+
+    from draaw_mi.cli import main
+    d = tiny_description()
+    d["materials"]["extra"] = {"base_color": [[[0.9, 0.2, 0.1], [0.1, 0.2, 0.9]]] * 2,
+                               "normalmap": [[[0.6, 0.5, 0.9], [0.4, 0.5, 0.9]]] * 2}
+    s = draaw_mi.load_scene(d)
+    assert s.info["unused_materials"] == ["extra"] and s.info["materials"] == ["ball", "ground"]
+    assert not any(k.startswith("extra.") for k in s.params.keys())
+    assert sum(sh.bsdf() is not None for sh in s.mi_scene.shapes()) == 2
+    f = s.features()
+    assert not f["textures"] and not f["normal_maps"]
+    p = tmp_path / "scene.json"
+    p.write_text(json.dumps(d))
+    assert main(["info", str(p)]) == 0
+    assert "unused: extra (no shape uses them: left out of the scene)" in capsys.readouterr().out
+    # a [[volumes]] material is copied into the voxel meshes: left out, but not unused
+    d["volumes"] = [{"name": "vox", "mode": "solid", "occupied": [[[1]]], "bounds": [[1, 0, 0], [1.5, 0.5, 0.5]],
+                     "material": "extra"}]
+    d["materials"]["extra"] = {"roughness": 0.3}
+    assert draaw_mi.load_scene(d).info["unused_materials"] == []
