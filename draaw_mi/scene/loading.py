@@ -36,6 +36,7 @@ from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file, mitsuba_error_message
 from .mitsuba_xml import integrator_name, shape_names, xml_references
 from .schema import Where, number, read_document, resolution, string
+from .sdf_dicts import refuse_textured_materials
 from .xml_film import check_defines, declared_defaults
 
 SCENE_SUFFIXES = (".toml", ".json", ".xml") + MESH_SUFFIXES
@@ -297,6 +298,8 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
     tmp = ScratchFolder()
     mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
     scene = load_dict_or_error(mi_dict, source)
+    if info.get("sdf") is not None:
+        refuse_textured_materials(scene, info["sdf"], source)
     return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
 
 

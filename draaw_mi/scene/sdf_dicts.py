@@ -33,7 +33,8 @@ import os
 import mitsuba as mi
 import numpy as np
 
-from ..errors import DraawError, suggest
+from ..errors import DraawError, SceneError, suggest
+from ..integrators.features import textured_parameters
 from ..sdf.node import NAME_PATTERN, SDFNode, is_infinite
 from ..sdf.operators import OPERATORS
 from ..sdf.primitives import PRIMITIVE_KEYS, PRIMITIVES
@@ -270,6 +271,24 @@ def sdf_dicts(entries, materials: dict, ctx, where):
     return shapes, sdf
 
 
+def refuse_textured_materials(mi_scene, sdf: SDFScene, source: str) -> None:
+    """A :class:`~draaw_mi.errors.SceneError` when an ``[[sdf]]`` object's material has a
+    texture or a normal map: an SDF surface has no uv coordinates (its interactions have uv
+    (0, 0)), so the texture would render as one colour, the texels at its corner."""
+    by_id = {sh.id(): sh for sh in mi_scene.shapes()}
+    for slot, (pid, mid) in enumerate(zip(sdf.proxy_ids, sdf.slots)):
+        shape = by_id.get(pid)
+        textured = textured_parameters(shape.bsdf()) if shape is not None else []
+        if textured:
+            users = [n.name for n in sdf.nodes.values() if not n.children() and n.slot == slot]
+            raise SceneError(f"{source}: [[sdf]] object {', '.join(map(repr, users)) or '?'} uses "
+                             f"material {mid!r}, whose {', '.join(textured)} "
+                             f"{'is a texture or map' if len(textured) == 1 else 'are textures or maps'}; "
+                             "SDF surfaces have no uv coordinates (it would render as one colour, read "
+                             "at uv (0, 0)); expected a material of plain values for "
+                             "SDF objects (a textured one for [[shapes]] only)")
+
+
 def _has_material_above(root: SDFNode, target: SDFNode) -> bool:
     def walk(n, inherited):
         has = inherited or n.material is not None
@@ -291,4 +310,4 @@ def _default_slots(node: SDFNode, slot: int, inherited: bool) -> None:
         _default_slots(c, slot, has)
 
 
-__all__ = ["build_nodes", "sdf_dicts", "write_back"]
+__all__ = ["build_nodes", "refuse_textured_materials", "sdf_dicts", "write_back"]

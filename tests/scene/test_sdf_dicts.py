@@ -278,3 +278,33 @@ def test_cli_info_shows_the_fixed_shape_values(tmp_path, capsys):
     got = Rotation.from_rotvec(np.radians(float(m.group(1))) * np.array([float(v) for v in m.group(2).split(",")]))
     want = Rotation.from_rotvec(np.radians(40) * np.array([1, 2, -2]) / 3.0)
     assert np.allclose(got.as_matrix(), want.as_matrix(), atol=1e-3), (m.group(0), out)
+
+
+_TEX = [[[0.9, 0.1, 0.1], [0.1, 0.1, 0.9]], [[0.1, 0.1, 0.9], [0.9, 0.1, 0.1]]]
+
+
+@pytest.mark.parametrize("table, named", [
+    ({"base_color": _TEX}, "base_color"),
+    ({"roughness": [[0.2, 0.8], [0.8, 0.2]]}, "roughness"),
+    ({"normalmap": [[[0.6, 0.5, 0.9], [0.4, 0.5, 0.9]]] * 2}, "normalmap"),
+    ({"type": "diffuse", "reflectance": _TEX}, "reflectance"),
+])
+def test_a_textured_material_on_an_sdf_object_is_refused(table, named):
+    """An SDF surface has no uv (its interactions have uv (0, 0)): a textured material
+    rendered one colour there, its corner texels', and info said textures were on."""
+    d = _desc([{"type": "sphere", "name": "orb", "center": [0, 0.6, 0], "radius": 0.6, "material": "tex"}])
+    d["materials"]["tex"] = table
+    with pytest.raises(SceneError, match=rf"\[\[sdf\]\] object 'orb' uses material 'tex', whose {named} .*no uv"):
+        draaw_mi.load_scene(d)
+    # the same material on a mesh loads; plain values on the SDF object load
+    d["shapes"].append({"type": "sphere", "name": "mesh_ball", "material": "tex", "center": [2, 0.5, 0],
+                        "radius": 0.5})
+    d["sdf"][0]["material"] = "ball"
+    assert draaw_mi.load_scene(d).features()["sdf"]
+
+
+def test_a_material_only_an_sdf_object_uses_is_in_the_scene():
+    """Materials no shape uses are left out of the Mitsuba scene; an SDF object's are used."""
+    s = draaw_mi.load_scene(_desc(CSG))
+    assert "ball" in s.info["materials"] and "ball" not in s.info["unused_materials"]
+    assert "ball.base_color.value" in s.params.keys()
