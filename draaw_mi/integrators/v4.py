@@ -136,7 +136,10 @@ class DraawV4Integrator(V4Passes):
       emitters, delta BSDFs, textures and normal maps, AOVs) is a Python-level branch, so an
       absent feature adds no code to the JIT kernel (for example, a scene lit only by point
       lights has no MIS and no emitter lookups at surface hits, a scene without textures
-      computes no uv / dp/du).
+      computes no uv / dp/du). BSDF calls trace the BSDFs of every scene alive in the
+      process, so another live scene's materials add their code (``del`` unused scenes;
+      ``draaw_mi.scene.loading.release_wrapped()`` lets go of the bare ``mi.Scene`` objects
+      ``draaw_mi.render`` keeps for replays).
 
     What is on by default and why (``benchmarks/results/speed_suite.md``, ten scenes of
     different kinds, time to reach ``path``'s 64-spp error): the roulette threshold because
