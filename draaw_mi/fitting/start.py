@@ -1,7 +1,7 @@
 """The parameters a fit moves and the values it starts from.
 
 :func:`fit_parameters` resolves the names given to :func:`~draaw_mi.fitting.fit` into the
-scene's keys, refuses what cannot be fitted (an 8-bit texture, a non-differentiable or
+scene's keys, refuses what cannot be fitted (an XML scene's 8-bit texture, a non-differentiable or
 plugin-declared non-differentiable parameter) and checks each start: ``init``'s value where
 given (:func:`texture_start` shapes a texture's), else the scene's, finite and in range
 (:func:`check_start`).
@@ -37,8 +37,9 @@ def fit_parameters(scene, params, init):
     for k in keys:
         if dr.is_tensor_v(p[k]) and not dr.is_float_v(p[k]):
             raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is an 8-bit image texture, which "
-                             "Mitsuba stores as integers (not differentiable); give the texture as a "
-                             "float image (EXR) to fit it")
+                             "Mitsuba stores as integers (not differentiable) when it loads the file "
+                             "itself (an XML scene); give the texture as a float image (EXR), or load "
+                             "the scene from a TOML/JSON file or dict, whose image files are read as floats")
         if not dr.is_diff_v(p[k]) or not dr.is_float_v(p[k]):
             raise ParameterError(f"fit: parameter {names[k]!r} ({k}) is not differentiable")
         # what the plugin declares non-differentiable (a point light's position: its samples
@@ -51,10 +52,11 @@ def fit_parameters(scene, params, init):
             prm[k].space = "linear"            # textures: optimise texels linearly
     for k in keys:
         given = bool(init) and (names[k] in init or k in init)
-        value = init.get(names[k], init.get(k)) if given else p[k]
+        as_given = init.get(names[k], init.get(k)) if given else p[k]
+        value = as_given
         if given and prm[k].shape is not None:
             value = texture_start(names[k], value, prm[k].shape)
-        check_start(scene, k, names[k], prm[k], value, given)
+        check_start(scene, k, names[k], prm[k], value, given, as_given)
         if given:
             initial[k] = value
     return keys, names, prm, start, initial
@@ -83,10 +85,11 @@ def texture_start(name: str, value, shape: tuple) -> np.ndarray:
                          f"channel) or an array of the texture's shape {tuple(shape)}")
 
 
-def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -> None:
+def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, as_given=None) -> None:
     """A parameter's start (its ``init``, where ``given``, else its value in the scene) within
-    its range and finite, else a :class:`ParameterError`; a warning where a log-space one
-    starts near its floor. A value set through ``scene.params`` is not checked when it is set:
+    its range and finite, else a :class:`ParameterError` (showing ``as_given``, the ``init``
+    as the caller wrote it, where given: one number for a whole texture); a warning where a
+    log-space one starts near its floor. A value set through ``scene.params`` is not checked when it is set:
     a NaN one went on to a zero gradient, then "diverged to NaN"."""
     lo, hi = range_for(key, scene)
     v = np.asarray(np.array(value) if dr.is_array_v(value) else value, dtype=float)
@@ -98,7 +101,8 @@ def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool) -
             not projected and hi is not None and np.any(v > hi)):
         expected = f"values in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
         if given:
-            raise ParameterError(f"fit: init {name}={shown(value)}; expected {expected}")
+            raise ParameterError(f"fit: init {name}={shown(value if as_given is None else as_given)}; "
+                                 f"expected {expected}")
         flat = v.ravel()
         at = (shown(float(flat[0])) if flat.size == 1 else shown(flat.tolist()) if flat.size <= 4
               else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")

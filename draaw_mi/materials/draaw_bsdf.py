@@ -52,7 +52,8 @@ Plugin parameters
 
  * - normalmap
    - |texture|
-   - Tangent-space normal map (RGB). (Default: none)
+   - Tangent-space normal map, 3 channels: x along the surface's u direction, y (green) along
+     v, z out of the surface. Height and bump maps are not supported. (Default: none)
 
  * - normalmap_encoding
    - |string|
@@ -163,6 +164,13 @@ class DraawBSDF(mi.BSDF):
             lo, hi = (-1.0, 1.0) if self.normalmap_signed else (0.0, 1.0)
             lo, hi = lo - NORMALMAP_SLACK, hi + NORMALMAP_SLACK
             self.normalmap = textures.texture_property(props, "normalmap", None, lo, hi, color=True)
+            n = textures.channels(self.normalmap)
+            if n is not None and n != 3:
+                # (a grey map would be looked up as equal x, y, z: a height map's 0.7 tilts
+                # every normal 55 degrees towards (1, 1))
+                raise ParameterError(f"draaw BSDF: normalmap has {n} channel(s); expected a 3-channel "
+                                     "(RGB) tangent-space normal map (height and bump maps are not "
+                                     "supported)")
         two_sided = props.get("two_sided", False)
         if not isinstance(two_sided, bool):
             raise ParameterError(f"draaw BSDF: two_sided={two_sided!r}; expected true or false")

@@ -58,15 +58,48 @@ def constant_texture(value, color: bool) -> mi.Texture:
     return props.get_texture("value")
 
 
+def linear_image(bitmap: mi.Bitmap, raw: bool, name: str = "texture") -> np.ndarray:
+    """An image's pixels as the (H, W, 1 | 3) linear float32 values Mitsuba's ``bitmap``
+    texture would look up: grey (Y, YA) as one channel, colour (RGB, RGBA, XYZ[A]) as RGB,
+    alpha dropped; an sRGB-encoded file (8/16-bit PNG, JPEG) decoded unless ``raw`` (a data
+    map: roughness 102/255 stays 0.4). Mitsuba keeps an 8-bit file's integers and decodes each
+    texel on lookup, before filtering, so a texture of these values renders alike; stored as
+    floats, its texels take float values (``params[...] = ...``) and have a gradient.
+
+    >>> bm = mi.Bitmap(np.full((1, 1, 3), 188, np.uint8), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    >>> bm.set_srgb_gamma(True)
+    >>> [round(float(linear_image(bm, raw)[0, 0, 0]), 4) for raw in (False, True)]
+    [0.5029, 0.7373]
+    """
+    fmt = bitmap.pixel_format()
+    pf = mi.Bitmap.PixelFormat
+    if fmt in (pf.Y, pf.YA):
+        target = pf.Y
+    elif fmt in (pf.RGB, pf.RGBA, pf.XYZ, pf.XYZA):
+        target = pf.RGB
+    else:
+        raise ParameterError(f"draaw BSDF: {name}: an image of {bitmap.channel_count()} channels "
+                             f"({fmt.name}); expected a grey (Y, YA) or colour (RGB, RGBA) image")
+    srgb = bool(bitmap.srgb_gamma())
+    out = bitmap.convert(target, mi.Struct.Type.Float32, srgb_gamma=srgb if raw else False)
+    return np.array(out, dtype=np.float32).reshape(out.height(), out.width(), -1)
+
+
 def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
-    """A bitmap texture from a file name or an (H, W[, C]) array (values as given, linear)."""
+    """A bitmap texture from a file name (its pixels as :func:`linear_image` gives them) or an
+    (H, W[, C]) array (values as given, linear): float32 texels either way."""
     if isinstance(source, str):
         # found as Mitsuba finds a bitmap's file: an XML scene's folder is on the resolver's
         # path, not only the working directory
         path = str(mi.file_resolver().resolve(source))
         if not os.path.isfile(path):
             raise ParameterError(f"draaw BSDF: {name}={source!r}: texture file does not exist")
-        return mi.load_dict({"type": "bitmap", "filename": path, "raw": raw}, parallel=False)
+        try:
+            bitmap = mi.Bitmap(path)
+        except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
+            raise ParameterError(f"draaw BSDF: {name}={source!r} cannot be read as an image: "
+                                 f"{str(e).strip().splitlines()[-1]}") from None
+        source = linear_image(bitmap, raw, name)
     arr = np.asarray(source, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
@@ -87,6 +120,14 @@ def texture_values(tex: mi.Texture):
                 # 8/16-bit image files keep their integer data; eval() maps it onto [0, 1]
                 arr = arr.astype(np.float64) / np.iinfo(arr.dtype).max
             return arr
+    return None
+
+
+def channels(tex) -> int | None:
+    """The channel count of a bitmap texture's texels (None for any other texture)."""
+    params = mi.traverse(tex) if isinstance(tex, mi.Texture) else None
+    if params is not None and "data" in params.keys():
+        return int(params["data"].shape[2])
     return None
 
 

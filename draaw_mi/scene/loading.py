@@ -300,7 +300,12 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
     scene = load_dict_or_error(mi_dict, source)
     if info.get("sdf") is not None:
         refuse_textured_materials(scene, info["sdf"], source)
-    return DraawScene(scene, settings, source, info, mi_dict, tmp, description=copy.deepcopy(desc))
+    try:
+        description = copy.deepcopy(desc)      # (kept for writing the scene back: a fit's save)
+    except Exception as e:  # noqa: BLE001 - a value's own __deepcopy__ / pickling: any kind
+        raise SceneError(f"{source}: the scene holds a value that cannot be copied ({e}); give numbers, "
+                         "lists, numpy arrays and file names") from None
+    return DraawScene(scene, settings, source, info, mi_dict, tmp, description=description)
 
 
 #: the smallest value of each integer override of :func:`load_scene` (the CLI names its flags

@@ -14,6 +14,7 @@ from ..errors import user_stacklevel
 from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
+from ..materials.textures import linear_image
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
 
@@ -26,16 +27,24 @@ NEGATIVE_SLACK = 1e-2
 
 
 def check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
-    """Refuse an image file with a non-finite value in its colour channels, or, with
-    ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI stores a sun above 65504 as
-    +Inf: its environment map renders NaN / Inf pixels in V3, V4 and Mitsuba's ``path``),
-    naming the first bad pixel. Alpha and other layers are not looked at. Returns the image
-    read (an environment map's tint uses it: the file is read once)."""
+    """Refuse an image file Mitsuba cannot read (naming it), one of channels other than grey or
+    colour (Y, YA, RGB, RGBA, XYZ[A]: a multi-layer EXR), or one with a non-finite value in its
+    colour channels, or, with ``nonneg``, one below ``-NEGATIVE_SLACK`` (a half-float HDRI
+    stores a sun above 65504 as +Inf: its environment map renders NaN / Inf pixels in V3, V4
+    and Mitsuba's ``path``), naming the first bad pixel. Alpha and other layers are not looked
+    at. Returns the image read (a draaw material's texture and an environment map's tint use
+    it: the file is read once)."""
     try:
         with exr_reading_threads():
             bitmap = mi.Bitmap(path)
     except Exception as e:  # noqa: BLE001 - Mitsuba's reader: one line
-        raise where.error(f"{what} {label!r} cannot be read: {str(e).strip().splitlines()[-1]}") from None
+        raise where.error(f"{what} {label!r} cannot be read as an image file (Mitsuba: "
+                          f"{str(e).strip().splitlines()[-1]})") from None
+    pf = mi.Bitmap.PixelFormat
+    if bitmap.pixel_format() not in (pf.Y, pf.YA, pf.RGB, pf.RGBA, pf.XYZ, pf.XYZA):
+        raise where.error(f"{what} {label!r} has {bitmap.channel_count()} channels "
+                          f"({bitmap.pixel_format().name}); expected a grey (Y, YA) or colour (RGB, RGBA) "
+                          "image")
     arr = np.asarray(bitmap)
     if np.issubdtype(arr.dtype, np.integer):
         return bitmap                             # 8/16-bit: finite and >= 0 by construction
@@ -57,20 +66,33 @@ def tinted_image(bitmap: "mi.Bitmap", color) -> "mi.Bitmap":
     return mi.Bitmap(rgb * np.asarray(color, np.float32))
 
 
-def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None):
+def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float | None = None,
+                  linear: bool = False):
     """Scene-file value -> what the draaw plugin (or a Mitsuba BSDF) accepts; ``lo``: the
-    least a plain number or RGB triple may be (a reflectance's 0)."""
-
+    least a plain number or RGB triple may be (a reflectance's 0). An image file (a name, or a
+    Mitsuba ``{type = "bitmap", filename = ...}`` table, whose ``raw`` defaults to true for a
+    data parameter) is read and checked (:func:`check_image_values`); with ``linear`` (a draaw
+    material) its texels are given as linear float32 values (:func:`linear_image`: an 8-bit
+    PNG's too, so they take float values and have a gradient), else as the file."""
+    value = plain(value, where)
+    if isinstance(value, dict) and value.get("type") == "bitmap" and isinstance(value.get("filename"), str):
+        table = dict(value)
+        raw = table.setdefault("raw", not is_colour(name))
+        if not isinstance(raw, bool):
+            raise (where / "raw").error(f"{shown(raw)}; expected true or false")
+        table.update(image_file(table.pop("filename"), raw, ctx, where, nonneg=is_colour(name) and not linear,
+                                linear=linear))
+        return table
     if isinstance(value, str):
-        path = ctx.path(value)
-        if not os.path.isfile(path):
-            raise where.error(f"texture file {value!r} does not exist (looked for {path!r})")
-        if not path.lower().endswith(IMAGE_SUFFIXES):
-            raise where.error(f"{value!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
-        return {"type": "bitmap", "filename": path, "raw": not is_colour(name)}
+        return image_file(value, not is_colour(name), ctx, where, nonneg=is_colour(name) and not linear,
+                          linear=linear)
     if is_nested(value):
         value = nested_array(value, where)
     if isinstance(value, np.ndarray):
+        if not np.issubdtype(value.dtype, np.floating):
+            raise where.error(f"an array of {value.dtype} values; expected linear floats (an 8-bit "
+                              "image's values: divide by 255, and decode sRGB for a colour, or give "
+                              "the image's file name)")
         arr = value.astype(np.float32)
         if arr.ndim == 2:
             arr = arr[..., None]
@@ -83,6 +105,36 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
         # numbers are floats, and its int_ior = 2 would fail in Mitsuba ("expected string")
         return number(value, where, lo=lo)
     return value
+
+
+def plain(value, where: Where):
+    """A dict scene's numpy number or 0-d array as a float, a 1-d array as a list (an RGB
+    triple); a ``mi.Bitmap`` refused (the scene description is copied, and a Bitmap cannot
+    be)."""
+    if isinstance(value, np.generic) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        return value.item()
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        return value.tolist()
+    if isinstance(value, mi.Bitmap):
+        raise where.error("a mi.Bitmap; give its linear values as a numpy array (np.array(bitmap), "
+                          "8-bit ones divided by 255) or the image's file name")
+    return value
+
+
+def image_file(file: str, raw: bool, ctx: BuildContext, where: Where, nonneg: bool, linear: bool) -> dict:
+    """The ``bitmap`` texture entries for the image ``file`` (found from the scene's folder):
+    ``filename`` and ``raw``, or with ``linear`` its texels (:func:`linear_image`) as ``data``."""
+    path = ctx.path(file)
+    if not os.path.isfile(path):
+        raise where.error(f"texture file {file!r} does not exist (looked for {path!r})")
+    if not path.lower().endswith(IMAGE_SUFFIXES):
+        raise where.error(f"{file!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
+    # (a draaw material's ranges are checked by the BSDF, naming the parameter's range)
+    bitmap = check_image_values(path, file, where, "texture", nonneg)
+    if not linear:
+        return {"type": "bitmap", "filename": path, "raw": raw}
+    data = linear_image(bitmap, raw)
+    return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data)), "raw": True}
 
 
 def is_colour(name: str) -> bool:
@@ -114,6 +166,15 @@ def nested_array(value, where: Where) -> np.ndarray:
     return arr
 
 
+def _above_one(where: Where, what: str) -> None:
+    """Warn of a colour above 1: reflecting more than arrives is allowed, as Mitsuba allows
+    it, yet it is what GO-Draaw's 0-255 colours (or a PNG's 8-bit values) give when copied
+    over."""
+    warnings.warn(f"{where}: {what} reflects more light than arrives (above 1); GO-Draaw's 0-255 "
+                  "colours are divided by 255 here, and light is given off by a light or a shape's "
+                  "emission = [r, g, b]", RuntimeWarning, stacklevel=user_stacklevel())
+
+
 def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_sided_default=True) -> dict:
     """A Mitsuba BSDF dict for one ``[materials.NAME]`` table (validated)."""
     if not isinstance(table, dict):
@@ -127,26 +188,29 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             if key == "type":
                 continue
             wk = where / key
+            value = plain(value, wk)
             if key in SCALAR_PARAMS:
                 lo, hi = SCALAR_PARAMS[key][1:]
                 out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float))\
-                    else texture_value(value, key, ctx, wk)
+                    else texture_value(value, key, ctx, wk, linear=True)
             elif key in COLOR_PARAMS:
                 if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool)\
                         and not is_nested(value):
                     rgb = vector(value, wk, lo=0.0)
                     if max(rgb) > 1.0:
-                        # (reflecting more than arrives: allowed, as Mitsuba allows it, yet it is
-                        # what GO-Draaw's 0-255 colours give when copied over)
-                        warnings.warn(f"{wk}: {shown(value)} reflects more light than arrives (above 1); "
-                                      "GO-Draaw's 0-255 colours are divided by 255 here, and light is "
-                                      "given off by a light or a shape's emission = [r, g, b]",
-                                      RuntimeWarning, stacklevel=user_stacklevel())
+                        _above_one(wk, shown(value))
                     out[key] = {"type": "rgb", "value": rgb}
                 else:
-                    out[key] = texture_value(value, key, ctx, wk)
+                    out[key] = texture_value(value, key, ctx, wk, linear=True)
+                    data = out[key].get("data") if isinstance(value, (list, tuple, np.ndarray)) else None
+                    if data is not None and np.nanmax(np.asarray(data)) > 1.0:
+                        _above_one(wk, f"an array of values up to {float(np.nanmax(np.asarray(data))):g}")
             elif key == "normalmap":
-                out[key] = texture_value(value, key, ctx, wk)
+                out[key] = texture_value(value, key, ctx, wk, linear=True)
+                data = out[key].get("data") if isinstance(out[key], dict) else None
+                if data is not None and data.shape[2] != 3:
+                    raise wk.error(f"{shown(value)} has {data.shape[2]} channel(s); a normal map has 3 "
+                                   "(RGB: x, y, z), and height or bump maps are not supported")
             elif key == "normalmap_encoding":
                 out[key] = string(value, wk, ("unsigned", "signed"))
             elif key == "two_sided":
@@ -165,9 +229,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                 out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
                 continue              # distribution = "beckmann" (none is a texture file)
             out[key] = texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
-            if isinstance(value, str) and out[key].get("type") == "bitmap":
-                check_image_values(out[key]["filename"], value, where / key, "texture", nonneg)
-            elif isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
+            if isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
                 arr = np.asarray(out[key]["data"], dtype=np.float64)
                 if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):
                     raise (where / key).error("texture array has a non-finite"

@@ -20,6 +20,9 @@ def value_like(current, value, key: str):
     'Point3f'
     """
     check_like(current, value, key)
+    if dr.is_tensor_v(current) and np.ndim(value) <= 1 and not dr.is_tensor_v(value):
+        # one number, or one per channel: a constant map of the texture's shape
+        value = np.broadcast_to(np.asarray(value, np.float32), tuple(current.shape)).copy()
     seq = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)
     try:
         if seq and dr.depth_v(current) > 1 and len(value) == len(current):
@@ -33,20 +36,32 @@ def value_like(current, value, key: str):
 def check_like(current, value, key: str) -> None:
     """The checks of :func:`value_like` that need no conversion (no Dr.Jit value is made, so a
     caller need not wait for a render in another thread): a number or numbers, and for a
-    texture texels of its dimension and channel count. A colour written to a textured
-    ``base_color`` would fail at ``params.update()`` and stay queued there: every later update
-    would fail with it.
+    texture one number or one per channel (filling it), or texels of its dimension and channel
+    count. A colour of the wrong size written to a textured ``base_color`` would fail at
+    ``params.update()`` and stay queued there: every later update would fail with it. An
+    integer texture (an 8-bit image Mitsuba loaded itself: an XML scene's) takes no values: a
+    float written into it would be truncated (0.9 -> 0, a mirror).
 
     >>> import mitsuba as mi, numpy as np
-    >>> check_like(mi.TensorXf(np.zeros((4, 4, 3))), [1.0, 0.0, 0.0], "m.base_color.data")
+    >>> check_like(mi.TensorXf(np.zeros((4, 4, 3))), [1.0, 0.0], "m.base_color.data")
     Traceback (most recent call last):
     ...
-    draaw_mi.errors.RenderError: params['m.base_color.data']: texels of shape (3,); this texture takes (H, W, 3) like its (4, 4, 3)
+    draaw_mi.errors.RenderError: params['m.base_color.data'] = [1.0, 0.0]: m.base_color.data is a texture of shape (4, 4, 3); give one number or 3 (filling it), or texels of shape (H, W, 3)
     """
     if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
         raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
     if dr.is_tensor_v(current):
+        if not dr.is_float_v(current):
+            raise RenderError(f"params[{key!r}]: an image texture of {type(current).__name__} (8/16-bit "
+                              "integers, as Mitsuba stores an XML scene's PNG); it takes no new values "
+                              "(floats would be truncated); give the texture as a float image (EXR) or "
+                              "load the scene from TOML, which stores its image files as floats")
         shape = tuple(value.shape) if dr.is_tensor_v(value) else np.shape(value)
-        if len(shape) != current.ndim or shape[-1] != current.shape[-1]:
-            raise RenderError(f"params[{key!r}]: texels of shape {shape}; this texture takes "
-                              f"(H, W, {current.shape[-1]}) like its {tuple(current.shape)}")
+        channels = current.shape[-1]
+        if len(shape) == 0 or (len(shape) == 1 and shape[0] in (1, channels)):
+            return
+        if len(shape) != current.ndim or shape[-1] != channels:
+            shown = f"{value!r}" if len(shape) == 1 else f"texels of shape {shape}"
+            raise RenderError(f"params[{key!r}] = {shown}: {key} is a texture of shape "
+                              f"{tuple(current.shape)}; give one number or {channels} (filling it), or "
+                              f"texels of shape (H, W, {channels})")

@@ -310,18 +310,29 @@ def test_a_parameter_its_plugin_declares_non_differentiable_is_refused():
     assert np.isfinite(res.losses).all()
 
 
-def test_an_8_bit_texture_is_refused_with_what_to_do(tmp_path):
-    """A PNG texture is stored as 8-bit integers by Mitsuba: no gradient. The error says so and
-    what to use instead (it said "not differentiable" only)."""
+def test_an_8_bit_texture_fits_from_a_toml_scene_and_is_refused_from_an_xml_one(tmp_path):
+    """A TOML/dict scene reads a PNG as linear floats: its roughness map is fitted (it was
+    refused: Mitsuba kept the integers, which have no gradient). Mitsuba still keeps an XML
+    scene's PNG as integers: the error says so and what to use instead."""
     from PIL import Image
     Image.fromarray(np.full((4, 4), 128, np.uint8)).save(tmp_path / "rough.png")
     d = {"shapes": [{"type": "sphere", "material": "m"}],
          "materials": {"m": {"base_color": [0.5, 0.5, 0.5], "roughness": str(tmp_path / "rough.png")}},
          "lights": [{"type": "point", "position": [0, 3, 3], "intensity": 20}],
          "render": {"resolution": [8, 8], "spp": 4}}
-    with pytest.raises(DraawError, match=r"8-bit image texture.*float image \(EXR\)"):
-        draaw_mi.fit(draaw_mi.load_scene(d), np.zeros((8, 8, 3), np.float32), ["m.roughness"],
-                     iterations=1, spp=4, progress=False)
+    res = draaw_mi.fit(draaw_mi.load_scene(d), np.zeros((8, 8, 3), np.float32), ["m.roughness"],
+                       iterations=2, spp=4, progress=False)
+    fitted = np.asarray(res.values["m.roughness"])
+    assert fitted.shape == (4, 4, 1) and np.all((fitted >= 0) & (fitted <= 1)) and np.any(fitted != np.float32(128 / 255))
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><integrator type="path"/><sensor type="perspective"><film type="hdrfilm">'
+        '<integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>'
+        '<bsdf type="draaw" id="m"><texture type="bitmap" name="roughness"><string name="filename" '
+        'value="rough.png"/><boolean name="raw" value="true"/></texture></bsdf>'
+        '<shape type="sphere"><ref id="m"/></shape><emitter type="constant"/></scene>')
+    with pytest.raises(DraawError, match=r"8-bit image texture.*float image \(EXR\), or load the scene from a TOML"):
+        draaw_mi.fit(draaw_mi.load_scene(str(tmp_path / "s.xml")), np.zeros((8, 8, 3), np.float32),
+                     ["m.roughness"], iterations=1, spp=4, progress=False)
 
 
 def test_a_parameter_without_any_gradient_is_reported():

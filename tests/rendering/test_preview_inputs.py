@@ -20,18 +20,21 @@ def _preview(textured=False):
     return Preview(draaw_mi.load_scene(desc), version="v4", max_depth=3, freeze=False, seed=1)
 
 
-def test_a_colour_for_a_textured_parameter_is_refused_and_the_preview_goes_on():
-    """It was accepted; the next frame failed in params.update(), the value stayed queued in
-    the scene's parameters and every later frame (and the user's own params.update()) failed."""
+def test_texels_of_the_wrong_shape_are_refused_and_the_preview_goes_on():
+    """They were accepted; the next frame failed in params.update(), the value stayed queued in
+    the scene's parameters and every later frame (and the user's own params.update()) failed.
+    A colour fills the texture (a constant map of its shape)."""
     pv = _preview(textured=True)
     pv.step()
-    with pytest.raises(ParameterError, match=r"Preview.update: ball.base_color: .*this texture "
-                                             r"takes \(H, W, 3\)"):
-        pv.update({"ball.base_color": [1.0, 0.0, 0.0]})
-    pv.update({"ball.roughness": 0.2})
+    with pytest.raises(ParameterError, match=r"Preview.update: ball.base_color: .*is a texture of shape "
+                                             r"\(4, 4, 3\); give one number or 3"):
+        pv.update({"ball.base_color": np.full((4, 4, 2), 0.5)})
+    pv.update({"ball.roughness": 0.2, "ball.base_color": [1.0, 0.0, 0.0]})
     f = pv.step()
     assert pv.error is None and f is not None and np.isfinite(f.raw).all()
     pv.scene.params.update()                          # nothing left queued
+    texels = np.array(pv.scene.params["ball.base_color.data"])
+    assert texels.shape == (4, 4, 3) and np.all(texels == np.array([1.0, 0.0, 0.0], np.float32))
 
 
 @pytest.mark.parametrize("value", [np.float32(7.0), np.float32("nan"), np.int64(-3), np.array(2.0)])
