@@ -274,7 +274,8 @@ def _check_shape(loc, name, spec, current, key):
                          f"set number parameters{hint}")
     kind, data = spec
     samples = data if kind in ("values", "linear") else [data]
-    want = components(current)
+    # (a texture takes one number or one per channel: a constant map of its shape)
+    want = current.shape[-1] if dr.is_tensor_v(current) else components(current)
     for v in samples:
         size = len(v) if isinstance(v, list) else 1
         if size != want and size != 1:

@@ -69,8 +69,8 @@ def load_for_cli(args, **overrides):
 
 SET_HELP = ("NAME=VALUE: set a scene parameter before rendering, named as `fit` names it "
             "(material.parameter, a light's key such as key.emitter.radiance, sdf.NODE.PARAM); VALUE a "
-            "number or a JSON list, e.g. --set target.roughness=0.3 --set target.base_color=[0.9,0.2,0.1]; "
-            "repeatable")
+            "number or a JSON list, e.g. --set target.roughness=0.3 --set target.base_color=[0.9,0.2,0.1] "
+            "(a textured parameter is filled with the value); repeatable")
 
 
 def add_set_option(parser) -> None:
@@ -96,6 +96,9 @@ def apply_sets(scene, given) -> dict:
         except ValueError:
             value = None
         numbers = value if isinstance(value, list) else [value]
+        if numbers and all(isinstance(x, list) for x in numbers):
+            raise CliError(f"--set {item}: {text!r} is an array of arrays; --set takes a number or a JSON "
+                           "list of numbers (a texture: one number, or one per channel, fills it)")
         if not numbers or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                   and math.isfinite(x) for x in numbers):
             raise CliError(f"--set {item}: {text!r} is not a finite number or a JSON list of finite "

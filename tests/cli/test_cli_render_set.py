@@ -66,3 +66,30 @@ def test_a_bad_set_is_one_line_and_status_2(tmp_path, capsys, given, says):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("draaw-mi: error: --set") and says in err[0], err
     assert not out.exists()
+
+
+def test_set_fills_a_textured_parameter_with_a_number_or_a_colour(tmp_path, capsys):
+    """``--set m.roughness=0.2`` on a textured roughness said "texels of shape (); this texture
+    takes (H, W, 1)", and the help's ``--set target.base_color=[0.9,0.2,0.1]`` failed on a
+    textured base colour. Both fill the texture: the render equals the scene with those
+    values as arrays of the texture's shape; an array of arrays is refused in one line."""
+    text = open(SCENE).read()
+
+    def scene_with(base, rough, name):
+        t = text.replace("base_color = [0.06, 0.22, 0.75]", f"base_color = {np.full((2, 2, 3), base).tolist()}")
+        t = t.replace("roughness = 0.5", f"roughness = {np.full((2, 2), rough).tolist()}")
+        (tmp_path / name).write_text(t)
+        return str(tmp_path / name)
+
+    start = scene_with([0.5, 0.5, 0.5], 0.6, "start.toml")
+    want = scene_with([0.9, 0.2, 0.1], 0.2, "want.toml")
+    out, ref = tmp_path / "set.exr", tmp_path / "want.exr"
+    assert main(["render", start, "-o", str(out), *SMALL, "--set", "target.roughness=0.2",
+                 "--set", "target.base_color=[0.9,0.2,0.1]"]) == 0
+    assert main(["render", want, "-o", str(ref), *SMALL]) == 0
+    np.testing.assert_allclose(draaw_mi.read_exr(str(out))[..., :3], draaw_mi.read_exr(str(ref))[..., :3],
+                               rtol=0, atol=1e-3)
+    capsys.readouterr()
+    assert main(["render", start, "-o", str(tmp_path / "x.exr"), *SMALL, "--set", "target.roughness=[[0.2]]"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is an array of arrays; --set takes a number or a JSON list of numbers" in err[0], err
