@@ -32,6 +32,10 @@ def range_for(key: str, scene: DraawScene | None = None):
     if node_param is not None:
         return scene.sdf.param_range(node_param)             # an SDF object's radius > 0, ...
     parts = key.split(".")
+    if parts[-2:] == ["normalmap", "data"] and not key.startswith("sdf."):
+        # its encoding's range, as the draaw BSDF loads it (unbounded, a fitted map of 2.1
+        # would be saved and refused at the next load)
+        return (-1.0, 1.0) if _owner_attr(scene, key, "normalmap_signed", False) else (0.0, 1.0)
     for p in reversed(parts):
         if p in RANGES:
             return RANGES[p]
@@ -96,12 +100,17 @@ def space_for(key: str) -> str:
 
 def alpha_min(scene: DraawScene, key: str) -> float:
     """``alpha_min`` of the draaw BSDF that owns ``key`` (default 1e-3 for other BSDFs)."""
+    return float(_owner_attr(scene, key, "alpha_min", DEFAULT_ALPHA_MIN))
+
+
+def _owner_attr(scene: DraawScene | None, key: str, name: str, default):
+    """Attribute ``name`` of the BSDF that owns ``key`` (``default`` where there is none)."""
     owner = key.split(".")[0]
     try:
         for shape in scene.mi_scene.shapes():
             bsdf = shape.bsdf()
             if bsdf is not None and bsdf.id() == owner:
-                return float(getattr(bsdf, "alpha_min", DEFAULT_ALPHA_MIN))
+                return getattr(bsdf, name, default)
     except Exception:  # noqa: BLE001 - best effort
         pass
-    return DEFAULT_ALPHA_MIN
+    return default

@@ -271,3 +271,29 @@ def test_a_roughness_started_at_the_floor_is_warned_about(tiny_scene):
         warnings.filterwarnings("error", message="fit: ball.roughness starts at")
         draaw_mi.fit(tiny_scene, ref, params=["ball.roughness"], iterations=1, progress=False,
                      init={"ball.roughness": 0.3})
+
+
+@pytest.mark.parametrize("encoding", ["unsigned", "signed"])
+def test_a_fitted_normal_map_stays_in_its_encodings_range_and_reloads(tmp_path, encoding):
+    """A normal map had no range: it was fitted texel by texel without projection, reached
+    2.1 and the saved scene was refused at its next load ("normalmap=2.12138 (texture values)
+    is above 1.01"). It is fitted as a map in its encoding's range ([0, 1] unsigned, [-1, 1]
+    signed): a reference of a strongly tilted truth pulls a flat start to the bound."""
+    from draaw_mi.fitting.params import range_for
+    lo = 0.0 if encoding == "unsigned" else -1.0
+    flat = np.zeros((4, 4, 3), np.float32) + np.float32([(lo + 1) / 2, (lo + 1) / 2, 1.0])
+    tilted = flat.copy()
+    tilted[..., 0] = 1.0
+    for name, texels in (("flat", flat), ("tilted", tilted)):
+        draaw_mi.write_exr(str(tmp_path / f"{name}.exr"), texels)
+    extra = f'normalmap = "{{}}.exr"\nnormalmap_encoding = "{encoding}"\n'
+    ref = np.array(draaw_mi.render(str(_textured(tmp_path / "t", extra.format("../tilted"))), spp=16, seed=1))
+    path = _textured(tmp_path / "s", extra.format("../flat"))
+    scene = draaw_mi.load_scene(str(path))
+    assert range_for("m.normalmap.data", scene) == (lo, 1.0)
+    res = draaw_mi.fit(scene, ref, ["m.normalmap"], spp=4, iterations=12, lr=0.5, progress=False)
+    fitted = np.asarray(res.values["m.normalmap"])
+    assert fitted.shape == (4, 4, 3) and fitted.min() >= lo and fitted.max() <= 1.0, (fitted.min(), fitted.max())
+    saved = res.save(str(tmp_path / "s" / "fitted.toml"), str(path))
+    reloaded = draaw_mi.load_scene(str(saved if isinstance(saved, str) else tmp_path / "s" / "fitted.toml"))
+    np.testing.assert_allclose(np.array(reloaded.params["m.normalmap.data"]), fitted, atol=1e-6)
