@@ -65,6 +65,22 @@ def save_maps(values: dict, folder: str, formats=FORMATS) -> list:
     return written
 
 
+def truth_like(who: str, name: str, truth, shape: tuple, dtype) -> np.ndarray:
+    """``truth`` of the map ``name`` as an array of the fitted map's ``shape`` ((H, W) for an
+    (H, W, 1) map too), or an error naming both shapes.
+
+    >>> truth_like("map_errors", "m.roughness", np.zeros((8, 8)), (4, 4, 1), np.float64)
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: map_errors: the truth of m.roughness has shape (8, 8); the fitted map has (4, 4, 1) (a grey map may be given as (H, W))
+    """
+    t = np.asarray(truth, dtype=dtype)
+    if t.shape == tuple(shape) or (t.ndim == 2 and shape[-1] == 1 and t.shape == tuple(shape[:2])):
+        return t.reshape(shape)
+    raise ParameterError(f"{who}: the truth of {name} has shape {t.shape}; the fitted map has {tuple(shape)}"
+                         + (" (a grey map may be given as (H, W))" if shape[-1] == 1 else ""))
+
+
 def map_errors(values: dict, truth: dict, observed: dict | None = None) -> dict:
     """Per map named in ``truth``: ``mae`` and ``psnr`` (peak 1) over the observed texels
     (all where ``observed`` has no entry for it)."""
@@ -74,7 +90,7 @@ def map_errors(values: dict, truth: dict, observed: dict | None = None) -> dict:
             raise ParameterError(f"map_errors: truth names {name!r}, which was not fitted "
                                  f"(fitted: {', '.join(values)})")
         v = np.asarray(values[name], dtype=np.float64)
-        t = np.asarray(t, dtype=np.float64).reshape(v.shape)
+        t = truth_like("map_errors", name, t, v.shape, np.float64)
         seen = np.ones(v.shape[:2], bool) if observed is None or name not in observed else observed[name]
         d = (v - t)[seen]
         mse = float(np.mean(d * d)) if d.size else float("nan")
@@ -106,7 +122,7 @@ def plot_maps(values: dict, truth: dict | None = None, losses=None, observed: di
         axes[r][0].imshow(show(v), **kw)
         axes[r][0].set_title(f"{name}: fitted", fontsize=9)
         if truth and name in truth:
-            t = np.asarray(truth[name], dtype=np.float32).reshape(v.shape)
+            t = truth_like("plot_maps", name, truth[name], v.shape, np.float32)
             axes[r][1].imshow(show(t), **kw)
             axes[r][1].set_title("truth", fontsize=9)
             err = np.abs(v - t).mean(axis=2)

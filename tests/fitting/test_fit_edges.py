@@ -180,3 +180,15 @@ def test_settled_bounds_the_drift_by_the_steps_of_one_eighth(step, tol, expected
     hist = [{"loss": 1.0, "lr": 0.01, "values": {"m": 0.5 + step * i}, "latent": {"m": 0.5 + step * i}}
             for i in range(128)]
     assert settled(hist, tol) is expected
+
+
+def test_an_init_out_of_range_is_shown_as_given():
+    """One number given for a textured base colour was reported as "an array of shape
+    (4, 4, 3), all NaN"."""
+    from conftest import tiny_description
+    d = tiny_description(resolution=[8, 6])
+    d["materials"]["ball"]["base_color"] = np.full((4, 4, 3), 0.5)
+    for given, shown in ((float("nan"), "nan"), (-1.0, "-1.0")):
+        with pytest.raises(ParameterError, match=rf"fit: init ball.base_color={shown}; expected values in \[0.0, 1.0\]"):
+            draaw_mi.fit(draaw_mi.load_scene(d), np.zeros((6, 8, 3), np.float32), ["ball.base_color"],
+                         iterations=1, spp=2, progress=False, init={"ball.base_color": given})

@@ -271,3 +271,20 @@ def test_plot_maps_shows_fit_truth_error_and_loss(tmp_path):
     assert (tmp_path / "maps.png").stat().st_size > 0
     with pytest.raises(ParameterError, match="no texture maps"):
         plot_maps({"m.roughness": 0.3})
+
+
+@pytest.mark.parametrize("truth", [np.zeros((8, 8, 3)), np.zeros((4, 4, 1)), np.zeros((2, 2))])
+def test_a_truth_of_another_shape_is_named_with_both_shapes(truth, tmp_path):
+    """A bare numpy reshape error ("cannot reshape array of size 192 into shape (2,2,3)")."""
+    values = {"m.base_color": np.zeros((2, 2, 3))}
+    shape = str(tuple(truth.shape)).replace("(", r"\(").replace(")", r"\)")
+    with pytest.raises(ParameterError, match=rf"map_errors: the truth of m\.base_color has shape {shape}; "
+                                             r"the fitted map has \(2, 2, 3\)"):
+        map_errors(values, {"m.base_color": truth})
+    with pytest.raises(ParameterError, match=rf"plot_maps: the truth of m\.base_color has shape {shape}"):
+        plot_maps(values, {"m.base_color": truth}, path=str(tmp_path / "p.png"))
+
+
+def test_a_grey_truth_may_leave_out_its_channel():
+    errs = map_errors({"m.roughness": np.full((2, 2, 1), 0.5)}, {"m.roughness": np.full((2, 2), 0.25)})
+    assert errs["m.roughness"]["mae"] == pytest.approx(0.25)
