@@ -63,8 +63,9 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     ``allowed-failures``; a remote scheduler's own setting applies to it), and a worker holds
     one task at a time (``worker-saturation`` 1: a task queued behind a crash would count as a
     failure too; a remote scheduler's should say the same).
-    ``scratch``: the folder a new LocalCluster's workers keep their scratch space in (Dask's
-    default is ``dask-scratch-space`` in the temporary folder, outside a batch's ``--out``).
+    ``scratch``: the folder a new LocalCluster's scheduler and workers keep their scratch
+    space in (Dask's default is ``dask-scratch-space`` in the temporary folder, outside a
+    batch's ``--out``).
     Returns ``(client, cluster, drjit_threads)``; ``cluster`` is None for a remote scheduler.
     """
     try:
@@ -87,8 +88,11 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     threads = max(1, cores // n)
     # one task at a time on a worker (no queued second one): a frame that kills its worker
     # then takes no innocent frame with it (each task on a dying worker counts one failure)
+    # the scheduler's work space too (Dask's temporary-directory: its lock files, and its
+    # scheduler-* folders after a kill) in ``scratch``, not in the system's temporary folder
     with dask.config.set({"distributed.scheduler.allowed-failures": int(retries),
-                          "distributed.scheduler.worker-saturation": 1.0}):
+                          "distributed.scheduler.worker-saturation": 1.0,
+                          **({"temporary-directory": scratch} if scratch else {})}):
         # the scheduler's HTTP routes (health, metrics; the dashboard only with ``dashboard``)
         # on a free port of 127.0.0.1: without an address they took 8787, and a second
         # cluster on the machine warned that the port was in use

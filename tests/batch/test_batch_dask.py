@@ -103,10 +103,16 @@ def test_two_runs_into_other_folders_share_no_task_key(tmp_path, client, monkeyp
     assert len(runs[0]) == 2 and not runs[0] & runs[1]
 
 
-def test_a_runs_own_cluster_keeps_its_scratch_under_the_output_folder(tmp_path):
-    """A LocalCluster's workers keep Dask's scratch space beside the run's log, under
-    ``--out`` (Dask's default, ``dask-scratch-space`` in the temporary folder, left lock files
-    outside it), and the folder goes with the cluster."""
+def test_a_runs_own_cluster_keeps_its_scratch_under_the_output_folder(tmp_path, monkeypatch):
+    """A LocalCluster's scheduler and workers keep Dask's scratch space beside the run's log,
+    under ``--out`` (Dask's default, ``dask-scratch-space`` in the temporary folder, left lock
+    files outside it: the scheduler's global.lock and purge.lock, after a kill its
+    scheduler-* folders), and the folder goes with the cluster."""
+    import tempfile
+    system_tmp = tmp_path / "system-tmp"
+    system_tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(system_tmp))
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
     doc = manifest(tmp_path, frames=2)
     scratch_seen = []
     log = {}
@@ -120,3 +126,5 @@ def test_a_runs_own_cluster_keeps_its_scratch_under_the_output_folder(tmp_path):
     assert res.complete and scratch_seen == [True, True]
     assert os.path.dirname(res.log) == log["dir"] and str(tmp_path) in log["dir"]
     assert not os.path.exists(os.path.join(log["dir"], ".draaw-dask-scratch"))
+    # (the scenes' own scratch folders, draaw-mi-PID-*, live while this process holds them)
+    assert [n for n in os.listdir(system_tmp) if not n.startswith("draaw-mi-")] == []
