@@ -21,10 +21,10 @@ equals the planned hash and its pixel data is all there (:func:`frame_status`,
 :func:`exr_complete`). The file is renamed into place only after it is completely written, so
 draaw-mi never leaves a partial one; the last check catches a file cut short later (a copy
 that ran out of disk, a partial rsync), whose header still reads. A job with previews
-also wants the frame's PNG, which carries the same hash as a text chunk and is written before
-the EXR: a finished EXR whose PNG is missing or another frame's (a run killed between the two
-writes, previews turned on later) gets its PNG from the EXR, not a new render
-(:func:`write_preview`).
+also wants the frame's PNG, which carries the same hash as a text chunk and is written after
+the EXR (a PNG is never there without its frame): a finished EXR whose PNG is missing or
+another frame's (a run killed between the two writes, previews turned on later) gets its PNG
+from the EXR, not a new render (:func:`write_preview`).
 """
 from __future__ import annotations
 

@@ -209,9 +209,11 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     seconds = time.perf_counter() - t0
     # still under the output folder: a symbolic link made there since planning is not followed
     check_inside(spec["output"], spec.get("root"), f"job {spec['job']!r} frame {spec['frame']}", "its EXR")
-    if spec.get("preview"):      # first: a finished EXR then has its preview (exr.frame_status)
-        write_preview(spec, arr, channels)
     write_frame(spec["output"], arr, channels, metadata(spec, seconds, post=info["post"]), half=spec["half"])
+    # after its EXR: a PNG is never there without its frame; an EXR whose preview a kill
+    # prevented reads as "no-preview", and the next run writes the PNG from it
+    if spec.get("preview"):
+        write_preview(spec, arr, channels)
     return {"job": spec["job"], "frame": spec["frame"], "output": spec["output"], "seconds": seconds,
             "channels": channels, "kernels": kernels, "pid": os.getpid(), "threads": dr.thread_count()}
 

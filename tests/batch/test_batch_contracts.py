@@ -51,6 +51,37 @@ def test_an_intact_header_over_zeroed_data_is_damaged(tmp_path, zeroed):
     assert batch.frame_status(specs[0]) == "damaged"
 
 
+def test_a_preview_is_never_there_without_its_frame(tmp_path, monkeypatch):
+    """A frame whose EXR is not written (a kill, a full disk during the write) leaves no PNG:
+    the PNG was written first, and a run killed between the two left a preview of a frame
+    that does not exist. A kill between the EXR and its PNG leaves a frame without preview,
+    which the next run writes from the EXR."""
+    from draaw_mi.batch import frame
+    doc = _still(tmp_path, frames=1)
+    doc["previews"] = True
+    _, specs, _ = batch.load(doc)
+    png = os.path.splitext(specs[0]["output"])[0] + ".png"
+
+    def disk_full(path, *args, **kwargs):
+        raise IOFailure(f"write_exr({path!r}): No space left on device")
+    real_frame, real_preview = frame.write_frame, frame.write_preview
+    monkeypatch.setattr(frame, "write_frame", disk_full)
+    res = batch.run(doc, progress=False)
+    assert res.failed and "No space left" in res.failed[0]["error"]
+    assert not os.path.exists(specs[0]["output"]) and not os.path.exists(png)
+    monkeypatch.setattr(frame, "write_frame", real_frame)
+
+    def killed(spec, *args, **kwargs):
+        raise IOFailure("killed between the writes")
+    monkeypatch.setattr(frame, "write_preview", killed)
+    assert batch.run(doc, progress=False).failed
+    assert os.path.exists(specs[0]["output"]) and not os.path.exists(png)
+    assert batch.frame_status(specs[0]) == "no-preview"
+    monkeypatch.setattr(frame, "write_preview", real_preview)
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 0 and res.previews == 1 and os.path.exists(png)
+
+
 def test_frames_of_a_dict_manifest_are_stale_not_foreign_to_a_manifest_file(tmp_path):
     """Frames made from a dict manifest carry no draaw:manifest. Run again from a manifest
     file with other settings, they are stale and rendered again; a missing maker is not
