@@ -42,6 +42,58 @@ def _holder(fd: int) -> str:
     return f" (pid {pid})" if pid.isdigit() else ""
 
 
+def running_pid(folder: str) -> int | None:
+    """The pid of the run holding ``folder``'s lock, or None when no run holds it; the lock is
+    not touched (a second process trying it, even for an instant, would make a run starting
+    then refuse the folder). The pid is the one the holder wrote into its lock file; a file
+    left by a killed run names a process that is gone (or, on Linux, holds no lock on it:
+    ``/proc/locks`` lists the files locked and by whom, so a reused pid is not taken for a
+    run). A holder that could not write its pid (another user's lock file) is not seen."""
+    path = os.path.join(folder, LOCK_NAME)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return None
+    try:
+        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
+        inode = os.fstat(fd).st_ino
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    if not text.isdigit():
+        return None
+    pid = int(text)
+    locked = _flock_holders(inode)
+    if locked is not None:
+        return pid if locked else None
+    try:
+        os.kill(pid, 0)
+    except PermissionError:          # alive, another user's
+        return pid
+    except (OSError, OverflowError):
+        return None
+    return pid
+
+
+def _flock_holders(inode: int) -> bool | None:
+    """Whether ``/proc/locks`` lists a ``flock`` on a file of this inode number (the device is
+    left out: its numbering there is the kernel's); None where there is no such file."""
+    try:
+        with open("/proc/locks", encoding="ascii", errors="replace") as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return None
+    for line in lines:
+        fields = line.split()
+        # "1: FLOCK  ADVISORY  WRITE 1234 08:02:5678 0 EOF" (a waiting lock has "->" after "1:")
+        if "FLOCK" in fields and len(fields) >= 6:
+            where = fields[fields.index("FLOCK") + 4]
+            if where.rsplit(":", 1)[-1] == str(inode):
+                return True
+    return False
+
+
 @contextlib.contextmanager
 def output_locks(folders, where: str, optional=()):
     """Hold an exclusive lock on every folder in ``folders`` for the duration of the block.

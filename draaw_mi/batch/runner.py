@@ -54,7 +54,7 @@ from .confine import check_inside
 from .executors import DEFAULT_RETRIES, EXECUTORS, TLS_KEYS, run_dask, run_inprocess
 from .exr import MANIFEST_ATTR, frame_status, preview_path, read_header, write_preview
 from .frame import SceneCache
-from .lock import output_locks
+from .lock import output_locks, running_pid
 from .manifest import Manifest, fixed_folder, parse_manifest
 from .planner import check_writable, plan, prepare_outputs
 from .sheet import contact_sheets
@@ -239,7 +239,8 @@ def status(manifest, out: str | None = None, allow_outside_out: bool = False) ->
     (present, made by another manifest file) / ``damaged``
     (unreadable or cut short) / ``no-preview``, or ``failed`` with the last error the log
     recorded for the frame's present settings. Reads only: read-only outputs are fine.
-    Returns ``{"frames": [...], "counts": {...}, "log": path}``."""
+    Returns ``{"frames": [...], "counts": {...}, "log": path, "running": pid}``, ``running`` the
+    pid of a run holding the output folders now (its frames are a snapshot), else None."""
     m, specs, _ = load(manifest, out, allow_outside_out=allow_outside_out)
     errors = {}
     for rec in read_log(log_path(m)):
@@ -256,7 +257,9 @@ def status(manifest, out: str | None = None, allow_outside_out: bool = False) ->
             st = "failed"
         counts[st] += 1
         frames.append({"job": s["job"], "frame": s["frame"], "output": s["output"], "status": st, "error": err})
-    return {"frames": frames, "counts": counts, "log": log_path(m)}
+    folders = sorted({os.path.dirname(s["output"]) for s in specs} | {os.path.dirname(log_path(m))})
+    running = next((pid for pid in map(running_pid, folders) if pid is not None), None)
+    return {"frames": frames, "counts": counts, "log": log_path(m), "running": running}
 
 
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
@@ -384,8 +387,8 @@ def _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_r
 
     remove_temp_files(specs)
     log = _Log(res.log)
-    log.write(event="start", manifest=m.path, frames=len(specs), todo=len(todo), executor=executor,
-              pid=os.getpid())
+    log.write(event="start", manifest=m.path if m.path.startswith("<") else os.path.abspath(m.path),
+              frames=len(specs), todo=len(todo), executor=executor, pid=os.getpid())
     for s in previews:
         try:
             write_preview(s)

@@ -310,7 +310,8 @@ def _cmd_batch(args) -> int:
         damaged = f", {c['damaged']} damaged (unreadable or cut short)" if c["damaged"] else ""
         damaged += f", {c['foreign']} made by another manifest" if c["foreign"] else ""
         print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
-              f"(other job settings){damaged}{nopreview}, {c['failed']} failed; log {st['log']}")
+              f"(other job settings){damaged}{nopreview}, {c['failed']} failed; log {st['log']}"
+              + (f" (a run is in progress: pid {st['running']})" if st["running"] else ""))
         return 0 if c["done"] == len(st["frames"]) else 1
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
                     scheduler=args.scheduler, progress=progress_mode(args.no_progress),

@@ -134,6 +134,47 @@ def test_a_second_run_on_busy_folders_stops_before_touching_them(tmp_path, capsy
     assert res.complete and len(frames_of(tmp_path / "out")) == 2 and not in_flight.exists()
 
 
+def test_status_says_a_run_holds_the_folders(tmp_path, capsys):
+    """--status while a run renders is a snapshot: it says so, naming the run's pid as a second
+    run's refusal does; a lock file left by a killed run names no run."""
+    import subprocess
+    import sys
+
+    from draaw_mi.batch.lock import LOCK_NAME, output_locks
+    from draaw_mi.cli import main
+    doc = manifest(tmp_path, frames=2)
+    path = write_manifest(tmp_path, doc)
+    folder = tmp_path / "out" / "orbit"
+    folder.mkdir(parents=True)
+    with output_locks([str(folder)], "other run"):
+        assert batch.status(doc)["running"] == os.getpid()
+        assert main(["batch", path, "--status"]) == 1
+        out = capsys.readouterr().out.strip().splitlines()
+        assert out[-1].endswith(f"(a run is in progress: pid {os.getpid()})"), out
+    assert batch.status(doc)["running"] is None
+    main(["batch", path, "--status"])
+    assert "in progress" not in capsys.readouterr().out
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    (folder / LOCK_NAME).write_text(f"{gone.pid}\n")               # a killed run's lock file
+    assert batch.status(doc)["running"] is None
+    if os.path.exists("/proc/locks"):          # its pid alive again (reused), the file unlocked
+        (folder / LOCK_NAME).write_text(f"{os.getpid()}\n")
+        assert batch.status(doc)["running"] is None
+
+
+def test_the_logs_start_record_names_the_manifest_by_its_absolute_path(tmp_path, monkeypatch):
+    """Run from the manifest's folder as ``batch.toml``: the log named it so, where the frames'
+    headers have its absolute path."""
+    doc = manifest(tmp_path, frames=1)
+    write_manifest(tmp_path, doc)
+    monkeypatch.chdir(tmp_path)
+    res = batch.run("batch.toml", progress=False)
+    start = batch.read_log(res.log)[0]
+    assert start["event"] == "start" and start["manifest"] == str(tmp_path / "batch.toml")
+    assert batch.read_header(res.results[0]["output"])["draaw:manifest"] == start["manifest"]
+
+
 def test_frames_another_run_finished_before_the_lock_are_not_rendered_again(tmp_path, monkeypatch):
     """Two runs of one manifest: the second plans while the first still renders, then gets the
     lock once the first is done. It must read the frames' state again under the lock and
