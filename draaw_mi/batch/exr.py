@@ -18,9 +18,13 @@ with ``exrheader`` or ``OpenEXR.File(path, header_only=True).header()``)::
 
 A frame is *finished* when its file exists, its header is readable, its ``draaw:frame_hash``
 equals the planned hash and its pixel data is all there (:func:`frame_status`,
-:func:`exr_complete`). The file is renamed into place only after it is completely written, so
-draaw-mi never leaves a partial one; the last check catches a file cut short later (a copy
-that ran out of disk, a partial rsync), whose header still reads. A job with previews
+:func:`exr_complete`: every chunk the offset table lists lies in the file, with a chunk header
+of a non-empty size; the compressed bytes themselves are not read). The file is renamed into
+place only after it is completely written, so draaw-mi never leaves a partial one; the last
+check catches a file cut short later (a copy that ran out of disk, a partial rsync), whose
+header still reads. Bytes changed inside a chunk (a disk's bad block, zeros written over the
+middle of a file) leave its size intact: only decoding finds them (``frame_status(...,
+verify=True)``, :func:`exr_decodes`), which costs a read of every pixel. A job with previews
 also wants the frame's PNG, which carries the same hash as a text chunk and is written after
 the EXR (a PNG is never there without its frame): a finished EXR whose PNG is missing or
 another frame's (a run killed between the two writes, previews turned on later) gets its PNG
@@ -28,9 +32,12 @@ from the EXR, not a new render (:func:`write_preview`).
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import json
 import os
 import struct
+import sys
 import time
 
 import numpy as np
@@ -125,8 +132,10 @@ def exr_complete(path: str) -> bool:
     A file cut short keeps a readable header, so :func:`read_header` alone would take it for
     finished; a power cut can leave the header and table over zeroed blocks, whose chunks
     read as empty (every chunk is looked at: zeroed ones before the last count too). Reads
-    the header, the offset table and 8 bytes per chunk; files that are not single-part
-    scanline images (tiled, deep, multi-part, newer compressions) are read in full instead.
+    the header, the offset table and 8 bytes per chunk, not the compressed bytes: zeros or
+    other bytes written inside a chunk whose header is intact pass (:func:`exr_decodes`
+    finds them). Files that are not single-part scanline images (tiled, deep, multi-part,
+    newer compressions) are decoded in full instead.
 
     >>> import tempfile, numpy as np
     >>> from draaw_mi.io import write_exr
@@ -145,7 +154,7 @@ def exr_complete(path: str) -> bool:
             head = fh.read(_HEADER_READ)
             layout = _scanline_layout(head)
             if layout is None:
-                return _reads_in_full(path)
+                return exr_decodes(path)
             table_at, chunks = layout
             if table_at + 8 * chunks > size:
                 return False
@@ -205,28 +214,92 @@ def _scanline_layout(head: bytes):
     return (pos, count) if count > 0 else None
 
 
-def _reads_in_full(path: str) -> bool:
+def exr_decodes(path: str) -> bool:
+    """Whether every channel of the EXR at ``path`` decodes: every chunk is read and
+    decompressed, so bytes changed inside a chunk whose size is intact are found (draaw-mi
+    writes ZIP-compressed frames, whose zlib checksum fails on them), as :func:`exr_complete`
+    cannot. OpenEXR's own messages about a chunk it cannot decompress are silenced
+    (:func:`quiet_native_output`): the caller reports the frame."""
     try:
-        with OpenEXR.File(path) as f:
+        with quiet_native_output(), OpenEXR.File(path) as f:
             for channel in f.channels().values():
                 channel.pixels                          # noqa: B018 - decoding is the check
         return True
-    except Exception:  # noqa: BLE001 - any failure to decode is an incomplete file
+    except Exception:  # noqa: BLE001 - any failure to decode is a damaged file
         return False
 
 
-def frame_status(spec: dict) -> str:
+def read_frame(path: str, with_names: bool = False):
+    """:func:`draaw_mi.io.read_exr` with OpenEXR's own messages silenced: a frame that does not
+    decode raises one :class:`~draaw_mi.errors.IOFailure`, and nothing else reaches the
+    terminal."""
+    with quiet_native_output():
+        return read_exr(path, with_names=with_names)
+
+
+def _flush_c_stdio() -> None:
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):      # (no C library to ask: nothing buffered there)
+        pass
+
+
+@contextlib.contextmanager
+def quiet_native_output():
+    """Nothing written to standard output or error reaches them during the block. OpenEXR's C
+    library reports a chunk it cannot decompress on standard error (``(EXR_ERR_CORRUPT_CHUNK)
+    Unable to decompress ...``) and its Python binding prints a warning to ``sys.stdout``
+    before it raises; the binding offers no way to turn either off, so file descriptors 1 and
+    2 go to the null device and ``sys.stdout`` / ``sys.stderr`` are swapped for it too (they
+    need not write to the descriptors: a notebook's, pytest's). Python's and C's buffers are
+    flushed on both sides (nothing written before lands in the block, nothing written in it
+    comes out after). What other threads of the process write meanwhile is lost too: the
+    batch runner reads frames this way while it renders nothing (before its executor
+    starts, after it ends)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):          # (a closed or replaced stream)
+            stream.flush()
+    _flush_c_stdio()
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        yield
+        return
+    saved = []
+    try:
+        for fd in (1, 2):
+            try:
+                saved.append((fd, os.dup(fd)))
+                os.dup2(null, fd)
+            except OSError:           # (a descriptor that is not open: nothing to silence)
+                pass
+        with open(os.devnull, "w", encoding="utf-8") as sink, contextlib.redirect_stdout(sink), \
+                contextlib.redirect_stderr(sink):
+            yield
+    finally:
+        _flush_c_stdio()
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(null)
+
+
+def frame_status(spec: dict, verify: bool = False) -> str:
     """``"done"`` (present, hash matches, pixel data complete), ``"stale"`` (present, another
     job's settings), ``"foreign"`` (present, other settings, and made by another manifest
-    file: :func:`draaw_mi.batch.run` does not replace it unless told to), ``"damaged"`` (present but unreadable or cut short), ``"missing"``, or
-    ``"no-preview"`` (the EXR is done, the preview the job asks for is missing or stale)."""
+    file: :func:`draaw_mi.batch.run` does not replace it unless told to), ``"damaged"``
+    (present but unreadable or cut short; with ``verify``, also one whose pixel data does not
+    decode: :func:`exr_decodes`), ``"missing"``, or ``"no-preview"`` (the EXR is done, the
+    preview the job asks for is missing or stale). Without ``verify`` it reads the header, the
+    offset table and 8 bytes per chunk (:func:`exr_complete`); ``verify`` decodes the whole
+    file of a frame that passes those."""
     header = read_header(spec["output"])
     if header is None:
         return "damaged" if os.path.exists(spec["output"]) else "missing"
     if header.get(HASH_ATTR) != spec["hash"]:
         other, mine = header.get(MANIFEST_ATTR), spec.get("manifest")
         return "foreign" if other and mine and other != mine else "stale"
-    if not exr_complete(spec["output"]):
+    if not exr_complete(spec["output"]) or (verify and not exr_decodes(spec["output"])):
         return "damaged"
     if spec.get("preview"):
         tag = _png_hash(preview_path(spec))
@@ -249,7 +322,7 @@ def write_preview(spec: dict, image: np.ndarray | None = None, channels=None) ->
     AOVs as R, G, B)."""
 
     if image is None:
-        image, channels = read_exr(spec["output"], with_names=True)
+        image, channels = read_frame(spec["output"], with_names=True)
     write_png(preview_path(spec), image, channels=channels, text={HASH_ATTR: spec["hash"]},
               encoded=bool(spec.get("encoded")))
 

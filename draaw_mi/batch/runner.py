@@ -21,6 +21,9 @@ Parameter          Meaning
 ``dashboard``      serve the LocalCluster's dashboard on 127.0.0.1 (default: none)
 ``allow_outside_out``  let the manifest put files outside ``out`` (absolute or ``..`` patterns)
 ``dry_run``        plan and report, render nothing
+``verify``         decode every finished frame; one that does not decode is ``damaged`` and
+                   rendered again (without it, a frame's header, offset table and chunk
+                   headers are checked, not its compressed bytes)
 ``overwrite``      replace frames that another manifest file made (default: refuse the run)
 ``progress``       tqdm bar with frames done / failed and ETA (``True``: in a log, lines instead);
                    ``"lines"``: a line every 10 s (logs)
@@ -52,7 +55,7 @@ from ..errors import DraawError, ParameterError, SceneError, suggest
 from ..progress import check_mode, progress_bar
 from .confine import check_inside
 from .executors import DEFAULT_RETRIES, EXECUTORS, TLS_KEYS, run_dask, run_inprocess
-from .exr import MANIFEST_ATTR, frame_status, preview_path, read_header, write_preview
+from .exr import MANIFEST_ATTR, frame_status, preview_path, read_frame, read_header, write_preview
 from .frame import SceneCache
 from .lock import output_locks, running_pid
 from .manifest import Manifest, fixed_folder, parse_manifest
@@ -78,6 +81,9 @@ class BatchResult:
     new_kernels: dict = field(default_factory=dict)   # job -> kernels first seen after its first frame
     results: list = field(default_factory=list)
     missing: int = 0
+    # frames that read as finished but did not decode when the run read them after rendering
+    # (for a contact sheet): not rendered again, counted in ``missing``
+    damaged: list = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
@@ -90,6 +96,9 @@ class BatchResult:
         recompiles = sum(self.new_kernels.values())
         extra = f"; WARNING: {recompiles} kernel(s) compiled after a job's first frame" if recompiles else ""
         previews = f" ({self.previews} previews from their EXRs)" if self.previews else ""
+        if self.damaged:
+            extra += (f"; {len(self.damaged)} frame(s) counted as done do not decode (first: "
+                      f"{self.damaged[0]}): run again with --verify (verify=True) to render them again")
         if self.sheet_error:
             extra += f"; contact sheets not written: {self.sheet_error}"
         if self.log_error:
@@ -234,13 +243,15 @@ def remove_temp_files(specs) -> list[str]:
     return removed
 
 
-def status(manifest, out: str | None = None, allow_outside_out: bool = False) -> dict:
+def status(manifest, out: str | None = None, allow_outside_out: bool = False, verify: bool = False) -> dict:
     """Per frame ``done`` / ``missing`` / ``stale`` (present, other job) / ``foreign``
     (present, made by another manifest file) / ``damaged``
-    (unreadable or cut short) / ``no-preview``, or ``failed`` with the last error the log
-    recorded for the frame's present settings. Reads only: read-only outputs are fine.
-    Returns ``{"frames": [...], "counts": {...}, "log": path, "running": pid}``, ``running`` the
-    pid of a run holding the output folders now (its frames are a snapshot), else None."""
+    (unreadable or cut short; with ``verify``, also a frame whose pixel data does not decode)
+    / ``no-preview``, or ``failed`` with the last error the log recorded for the frame's
+    present settings. Reads only: read-only outputs are fine. Returns ``{"frames": [...],
+    "counts": {...}, "log": path, "running": pid}``, ``running`` the pid of a run holding the
+    output folders now (its frames are a snapshot), else None."""
+    _check_flag("batch.status", "verify", verify)
     m, specs, _ = load(manifest, out, allow_outside_out=allow_outside_out)
     errors = {}
     for rec in read_log(log_path(m)):
@@ -249,7 +260,7 @@ def status(manifest, out: str | None = None, allow_outside_out: bool = False) ->
     frames = []
     counts = {"done": 0, "missing": 0, "stale": 0, "foreign": 0, "damaged": 0, "no-preview": 0, "failed": 0}
     for s in specs:
-        st = frame_status(s)
+        st = frame_status(s, verify=verify)
         seen, err = errors.get((s["job"], s["frame"]), (None, None))
         if st == "done" or (seen is not None and seen != s["hash"]):
             err = None          # (an error of other settings for this frame, since edited)
@@ -265,8 +276,9 @@ def status(manifest, out: str | None = None, allow_outside_out: bool = False) ->
 def run(manifest, out: str | None = None, executor: str = "inprocess", workers: int | None = None,
         scheduler: str | None = None, progress: bool | str = True, on_result=None, dry_run: bool = False,
         client=None, overwrite: bool = False, allow_outside_out: bool = False, retries: int | None = None,
-        dashboard: bool = False, tls: dict | None = None) -> BatchResult:
-    """Render every unfinished frame of ``manifest``; see the module docstring."""
+        dashboard: bool = False, tls: dict | None = None, verify: bool = False) -> BatchResult:
+    """Render every unfinished frame of ``manifest``; see the module docstring. A run with
+    contact sheets verifies the finished frames (it decodes each of them for the sheets)."""
     check_mode(progress, "batch.run")
 
     if executor not in EXECUTORS:
@@ -276,6 +288,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     # (the string "false" is true: another manifest's frames would be replaced)
     _check_flag("batch.run", "overwrite", overwrite)
     _check_flag("batch.run", "dry_run", dry_run)
+    _check_flag("batch.run", "verify", verify)
     if on_result is not None and not callable(on_result):      # (else it fails after frame 0)
         raise ParameterError(f"batch.run: on_result={on_result!r}; expected a function of a frame's "
                              "result record, or None")
@@ -284,7 +297,10 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
             raise DraawError("the dask executor needs Dask: pip install 'draaw-mi[batch]'")
     t0 = time.perf_counter()
     m, specs, cache = load(manifest, out, allow_outside_out=allow_outside_out)
-    states = [frame_status(s) for s in specs]
+    # (a run with contact sheets decodes every finished frame for them: a frame that does not
+    # decode is found here and rendered again, not left out of its sheet)
+    verify = verify or m.contact_sheet
+    states = [frame_status(s, verify=verify) for s in specs]
     if not overwrite:
         _refuse_foreign(m, [s for s, st in zip(specs, states) if st == "foreign"])
     todo = [s for s, st in zip(specs, states) if st != "done"]
@@ -311,7 +327,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     with output_locks(folders, m.path, optional=[f for f in done_folders if os.path.isdir(f)]):
         # read again under the lock: a run that held it may have finished frames since
         # planning, and a finished frame is never rendered twice
-        states = [frame_status(s) for s in todo]
+        states = [frame_status(s, verify=verify) for s in todo]
         previews = [s for s, st in zip(todo, states) if st == "no-preview"]
         kept = ("done", "no-preview") + (() if overwrite else ("foreign",))   # (written meanwhile)
         todo = [s for s, st in zip(todo, states) if st not in kept]
@@ -383,15 +399,25 @@ def _dask_options(executor, workers, scheduler, client, retries, dashboard, tls)
 
 def _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_result, t0) -> BatchResult:
     """``run``'s rendering phase, with the output folders locked. ``previews``: finished
-    frames whose PNG preview is missing or stale, written from their EXRs."""
+    frames whose PNG preview is missing or stale, written from their EXRs (one whose EXR does
+    not decode is rendered again)."""
 
     remove_temp_files(specs)
+    todo = list(todo)
     log = _Log(res.log)
     log.write(event="start", manifest=m.path if m.path.startswith("<") else os.path.abspath(m.path),
               frames=len(specs), todo=len(todo), executor=executor, pid=os.getpid())
     for s in previews:
         try:
-            write_preview(s)
+            image, channels = read_frame(s["output"], with_names=True)
+        except DraawError as e:       # its header and chunk table pass, its pixels do not decode
+            log.write(event="damaged", job=s["job"], frame=s["frame"], output=s["output"], error=str(e),
+                      action="rendered again")
+            todo.append(s)
+            res.skipped -= 1
+            continue
+        try:
+            write_preview(s, image, channels)
             res.previews += 1
             log.write(event="preview", job=s["job"], frame=s["frame"], output=s["output"])
         except DraawError as e:
@@ -426,24 +452,48 @@ def _render(m, specs, todo, previews, cache, res, executor, dask, progress, on_r
         if on_result is not None:
             on_result(r)
 
+    finished = False
     try:
         if executor == "inprocess":
             run_inprocess(todo, cache, handle)
         else:
             # (the workers' scratch under the output folder, as every file of the run)
             run_dask(todo, handle, scratch=os.path.join(os.path.dirname(res.log), ".draaw-dask-scratch"), **dask)
+        finished = True
     finally:
         if bar is not None:
             bar.close()
         res.seconds = time.perf_counter() - t0
-        res.missing = sum(frame_status(s) != "done" for s in specs)
-        log.write(event="end", rendered=res.rendered, failed=len(res.failed), missing=res.missing,
-                  seconds=round(res.seconds, 3))
-        log.close()
-        res.log_error = log.error or ""
-    if m.contact_sheet:
-        try:
-            contact_sheets(specs)
-        except DraawError as e:      # the frames are what the run is for: report, keep the result
-            res.sheet_error = str(e)
+        if not finished:           # (interrupted: no contact sheets)
+            _end(res, specs, log)
+    try:
+        if m.contact_sheet:
+            _sheets(specs, res, log)
+    finally:
+        _end(res, specs, log)
     return res
+
+
+def _sheets(specs, res: BatchResult, log: _Log) -> None:
+    """Write the contact sheets; a frame that does not decode as they read it (damaged while
+    the run rendered: a run with sheets verified the finished frames first) goes to
+    ``res.damaged``."""
+    damaged: list = []
+    try:
+        contact_sheets(specs, damaged=damaged)
+    except DraawError as e:      # the frames are what the run is for: report, keep the result
+        res.sheet_error = str(e)
+    for s in damaged:
+        res.damaged.append(s["output"])
+        log.write(event="damaged", job=s["job"], frame=s["frame"], output=s["output"],
+                  error="its pixel data does not decode (read for the contact sheet)")
+
+
+def _end(res: BatchResult, specs, log: _Log) -> None:
+    """Count the frames missing on the disk (and those found damaged), write the log's end
+    record and close it."""
+    res.missing = sum(frame_status(s) != "done" for s in specs if s["output"] not in res.damaged) + len(res.damaged)
+    log.write(event="end", rendered=res.rendered, failed=len(res.failed), missing=res.missing,
+              seconds=round(res.seconds, 3))
+    log.close()
+    res.log_error = log.error or ""

@@ -6,8 +6,9 @@ import os
 
 import numpy as np
 
-from ..io import read_exr, write_png
-from .exr import frame_status
+from ..errors import IOFailure
+from ..io import write_png
+from .exr import frame_status, read_frame
 
 
 def sheet_path(first_frame: dict) -> str:
@@ -20,8 +21,11 @@ def sheet_path(first_frame: dict) -> str:
     return os.path.join(os.path.dirname(first_frame["output"]), f"{first_frame['job']}_contact.png")
 
 
-def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
-    """Write ``<first frame's folder>/<job>_contact.png`` for each job; return the paths."""
+def contact_sheets(specs, thumb: int = 128, columns: int = 6, damaged: list | None = None) -> list[str]:
+    """Write ``<first frame's folder>/<job>_contact.png`` for each job; return the paths.
+    A finished frame (:func:`~draaw_mi.batch.exr.frame_status` ``"done"``) whose pixel data
+    does not decode raises :class:`~draaw_mi.errors.IOFailure`; with a ``damaged`` list, its
+    spec is appended there instead and its sheet made of the other frames."""
     jobs: dict = {}
     for s in specs:
         jobs.setdefault(s["job"], []).append(s)
@@ -31,7 +35,13 @@ def contact_sheets(specs, thumb: int = 128, columns: int = 6) -> list[str]:
         for s in frames:
             if frame_status(s) != "done":
                 continue
-            img = read_exr(s["output"])[..., :3]
+            try:
+                img = read_frame(s["output"])[..., :3]
+            except IOFailure:
+                if damaged is None:
+                    raise
+                damaged.append(s)
+                continue
             step = max(1, math.ceil(max(img.shape[:2]) / thumb))
             tiles.append(img[::step, ::step])
         if not tiles:

@@ -300,14 +300,16 @@ def _cmd_batch(args) -> int:
     else:
         tls = None
     if args.status or args.dry_run:
-        st = batch.status(args.manifest, out=args.out, allow_outside_out=args.allow_outside_out)
+        st = batch.status(args.manifest, out=args.out, allow_outside_out=args.allow_outside_out,
+                          verify=args.verify)
         for f in st["frames"]:
             if args.dry_run or f["status"] != "done":
                 print(f"{f['job']:>16} {f['frame']:>5}  {f['status']:<10} {f['output']}"
                       + (f"  ({f['error']})" if f["error"] else ""))
         c = st["counts"]
         nopreview = f", {c['no-preview']} without their preview" if c["no-preview"] else ""
-        damaged = f", {c['damaged']} damaged (unreadable or cut short)" if c["damaged"] else ""
+        what = "unreadable, cut short or not decoding" if args.verify else "unreadable or cut short"
+        damaged = f", {c['damaged']} damaged ({what})" if c["damaged"] else ""
         damaged += f", {c['foreign']} made by another manifest" if c["foreign"] else ""
         print(f"{len(st['frames'])} frames: {c['done']} done, {c['missing']} missing, {c['stale']} stale "
               f"(other job settings){damaged}{nopreview}, {c['failed']} failed; log {st['log']}"
@@ -316,7 +318,7 @@ def _cmd_batch(args) -> int:
     res = batch.run(args.manifest, out=args.out, executor=args.executor, workers=args.workers,
                     scheduler=args.scheduler, progress=progress_mode(args.no_progress),
                     overwrite=args.overwrite, allow_outside_out=args.allow_outside_out, retries=args.retries,
-                    dashboard=args.dashboard, tls=tls)
+                    dashboard=args.dashboard, tls=tls, verify=args.verify)
     for r in res.failed:
         print(f"failed: {r['job']} frame {r['frame']}: {r['error']}", file=sys.stderr)
     print(res.summary())

@@ -149,6 +149,10 @@ def _batch_parser(sub) -> None:
     mode = a.add_mutually_exclusive_group()
     mode.add_argument("--dry-run", action="store_true", help="list the frames and their state; render nothing")
     mode.add_argument("--status", action="store_true", help="say which frames are done, missing or failed")
+    a.add_argument("--verify", action="store_true",
+                   help="decode every finished frame (with --status, --dry-run or a run): one whose pixel "
+                   "data does not decode is damaged, and a run renders it again (without it, a frame's "
+                   "header, offset table and chunk sizes are checked, not its compressed bytes)")
     a.add_argument("--overwrite", action="store_true",
                    help="replace frames that another manifest file rendered to the same outputs "
                    "(without it such a run is refused)")

@@ -444,7 +444,7 @@ def test_a_contact_sheet_that_cannot_be_written_leaves_the_run_complete(tmp_path
     from draaw_mi.cli import main
     from draaw_mi.errors import IOFailure
 
-    def failing(specs):
+    def failing(specs, damaged=None):
         raise IOFailure("write_png('x_contact.png'): disk full")
     monkeypatch.setattr(runner, "contact_sheets", failing)
     doc = manifest(tmp_path, frames=2)
