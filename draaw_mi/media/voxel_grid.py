@@ -139,7 +139,9 @@ class VoxelGrid:
             bbox_min = lo - pad if bbox_min is None else bbox_min
             bbox_max = hi + pad if bbox_max is None else bbox_max
         g = cls.empty(resolution, bbox_min, bbox_max, seed)
-        g.occupied = voxelize(tris, g.shape, g.bbox_min, g.bbox_max, fill)
+        name = repr(os.fspath(mesh)) if isinstance(mesh, (str, os.PathLike)) else f"the {type(mesh).__name__}"
+        g.occupied = voxelize(tris, g.shape, g.bbox_min, g.bbox_max, fill,
+                               name=f"VoxelGrid.from_mesh: mesh {name}")
         g.color[g.occupied] = _color(color, "VoxelGrid.from_mesh")
         return g
 

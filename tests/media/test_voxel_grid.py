@@ -230,6 +230,66 @@ def test_solid_voxelisation_matches_inside_test():
     assert not g.occupied[far].any()
 
 
+def _convex_inside(mesh, points):
+    """Closed form for a convex mesh: inside when behind every face's plane."""
+    n = np.asarray(mesh.face_normals)
+    v0 = np.asarray(mesh.triangles)[:, 0]
+    off = np.einsum("fk,fk->f", n, v0)
+    return np.all(points @ n.T - off <= 0, axis=-1)
+
+
+def _surface_band(g, mesh_tris, points):
+    """Points within half a cell diagonal of a triangle (where surface cells may be filled)."""
+    from draaw_mi.media.voxelize import _closest_sq_dist
+    half = 0.5 * float(np.linalg.norm(g.cell_size))
+    near = np.zeros(len(points), bool)
+    for a, b, c in mesh_tris:
+        near |= _closest_sq_dist(points, a, b, c) <= half * half
+    return near
+
+
+def test_solid_fill_of_a_closed_mesh_is_its_inside_without_a_warning():
+    """A closed (convex) mesh: the cells whose centres are inside it by the closed form are
+    filled, and none outside it beyond the surface band; no warning."""
+    import warnings
+    import trimesh
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        g = VoxelGrid.from_mesh(sphere, 20, fill="solid", bbox_min=(-1.2,) * 3, bbox_max=(1.2,) * 3)
+    c = g.centers().reshape(-1, 3)
+    occ = g.occupied.reshape(-1)
+    inside = _convex_inside(sphere, c)
+    assert inside.sum() > 1000 and occ[inside].all()
+    band = _surface_band(g, np.asarray(sphere.triangles), c)
+    assert not occ[~inside & ~band].any()
+
+
+def test_solid_fill_of_an_open_mesh_warns_and_fills_only_its_closed_parts():
+    """A closed sphere beside an open sheet (a quad at x = 1.5, crossed by lines along x):
+    the sheet has no inside, so it is a surface only; the sphere is filled as alone, and
+    nothing else. (A parity count along x through the sheet had filled every line crossing it
+    out to the box's +x face; GO-Draaw's monkey.obj filled 88 % of its box.)"""
+    import trimesh
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    sheet = trimesh.Trimesh(vertices=[[1.5, -1.1, -1.1], [1.5, 1.1, -1.1], [1.5, 1.1, 1.1], [1.5, -1.1, 1.1]],
+                            faces=[[0, 1, 2], [0, 2, 3]], process=False)
+    both = trimesh.util.concatenate([sphere, sheet])
+    box = dict(bbox_min=(-1.2, -1.2, -1.2), bbox_max=(2.4, 1.2, 1.2))
+    with pytest.warns(RuntimeWarning, match=r"VoxelGrid.from_mesh: mesh the Trimesh is not closed: 4 edges "
+                                            r".* 2 of its 322 triangles.*fill_holes.*fill='surface'"):
+        g = VoxelGrid.from_mesh(both, (30, 20, 20), fill="solid", **box)
+    c = g.centers().reshape(-1, 3)
+    occ = g.occupied.reshape(-1)
+    inside = _convex_inside(sphere, c)
+    assert occ[inside].all()
+    band = _surface_band(g, np.asarray(both.triangles), c)
+    assert not occ[~inside & ~band].any(), f"{int(occ[~inside & ~band].sum())} cells filled outside"
+    alone = VoxelGrid.from_mesh(sphere, (30, 20, 20), fill="solid", **box)
+    surface = VoxelGrid.from_mesh(sheet, (30, 20, 20), fill="surface", **box)
+    assert np.array_equal(g.occupied, alone.occupied | surface.occupied)
+
+
 def go_draaw_reference_voxelize(tris, shape, lo, hi):
     """GO-Draaw's rule verbatim: plane distance <= 0.5 max(step), barycentric inside."""
     shape = np.asarray(shape)
