@@ -12,6 +12,7 @@ import numbers
 import numpy as np
 
 from ..errors import ParameterError
+from ..limits import grid_size_problem
 
 
 def _smooth_noise(shape, cells: int, rng) -> np.ndarray:
@@ -42,6 +43,9 @@ def plume(resolution=(48, 64, 48), seed: int = 0, sharpness: float = 3.0) -> np.
         raise ParameterError(f"plume: resolution {resolution!r}; expected an integer or "
                              "(nx, ny, nz) integers >= 1")
     shape = tuple(int(v) for v in shape)
+    too_large = grid_size_problem(shape)
+    if too_large:
+        raise ParameterError(f"plume: resolution {too_large}")
     rng = np.random.default_rng(seed)
     x, y, z = np.meshgrid(*[(np.arange(n) + 0.5) / n for n in shape], indexing="ij")
     drift = 0.12 * np.sin(3.0 * y + rng.uniform(0, 6.3)) + 0.15 * y

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import IOFailure, ParameterError
 from ..io import atomic_path
-from ..limits import FLOAT32_MAX
+from ..limits import FLOAT32_MAX, grid_size_problem
 from .pick import traverse
 from .volfile import read_vol, write_vol
 from .voxelize import load_triangles, voxelize
@@ -74,7 +74,8 @@ class VoxelGrid:
     @classmethod
     def empty(cls, resolution, bbox_min=(-0.5, -0.5, -0.5), bbox_max=(0.5, 0.5, 0.5),
               seed: int | None = 0) -> "VoxelGrid":
-        """An empty grid (no voxels, no smoke). ``resolution``: an int or ``(nx, ny, nz)``."""
+        """An empty grid (no voxels, no smoke). ``resolution``: an int or ``(nx, ny, nz)``, at most
+        :data:`~draaw_mi.limits.MAX_GRID_CELLS` cells (2^26, ~4.5 GB to voxelise and render)."""
         shape = _resolution(resolution, "VoxelGrid.empty")
         return cls(np.zeros(shape, bool), np.zeros(shape + (3,), np.float32),
                    np.zeros(shape, np.float32), np.full(shape + (3,), 0.8, np.float32),
@@ -109,6 +110,8 @@ class VoxelGrid:
         if shape is None:
             raise ParameterError("VoxelGrid.from_arrays: give at least one of occupied, density or a "
                                  "per-voxel colour array")
+        if grid_size_problem(shape):
+            raise ParameterError(f"VoxelGrid.from_arrays: arrays of shape {grid_size_problem(shape)}")
         g = cls.empty(shape, bbox_min, bbox_max, seed)
         if occupied is not None:
             g.occupied = np.asarray(occupied, bool).copy()
@@ -445,4 +448,7 @@ def _resolution(value, where: str) -> Index:
         raise ParameterError(f"{where}: resolution {value!r}; expected an int or (nx, ny, nz)") from None
     if len(t) != 3 or min(t) < 1 or any(v != w for v, w in zip(t, value)):
         raise ParameterError(f"{where}: resolution {value!r}; expected an int or (nx, ny, nz) of ints >= 1")
+    too_large = grid_size_problem(t)
+    if too_large:
+        raise ParameterError(f"{where}: resolution {too_large}")
     return t

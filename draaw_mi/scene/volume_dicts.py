@@ -30,7 +30,7 @@ import os
 import numpy as np
 
 from ..errors import DraawError, ParameterError
-from ..limits import FLOAT32_MAX, HG_G_MAX
+from ..limits import FLOAT32_MAX, HG_G_MAX, grid_size_problem
 from ..media.faces import solid_meshes
 from ..media.mitsuba_dicts import FILTERS, smoke_shape
 from ..media.procedural import plume
@@ -63,18 +63,24 @@ def _array(value, where, key):
     return arr
 
 
-#: voxels per axis at most (4800 per axis would ask for 885 GB of float64 and kill the process)
+#: voxels per axis at most; the grid's cells at most limits.MAX_GRID_CELLS (2^26, ~4.5 GB)
 MAX_GRID_RESOLUTION = 1024
 
 
 def _grid_resolution(value, where):
-    """Voxels per axis: one integer in [1, MAX_GRID_RESOLUTION] for all three, or a list of three."""
+    """Voxels per axis: one integer in [1, MAX_GRID_RESOLUTION] for all three, or a list of
+    three, making at most :data:`~draaw_mi.limits.MAX_GRID_CELLS` cells."""
     hi = MAX_GRID_RESOLUTION
     if isinstance(value, (list, tuple)):
         if len(value) != 3:
             raise where.error(f"{value!r}; expected an integer or a list of 3 integers (voxels per axis)")
-        return tuple(int(number(v, where / i, lo=1, hi=hi, integer=True)) for i, v in enumerate(value))
-    return int(number(value, where, lo=1, hi=hi, integer=True))
+        res = tuple(int(number(v, where / i, lo=1, hi=hi, integer=True)) for i, v in enumerate(value))
+    else:
+        res = int(number(value, where, lo=1, hi=hi, integer=True))
+    too_large = grid_size_problem(res if isinstance(res, tuple) else (res,) * 3)
+    if too_large:
+        raise where.error(too_large)
+    return res
 
 
 def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:

@@ -59,6 +59,24 @@ def test_validation_errors_name_the_field():
         VoxelGrid.empty(2).paint((1, 0, 0), randomness=-1)
 
 
+def test_a_grid_too_large_for_memory_is_refused_with_its_size():
+    """Past limits.MAX_GRID_CELLS (2^26) a grid is refused before anything is allocated, with
+    the estimated memory (numpy had said 'Unable to allocate 909 TiB', or died at 1024^3)."""
+    from draaw_mi.limits import MAX_GRID_CELLS
+    from draaw_mi.media.procedural import plume
+    with pytest.raises(ParameterError, match=r"VoxelGrid.empty: resolution \(100000, 100000, 100000\) is "
+                                             r"1,000,000,000,000,000 cells \(~6\.7e\+07 GB"):
+        VoxelGrid.empty(100000)
+    with pytest.raises(ParameterError, match=r"VoxelGrid.empty: resolution \(512, 512, 257\) is .* expected at "
+                                             r"most 67,108,864 cells"):
+        VoxelGrid.empty((512, 512, 257))
+    with pytest.raises(ParameterError, match=r"VoxelGrid.from_arrays: arrays of shape \(67108865, 1, 1\) is"):
+        VoxelGrid.from_arrays(density=np.broadcast_to(np.float32(0), (MAX_GRID_CELLS + 1, 1, 1)))
+    with pytest.raises(ParameterError, match=r"plume: resolution \(4096, 4096, 8\) is"):
+        plume((4096, 4096, 8))
+    assert VoxelGrid.empty((MAX_GRID_CELLS // 4, 2, 2), seed=1).shape == (MAX_GRID_CELLS // 4, 2, 2)
+
+
 # --------------------------------------------------------------------------- picking
 def test_pick_matches_exact_ray_box_reference():
     rng = np.random.default_rng(3)

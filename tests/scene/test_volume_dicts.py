@@ -99,6 +99,9 @@ def base_desc(**vol):
      r"procedural\.resolution\[0\]: 8\.5 is not an integer"),
     ({"density": None, "procedural": {"type": "plume", "resolution": [8, 8]}}, r"list of 3 integers"),
     ({"density": None, "procedural": {"type": "plume", "resolution": 4800}}, r"4800 is out of range"),
+    # within 1024 per axis but too many cells: 1024^3 had died in numpy's allocator (~72 GB)
+    ({"density": None, "procedural": {"type": "plume", "resolution": [1024, 1024, 128]}},
+     r"procedural\.resolution: \(1024, 1024, 128\) is 134,217,728 cells \(~8\.99 GB .* at most 67,108,864"),
     # keys that were taken and ignored: a second grid beside a procedural one, a mesh's
     # voxelisation settings on a grid that is no mesh
     ({"procedural": {"type": "plume"}}, r"one of 'file', 'procedural' or inline arrays, not procedural and density"),
@@ -115,6 +118,18 @@ def test_bad_volume_entries_are_one_scene_error(vol, match):
         draaw_mi.load_scene(desc)
     assert "\n" not in str(e.value)
     assert str(e.value).count("volumes[0]") == 1     # one location (g named it twice)
+
+
+def test_a_mesh_voxelised_past_the_cell_limit_is_a_scene_error(tmp_path):
+    """resolution = 1024 passes the per-axis bound but is 2^30 cells (~72 GB): refused by name
+    before voxelising (it had died in numpy's allocator)."""
+    import trimesh
+    trimesh.creation.box().export(tmp_path / "box.obj")
+    desc = base_desc(mode="solid", file=str(tmp_path / "box.obj"), resolution=1024)
+    del desc["volumes"][0]["density"]
+    with pytest.raises(SceneError, match=r"volumes\[0\]\.resolution: \(1024, 1024, 1024\) is 1,073,741,824 "
+                                         r"cells \(~71\.9 GB .* expected at most 67,108,864 cells"):
+        draaw_mi.load_scene(desc)
 
 
 def test_truncated_vol_file_is_a_scene_error_and_cli_exit_2(tmp_path):
