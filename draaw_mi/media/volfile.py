@@ -34,7 +34,8 @@ def read_vol(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a ``.vol`` file: ``(data (Z, Y, X, C) float32, bbox_min (3,), bbox_max (3,))``.
 
     Raises :class:`IOFailure` for a missing/unreadable file and :class:`ParameterError` for a
-    malformed one (bad magic, unsupported encoding, non-positive sizes, truncated data).
+    malformed one (bad magic, unsupported encoding, non-positive sizes, truncated data, bytes
+    after the data). The header box is returned as stored, even when empty (Mitsuba ignores it).
     """
     path = os.fspath(path)
     try:
@@ -59,6 +60,10 @@ def read_vol(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if body < 4 * n:
         raise ParameterError(f"read_vol({path!r}): {body} data bytes for a {xr}x{yr}x{zr}x{ch} grid; "
                              f"expected {4 * n} (truncated file)")
+    if body > 4 * n:
+        # (a size field written wrong, or two grids in one file: not to be read as this one)
+        raise ParameterError(f"read_vol({path!r}): {body} data bytes for a {xr}x{yr}x{zr}x{ch} grid; "
+                             f"expected {4 * n} ({body - 4 * n} bytes after the data)")
     data = np.frombuffer(raw, dtype="<f4", count=n, offset=_HEADER.size)
     data = data.reshape(zr, yr, xr, ch).astype(np.float32)
     lo = np.array(box[:3], dtype=np.float64)
@@ -67,15 +72,35 @@ def read_vol(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def write_vol(path: str, data: np.ndarray, bbox_min, bbox_max) -> None:
-    """Write ``data`` of shape (Z, Y, X, C) (or (Z, Y, X)) as a float32 ``.vol``, atomically."""
+    """Write ``data`` of shape (Z, Y, X, C) (or (Z, Y, X)) as a float32 ``.vol``, atomically.
+
+    The data must be real, finite and >= 0 (densities, albedos: what a grid volume holds) and
+    the box ``bbox_min < bbox_max``, two 3-vectors; anything else is a :class:`ParameterError`
+    (:meth:`VoxelGrid.from_vol <draaw_mi.media.VoxelGrid.from_vol>` would refuse the file)."""
+    path = os.fspath(path)
+    if np.iscomplexobj(data):
+        raise ParameterError(f"write_vol({path!r}): complex data; expected real values")
     arr = np.asarray(data, dtype=np.float32)
     if arr.ndim == 3:
         arr = arr[..., None]
     if arr.ndim != 4 or min(arr.shape) < 1:
         raise ParameterError(f"write_vol({path!r}): data of shape {arr.shape}; expected (Z, Y, X[, C])")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ParameterError(f"write_vol({path!r}): data{list(first)} = {float(arr[first])!r}; expected finite "
+                             "values >= 0")
+    try:
+        lo = np.asarray(bbox_min, dtype=np.float64).reshape(-1)
+        hi = np.asarray(bbox_max, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        lo = hi = np.empty(0)
+    if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) \
+            or np.any(hi <= lo):
+        raise ParameterError(f"write_vol({path!r}): box {bbox_min!r}..{bbox_max!r}; expected two finite "
+                             "3-vectors with bbox_min < bbox_max on every axis")
     zr, yr, xr, ch = arr.shape
-    lo = [float(v) for v in bbox_min]
-    hi = [float(v) for v in bbox_max]
+    lo, hi = lo.tolist(), hi.tolist()
     header = _HEADER.pack(b"VOL", 3, 1, xr, yr, zr, ch, *lo, *hi)
     with atomic_path(path, ".vol") as tmp:
         with open(tmp, "wb") as f:

@@ -406,6 +406,14 @@ class VoxelGrid:
         except OSError as e:
             raise IOFailure(f"VoxelGrid.load({path!r}): {e.strerror or e}") from None
         except (ValueError, EOFError) as e:
+            with open(path, "rb") as f:
+                head = f.read(4)
+            if head[:3] == b"VOL":
+                raise IOFailure(f"VoxelGrid.load({path!r}): a Mitsuba .vol grid, not a .npz; read it with "
+                                "VoxelGrid.from_vol") from None
+            if head != b"PK\x03\x04":
+                raise IOFailure(f"VoxelGrid.load({path!r}): not a .npz file (no zip archive's header); "
+                                "expected a grid written by VoxelGrid.save") from None
             raise IOFailure(f"VoxelGrid.load({path!r}): not a readable .npz file ({e})") from None
         kw = {k: data[k] for k in ("occupied", "color", "density", "smoke_color") if k in data}
         if "bbox_min" in data:
@@ -418,18 +426,41 @@ class VoxelGrid:
             raise ParameterError(f"VoxelGrid.load({path!r}): {e}") from None
 
     @classmethod
-    def from_vol(cls, path: str, seed: int | None = 0) -> "VoxelGrid":
-        """Import a density grid from Mitsuba's ``.vol`` format (1 channel: density; 3
-        channels: the mean is the density). Bounds come from the file."""
+    def from_vol(cls, path: str, what: str = "density", bbox_min=None, bbox_max=None,
+                 seed: int | None = 0) -> "VoxelGrid":
+        """Import a grid from Mitsuba's ``.vol`` format: a 1-channel file as the density
+        (``what="density"``) or a 3-channel one as the smoke colour (``what="smoke_color"``,
+        the density then 0), as :meth:`save_vol` writes them; a file of another channel count
+        is refused, naming what it holds. The world box is ``bbox_min .. bbox_max`` where given
+        (the header's box is then not read: Mitsuba ignores it, and may have left it empty),
+        else the header's."""
+        path = os.fspath(path)
+        if what not in ("density", "smoke_color"):
+            raise ParameterError(f"VoxelGrid.from_vol({path!r}): what={what!r}; expected 'density' or "
+                                 "'smoke_color'")
         data, lo, hi = read_vol(path)
-        dens = data.mean(axis=3).transpose(2, 1, 0)            # (Z, Y, X) -> [ix, iy, iz]
+        ch = data.shape[3]
+        want = 1 if what == "density" else 3
+        if ch != want:
+            kind = {1: "a density grid", 3: "a colour grid, as save_vol(what='smoke_color') writes"}.get(
+                ch, "neither a density nor a colour grid")
+            hint = {1: "; read it with what='density'", 3: "; read it with what='smoke_color'"}.get(ch, "")
+            raise ParameterError(f"VoxelGrid.from_vol({path!r}): the file has {ch} channels ({kind}); "
+                                 f"what={what!r} reads {want}{hint}")
+        arr = data.transpose(2, 1, 0, 3)                       # (Z, Y, X, C) -> [ix, iy, iz, c]
+        kw = {"density": arr[..., 0]} if what == "density" else {"smoke_color": arr}
         try:
-            return cls.from_arrays(density=dens, bbox_min=lo, bbox_max=hi, seed=seed)
+            return cls.from_arrays(bbox_min=lo if bbox_min is None else bbox_min,
+                                   bbox_max=hi if bbox_max is None else bbox_max, seed=seed, **kw)
         except ParameterError as e:
             raise ParameterError(f"VoxelGrid.from_vol({path!r}): {e}") from None
 
     def save_vol(self, path: str, what: str = "density") -> None:
         """Write ``density`` (1 channel) or ``smoke_color`` (3 channels) as a Mitsuba ``.vol``."""
+        path = os.fspath(path)
+        if not path.lower().endswith(".vol"):
+            raise ParameterError(f"VoxelGrid.save_vol({path!r}): expected a .vol file name "
+                                 "(save writes .npz grids)")
         if what == "density":
             arr = self.density[..., None]
         elif what == "smoke_color":

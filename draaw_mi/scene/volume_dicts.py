@@ -109,7 +109,7 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
             if low.endswith(".npz"):
                 g = VoxelGrid.load(path, seed=seed)
             elif low.endswith(".vol"):
-                g = VoxelGrid.from_vol(path, seed=seed)
+                g = VoxelGrid.from_vol(path, seed=seed, **kw)    # (its header box read only without bounds)
             elif low.endswith(MESH_SUFFIXES):
                 res = _grid_resolution(entry.get("resolution", 64), where / "resolution")
                 fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))

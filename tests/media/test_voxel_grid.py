@@ -520,6 +520,82 @@ def test_a_vol_of_another_version_or_encoding_or_with_an_empty_side_is_refused(t
     assert read_vol(_vol_header(tmp_path / "ok.vol"))[0].shape == (2, 2, 2, 1)   # the same, valid
 
 
+def test_a_vol_is_read_as_the_kind_it_holds(tmp_path):
+    """A 3-channel .vol (save_vol(what='smoke_color')) was read as a density (the mean of the
+    albedo channels) and a 2-channel one taken: each kind is read only when asked for, and
+    bytes after the data are refused."""
+    rng = np.random.default_rng(2)
+    g = VoxelGrid.from_arrays(density=rng.random((3, 4, 2)), smoke_color=rng.random((3, 4, 2, 3)))
+    c, d = str(tmp_path / "c.vol"), str(tmp_path / "d.vol")
+    g.save_vol(c, what="smoke_color")
+    g.save_vol(d)
+    with pytest.raises(ParameterError, match=r"VoxelGrid.from_vol\('.*c\.vol'\): the file has 3 channels \(a "
+                                             r"colour grid, as save_vol\(what='smoke_color'\) writes\); "
+                                             r"what='density' reads 1; read it with what='smoke_color'"):
+        VoxelGrid.from_vol(c)
+    h = VoxelGrid.from_vol(c, what="smoke_color")
+    assert np.array_equal(h.smoke_color, g.smoke_color) and not h.density.any()
+    with pytest.raises(ParameterError, match=r"d\.vol'\): the file has 1 channels \(a density grid\); "
+                                             r"what='smoke_color' reads 3; read it with what='density'"):
+        VoxelGrid.from_vol(d, what="smoke_color")
+    assert np.array_equal(VoxelGrid.from_vol(d).density, g.density)
+    two = tmp_path / "two.vol"
+    write_vol(two, rng.random((2, 2, 2, 2)), (0, 0, 0), (1, 1, 1))
+    with pytest.raises(ParameterError, match=r"the file has 2 channels \(neither a density nor a colour grid\)"):
+        VoxelGrid.from_vol(two)
+    extra = tmp_path / "extra.vol"
+    extra.write_bytes(open(d, "rb").read() + b"junk")
+    with pytest.raises(ParameterError, match=r"read_vol\(.*extra\.vol'\): 100 data bytes for a 3x4x2x1 grid; "
+                                             r"expected 96 \(4 bytes after the data\)"):
+        VoxelGrid.from_vol(extra)
+
+
+def test_a_vol_with_an_empty_header_box_is_placed_by_the_box_given(tmp_path):
+    """Mitsuba ignores a .vol's header box, and a file may leave it empty: with bbox_min /
+    bbox_max given the file is read (it had been refused for the box it was not to use)."""
+    import struct
+    p = tmp_path / "flat.vol"
+    vals = np.arange(8, dtype="<f4")
+    p.write_bytes(struct.pack("<3sBiiiii6f", b"VOL", 3, 1, 2, 2, 2, 1, 0, 0, 0, 0, 0, 0) + vals.tobytes())
+    with pytest.raises(ParameterError, match=r"from_vol\(.*flat\.vol'\): .*bounds .* are empty"):
+        VoxelGrid.from_vol(p)
+    g = VoxelGrid.from_vol(p, bbox_min=(-1, 0, 0), bbox_max=(1, 2, 3))
+    assert g.bbox_min.tolist() == [-1, 0, 0] and g.bbox_max.tolist() == [1, 2, 3]
+    assert np.array_equal(g.density, vals.reshape(2, 2, 2).transpose(2, 1, 0))
+
+
+@pytest.mark.parametrize("data, lo, hi, message", [
+    (np.ones((2, 2, 2)), (0, 0), (1, 1, 1), r"box \(0, 0\)\.\.\(1, 1, 1\); expected two finite 3-vectors"),
+    (np.ones((2, 2, 2)), (1, 1, 1), (0, 0, 0), r"box \(1, 1, 1\)\.\.\(0, 0, 0\); .* with bbox_min < bbox_max"),
+    (np.full((2, 2, 2), np.nan), (0, 0, 0), (1, 1, 1), r"data\[0, 0, 0, 0\] = nan; expected finite values >= 0"),
+    (-np.ones((2, 2, 2)), (0, 0, 0), (1, 1, 1), r"data\[0, 0, 0, 0\] = -1\.0; expected finite values >= 0"),
+    (np.ones((2, 2, 2)) * (1 + 1j), (0, 0, 0), (1, 1, 1), r"complex data; expected real values"),
+])
+def test_write_vol_refuses_what_from_vol_would_refuse(tmp_path, data, lo, hi, message):
+    """A box of 2 values was a bare struct.error; an inverted box, NaN or negative data were
+    written, to be refused when read back."""
+    p = tmp_path / "w.vol"
+    with pytest.raises(ParameterError, match=r"write_vol\('.*w\.vol'\): " + message):
+        write_vol(p, data, lo, hi)
+    assert not p.exists()
+
+
+def test_file_names_and_kinds_mixed_up_are_named(tmp_path):
+    """save_vol under a .npz name wrote a .vol there; load of a .vol said 'pickled object
+    data ... allow_pickle'."""
+    g = VoxelGrid.from_arrays(density=np.ones((2, 2, 2)))
+    with pytest.raises(ParameterError, match=r"VoxelGrid.save_vol\('.*y\.npz'\): expected a \.vol file name"):
+        g.save_vol(str(tmp_path / "y.npz"))
+    assert not (tmp_path / "y.npz").exists()
+    g.save_vol(str(tmp_path / "x.vol"))
+    with pytest.raises(IOFailure, match=r"VoxelGrid.load\('.*x\.vol'\): a Mitsuba \.vol grid, not a \.npz; "
+                                        r"read it with VoxelGrid.from_vol"):
+        VoxelGrid.load(str(tmp_path / "x.vol"))
+    (tmp_path / "t.npz").write_text("hello")
+    with pytest.raises(IOFailure, match=r"t\.npz'\): not a \.npz file"):
+        VoxelGrid.load(str(tmp_path / "t.npz"))
+
+
 def test_an_empty_mesh_has_no_triangles_to_voxelise():
     """trimesh.Trimesh() has no faces: one ParameterError, not a (0, 3, 3) array that
     voxelises to an empty grid."""

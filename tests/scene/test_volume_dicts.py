@@ -150,6 +150,24 @@ def test_truncated_vol_file_is_a_scene_error_and_cli_exit_2(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("draaw-mi: error:") and "truncated" in lines[0]
 
 
+def test_a_vol_with_an_empty_header_box_loads_at_the_entrys_bounds(tmp_path):
+    """Mitsuba ignores a .vol's header box: with 'bounds' the entry places the grid, and a
+    file whose header box is empty loads (it had been refused before 'bounds' applied)."""
+    import struct
+    vals = np.arange(1, 9, dtype="<f4")
+    (tmp_path / "flat.vol").write_bytes(struct.pack("<3sBiiiii6f", b"VOL", 3, 1, 2, 2, 2, 1, *[0.0] * 6)
+                                        + vals.tobytes())
+    desc = base_desc(file=str(tmp_path / "flat.vol"))
+    del desc["volumes"][0]["density"]
+    s = draaw_mi.load_scene(desc)
+    assert s.summary()["volumes"][0]["bounds"] == [[-1, -1, -1], [1, 1, 1]]
+    data = np.array(mi.traverse(s.mi_scene)["v.interior_medium.sigma_t.data"])
+    assert np.array_equal(data.reshape(-1), vals)
+    del desc["volumes"][0]["bounds"]
+    with pytest.raises(SceneError, match=r"volumes\[0\]: VoxelGrid.from_vol\(.*flat\.vol'\).*are empty"):
+        draaw_mi.load_scene(desc)
+
+
 def test_npz_and_vol_sources_give_the_same_medium(tmp_path):
     rng = np.random.default_rng(0)
     g = VoxelGrid.from_arrays(density=rng.random((4, 3, 5)), bbox_min=(-1, -1, -1), bbox_max=(1, 1, 1))
