@@ -22,6 +22,7 @@ Example::
 """
 from __future__ import annotations
 
+import copy
 import os
 
 import mitsuba as mi
@@ -86,6 +87,11 @@ class VoxelGrid:
                     bbox_min=(-0.5, -0.5, -0.5), bbox_max=(0.5, 0.5, 0.5), seed: int | None = 0):
         """A grid from any subset of the arrays (the others default to empty / 0.8 grey);
         every given array must have the same ``(nx, ny, nz)``. A colour may be one RGB triple."""
+        for name, a in (("occupied", occupied), ("color", color), ("density", density),
+                        ("smoke_color", smoke_color)):
+            if a is not None and np.iscomplexobj(a):
+                # (numpy would drop the imaginary part with only a ComplexWarning)
+                raise ParameterError(f"VoxelGrid.from_arrays: {name} is complex; expected real values")
         shape = None
         for name, a in (("occupied", occupied), ("density", density)):
             if a is not None:
@@ -188,9 +194,11 @@ class VoxelGrid:
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
     def copy(self) -> "VoxelGrid":
+        """An independent copy, its generator's state included: the copy's random edits repeat
+        the original's, and copying leaves the original's stream as it was."""
         g = VoxelGrid(self.occupied.copy(), self.color.copy(), self.density.copy(),
                       self.smoke_color.copy(), self.bbox_min.copy(), self.bbox_max.copy())
-        g.rng = np.random.default_rng(self.rng.bit_generator.random_raw())
+        g.rng = copy.deepcopy(self.rng)
         return g
 
     def __repr__(self) -> str:
@@ -248,9 +256,12 @@ class VoxelGrid:
         Exact: a DDA visits every cell the ray crosses (fixes GO-Draaw's 64 fixed steps, which
         skip thin features and can pick a cell behind the visible one)."""
         d = np.asarray(direction, float)
-        if not np.all(np.isfinite(d)) or not np.any(d != 0):
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d != 0):
             raise ParameterError(f"VoxelGrid.pick: direction {direction!r}; expected a finite non-zero vector")
-        for cell, _, _ in traverse(origin, d, self.bbox_min, self.bbox_max, self.shape):
+        o = np.asarray(origin, float)
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise ParameterError(f"VoxelGrid.pick: origin {origin!r}; expected a finite 3-vector")
+        for cell, _, _ in traverse(o, d, self.bbox_min, self.bbox_max, self.shape):
             if self.occupied[cell]:
                 return cell
         return None
@@ -258,8 +269,8 @@ class VoxelGrid:
     def pick_pixel(self, sensor, x: float, y: float) -> Index | None:
         """First occupied cell under pixel ``(x, y)`` (pixel centre at ``+0.5``) of a Mitsuba
         sensor (or a scene / :class:`~draaw_mi.scene.DraawScene`, whose first sensor is used)."""
-        if hasattr(sensor, "scene"):
-            sensor = sensor.scene
+        if hasattr(sensor, "mi_scene"):                 # a DraawScene (not imported: a layer above)
+            sensor = sensor.mi_scene
         if isinstance(sensor, mi.Scene):
             sensor = sensor.sensors()[0]
         w, h = sensor.film().crop_size()

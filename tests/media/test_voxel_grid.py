@@ -146,6 +146,50 @@ def test_pick_pixel_uses_the_sensor_ray():
         g.pick_pixel(sensor, 9, 0)
 
 
+def test_pick_pixel_takes_a_draaw_scene_as_its_first_sensor():
+    """The docstring takes a DraawScene: it had raised AttributeError (no 'film')."""
+    g = VoxelGrid.empty((5, 5, 5), (-1, -1, -1), (1, 1, 1))
+    g.occupied[2, 2, 4] = True
+    scene = draaw_mi.load_scene({"render": {"resolution": [9, 9], "spp": 1},
+                                 "camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 30},
+                                 "lights": [{"type": "constant", "intensity": 0.5}],
+                                 "shapes": [{"type": "sphere", "center": [5, 5, -5], "radius": 0.1}]})
+    sensor = scene.mi_scene.sensors()[0]
+    for x, y in ((4, 4), (0, 0), (3, 5)):
+        assert g.pick_pixel(scene, x, y) == g.pick_pixel(scene.mi_scene, x, y) == g.pick_pixel(sensor, x, y)
+    assert g.pick_pixel(scene, 4, 4) == (2, 2, 4)
+
+
+def test_pick_refuses_a_nan_or_malformed_origin():
+    """A NaN origin had returned None with numpy's 'invalid value' warning."""
+    g = VoxelGrid.empty(4)
+    for origin in ((np.nan, 0, 0), (0, 0), (0, np.inf, 0)):
+        with pytest.raises(ParameterError, match=r"VoxelGrid.pick: origin .*; expected a finite 3-vector"):
+            g.pick(origin, (1, 0, 0))
+
+
+def test_copy_keeps_both_generators_where_they_were():
+    """copy() drew a seed from the original's generator, so the original's later random edits
+    were not those it would have made uncopied; now the copy repeats them."""
+    def edits(g):
+        g.paint((0.5, 0.5, 0.5), randomness=0.5)
+        return g.color.copy()
+    grid = VoxelGrid.from_arrays(occupied=np.ones((3, 3, 3)), seed=5)
+    uncopied = edits(VoxelGrid.from_arrays(occupied=np.ones((3, 3, 3)), seed=5))
+    twin = grid.copy()
+    assert np.array_equal(edits(grid), uncopied)
+    assert np.array_equal(edits(twin), uncopied)
+
+
+def test_complex_arrays_are_refused():
+    """numpy had dropped the imaginary part with only a ComplexWarning."""
+    for kw in (dict(density=np.ones((2, 2, 2)) * (1 + 1j)), dict(occupied=np.ones((2, 2, 2)),
+                                                                 color=np.full((2, 2, 2, 3), 0.5 + 0j))):
+        name = "density" if "density" in kw else "color"
+        with pytest.raises(ParameterError, match=rf"VoxelGrid.from_arrays: {name} is complex; expected real"):
+            VoxelGrid.from_arrays(**kw)
+
+
 # --------------------------------------------------------------------------- editing
 def test_draw_erase_via_ray_and_index():
     g = VoxelGrid.empty((4, 4, 4), (0, 0, 0), (1, 1, 1))
