@@ -112,8 +112,9 @@ for version in ("v4", "volpath"):
     t0 = time.perf_counter()
     imgs = np.array([np.array(draaw_mi.render(scene, version=version, seed=s, post=[]))[..., :3] for s in seeds])
     images[version], means[version] = imgs.mean(axis=0), imgs.mean()
-    # pixels are independent: the image mean's standard error pools the per-pixel variances
-    ses[version] = np.sqrt(imgs.var(axis=0, ddof=1).sum() / len(seeds)) / imgs[0].size
+    # the seeds are independent renders (a pixel's R, G and B come from the same paths, so
+    # per-pixel variances may not be pooled as independent): the spread of the per-seed means
+    ses[version] = imgs.mean(axis=(1, 2, 3)).std(ddof=1) / np.sqrt(len(seeds))
     print(f"{version:8s} image mean {means[version]:.5f} +- {ses[version]:.5f} "
           f"({len(seeds)} seeds x {SPP} spp, {time.perf_counter() - t0:.1f} s)")
 z = (means["v4"] - means["volpath"]) / np.hypot(ses["v4"], ses["volpath"])

@@ -119,7 +119,7 @@ def _check_voxels_smoke(text):
     draws (2, 4, 4); a ray along +x through row (:, 4, 4) first hits (2, 4, 4), then, once
     that is erased, (4, 4, 4); 27 voxels remain; the camera on +z looking down -z through the
     same row sees (4, 4, 5) first. draaw_v4 and volpath agree on the image mean within the
-    pooled per-pixel noise; the albedo gradient agrees with FD; one step lowers the loss."""
+    spread of the per-seed means; the albedo gradient agrees with FD; one step lowers the loss."""
     import re
     assert "pick along +x: (2, 4, 4)" in text
     assert "erased: (2, 4, 4) -> pick along +x: (4, 4, 4)" in text
