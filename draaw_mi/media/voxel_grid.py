@@ -87,11 +87,6 @@ class VoxelGrid:
                     bbox_min=(-0.5, -0.5, -0.5), bbox_max=(0.5, 0.5, 0.5), seed: int | None = 0):
         """A grid from any subset of the arrays (the others default to empty / 0.8 grey);
         every given array must have the same ``(nx, ny, nz)``. A colour may be one RGB triple."""
-        for name, a in (("occupied", occupied), ("color", color), ("density", density),
-                        ("smoke_color", smoke_color)):
-            if a is not None and np.iscomplexobj(a):
-                # (numpy would drop the imaginary part with only a ComplexWarning)
-                raise ParameterError(f"VoxelGrid.from_arrays: {name} is complex; expected real values")
         shape = None
         for name, a in (("occupied", occupied), ("density", density)):
             if a is not None:
@@ -116,6 +111,11 @@ class VoxelGrid:
         if shape is None:
             raise ParameterError("VoxelGrid.from_arrays: give at least one of occupied, density or a "
                                  "per-voxel colour array")
+        for name, a in (("occupied", occupied), ("color", color), ("density", density),
+                        ("smoke_color", smoke_color)):
+            if a is not None and np.iscomplexobj(a):
+                # (numpy would drop the imaginary part with only a ComplexWarning)
+                raise ParameterError(f"VoxelGrid.from_arrays: {name} is complex; expected real values")
         if grid_size_problem(shape):
             raise ParameterError(f"VoxelGrid.from_arrays: arrays of shape {grid_size_problem(shape)}")
         g = cls.empty(shape, bbox_min, bbox_max, seed)
