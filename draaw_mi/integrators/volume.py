@@ -67,11 +67,12 @@ class MediaTable:
                 raise RenderError(f"draaw integrators: a participating medium on a shape inside a "
                                   f"shapegroup ({shape.id() or shape.class_name()}) is not supported; "
                                   "move the shape out of the group, or render with volpath")
-        media, inside = [], []
+        media, inside, names = [], [], []
         for shape in top:
-            for m in (shape.interior_medium(), shape.exterior_medium()):
+            for m, side in ((shape.interior_medium(), "interior_medium"), (shape.exterior_medium(), "exterior_medium")):
                 if m is not None and all(m is not x for x in media):
                     media.append(m)
+                    names.append(f"{shape.id()}.{side}" if shape.id() else None)
                     bb = shape.bbox()
                     inside.append(0.5 * (np.array(bb.min) + np.array(bb.max)))
         self.sensor_media = {}
@@ -80,10 +81,11 @@ class MediaTable:
             if m is not None:
                 if all(m is not x for x in media):
                     media.append(m)
+                    names.append(f"{sensor.id()}.medium" if sensor.id() else None)
                     inside.append(np.array(sensor.world_transform().translation(), float).ravel())
                 self.sensor_media[k] = m
         self.media = media
-        self.majorants = [build_majorant(m, inside=p, factor=factor) for m, p in zip(media, inside)]
+        self.majorants = [build_majorant(m, inside=p, factor=factor, name=n) for m, p, n in zip(media, inside, names)]
         for m in media:
             self._check_grey(m)
         kinds = [mj.kind for mj in self.majorants]

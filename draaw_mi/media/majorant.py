@@ -45,6 +45,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..errors import ParameterError
+
 GLOBAL_BOX = 1e6        # half-size of the box of a global (1x1x1) majorant
 UNIFORM_GAIN = 1.3      # local grid kept only if max > 1.3 x mean of the local bounds
 MAX_CELL_DEPTH = 2048.0  # densest cell's majorant x diagonal, where a level can keep it
@@ -165,10 +167,30 @@ def choose_level(data: np.ndarray, lo, hi, resolution: int = 16, factor: float =
     return values, grid_lo, grid_lo + np.asarray(values.shape) * k * h, k
 
 
-def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.0) -> Majorant:
+def _check_values(medium, raw: np.ndarray, scale: float, name: str | None) -> None:
+    """Refuse what no render can use, set through ``mi.traverse`` where nothing checks it: a
+    non-finite density or a scale below 0 or non-finite (every sigma_t then reads as 0 here,
+    no smoke, while volpath renders the raw product). A density below 0 is kept, as no medium.
+    ``name``: the medium's parameter prefix (``plume.interior_medium``), else its id."""
+    key = f"{name}." if name else f"medium {medium.id() or medium.class_name()!r}: "
+    if not (np.isfinite(scale) and scale >= 0):
+        raise ParameterError(f"draaw_v3/draaw_v4: {key}scale = {scale!r}; expected a finite density "
+                             "scale >= 0")
+    bad = ~np.isfinite(raw)
+    if bad.any():
+        first = [int(i) for i in np.argwhere(bad)[0]]
+        raise ParameterError(f"draaw_v3/draaw_v4: {key}sigma_t.data{first} = {float(raw[tuple(first)])!r} "
+                             f"({int(bad.sum())} non-finite value(s), [z, y, x, channel]); expected finite "
+                             "densities")
+
+
+def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.0,
+                   name: str | None = None) -> Majorant:
     """Majorant of a Mitsuba medium (see module doc). ``inside``: a point inside the medium's
     box used to locate it (default: its centre as reported for a probe from the origin);
-    ``factor``: the tracker multiplies the bounds by it (the level is chosen for that)."""
+    ``factor``: the tracker multiplies the bounds by it (the level is chosen for that);
+    ``name``: the medium's parameter prefix, naming it in the :class:`ParameterError` for a
+    non-finite density or a scale below 0 or non-finite."""
     mei = dr.zeros(mi.MediumInteraction3f)
     mei.p = mi.Point3f(*[float(v) for v in (inside if inside is not None else (0.0, 0.0, 0.0))])
     if medium.is_homogeneous():
@@ -181,11 +203,12 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
         return fallback
     raw = np.array(params["sigma_t.data"], dtype=np.float64)
     scale = float(params["scale"])
+    _check_values(medium, raw, scale, name)
     if raw.ndim != 4 or raw.shape[3] != 1:
         fallback.note = f"sigma_t grid of shape {raw.shape} (spectral data)"
         return fallback
-    # at least 0, as the trackers read sigma_t (volume_tracking.coefficients): a density
-    # set below 0 through the parameters is no medium
+    # at least 0, as the trackers read sigma_t (volume_tracking.coefficients): a density an
+    # optimiser step set below 0 through the parameters is no medium there
     data = scale * np.maximum(raw[..., 0], 0.0).transpose(2, 1, 0)   # -> [ix, iy, iz]
     box = None
     for p in ([inside] if inside is not None else []) + [np.zeros(3)]:

@@ -3,6 +3,8 @@ negative densities and albedos above 1 are refused by name, before they render N
 stay finite under an infinite density that reaches them anyway."""
 from __future__ import annotations
 
+import re
+
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -147,6 +149,34 @@ def test_a_density_pushed_below_zero_through_params_is_no_medium(version):
     empty, negative = images
     assert negative.min() >= 0.0
     np.testing.assert_allclose(negative, empty, atol=1e-6)
+
+
+@pytest.mark.parametrize("what, value, match", [
+    ("scale", -2.0, r"plume\.interior_medium\.scale = -2\.0; expected a finite density scale >= 0"),
+    ("scale", float("nan"), r"plume\.interior_medium\.scale = nan; expected a finite density scale"),
+    ("data", float("nan"), r"plume\.interior_medium\.sigma_t\.data\[0, 0, 1, 0\] = nan \(1 non-finite "
+                           r"value\(s\), \[z, y, x, channel\]\); expected finite densities"),
+    ("data", float("inf"), r"plume\.interior_medium\.sigma_t\.data\[0, 0, 1, 0\] = inf"),
+])
+def test_a_scale_below_zero_or_a_non_finite_density_set_through_params_is_refused(what, value, match):
+    """A scale of -2 rendered V4 as if no smoke (every sigma_t read as 0) while volpath
+    rendered 0.163 for 0.300; a NaN density voxel rendered as no smoke there too: V3/V4 refuse
+    them by key and voxel when the media are read (a density below 0 stays no medium)."""
+    scene = draaw_mi.load_scene(SMOKE, resolution=(12, 9))
+    prefix = next(k for k in scene.params.keys() if k.endswith("interior_medium.scale"))[:-len("scale")]
+    if what == "scale":
+        scene.params[prefix + "scale"] = value
+    else:
+        data = np.array(scene.params[prefix + "sigma_t.data"])
+        data[0, 0, 1, 0] = value
+        scene.params[prefix + "sigma_t.data"] = mi.TensorXf(data)
+    scene.params.update()
+    for version in ("v3", "v4"):
+        with pytest.raises(Exception) as info:
+            draaw_mi.render(scene, version=version, spp=2, post=[])
+        err = info.value if isinstance(info.value, ParameterError) else info.value.__cause__
+        assert isinstance(err, ParameterError), repr(info.value)
+        assert re.search(r"draaw_v3/draaw_v4: " + match, str(err)), str(err)
 
 
 def test_a_phase_g_set_past_its_bound_through_params_is_said_by_the_render():
