@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import DraawError, suggest
 from ..integrators import resolve_version
 from ..post import load_chain
+from ..sdf.scene import PROXY_PREFIX
 from . import camera as cam
 from .context import BuildContext, safe_id
 from .framing import scene_bounds
@@ -141,6 +142,19 @@ def _emitter(shape: dict, where: Where) -> dict | None:
     color = vector(shape.get("emission_color", [1.0, 1.0, 1.0]), where / "emission_color", lo=0.0)
     rgb = vector(e, where / "emission", lo=0.0)
     return {"type": "area", "radiance": {"type": "rgb", "value": [a * b for a, b in zip(rgb, color)]}}
+
+
+# the scene dict's own keys, which a material, shape, light or volume name would overwrite (a
+# light named "sensor" was deleted by the camera) or break ("type"); "integrator" is where
+# readers of the dict find its integrator; SDF proxies' ids start with PROXY_PREFIX
+RESERVED_NAMES = ("type", "sensor", "integrator")
+
+
+def check_not_reserved(key: str, where: Where) -> None:
+    """Raise ``where``'s error if ``key`` is one of the scene dict's own keys."""
+    if key in RESERVED_NAMES or key.startswith(PROXY_PREFIX):
+        raise where.error(f"{key!r} is reserved ({', '.join(RESERVED_NAMES)} and names starting with "
+                          f"{PROXY_PREFIX!r} are the scene's own keys); pick another name")
 
 
 def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, where: Where) -> dict:
@@ -264,11 +278,16 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         if safe_id(mname) != mname:
             raise (where / "materials" / mname).error(f"material name {mname!r} may only contain letters, "
                                                       "digits, '_' and '-'")
+        check_not_reserved(mname, where / "materials" / mname)
         materials[mname] = material_dict(mname, table, ctx, where / "materials" / mname)
 
     shape_entries: dict = {}
     for i, shape in enumerate(shapes):
-        for key, d in shape_dicts(shape, i, materials, ctx, where / "shapes" / i).items():
+        before = set(materials)
+        entries = shape_dicts(shape, i, materials, ctx, where / "shapes" / i)
+        for key in [*entries, *(m for m in materials if m not in before)]:   # (its own materials)
+            check_not_reserved(key, where / "shapes" / i / "name")
+        for key, d in entries.items():
             if key in shape_entries or key in materials:
                 used = "a material" if key in materials else "another shape"
                 raise (where / "shapes" / i / "name").error(f"duplicate name {key!r} (already used by {used})")
@@ -290,6 +309,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         for i, vol in enumerate(volumes):
             entries, vinfo = volume_dicts(vol, i, mats, ctx, where / "volumes" / i)
             for key, d in entries.items():
+                check_not_reserved(key, where / "volumes" / i / "name")
                 if key in shape_entries or key in materials:
                     raise (where / "volumes" / i / "name").error(f"duplicate name {key!r}")
                 shape_entries[key] = d
@@ -311,6 +331,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     light_entries: dict = {}
     for i, light in enumerate(lights):
         for key, d in light_dicts(light, i, look_at, ctx, where / "lights" / i).items():
+            check_not_reserved(key, where / "lights" / i / "name")
             if key in light_entries or key in shape_entries or key in materials:
                 raise (where / "lights" / i / "name").error(f"duplicate name {key!r} (names of materials, "
                                                             "shapes and lights share one namespace)")
