@@ -63,8 +63,9 @@ def declared_defaults(path: str) -> list[str]:
 
 def film_sized_xml(path: str, width: int, height: int, defines: dict) -> tuple[str, dict]:
     """``(text, defines)``: the XML of ``path`` with its first sensor's film ``width`` x
-    ``height``, and the ``defines`` it still uses (a ``-D res=...`` that only sized the film
-    would be an unused parameter, which Mitsuba refuses)."""
+    ``height``, and the ``defines`` to load it with: all but those that only sized the film (a
+    ``-D res=...`` used nowhere else, in the file or its includes at any depth, would be an
+    unused parameter, which Mitsuba refuses)."""
     try:
         with open(path, encoding="utf-8") as fh:
             text = fh.read()
@@ -89,30 +90,50 @@ def film_sized_xml_text(text: str, folder: str, width: int, height: int, defines
     film = sensor.find("film")
     if film is None:                                  # (Mitsuba's default film)
         film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
+    replaced: set[str] = set()          # the $names in the film's width and height
     for name, value in (("width", width), ("height", height)):
         node = next((n for n in film if n.get("name") == name), None)
         if node is None:
             node = ET.SubElement(film, "integer", {"name": name})
+        replaced.update(re.findall(r"\$([A-Za-z_][A-Za-z0-9_]*)", node.get("value", "")))
         node.tag = "integer"
         node.set("value", str(int(value)))
     root.insert(0, ET.Element("path", {"value": folder}))
     out = ET.tostring(root, encoding="unicode")
-    kept = {k: v for k, v in defines.items() if re.search(rf"\${re.escape(k)}(?![A-Za-z0-9_])", out)
-            or _used_by_includes(root, folder, k)}
+    # only a define that sized the film and is used nowhere else is dropped; any other is
+    # passed on, used or not, as without a resolution (Mitsuba names an unused one)
+    kept = {k: v for k, v in defines.items() if k not in replaced
+            or re.search(rf"\${re.escape(k)}(?![A-Za-z0-9_])", out) or _used_by_includes(root, folder, folder, k)}
     return out, kept
 
 
-def _used_by_includes(root, folder: str, name: str) -> bool:
-    """Whether an ``<include>`` of ``root`` may use ``$name`` (its file is read as text; a file
-    that cannot be found or read counts as using it: Mitsuba then says what is wrong)."""
+def _used_by_includes(root, here: str, folder: str, name: str, seen: set | None = None) -> bool:
+    """Whether an ``<include>`` of ``root`` (a file in ``here``; the scene's folder ``folder``),
+    or an include of one of them at any depth, may use ``$name``. Each file is read as text; one
+    that cannot be found, read or parsed, or whose name has a ``$``, counts as using it (Mitsuba
+    then says what is wrong)."""
+    seen = set() if seen is None else seen
+    pattern = re.compile(rf"\${re.escape(name)}(?![A-Za-z0-9_])")
     for inc in root.iter("include"):
         file = inc.get("filename", "")
-        file = file if os.path.isabs(file) else os.path.join(folder, file)
+        if "$" in file:
+            return True
+        found = [f for f in ([file] if os.path.isabs(file) else [os.path.join(here, file), os.path.join(folder, file)])
+                 if os.path.isfile(f)]
+        if not found:
+            return True
+        file = os.path.realpath(found[0])
+        if file in seen:
+            continue
+        seen.add(file)
         try:
             with open(file, encoding="utf-8", errors="replace") as fh:
-                if f"${name}" in fh.read():
-                    return True
-        except OSError:
+                text = fh.read()
+            if pattern.search(text):
+                return True
+            if _used_by_includes(parse_xml_text(text), os.path.dirname(file), folder, name, seen):
+                return True
+        except (OSError, ET.ParseError, ValueError):
             return True
     return False
 
