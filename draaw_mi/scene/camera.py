@@ -191,8 +191,9 @@ def camera_to_look_at(cam: dict, where: Where):
 
 def check_look_at(origin, target, up, where) -> None:
     """Raise ``where``'s error unless ``origin``, ``target`` and ``up`` make a camera: a view
-    direction float32 can hold and an ``up`` not parallel to it (scene files' cameras and the
-    batch's ``look_at`` keyframes and frames)."""
+    direction float32 can hold and an ``up`` at least ``FLOAT32_SEPARATION`` radians from
+    it in float32 (scene files' cameras, area lights, and the batch's ``look_at`` keyframes
+    and frames)."""
     origin, target, up = (np.asarray(v, dtype=np.float64) for v in (origin, target, up))
     d = target - origin
     if np.linalg.norm(d) < 1e-9:
@@ -204,8 +205,21 @@ def check_look_at(origin, target, up, where) -> None:
             f"is {np.linalg.norm(d):g} from 'origin', too close to tell apart in float32 at "
             f"{max(np.linalg.norm(origin), np.linalg.norm(target)):g} from the world origin; "
             "move it further along the view direction")
-    if np.linalg.norm(np.cross(d, up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(up), 1e-30):
-        raise (where / "up").error(f"{up.tolist()} is parallel to the view direction; pick another up vector")
+    # Mitsuba builds the look-at in float32 (left = normalize(cross(up, dir))): a direction
+    # and an up parallel there, or nearly (the cross product then is rounding noise), give a
+    # NaN or arbitrarily rolled camera; origin [0.3, 3, 0.3] and target [0.3, 0, 0.30000001]
+    # are straight down in float32, along up [0, 1, 0]
+    up32 = up.astype(np.float32).astype(np.float64)
+    if not np.any(up32):
+        raise (where / "up").error(f"{up.tolist()} is the zero vector" + (" in float32" if np.any(up) else "")
+                                   + "; expected a direction not along the view")
+    d32 = (target.astype(np.float32) - origin.astype(np.float32)).astype(np.float64)
+    sine = np.linalg.norm(np.cross(d32, up32)) / (np.linalg.norm(d32) * np.linalg.norm(up32))
+    if not sine >= FLOAT32_SEPARATION:
+        raise (where / "up").error(
+            f"{up.tolist()} is parallel to the view direction {d32.tolist()} (in float32, as Mitsuba "
+            f"builds the camera; the angle between them, {math.degrees(math.asin(min(sine, 1.0))):.2g} "
+            f"degrees, is below {math.degrees(FLOAT32_SEPARATION):.2g}); pick another up vector")
 
 
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,

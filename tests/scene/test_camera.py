@@ -1,0 +1,64 @@
+"""Look-at cameras and area lights (draaw_mi.scene.camera.check_look_at) that Mitsuba can build:
+it builds the look-at in float32, left = normalize(cross(up, target - origin))."""
+from __future__ import annotations
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi import SceneError
+
+from conftest import tiny_description
+
+# straight down in float32 (0.30000001 and 0.3 are one float32), along up [0, 1, 0]; float64
+# sees them 1e-8 apart, an angle of 3e-9 rad, which a 1e-9 tolerance passed: a NaN to_world
+DOWN = {"origin": [0.3, 3.0, 0.3], "target": [0.3, 0.0, 0.30000001], "up": [0.0, 1.0, 0.0]}
+
+
+def _with_camera(cam):
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d["camera"] = dict(cam, fov=40)
+    return d
+
+
+def _with_area_light(position, target, up):
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d["lights"] = [{"type": "area", "name": "panel", "position": position, "target": target, "up": up,
+                    "intensity": 5.0}]
+    return d
+
+
+def test_an_up_parallel_to_the_view_in_float32_is_refused():
+    with pytest.raises(SceneError, match=r"^<dict>: camera.up: \[0.0, 1.0, 0.0\] is parallel to the view "
+                                         r"direction \[0.0, -3.0, 0.0\] \(in float32"):
+        draaw_mi.load_scene(_with_camera(DOWN))
+    with pytest.raises(SceneError, match=r"^<dict>: lights\[0\].up: \[0.0, 1.0, 0.0\] is parallel"):
+        draaw_mi.load_scene(_with_area_light(DOWN["origin"], DOWN["target"], DOWN["up"]))
+
+
+def test_a_view_just_beyond_the_tolerance_gives_a_finite_camera():
+    """A target 6e-5 off the vertical under a camera 3 up: 2e-5 rad from up, twice the 1e-5
+    tolerance. Mitsuba's to_world is finite, its forward column the view direction and its
+    up column at right angles to it (tolerance: float32 roundings of unit vectors)."""
+    cam = dict(DOWN, target=[0.3, 0.0, 0.3 + 6e-5])
+    scene = draaw_mi.load_scene(_with_camera(cam))
+    m = np.array(scene.mi_scene.sensors()[0].world_transform().matrix)[..., 0]
+    assert np.isfinite(m).all()
+    view = np.subtract(cam["target"], cam["origin"])
+    np.testing.assert_allclose(m[:3, 2], view / np.linalg.norm(view), atol=1e-6)
+    assert abs(m[:3, 1] @ m[:3, 2]) < 1e-6 and abs(np.linalg.norm(m[:3, 1]) - 1) < 1e-6
+    light = draaw_mi.load_scene(_with_area_light(cam["origin"], cam["target"], cam["up"]))
+    m = np.array(mi.traverse(light.mi_scene)["panel.to_world"].matrix)[..., 0]
+    assert np.isfinite(m).all()
+    np.testing.assert_allclose(m[:3, 2], view / np.linalg.norm(view), atol=1e-6)   # it faces its target
+
+
+@pytest.mark.parametrize("up,said", [([0, 0, 0], "is the zero vector;"),
+                                     ([0, 1e-50, 0], "is the zero vector in float32;")])
+def test_a_zero_up_is_said_to_be_zero(up, said):
+    """A zero up said "is parallel to the view direction"."""
+    with pytest.raises(SceneError, match=r"camera.up: \[.*\] " + said):
+        draaw_mi.load_scene(_with_camera({"origin": [0, 1, 5], "target": [0, 0.5, 0], "up": up}))
+    with pytest.raises(SceneError, match=r"lights\[0\].up: \[.*\] " + said):
+        draaw_mi.load_scene(_with_area_light([0, 3, 0], [0, 0, 0], up))
