@@ -75,7 +75,7 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
             raise where.error("an envmap light needs 'file'")
         path = ctx.path(string(light["file"], where / "file"))
         if not os.path.isfile(path):
-            raise (where / "file").error(f"environment map {light['file']!r} does not exist")
+            raise (where / "file").error(f"environment map {light['file']!r} does not exist (looked for {path!r})")
         image = check_image_values(path, light["file"], where / "file", "environment map", nonneg=False)
         if list(color) == [1.0, 1.0, 1.0]:
             return {name: {"type": "envmap", "filename": path, "scale": intensity}}
@@ -89,7 +89,10 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         return {name: {"type": "directional", "direction": d, "irradiance": rgb}}
     # area light: an emitting rectangle, disk or sphere that faces 'target'
     shape = string(light.get("shape", "rectangle"), where / "shape", ("rectangle", "disk", "sphere"))
-    pos = vector(light.get("position", [0.0, 0.0, 0.0]), where / "position")
+    # (no default: one at the origin sat in the floor of most scenes, a black image)
+    if "position" not in light:
+        raise where.error(f"an area light needs 'position' (the centre of its {shape})")
+    pos = vector(light["position"], where / "position")
     emitter = {"type": "area", "radiance": rgb}
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
     # the keys that size the light: a rectangle's size, a sphere's radius, a disk's radius (or

@@ -9,6 +9,7 @@ irradiance of the light, known in closed form at the points checked.
 from __future__ import annotations
 
 import math
+import re
 
 import mitsuba as mi
 import numpy as np
@@ -138,6 +139,29 @@ def test_a_sphere_area_light_refuses_a_direction(key, value):
     light = {"type": "area", "shape": "sphere", "position": [0, 2, 0], "radius": 0.3, key: value}
     with pytest.raises(SceneError, match=f"lights\\[0\\]\\.{key}.*sphere area light .*no '{key}'"):
         _floor_scene([light], res=(8, 8))
+
+
+
+@pytest.mark.parametrize("shape", ["rectangle", "disk", "sphere"])
+def test_an_area_light_needs_a_position(shape):
+    """An area light without 'position' sat at the origin, in this floor: a black image."""
+    with pytest.raises(SceneError, match=rf"^<dict>: lights\[0\]: an area light needs 'position' \(the centre of its {shape}\)$"):
+        _floor_scene([{"type": "area", "shape": shape, "intensity": 5.0}], res=(8, 8))
+
+
+def _toml(folder, text):
+    (folder / "s.toml").write_text(text)
+    return folder / "s.toml"
+
+
+def test_a_missing_envmap_says_where_it_was_looked_for(tmp_path):
+    """The error named the file as written, not the path it was looked for at (beside the
+    scene file)."""
+    path = str(tmp_path / "nope.exr")
+    with pytest.raises(SceneError, match=r"lights\[0\].file: environment map 'nope.exr' does not exist "
+                                         rf"\(looked for '{re.escape(path)}'\)"):
+        draaw_mi.load_scene(str(_toml(tmp_path, '[[shapes]]\ntype = "sphere"\n'
+                                                 '[[lights]]\ntype = "envmap"\nfile = "nope.exr"\n')))
 
 
 def test_emission_on_shapes():
