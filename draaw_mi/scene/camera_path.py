@@ -7,9 +7,7 @@ GO-Draaw's interpolation renders ``int(60 · duration)`` frames, ``total // (n -
 segment, eased with ``t · smoothstep(t)`` (a slip for ``smoothstep``), and leaves the frames
 that do not divide evenly at the origin. ``faithful=True`` reproduces that exactly (for
 GO-Draaw's benchmark); ``faithful=False`` (default) uses ``smoothstep`` and distributes every
-frame over the segments, turning each angle the short way round between keyframes (theta
-3.0 -> -3.0 steps 0.28 rad across +-pi, where GO-Draaw, interpolating the numbers, spins
-6 rad the other way); the frames on keyframes are the keyframes as given.
+frame over the segments.
 
 >>> frames = interpolate([(0, 0, 0, 0, 1), (1, 0, 0, 0, 1)], duration=0.05)
 >>> frames.shape, float(frames[0, 0]), float(frames[-1, 0])
@@ -96,11 +94,4 @@ def interpolate(keys, duration: float = 10.0, fps: int = 60, faithful: bool = Fa
     seg = np.minimum(u.astype(int), n - 2)
     t = u - seg
     s = t * t * (3 - 2 * t)
-    step = p[seg + 1] - p[seg]
-    # the angles turn the short way round: theta 3.0 -> -3.0 is a step of 0.28 across +-pi
-    # (the same view at the end), not a 6 rad spin the other way (phi alike: the view
-    # repeats every 2 pi in both)
-    step[:, 3:] = (step[:, 3:] + np.pi) % (2 * np.pi) - np.pi
-    out = p[seg] + step * s[:, None]
-    out[-1] = p[-1]                      # (p[-2] + the wrapped step: the key, maybe + 2 pi k)
-    return out
+    return p[seg] + (p[seg + 1] - p[seg]) * s[:, None]

@@ -135,26 +135,3 @@ def test_dict_keyframes_read_camerax_as_theta_and_cameray_as_phi():
     from draaw_mi.scene.camera_path import as_keyframes
     rows = as_keyframes([{"x": 0, "y": 1, "z": 2, "cameraX": 0.24, "cameraY": -2.08}])
     assert rows.tolist() == [[0.0, 1.0, 2.0, 0.24, -2.08]]
-
-
-def test_angles_turn_the_short_way_round_between_keyframes():
-    """theta 3.0 -> -3.0 (and phi 2.9 -> -3.1, the same step across pi) over 6 frames spun
-    the long way, theta 3.0, 2.38, 0.89, -0.89, -2.38, -3.0 (6 rad), where -3.0 is the view
-    at 3.0 + 0.283: each frame is now the key plus that short step eased by smoothstep
-    (u = j / 5), the last frame the key as given, and every frame's view direction
-    spherical(theta, phi) turns monotonically by at most the step (closed form; tolerance
-    float64 roundings). GO-Draaw's faithful mode interpolates the numbers: the long way."""
-    from draaw_mi.scene.camera import spherical
-    keys = [(0, 0, 5, 3.0, 2.9), (0, 0, 5, -3.0, -3.1)]
-    f = interpolate(keys, duration=0.1)
-    step_theta, step_phi = 2 * np.pi - 6.0, 2 * np.pi - 6.0
-    u = np.arange(6) / 5
-    np.testing.assert_allclose(f[:5, 3], 3.0 + step_theta * smoothstep(u[:5]), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(f[:5, 4], 2.9 + step_phi * smoothstep(u[:5]), rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(f[-1], keys[-1])
-    views = np.array([spherical(t, p) for t, p in f[:, 3:]])
-    turned = np.degrees(np.arccos(np.clip(views @ views[0], -1, 1)))
-    assert np.all(np.diff(turned) > 0) and turned[-1] < np.degrees(np.hypot(step_theta, step_phi)) + 1e-9
-    faithful = interpolate(keys, duration=0.1, faithful=True)
-    t = np.arange(5) / 6                        # (6 frames per segment; the 6th is the last key)
-    np.testing.assert_allclose(faithful[:5, 3], 3.0 - 6.0 * t * smoothstep(t), rtol=0, atol=1e-12)
