@@ -7,7 +7,9 @@ GO-Draaw's interpolation renders ``int(60 · duration)`` frames, ``total // (n -
 segment, eased with ``t · smoothstep(t)`` (a slip for ``smoothstep``), and leaves the frames
 that do not divide evenly at the origin. ``faithful=True`` reproduces that exactly (for
 GO-Draaw's benchmark); ``faithful=False`` (default) uses ``smoothstep`` and distributes every
-frame over the segments.
+frame over the segments. Both interpolate the angles as the numbers given (as GO-Draaw and
+Blender's Euler keys do): theta 0 -> 2 pi is a full orbit, 3.0 -> -3.0 turns 6 rad (write
+-3.0 as 3.28 to turn the short way across +-pi).
 
 >>> frames = interpolate([(0, 0, 0, 0, 1), (1, 0, 0, 0, 1)], duration=0.05)
 >>> frames.shape, float(frames[0, 0]), float(frames[-1, 0])

@@ -135,3 +135,14 @@ def test_dict_keyframes_read_camerax_as_theta_and_cameray_as_phi():
     from draaw_mi.scene.camera_path import as_keyframes
     rows = as_keyframes([{"x": 0, "y": 1, "z": 2, "cameraX": 0.24, "cameraY": -2.08}])
     assert rows.tolist() == [[0.0, 1.0, 2.0, 0.24, -2.08]]
+
+
+def test_angles_are_interpolated_as_the_numbers_given():
+    """Two keys theta 0 -> 2 pi are a full orbit: the middle frame looks the other way
+    (theta pi), a quarter of the way it has turned about pi / 2 by smoothstep's easing.
+    Wrapping each step into [-pi, pi) (the "short way") made this camera stand still."""
+    two_pi = 2 * np.pi
+    frames = interpolate([(0, 0, 5, 0.0, 1.5), (0, 0, 5, two_pi, 1.5)], duration=1.0, fps=5)
+    u = np.linspace(0.0, 1.0, len(frames))
+    np.testing.assert_allclose(frames[:, 3], two_pi * u * u * (3 - 2 * u), atol=1e-12)
+    assert frames[-1, 3] == two_pi and np.ptp(frames[:, 3]) == two_pi
