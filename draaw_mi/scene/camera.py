@@ -191,8 +191,8 @@ def camera_to_look_at(cam: dict, where: Where):
 
 def check_look_at(origin, target, up, where) -> None:
     """Raise ``where``'s error unless ``origin``, ``target`` and ``up`` make a camera: a view
-    direction float32 can hold and an ``up`` at least ``FLOAT32_SEPARATION`` radians from
-    it in float32 (scene files' cameras, area lights, and the batch's ``look_at`` keyframes
+    direction float32 can hold and an ``up`` further from it in float32 than float32's
+    rounding of the two can move them (scene files' cameras, area lights, and the batch's ``look_at`` keyframes
     and frames)."""
     origin, target, up = (np.asarray(v, dtype=np.float64) for v in (origin, target, up))
     d = target - origin
@@ -215,11 +215,16 @@ def check_look_at(origin, target, up, where) -> None:
                                    + "; expected a direction not along the view")
     d32 = (target.astype(np.float32) - origin.astype(np.float32)).astype(np.float64)
     sine = np.linalg.norm(np.cross(d32, up32)) / (np.linalg.norm(d32) * np.linalg.norm(up32))
-    if not sine >= FLOAT32_SEPARATION:
+    # the angle float32 rounding can move the direction and up by (origin and target rounded,
+    # then subtracted: eps32 of the larger per component; up rounded), 8x: a camera looking
+    # down from [0, 5, 1e-5] at the origin (2e-6 rad from up, exact in float32) is a camera
+    eps32 = float(np.finfo(np.float32).eps)
+    noise = 8 * eps32 * (max(np.abs(origin).max(), np.abs(target).max()) / np.linalg.norm(d32) + 1.0)
+    if not sine >= noise:
         raise (where / "up").error(
             f"{up.tolist()} is parallel to the view direction {d32.tolist()} (in float32, as Mitsuba "
             f"builds the camera; the angle between them, {math.degrees(math.asin(min(sine, 1.0))):.2g} "
-            f"degrees, is below {math.degrees(FLOAT32_SEPARATION):.2g}); pick another up vector")
+            f"degrees, is within float32's rounding, {math.degrees(noise):.2g}); pick another up vector")
 
 
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,

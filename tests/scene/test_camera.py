@@ -29,6 +29,14 @@ def _with_area_light(position, target, up):
     return d
 
 
+def test_an_up_within_float32s_rounding_of_the_view_is_refused():
+    """0.30000003 is one float32 step above 0.3: the view is 1e-8 rad from up, far below
+    what the rounding of 0.3 and 3 can move it; Mitsuba's camera would roll by chance."""
+    with pytest.raises(SceneError, match=r"camera.up: .* is parallel to the view direction .* within "
+                                         r"float32's rounding"):
+        draaw_mi.load_scene(_with_camera(dict(DOWN, target=[0.3, 0.0, 0.30000003])))
+
+
 def test_an_up_parallel_to_the_view_in_float32_is_refused():
     with pytest.raises(SceneError, match=r"^<dict>: camera.up: \[0.0, 1.0, 0.0\] is parallel to the view "
                                          r"direction \[0.0, -3.0, 0.0\] \(in float32"):
@@ -37,11 +45,15 @@ def test_an_up_parallel_to_the_view_in_float32_is_refused():
         draaw_mi.load_scene(_with_area_light(DOWN["origin"], DOWN["target"], DOWN["up"]))
 
 
-def test_a_view_just_beyond_the_tolerance_gives_a_finite_camera():
-    """A target 6e-5 off the vertical under a camera 3 up: 2e-5 rad from up, twice the 1e-5
-    tolerance. Mitsuba's to_world is finite, its forward column the view direction and its
-    up column at right angles to it (tolerance: float32 roundings of unit vectors)."""
-    cam = dict(DOWN, target=[0.3, 0.0, 0.3 + 6e-5])
+@pytest.mark.parametrize("origin, target", [([0.3, 3.0, 0.3], [0.3, 0.0, 0.3 + 6e-5]),
+                                            ([0.0, 5.0, 1e-5], [0.0, 0.0, 0.0])])
+def test_a_view_beyond_float32s_rounding_gives_a_finite_camera(origin, target):
+    """A target 6e-5 off the vertical under a camera 3 up (2e-5 rad from up), and a camera
+    looking down from [0, 5, 1e-5] at the origin (2e-6 rad, exact in float32, which a fixed
+    1e-5 rad tolerance refused). Mitsuba's to_world is finite, its forward column the view
+    direction and its up column at right angles to it (tolerance: float32 roundings of unit
+    vectors)."""
+    cam = dict(DOWN, origin=origin, target=target)
     scene = draaw_mi.load_scene(_with_camera(cam))
     m = np.array(scene.mi_scene.sensors()[0].world_transform().matrix)[..., 0]
     assert np.isfinite(m).all()
