@@ -86,13 +86,49 @@ def _closest_sq_dist(p: np.ndarray, a, b, c) -> np.ndarray:
     return np.sum((p - q) ** 2, axis=1)
 
 
+def _weld_tolerance(tris: np.ndarray) -> float:
+    """The distance below which two vertices are one: 1e-6 of the mesh's box diagonal (an
+    exporter's unwelded copies differ by float rounding, 1e-9 of a unit cube)."""
+    pts = np.asarray(tris, float).reshape(-1, 3)
+    return 1e-6 * max(float(np.linalg.norm(pts.max(0) - pts.min(0))), 1e-300)
+
+
 def _edges(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(ids (T, 3), edges (E, 2))``: vertex ids matched by position (a mesh split at UV or
-    normal seams still closes) and each triangle's three edges as sorted id pairs, triangle
-    ``k``'s at rows ``k``, ``T + k`` and ``2 T + k``."""
-    _, ids = np.unique(np.asarray(tris, float).reshape(-1, 3), axis=0, return_inverse=True)
+    """``(ids (T, 3), edges (E, 2))``: vertex ids matched by position within
+    :func:`_weld_tolerance` (a mesh split at UV or normal seams, or exported unwelded, still
+    closes) and each triangle's three edges as sorted id pairs, triangle ``k``'s at rows
+    ``k``, ``T + k`` and ``2 T + k``."""
+    pts = np.asarray(tris, float).reshape(-1, 3)
+    _, ids = np.unique(np.round(pts / _weld_tolerance(tris)), axis=0, return_inverse=True)
     ids = ids.reshape(-1, 3)
     return ids, np.sort(np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]]), axis=1)
+
+
+def _uncovered(segments: np.ndarray, tol: float) -> np.ndarray:
+    """Per segment (K, 2, 3): whether some stretch of it is covered an odd number of times by
+    the segments on its line. A T-junction (a vertex inside another triangle's edge) leaves
+    the long edge and the two halves beside it each bounding one triangle, yet together they
+    cover their line twice: no hole. A hole's border covers its line once."""
+    p, q = segments[:, 0], segments[:, 1]
+    length = np.linalg.norm(q - p, axis=1)
+    u = (q - p) / np.maximum(length, 1e-300)[:, None]
+    first = np.argmax(np.abs(u) > 1e-9, axis=1)                 # one orientation per line
+    u *= np.sign(u[np.arange(len(u)), first])[:, None]
+    t0, t1 = np.einsum("ij,ij->i", p, u), np.einsum("ij,ij->i", q, u)
+    foot = p - t0[:, None] * u                                  # the line's point nearest 0
+    keys = np.concatenate([np.round(u * 1e5), np.round(foot / (100 * tol))], axis=1)
+    _, line = np.unique(keys, axis=0, return_inverse=True)
+    line = line.ravel()
+    lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
+    out = np.zeros(len(segments), bool)
+    for g in np.unique(line):
+        members = np.flatnonzero(line == g)
+        ends = np.unique(np.round(np.concatenate([lo[members], hi[members]]) / tol))
+        mids = 0.5 * (ends[:-1] + ends[1:]) * tol
+        cover = ((lo[members, None] <= mids) & (mids <= hi[members, None])).sum(0)
+        odd = mids[cover % 2 == 1]
+        out[members] = ((lo[members, None] <= odd) & (odd <= hi[members, None])).any(1)
+    return out
 
 
 def open_edges(tris: np.ndarray) -> int:
@@ -120,7 +156,13 @@ def closed_parts(tris: np.ndarray) -> np.ndarray:
     part = lab[ids[:, 0]]
     real = e[:, 0] != e[:, 1]
     uniq, inv, counts = np.unique(e[real], axis=0, return_inverse=True, return_counts=True)
-    odd_edge = (counts % 2 == 1)[inv.ravel()]
+    odd = np.flatnonzero(counts % 2 == 1)
+    if len(odd):                     # (T-junctions' edges cover their lines an even number of times)
+        corner = np.asarray(tris, float).reshape(-1, 3)
+        first_id = np.full(int(ids.max()) + 1, -1)
+        first_id[ids.ravel()[::-1]] = np.arange(ids.size)[::-1]
+        odd = odd[_uncovered(corner[first_id[uniq[odd]]], _weld_tolerance(tris))]
+    odd_edge = np.isin(inv.ravel(), odd)
     owner = np.tile(np.arange(n_t), 3)[real]
     open_part = np.zeros(int(lab.max()) + 1, bool)
     open_part[part[owner[odd_edge]]] = True
@@ -155,7 +197,7 @@ def voxelize(tris: np.ndarray, shape, bbox_min, bbox_max, fill: str = "surface",
         d2 = _closest_sq_dist(g + 0.5, t[k, 0], t[k, 1], t[k, 2])
         hit = g[d2 <= r * r]
         occ[hit[:, 0], hit[:, 1], hit[:, 2]] = True
-    if fill == "solid":
+    if fill == "solid" and len(t):
         closed = closed_parts(tris)
         if not closed.all():
             warnings.warn(f"{name} is not closed: {open_edges(tris[~closed])} edges bound an odd number "

@@ -352,6 +352,51 @@ def test_solid_fill_of_an_open_mesh_warns_and_fills_only_its_closed_parts():
     assert np.array_equal(g.occupied, alone.occupied | surface.occupied)
 
 
+def _cube_triangles() -> np.ndarray:
+    import trimesh
+    return np.asarray(trimesh.creation.box(extents=(2.0, 2.0, 2.0)).triangles, float)
+
+
+def _t_junction_cube() -> np.ndarray:
+    """The cube with its top face (y = 1) split at the middle M of its edge A B (z = -1): the
+    top's edges A M and M B and the side face's edge A B each bound one triangle, and
+    together cover that line twice (a T-junction, as mesh editors leave them)."""
+    tris = _cube_triangles()
+    top = np.all(np.isclose(tris[:, :, 1], 1.0), axis=1)
+    A, B, C, D = [np.array(v, float) for v in ([-1, 1, -1], [1, 1, -1], [1, 1, 1], [-1, 1, 1])]
+    M = 0.5 * (A + B)
+    return np.concatenate([tris[~top], np.array([[A, M, D], [M, B, C], [M, C, D]])])
+
+
+@pytest.mark.parametrize("make", ["t_junction", "unwelded", "both"])
+def test_closed_meshes_with_t_junctions_or_unwelded_copies_fill_as_closed(make):
+    """A cube with a T-junction, one whose corner copies differ by 1e-9 (an exporter's
+    unwelded vertices), and both: closed, so filled as the plain cube is, without a warning
+    (an exact-position edge count called them open and filled their surfaces only: 33 % of
+    the box for 100 %)."""
+    import warnings
+    tris = _t_junction_cube() if make in ("t_junction", "both") else _cube_triangles()
+    if make in ("unwelded", "both"):
+        tris = tris.copy()
+        tris[0, 0] += 1e-9
+    box = dict(shape=(8, 8, 8), bbox_min=(-1.0,) * 3, bbox_max=(1.0,) * 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        occ = voxelize(tris, box["shape"], box["bbox_min"], box["bbox_max"], "solid")
+    assert occ.all()
+
+
+def test_an_open_box_is_still_open_and_nothing_is_a_solid_of_nothing():
+    """The cube without its top: its rim's edges each bound one triangle on lines nothing
+    else covers (a hole, not a T-junction), so it warns; no triangles give an empty grid."""
+    tris = _cube_triangles()
+    open_box = tris[~np.all(np.isclose(tris[:, :, 1], 1.0), axis=1)]
+    with pytest.warns(RuntimeWarning, match="is not closed: 4 edges"):
+        occ = voxelize(open_box, (8, 8, 8), (-1.0,) * 3, (1.0,) * 3, "solid")
+    assert 0 < occ.mean() < 1
+    assert not voxelize(np.zeros((0, 3, 3)), (4, 4, 4), (0.0,) * 3, (1.0,) * 3, "solid").any()
+
+
 def go_draaw_reference_voxelize(tris, shape, lo, hi):
     """GO-Draaw's rule verbatim: plane distance <= 0.5 max(step), barycentric inside."""
     shape = np.asarray(shape)
