@@ -437,8 +437,8 @@ class VoxelGrid:
             raise ParameterError(f"VoxelGrid.load({path!r}): {e}") from None
 
     @classmethod
-    def from_vol(cls, path: str, what: str = "density", bbox_min=None, bbox_max=None,
-                 seed: int | None = 0) -> "VoxelGrid":
+    def from_vol(cls, path: str, seed: int | None = 0, *, what: str = "density", bbox_min=None,
+                 bbox_max=None) -> "VoxelGrid":
         """Import a grid from Mitsuba's ``.vol`` format: a 1-channel file as the density
         (``what="density"``) or a 3-channel one as the smoke colour (``what="smoke_color"``,
         the density then 0), as :meth:`save_vol` writes them; a file of another channel count

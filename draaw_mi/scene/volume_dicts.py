@@ -34,6 +34,7 @@ from ..limits import FLOAT32_MAX, HG_G_MAX, grid_size_problem
 from ..media.faces import solid_meshes
 from ..media.mitsuba_dicts import FILTERS, smoke_shape
 from ..media.procedural import plume
+from ..media.volfile import read_vol
 from ..media.voxel_grid import VoxelGrid
 from .context import safe_id
 from .schema import check_keys, number, shown, string, vector
@@ -65,6 +66,22 @@ def _array(value, where, key):
 
 #: voxels per axis at most; the grid's cells at most limits.MAX_GRID_CELLS (2^26, ~4.5 GB)
 MAX_GRID_RESOLUTION = 1024
+
+
+def _density_vol(path: str, seed: int, box: dict, where):
+    """A ``.vol`` file's grid as a volume's density (its header box read only without
+    ``bounds``); a file of another channel count is one error in the scene's terms (an entry
+    has no ``what``: ``VoxelGrid.from_vol``'s hint does not apply)."""
+    try:
+        return VoxelGrid.from_vol(path, seed=seed, **box)
+    except ParameterError:
+        channels = read_vol(path)[0].shape[3]
+        if channels == 1:
+            raise
+    raise (where / "file").error(
+        f"{path!r} has {channels} channels; a [[volumes]] .vol file is the density, 1 channel (3 are a "
+        "colour grid, as save_vol(what='smoke_color') writes, or an RGB extinction): keep a grid's "
+        "density and colours in one .npz (VoxelGrid.save) or write its density with save_vol")
 
 
 def _grid_resolution(value, where):
@@ -109,7 +126,7 @@ def load_volume_grid(entry: dict, ctx, where) -> VoxelGrid:
             if low.endswith(".npz"):
                 g = VoxelGrid.load(path, seed=seed)
             elif low.endswith(".vol"):
-                g = VoxelGrid.from_vol(path, seed=seed, **kw)    # (its header box read only without bounds)
+                g = _density_vol(path, seed, kw, where)
             elif low.endswith(MESH_SUFFIXES):
                 res = _grid_resolution(entry.get("resolution", 64), where / "resolution")
                 fill = string(entry.get("fill", "surface"), where / "fill", ("surface", "solid"))

@@ -168,6 +168,22 @@ def test_a_vol_with_an_empty_header_box_loads_at_the_entrys_bounds(tmp_path):
         draaw_mi.load_scene(desc)
 
 
+def test_a_colour_vol_as_a_volumes_file_is_one_error_in_the_scenes_terms(tmp_path):
+    """A 3-channel .vol (save_vol(what='smoke_color')) as a [[volumes]] file: the entry has no
+    'what', so VoxelGrid.from_vol's hint to read it with what='smoke_color' cannot be
+    followed; the error names the entry's file, its channels and what to give instead.
+    from_vol's new arguments are keywords: from_vol(path, 3) is still the seed."""
+    g = VoxelGrid.from_arrays(density=np.ones((2, 2, 2)), smoke_color=np.full((2, 2, 2, 3), 0.5),
+                              bbox_min=(-1, -1, -1), bbox_max=(1, 1, 1))
+    g.save_vol(str(tmp_path / "c.vol"), what="smoke_color")
+    desc = base_desc(file=str(tmp_path / "c.vol"))
+    del desc["volumes"][0]["density"]
+    with pytest.raises(SceneError, match=r"^<dict>: volumes\[0\]\.file: '.*c\.vol' has 3 channels; a \[\[volumes\]\] "
+                                         r"\.vol file is the density, 1 channel .*VoxelGrid\.save"):
+        draaw_mi.load_scene(desc)
+    assert VoxelGrid.from_vol(str(tmp_path / "c.vol"), 3, what="smoke_color").smoke_color.shape == (2, 2, 2, 3)
+
+
 def test_npz_and_vol_sources_give_the_same_medium(tmp_path):
     rng = np.random.default_rng(0)
     g = VoxelGrid.from_arrays(density=rng.random((4, 3, 5)), bbox_min=(-1, -1, -1), bbox_max=(1, 1, 1))
