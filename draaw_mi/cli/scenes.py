@@ -228,6 +228,8 @@ def cmd_info(args) -> int:
         print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
         print(f"    lights: {', '.join(s['lights']) or 'none'}")
         print(f" materials: {', '.join(s['materials']) or '(from the file)'}")
+        if s.get("volume_materials"):
+            print(f"   volumes: {', '.join(s['volume_materials'])} (copied into the volumes' voxels)")
         if s.get("unused_materials"):
             print(f"    unused: {', '.join(s['unused_materials'])} (no shape uses them: left out "
                   "of the scene)")

@@ -343,6 +343,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
     used = _referenced_ids(shape_entries) | _referenced_ids(light_entries)
     copied = {v.get("material") for v in volumes if isinstance(v, dict)}      # (not unused)
     unused = [m for m in materials if m not in used and m not in copied]
+    in_volumes = [m for m in materials if m in copied and m not in used]
     materials = {m: d for m, d in materials.items() if m in used}
     scene = {"type": "scene"}
     scene.update(materials)
@@ -359,7 +360,7 @@ def build_mitsuba_dict(desc: dict, source: str, base_dir: str, tmp_dir: str, ove
         except DraawError as e:
             raise (where / "post").error(str(e)) from None
     settings["post"] = post or []
-    info = {"materials": list(materials), "unused_materials": unused, "shapes": list(shape_entries), "lights": list(light_entries),
+    info = {"materials": list(materials), "unused_materials": unused, "volume_materials": in_volumes, "shapes": list(shape_entries), "lights": list(light_entries),
             "camera": {"origin": list(map(float, look_at[0])), "target": list(map(float, look_at[1])),
                        "up": list(map(float, look_at[2])), "fov": look_at[3], "fov_axis": look_at[4],
                        "mirror": look_at[7]}}

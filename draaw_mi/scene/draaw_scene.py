@@ -160,6 +160,15 @@ class DraawScene:
         if ending:                 # a bare parameter name ("roughness"): the materials that have it
             shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
             raise SceneError(f"{self.source}: no parameter {name!r}; name the material too: {shown}")
+        material = name.split(".")[0]
+        if material in self.info.get("unused_materials", ()):
+            raise SceneError(f"{self.source}: no parameter {name!r}: material {material!r} is used by no "
+                             "shape, so it is left out of the scene; give a shape material = "
+                             f"{material!r} to tune it")
+        if material in self.info.get("volume_materials", ()):
+            raise SceneError(f"{self.source}: no parameter {name!r}: material {material!r} is copied into "
+                             "the voxels of the [[volumes]] that use it, which have no parameters of their own; "
+                             "change the material in the scene file")
         hint = suggest(name, short)
         if "; did you mean" not in hint:
             hint = suggest(name, keys)
@@ -280,6 +289,8 @@ class DraawScene:
             # materials no shape uses, left out of the Mitsuba scene (their code would enter
             # every kernel)
             "unused_materials": self.info.get("unused_materials", []),
+            # materials only [[volumes]] use: copied into the voxels' blocks, with no parameters
+            "volume_materials": self.info.get("volume_materials", []),
             "settings": {k: v for k, v in self.settings.items() if k != "post"},
             "post": [p.get("type") if isinstance(p, dict) else p for p in self.settings.get("post", [])],
             "features": self.features(),

@@ -381,4 +381,15 @@ def test_a_material_no_shape_uses_is_left_out_and_info_says_so(tmp_path, capsys)
     d["volumes"] = [{"name": "vox", "mode": "solid", "occupied": [[[1]]], "bounds": [[1, 0, 0], [1.5, 0.5, 0.5]],
                      "material": "extra"}]
     d["materials"]["extra"] = {"roughness": 0.3}
-    assert draaw_mi.load_scene(d).info["unused_materials"] == []
+    with_volume = draaw_mi.load_scene(d)
+    assert with_volume.info["unused_materials"] == [] and with_volume.info["volume_materials"] == ["extra"]
+    # a parameter of either is said to be left out, not a misspelling of another material's
+    with pytest.raises(draaw_mi.SceneError, match=r"no parameter 'extra.roughness': material 'extra' is "
+                                                  r"copied into the voxels"):
+        with_volume.key("extra.roughness")
+    with pytest.raises(draaw_mi.SceneError, match=r"no parameter 'extra.roughness': material 'extra' is used "
+                                                  r"by no shape, so it is left out"):
+        s.key("extra.roughness")
+    p.write_text(json.dumps(d))
+    assert main(["info", str(p)]) == 0
+    assert "volumes: extra (copied into the volumes' voxels)" in capsys.readouterr().out
