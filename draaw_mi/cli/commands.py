@@ -34,7 +34,7 @@ from ..fitting import fit, fit_two_starts
 from ..io import read_exr, write_exr, write_png
 from ..post import display_encoded
 from ..rendering import render
-from ..scene import OVERRIDE_MINIMA
+from ..scene import OVERRIDE_MAXIMA, OVERRIDE_MINIMA
 from ..scene.description import SAMPLERS
 from ..scene.schema import Where, resolution, string
 from .bench import cmd_bench
@@ -83,9 +83,10 @@ def _cmd_render(args) -> int:
             raise CliError(f"--threads {args.threads}: expected an integer >= 1")
         dr.set_thread_count(args.threads)
     for key, lo in OVERRIDE_MINIMA.items():      # (named as the flag, not as "override.spp")
-        value = getattr(args, key)
-        if value is not None and value < lo:
-            raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer >= {lo}")
+        value, hi = getattr(args, key), OVERRIDE_MAXIMA.get(key)
+        if value is not None and (value < lo or (hi is not None and value > hi)):
+            raise CliError(f"--{key.replace('_', '-')} {value}: expected an integer "
+                           + (f">= {lo}" if hi is None else f"in [{lo}, {hi}]"))
     try:                                         # (named as the flags, not "override.resolution.width")
         if args.resolution is not None:
             resolution(args.resolution, Where("--resolution"))
@@ -93,8 +94,8 @@ def _cmd_render(args) -> int:
             string(args.sampler, Where("--sampler"), SAMPLERS)
     except SceneError as e:
         raise CliError(str(e)) from None
-    if args.time_budget is not None and not args.time_budget > 0:
-        raise CliError(f"--time-budget {args.time_budget:g}: expected seconds > 0")
+    if args.time_budget is not None and not 0 < args.time_budget < float("inf"):
+        raise CliError(f"--time-budget {args.time_budget:g}: expected a finite number of seconds > 0")
     overrides = {"resolution": args.resolution, "spp": args.spp, "seed": args.seed, "max_depth": args.max_depth,
                  "sampler": args.sampler}
     scene = load_for_cli(args, **{k: v for k, v in overrides.items() if v is not None})

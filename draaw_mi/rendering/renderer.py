@@ -40,7 +40,7 @@ from ..scene.schema import resolution as parse_res
 from ..sdf.params import SDFParameters
 from .denoiser import AUX_AOVS, denoise_aovs, load_pyoidn
 from .film_colour import check_film_colour, scene_colour_names
-from .passes import pass_seeds
+from .passes import pass_seed
 from .session import apply_post, non_finite_count, session_of
 from .subsample import render_adaptive
 
@@ -130,17 +130,21 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     session = session_of(rs.scene)
     if adaptive is not None:
         return _render_adaptive(rs, session, adaptive, params, return_info, progress)
-    if _emission_apart(rs, session, time_budget):
-        return _render_denoised_apart(rs, progress, return_info)
+    if _emission_apart(rs, session):
+        return _render_denoised_apart(rs, progress, return_info, time_budget)
     integrator = session.integrator(rs.version, rs.max_depth, rs.hide_emitters, rs.aovs, **rs.options)
-    counts = session.sample_passes(rs.spp, rs.pass_spp)
-    n_passes = len(counts)
-    # (the samples taken: a sampler rounds spp up to its pattern, 5 -> 8 of ldsampler)
-    bar = progress_bar(sum(counts), f"render {rs.version}", "spp", progress, leave=False, where="render")
+    if time_budget is None:
+        counts = session.sample_passes(rs.spp, rs.pass_spp)
+        n_passes = len(counts)
+        # (the samples taken: a sampler rounds spp up to its pattern, 5 -> 8 of ldsampler)
+        total = sum(counts)
+    else:                # (as many as the budget allows of up to 2^32 - 1: not listed up front)
+        counts, n_passes, total = _budget_passes(session, rs.spp, rs.pass_spp), None, rs.spp
+    bar = progress_bar(total, f"render {rs.version}", "spp", progress, leave=False, where="render")
     acc, done, passes, t0 = None, 0, 0, time.perf_counter()
     with session.lock:                         # the passes of one render see one scene
-        for count, pseed in zip(counts, pass_seeds(rs.seed, n_passes)):
-            img = session.render_pass(integrator, count, pseed, params=params)
+        for i, count in enumerate(counts):
+            img = session.render_pass(integrator, count, pass_seed(rs.seed, i), params=params)
             if n_passes == 1:
                 acc = img                      # one pass: no extra scaling kernels (small renders)
             else:
@@ -156,7 +160,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
                 break
     if bar is not None:
         bar.close()
-    image, names, bad, raw = _finish(rs, integrator, acc, done, n_passes)
+    image, names, bad, raw = _finish(rs, integrator, acc, done, summed=n_passes != 1)
     _warn_non_finite(bad, rs)
     if return_info:
         info = {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
@@ -166,6 +170,21 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             info["raw"] = raw
         return image, info
     return image
+
+
+#: the most samples per pixel a render takes (Mitsuba's samplers count them in 32 bits)
+MAX_SPP = 2 ** 32 - 1
+
+
+def _budget_passes(session, spp: int, pass_spp: int):
+    """The pass counts of ``spp`` samples, as :meth:`Session.sample_passes` gives them, made
+    4096 passes at a time: a time budget ends a render early, and 4e9 spp asked for in
+    passes of 16 listed up front took 1.4 GB and the budget before a pass rendered."""
+    left = spp
+    while left > 0:
+        part = session.sample_passes(min(left, pass_spp * 4096), pass_spp)
+        yield from part
+        left -= sum(part)
 
 
 def _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
@@ -198,7 +217,7 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
             warnings.warn(f"render: version 'scene' renders with the integrator the scene declares, "
                           f"with its own settings: {', '.join(ignored)} not applied (give a version "
                           "such as 'v4' or 'path' to set them)", RuntimeWarning, stacklevel=3)
-    spp = _check_int("spp", s["spp"] if spp is None else spp, 1)
+    spp = _check_int("spp", s["spp"] if spp is None else spp, 1, MAX_SPP)
     seed = _check_int("seed", s["seed"] if seed is None else seed, 0, 2 ** 32 - 1)     # a UInt32
     max_depth = _check_int("max_depth", s["max_depth"] if max_depth is None else max_depth, -1)
     if time_budget is not None and (isinstance(time_budget, bool) or not (
@@ -280,7 +299,7 @@ def _warn_non_finite(bad: int, rs: RenderSettings) -> None:
                       RuntimeWarning, stacklevel=3)
 
 
-def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
+def _finish(rs: RenderSettings, integrator, acc, done: int, summed: bool):
     """``(image, channel names, non-finite values, the undenoised colour or None)``: the mean
     of the passes, named by the film's colour channels as its pixel_format stores them (R, G,
     B[, A], X, Y, Z[, A] or Y[, A]) and the AOVs', denoised and post-processed as asked. The
@@ -292,7 +311,7 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
     names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
              else channel_names(acc.shape[2], aov_names))
     image = acc
-    if n_passes > 1:
+    if summed:                                 # (passes weighted by their counts: / the total)
         with RENDER_GUARD:
             image = acc / done
             dr.eval(image)
@@ -309,16 +328,14 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, n_passes: int):
     return image, names, bad, raw
 
 
-def _emission_apart(rs: RenderSettings, session, time_budget) -> bool:
+def _emission_apart(rs: RenderSettings, session) -> bool:
     """Whether ``denoise=True`` keeps the emitters seen directly out of the denoiser: draaw
-    versions (the guides), emitters shown, an RGB film, no media, a fixed spp, no AOVs asked
-    for beyond the denoiser's guides (such renders take the one-pass path)."""
-    return (rs.denoise and is_draaw(rs.version) and not rs.hide_emitters and time_budget is None
-            and not [a for a in rs.aovs if a not in rs.guide_aovs]
+    versions (the guides), emitters shown, an RGB film, no media."""
+    return (rs.denoise and is_draaw(rs.version) and not rs.hide_emitters
             and scene_colour_names(rs.scene) == ["R", "G", "B"] and not session.holds()["media"])
 
 
-def _render_denoised_apart(rs: RenderSettings, progress, return_info):
+def _render_denoised_apart(rs: RenderSettings, progress, return_info, time_budget=None):
     """``denoise=True`` with the emitters seen directly left out of the denoiser: OIDN smears
     the edge of a bright emitter (the Cornell box's ceiling light at 18 next to a ceiling at
     0.2 came out 3.5 lower along its edge, an RMSE of 0.042 at 256x256 where the raw 64-spp
@@ -327,13 +344,15 @@ def _render_denoised_apart(rs: RenderSettings, progress, return_info):
     the sampling is not adaptive) are rendered apart, the rest (full minus seen, at least 0) is
     denoised, and the seen emitters are added back undenoised. (Rendering the rest with the
     emitters hidden instead would shade what lies behind an area light where the camera sees
-    it: a light seen from its back would vanish.)"""
-    common = dict(version=rs.version, spp=rs.spp, seed=rs.seed, pass_spp=rs.pass_spp, post=[],
+    it: a light seen from its back would vanish.) With a time budget the emitters take the
+    passes the full render did (the same seeds and counts: the first passes of the spp
+    asked); AOVs asked for come with the full render."""
+    common = dict(version=rs.version, seed=rs.seed, pass_spp=rs.pass_spp, post=[],
                   integrator_options=rs.options or None)
     t0 = time.perf_counter()
-    full, info = render(rs.scene, max_depth=rs.max_depth, hide_emitters=False, aovs=rs.aovs,
-                        progress=progress, return_info=True, **common)
-    seen = render(rs.scene, max_depth=1, hide_emitters=False, aovs=[], **common)
+    full, info = render(rs.scene, max_depth=rs.max_depth, hide_emitters=False, aovs=rs.aovs, spp=rs.spp,
+                        time_budget=time_budget, progress=progress, return_info=True, **common)
+    seen = render(rs.scene, max_depth=1, hide_emitters=False, aovs=[], spp=info["spp"], **common)
     with RENDER_GUARD:
         arr = np.array(full)
         emission = np.nan_to_num(np.array(seen)[..., :3])

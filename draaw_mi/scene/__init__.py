@@ -32,10 +32,10 @@ from __future__ import annotations
 
 from .._lazy import old_names
 from .draaw_scene import DraawScene
-from .loading import OVERRIDE_MINIMA, SCENE_SUFFIXES, load_scene
+from .loading import OVERRIDE_MAXIMA, OVERRIDE_MINIMA, SCENE_SUFFIXES, load_scene
 from .values import check_like, value_like
 
-__all__ = ["DraawScene", "OVERRIDE_MINIMA", "SCENE_SUFFIXES", "check_like", "load_scene", "value_like"]
+__all__ = ["DraawScene", "OVERRIDE_MAXIMA", "OVERRIDE_MINIMA", "SCENE_SUFFIXES", "check_like", "load_scene", "value_like"]
 
 # names the earlier release had here, served from their new modules with a DeprecationWarning
 __getattr__ = old_names(__name__, {

@@ -311,6 +311,8 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
 #: the smallest value of each integer override of :func:`load_scene` (the CLI names its flags
 #: with them)
 OVERRIDE_MINIMA = {"spp": 1, "max_depth": -1, "seed": 0}
+#: and the largest (Mitsuba's samplers count samples, and take seeds, in 32 bits)
+OVERRIDE_MAXIMA = {"spp": 2 ** 32 - 1, "seed": 2 ** 32 - 1}
 
 
 def _checked(overrides: dict, source: str) -> dict:
@@ -320,7 +322,7 @@ def _checked(overrides: dict, source: str) -> dict:
         out["resolution"] = resolution(out["resolution"], where / "resolution")
     for key, lo in OVERRIDE_MINIMA.items():
         if out.get(key) is not None:
-            out[key] = number(out[key], where / key, lo=lo, integer=True)
+            out[key] = number(out[key], where / key, lo=lo, hi=OVERRIDE_MAXIMA.get(key), integer=True)
     if out.get("sampler") is not None:
         out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
     if out.get("version") is not None:       # (refused now, not at the first render)

@@ -179,11 +179,17 @@ def test_console_script_exit_status(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "does not exist" in r.stderr
 
 
-@pytest.mark.parametrize("flag, value, lo", [("--spp", "0", 1), ("--max-depth", "-2", -1), ("--seed", "-1", 0)])
-def test_a_bad_render_flag_is_named_as_a_flag(flag, value, lo, tmp_path, capsys):
-    """``--spp 0`` was blamed on the scene file ("cornell.toml: override.spp: 0 is out of range")."""
+@pytest.mark.parametrize("flag, value, expected", [
+    ("--spp", "0", "an integer in [1, 4294967295]"), ("--max-depth", "-2", "an integer >= -1"),
+    ("--seed", "-1", "an integer in [0, 4294967295]"),
+    ("--spp", "100000000000", "an integer in [1, 4294967295]"), ("--seed", "4294967296", "an integer in [0, 4294967295]"),
+    ("--time-budget", "inf", "a finite number of seconds > 0")])
+def test_a_bad_render_flag_is_named_as_a_flag(flag, value, expected, tmp_path, capsys):
+    """``--spp 0`` was blamed on the scene file ("cornell.toml: override.spp: 0 is out of range"),
+    and ``--spp 1e11`` on Mitsuba's sampler ('At dictionary node "sensor.sampler" ... out of
+    bounds'); ``--seed 2^32`` and ``--time-budget inf`` were named as the Python call."""
     assert main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(tmp_path / "x.exr"), flag, value]) == 2
-    assert capsys.readouterr().err.strip() == f"draaw-mi: error: {flag} {value}: expected an integer >= {lo}"
+    assert capsys.readouterr().err.strip() == f"draaw-mi: error: {flag} {value}: expected {expected}"
 
 
 def test_no_command_lists_the_commands(capsys):

@@ -257,7 +257,7 @@ def test_fit_output_keeps_the_scene_files_comments_and_layout(tmp_path, capsys):
 @pytest.mark.parametrize("flags, says", [
     (["--resolution", "0x0"], "--resolution: width: 0 is out of range; expected a value in [1, 16384]"),
     (["--sampler", "foo"], "--sampler: 'foo' is not one of independent, multijitter"),
-    (["--time-budget", "-1"], "--time-budget -1: expected seconds > 0"),
+    (["--time-budget", "-1"], "--time-budget -1: expected a finite number of seconds > 0"),
 ])
 def test_a_bad_render_flag_is_named_as_the_flag(tmp_path, tiny_file, capsys, flags, says):
     """They were named as the scene loader's overrides ("override.resolution.width: ...",

@@ -212,6 +212,27 @@ def test_render_denoise_renders_and_uses_the_guides(cornell, tmp_path):
     assert np.abs(colour_only - img).max() > 1e-3
 
 
+def test_denoising_keeps_the_emitters_apart_with_aovs_and_a_time_budget(cornell):
+    """A depth AOV asked for, or a time budget, took the one-pass path: OIDN over the whole
+    image smeared the ceiling light's edge (RMSE 0.093 against 0.014 at 64x64, 16 spp). The
+    colour is now the one render(denoise=True) gives without them: with the AOV, the same
+    image and the depth beside it; with a budget that stops after the first pass of 2, the
+    image of a 2-spp render (its emitters rendered with the passes the budget allowed)."""
+    plain = np.array(draaw_mi.render(cornell, spp=4, seed=4, denoise=True, post=[]))
+    img, info = draaw_mi.render(cornell, spp=4, seed=4, denoise=True, aovs=["depth"], post=[],
+                                return_info=True)
+    img = np.array(img)
+    assert info["channels"] == ["R", "G", "B", "depth.Z"] and info["emitters_denoised"] is False
+    np.testing.assert_allclose(img[..., :3], plain, rtol=1e-5, atol=1e-6)
+    depth = np.array(draaw_mi.render(cornell, spp=4, seed=4, aovs=["depth"], post=[]))[..., 3]
+    np.testing.assert_array_equal(img[..., 3], depth)
+    budget, binfo = draaw_mi.render(cornell, spp=8, pass_spp=2, seed=4, denoise=True, time_budget=1e-6,
+                                    post=[], return_info=True)
+    two = np.array(draaw_mi.render(cornell, spp=2, pass_spp=2, seed=4, denoise=True, post=[]))
+    assert binfo["spp"] == 2 and binfo["emitters_denoised"] is False
+    np.testing.assert_allclose(np.array(budget), two, rtol=1e-5, atol=1e-6)
+
+
 def test_cli_render_denoise(tmp_path, capsys):
     out = tmp_path / "d.exr"
     rc = main(["render", os.path.join(SCENES, "cornell.toml"), "-o", str(out), "--spp", "2",

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
+from draaw_mi.rendering.passes import pass_seeds
 
 
 def test_same_seed_same_image(tiny_scene):
@@ -25,7 +26,7 @@ def test_single_pass_equals_mitsuba(tiny_scene):
 
 def test_passes_are_a_true_mean_of_independent_passes(tiny_scene):
     integ = mi.load_dict({"type": "path", "max_depth": 4})
-    seeds = draaw_mi.render.__globals__["pass_seeds"](11, 4)
+    seeds = pass_seeds(11, 4)
     assert len(set(seeds)) == 4
     manual = sum(np.array(mi.render(tiny_scene.mi_scene, integrator=integ, spp=4, seed=s)) for s in seeds) / 4
     ours, info = draaw_mi.render(tiny_scene, version="path", spp=16, pass_spp=4, seed=11, return_info=True)
@@ -39,7 +40,7 @@ def test_uneven_passes_are_weighted_by_spp(tiny_scene):
     img, info = draaw_mi.render(tiny_scene, version="path", spp=10, pass_spp=4, seed=3, return_info=True)
     assert info["spp"] == 10 and info["passes"] == 3
     integ = mi.load_dict({"type": "path", "max_depth": 4})
-    seeds = draaw_mi.render.__globals__["pass_seeds"](3, 3)
+    seeds = pass_seeds(3, 3)
     passes = [np.array(mi.render(tiny_scene.mi_scene, integrator=integ, spp=n, seed=s))
               for n, s in zip((4, 4, 2), seeds)]
     manual = (4 * passes[0] + 4 * passes[1] + 2 * passes[2]) / 10
@@ -52,6 +53,29 @@ def test_time_budget_stops_early_but_renders_one_pass(tiny_scene):
     img, info = draaw_mi.render(tiny_scene, version="path", spp=4096, pass_spp=4, time_budget=1e-6,
                                 return_info=True)
     assert info["spp"] == 4 and np.isfinite(np.array(img)).all()
+
+
+def test_a_time_budget_of_the_most_samples_lists_its_passes_as_it_goes(tiny_scene, monkeypatch):
+    """spp = 2^32 - 1 with a time budget ("as many as fit"): the passes are listed 4096 at a
+    time (listed up front in passes of 16, 4e9 spp took 1.4 GB and the whole budget before a
+    pass rendered); the image is the mean of the passes done, as with a small spp; one more
+    sample is refused by name (Mitsuba counts samples in 32 bits)."""
+    from draaw_mi.rendering.session import Session
+    asked = []
+    real = Session.sample_passes
+
+    def spy(self, spp, pass_spp):
+        asked.append(spp)
+        assert spp <= 16 * 4096, f"sample_passes asked for {spp} spp at once"
+        return real(self, spp, pass_spp)
+    monkeypatch.setattr(Session, "sample_passes", spy)
+    img, info = draaw_mi.render(tiny_scene, version="path", spp=2 ** 32 - 1, time_budget=1e-6, seed=3,
+                                return_info=True)
+    assert asked == [16 * 4096] and info["spp"] == 16 and info["passes"] == 1
+    one = draaw_mi.render(tiny_scene, version="path", spp=16, seed=3)
+    assert np.array_equal(np.array(img), np.array(one))
+    with pytest.raises(draaw_mi.RenderError, match=r"render: spp=4294967296; expected an integer in \[1, 4294967295\]"):
+        draaw_mi.render(tiny_scene, version="path", spp=2 ** 32, time_budget=1.0)
 
 
 def test_progress_bar_does_not_change_the_image(tiny_scene, capsys):
