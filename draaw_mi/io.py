@@ -347,7 +347,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     ``text``: string key/value pairs stored as PNG text chunks (Pillow reads them back as
     ``PIL.Image.open(path).text``).
     """
-    import matplotlib.image  # (0.16 s to import: paid by PNG/JPEG files only)
+    from PIL import Image, PngImagePlugin  # (Pillow, matplotlib's own PNG writer: RGB stays RGB)
 
     if not os.fspath(path).lower().endswith(".png"):
         # (no 8-bit PNG under an .exr name; write_exr refuses the mirror case)
@@ -384,6 +384,11 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     u8 = np.round(out * 255.0).astype(np.uint8)
     with atomic_path(path, ".png") as tmp:
         try:
-            matplotlib.image.imsave(tmp, u8, format="png", metadata=text)
+            info = PngImagePlugin.PngInfo()
+            for key, value in (text or {}).items():
+                info.add_text(str(key), str(value))
+            # (matplotlib's imsave wrote every PNG as RGBA, an opaque alpha on colour alone)
+            Image.fromarray(np.ascontiguousarray(u8), "RGBA" if u8.shape[2] == 4 else "RGB").save(
+                tmp, format="png", pnginfo=info)
         except Exception as e:  # noqa: BLE001
             raise IOFailure(f"write_png({path!r}): {e}") from None

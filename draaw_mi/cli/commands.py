@@ -121,7 +121,7 @@ def _cmd_render(args) -> int:
     # PNG's alpha, an xyz film's X, Y, Z its R, G, B
     for png in [p for p in (args.output, args.png) if p and p.lower().endswith(".png")]:
         write_png(png, arr, channels=info["channels"], encoded=display_encoded(chain),
-                  text={k: str(v) for k, v in meta.items()} if png == args.output else None)
+                  text={k: str(v) for k, v in meta.items()})
     raw_note = ""
     if args.output.lower().endswith(".exr"):
         exr, names = arr, info["channels"]

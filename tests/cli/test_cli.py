@@ -37,9 +37,14 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     deeper = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "path", "max_depth": 6}),
                                 spp=4, seed=3))
     assert not np.allclose(deeper, ref)                # (the depth flag matters here)
-    shown = matplotlib.image.imread(str(png))[..., :3]
+    shown = matplotlib.image.imread(str(png))
     from draaw_mi.io import srgb_encode
     assert np.abs(shown - srgb_encode(ref)).max() <= 1.0 / 255 + 1e-6
+    # an RGB PNG (matplotlib's imsave added an opaque alpha to every one) with the render's
+    # text, as an -o PNG has (the --png one had none: no scene, seed or spp to trace it by)
+    from PIL import Image
+    with Image.open(str(png)) as im:
+        assert im.mode == "RGB" and im.text["draaw:seed"] == "3" and im.text["draaw:spp"] == "4"
     # the header says what rendered it, as batch frames do
     import hashlib
     from draaw_mi.batch.exr import read_header
