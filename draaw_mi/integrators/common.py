@@ -29,7 +29,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..errors import ParameterError, suggest
+from ..errors import ParameterError, RenderError, suggest
 from ..guard import RENDER_GUARD
 from ..sdf.integration import hook
 from ..sdf.tracer import TracerOptions
@@ -243,9 +243,22 @@ class DraawIntegrator(RBIntegrator):
         """:meth:`render` itself: Mitsuba's path-replay primal render."""
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 
+    #: whether the version differentiates scenes with participating media (V1 / V2 march
+    #: single scattering, primal-only)
+    DIFFERENTIATES_MEDIA = True
+
+    def _check_differentiable(self, scene) -> None:
+        """A :class:`~draaw_mi.errors.RenderError` before a gradient pass of a scene this
+        version renders primal-only: raised inside the traced loop, it reached the caller as
+        Dr.Jit's "dr.if_stmt(): encountered an exception (see above)"."""
+        if not self.DIFFERENTIATES_MEDIA and self.features(scene)["media"]:
+            raise RenderError(f"{self.PLUGIN}: scenes with participating media are rendered primal-only "
+                              "by V1/V2 (single-scattering march); differentiate with draaw_v3 / draaw_v4")
+
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
         """Mitsuba's path-replay adjoint (interior terms), then, for SDF shape parameters,
         the outline and shadow-edge terms (:mod:`~draaw_mi.integrators.silhouettes`)."""
+        self._check_differentiable(scene)
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
         with silhouettes.boundary_band(self, scene, sensor) as band:
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
@@ -255,6 +268,7 @@ class DraawIntegrator(RBIntegrator):
     def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
         """The gradient image: Mitsuba's path-replay tangents plus, for SDF shape parameters,
         the outline and shadow-edge terms."""
+        self._check_differentiable(scene)
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
         with silhouettes.boundary_band(self, scene, sensor) as band:
             grad = super().render_forward(scene, params, sensor, seed, spp)

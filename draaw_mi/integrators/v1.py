@@ -104,6 +104,7 @@ class DraawV1Integrator(DraawIntegrator):
             'scatter': 8
     """
     READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
+    DIFFERENTIATES_MEDIA = False       # (volume_march: a primal single-scattering march)
     PLUGIN = "draaw_v1"
 
     def __init__(self, props: mi.Properties):

@@ -103,6 +103,7 @@ class DraawV2Integrator(DraawIntegrator):
             'scatter': 2
     """
     READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
+    DIFFERENTIATES_MEDIA = False       # (volume_march: a primal single-scattering march)
     PLUGIN = "draaw_v2"
 
     def __init__(self, props: mi.Properties):
