@@ -227,6 +227,36 @@ def check_look_at(origin, target, up, where) -> None:
             f"degrees, is within float32's rounding, {math.degrees(noise):.2g}); pick another up vector")
 
 
+def clipped_away(origin, near: float, far: float, boxes) -> str | None:
+    """What the camera at ``origin`` cannot see of the shapes' bounding boxes ``boxes``
+    (pairs of corners) for its clip planes: all of them closer than ``near`` or beyond ``far``
+    (a scene drawn at 1e-4 or 1e4 of the usual size with the default planes, 0.01 and 1e4,
+    rendered plain sky, and every gradient 0), else None.
+
+    >>> clipped_away([0, 1, 4], 0.01, 1e4, [([-3, 0, -3], [3, 0, 3])]) is None
+    True
+    >>> clipped_away([0, 1e-4, 4e-4], 0.01, 1e4, [([-3e-4, 0, -3e-4], [3e-4, 0, 3e-4])])[:21]
+    'every shape is within'
+    """
+    o = np.asarray(origin, float)
+    nearest, farthest = [], []
+    for lo, hi in boxes:
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+            continue                                       # (an empty or infinite shape)
+        nearest.append(float(np.linalg.norm(np.maximum(np.maximum(lo - o, o - hi), 0.0))))
+        farthest.append(float(np.linalg.norm(np.maximum(np.abs(lo - o), np.abs(hi - o)))))
+    if not nearest:
+        return None
+    if max(farthest) < near:
+        return (f"every shape is within {max(farthest):.3g} of the camera, closer than its near_clip "
+                f"{near:g}; set [camera] near_clip (e.g. {1e-3 * max(farthest):.2g})")
+    if min(nearest) > far:
+        return (f"every shape is at least {min(nearest):.3g} from the camera, beyond its far_clip "
+                f"{far:g}; set [camera] far_clip (e.g. {10 * max(farthest):.2g})")
+    return None
+
+
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
                 sampler: str = "independent") -> dict:
     """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with

@@ -25,10 +25,10 @@ except ImportError:              # pragma: no cover - Windows
 
 import mitsuba as mi
 
-from ..errors import DraawError, SceneError, suggest
+from ..errors import DraawError, SceneError, suggest, user_stacklevel
 from ..guard import RENDER_GUARD
 from ..integrators import SCENE_VERSION, resolve_version
-from .camera import auto_camera, filter_plugin, sampler_plugin
+from .camera import auto_camera, clipped_away, filter_plugin, sampler_plugin
 from .description import DEFAULT_SETTINGS, SAMPLERS, TOP_KEYS, build_mitsuba_dict
 from .draaw_scene import DraawScene
 from .light_dicts import auto_light
@@ -298,6 +298,12 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
     tmp = ScratchFolder()
     mi_dict, settings, info = build_mitsuba_dict(desc, source, base_dir, tmp.name, _checked(overrides, source))
     scene = load_dict_or_error(mi_dict, source)
+    sensor = mi_dict["sensor"]
+    clipped = clipped_away(info["camera"]["origin"], sensor["near_clip"], sensor["far_clip"],
+                           [(sh.bbox().min, sh.bbox().max) for sh in scene.shapes()])
+    if clipped:
+        warnings.warn(f"{source}: camera: {clipped}; the image shows none of it", RuntimeWarning,
+                      stacklevel=user_stacklevel())
     if info.get("sdf") is not None:
         refuse_textured_materials(scene, info["sdf"], source)
     try:

@@ -74,3 +74,33 @@ def test_a_zero_up_is_said_to_be_zero(up, said):
         draaw_mi.load_scene(_with_camera({"origin": [0, 1, 5], "target": [0, 0.5, 0], "up": up}))
     with pytest.raises(SceneError, match=r"lights\[0\].up: \[.*\] " + said):
         draaw_mi.load_scene(_with_area_light([0, 3, 0], [0, 0, 0], up))
+
+
+@pytest.mark.parametrize("s, said", [(1e-4, "closer than its near_clip 0.01"), (1e4, "beyond its far_clip 10000"),
+                                     (1.0, None)])
+def test_a_scene_the_clip_planes_hide_is_said(s, said):
+    """A floor and a ball drawn at 1e-4 or 1e4 of the usual size, the camera scaled with
+    them: the default clip planes (0.01, 1e4) hid every shape, and the image was plain sky
+    with every gradient 0, without a word; now a RuntimeWarning says which plane and what to
+    set, and with that setting the shapes are in view (the image is not the sky's 0.5)."""
+    import warnings
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d["shapes"] = [{"type": "rectangle", "name": "floor", "scale": 3 * s, "rotate": {"axis": [1, 0, 0], "angle": -90}},
+                   {"type": "sphere", "name": "ball", "center": [0, 0.5 * s, 0], "radius": 0.5 * s}]
+    d["lights"] = [{"type": "constant", "intensity": 0.5}]
+    d.pop("materials", None)
+    d["camera"] = {"origin": [0, s, 4 * s], "target": [0, 0.5 * s, 0], "fov": 45}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = draaw_mi.load_scene(d)
+    msgs = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    if said is None:
+        assert not [m for m in msgs if "camera:" in m], msgs
+        return
+    assert len(msgs) == 1 and said in msgs[0] and "the image shows none of it" in msgs[0], msgs
+    assert np.allclose(np.array(draaw_mi.render(scene, version="path", spp=1, post=[])), 0.5)
+    d["camera"].update(near_clip=1e-3 * s, far_clip=100 * s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        fixed = draaw_mi.load_scene(d)
+    assert not np.allclose(np.array(draaw_mi.render(fixed, version="path", spp=1, post=[])), 0.5)
