@@ -151,6 +151,15 @@ def held_media() -> list:
     return [seen[k] for k in sorted(seen)]
 
 
+def release_tables() -> None:
+    """Drop every majorant table, and with them the media only they hold alive (a scene
+    rendered again rebuilds its table). ``rendering.frozen`` does this when a recording
+    failed with held media about: a medium with its own phase function (an ``hg``) kept
+    alive here broke the recording of a volpath render of another scene even as an input
+    (its phase call traced over a phase function the recorder did not find)."""
+    _TABLES.clear()
+
+
 def media_table(scene: mi.Scene) -> MediaTable:
     """The scene's :class:`MediaTable`, rebuilt when medium parameters changed."""
     key = id(scene)

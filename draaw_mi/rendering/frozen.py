@@ -136,6 +136,17 @@ def _held_media() -> list:
     return [] if volume is None else volume.held_media()
 
 
+def _release_held_media() -> bool:
+    """Drop V3 / V4's majorant tables (:func:`~draaw_mi.integrators.volume.release_tables`)
+    and collect what they alone held; whether there were media to let go."""
+    volume = sys.modules.get("draaw_mi.integrators.volume")
+    if volume is None or not volume.held_media():
+        return False
+    volume.release_tables()
+    gc.collect()
+    return True
+
+
 def other_live_bsdfs(mi_scene, cache=None) -> list:
     """The live draaw BSDFs that ``mi_scene``'s shapes do not hold (ordered by ``id``). With
     ``cache`` (the session of ``mi_scene``'s :class:`DraawScene`) the scene's own BSDFs are looked up
@@ -280,23 +291,32 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         # and the media V3 / V4 keep alive for their majorant tables (a few scenes'): a medium
         # call (volpath's, even in a scene without media) traced over them fails to record
         # when none is an input
-        live = other_live_bsdfs(mi_scene, cache) + _held_media()
         memo = None if cache is None else cache.memo
         state = None
         if state_of is not None:
             state = state_of(mi_scene, memo) if sensor is None else state_of(mi_scene, memo, sensor)
-        try:
-            with _PAUSED:
-                return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live, tuple(args))
-        except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
-            if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
-                raise KeyboardInterrupt from None
-            failed.append(str(e))
-            warnings.warn(f"freeze_render: dr.freeze could not record this render "
-                          f"({_first_cause(e)}); it is traced from now on",
-                          RuntimeWarning, stacklevel=2)
-            if before_retry is not None:
-                before_retry()
-            return body(mi_scene, seed, *args)
+        for attempt in (1, 2):
+            live = other_live_bsdfs(mi_scene, cache) + _held_media()
+            try:
+                with _PAUSED:
+                    return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live,
+                                  tuple(args))
+            except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
+                if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
+                    raise KeyboardInterrupt from None
+                if attempt == 1 and live and _release_held_media():
+                    # the media V3 / V4 held for other scenes may be what it could not hold:
+                    # let them go (their scenes rebuild their tables) and record once more
+                    if before_retry is not None:
+                        before_retry()
+                    continue
+                error = e
+                break
+        failed.append(str(error))
+        warnings.warn(f"freeze_render: dr.freeze could not record this render "
+                      f"({_first_cause(error)}); it is traced from now on", RuntimeWarning, stacklevel=2)
+        if before_retry is not None:
+            before_retry()
+        return body(mi_scene, seed, *args)
     call.frozen = frozen
     return call

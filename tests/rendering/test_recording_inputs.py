@@ -283,9 +283,17 @@ def test_volpath_records_after_a_smoke_scene_rendered_with_v4(monkeypatch):
         "box": {"type": "cube", "bsdf": {"type": "null"},
                 "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.9}}})
     mi.render(smoke, spp=4)
+    # and a draaw smoke volume (a grid medium with its own hg phase) rendered by V4: held as
+    # an input, its medium still broke the recording ("no such object instance ... in the
+    # function's inputs"); the failed recording lets the held media go and records again
+    from conftest import tiny_description
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d["volumes"] = [{"name": "v", "mode": "smoke", "density": [[[1.0, 2.0]], [[0.5, 0.0]]], "g": 0.3,
+                     "bounds": [[-1, -1, -4], [1, 1, -3]]}]
+    draaw_mi.render(draaw_mi.load_scene(d), version="v4", spp=1, post=[])
     del smoke
     gc.collect()
-    assert volume.held_media()                     # the table holds the smoke's medium
+    assert len(volume.held_media()) == 2           # the tables hold the smokes' media
     d = rs.cornell_draaw(res=16, spp=4)
     d["integrator"] = {"type": "volpath", "max_depth": 4}
     plain = draaw_mi.load_scene(d)
