@@ -69,15 +69,13 @@ def removed_feature_ops() -> dict:
     return counts
 
 
-def test_each_removed_feature_lowers_v4_kernel():
-    """In a process of its own: a vcall traces every live instance of its class, so a two-sided
-    BSDF that an earlier test leaves alive (a cached scene) puts its code into the kernel of
-    the scene without one (measured: 6857 operations, the full scene's, against 6278 with no
-    such scene alive; the in-process form failed under another test order)."""
+def _counts_in_a_process(function: str) -> dict:
+    """``function()`` of this module, run in a process of its own (no other scene alive: a
+    vcall traces every live instance of its class), its JSON result."""
     from conftest import ROOT          # (here, not at the top: the child imports this module alone)
     here = os.path.dirname(os.path.abspath(__file__))
     script = (f"import json, sys; sys.path.insert(0, {here!r}); "
-              "import test_integrators_kernels as t; print(json.dumps(t.removed_feature_ops()))")
+              f"import test_integrators_kernels as t; print(json.dumps(t.{function}()))")
     try:
         out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=600)
     except subprocess.TimeoutExpired as e:
@@ -85,9 +83,17 @@ def test_each_removed_feature_lowers_v4_kernel():
     tail = f"stdout {out.stdout[-1000:]!r}, stderr {out.stderr[-2000:]!r}"
     assert out.returncode == 0, tail
     try:
-        counts = json.loads(out.stdout.strip().splitlines()[-1])
+        return json.loads(out.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
         pytest.fail(f"the counting process printed no counts: {tail}")
+
+
+def test_each_removed_feature_lowers_v4_kernel():
+    """In a process of its own: a vcall traces every live instance of its class, so a two-sided
+    BSDF that an earlier test leaves alive (a cached scene) puts its code into the kernel of
+    the scene without one (measured: 6857 operations, the full scene's, against 6278 with no
+    such scene alive; the in-process form failed under another test order)."""
+    counts = _counts_in_a_process("removed_feature_ops")
     full = counts.pop("full")
     for feature, n in counts.items():
         assert n < full, (feature, n, full)
@@ -200,20 +206,7 @@ def test_kernels_hold_only_what_the_scene_renders():
     which ignore normal maps, trace a normal-mapped scene as the scene without its map: the
     same kernel and the same image (they had traced uv and dp/du for it: 4019 / 2684
     operations for 3936 / 2601)."""
-    from conftest import ROOT
-    here = os.path.dirname(os.path.abspath(__file__))
-    script = (f"import json, sys; sys.path.insert(0, {here!r}); "
-              "import test_integrators_kernels as t; print(json.dumps(t.scene_content_ops()))")
-    try:
-        out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=600)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"the counting process ran past 600 s; its stderr: {str(e.stderr)[-2000:]}")
-    tail = f"stdout {out.stdout[-1000:]!r}, stderr {out.stderr[-2000:]!r}"
-    assert out.returncode == 0, tail
-    try:
-        c = json.loads(out.stdout.strip().splitlines()[-1])
-    except (IndexError, ValueError):
-        pytest.fail(f"the counting process printed no counts: {tail}")
+    c = _counts_in_a_process("scene_content_ops")
     for kind in ("draaw_v3", "draaw_v4"):
         assert c[f"unused_tex {kind}"] == c[f"base {kind}"], (kind, c)
     assert c["unused_metal draaw_v4"] == c["base draaw_v4"], c
