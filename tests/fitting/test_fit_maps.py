@@ -286,5 +286,8 @@ def test_a_truth_of_another_shape_is_named_with_both_shapes(truth, tmp_path):
 
 
 def test_a_grey_truth_may_leave_out_its_channel():
-    errs = map_errors({"m.roughness": np.full((2, 2, 1), 0.5)}, {"m.roughness": np.full((2, 2), 0.25)})
+    fit = np.array([[0.5, 0.5], [0.25, 1.0]]).reshape(2, 2, 1)
+    truth = np.array([[0.0, 0.5], [0.25, 0.5]])                # texel by texel: 0.5, 0, 0, 0.5
+    errs = map_errors({"m.roughness": fit}, {"m.roughness": truth})
     assert errs["m.roughness"]["mae"] == pytest.approx(0.25)
+    assert errs["m.roughness"]["psnr"] == pytest.approx(-10 * np.log10(0.125))   # mse 0.5 / 4
