@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
 import json
 import os
 import struct
@@ -237,11 +238,19 @@ def read_frame(path: str, with_names: bool = False):
         return read_exr(path, with_names=with_names)
 
 
-def _flush_c_stdio() -> None:
+@functools.cache
+def _c_fflush():
+    """The C library's ``fflush``, looked up once; None where there is none to ask."""
     try:
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError, TypeError):      # (no C library to ask: nothing buffered there)
-        pass
+        return ctypes.CDLL(None).fflush
+    except (OSError, AttributeError, TypeError):
+        return None
+
+
+def _flush_c_stdio() -> None:
+    fflush = _c_fflush()
+    if fflush is not None:                       # (no C library: nothing buffered there)
+        fflush(None)
 
 
 @contextlib.contextmanager

@@ -34,12 +34,18 @@ except ImportError:                     # pragma: no cover - Windows
     fcntl = None
 
 
-def _holder(fd: int) -> str:
+def _written_pid(fd: int) -> int | None:
+    """The pid a run wrote into the lock file open as ``fd``, or None."""
     try:
-        pid = os.pread(fd, 32, 0).decode().strip()
+        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
     except OSError:
-        return ""
-    return f" (pid {pid})" if pid.isdigit() else ""
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _holder(fd: int) -> str:
+    pid = _written_pid(fd)
+    return "" if pid is None else f" (pid {pid})"
 
 
 def running_pid(folder: str) -> int | None:
@@ -55,15 +61,14 @@ def running_pid(folder: str) -> int | None:
     except OSError:
         return None
     try:
-        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
+        pid = _written_pid(fd)
         inode = os.fstat(fd).st_ino
     except OSError:
         return None
     finally:
         os.close(fd)
-    if not text.isdigit():
+    if pid is None:
         return None
-    pid = int(text)
     locked = _flock_holders(inode)
     if locked is not None:
         return pid if locked else None

@@ -83,28 +83,18 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
         f["delta_bsdfs"] = True
     if mi.has_flag(flags, mi.BSDFFlags.Anisotropic):
         f["anisotropic"] = True
+    # (by the parameters, not the BSDF's SpatiallyVarying flag: a normal map sets it too, and
+    # V1 / V2, which ignore normal maps, would trace uv and dp/du for it)
+    for name in textured_parameters(bsdf):
+        f["normal_maps" if any(p in _NORMALMAP_KEYS for p in name.split(".")) else "textures"] = True
     if _is_draaw(bsdf):
         f["draaw_materials"] = True
-        if bsdf.normalmap is not None:
-            f["normal_maps"] = True
-        # (not the BSDF's SpatiallyVarying flag: a normal map sets it too, and V1 / V2, which
-        # ignore normal maps, would trace uv and dp/du for it)
-        if any(is_spatially_varying(getattr(bsdf, n)) for n in ALL_PARAMS):
-            f["textures"] = True
         return
     f["other_materials"] = True
     if bsdf.class_name() == "Null":
         f["null_surfaces"] = True
     if mi.has_flag(flags, mi.BSDFFlags.Glossy):
         f["other_glossy"] = True
-    if bsdf.class_name() in _NORMALMAP_CLASSES:
-        f["normal_maps"] = True
-    for key in mi.traverse(bsdf).keys():
-        parts = key.split(".")
-        if any(p in _NORMALMAP_KEYS for p in parts):
-            f["normal_maps"] = True
-        elif parts[-1] in ("data", "to_uv"):
-            f["textures"] = True
 
 
 def textured_parameters(bsdf) -> list[str]:

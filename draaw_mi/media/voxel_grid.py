@@ -116,8 +116,9 @@ class VoxelGrid:
             if a is not None and np.iscomplexobj(a):
                 # (numpy would drop the imaginary part with only a ComplexWarning)
                 raise ParameterError(f"VoxelGrid.from_arrays: {name} is complex; expected real values")
-        if grid_size_problem(shape):
-            raise ParameterError(f"VoxelGrid.from_arrays: arrays of shape {grid_size_problem(shape)}")
+        problem = grid_size_problem(shape)
+        if problem:
+            raise ParameterError(f"VoxelGrid.from_arrays: arrays of shape {problem}")
         g = cls.empty(shape, bbox_min, bbox_max, seed)
         if occupied is not None:
             g.occupied = np.asarray(occupied, bool).copy()

@@ -93,13 +93,13 @@ def _weld_tolerance(tris: np.ndarray) -> float:
     return 1e-6 * max(float(np.linalg.norm(pts.max(0) - pts.min(0))), 1e-300)
 
 
-def _edges(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(ids (T, 3), edges (E, 2))``: vertex ids matched by position within
-    :func:`_weld_tolerance` (a mesh split at UV or normal seams, or exported unwelded, still
+def _edges(tris: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(ids (T, 3), edges (E, 2))``: vertex ids matched by position within ``tol``
+    (:func:`_weld_tolerance`: a mesh split at UV or normal seams, or exported unwelded, still
     closes) and each triangle's three edges as sorted id pairs, triangle ``k``'s at rows
     ``k``, ``T + k`` and ``2 T + k``."""
     pts = np.asarray(tris, float).reshape(-1, 3)
-    _, ids = np.unique(np.round(pts / _weld_tolerance(tris)), axis=0, return_inverse=True)
+    _, ids = np.unique(np.round(pts / tol), axis=0, return_inverse=True)
     ids = ids.reshape(-1, 3)
     return ids, np.sort(np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]]), axis=1)
 
@@ -131,18 +131,12 @@ def _uncovered(segments: np.ndarray, tol: float) -> np.ndarray:
     return out
 
 
-def open_edges(tris: np.ndarray) -> int:
-    """Edges of triangles (T, 3, 3) that bound an odd number of them (0 for a closed mesh)."""
-    _, e = _edges(tris)
-    e = e[e[:, 0] != e[:, 1]]                                   # (a collapsed edge bounds nothing)
-    _, counts = np.unique(e, axis=0, return_counts=True)
-    return int(np.sum(counts % 2 == 1))
-
-
-def closed_parts(tris: np.ndarray) -> np.ndarray:
+def closed_parts(tris: np.ndarray) -> tuple[np.ndarray, int]:
     """Per triangle: whether its connected part (triangles joined by shared vertices) is
-    closed, i.e. none of the part's edges bounds an odd number of triangles."""
-    ids, e = _edges(tris)
+    closed, i.e. none of the part's edges bounds an odd number of triangles (T-junctions'
+    edges apart); and the number of edges that leave parts open."""
+    tol = _weld_tolerance(tris)
+    ids, e = _edges(tris, tol)
     n_t = len(ids)
     lab = np.arange(int(ids.max()) + 1)
     while True:                                                 # vertex labels: min over edges
@@ -161,12 +155,12 @@ def closed_parts(tris: np.ndarray) -> np.ndarray:
         corner = np.asarray(tris, float).reshape(-1, 3)
         first_id = np.full(int(ids.max()) + 1, -1)
         first_id[ids.ravel()[::-1]] = np.arange(ids.size)[::-1]
-        odd = odd[_uncovered(corner[first_id[uniq[odd]]], _weld_tolerance(tris))]
+        odd = odd[_uncovered(corner[first_id[uniq[odd]]], tol)]
     odd_edge = np.isin(inv.ravel(), odd)
     owner = np.tile(np.arange(n_t), 3)[real]
     open_part = np.zeros(int(lab.max()) + 1, bool)
     open_part[part[owner[odd_edge]]] = True
-    return ~open_part[part]
+    return ~open_part[part], len(odd)
 
 
 def voxelize(tris: np.ndarray, shape, bbox_min, bbox_max, fill: str = "surface",
@@ -198,9 +192,9 @@ def voxelize(tris: np.ndarray, shape, bbox_min, bbox_max, fill: str = "surface",
         hit = g[d2 <= r * r]
         occ[hit[:, 0], hit[:, 1], hit[:, 2]] = True
     if fill == "solid" and len(t):
-        closed = closed_parts(tris)
+        closed, n_open = closed_parts(tris)
         if not closed.all():
-            warnings.warn(f"{name} is not closed: {open_edges(tris[~closed])} edges bound an odd number "
+            warnings.warn(f"{name} is not closed: {n_open} edges bound an odd number "
                           f"of triangles, in parts holding {int((~closed).sum())} of its {len(closed)} "
                           "triangles; fill='solid' fills the closed parts only and voxelises the open "
                           "ones as surfaces (an open part has no inside); close the mesh (e.g. trimesh's "
