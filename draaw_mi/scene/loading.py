@@ -28,6 +28,7 @@ import mitsuba as mi
 from ..errors import DraawError, SceneError, suggest, user_stacklevel
 from ..guard import RENDER_GUARD
 from ..integrators import SCENE_VERSION, resolve_version
+from ..sdf.scene import find as find_sdf
 from .camera import auto_camera, clipped_away, filter_plugin, sampler_plugin
 from .description import DEFAULT_SETTINGS, SAMPLERS, TOP_KEYS, build_mitsuba_dict
 from .draaw_scene import DraawScene
@@ -394,6 +395,9 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         info["xml"] = xml
     if integ is not None and named_integrator:
         info["integrator"] = integrator_name(integ)
+    sdf = find_sdf(scene)        # (the mi_scene of a loaded SDF scene: held while wrapped; a
+    if sdf is not None:          # SceneError when that scene was let go)
+        info["sdf"] = sdf
     d = DraawScene(scene, settings, source, info, mi_dict)
     # (the checked value: the command line's "32x32" would go in as a string, and a traceback out)
     if checked.get("resolution") and tuple(checked["resolution"]) != d.resolution:

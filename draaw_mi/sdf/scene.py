@@ -5,21 +5,25 @@ never hit by a ray) that carries the slot's BSDF, so SDF hits are shaded through
 ``si.bsdf()`` path, the BSDF parameters appear in ``mi.traverse`` as for meshes, and the
 integrators find the SDF tree from the proxies' ids (``__sdf_<token>_<slot>``) in
 :data:`REGISTRY`. :func:`find` returns the :class:`SDFScene` of an ``mi.Scene`` or ``None``.
+:data:`REGISTRY` holds its scenes weakly: an :class:`SDFScene` lives as long as its owner (the
+``info["sdf"]`` of the loaded :class:`~draaw_mi.scene.DraawScene`), and its entry goes with it.
 The ``[[sdf]]`` tables of scene files are read by :mod:`draaw_mi.scene.sdf_dicts`.
 """
 from __future__ import annotations
 
 import itertools
+import weakref
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import ParameterError, suggest
+from ..errors import ParameterError, SceneError, suggest
 from .node import SDFNode, box, infinite_box, is_infinite
 
 PROXY_PREFIX = "__sdf_"
-REGISTRY: dict[str, "SDFScene"] = {}
+#: ``{token: SDFScene}`` of the live SDF scenes (weak values: an entry goes with its scene)
+REGISTRY: "weakref.WeakValueDictionary[str, SDFScene]" = weakref.WeakValueDictionary()
 _TOKENS = itertools.count()
 
 
@@ -129,12 +133,20 @@ class SDFScene:
 
 
 def find(scene: mi.Scene) -> SDFScene | None:
-    """The :class:`SDFScene` placed in ``scene`` (via its proxy shapes), or ``None``."""
+    """The :class:`SDFScene` placed in ``scene`` (via its proxy shapes), or ``None`` when it has
+    no proxy. A :class:`~draaw_mi.errors.SceneError` when it has proxies but their SDF scene is
+    gone (its owner, the loaded scene, was let go while its ``mi_scene`` is still rendered):
+    the image would silently lose every SDF object."""
     for sh in scene.shapes():
         sid = sh.id()
         if sid.startswith(PROXY_PREFIX):
             token = sid[len(PROXY_PREFIX):].rsplit("_", 1)[0]
-            return REGISTRY.get(token)
+            sdf = REGISTRY.get(token)
+            if sdf is None:
+                raise SceneError(f"sdf.find: the SDF objects of shape {sid!r} were released with the "
+                                 "scene that loaded them; expected that scene (the DraawScene of "
+                                 "load_scene, or the SDFScene) kept alive while its mi_scene renders")
+            return sdf
     return None
 
 

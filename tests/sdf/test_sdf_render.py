@@ -352,3 +352,31 @@ def test_sdf_objects_beyond_the_far_clip_are_not_drawn(version):
     with pytest.warns(RuntimeWarning, match="beyond its far_clip 3"):
         assert np.all(image(3.0) == 1.0)
     assert (image(6.0) < 0.99).mean() > 0.2
+
+
+def test_a_let_go_sdf_scene_leaves_the_registry_and_a_live_one_still_renders():
+    """Each loaded SDF scene's registry entry goes with the scene (the registry held every
+    SDFScene, its nodes and Dr.Jit arrays, for the life of the process); the scene kept alive
+    renders the image it rendered before the others went; the ``mi_scene`` of a let-go scene
+    is refused by name rather than rendered without its SDF objects."""
+    import gc
+
+    from draaw_mi.errors import SceneError
+    from draaw_mi.sdf.scene import REGISTRY
+    desc = base_description(res=(12, 9))
+    desc["sdf"] = [{"type": "sphere", "name": "obj", "material": "ball", "center": [0.0, 0.8, 0.0], "radius": 0.8}]
+    live = draaw_mi.load_scene(desc)
+    before = render_np(live, "v4", 2, 0)
+    tokens = []
+    for _ in range(3):
+        scene = draaw_mi.load_scene(desc)
+        tokens.append(scene.info["sdf"].token)
+        orphan = scene.mi_scene
+        del scene
+    gc.collect()
+    assert not [t for t in tokens if t in REGISTRY]
+    assert live.info["sdf"].token in REGISTRY
+    np.testing.assert_array_equal(render_np(live, "v4", 2, 0), before)
+    assert (before[..., :3] != render_np(draaw_mi.load_scene(base_description(res=(12, 9))), "v4", 2, 0)[..., :3]).any()
+    with pytest.raises(SceneError, match="released with the scene that loaded them"):
+        draaw_mi.render(orphan, version="v4", spp=1)
