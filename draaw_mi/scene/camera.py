@@ -249,8 +249,11 @@ def clipped_away(origin, near: float, far: float, boxes) -> str | None:
     if not nearest:
         return None
     if max(farthest) < near:
+        # (a near_clip must be > 0: shapes all at the camera's position are shown by none)
+        fix = (f"set [camera] near_clip (e.g. {1e-3 * max(farthest):.2g})" if max(farthest) > 0
+               else "move the camera off them")
         return (f"every shape is within {max(farthest):.3g} of the camera, closer than its near_clip "
-                f"{near:g}; set [camera] near_clip (e.g. {1e-3 * max(farthest):.2g})")
+                f"{near:g}; {fix}")
     if min(nearest) > far:
         return (f"every shape is at least {min(nearest):.3g} from the camera, beyond its far_clip "
                 f"{far:g}; set [camera] far_clip (e.g. {10 * max(farthest):.2g})")

@@ -301,7 +301,7 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
     scene = load_dict_or_error(mi_dict, source)
     sensor = mi_dict["sensor"]
     clipped = clipped_away(info["camera"]["origin"], sensor["near_clip"], sensor["far_clip"],
-                           [(sh.bbox().min, sh.bbox().max) for sh in scene.shapes()])
+                           _visible_boxes(scene, info.get("sdf")))
     if clipped:
         warnings.warn(f"{source}: camera: {clipped}; the image shows none of it", RuntimeWarning,
                       stacklevel=user_stacklevel())
@@ -313,6 +313,14 @@ def from_description(desc: dict, source: str, base_dir: str, overrides: dict) ->
         raise SceneError(f"{source}: the scene holds a value that cannot be copied ({e}); give numbers, "
                          "lists, numpy arrays and file names") from None
     return DraawScene(scene, settings, source, info, mi_dict, tmp, description=description)
+
+
+def _visible_boxes(scene, sdf) -> list:
+    """The boxes (pairs of corners) of what ``scene`` draws: its shapes' but for the SDF
+    objects' hidden proxies (a point at the SDF box's centre), and the SDF objects' own."""
+    skip = set(sdf.proxy_ids) if sdf is not None else set()
+    boxes = [(sh.bbox().min, sh.bbox().max) for sh in scene.shapes() if sh.id() not in skip]
+    return boxes + [(b.min, b.max) for b in (sdf.bboxes() if sdf is not None else [])]
 
 
 #: the smallest value of each integer override of :func:`load_scene` (the CLI names its flags

@@ -104,3 +104,58 @@ def test_a_scene_the_clip_planes_hide_is_said(s, said):
         warnings.simplefilter("error", RuntimeWarning)
         fixed = draaw_mi.load_scene(d)
     assert not np.allclose(np.array(draaw_mi.render(fixed, version="path", spp=1, post=[])), 0.5)
+
+
+def _camera_warnings(d):
+    import warnings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = draaw_mi.load_scene(d)
+    return scene, [str(w.message) for w in caught if "camera:" in str(w.message)]
+
+
+@pytest.mark.parametrize("room", [
+    [{"type": "sphere", "name": "room", "center": [0, 0.5, 0], "radius": 3.0}],
+    [{"type": "box", "name": "outer", "center": [0, 0.5, 0], "size": [6, 6, 6]},
+     {"type": "box", "name": "inner", "center": [0, 0.5, 0], "size": [5, 5, 5]},
+     {"type": "subtraction", "name": "room", "children": ["outer", "inner"]}]])
+def test_a_camera_inside_an_sdf_room_is_not_said_to_clip_it(room):
+    """The clip check measured the SDF objects' hidden proxies (one point at the SDF box's
+    centre, here the camera's position) and warned "every shape is within 0 of the camera
+    ... near_clip (e.g. 0)", a value the loader refuses; the SDF objects' own boxes are
+    measured, and the room is drawn (no pixel is the sky's 0.5)."""
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d.update(shapes=[], sdf=room, lights=[{"type": "constant", "intensity": 0.5}])
+    d["camera"] = {"origin": [0, 0.5, 0], "target": [0, 0.5, -1], "fov": 60}
+    scene, said = _camera_warnings(d)
+    assert not said, said
+    img = np.array(draaw_mi.render(scene, version="v4", spp=1, seed=0, post=[]))
+    assert np.all(img[..., :3] < 0.45), img[..., :3].max()
+
+
+def test_an_sdf_object_the_near_plane_hides_is_said_with_a_value_the_loader_takes():
+    """A ball 1e-3 across, 2e-3 from the camera, with the default near_clip 0.01: said, with
+    a near_clip > 0 that loads without the warning and shows the ball."""
+    import re
+    d = tiny_description(resolution=[8, 6], spp=1)
+    d.update(shapes=[], lights=[{"type": "constant", "intensity": 0.5}],
+             sdf=[{"type": "sphere", "name": "ball", "center": [0, 0, -2e-3], "radius": 5e-4}])
+    d["camera"] = {"origin": [0, 0, 0], "target": [0, 0, -1], "fov": 30}
+    _, said = _camera_warnings(d)
+    assert len(said) == 1 and "closer than its near_clip 0.01" in said[0], said
+    value = float(re.search(r"near_clip \(e\.g\. ([^)]+)\)", said[0]).group(1))
+    assert value > 0
+    d["camera"]["near_clip"] = value
+    scene, said = _camera_warnings(d)
+    assert not said, said
+    img = np.array(draaw_mi.render(scene, version="v4", spp=1, seed=0, post=[]))
+    assert img[3, 4, 0] < 0.45                     # the ball, not the sky
+
+
+def test_shapes_at_the_camera_are_said_without_a_near_clip_of_0():
+    """Every box a point at the camera: no near_clip shows it (the warning offered 0, which
+    the loader refuses)."""
+    from draaw_mi.scene.camera import clipped_away
+    said = clipped_away([0, 0, 0], 0.01, 1e4, [([0, 0, 0], [0, 0, 0])])
+    assert said.startswith("every shape is within 0 of the camera") and "e.g." not in said, said
+    assert clipped_away([0, 0, 0], 0.01, 1e4, [([0, 0, 0], [1e-3, 0, 0])]).endswith("near_clip (e.g. 1e-06)")
