@@ -110,14 +110,18 @@ def boundary_samples(integrator, scene: mi.Scene, sensor: mi.Sensor, sampler: mi
         jump = dr.select(dr.isfinite(jump), jump, 0.0)
         delta = 0.5 * m + 1e-4 * eps
         # each ray's place among the band's rays (gathered back: a scatter into an attached
-        # array leaves it dirty inside the AD traversal)
+        # array leaves it dirty inside the AD traversal). The gather's adjoint is a plain
+        # atomic scatter-add (ReduceMode.Direct): Auto expands a small target per thread with
+        # its size, the band's ray count, a literal: a new kernel for each count
+        # (each new SDF parameter value, in a fit)
         slot = dr.full(mi.UInt32, 0xFFFFFFFF, n_all)
         dr.scatter(slot, dr.arange(mi.UInt32, n), idx)
         dr.eval(slot)
         in_band = slot != 0xFFFFFFFF
     with dr.resume_grad():
         m_att = attached_minimum(sdf, r.o, r.d, t, m, delta, on)
-        value = dr.gather(mi.Spectrum, jump * (dr.detach(m_att) - m_att), slot, in_band)
+        value = dr.gather(mi.Spectrum, jump * (dr.detach(m_att) - m_att), slot, in_band,
+                          mode=dr.ReduceMode.Direct)
     return value, weight, pos, ray
 
 

@@ -205,6 +205,39 @@ def test_primal_renders_trace_no_boundary_code():
     assert np.array_equal(before, after)
 
 
+def test_gradient_passes_at_new_radii_compile_no_new_kernel():
+    """The band's ray count changes with the radius; the adjoint of the gather that spreads
+    their values back over the image's rays wrote into an array of that count, which Dr.Jit
+    expands per thread with the count as a literal: each new value compiled a new kernel
+    (a 60-step fit: 34 compiles). Gradient passes at 0.62, 0.66 and 0.70 launch only the
+    kernels that the pass at 0.58 launched (compared by their code's hash, so that a kernel
+    cache on disk does not hide one)."""
+    scene = _scene(BALL)
+    params = draaw_mi.sdf.parameters(scene)
+    flag = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        seen = []
+        for radius in (0.58, 0.62, 0.66, 0.70):
+            params["sdf.ball.radius"] = radius
+            params.update()
+            val = params["sdf.ball.radius"]
+            dr.kernel_history()                                  # (cleared)
+            dr.enable_grad(val)
+            dr.backward(_loss(draaw_mi.render(scene, version="v4", spp=4, seed=0, params=params, post=[])))
+            grad = dr.grad(val)
+            dr.eval(grad)
+            dr.disable_grad(val)
+            dr.sync_thread()
+            assert float(grad[0]) != 0.0
+            seen.append({(k["hash"], k["operation_count"]) for k in dr.kernel_history()
+                         if k["type"] == dr.KernelType.JIT})
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, flag)
+    for radius, kernels in zip((0.62, 0.66, 0.70), seen[1:]):
+        assert kernels <= seen[0], (radius, sorted(n for _, n in kernels - seen[0]))
+
+
 # --------------------------------------------------------------------------- the band's parts
 def test_closest_approach_of_a_sphere_is_the_lines_distance():
     """Rays passing a sphere: m = distance from the centre to the line - R (closed form), at
