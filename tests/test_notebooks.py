@@ -65,14 +65,26 @@ def test_notebook_executes_small(name, monkeypatch, tmp_path):
                    if o.output_type == "stream")
     markers, min_images = SMALL_RUN[name]
     assert all(m in text for m in markers), markers            # the small configuration ran
-    {"inverse_fitting": _check_fitted_values, "voxels_smoke": _check_voxels_smoke,
-     "sdf_csg": _check_sdf_csg, "texture_capture": _check_texture_capture}[name](text)
+    CHECKS[name](text)
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
     assert len(images) >= min_images                           # e.g. side by side + convergence
     written = {os.path.relpath(os.path.join(d, f), tmp_path) for d, _, fs in os.walk(tmp_path) for f in fs}
     assert written >= WRITES.get(name, set()) and all(p.startswith(name + os.sep) for p in written), \
         sorted(written)
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_stored_full_run_passes_the_same_checks(name):
+    """The executed copy the documentation shows (docs/tutorials/<name>.ipynb, the full
+    configuration) passes the checks of the small run: a stored page whose printed AD and FD
+    disagree by 6 standard errors under prose saying they agree cannot be committed."""
+    path = os.path.join(ROOT, "docs", "tutorials", f"{name}.ipynb")
+    nb = nbformat.read(path, as_version=4)
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs
+                   if o.output_type == "stream")
+    assert nb.metadata["draaw_mi_executed"]["configuration"] == "full", path
+    CHECKS[name](text)
 
 
 # name -> files the small configuration writes (under DRAAW_MI_NOTEBOOK_OUT, not the system's
@@ -182,3 +194,8 @@ def _check_texture_capture(text):
     assert found["obj.roughness"][0] < found["obj.roughness"][1], found
     psnr = float(re.search(r"relit PSNR ([-\d.]+) dB", text).group(1))
     assert np.isfinite(psnr) and psnr > 10, psnr
+
+
+# name -> the checks of its printed text (small runs and the stored full runs alike)
+CHECKS = {"inverse_fitting": _check_fitted_values, "voxels_smoke": _check_voxels_smoke,
+          "sdf_csg": _check_sdf_csg, "texture_capture": _check_texture_capture}
