@@ -31,6 +31,18 @@ from .limits import HALF_MAX
 DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}
 
 
+def openexr(where: str):
+    """The ``OpenEXR`` module, imported on first use (15 ms: paid by EXR files only, so PNG
+    renders and ``draaw-mi --help`` work without it); an :class:`IOFailure` naming ``where``
+    and how to get it back when it cannot be imported (it is a core dependency)."""
+    try:
+        import OpenEXR
+    except ImportError as e:
+        raise IOFailure(f"{where}: EXR files need the OpenEXR package, which cannot be imported ({e}); "
+                        "reinstall draaw-mi (pip install -e .) or pip install OpenEXR") from None
+    return OpenEXR
+
+
 def to_numpy(image, where: str = "to_numpy") -> np.ndarray:
     """An (H, W, C) float32 numpy copy of a TensorXf, Bitmap or array (2-D gets C = 1);
     ``where`` names the caller in the error."""
@@ -172,7 +184,7 @@ def write_exr(path: str, image, channels: Sequence[str] | None = None, half: boo
     if over:      # (one message for every file: Python shows it once per calling line)
         warnings.warn("write_exr: values beyond half's range (+-65504) are stored as +-inf; half=False "
                       "keeps them", RuntimeWarning, stacklevel=2)
-    import OpenEXR  # (15 ms to import: paid by EXR files only)
+    OpenEXR = openexr(f"write_exr({path!r})")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         if key in header or not isinstance(value, (str, int, float)) or isinstance(value, bool):
@@ -286,7 +298,7 @@ def read_exr(path: str, with_names: bool = False):
     if cut is not None:
         raise IOFailure(f"read_exr({path!r}): not a readable EXR file: truncated or damaged "
                         f"({os.path.getsize(path)} bytes: {cut})")
-    import OpenEXR  # (15 ms to import: paid by EXR files only)
+    OpenEXR = openexr(f"read_exr({path!r})")
     try:
         with OpenEXR.File(path, separate_channels=True) as f:
             chans = {n: np.asarray(c.pixels, dtype=np.float32) for n, c in f.channels().items()}

@@ -42,12 +42,11 @@ import sys
 import time
 
 import numpy as np
-import OpenEXR
 from PIL import Image
 
 from ..errors import IOFailure
 from ..integrators import resolve_version
-from ..io import read_exr, write_exr, write_png
+from ..io import openexr, read_exr, write_exr, write_png
 from ..post import load_chain
 from .digests import file_hash, versions
 
@@ -113,6 +112,7 @@ def read_header(path: str) -> dict | None:
     """The header of an EXR, or None when the file is missing or not a readable EXR."""
     if not os.path.isfile(path):
         return None
+    OpenEXR = openexr(f"read_header({path!r})")      # (outside the try: no OpenEXR is no unread frame)
     try:
         with OpenEXR.File(path, header_only=True) as f:
             return dict(f.header())
@@ -221,6 +221,7 @@ def exr_decodes(path: str) -> bool:
     writes ZIP-compressed frames, whose zlib checksum fails on them), as :func:`exr_complete`
     cannot. OpenEXR's own messages about a chunk it cannot decompress are silenced
     (:func:`quiet_native_output`): the caller reports the frame."""
+    OpenEXR = openexr(f"exr_decodes({path!r})")
     try:
         with quiet_native_output(), OpenEXR.File(path) as f:
             for channel in f.channels().values():

@@ -31,7 +31,7 @@ from .. import batch, post
 from ..batch.exr import HASH_ATTR, MANIFEST_ATTR, read_header, render_metadata
 from ..errors import DraawError, SceneError
 from ..fitting import fit, fit_two_starts
-from ..io import read_exr, write_exr, write_png
+from ..io import openexr, read_exr, write_exr, write_png
 from ..post import display_encoded
 from ..rendering import render
 from ..scene import OVERRIDE_MAXIMA, OVERRIDE_MINIMA
@@ -74,6 +74,8 @@ def _writable(path: str, suffixes: tuple[str, ...], what: str) -> str:
 
 def _cmd_render(args) -> int:
     _writable(args.output, (".exr", ".png"), "output")
+    if args.output.lower().endswith(".exr"):
+        openexr(f"draaw-mi render -o {args.output}")   # before the render, not after it
     if args.png:
         _writable(args.png, (".png",), "--png")
         if os.path.abspath(args.png) == os.path.abspath(args.output):

@@ -17,7 +17,7 @@ from draaw_mi.cli import main
 from draaw_mi.errors import IOFailure
 from draaw_mi.fitting.reference import load_reference
 
-from conftest import SCENES, tiny_description
+from conftest import ROOT, SCENES, tiny_description
 
 
 @pytest.fixture
@@ -187,6 +187,53 @@ def test_a_variant_draaw_mi_cannot_run_is_refused_in_one_line(variant):
     r = subprocess.run([sys.executable, "-c", "import draaw_mi"], capture_output=True, text=True,
                        env=env, timeout=120)
     assert r.returncode == 1 and "DraawError" in r.stderr.splitlines()[-1]
+
+
+# Each command runs in one process where ``import OpenEXR`` fails (as when the package is
+# missing or broken); prints {argv: [exit status, stderr]} as JSON.
+_WITHOUT_OPENEXR = """
+import contextlib, io, json, sys
+sys.modules["OpenEXR"] = None
+from draaw_mi_cli import main
+results = {}
+for argv in json.loads(sys.argv[1]):
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        try:
+            status = main(argv)
+        except SystemExit as e:                # --help, --version
+            status = e.code
+    results[" ".join(argv)] = [status, err.getvalue(), out.getvalue()]
+print(json.dumps(results))
+"""
+
+
+def test_without_openexr_help_info_and_png_work_and_exr_is_one_line(tmp_path):
+    """Every command crashed with a traceback, --help included, when OpenEXR could not be
+    imported (draaw_mi.batch.exr imported it at load); now only EXR files need it."""
+    scene, png, exr = os.path.join(SCENES, "cornell.toml"), str(tmp_path / "c.png"), str(tmp_path / "c.exr")
+    small = ["--resolution", "8x8", "--spp", "1"]
+    whole = str(tmp_path / "whole.exr")
+    draaw_mi.write_exr(whole, np.ones((4, 4, 3), np.float32))         # (OpenEXR is here)
+    commands = [["--help"], ["--version"], ["info", scene], ["render", scene, "-o", png] + small,
+                ["render", scene, "-o", exr] + small, ["post", whole, "-o", str(tmp_path / "p.exr"), "--chain",
+                 os.path.join(SCENES, "post_chain.json")]]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")]))
+    r = subprocess.run([sys.executable, "-c", _WITHOUT_OPENEXR, json.dumps(commands)], capture_output=True,
+                       text=True, env=env, cwd=str(tmp_path), timeout=300)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout.splitlines()[-1])
+    for argv in commands[:4]:
+        status, err, out = res[" ".join(argv)]
+        assert status in (0, None) and "Traceback" not in err, (argv, err)
+    assert "usage: draaw-mi" in res["--help"][2] and "draaw-mi" in res["--version"][2]
+    assert "materials:" in res[f"info {scene}"][2]
+    assert os.path.getsize(png) > 0
+    for argv in commands[4:]:
+        status, err, _ = res[" ".join(argv)]
+        line = _one_error_line(err)
+        assert status == 2 and "OpenEXR" in line and "pip install" in line, (argv, line)
+    assert not os.path.exists(exr)             # refused before rendering, not after it
 
 
 COMMENTED = """\
