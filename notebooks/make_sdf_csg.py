@@ -159,9 +159,10 @@ plt.title("outline, shadow edge and shading")
 plt.axis("off")"""),
     ("md", """## Fitting a shape to two views
 
-A ball smoothly merged into a slab, seen from two cameras. Starting 25-30 % off in radius,
-x position and blend radius, `draaw_mi.fit` moves the outline onto the references'. Without
-the boundary terms the same fit runs away (`benchmarks/sdf_fit.py`: radius 0.55 → 1.23)."""),
+A ball smoothly merged into a slab, seen from two cameras. Starting from radius 0.42 (truth
+0.55: 24 % small), blend radius k 0.18 (truth 0.25: 28 % small) and centre x -0.05 (truth
+0.12: 0.17 off, on the other side of the slab's middle), `draaw_mi.fit` moves the outline onto
+the references'. Without the boundary terms the same fit runs away (`benchmarks/sdf_fit.py`: radius 0.55 → 1.23)."""),
     ("code", """FIT_RES = 32 if SMALL else 96
 views = [{"origin": [0.0, 1.3, 4.2], "target": [0.0, 0.5, 0.0], "fov": 36},
          {"origin": [3.0, 1.8, 2.8], "target": [0.0, 0.5, 0.0], "fov": 36}]

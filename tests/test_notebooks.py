@@ -87,6 +87,24 @@ def test_stored_full_run_passes_the_same_checks(name):
     CHECKS[name](text)
 
 
+def test_sdf_csg_fit_prose_names_the_start_and_truth_the_code_sets():
+    """The shape fit's prose said "25-30 % off" of a centre x that starts 0.17 away, on the
+    slab's other side: it names each start and truth of the code now, in the generator's
+    notebook and in the stored page alike."""
+    import ast
+    import re
+    for nb in (notebook_generator("make_sdf_csg.py").build(),
+               nbformat.read(os.path.join(ROOT, "docs", "tutorials", "sdf_csg.ipynb"), as_version=4)):
+        i = next(i for i, c in enumerate(nb.cells) if "\nstart = {" in c.source)
+        code, prose = nb.cells[i].source, " ".join(nb.cells[i - 1].source.split())
+        start, truth = (ast.literal_eval(re.search(r"\n" + n + r" = (\{.*?\})\n", code).group(1))
+                        for n in ("start", "truth"))
+        assert start.keys() == truth.keys()
+        for key in start:                                  # (the centre: its x moves)
+            s, t = (v[0] if isinstance(v, list) else v for v in (start[key], truth[key]))
+            assert f"{s} (truth {t}" in prose, (key, s, t, prose)
+
+
 # name -> files the small configuration writes (under DRAAW_MI_NOTEBOOK_OUT, not the system's
 # temporary folder, where every run left a folder)
 WRITES = {"voxels_smoke": {"voxels_smoke/solid.npz", "voxels_smoke/smoke.npz"},
