@@ -5,7 +5,19 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.draaw-mi-installed
 
-.PHONY: setup llvm demo test test-all docs clean
+.PHONY: help setup llvm demo test test-all docs clean
+# a bare `make` lists the targets: set-up may install libLLVM with apt (as root)
+.DEFAULT_GOAL := help
+
+help:
+	@echo "make setup      .venv with the package and its dev extra; libLLVM >= 16 via apt if missing (root)"
+	@echo "make demo       set up, then render scenes/cornell.toml to out/cornell.exr and out/cornell.png"
+	@echo "make test       set up, then the default test suite (not the slow tests; CI runs this)"
+	@echo "make test-all   set up with the notebooks and browser extras, then every test"
+	@echo "make docs       set up with the docs extra, then the documentation site in docs/_build/html"
+	@echo "make notebook   set up with the notebooks extra, then JupyterLab on notebooks/"
+	@echo "make llvm       only the libLLVM check (and apt install when missing)"
+	@echo "make clean      remove .venv, out/, docs/_build, docs/benchmarks and .pytest_cache"
 
 setup: llvm $(STAMP)
 

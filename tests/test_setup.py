@@ -71,3 +71,31 @@ def test_subpackages_are_attributes_after_a_plain_import():
         "print('ok')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
+def test_a_bare_make_lists_the_targets_and_sets_up_nothing():
+    """``make`` with no target ran set-up (which may apt-install libLLVM as root) and ``make help``
+    had no rule: now a bare ``make`` is ``make help``, which names every target of the Makefile,
+    and each of those is a rule (``make -n``: nothing runs)."""
+    import re
+    import shutil
+
+    import pytest
+    if shutil.which("make") is None:
+        pytest.skip("no make on this machine")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+    def make(*args):
+        return subprocess.run(["make", *args], cwd=root, capture_output=True, text=True, timeout=60)
+    bare = make("-n")                  # (dry runs first: a bare make that sets up would do it for real)
+    assert bare.returncode == 0 and bare.stdout == make("-n", "help").stdout, bare.stdout
+    assert all(line.startswith("echo ") for line in bare.stdout.splitlines()), bare.stdout
+    helped = make("-s", "help")
+    assert helped.returncode == 0, helped.stderr
+    listed = re.findall(r"^make (\S+)", helped.stdout, re.M)
+    with open(os.path.join(root, "Makefile")) as fh:
+        phony = {t for line in fh if line.startswith(".PHONY:") for t in line.split()[1:]}
+    assert set(listed) == phony - {"help"}, (listed, phony)
+    for target in listed + ["test"]:               # (.ci/run calls make test)
+        r = make("-n", target)
+        assert r.returncode == 0, (target, r.stderr)
