@@ -10,10 +10,10 @@ the outputs stored here. Refresh them after a notebook or the renderer changes::
 Each notebook runs top to bottom in a fresh ``python3`` kernel with ``notebooks/`` as its
 working directory, in the notebooks' full configuration unless ``--small`` is given (the
 CI-sized one, ``DRAAW_MI_NOTEBOOK_SMALL=1``: seconds, tiny images). Outputs are made to fit
-a static page: figures as PNG at a modest resolution, interactive widgets (which need a live
-kernel) replaced by their plain-text form (``ipywidgets.interact`` runs once with each control's
-first value), widget state and execution timings dropped, so the stored copies stay small and
-the pages load without fetching widget scripts from the web.
+a static page: figures as PNG at a modest resolution, each cell's interactive widgets (a panel,
+a progress bar: they need a live kernel) replaced by one line saying so (``ipywidgets.interact``
+runs once with each control's first value), widget state and execution timings dropped, so the
+stored copies stay small and the pages load without fetching widget scripts from the web.
 """
 from __future__ import annotations
 
@@ -50,19 +50,21 @@ try:
     _widgets.interact = _static_interact
 except ImportError:
     pass"""
+WIDGET_NOTE = "(an interactive widget: run the notebook to use it)"
 MAX_OUTPUT_BYTES = 1_500_000        # a stored tutorial above this is refused: shrink its figures
 
 
 def static_outputs(nb: nbformat.NotebookNode) -> int:
-    """Make ``nb``'s outputs fit a static page, in place: widget views become their text/plain
-    form (or vanish), widget state and per-cell timing metadata go. Returns how many widget
+    """Make ``nb``'s outputs fit a static page, in place: a cell's widget views become one
+    output saying :data:`WIDGET_NOTE` (their text/plain, a repr or a progress bar at 0 %, says
+    nothing on a page), widget state and per-cell timing metadata go. Returns how many widget
     outputs were replaced.
 
     >>> nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("w")])
     >>> nb.cells[0].outputs = [nbformat.v4.new_output("display_data",
     ...     data={WIDGET_VIEW: {"model_id": "x"}, "text/plain": "Tuner(...)"})]
     >>> static_outputs(nb), nb.cells[0].outputs[0].data
-    (1, {'text/plain': 'Tuner(...)'})
+    (1, {'text/plain': '(an interactive widget: run the notebook to use it)'})
     """
     replaced = 0
     nb.metadata.pop("widgets", None)
@@ -70,14 +72,14 @@ def static_outputs(nb: nbformat.NotebookNode) -> int:
         cell.metadata.pop("execution", None)
         if cell.cell_type != "code":
             continue
-        kept = []
+        kept, noted = [], False
         for out in cell.outputs:
-            data = out.get("data", {})
-            if WIDGET_VIEW in data:
+            if WIDGET_VIEW in out.get("data", {}):
                 replaced += 1
-                data.pop(WIDGET_VIEW)
-                if not data:
-                    continue
+                if not noted:                       # one line for the cell's widgets
+                    kept.append(nbformat.v4.new_output("display_data", data={"text/plain": WIDGET_NOTE}))
+                    noted = True
+                continue
             kept.append(out)
         cell.outputs = kept
     return replaced
@@ -99,7 +101,7 @@ def add_stored_note(nb: nbformat.NotebookNode, name: str) -> None:
     text = ("```{note}\n"
             "The outputs on this page are **stored**: this notebook (`notebooks/" + name + ".ipynb`) was "
             "executed once, in its full configuration, and the documentation shows what it printed and "
-            "drew then; interactive widgets appear as text. Refresh them with "
+            "drew then; interactive widgets appear as a line saying so. Refresh them with "
             "`.venv/bin/python docs/execute_notebooks.py " + name + "`, or run the notebook yourself "
             "with `make notebook`.\n```")
     cell = nbformat.v4.new_markdown_cell(text)
