@@ -26,9 +26,7 @@ Set `DRAAW_MI_NOTEBOOK_SMALL=1` to run a tiny study live instead (32x32, seconds
     ("code", """import json
 import os
 
-import numpy as np
 import matplotlib.pyplot as plt
-import ipywidgets as widgets
 
 from draaw_mi import bench
 from draaw_mi.rendering.denoiser import available as denoiser_available
@@ -86,8 +84,13 @@ def plot(scene=scenes[0], metric="rmse", show=tuple(labels)):
 for sc in scenes:          # static plots (also in the saved notebook)
     plot(sc, "rmse")"""),
     ("md", "## Interactive: pick the scene, the metric and the settings"),
-    ("code", """widgets.interact(plot, scene=scenes, metric=list(METRICS),
-                 show=widgets.SelectMultiple(options=labels, value=tuple(labels), rows=min(10, len(labels))));"""),
+    ("code", """try:
+    import ipywidgets as widgets
+except ImportError:
+    print("the interactive plot needs ipywidgets: pip install 'draaw-mi[notebooks]'")
+else:
+    widgets.interact(plot, scene=scenes, metric=list(METRICS),
+                     show=widgets.SelectMultiple(options=labels, value=tuple(labels), rows=min(10, len(labels))))"""),
     ("md", """## Denoised few samples vs many raw samples
 
 The acceptance question of the denoiser: does OIDN on 4 spp beat 64 raw spp? Per scene and

@@ -87,6 +87,22 @@ def test_stored_full_run_passes_the_same_checks(name):
     CHECKS[name](text)
 
 
+def test_accuracy_vs_time_runs_without_ipywidgets(monkeypatch, tmp_path):
+    """Without the notebooks extra every cell still runs and the interactive one says what to
+    install (its first cell imported ipywidgets, so every later cell failed with NameError)."""
+    monkeypatch.setenv("DRAAW_MI_NOTEBOOK_SMALL", "1")
+    monkeypatch.setenv("DRAAW_MI_NOTEBOOK_OUT", str(tmp_path))
+    nb = nbformat.read(os.path.join(NOTEBOOKS, "accuracy_vs_time.ipynb"), as_version=4)
+    nb.cells.insert(0, nbformat.v4.new_code_cell("import sys\nsys.modules['ipywidgets'] = None   # not installed"))
+    nbclient.NotebookClient(nb, kernel_name="python3", timeout=180,
+                            resources={"metadata": {"path": NOTEBOOKS}}).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "small study: 32x32" in text and "winner" in text
+    assert "the interactive plot needs ipywidgets: pip install 'draaw-mi[notebooks]'" in text
+
+
 def test_sdf_csg_fit_prose_names_the_start_and_truth_the_code_sets():
     """The shape fit's prose said "25-30 % off" of a centre x that starts 0.17 away, on the
     slab's other side: it names each start and truth of the code now, in the generator's
