@@ -8,6 +8,7 @@ import json
 import math
 import os
 import re
+from importlib.util import find_spec
 
 import drjit as dr
 import mitsuba as mi
@@ -178,8 +179,32 @@ def check_own_integrator_flags(args, scene) -> None:
                        "there, or give --version (path, v4, ...) with --max-depth")
 
 
+# extra -> the modules it installs that draaw-mi imports (pyproject.toml's optional-dependencies)
+EXTRAS = {"denoise": ("pyoidn",), "batch": ("dask", "distributed"),
+          "notebooks": ("ipywidgets", "jupyter_rfb", "ipykernel", "jupyterlab"),
+          "docs": ("sphinx", "myst_nb", "furo", "sphinxarg")}
+
+
+def extras_present() -> dict:
+    """{extra: the modules of it that cannot be found ([] when all are there)}, by
+    ``importlib.util.find_spec``: nothing is imported."""
+    return {extra: [m for m in modules if find_spec(m) is None] for extra, modules in EXTRAS.items()}
+
+
+def extras_line(missing: dict) -> str:
+    """``denoise yes, batch no (pip install 'draaw-mi[batch]'), ...``
+
+    >>> extras_line({"denoise": [], "batch": ["distributed"]})
+    "denoise yes, batch no (no distributed: pip install 'draaw-mi[batch]')"
+    """
+    return ", ".join(f"{extra} yes" if not gone else
+                     f"{extra} no (no {', '.join(gone)}: pip install 'draaw-mi[{extra}]')"
+                     for extra, gone in missing.items())
+
+
 def cmd_info(args) -> int:
     """``draaw-mi info [SCENE]``: the set-up, and what a scene holds."""
+    missing = extras_present()
     out = {
         "draaw_mi": __version__,
         "variant": mi.variant(),
@@ -190,6 +215,7 @@ def cmd_info(args) -> int:
         "plugins": {"bsdf": list(getattr(materials, "PLUGINS", ["draaw"])),
                     "integrators": sorted(set(getattr(integrators, "PLUGINS", [])))},
         "versions": dict(integrators.VERSION_ALIASES),
+        "extras": {extra: not gone for extra, gone in missing.items()},
     }
     if args.scene:
         loaded = load_for_cli(args)
@@ -214,7 +240,7 @@ def cmd_info(args) -> int:
     for key, value in out.items():
         if key in ("scene", "versions", "plugins"):
             continue
-        print(f"{key:>10}: {value}")
+        print(f"{key:>10}: {extras_line(missing) if key == 'extras' else value}")
     print(f"{'bsdfs':>10}: {', '.join(out['plugins']['bsdf'])}")
     by_plugin: dict = {}
     for alias, plugin in out["versions"].items():

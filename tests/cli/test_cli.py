@@ -131,6 +131,29 @@ def test_render_sampler_reaches_the_scene(tmp_path, monkeypatch):
     assert seen == ["MultijitterSampler"] and exr.exists()
 
 
+def test_info_says_which_extras_are_there(capsys, monkeypatch):
+    """One line per set-up: each extra yes, or no with the module missing and the install
+    command (pyoidn and distributed hidden here; the others as find_spec finds them)."""
+    import importlib.util
+    import json
+    import tomllib
+    monkeypatch.setitem(sys.modules, "pyoidn", None)          # as if not installed
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    assert main(["info"]) == 0
+    line = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip().startswith("extras:")]
+    assert len(line) == 1, line
+    assert "denoise no (no pyoidn: pip install 'draaw-mi[denoise]')" in line[0]
+    assert "batch no (no distributed: pip install 'draaw-mi[batch]')" in line[0]
+    docs = all(importlib.util.find_spec(m) for m in ("sphinx", "myst_nb", "furo", "sphinxarg"))
+    assert ("docs yes" in line[0]) == docs and ("docs no (" in line[0]) == (not docs)
+    assert main(["info", "--json"]) == 0
+    extras = json.loads(capsys.readouterr().out)["extras"]
+    assert extras["denoise"] is False and extras["batch"] is False and extras["docs"] is docs
+    assert set(extras) == {"denoise", "batch", "notebooks", "docs"}
+    with open(os.path.join(SCENES, "..", "pyproject.toml"), "rb") as fh:    # the extras' real names
+        assert set(extras) <= set(tomllib.load(fh)["project"]["optional-dependencies"])
+
+
 def test_info_lists_setup_and_scene(capsys):
     assert main(["info"]) == 0
     out = capsys.readouterr().out
