@@ -27,16 +27,88 @@ guarded by draaw-mi: hold the guard around them::
 Take it around such calls, never inside a Dr.Jit callback (an integrator's
 ``render_backward``, a ``dr.CustomOp``): Dr.Jit holds its AD lock there, which a preview's
 frozen call waits for while it holds the guard, and the two threads would deadlock.
+
+Freeing a scene is Dr.Jit work too: a draaw BSDF or a scene's buffers freed on one thread
+while another records or replays a render aborts the process ("jit_var(r1343): unknown
+variable!") or crashes it. Python's cycle collector frees at arbitrary times on arbitrary
+threads, so while a render pass runs (:data:`COLLECTOR_PAUSED`) automatic collections are off
+and a ``gc.collect()`` of another thread waits for the pass to end.
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
+import gc
 import threading
 
 import drjit as dr
 
 #: see the module docstring
 RENDER_GUARD = threading.RLock()
+
+#: the longest a ``gc.collect()`` waits for a render pass of another thread to end (and a
+#: pass for a collection of another thread): then it goes on regardless
+COLLECTION_WAIT_S = 60.0
+
+
+class _CollectorPaused:
+    """Python's cycle collector kept away from a render (see the module docstring): automatic
+    collections off (on again when the last paused block of any thread ends, if they were on
+    when the first began), a collection in progress on another thread finished before the
+    block starts, and a ``gc.collect()`` of another thread made to wait until no block runs
+    (:func:`_collection_waits`). Nested and across threads. A class rather than a generator
+    context manager: it runs on every replay of a frozen render."""
+    __slots__ = ()
+    depth: dict = {}                   # thread ident -> nesting depth of its paused blocks
+    was_enabled = False
+    collecting = None                  # ident of the thread in a collection, if any
+    cond = threading.Condition(threading.RLock())   # (an automatic collection may start inside)
+
+    def __enter__(self):
+        cls, me = _CollectorPaused, threading.get_ident()
+        with cls.cond:
+            if me not in cls.depth:
+                cls.cond.wait_for(lambda: cls.collecting in (None, me), timeout=COLLECTION_WAIT_S)
+                if not cls.depth:
+                    cls.was_enabled = gc.isenabled()
+                    gc.disable()
+            cls.depth[me] = cls.depth.get(me, 0) + 1
+
+    def __exit__(self, *exc):
+        cls, me = _CollectorPaused, threading.get_ident()
+        with cls.cond:
+            n = cls.depth.pop(me) - 1
+            if n:
+                cls.depth[me] = n
+            elif not cls.depth:
+                if cls.was_enabled:
+                    gc.enable()
+                cls.cond.notify_all()
+        return False
+
+
+#: ``with COLLECTOR_PAUSED:`` around a render pass (see :class:`_CollectorPaused`)
+COLLECTOR_PAUSED = _CollectorPaused()
+
+
+def _collection_waits(phase: str, info: dict) -> None:
+    """``gc.callbacks`` hook: a collection starts only once no other thread is in a
+    :data:`COLLECTOR_PAUSED` block (at most :data:`COLLECTION_WAIT_S` seconds), and is known
+    while it runs (a block of another thread waits for its end)."""
+    cls, me = _CollectorPaused, threading.get_ident()
+    with cls.cond:
+        if phase == "start":
+            cls.cond.wait_for(lambda: not any(t != me for t in cls.depth), timeout=COLLECTION_WAIT_S)
+            cls.collecting = me
+        else:
+            cls.collecting = None
+            cls.cond.notify_all()
+
+
+gc.callbacks.append(_collection_waits)
+# (taken out at exit: a daemon worker stopped by the interpreter inside a block would make
+# the final collections wait)
+atexit.register(lambda: _collection_waits in gc.callbacks and gc.callbacks.remove(_collection_waits))
 
 #: fewest Dr.Jit threads with which Mitsuba 3.9.1 reads an EXR file (see exr_reading_threads)
 EXR_READ_THREADS = 2

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import gc
 import sys
-import threading
 import warnings
 
 import drjit as dr
@@ -23,6 +22,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import caused_by_interrupt
+from ..guard import COLLECTOR_PAUSED
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
 from ..sdf.scene import PROXY_PREFIX
@@ -194,36 +194,11 @@ def owned_tensor(array) -> mi.TensorXf:
 RECORDINGS_KEPT = 8
 
 
-class _CollectorPaused:
-    """Python's cycle collector off while a frozen render runs (nested and across threads: on
-    again when the last one ends, if it was on when the first began). A collection during a
-    ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's buffers, a dead preview's
-    recordings) aborts the process: "RecordThreadState::enqueue_host_func(): this function
-    cannot be recorded!".
-    A class rather than a generator context manager: this runs on every replay (1 us, not 2)."""
-    __slots__ = ()
-    depth = 0
-    was_enabled = False
-    guard = threading.Lock()
-
-    def __enter__(self):
-        cls = _CollectorPaused
-        with cls.guard:
-            if cls.depth == 0:
-                cls.was_enabled = gc.isenabled()
-                gc.disable()
-            cls.depth += 1
-
-    def __exit__(self, *exc):
-        cls = _CollectorPaused
-        with cls.guard:
-            cls.depth -= 1
-            if cls.depth == 0 and cls.was_enabled:
-                gc.enable()
-        return False
-
-
-_PAUSED = _CollectorPaused()
+#: Python's cycle collector kept away from a frozen render (:data:`draaw_mi.guard.COLLECTOR_PAUSED`):
+#: a collection during a ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's
+#: buffers, a dead preview's recordings) aborts the process: "RecordThreadState::enqueue_host_func():
+#: this function cannot be recorded!"
+_PAUSED = COLLECTOR_PAUSED
 
 
 def _first_cause(e: BaseException) -> str:

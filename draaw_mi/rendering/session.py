@@ -22,7 +22,8 @@ and the preview render through them. :meth:`Session.gradient_pass` renders a dif
 pass, its loss and its backward pass (:func:`draaw_mi.fit`'s captures), traced or replayed.
 
 Renders of different scenes from different threads are serialised: every pass runs under
-:data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), and so does
+:data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), with Python's cycle
+collector kept away from it (:data:`draaw_mi.guard.COLLECTOR_PAUSED`), and so does
 ``mi.render`` with a draaw integrator called directly. Take a scene's lock before the
 guard, never after: :func:`holding` takes them so.
 
@@ -49,7 +50,7 @@ import numpy as np
 
 from .. import post
 from ..errors import RenderError, caused_by_interrupt
-from ..guard import RENDER_GUARD
+from ..guard import COLLECTOR_PAUSED, RENDER_GUARD
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
 from .frozen import freeze_render, freeze_supported
@@ -267,7 +268,7 @@ class Session:
         parameters) makes it differentiable (traced; ``sensor`` as in ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
         bits either way."""
         scene = self.scene
-        with self.lock, RENDER_GUARD, interrupts_raised_as_such():
+        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
             if params is None and sensor is None and self.freezes(spp, freeze):
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
@@ -300,7 +301,7 @@ class Session:
         scene = self.scene
         spp_grad = spp if spp_grad is None else spp_grad
         adaptive = getattr(integrator, "adaptive_applies", None)
-        with self.lock, RENDER_GUARD, interrupts_raised_as_such():
+        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
             if (freeze and self.freezes(spp, True)
                     and not (adaptive is not None and adaptive(scene.mi_scene, sensor, seed, spp))):
                 key = ("gradient", id(integrator), int(spp), int(spp_grad), loss)
