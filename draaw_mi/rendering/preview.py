@@ -53,6 +53,7 @@ import numpy as np
 
 from .. import post as _post
 from ..errors import DraawError, ParameterError, suggest
+from ..guard import RENDER_GUARD
 from ..integrators import is_draaw
 from ..post import load_chain
 from ..scene import DraawScene, check_like, load_scene, value_like
@@ -247,6 +248,20 @@ class Preview(PreviewWorker):
         self._wake.notify_all()
         return self._generation
 
+    def close(self, timeout: float = 10.0) -> None:
+        """Stop the worker (:meth:`stop`) and let go of the scene, its reduced-resolution copy
+        and the callbacks: the preview renders no more. The scene is dropped under
+        :data:`~draaw_mi.guard.RENDER_GUARD`, so when nothing else holds it its draaw BSDFs are
+        freed here (each live one widens every later render's BSDF calls), not by a later
+        garbage collection beside another thread's render (which kills the process)."""
+        self.stop(timeout)
+        with RENDER_GUARD:
+            with self._lock:
+                self._callbacks.clear()
+                self._error_callbacks.clear()
+                held, self.scene, self._lo = (self.scene, self._lo), None, None
+            del held
+
     def reset(self) -> int:
         """Restart the accumulation (e.g. after changing the scene from outside)."""
         with self._lock:
@@ -291,6 +306,8 @@ class Preview(PreviewWorker):
         preview accumulated it without publishing (at most one denoised refinement frame per
         ``denoise_interval`` seconds; the first frame after a change is always published)."""
         with self._lock:
+            if self.scene is None:
+                raise DraawError("Preview.step: this preview was closed (Preview.close); make a new one")
             generation = self._generation
             interactive = (self._spp == 0 and self.interactive_scale < 1.0 and generation != self._shown_generation
                            and self.scene.mi_dict is not None)   # (XML / mi.Scene: no second resolution)

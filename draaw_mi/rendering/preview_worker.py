@@ -60,6 +60,8 @@ class PreviewWorker:
         stopped, and its error callbacks get :class:`PreviewSuperseded`. The worker is the
         scene session's (:meth:`~draaw_mi.rendering.session.Session.add_worker`): closing the
         session, or the interpreter's exit, stops it."""
+        if self.scene is None:
+            raise DraawError("Preview.start: this preview was closed (Preview.close); make a new one")
         with _STARTS:                 # (two starts at once would each leave the other running)
             session = session_of(self.scene)
             for other in session.workers():

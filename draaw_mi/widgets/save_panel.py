@@ -13,6 +13,8 @@ import os
 import ipywidgets as W
 import numpy as np
 
+from ..guard import RENDER_GUARD
+from ..rendering.session import holding
 from ..scene.loading import from_description
 from . import tuning
 
@@ -87,9 +89,15 @@ class SavePanel:
         if self._file_values is None:                 # the file's own values, loaded once
             src = self.base_scene.source
             base = os.path.dirname(os.path.abspath(src)) if os.path.isfile(src) else os.getcwd()
-            fresh = from_description(copy.deepcopy(self.base_scene.description), src, base, {})
-            self._file_values = _editable_values(fresh, tuning.light_values(fresh))
-        now = _editable_values(self._scene(), self.lights.base)
+            # read and freed under the render guard: a scene freed while another thread
+            # records a frame kills the process
+            with RENDER_GUARD:
+                fresh = from_description(copy.deepcopy(self.base_scene.description), src, base, {})
+                self._file_values = _editable_values(fresh, tuning.light_values(fresh))
+                del fresh
+        scene = self._scene()
+        with holding(scene):                          # (its values read beside no frame)
+            now = _editable_values(scene, self.lights.base)
         return {k: v for k, v in now.items()
                 if k in self._file_values and not np.allclose(v, self._file_values[k], rtol=1e-6, atol=0)}
 

@@ -40,10 +40,12 @@ import numpy as np
 
 from ..errors import DraawError
 from ..fitting.reference import load_reference
+from ..guard import RENDER_GUARD
 from ..rendering.preview import Preview, PreviewSuperseded, _budget, _scale
 from ..scene import DraawScene, load_scene
 from ..scene.loading import from_description
 from . import tuning
+from .tuning import scaled_resolution  # (public here, the resolution slider's rule)
 
 try:
     import ipywidgets as W
@@ -115,6 +117,7 @@ class MaterialTuner:
         self._syncing = False
         self._textures: dict = {}
         self.frames_shown = 0
+        self._render_failed = False                 # the message line says a frame failed
         self._lossless_at = -float("inf")            # when the canvas last got a PNG
         self.last_format = None
         self.sent = collections.deque(maxlen=256)    # (generation, spp, format) of pushed frames
@@ -178,9 +181,17 @@ class MaterialTuner:
         o = self._options
         pv = Preview(scene, version=o["version"], max_spp=o["max_spp"], denoise=o["denoise"], post=chain,
                      interactive_scale=o["interactive_scale"], freeze=o["freeze"])
-        pv.on_frame(self._show)
-        pv.on_error(self._show_error)
+        pv.on_frame(self._current_only(pv, self._show))
+        pv.on_error(self._current_only(pv, self._show_error))
         return pv
+
+    def _current_only(self, pv, fn):
+        """``fn`` as ``pv``'s callback: called while ``pv`` is the panel's preview only (an
+        error of the preview a reload replaced would otherwise stay in red next to the new
+        one's frames). ``pv`` held weakly: a replaced preview is freed, with its scene, when
+        the panel drops it."""
+        ref = weakref.ref(pv)
+        return lambda arg: fn(arg) if self.preview is ref() else None
 
     def _guard(self, fn):
         """Run a control's action; a DraawError / bad value becomes a red message, not a traceback."""
@@ -236,6 +247,9 @@ class MaterialTuner:
             data = tuning.encode(frame.image, fmt, encoded=frame.encoded)
             self.image.format = fmt
             self.image.value = data
+        if self._render_failed:            # a frame of a later change: the failure is past
+            self._render_failed = False
+            self.message.value = ""
         self.frames_shown += 1
         self.last_format = fmt
         self.last_frame = frame
@@ -261,8 +275,9 @@ class MaterialTuner:
             self.message.value = _error_html(f"{error}")
             self.status.value = "stopped"
             return
-        self.message.value = _error_html(f"render failed: {error}; change a value to try again")
+        self.message.value = _error_html(f"render failed: {tuning.innermost_error(error)}; change a value to try again")
         self.status.value = "render failed"
+        self._render_failed = True
 
     def refresh(self, frames: int = 1):
         """Render ``frames`` frames now in this thread (for scripts/tests without the worker)."""
@@ -272,12 +287,18 @@ class MaterialTuner:
         return out
 
     def close(self):
-        """Stop the worker thread and close every widget of the panel (:func:`close_widgets`)."""
-        self.preview.stop()
+        """Stop the worker thread, close every widget of the panel (:func:`close_widgets`) and
+        let go of the scenes (:meth:`Preview.close`): the panel's draaw BSDFs are freed now,
+        under :data:`~draaw_mi.guard.RENDER_GUARD` (each live one widens every later render's
+        BSDF calls, and one freed by a later garbage collection beside another thread's render
+        kills the process). A closed panel shows and saves nothing more."""
+        self.preview.close()
         panels = (self.camera_panel, self.lights_panel, self.post_panel, self.save_panel)
         close_widgets(self.widget, *self.camera_panel.links, *vars(self).values(),
                       *(w for panel in panels for w in vars(panel).values()),
                       getattr(self.canvas, "_output_context", None))   # jupyter_rfb's error output
+        with RENDER_GUARD:
+            self.scene = self.base_scene = self.save_panel.base_scene = None
 
     def _ipython_display_(self):
         from IPython.display import display  # optional: only in a notebook
@@ -401,9 +422,32 @@ class MaterialTuner:
             self.controls[m]["base_color_text"].disabled = True
 
     def _reload(self, scale: float | None = None):
-        """Rebuild the scene (textures, resolution): the only changes that recompile."""
+        """Rebuild the scene (textures, resolution): the only changes that recompile. The
+        worker stops first (a scene built or freed here while it records a frame kills the
+        process); the old preview goes on if the new scene cannot be made."""
         scale = self.controls_render["scale"].value if scale is None else scale
         size = scaled_resolution(self.base_scene.resolution, scale)
+        running = self.preview.running
+        self.preview.stop()
+        try:
+            scene = self._rebuilt(size)
+            new = self._new_preview(scene, self.post_panel.chain)
+        except BaseException:
+            if running:
+                self.preview.start()
+            raise
+        for m, files in self._textures.items():
+            if "base_color" in files:                   # a texture now: no single colour
+                self.materials[m].pop("base_color", None)
+        # the lights' base values stay the loaded scene's: the new scene's lights are already
+        # scaled by the intensity and colour controls
+        old, self.preview, self.scene = self.preview, new, scene
+        old.close()                      # (its scene freed now, under the render guard)
+        if running:
+            self.preview.start()
+
+    def _rebuilt(self, size):
+        """The scene at ``size`` with the panel's values and texture files."""
         if self.scene.description is None:
             # an XML scene has no description to rebuild: loaded again at the new size, its
             # current values carried over (its resolution had failed with "only TOML/JSON/dict
@@ -417,17 +461,7 @@ class MaterialTuner:
                     else os.getcwd())
             doc["render"]["resolution"] = list(size)
             scene = from_description(doc, self.scene.source, base, {})
-        for m, files in self._textures.items():
-            if "base_color" in files:                   # a texture now: no single colour
-                self.materials[m].pop("base_color", None)
-        running = self.preview.running
-        self.preview.stop()
-        self.scene = scene
-        # the lights' base values stay the loaded scene's: the new scene's lights are already
-        # scaled by the intensity and colour controls
-        self.preview = self._new_preview(scene, self.post_panel.chain)
-        if running:
-            self.preview.start()
+        return scene
 
     def _render_panel(self):
         o = self._options
@@ -458,20 +492,6 @@ class MaterialTuner:
 #: the newest running panel of each scene file (MaterialTuner._take_over_file)
 _PANELS: dict = {}
 _PANELS_GUARD = threading.Lock()
-
-def scaled_resolution(size, scale: float) -> tuple[int, int]:
-    """The film for the resolution slider: ``size`` (W, H) itself at scale 1, else one factor
-    on both axes, at least 8 pixels on the shorter one (8 per axis would turn 32x24 at 0.25
-    into 8x8, and a 6x6 scene at 1.0 into 8x8).
-
-    >>> scaled_resolution((32, 24), 0.25), scaled_resolution((6, 6), 1.0), scaled_resolution((640, 480), 0.5)
-    ((11, 8), (6, 6), (320, 240))
-    """
-    w, h = int(size[0]), int(size[1])
-    s = min(1.0, max(float(scale), 8.0 / min(w, h)))
-    if s >= 1.0:
-        return w, h
-    return max(1, round(w * s)), max(1, round(h * s))
 
 
 def _revert(args) -> None:

@@ -311,6 +311,45 @@ def snippet(source: str, materials: dict, settings: dict | None = None, resoluti
     return "\n".join(lines) + "\n"
 
 
+def scaled_resolution(size, scale: float) -> tuple[int, int]:
+    """The film for the resolution slider: ``size`` (W, H) itself at scale 1, else one factor
+    on both axes, at least 8 pixels on the shorter one (8 per axis would turn 32x24 at 0.25
+    into 8x8, and a 6x6 scene at 1.0 into 8x8).
+
+    >>> scaled_resolution((32, 24), 0.25), scaled_resolution((6, 6), 1.0), scaled_resolution((640, 480), 0.5)
+    ((11, 8), (6, 6), (320, 240))
+    """
+    w, h = int(size[0]), int(size[1])
+    s = min(1.0, max(float(scale), 8.0 / min(w, h)))
+    if s >= 1.0:
+        return w, h
+    return max(1, round(w * s)), max(1, round(h * s))
+
+
+def innermost_error(error: BaseException) -> str:
+    """The text of the exception at the bottom of ``error``'s chain (``raise ... from``, or
+    raised while handling): Dr.Jit's wrappers say only "error while performing a custom
+    differentiable operation. (see above)", and nothing is above in a panel.
+
+    >>> try:
+    ...     try:
+    ...         raise ValueError("the BSDF failed")
+    ...     except ValueError as e:
+    ...         raise RuntimeError("drjit.custom(): error (see above)") from e
+    ... except RuntimeError as e:
+    ...     innermost_error(e)
+    'ValueError: the BSDF failed'
+    """
+    seen, e = {id(error)}, error
+    while True:
+        nxt = e.__cause__ if e.__cause__ is not None else (None if e.__suppress_context__ else e.__context__)
+        if nxt is None or id(nxt) in seen:
+            break
+        seen.add(id(nxt))
+        e = nxt
+    return str(error) if e is error else f"{type(e).__name__}: {e}"
+
+
 __all__ = ["material_values", "parse_rgb", "hex_to_linear", "linear_to_hex", "light_values", "light_positions", "orbit",
            "look_at", "to_uint8", "encode", "errors", "error_image", "document", "save_toml", "snippet",
-           "SCALAR_PARAMS"]
+           "SCALAR_PARAMS", "scaled_resolution", "innermost_error"]

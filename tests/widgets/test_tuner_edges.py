@@ -299,3 +299,70 @@ def test_a_closed_session_is_said_by_the_panel():
         assert float(np.asarray(t.scene.params["ball.roughness.value"]).ravel()[0]) != pytest.approx(0.77)
     finally:
         t.close()
+
+
+def test_a_reload_stops_the_worker_before_it_builds_a_scene_and_goes_on_if_it_fails():
+    """A scene built (document() loads the file's) or freed while the worker records a frame
+    killed the process: the worker is stopped first; a reload that fails leaves the old
+    preview refining."""
+    t = _tuner(tiny_description(), autostart=True, max_spp=100000)
+    try:
+        first, seen = t.preview, []
+        document = t.document
+
+        def spy(*a):
+            seen.append(first.running)
+            return document(*a)
+        t.document = spy
+        t.controls_render["scale"].value = 0.5
+        assert seen == [False]                         # (was True: built beside the frame)
+        assert t.preview is not first and t.preview.running and first.scene is None
+
+        def broken(*a):
+            raise draaw_mi.errors.DraawError("no document")
+        t.document = broken
+        second = t.preview
+        t.controls_render["scale"].value = 0.25
+        assert "no document" in t.message.value
+        assert t.preview is second and second.running  # (was stopped for good)
+    finally:
+        t.close()
+
+
+def test_a_failed_frame_says_its_innermost_error_and_a_later_frame_clears_it():
+    """Dr.Jit wraps an integrator's error in "drjit.custom(...): error while performing a
+    custom differentiable operation. (see above)" -- nothing is above in a panel; the red
+    line stayed next to the good frames that followed."""
+    t = _tuner(tiny_description())
+    try:
+        try:
+            try:
+                raise ValueError("ball.roughness: NaN in the BSDF")
+            except ValueError as e:
+                raise RuntimeError("drjit.custom(<_RenderOp>): error while performing a custom "
+                                   "differentiable operation. (see above).") from e
+        except RuntimeError as e:
+            err = e
+        t.preview._error_callbacks[0](err)
+        assert "NaN in the BSDF" in t.message.value and "see above" not in t.message.value
+        t.preview.update({"ball.roughness": 0.4})
+        t.refresh(1)
+        assert t.message.value == "" and "spp" in t.status.value
+    finally:
+        t.close()
+
+
+def test_a_replaced_previews_error_is_not_shown():
+    """(a reload's old preview, stopped in its frame, reported a failure next to the new
+    preview's frames)"""
+    t = _tuner(tiny_description())
+    try:
+        old_error, old_frame = t.preview._error_callbacks[0], t.preview._callbacks[0]
+        t.controls_render["scale"].value = 0.5
+        t.refresh(1)
+        shown = t.frames_shown
+        old_error(RuntimeError("the old scene's frame failed"))
+        old_frame(t.last_frame)
+        assert t.message.value == "" and t.frames_shown == shown
+    finally:
+        t.close()
