@@ -3,7 +3,8 @@
 :mod:`~draaw_mi.widgets.tuning` holds the tuner's helpers that need no widgets (plain numpy)
 and imports without ipywidgets; :class:`MaterialTuner` (:mod:`~draaw_mi.widgets.tuner`, with
 the panels :mod:`~draaw_mi.widgets.camera_panel`, :mod:`~draaw_mi.widgets.lights_panel`,
-:mod:`~draaw_mi.widgets.post_panel` and :mod:`~draaw_mi.widgets.save_panel`) and
+:mod:`~draaw_mi.widgets.post_panel`, :mod:`~draaw_mi.widgets.save_panel`; its scene rebuilds in
+:mod:`~draaw_mi.widgets.rebuild`) and
 :class:`OrbitCanvas` (:mod:`~draaw_mi.widgets.orbit_canvas`) need the ``notebooks`` extra and
 are imported when first named::
 

@@ -43,9 +43,8 @@ from ..fitting.reference import load_reference
 from ..guard import RENDER_GUARD
 from ..rendering.preview import Preview, PreviewSuperseded, _budget, _scale
 from ..scene import DraawScene, load_scene
-from ..scene.loading import from_description
-from . import tuning
-from .tuning import scaled_resolution  # (public here, the resolution slider's rule)
+from . import rebuild, tuning
+from .tuning import scaled_resolution  # noqa: F401 (public here: the resolution slider's rule)
 
 try:
     import ipywidgets as W
@@ -397,71 +396,11 @@ class MaterialTuner:
             self.controls[m]["base_color_text"].value = ", ".join(f"{x:.4g}" for x in rgb)
 
     def _apply_textures(self, m):
-        base = os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source) else os.getcwd()
-        files = {}
-        for field, param in (("texture", "base_color"), ("normalmap", "normalmap")):
-            text = self.controls[m][field].value.strip()
-            if not text:
-                continue
-            path = text if os.path.isabs(text) else os.path.join(base, text)
-            if not os.path.isfile(path):
-                raise DraawError(f"{m}.{param}: file {text!r} does not exist (looked for {path!r})")
-            files[param] = os.path.abspath(path)
-        if not files:
-            raise DraawError(f"{m}: no texture or normal-map file given")
-        previous = {k: dict(v) for k, v in self._textures.items()}
-        self._textures.setdefault(m, {}).update(files)
-        try:
-            self._reload()
-        except Exception:
-            self._textures.clear()           # a file that does not load is not kept
-            self._textures.update(previous)
-            raise
-        if "base_color" in files:               # now a texture: no single colour to pick
-            self.controls[m]["base_color"].disabled = True
-            self.controls[m]["base_color_text"].disabled = True
+        rebuild.apply_textures(self, m)
 
     def _reload(self, scale: float | None = None):
-        """Rebuild the scene (textures, resolution): the only changes that recompile. The
-        worker stops first (a scene built or freed here while it records a frame kills the
-        process); the old preview goes on if the new scene cannot be made."""
-        scale = self.controls_render["scale"].value if scale is None else scale
-        size = scaled_resolution(self.base_scene.resolution, scale)
-        running = self.preview.running
-        self.preview.stop()
-        try:
-            scene = self._rebuilt(size)
-            new = self._new_preview(scene, self.post_panel.chain)
-        except BaseException:
-            if running:
-                self.preview.start()
-            raise
-        for m, files in self._textures.items():
-            if "base_color" in files:                   # a texture now: no single colour
-                self.materials[m].pop("base_color", None)
-        # the lights' base values stay the loaded scene's: the new scene's lights are already
-        # scaled by the intensity and colour controls
-        old, self.preview, self.scene = self.preview, new, scene
-        old.close()                      # (its scene freed now, under the render guard)
-        if running:
-            self.preview.start()
-
-    def _rebuilt(self, size):
-        """The scene at ``size`` with the panel's values and texture files."""
-        if self.scene.description is None:
-            # an XML scene has no description to rebuild: loaded again at the new size, its
-            # current values carried over (its resolution had failed with "only TOML/JSON/dict
-            # scenes can be written back")
-            scene = self.scene.with_resolution(*size)
-        else:
-            doc = self.document()
-            for m, files in self._textures.items():
-                doc["materials"][m].update(files)
-            base = (os.path.dirname(os.path.abspath(self.scene.source)) if os.path.isfile(self.scene.source)
-                    else os.getcwd())
-            doc["render"]["resolution"] = list(size)
-            scene = from_description(doc, self.scene.source, base, {})
-        return scene
+        """Rebuild the scene (:func:`~draaw_mi.widgets.rebuild.reload`)."""
+        rebuild.reload(self, scale)
 
     def _render_panel(self):
         o = self._options
