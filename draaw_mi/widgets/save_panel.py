@@ -13,8 +13,10 @@ import os
 import ipywidgets as W
 import numpy as np
 
+from ..errors import DraawError
 from ..guard import RENDER_GUARD
 from ..rendering.session import holding
+from ..scene import DraawScene
 from ..scene.loading import from_description
 from . import tuning
 
@@ -44,6 +46,7 @@ class SavePanel:
         self.base_scene, self.materials, self.textures, self.lights = base_scene, materials, textures, lights
         self._scene, self._chain, self._camera, self._render, self._say = scene, chain, camera, render, say
         self._file_values = None             # the file's own light and SDF values (outside_edits)
+        self._values_at_close = None         # the scene's SDF values when the tuner closed
         src = base_scene.source
         default = save_path or (os.path.splitext(src)[0] + "_tuned.toml" if src.endswith((".toml", ".json"))
                                 else "tuned.toml")
@@ -95,9 +98,11 @@ class SavePanel:
                 fresh = from_description(copy.deepcopy(self.base_scene.description), src, base, {})
                 self._file_values = _editable_values(fresh, tuning.light_values(fresh))
                 del fresh
-        scene = self._scene()
-        with holding(scene):                          # (its values read beside no frame)
-            now = _editable_values(scene, self.lights.base)
+        now = self._values_at_close
+        if now is None:
+            scene = self._scene()
+            with holding(scene):                      # (its values read beside no frame)
+                now = _editable_values(scene, self.lights.base)
         return {k: v for k, v in now.items()
                 if k in self._file_values and not np.allclose(v, self._file_values[k], rtol=1e-6, atol=0)}
 
@@ -113,6 +118,45 @@ class SavePanel:
         """Python code reproducing the tuned materials."""
         return tuning.snippet(self.base_scene.source, self.materials, dict(self._render()),
                               resolution=self.base_scene.resolution)
+
+    def close(self) -> None:
+        """Keep what :meth:`document`, :meth:`save` and :meth:`snippet` read of the scenes
+        (:class:`ClosedScene`, and the ``[[sdf]]`` values the scene has now) and let go of
+        them: the tuner frees its scenes when it closes. Call it with the worker stopped."""
+        if isinstance(self.base_scene, ClosedScene):
+            return
+        scene = self._scene()
+        if scene is not None:
+            with holding(scene):
+                self._values_at_close = _editable_values(scene, self.lights.base)
+        self.base_scene = ClosedScene(self.base_scene)
+        self._scene = lambda: None
+
+
+class ClosedScene:
+    """What the Save panel reads of the loaded scene, kept as plain data (no Dr.Jit object)
+    once the tuner has closed and freed the scene: its description, file, settings, resolution,
+    the relative file names the loader resolved and its parameter names.
+    :meth:`updated_description` is :meth:`DraawScene.updated_description
+    <draaw_mi.scene.DraawScene.updated_description>` over these; anything else read of it raises
+    a :class:`~draaw_mi.errors.DraawError` saying that the panel was closed."""
+
+    def __init__(self, scene):
+        self.description = copy.deepcopy(scene.description)
+        self.source = scene.source
+        self.settings = copy.deepcopy(dict(scene.settings))
+        self.resolution = tuple(scene.resolution)
+        self.info = {"relative_files": dict(scene.info.get("relative_files", {}))}
+        self.sdf = None if scene.sdf is None else True        # (only whether it has [[sdf]])
+        self.params = frozenset(scene.params.keys())          # (names: whether a key is one)
+
+    updated_description = DraawScene.updated_description
+
+    def __getattr__(self, name):
+        if name.startswith("__"):              # (copy, pickle and hasattr ask for these)
+            raise AttributeError(name)
+        raise DraawError(f"MaterialTuner: the panel was closed (MaterialTuner.close) and its scene "
+                         f"freed; its {name!r} is not kept. Open a new MaterialTuner")
 
 
 def _editable_values(scene, lights: dict) -> dict:

@@ -121,6 +121,7 @@ class MaterialTuner:
         self.last_format = None
         self.sent = collections.deque(maxlen=256)    # (generation, spp, format) of pushed frames
         self._autostart = autostart
+        self._closed = False
         self.preview = self._new_preview(self.scene, chain)
         self._build(save_path, frame_channel, chain)
         if autostart:
@@ -174,6 +175,7 @@ class MaterialTuner:
 
     def load_camera_path(self, keys, frames: int = 120):
         """Move the camera along GO-Draaw keyframes (:meth:`CameraPanel.load_camera_path`)."""
+        self._check_open("load_camera_path")
         return self.camera_panel.load_camera_path(keys, frames)
 
     def _new_preview(self, scene, chain) -> Preview:
@@ -196,6 +198,9 @@ class MaterialTuner:
         """Run a control's action; a DraawError / bad value becomes a red message, not a traceback."""
         def run(*args):
             if self._syncing:
+                return
+            if self._closed:            # (its preview has no scene to change)
+                self.message.value = _error_html(_closed_text("MaterialTuner"))
                 return
             if isinstance(self.preview.error, PreviewSuperseded):
                 # (a change here would go into the scene the newer panel shows, unrendered here,
@@ -224,7 +229,12 @@ class MaterialTuner:
     def _say(self, html: str) -> None:
         self.message.value = html
 
+    def _check_open(self, who: str) -> None:
+        if self._closed:
+            raise DraawError(_closed_text(f"MaterialTuner.{who}"))
+
     def _changed(self, values: dict):
+        self._check_open("update")
         self._last_change = time.perf_counter()
         self.preview.update(values)
 
@@ -280,6 +290,7 @@ class MaterialTuner:
 
     def refresh(self, frames: int = 1):
         """Render ``frames`` frames now in this thread (for scripts/tests without the worker)."""
+        self._check_open("refresh")
         out = None
         for _ in range(frames):
             out = self.preview.step() or out
@@ -290,14 +301,19 @@ class MaterialTuner:
         let go of the scenes (:meth:`Preview.close`): the panel's draaw BSDFs are freed now,
         under :data:`~draaw_mi.guard.RENDER_GUARD` (each live one widens every later render's
         BSDF calls, and one freed by a later garbage collection beside another thread's render
-        kills the process). A closed panel shows and saves nothing more."""
+        kills the process). A closed panel renders and changes nothing more (its controls say
+        so in red; :meth:`refresh` and :meth:`load_camera_path` raise a DraawError), but
+        :meth:`document`, :meth:`save` and :meth:`snippet` still give the panel's values as
+        they were at close (:class:`~draaw_mi.widgets.save_panel.ClosedScene`)."""
+        self._closed = True
         self.preview.close()
+        self.save_panel.close()           # (keeps what saving needs; before the guard: lock order)
         panels = (self.camera_panel, self.lights_panel, self.post_panel, self.save_panel)
         close_widgets(self.widget, *self.camera_panel.links, *vars(self).values(),
                       *(w for panel in panels for w in vars(panel).values()),
                       getattr(self.canvas, "_output_context", None))   # jupyter_rfb's error output
         with RENDER_GUARD:
-            self.scene = self.base_scene = self.save_panel.base_scene = None
+            self.scene = self.base_scene = None
 
     def _ipython_display_(self):
         from IPython.display import display  # optional: only in a notebook
@@ -424,6 +440,7 @@ class MaterialTuner:
         return W.VBox(list(c.values()))
 
     def _configure(self, **kw):
+        self._check_open("configure")
         self._last_change = time.perf_counter()
         self.preview.configure(**kw)
         self._options.update({k: v for k, v in kw.items() if k in self._options})
@@ -442,6 +459,11 @@ def _revert(args) -> None:
     if owner is None or "old" not in change or isinstance(owner, (W.Text, W.Textarea)):
         return
     owner.value = change["old"]        # (the tuner's _syncing is set: nothing is applied again)
+
+
+def _closed_text(who: str) -> str:
+    return (f"{who}: this panel was closed (MaterialTuner.close); open a new MaterialTuner to "
+            "change or render the scene (document(), save() and snippet() still work)")
 
 
 def _error_html(text: str) -> str:

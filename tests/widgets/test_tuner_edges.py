@@ -366,3 +366,35 @@ def test_a_replaced_previews_error_is_not_shown():
         assert t.message.value == "" and t.frames_shown == shown
     finally:
         t.close()
+
+
+def test_a_closed_panel_still_saves_its_values_and_refuses_changes_in_words(tmp_path):
+    """close() frees the scenes; document(), save() and snippet() had failed after it with
+    "'NoneType' object has no attribute 'settings'" / "'source'", and a slider with
+    "'NoneType' object has no attribute 'key'" out of the preview."""
+    d = tiny_description()
+    d["sdf"] = [{"type": "sphere", "name": "blob", "material": "ball", "center": [1.2, 0.5, 0.0], "radius": 0.3}]
+    t = _tuner(draaw_mi.load_scene(d, filter="gaussian"))
+    t.controls["ball"]["roughness"].value = 0.35
+    t.lights_panel.light_scale.value = 2.0
+    t.preview.update({"sdf.blob.radius": 0.2})
+    t.refresh(1)
+    dest = str(tmp_path / "sub" / "tuned.toml")
+    before, snippet = t.document(dest), t.snippet()
+    t.close()
+    assert t.document(dest) == before and t.snippet() == snippet
+    saved = draaw_mi.load_scene(t.save(str(tmp_path / "tuned.toml")))
+    assert float(np.array(saved.all_params["sdf.blob.radius"]).ravel()[0]) == pytest.approx(0.2)
+    assert float(np.array(saved.params["ball.roughness.value"]).ravel()[0]) == pytest.approx(0.35)
+    assert saved.settings["filter"] == "gaussian"
+    t.controls["ball"]["roughness"].value = 0.6           # refused in red, not raised
+    assert "panel was closed" in t.message.value and "new MaterialTuner" in t.message.value
+    assert t.materials["ball"]["roughness"] == pytest.approx(0.35)
+    for call, who in ((lambda: t.refresh(1), "MaterialTuner.refresh"),
+                      (lambda: t.load_camera_path([(0, 1, 5, 0, 0), (1, 1, 5, 0, 0)]), "MaterialTuner.load_camera_path")):
+        with pytest.raises(draaw_mi.errors.DraawError, match=f"{who}: this panel was closed.*new MaterialTuner"):
+            call()
+    with pytest.raises(draaw_mi.errors.DraawError, match="panel was closed.*'mi_scene' is not kept"):
+        t.save_panel.base_scene.mi_scene
+    t.close()                                              # (again: nothing to do)
+    assert t.document(dest) == before
