@@ -179,9 +179,10 @@ def check_own_integrator_flags(args, scene) -> None:
                        "there, or give --version (path, v4, ...) with --max-depth")
 
 
-# extra -> the modules it installs that draaw-mi imports (pyproject.toml's optional-dependencies)
+# extra -> the modules it installs (pyproject.toml's optional-dependencies, all of each but the
+# test tooling of dev and browser; tests/cli/test_cli.py compares them with the file)
 EXTRAS = {"denoise": ("pyoidn",), "batch": ("dask", "distributed"),
-          "notebooks": ("ipywidgets", "jupyter_rfb", "ipykernel", "jupyterlab"),
+          "notebooks": ("ipywidgets", "jupyter_rfb", "ipykernel", "jupyterlab", "pyoidn"),
           "docs": ("sphinx", "myst_nb", "furo", "sphinxarg")}
 
 

@@ -23,9 +23,11 @@ pass, its loss and its backward pass (:func:`draaw_mi.fit`'s captures), traced o
 
 Renders of different scenes from different threads are serialised: every pass runs under
 :data:`draaw_mi.guard.RENDER_GUARD` (see :mod:`draaw_mi.guard` for why), with Python's cycle
-collector kept away from it (:data:`draaw_mi.guard.COLLECTOR_PAUSED`), and so does
-``mi.render`` with a draaw integrator called directly. Take a scene's lock before the
-guard, never after: :func:`holding` takes them so.
+collector kept away from it (:data:`draaw_mi.guard.COLLECTOR_PAUSED`). ``mi.render`` with a
+draaw integrator called directly takes the guard too (its primal render,
+:meth:`~draaw_mi.integrators.common.DraawIntegrator.render`), but the collector is not kept
+away from it: automatic collections stay on and a ``gc.collect()`` of another thread does not
+wait for it. Take a scene's lock before the guard, never after: :func:`holding` takes them so.
 
 >>> import draaw_mi
 >>> from draaw_mi.rendering.session import session_of

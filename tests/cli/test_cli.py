@@ -154,6 +154,28 @@ def test_info_says_which_extras_are_there(capsys, monkeypatch):
         assert set(extras) <= set(tomllib.load(fh)["project"]["optional-dependencies"])
 
 
+def test_each_extra_info_checks_is_what_pyproject_installs():
+    """info's extras (cli.scenes.EXTRAS) name the modules of pyproject.toml's extras, read from
+    the file (distribution names to module names by hand): the notebooks extra's pyoidn was
+    left out, so info said "notebooks yes" without it. dev and browser are test tooling."""
+    import re
+    import tomllib
+
+    from draaw_mi.cli.scenes import EXTRAS
+    with open(os.path.join(SCENES, "..", "pyproject.toml"), "rb") as fh:
+        extras = tomllib.load(fh)["project"]["optional-dependencies"]
+    module = {"sphinx_argparse": "sphinxarg"}
+
+    def modules(requirement):
+        name, sub = re.match(r"([A-Za-z0-9_.-]+)(?:\[([^\]]*)\])?", requirement).groups()
+        names = [name] + (sub.split(",") if sub else [])      # dask[distributed]: both
+        return {module.get(n, n) for n in (n.strip().lower().replace("-", "_") for n in names)}
+
+    assert set(EXTRAS) == set(extras) - {"dev", "browser"}
+    for extra, mods in EXTRAS.items():
+        assert set(mods) == set().union(*map(modules, extras[extra])), extra
+
+
 def test_info_lists_setup_and_scene(capsys):
     assert main(["info"]) == 0
     out = capsys.readouterr().out
