@@ -403,8 +403,10 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
         info["xml"] = xml
     if integ is not None and named_integrator:
         info["integrator"] = integrator_name(integ)
-    sdf = find_sdf(scene)        # (the mi_scene of a loaded SDF scene: held while wrapped; a
-    if sdf is not None:          # SceneError when that scene was let go)
+    # (the mi_scene of a loaded SDF scene: held while wrapped; a SceneError when that scene was
+    # let go. load_scene(mi.Scene) is how draaw_mi.render takes one)
+    sdf = find_sdf(scene, who="draaw_mi.render / load_scene of an mi.Scene")
+    if sdf is not None:
         info["sdf"] = sdf
     d = DraawScene(scene, settings, source, info, mi_dict)
     # (the checked value: the command line's "32x32" would go in as a string, and a traceback out)

@@ -6,7 +6,10 @@ never hit by a ray) that carries the slot's BSDF, so SDF hits are shaded through
 integrators find the SDF tree from the proxies' ids (``__sdf_<token>_<slot>``) in
 :data:`REGISTRY`. :func:`find` returns the :class:`SDFScene` of an ``mi.Scene`` or ``None``.
 :data:`REGISTRY` holds its scenes weakly: an :class:`SDFScene` lives as long as its owner (the
-``info["sdf"]`` of the loaded :class:`~draaw_mi.scene.DraawScene`), and its entry goes with it.
+``info["sdf"]`` of the loaded :class:`~draaw_mi.scene.DraawScene`), and its entry goes with it
+(an ``mi.Scene`` takes neither weak references nor attributes, so it cannot hold them);
+:data:`NAMES` keeps the object names of recent tokens, for the error that an ``mi_scene``
+whose owner is gone gets.
 The ``[[sdf]]`` tables of scene files are read by :mod:`draaw_mi.scene.sdf_dicts`.
 """
 from __future__ import annotations
@@ -25,6 +28,10 @@ PROXY_PREFIX = "__sdf_"
 #: ``{token: SDFScene}`` of the live SDF scenes (weak values: an entry goes with its scene)
 REGISTRY: "weakref.WeakValueDictionary[str, SDFScene]" = weakref.WeakValueDictionary()
 _TOKENS = itertools.count()
+#: ``{token: names of the SDF scene's objects}`` (strings only, held strongly) of the last
+#: :data:`NAMES_KEPT` SDF scenes: :func:`find` names the objects of one that is gone
+NAMES: dict = {}
+NAMES_KEPT = 1024
 
 
 class SDFScene:
@@ -40,6 +47,9 @@ class SDFScene:
         self.token = f"{next(_TOKENS)}x{id(self) & 0xFFFF:x}"
         self.proxy_ids = [f"{PROXY_PREFIX}{self.token}_{i}" for i in range(len(self.slots))]
         REGISTRY[self.token] = self
+        NAMES[self.token] = tuple(r.name for r in self.roots)
+        while len(NAMES) > NAMES_KEPT:
+            NAMES.pop(next(iter(NAMES)))
 
     def distance(self, p: mi.Point3f) -> mi.Float:
         d = self.roots[0].distance(p)
@@ -132,22 +142,27 @@ class SDFScene:
         return lines
 
 
-def find(scene: mi.Scene) -> SDFScene | None:
+def find(scene: mi.Scene, who: str = "mi.render of an mi_scene with a draaw integrator") -> SDFScene | None:
     """The :class:`SDFScene` placed in ``scene`` (via its proxy shapes), or ``None`` when it has
-    no proxy. A :class:`~draaw_mi.errors.SceneError` when it has proxies but their SDF scene is
-    gone (its owner, the loaded scene, was let go while its ``mi_scene`` is still rendered):
-    the image would silently lose every SDF object."""
+    no proxy. A :class:`~draaw_mi.errors.SceneError` starting with ``who`` (the call that
+    rendered or loaded ``scene``) when it has proxies but their SDF scene is gone (its owner,
+    the loaded scene, was let go while its ``mi_scene`` is still rendered): the image would
+    silently lose every SDF object."""
     for sh in scene.shapes():
         sid = sh.id()
         if sid.startswith(PROXY_PREFIX):
             token = sid[len(PROXY_PREFIX):].rsplit("_", 1)[0]
             sdf = REGISTRY.get(token)
             if sdf is None:
-                raise SceneError(f"sdf.find: the SDF objects of shape {sid!r} were released with the "
-                                 "scene that loaded them; expected that scene (the DraawScene of "
-                                 "load_scene, or the SDFScene) kept alive while its mi_scene renders")
+                names = NAMES.get(token)
+                many = names is None or len(names) > 1
+                what = "SDF object" + "s" * many + (f" {', '.join(map(repr, names))}" if names else "")
+                raise SceneError(f"{who}: the {what} of this mi.Scene {'were' if many else 'was'} freed with the DraawScene "
+                                 "that loaded it (only its mi_scene was kept, and an mi.Scene cannot "
+                                 "hold them); keep scene = draaw_mi.load_scene(...) and render it (or "
+                                 "its mi_scene while scene lives)")
             return sdf
     return None
 
 
-__all__ = ["PROXY_PREFIX", "REGISTRY", "SDFScene", "find"]
+__all__ = ["NAMES", "PROXY_PREFIX", "REGISTRY", "SDFScene", "find"]

@@ -360,6 +360,7 @@ def test_a_let_go_sdf_scene_leaves_the_registry_and_a_live_one_still_renders():
     renders the image it rendered before the others went; the ``mi_scene`` of a let-go scene
     is refused by name rather than rendered without its SDF objects."""
     import gc
+    import re
 
     from draaw_mi.errors import SceneError
     from draaw_mi.sdf.scene import REGISTRY
@@ -378,5 +379,13 @@ def test_a_let_go_sdf_scene_leaves_the_registry_and_a_live_one_still_renders():
     assert live.info["sdf"].token in REGISTRY
     np.testing.assert_array_equal(render_np(live, "v4", 2, 0), before)
     assert (before[..., :3] != render_np(draaw_mi.load_scene(base_description(res=(12, 9))), "v4", 2, 0)[..., :3]).any()
-    with pytest.raises(SceneError, match="released with the scene that loaded them"):
+    # the message names the call, the object and what to do (it had named sdf.find and a proxy id)
+    keep = r"; keep scene = draaw_mi.load_scene\(\.\.\.\) and render it"
+    with pytest.raises(SceneError, match=r"^draaw_mi.render / load_scene of an mi.Scene: the SDF object 'obj' "
+                       r"of this mi.Scene was freed with the DraawScene that loaded it.*" + keep):
         draaw_mi.render(orphan, version="v4", spp=1)
+    with pytest.raises(RuntimeError) as raised:            # (Dr.Jit's custom op wraps it)
+        mi.render(orphan, integrator=mi.load_dict({"type": "draaw_v4"}), spp=1)
+    assert isinstance(raised.value.__cause__, SceneError)
+    assert re.match(r"mi.render of an mi_scene with a draaw integrator: the SDF object 'obj' .*" + keep,
+                    str(raised.value.__cause__))
