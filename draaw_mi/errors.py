@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import difflib
 import os
+import re
 import sys
 from typing import Iterable
 
@@ -85,3 +86,32 @@ def caused_by_interrupt(error: BaseException) -> bool:
             return True
         cause, seen = cause.__cause__ or cause.__context__, seen + 1
     return False
+
+
+# the last line of a Python traceback that Mitsuba's error text carries when a Python plugin's
+# constructor was interrupted ("KeyboardInterrupt: ", "draaw_mi.cli.commands.Terminated: ")
+_INTERRUPT_LINE = re.compile(r"^\s*(?:[\w.]+\.)?(?:KeyboardInterrupt|Terminated):", re.M)
+
+
+def raise_if_interrupted(error: BaseException) -> None:
+    """Raise the ``KeyboardInterrupt`` behind ``error`` (Ctrl-C, or the CLI's SIGTERM) as it
+    is, where a caller would otherwise wrap ``error`` in a :class:`DraawError`: one in its
+    chain (:func:`caused_by_interrupt`), or one that Mitsuba's ``RuntimeError`` names only in
+    its text (a Python plugin's constructor interrupted while ``mi.load_dict`` made it). Else
+    return. An ``except DraawError`` loop would go on past Ctrl-C, and the CLI would exit 2
+    instead of 130.
+
+    >>> try:
+    ...     raise_if_interrupted(RuntimeError('failed to instantiate "draaw_v4": Traceback ...\\nKeyboardInterrupt: '))
+    ... except KeyboardInterrupt:
+    ...     print("interrupted")
+    interrupted
+    >>> raise_if_interrupted(RuntimeError("unreferenced property"))
+    """
+    cause, seen = error, 0
+    while cause is not None and seen < 16:
+        if isinstance(cause, KeyboardInterrupt):
+            raise cause
+        cause, seen = cause.__cause__ or cause.__context__, seen + 1
+    if isinstance(error, RuntimeError) and _INTERRUPT_LINE.search(str(error)):
+        raise KeyboardInterrupt from None

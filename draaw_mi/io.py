@@ -25,7 +25,7 @@ from typing import Sequence
 import mitsuba as mi
 import numpy as np
 
-from .errors import IOFailure
+from .errors import IOFailure, raise_if_interrupted
 from .limits import HALF_MAX
 
 DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}
@@ -38,6 +38,7 @@ def openexr(where: str):
     try:
         import OpenEXR
     except ImportError as e:
+        raise_if_interrupted(e)          # (Ctrl-C or SIGTERM during the import: not a missing package)
         raise IOFailure(f"{where}: EXR files need the OpenEXR package, which cannot be imported ({e}); "
                         "reinstall draaw-mi (pip install -e .) or pip install OpenEXR") from None
     return OpenEXR

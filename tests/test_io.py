@@ -293,3 +293,34 @@ def test_what_is_not_an_image_or_not_a_file_is_said_so(tmp_path):
         draaw_mi.read_exr(str(tmp_path))
     with pytest.raises(draaw_mi.IOFailure, match=r"read_exr: .* does not exist"):
         draaw_mi.read_exr(str(tmp_path / "nothing.exr"))
+
+
+def test_an_interrupt_during_the_openexr_import_is_not_a_missing_package(monkeypatch):
+    """SIGTERM (the CLI's Terminated, a KeyboardInterrupt) landing in OpenEXR's first import
+    fails the extension's initialisation with an ImportError from it: that is the interrupt,
+    not "EXR files need the OpenEXR package"; a real ImportError still says that."""
+    import builtins
+    import sys
+
+    from draaw_mi.io import openexr
+
+    class Terminated(KeyboardInterrupt):
+        pass
+    real_import = builtins.__import__
+
+    def importing(name, *a, **k):
+        if name != "OpenEXR":
+            return real_import(name, *a, **k)
+        try:
+            raise Terminated
+        except Terminated as e:
+            raise ImportError("initialization failed") from e
+    monkeypatch.delitem(sys.modules, "OpenEXR", raising=False)
+    monkeypatch.setattr(builtins, "__import__", importing)
+    with pytest.raises(Terminated):
+        openexr("write_exr")
+    monkeypatch.setattr(builtins, "__import__",
+                        lambda name, *a, **k: (_ for _ in ()).throw(ImportError("No module named 'OpenEXR'"))
+                        if name == "OpenEXR" else real_import(name, *a, **k))
+    with pytest.raises(IOFailure, match="write_exr: EXR files need the OpenEXR package"):
+        openexr("write_exr")

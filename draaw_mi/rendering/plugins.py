@@ -11,7 +11,7 @@ import re
 
 import mitsuba as mi
 
-from ..errors import RenderError, suggest
+from ..errors import RenderError, raise_if_interrupted, suggest
 from ..integrators import resolve_version
 from ..scene.mitsuba_load import mitsuba_error_message
 
@@ -33,6 +33,7 @@ def make_plugin(props: dict):
     try:
         return mi.load_dict(props)
     except Exception as e:  # noqa: BLE001 - Mitsuba reports every refusal as a RuntimeError
+        raise_if_interrupted(e)                  # (Ctrl-C in a draaw integrator's constructor)
         raise _integrator_error(props["type"], props, e) from None
 
 

@@ -25,7 +25,7 @@ except ImportError:              # pragma: no cover - Windows
 
 import mitsuba as mi
 
-from ..errors import DraawError, SceneError, suggest, user_stacklevel
+from ..errors import DraawError, SceneError, raise_if_interrupted, suggest, user_stacklevel
 from ..guard import RENDER_GUARD
 from ..integrators import SCENE_VERSION, resolve_version
 from ..sdf.scene import find as find_sdf
@@ -138,6 +138,7 @@ def load_xml(path: str, defines: dict, size=None):
     except SceneError:
         raise
     except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
+        raise_if_interrupted(e)                  # (Ctrl-C in a draaw plugin's constructor)
         message = mitsuba_error_message(e)
         if defines and "its includes use no $" in message:
             message += f"; its <default>s: {', '.join(declared_defaults(path)) or 'none'}"

@@ -12,7 +12,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import DraawError, SceneError, suggest
+from ..errors import DraawError, SceneError, raise_if_interrupted, suggest
 from ..guard import RENDER_GUARD, exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
 from ..sdf.scene import PROXY_PREFIX
@@ -183,4 +183,5 @@ def load_dict_or_error(d: dict, source: str):
     except DraawError:
         raise
     except Exception as e:  # noqa: BLE001 - Mitsuba reports everything as RuntimeError
+        raise_if_interrupted(e)                  # (Ctrl-C in a draaw plugin's constructor)
         raise SceneError(f"{source}: {mitsuba_error_message(e)}") from None

@@ -244,3 +244,43 @@ def test_the_cli_says_interrupted_and_exits_130_when_a_render_is_interrupted(tmp
     assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "--no-progress"]) == 130
     err = capsys.readouterr().err
     assert err == "draaw-mi: interrupted\n" and not (tmp_path / "a.exr").exists()
+
+
+def _interrupted_init(cls, monkeypatch):
+    """Ctrl-C landing in ``cls``'s Python constructor while Mitsuba makes the plugin (Mitsuba
+    raises a RuntimeError that names the KeyboardInterrupt only in its text)."""
+    made = cls.__init__
+
+    def init(self, props):
+        made(self, props)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cls, "__init__", init)
+
+
+def test_ctrl_c_while_an_integrator_or_a_scene_is_made_leaves_as_a_keyboard_interrupt(monkeypatch):
+    """(were RenderError "cannot create integrator 'draaw_v4': KeyboardInterrupt:" and
+    SceneError "<dict>: KeyboardInterrupt:", which an ``except DraawError`` loop swallowed)"""
+    from draaw_mi.integrators.v4 import DraawV4Integrator
+    from draaw_mi.materials.draaw_bsdf import DraawBSDF
+    scene = draaw_mi.load_scene(tiny_description())
+    with monkeypatch.context() as m:
+        _interrupted_init(DraawV4Integrator, m)
+        with pytest.raises(KeyboardInterrupt):
+            draaw_mi.render(scene, spp=1, version="v4", max_depth=2)
+    with monkeypatch.context() as m:
+        _interrupted_init(DraawBSDF, m)
+        with pytest.raises(KeyboardInterrupt):
+            draaw_mi.load_scene(tiny_description())
+    with pytest.raises(draaw_mi.errors.RenderError, match="no option 'sdf_bands'"):
+        session_of(scene).integrator("v4", 2, sdf_bands=1.0)          # (other errors as they were)
+
+
+def test_the_cli_exits_130_when_the_integrator_is_interrupted_as_it_is_made(tmp_path, monkeypatch, capsys):
+    import tomli_w
+    from draaw_mi.cli import main
+    from draaw_mi.integrators.v4 import DraawV4Integrator
+    path = tmp_path / "s.toml"
+    path.write_text(tomli_w.dumps(tiny_description()))
+    _interrupted_init(DraawV4Integrator, monkeypatch)
+    assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "--no-progress", "--version", "v4"]) == 130
+    assert capsys.readouterr().err == "draaw-mi: interrupted\n"
