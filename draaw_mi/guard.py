@@ -32,14 +32,19 @@ Freeing a scene is Dr.Jit work too: a draaw BSDF or a scene's buffers freed on o
 while another records or replays a render aborts the process ("jit_var(r1343): unknown
 variable!") or crashes it. Python's cycle collector frees at arbitrary times on arbitrary
 threads, so while a render pass runs (:data:`COLLECTOR_PAUSED`) automatic collections are off
-and a ``gc.collect()`` of another thread waits for the pass to end.
+and a ``gc.collect()`` of another thread waits for the pass to end (at most
+:data:`COLLECTION_WAIT_S` seconds, then it goes on with a ``RuntimeWarning``). While a
+collection waits so, a ``gc.collect()`` elsewhere returns at once having collected nothing
+(Python runs one collection at a time).
 """
 from __future__ import annotations
 
+import _thread
 import atexit
 import contextlib
 import gc
 import threading
+import warnings
 
 import drjit as dr
 
@@ -47,28 +52,34 @@ import drjit as dr
 RENDER_GUARD = threading.RLock()
 
 #: the longest a ``gc.collect()`` waits for a render pass of another thread to end (and a
-#: pass for a collection of another thread): then it goes on regardless
+#: pass for a collection of another thread): then it goes on regardless, with a
+#: ``RuntimeWarning`` (a pass that long on a background thread is not a preview's)
 COLLECTION_WAIT_S = 60.0
 
 
 class _CollectorPaused:
     """Python's cycle collector kept away from a render (see the module docstring): automatic
     collections off (on again when the last paused block of any thread ends, if they were on
-    when the first began), a collection in progress on another thread finished before the
-    block starts, and a ``gc.collect()`` of another thread made to wait until no block runs
+    when the first began), a collection in progress or waiting on another thread finished
+    before the first block of a thread starts (so back-to-back passes cannot starve it), and a
+    ``gc.collect()`` of another thread made to wait until no block runs
     (:func:`_collection_waits`). Nested and across threads. A class rather than a generator
     context manager: it runs on every replay of a frozen render."""
     __slots__ = ()
     depth: dict = {}                   # thread ident -> nesting depth of its paused blocks
     was_enabled = False
     collecting = None                  # ident of the thread in a collection, if any
+    waiting = 0                        # collections waiting for the blocks to end
+    exiting = False                    # the interpreter is shutting down: nothing waits
+    interrupted: BaseException | None = None   # an interrupt that landed in a collection's wait
     cond = threading.Condition(threading.RLock())   # (an automatic collection may start inside)
 
     def __enter__(self):
         cls, me = _CollectorPaused, threading.get_ident()
         with cls.cond:
             if me not in cls.depth:
-                cls.cond.wait_for(lambda: cls.collecting in (None, me), timeout=COLLECTION_WAIT_S)
+                _wait(lambda: cls.exiting or (cls.collecting in (None, me) and not cls.waiting),
+                      "a render pass waited for a collection of another thread")
                 if not cls.depth:
                     cls.was_enabled = gc.isenabled()
                     gc.disable()
@@ -91,23 +102,60 @@ class _CollectorPaused:
 COLLECTOR_PAUSED = _CollectorPaused()
 
 
+def _wait(ready, what: str) -> None:
+    """Wait on the condition (held) until ``ready()``, at most :data:`COLLECTION_WAIT_S`
+    seconds, then warn and go on."""
+    if not _CollectorPaused.cond.wait_for(ready, timeout=COLLECTION_WAIT_S):
+        warnings.warn(f"draaw_mi.guard: {what} for {COLLECTION_WAIT_S:g} s and went on",
+                      RuntimeWarning, stacklevel=3)
+
+
 def _collection_waits(phase: str, info: dict) -> None:
     """``gc.callbacks`` hook: a collection starts only once no other thread is in a
     :data:`COLLECTOR_PAUSED` block (at most :data:`COLLECTION_WAIT_S` seconds), and is known
-    while it runs (a block of another thread waits for its end)."""
+    while it runs (a block of another thread waits for its end). An exception raised in a
+    ``gc`` callback is dropped by Python and the collection goes on: a Ctrl-C that lands in
+    the wait is kept, the wait goes on, and the interrupt is raised in the main thread again
+    just after the collection is over."""
     cls, me = _CollectorPaused, threading.get_ident()
     with cls.cond:
         if phase == "start":
-            cls.cond.wait_for(lambda: not any(t != me for t in cls.depth), timeout=COLLECTION_WAIT_S)
+            cls.waiting += 1
+            try:
+                while True:
+                    try:
+                        _wait(lambda: cls.exiting or not any(t != me for t in cls.depth),
+                              "a gc.collect() waited for a render pass of another thread")
+                        break
+                    except KeyboardInterrupt as e:  # (kept, raised again at "stop")
+                        cls.interrupted = e
+                    except Exception:               # noqa: BLE001 - (a warning made an error)
+                        break
+            finally:
+                cls.waiting -= 1
             cls.collecting = me
         else:
             cls.collecting = None
             cls.cond.notify_all()
+            if cls.interrupted is not None and not cls.exiting:
+                cls.interrupted = None
+                # (from another thread, a moment later: raised in this callback, it would be
+                # dropped again)
+                threading.Timer(0.05, _thread.interrupt_main).start()
+
+
+def _exiting() -> None:
+    _CollectorPaused.exiting = True
+    with _CollectorPaused.cond:
+        _CollectorPaused.cond.notify_all()
 
 
 gc.callbacks.append(_collection_waits)
-# (taken out at exit: a daemon worker stopped by the interpreter inside a block would make
-# the final collections wait)
+# (nothing waits once the interpreter shuts down: a daemon worker stopped inside a block would
+# make the final collections wait. threading's exit hooks run before atexit's, whose handlers
+# registered after this module (last in, first out) may collect)
+_register = getattr(threading, "_register_atexit", None)
+(_register or atexit.register)(_exiting)
 atexit.register(lambda: _collection_waits in gc.callbacks and gc.callbacks.remove(_collection_waits))
 
 #: fewest Dr.Jit threads with which Mitsuba 3.9.1 reads an EXR file (see exr_reading_threads)
