@@ -82,8 +82,11 @@ class PreviewWorker:
         self.stop(why="stopped: a newer preview of this scene is running (run this panel's cell "
                       "again to take the scene back)")
 
+    _failed_generation = -1            # the generation whose frame failed: idle until a change
+
     def _idle(self) -> bool:
-        return self._spp >= self.max_spp and not self._pending and self._shown_generation == self._generation
+        done = self._spp >= self.max_spp or self._failed_generation == self._generation
+        return done and not self._pending and self._shown_generation == self._generation
 
     def _run(self):
         while not self._stop.is_set():
@@ -101,7 +104,7 @@ class PreviewWorker:
                     if generation != self._generation:
                         continue          # changed meanwhile: the next frame tries the new values
                     self.error = e
-                    self._spp = self.max_spp      # idle until the next change
+                    self._failed_generation = generation    # idle until the next change
                     self._shown_generation = generation
                     self._wake.notify_all()
                     callbacks = list(self._error_callbacks)
@@ -117,7 +120,8 @@ class PreviewWorker:
         self._stop.set()
         with self._lock:
             self._wake.notify_all()
-        if self._thread is not None:
+        if self._thread is not None and self._thread is not threading.current_thread():
+            # (called by a frame callback, on the worker itself: it stops after this frame)
             self._thread.join(timeout)
             if not self._thread.is_alive():       # (a worker still in its frame stays known:
                 self._thread = None               # start() must not run a second one)

@@ -408,3 +408,24 @@ def test_to_uint8_rounds_to_the_nearest_level():
     ref = np.round(np.clip(srgb_encode(x), 0, 1) * 255).astype(np.uint8)
     assert np.array_equal(tuning.to_uint8(x), ref)
     assert np.array_equal(tuning.to_uint8(np.full((1, 1, 3), 0.5, np.float32), encoded=True), [[[128] * 3]])
+
+
+def test_a_frame_callback_that_stops_the_preview_stops_it_quietly():
+    """stop() from an on_frame callback runs on the worker itself: it must not join its own
+    thread (which raised 'cannot join current thread', shown as the frame's error), and the
+    samples taken stay what ``spp`` says (an error set it to max_spp)."""
+    scene = draaw_mi.load_scene(tiny_description())
+    pv = Preview(scene, version="v4", max_depth=2, max_spp=1000, freeze=False)
+    errors = []
+    pv.on_error(errors.append)
+    pv.on_frame(lambda f: pv.stop() if f.spp >= 3 else None)
+    pv.start()
+    deadline = time.perf_counter() + 60
+    while pv.running and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    try:
+        assert not pv.running
+        assert errors == [] and pv.error is None
+        assert pv.spp == 3
+    finally:
+        pv.stop()
