@@ -85,8 +85,13 @@ def test_a_bare_make_lists_the_targets_and_sets_up_nothing():
         pytest.skip("no make on this machine")
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
+    # (run from `make test`, a nested make says "Entering directory" unless told not to, and
+    # would take the outer make's flags)
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKELEVEL", "MAKEFLAGS", "MFLAGS")}
+
     def make(*args):
-        return subprocess.run(["make", *args], cwd=root, capture_output=True, text=True, timeout=60)
+        return subprocess.run(["make", "--no-print-directory", *args], cwd=root, capture_output=True,
+                              text=True, timeout=60, env=env)
     bare = make("-n")                  # (dry runs first: a bare make that sets up would do it for real)
     assert bare.returncode == 0 and bare.stdout == make("-n", "help").stdout, bare.stdout
     assert all(line.startswith("echo ") for line in bare.stdout.splitlines()), bare.stdout
