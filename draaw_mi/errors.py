@@ -69,6 +69,26 @@ def suggest(name: str, valid: Iterable[str]) -> str:
     return "; valid: " + ", ".join(valid)
 
 
+def exception_chain(error: BaseException, suppressed: bool = False) -> list[BaseException]:
+    """``error`` and the exceptions it was raised from (``raise ... from``) or while handling,
+    outermost first; a cycle ends it. ``suppressed``: stop where ``raise ... from None``
+    suppressed the context.
+
+    >>> try:
+    ...     raise RuntimeError("drjit.custom(): error (see above)") from ValueError("the BSDF failed")
+    ... except RuntimeError as e:
+    ...     [type(x).__name__ for x in exception_chain(e)]
+    ['RuntimeError', 'ValueError']
+    """
+    chain, seen, e = [], set(), error
+    while e is not None and id(e) not in seen:
+        chain.append(e)
+        seen.add(id(e))
+        e = e.__cause__ if e.__cause__ is not None or (suppressed and e.__suppress_context__) \
+            else e.__context__
+    return chain
+
+
 def caused_by_interrupt(error: BaseException) -> bool:
     """Whether ``error`` was raised because of a ``KeyboardInterrupt``: Dr.Jit's custom
     operations (``mi.render`` is one) and frozen functions raise Ctrl-C in their kernels again
@@ -80,12 +100,7 @@ def caused_by_interrupt(error: BaseException) -> bool:
     ...     caused_by_interrupt(e), caused_by_interrupt(RuntimeError("other"))
     (True, False)
     """
-    cause, seen = error, 0
-    while cause is not None and seen < 16:
-        if isinstance(cause, KeyboardInterrupt):
-            return True
-        cause, seen = cause.__cause__ or cause.__context__, seen + 1
-    return False
+    return any(isinstance(e, KeyboardInterrupt) for e in exception_chain(error))
 
 
 # the last line of a Python traceback that Mitsuba's error text carries when a Python plugin's
@@ -108,10 +123,8 @@ def raise_if_interrupted(error: BaseException) -> None:
     interrupted
     >>> raise_if_interrupted(RuntimeError("unreferenced property"))
     """
-    cause, seen = error, 0
-    while cause is not None and seen < 16:
+    for cause in exception_chain(error):
         if isinstance(cause, KeyboardInterrupt):
             raise cause
-        cause, seen = cause.__cause__ or cause.__context__, seen + 1
     if isinstance(error, RuntimeError) and _INTERRUPT_LINE.search(str(error)):
         raise KeyboardInterrupt from None

@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import caused_by_interrupt
+from ..errors import caused_by_interrupt, exception_chain
 from ..guard import COLLECTOR_PAUSED
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
@@ -215,10 +215,7 @@ def _first_cause(e: BaseException) -> str:
     ...     print(_first_cause(e))
     RuntimeError: validate(): a virtual call on an object not in the inputs
     """
-    seen = set()
-    while id(e) not in seen and (e.__cause__ or e.__context__) is not None:   # (a cycle ends it)
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
+    e = exception_chain(e)[-1]
     lines = str(e).strip().splitlines()
     return f"{type(e).__name__}: {lines[0] if lines else ''}"[:200]
 

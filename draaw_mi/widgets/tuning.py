@@ -19,7 +19,7 @@ import numpy as np
 import tomli_w
 from PIL import Image
 
-from ..errors import ParameterError
+from ..errors import ParameterError, exception_chain
 from ..io import srgb_decode, srgb_encode, write_text
 from ..limits import FLOAT32_MAX
 from ..materials.draaw_bsdf import ALL_PARAMS, COLOR_PARAMS, SCALAR_PARAMS
@@ -340,13 +340,7 @@ def innermost_error(error: BaseException) -> str:
     ...     innermost_error(e)
     'ValueError: the BSDF failed'
     """
-    seen, e = {id(error)}, error
-    while True:
-        nxt = e.__cause__ if e.__cause__ is not None else (None if e.__suppress_context__ else e.__context__)
-        if nxt is None or id(nxt) in seen:
-            break
-        seen.add(id(nxt))
-        e = nxt
+    e = exception_chain(error, suppressed=True)[-1]
     return str(error) if e is error else f"{type(e).__name__}: {e}"
 
 
