@@ -55,22 +55,26 @@ print("result", finite, len(frames), errors, running, tuner.preview.running, tim
 """
 
 
-#: the notebook of the crash: a panel on scene A, a slider and the resolution slider (a
-#: reload), close; then scene B; alternating. Each close had left its scene to the cycle
-#: collector, which freed its draaw BSDFs beside the next panel's frozen frame, and the
-#: reload built and dropped scenes while its own worker recorded one
-ALTERNATING_PANELS = """
-import faulthandler, sys
+#: (the scripts below) two tiny scene files, a/b.toml, in the folder given as argv[1]
+TWO_SCENE_FILES = """
+import faulthandler, gc, sys
 faulthandler.enable()
 import tomli_w
 sys.path.insert(0, "tests")
 from conftest import tiny_description
-from draaw_mi.widgets import MaterialTuner
 d = sys.argv[1]
 paths = []
 for name, res in (("a", [32, 24]), ("b", [24, 16])):
     paths.append(f"{d}/{name}.toml")
     open(paths[-1], "w").write(tomli_w.dumps(tiny_description(resolution=res)))
+"""
+
+#: the notebook of the crash: a panel on scene A, a slider and the resolution slider (a
+#: reload), close; then scene B; alternating. Each close had left its scene to the cycle
+#: collector, which freed its draaw BSDFs beside the next panel's frozen frame, and the
+#: reload built and dropped scenes while its own worker recorded one
+ALTERNATING_PANELS = TWO_SCENE_FILES + """
+from draaw_mi.widgets import MaterialTuner
 for i in range(20):
     tuner = MaterialTuner(paths[i % 2], max_spp=4, frame_channel="image")
     tuner.controls["ball"]["roughness"].value = 0.3
@@ -81,19 +85,9 @@ print("done")
 """
 
 #: a preview renders while another thread frees scenes held in reference cycles
-COLLECTED_BESIDE_A_PREVIEW = """
-import faulthandler, gc, sys
-faulthandler.enable()
-import tomli_w
-sys.path.insert(0, "tests")
-from conftest import tiny_description
+COLLECTED_BESIDE_A_PREVIEW = TWO_SCENE_FILES + """
 import draaw_mi
 from draaw_mi.rendering.preview import Preview
-d = sys.argv[1]
-paths = []
-for name, res in (("a", [32, 24]), ("b", [24, 16])):
-    paths.append(f"{d}/{name}.toml")
-    open(paths[-1], "w").write(tomli_w.dumps(tiny_description(resolution=res)))
 for i in range(12):
     sc = draaw_mi.load_scene(paths[i % 2])
     pv = Preview(sc, max_spp=4)
