@@ -194,13 +194,6 @@ def owned_tensor(array) -> mi.TensorXf:
 RECORDINGS_KEPT = 8
 
 
-#: Python's cycle collector kept away from a frozen render (:data:`draaw_mi.guard.COLLECTOR_PAUSED`):
-#: a collection during a ``dr.freeze`` recording that frees Dr.Jit memory (a dead scene's
-#: buffers, a dead preview's recordings) aborts the process: "RecordThreadState::enqueue_host_func():
-#: this function cannot be recorded!"
-_PAUSED = COLLECTOR_PAUSED
-
-
 def _first_cause(e: BaseException) -> str:
     """The first line of the innermost exception ``e`` was raised from (Dr.Jit's recorder
     wraps the error that stopped it in "error encountered while recording ... (see above)"),
@@ -270,7 +263,7 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         for attempt in (1, 2):
             live = other_live_bsdfs(mi_scene, cache) + _held_media()
             try:
-                with _PAUSED:
+                with COLLECTOR_PAUSED:   # (a collection freeing Dr.Jit memory while it records aborts)
                     return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live,
                                   tuple(args))
             except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead

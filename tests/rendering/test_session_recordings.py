@@ -63,7 +63,7 @@ def test_a_scene_collected_while_another_records_does_not_abort():
     assert out.stdout.strip().endswith("ok True")
     # the mechanism itself, in this process: off inside (nested too), on again after
     import gc
-    from draaw_mi.rendering.frozen import _PAUSED
+    from draaw_mi.guard import COLLECTOR_PAUSED as _PAUSED
     assert gc.isenabled()
     with _PAUSED:
         with _PAUSED:
