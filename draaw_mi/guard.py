@@ -30,7 +30,11 @@ frozen call waits for while it holds the guard, and the two threads would deadlo
 
 Freeing a scene is Dr.Jit work too: a draaw BSDF or a scene's buffers freed on one thread
 while another records or replays a render aborts the process ("jit_var(r1343): unknown
-variable!") or crashes it. Python's cycle collector frees at arbitrary times on arbitrary
+variable!") or crashes it. So a scene and its render session are let go under the guard
+(:func:`let_go`, from their ``__del__``): at once, or, while another thread holds the guard, by
+that thread as it lets the guard go; scene loads and these frees are counted
+(:func:`registry_changes`) so that no recording made before is replayed as if nothing had
+changed. Python's cycle collector frees at arbitrary times on arbitrary
 threads, so while a render pass runs (:data:`COLLECTOR_PAUSED`) automatic collections are off
 and a ``gc.collect()`` of another thread waits for the pass to end (at most
 :data:`COLLECTION_WAIT_S` seconds, then it goes on with a ``RuntimeWarning``). While a
@@ -48,8 +52,74 @@ import warnings
 
 import drjit as dr
 
+class _RenderGuard:
+    """A re-entrant lock (``with``, :meth:`acquire`, :meth:`release`) that also frees, while
+    held, what :func:`let_go` was handed, and counts the frees and scene loads that change
+    Dr.Jit's registry (:func:`registry_changes`). What another thread lets go while the guard
+    is held is freed by the holder as it lets the guard go (its outermost release), never in
+    the middle of that thread's render."""
+    __slots__ = ("_lock", "_depth", "_pending", "changes")
+
+    def __init__(self):
+        self._lock = threading.RLock()
+        self._depth = 0                 # the holder's nesting depth (only the holder changes it)
+        self._pending: list = []        # what other threads let go meanwhile
+        self.changes = 0
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        got = self._lock.acquire(blocking, timeout)
+        if got:
+            self._depth += 1
+        return got
+
+    def release(self) -> None:
+        if self._depth == 1:
+            while self._pending:        # (a free may let go of more: freed here too)
+                held = self._pending.pop()
+                del held
+                self.changes += 1
+        self._depth -= 1
+        self._lock.release()
+
+    def __enter__(self) -> bool:
+        return self.acquire()
+
+    def __exit__(self, *exc) -> bool:
+        self.release()
+        return False
+
+
 #: see the module docstring
-RENDER_GUARD = threading.RLock()
+RENDER_GUARD = _RenderGuard()
+
+
+def let_go(owner) -> None:
+    """Drop what ``owner`` holds (its ``__dict__``) under :data:`RENDER_GUARD`: at once when
+    no other thread holds the guard, else when that thread lets it go. For a ``__del__``:
+    a scene's Mitsuba objects leave Dr.Jit's registry of virtual-call targets, which a
+    recording or replay of another thread would read freed (a segmentation fault), and which
+    a recording replayed afterwards must not assume unchanged (:func:`registry_changes`).
+    Never waits, so a ``__del__`` that runs where the current thread holds another lock cannot
+    deadlock with a render that waits for that lock."""
+    held = dict(owner.__dict__)
+    owner.__dict__.clear()
+    RENDER_GUARD._pending.append(held)
+    del held
+    if RENDER_GUARD.acquire(blocking=False):        # (else the holder frees it)
+        RENDER_GUARD.release()
+
+
+def registry_changes() -> int:
+    """How many times scenes were made or let go (:func:`let_go`, :func:`note_registry_change`):
+    a ``dr.freeze`` recording made before a change may hold freed virtual-call targets, or
+    miss new ones, and is recorded anew (:func:`draaw_mi.rendering.frozen.freeze_render`)."""
+    return RENDER_GUARD.changes
+
+
+def note_registry_change() -> None:
+    """Count a change of Dr.Jit's registry (Mitsuba objects made: a scene loaded); call it
+    holding :data:`RENDER_GUARD`."""
+    RENDER_GUARD.changes += 1
 
 #: the longest a ``gc.collect()`` waits for a render pass of another thread to end (and a
 #: pass for a collection of another thread): then it goes on regardless, with a

@@ -120,3 +120,90 @@ def test_a_wait_that_times_out_says_so(monkeypatch):
     finally:
         leave.set()
         t.join(10)
+
+
+class _Owner:
+    """Something that holds things, as a scene holds its Mitsuba objects."""
+
+
+class _Held:
+    """A held thing that says on which thread it was freed."""
+    freed_on: list = []
+
+    def __del__(self):
+        _Held.freed_on.append(threading.get_ident())
+
+
+def _owner_of_one():
+    owner = _Owner()
+    owner.thing = _Held()
+    return owner
+
+
+def test_let_go_frees_at_once_where_no_other_thread_renders():
+    _Held.freed_on = []
+    owner, before = _owner_of_one(), guard.registry_changes()
+    guard.let_go(owner)
+    assert _Held.freed_on == [threading.get_ident()] and vars(owner) == {}
+    assert guard.registry_changes() == before + 1
+
+
+def test_let_go_beside_a_render_neither_waits_nor_frees_in_the_middle_of_it():
+    """A scene let go on the main thread while a preview's worker renders: freed by the worker
+    as it lets the guard go, not beside its render (a segmentation fault), and without making
+    the main thread wait (a ``__del__`` that waits can deadlock)."""
+    _Held.freed_on = []
+    inside, release, seen = threading.Event(), threading.Event(), []
+
+    def render():
+        with guard.RENDER_GUARD:
+            inside.set()
+            release.wait(10)
+            seen.append(list(_Held.freed_on))      # (still held at the end of the render)
+    t = threading.Thread(target=render)
+    t.start()
+    inside.wait(10)
+    started = time.perf_counter()
+    guard.let_go(_owner_of_one())
+    waited = time.perf_counter() - started
+    release.set()
+    t.join(10)
+    assert waited < 1.0 and seen == [[]]
+    assert _Held.freed_on == [t.ident]
+
+
+def test_let_go_inside_a_render_of_the_same_thread_frees_when_the_render_ends():
+    """Within its own render (a frozen recording in progress) a thread frees nothing: what it
+    lets go waits for its outermost release of the guard."""
+    _Held.freed_on = []
+    with guard.RENDER_GUARD:
+        with guard.RENDER_GUARD:
+            guard.let_go(_owner_of_one())
+        assert _Held.freed_on == []
+    assert _Held.freed_on == [threading.get_ident()]
+
+
+def test_a_scene_dropped_beside_a_render_is_freed_when_the_render_lets_go():
+    """``DraawScene.__del__`` lets its objects go through :func:`guard.let_go`: its draaw BSDFs
+    stay alive while another thread holds the guard and are gone once it lets go."""
+    import draaw_mi
+    from draaw_mi.materials.draaw_bsdf import LIVE_INSTANCES
+    from conftest import tiny_description
+    base = len(LIVE_INSTANCES)
+    scene = draaw_mi.load_scene(tiny_description(resolution=[8, 8]))
+    assert len(LIVE_INSTANCES) == base + 2
+    inside, release, seen = threading.Event(), threading.Event(), []
+
+    def render():
+        with guard.RENDER_GUARD:
+            inside.set()
+            release.wait(10)
+            seen.append(len(LIVE_INSTANCES))
+    t = threading.Thread(target=render)
+    t.start()
+    inside.wait(10)
+    del scene
+    release.set()
+    t.join(10)
+    gc.collect()
+    assert seen == [base + 2] and len(LIVE_INSTANCES) == base

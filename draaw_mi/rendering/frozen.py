@@ -22,7 +22,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import caused_by_interrupt, exception_chain
-from ..guard import COLLECTOR_PAUSED
+from ..guard import COLLECTOR_PAUSED, registry_changes
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
 from ..sdf.scene import PROXY_PREFIX
@@ -193,6 +193,9 @@ def owned_tensor(array) -> mi.TensorXf:
 #: recordings one frozen render keeps (see freeze_render)
 RECORDINGS_KEPT = 8
 
+#: what Dr.Jit 1.5's replay says when the registry of virtual-call targets changed
+_REGISTRY_CHANGED = "number of registry entries"
+
 
 def _first_cause(e: BaseException) -> str:
     """The first line of the innermost exception ``e`` was raised from (Dr.Jit's recorder
@@ -219,7 +222,10 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     the edge map of the sensor rendered, from its ``freeze_state``) passed to the recording as
     an input. Without it the recording would run a different sampler than a traced render, or
     replay a stale table. The preview, the batch executor and the fit's gradient passes record
-    their renders through this. ``limit``: the recordings kept (see below)."""
+    their renders through this. ``limit``: the recordings kept (see below). A recording is not
+    replayed once scenes were made or let go since it was made (:func:`draaw_mi.guard.registry_changes`):
+    the caller records anew, a ``background`` caller (a preview's worker) traces from then on
+    (``call.stale()`` says so: a new preview drops such recordings)."""
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
@@ -240,15 +246,28 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     frozen = dr.freeze(recorded, auto_opaque=False, limit=limit, warn_after=1 << 30)
 
     failed = []                      # a recording that failed once: trace from then on
+    # Dr.Jit's registry of virtual-call targets (every scene's shapes, BSDFs, emitters) as it
+    # was when the recordings were made: a recording replayed after a scene was let go and
+    # another made can find as many entries as it recorded and call the freed ones (a
+    # segmentation fault beside a notebook cell that loads a scene again), and one replayed
+    # after a scene was made refuses ('The number of registry entries ... did not match'):
+    # the caller's thread records anew; a background thread (a preview's worker) traces from
+    # then on, because a recording it makes beside the main thread's fit crashes Dr.Jit 1.5
+    # (a replay of it segfaults in PyType_GetName within the next seconds; MUTATIONS.md)
+    registry_seen = [registry_changes()]
+    made_at = registry_changes()
 
-    def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None):
+    def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None,
+             background: bool = False):
         """Render ``mi_scene`` with ``seed``; ``scene``: its :class:`DraawScene`, if any, and
         ``cache`` its session (a cheaper read of its plain-number parameters, see
         :func:`scene_scalars`); ``args``: ``body``'s further inputs (PyTrees: a sensor, a
         reference image); ``sensor``: the sensor ``body`` renders from, when not the scene's
         first (its edge map is part of the state); ``before_retry``: called before a failed
-        recording's pass is traced (a gradient pass puts its gradients back)."""
-        if failed:
+        recording's pass is traced (a gradient pass puts its gradients back); ``background``:
+        called from a thread other than the one that makes and frees scenes (a preview's)."""
+        nonlocal made_at
+        if failed or (background and made_at != registry_changes()):
             return body(mi_scene, seed, *args)
         # every live Python BSDF that the scene does not hold itself (those it holds are
         # traversed with it): without them the recording of a BSDF call fails (see
@@ -262,6 +281,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             state = state_of(mi_scene, memo) if sensor is None else state_of(mi_scene, memo, sensor)
         for attempt in (1, 2):
             live = other_live_bsdfs(mi_scene, cache) + _held_media()
+            if registry_seen[0] != registry_changes():
+                frozen.clear()
+                registry_seen[0] = registry_changes()
             try:
                 with COLLECTOR_PAUSED:   # (a collection freeing Dr.Jit memory while it records aborts)
                     return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live,
@@ -269,6 +291,14 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
                 if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
                     raise KeyboardInterrupt from None
+                if attempt == 1 and _REGISTRY_CHANGED in str(e):
+                    # objects made outside draaw-mi's loads (a plain mi.load_dict): as above
+                    registry_seen[0] = made_at = None
+                    if before_retry is not None:
+                        before_retry()
+                    if background:
+                        return body(mi_scene, seed, *args)
+                    continue
                 if attempt == 1 and live and _release_held_media():
                     # the media V3 / V4 held for other scenes may be what it could not hold:
                     # let them go (their scenes rebuild their tables) and record once more
@@ -284,4 +314,6 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             before_retry()
         return body(mi_scene, seed, *args)
     call.frozen = frozen
+    # (a background caller traces it: a new preview drops it and records afresh)
+    call.stale = lambda: made_at != registry_changes()
     return call

@@ -321,7 +321,8 @@ class Preview(PreviewWorker):
         t0 = time.perf_counter()
         session = session_of(target)
         with holding(self.scene, target):    # (the scene's, then its reduced copy's)
-            img = session.render_pass(self._integrator_for(target, settings), 1, seed, freeze=self.freeze)
+            img = session.render_pass(self._integrator_for(target, settings), 1, seed, freeze=self.freeze,
+                                      background=True)
             arr = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t0
         with self._lock:

@@ -52,7 +52,7 @@ import numpy as np
 
 from .. import post
 from ..errors import RenderError, caused_by_interrupt
-from ..guard import COLLECTOR_PAUSED, RENDER_GUARD
+from ..guard import COLLECTOR_PAUSED, RENDER_GUARD, let_go
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
 from .frozen import freeze_render, freeze_supported
@@ -263,18 +263,21 @@ class Session:
         w, h = self.film.size()
         return int(w) * int(h) <= FREEZE_MAX_PIXELS
 
-    def render_pass(self, integrator, spp: int, seed: int, *, params=None, sensor=None, freeze="small"):
+    def render_pass(self, integrator, spp: int, seed: int, *, params=None, sensor=None, freeze="small",
+                    background: bool = False):
         """Render one pass of ``spp`` samples with ``seed`` (an int, or an opaque ``mi.UInt32``
         that keeps a traced kernel from being compiled anew for each seed) and return the evaluated image
         (``mi.TensorXf`` (H, W, C), as ``mi.render`` gives it). ``params`` (``mi.traverse``
         parameters) makes it differentiable (traced; ``sensor`` as in ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
-        bits either way."""
+        bits either way. ``background``: rendered by a thread beside the one that makes and frees
+        scenes (a preview's worker), which traces once scenes were made or freed since the
+        recording (:func:`.frozen.freeze_render`)."""
         scene = self.scene
         with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
             if params is None and sensor is None and self.freezes(spp, freeze):
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
-                image = self.recording(integrator, spp)(scene.mi_scene, seed, scene, self)
+                image = self.recording(integrator, spp)(scene.mi_scene, seed, scene, self, background=background)
             else:
                 image = mi.render(scene.mi_scene, params, sensor=0 if sensor is None else sensor,
                                   integrator=integrator, seed=seed, spp=spp)
@@ -336,6 +339,13 @@ class Session:
             fn = self.recordings[key] = freeze_render(integrator, render_once)
         return fn
 
+    def forget_stale_recordings(self) -> None:
+        """Drop the recordings made before scenes were made or let go, which a preview's worker
+        no longer replays (:func:`.frozen.freeze_render`): a new preview records afresh."""
+        with self.lock, RENDER_GUARD:
+            for key in [k for k, r in self.recordings.items() if getattr(r, "stale", bool)()]:
+                del self.recordings[key]
+
     # ------------------------------------------------------------------ workers and lifetime
     def add_worker(self, worker) -> None:
         """Register ``worker`` (an object with ``stop(timeout)``, e.g. a preview whose thread
@@ -368,6 +378,11 @@ class Session:
     def __exit__(self, *exc) -> bool:
         self.close()
         return False
+
+    def __del__(self):
+        # its recordings and integrators are freed under the render guard (guard.let_go)
+        if let_go is not None:                 # (None while the interpreter shuts down)
+            let_go(self)
 
     def __repr__(self) -> str:
         return (f"Session[{self.source}, {len(self._integrators)} integrators, {len(self.recordings)} "

@@ -19,6 +19,7 @@ import numpy as np
 import tomli_w
 
 from ..errors import ParameterError, SceneError, suggest
+from ..guard import let_go
 from ..integrators.features import detect_features
 from ..materials import check_value
 from ..sdf.params import PREFIX, SDFParameters
@@ -47,6 +48,12 @@ class DraawScene:
     description: dict | None = None
     _params: Any = None
     _all_params: Any = None
+
+    def __del__(self):
+        # its Mitsuba objects leave Dr.Jit's registry under the render guard, never beside a
+        # preview's render on another thread (a segmentation fault): see guard.let_go
+        if let_go is not None:                 # (None while the interpreter shuts down)
+            let_go(self)
 
     def __repr__(self) -> str:
         """One line (a notebook cell that shows a scene printed its whole Mitsuba scene and

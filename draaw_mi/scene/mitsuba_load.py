@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import DraawError, SceneError, raise_if_interrupted, suggest
-from ..guard import RENDER_GUARD, exr_reading_threads
+from ..guard import RENDER_GUARD, exr_reading_threads, note_registry_change
 from ..materials.draaw_bsdf import ALL_PARAMS, OPTIONS
 from ..sdf.scene import PROXY_PREFIX
 from .xml_film import film_sized_xml
@@ -117,7 +117,9 @@ def load_mitsuba_dict(d: dict):
     without it too."""
     optimize = _emitting_shapes(d) < 2 and not _has_sdf_proxies(d) and not _has_equal_materials(d)
     with exr_reading_threads():
-        return mi.load_dict(_tensors_shared(d), optimize=optimize)
+        scene = mi.load_dict(_tensors_shared(d), optimize=optimize)
+    note_registry_change()                     # (its objects joined Dr.Jit's registry)
+    return scene
 
 
 def _tensors_shared(d):
@@ -173,6 +175,7 @@ def _load_file(path: str, source: str, defines: dict):
         merged = not _xml_shape_bsdfs(path) <= {sh.bsdf().id() for sh in scene.shapes()}
         if merged or sum(1 for e in scene.emitters() if e.get_shape() is not None) >= 2:
             scene = mi.load_file(path, optimize=False, **defines)
+    note_registry_change()
     return scene
 
 

@@ -402,3 +402,103 @@ def test_release_wrapped_lets_go_of_bare_mitsuba_scenes():
     release_wrapped()
     gc.collect()
     assert len(list(LIVE_INSTANCES)) == before
+
+
+def _counting_renders(monkeypatch) -> list:
+    """mi.render wrapped to count its calls: one per traced or recorded pass, none per replay."""
+    calls = []
+    real = mi.render
+    monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    return calls
+
+
+def _scene_made_and_let_go():
+    """A scene loaded and freed (its objects in and out of Dr.Jit's registry)."""
+    from conftest import tiny_description
+    other = draaw_mi.load_scene(tiny_description(resolution=[8, 8]))
+    del other
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")     # (no fallback to tracing for good)
+def test_a_recording_made_before_scenes_changed_is_made_anew(scene, monkeypatch):
+    """A recording replayed after a scene was let go and another loaded can call the freed
+    scene's objects (a notebook beside a preview re-running "scene = load_scene(...)"
+    segfaulted): once scenes are made or let go, the next pass records anew, then replays."""
+    from draaw_mi import guard
+    calls = _counting_renders(monkeypatch)
+    _record_afresh(scene, monkeypatch)
+    session = session_of(scene)
+    integ = session.integrator("v4", 3)
+    first = [np.array(session.render_pass(integ, 1, s, freeze=True)) for s in range(4)]
+    n = len(calls)                         # (one or two recordings, then replays)
+    np.array(session.render_pass(integ, 1, 0, freeze=True))
+    assert len(calls) == n
+    before = guard.registry_changes()
+    _scene_made_and_let_go()
+    assert guard.registry_changes() == before + 2            # (made, let go)
+    again = [np.array(session.render_pass(integ, 1, s, freeze=True)) for s in range(4)]
+    assert len(calls) == n + 1                               # recorded anew once
+    assert all(np.array_equal(a, b) for a, b in zip(again, first))
+
+
+def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch):
+    """A preview's worker (``background``) does not record anew beside the main thread's work
+    (Dr.Jit 1.5 crashed replaying such a recording beside a fit): it replays while no scene was
+    made or let go since the recording, and traces from then on, with the same image."""
+    calls = _counting_renders(monkeypatch)
+    _record_afresh(scene, monkeypatch)
+    session = session_of(scene)
+    integ = session.integrator("v4", 3)
+    replayed = [np.array(session.render_pass(integ, 1, 5, freeze=True, background=True)) for _ in range(3)]
+    n = len(calls)
+    np.array(session.render_pass(integ, 1, 5, freeze=True, background=True))
+    assert len(calls) == n                                   # replayed
+    _scene_made_and_let_go()
+    traced = [np.array(session.render_pass(integ, 1, 5, freeze=True, background=True)) for _ in range(2)]
+    assert len(calls) == n + 2                               # each pass traced
+    assert np.allclose(traced[0], replayed[0], rtol=1e-5, atol=1e-6) and np.array_equal(traced[0], traced[1])
+    np.array(session.render_pass(integ, 1, 5, freeze=True))
+    np.array(session.render_pass(integ, 1, 5, freeze=True))
+    np.array(session.render_pass(integ, 1, 5, freeze=True, background=True))
+    assert len(calls) == n + 4               # the main thread records anew; the worker traces
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("refused_in_background", [False, True])
+def test_a_replay_refused_for_a_changed_registry_records_anew(scene, monkeypatch, refused_in_background):
+    """Mitsuba objects made or freed outside draaw-mi (a plain ``mi.load_dict``) change the
+    registry without draaw-mi knowing; Dr.Jit then refuses the replay ('The number of registry
+    entries ... did not match'), seen beside a preview. That pass records anew, without a
+    warning, instead of tracing for good; a preview's worker traces from then on."""
+    real = F.dr.freeze
+    refusals, replays = [], []
+
+    def refusing_once(fn, **options):
+        frozen = real(fn, **options)
+
+        def call(*a, **k):
+            if not refusals:
+                refusals.append(1)
+                raise RuntimeError("assign_with_registry(): The number of registry entries (3) did not "
+                                   "match the number of registry entries recorded (6)!")
+            replays.append(1)
+            return frozen(*a, **k)
+        call.clear, call.n_recordings = frozen.clear, 0
+        return call
+    monkeypatch.setattr(F.dr, "freeze", refusing_once)
+    calls = _counting_renders(monkeypatch)
+    _record_afresh(scene, monkeypatch)
+    session = session_of(scene)
+    integ = session.integrator("v4", 3)
+    if refused_in_background:
+        np.array(session.render_pass(integ, 1, 0, freeze=True, background=True))
+        assert refusals == [1] and len(calls) == 1 and not replays      # refused, traced
+    images = [np.array(session.render_pass(integ, 1, s, freeze=True)) for s in range(5)]
+    n = len(calls)
+    np.array(session.render_pass(integ, 1, 0, freeze=True))
+    assert refusals == [1] and len(calls) == n               # refused, recorded, replayed
+    np.array(session.render_pass(integ, 1, 0, freeze=True, background=True))
+    assert len(calls) == n + 1                               # a preview's worker traces
+    monkeypatch.setattr(S, "FREEZE", False)
+    traced = np.array(session.render_pass(integ, 1, 4, freeze=True))
+    assert np.allclose(images[4], traced, rtol=1e-5, atol=1e-6)
