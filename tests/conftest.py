@@ -45,6 +45,19 @@ def _batch_tests_run_in_their_folder(request, monkeypatch):
         monkeypatch.chdir(request.getfixturevalue("tmp_path"))
 
 
+@pytest.fixture
+def no_collections():
+    """Earlier tests' garbage freed first and no automatic collection during the test: a scene
+    freed by the collector is a change of the registry too (a test that counts recordings would see it)."""
+    import gc
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
+
+
 def tiny_description(**render):
     """A sphere on a floor under a point light and a dim sky, 32x24 by default."""
     r = {"resolution": [32, 24], "spp": 4, "max_depth": 4, "filter": "box"}

@@ -20,7 +20,10 @@ Keys (always present, in this order):
                         a normal map alone is ``normal_maps``
 ``normal_maps``         some BSDF applies a normal or bump map
 ``draaw_materials``     some shape uses the ``draaw`` BSDF
-``other_materials``     some shape uses another BSDF
+``other_materials``     some shape uses another BSDF, one that reflects light (below)
+``black_surfaces``      some shape has the black surface draaw-mi gives a TOML scene's area
+                        light (:func:`is_black`): the integrators treat it as absorbing,
+                        without the code of other BSDFs
 ``delta_bsdfs``         some BSDF has a delta lobe (smooth glass, mirror conductor, ...) or
                         is ``null`` (below)
 ``other_glossy``        some BSDF other than ``draaw`` has a glossy lobe (``roughconductor``,
@@ -57,7 +60,7 @@ from ..sdf.scene import find as _find_sdf
 FEATURE_NAMES: tuple[str, ...] = (
     "area_lights", "point_lights", "spot_lights", "directional_lights", "envmap",
     "constant_env", "environment", "delta_lights", "hittable_lights", "textures",
-    "normal_maps", "draaw_materials", "other_materials", "delta_bsdfs", "other_glossy",
+    "normal_maps", "draaw_materials", "other_materials", "black_surfaces", "delta_bsdfs", "other_glossy",
     "anisotropic", "media", "aovs", "sdf", "null_surfaces",
 )
 
@@ -90,11 +93,31 @@ def _bsdf_features(bsdf, f: dict[str, bool]) -> None:
     if _is_draaw(bsdf):
         f["draaw_materials"] = True
         return
+    if is_black(bsdf):
+        f["black_surfaces"] = True
+        return
     f["other_materials"] = True
     if bsdf.class_name() == "Null":
         f["null_surfaces"] = True
     if mi.has_flag(flags, mi.BSDFFlags.Glossy):
         f["other_glossy"] = True
+
+
+#: the id prefix of the black surfaces draaw-mi gives its area lights (:func:`is_black`)
+BLACK_SURFACE_PREFIX = "draaw-black:"
+
+
+def is_black(bsdf) -> bool:
+    """Whether ``bsdf`` is a black surface draaw-mi made: the ``diffuse`` of reflectance 0
+    that a TOML scene's area light is given (its id starts with :data:`BLACK_SURFACE_PREFIX`).
+    Known by its id, not by reading its value: the flags are found while a render is traced or
+    recorded, where reading a JIT value is not allowed.
+
+    >>> black = {"type": "diffuse", "id": BLACK_SURFACE_PREFIX + "lamp", "reflectance": 0.0}
+    >>> is_black(mi.load_dict(black)), is_black(mi.load_dict({"type": "diffuse", "reflectance": 0.0}))
+    (True, False)
+    """
+    return bsdf.id().startswith(BLACK_SURFACE_PREFIX) and bsdf.class_name() == "SmoothDiffuse"
 
 
 def textured_parameters(bsdf) -> list[str]:

@@ -210,7 +210,9 @@ class DraawV3Integrator(DraawIntegrator):
 
             # ------------------- Material of this vertex --------------------
             is_draaw = mi.Bool(draaw_on)
-            if dr.hint(draaw_on and other_on, mode="scalar"):
+            if dr.hint(draaw_on and (other_on or feats["black_surfaces"]), mode="scalar"):
+                # (a black surface, a TOML light's: no draaw lane, and with other BSDFs off
+                # nothing samples a direction there, so the path ends on it)
                 is_draaw = active & bsdf.has_attribute("direct_to_scatter", active)
             sign = mi.Float(1.0)
             params = None

@@ -7,6 +7,7 @@ import os
 import mitsuba as mi
 import numpy as np
 
+from ..integrators.features import BLACK_SURFACE_PREFIX
 from . import camera as cam
 from .context import BuildContext, safe_id
 from .material_dicts import check_image_values, tinted_image
@@ -94,7 +95,9 @@ def light_dicts(light: dict, index: int, look_at, ctx: BuildContext, where: Wher
         raise where.error(f"an area light needs 'position' (the centre of its {shape})")
     pos = vector(light["position"], where / "position")
     emitter = {"type": "area", "radiance": rgb}
-    black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    # (absorbing: the integrators know it by its id and leave other BSDFs' code out)
+    black = {"type": "diffuse", "id": BLACK_SURFACE_PREFIX + name,
+             "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
     # the keys that size the light: a rectangle's size, a sphere's radius, a disk's radius (or
     # size, an ellipse); a key of another shape is refused, not ignored (the light would keep
     # its default size)

@@ -7,6 +7,7 @@ import pytest
 import draaw_mi
 import mitsuba as mi
 from draaw_mi.errors import ParameterError, RenderError
+from draaw_mi.integrators.features import BLACK_SURFACE_PREFIX
 from draaw_mi.integrators import (FEATURE_NAMES, PLUGINS, VERSION_ALIASES, detect_features,
                                   register, resolve_version)
 from draaw_mi.bench import reference_scenes as rs
@@ -100,7 +101,7 @@ def test_detect_features_cornell():
     assert f["area_lights"] and f["hittable_lights"] and f["draaw_materials"]
     for k in ("point_lights", "spot_lights", "envmap", "constant_env", "environment",
               "delta_lights", "textures", "normal_maps", "delta_bsdfs", "other_glossy", "anisotropic",
-              "media", "aovs", "null_surfaces"):
+              "media", "aovs", "null_surfaces", "black_surfaces"):
         assert not f[k], k
 
 
@@ -124,6 +125,8 @@ def test_detect_features_emitters_and_materials():
             "bsdf": {"type": "draaw", "normalmap": {"type": "bitmap", "data": tex(), "raw": True}}},
         fog={"type": "sphere", "radius": 0.1, "center": [0, 0.5, 0], "bsdf": {"type": "null"},
              "interior": {"type": "homogeneous", "sigma_t": 1.0}},
+        lamp={"type": "sphere", "radius": 0.05, "center": [0.5, 0.5, 0], "emitter": {"type": "area"},
+              "bsdf": {"type": "diffuse", "id": BLACK_SURFACE_PREFIX + "lamp", "reflectance": 0.0}},
         integrator={"type": "draaw_v4", "aovs": "depth"},
     ))
     for k in FEATURE_NAMES:
@@ -164,3 +167,18 @@ def test_a_normal_map_alone_is_no_texture_and_a_null_surface_is_named():
     assert f["normal_maps"] and not f["textures"]
     f = detect_features(_scene(veil={"type": "sphere", "radius": 0.1, "bsdf": {"type": "null"}}))
     assert f["null_surfaces"] and f["delta_bsdfs"] and f["other_materials"]
+
+
+def test_a_toml_area_lights_surface_is_black_not_another_material():
+    """A TOML scene's area light gets draaw-mi's black surface: ``black_surfaces``, not
+    ``other_materials`` (which would put every other-BSDF branch into V1..V3); a ``diffuse`` of
+    reflectance 0 of the user's own stays another material (only the id says black)."""
+    import draaw_mi
+    from conftest import tiny_description
+    d = tiny_description()
+    d["lights"] = [{"type": "area", "position": [0, 3, 0], "target": [0, 0, 0], "size": [0.5, 0.5]}]
+    f = draaw_mi.load_scene(d).features()
+    assert f["black_surfaces"] and not f["other_materials"] and f["draaw_materials"]
+    own = detect_features(_scene(dark={"type": "sphere", "radius": 0.1,
+                                       "bsdf": {"type": "diffuse", "reflectance": 0.0}}))
+    assert own["other_materials"] and not own["black_surfaces"]

@@ -431,7 +431,7 @@ def test_a_frame_callback_that_stops_the_preview_stops_it_quietly():
         pv.stop()
 
 
-def test_after_scenes_change_the_preview_traces_and_a_new_one_records_again(monkeypatch):
+def test_after_scenes_change_the_preview_traces_and_a_new_one_records_again(monkeypatch, no_collections):
     """Once a scene is made or let go, a preview's frames no longer replay the recording made
     before (freeze_render: a replay can call the freed scene's objects; recording anew beside a
     fit crashed Dr.Jit): they are traced. A preview started afterwards records afresh."""

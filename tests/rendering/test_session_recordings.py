@@ -420,7 +420,7 @@ def _scene_made_and_let_go():
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")     # (no fallback to tracing for good)
-def test_a_recording_made_before_scenes_changed_is_made_anew(scene, monkeypatch):
+def test_a_recording_made_before_scenes_changed_is_made_anew(scene, monkeypatch, no_collections):
     """A recording replayed after a scene was let go and another loaded can call the freed
     scene's objects (a notebook beside a preview re-running "scene = load_scene(...)"
     segfaulted): once scenes are made or let go, the next pass records anew, then replays."""
@@ -441,7 +441,7 @@ def test_a_recording_made_before_scenes_changed_is_made_anew(scene, monkeypatch)
     assert all(np.array_equal(a, b) for a, b in zip(again, first))
 
 
-def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch):
+def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch, no_collections):
     """A preview's worker (``background``) does not record anew beside the main thread's work
     (Dr.Jit 1.5 crashed replaying such a recording beside a fit): it replays while no scene was
     made or let go since the recording, and traces from then on, with the same image."""
@@ -465,7 +465,7 @@ def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch):
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize("refused_in_background", [False, True])
-def test_a_replay_refused_for_a_changed_registry_records_anew(scene, monkeypatch, refused_in_background):
+def test_a_replay_refused_for_a_changed_registry_records_anew(scene, monkeypatch, refused_in_background, no_collections):
     """Mitsuba objects made or freed outside draaw-mi (a plain ``mi.load_dict``) change the
     registry without draaw-mi knowing; Dr.Jit then refuses the replay ('The number of registry
     entries ... did not match'), seen beside a preview. That pass records anew, without a
