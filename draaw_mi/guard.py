@@ -46,6 +46,7 @@ from __future__ import annotations
 import _thread
 import atexit
 import contextlib
+import functools
 import gc
 import threading
 import warnings
@@ -107,6 +108,103 @@ def let_go(owner) -> None:
     del held
     if RENDER_GUARD.acquire(blocking=False):        # (else the holder frees it)
         RENDER_GUARD.release()
+
+
+class _Foreground:
+    """The draaw-mi calls in progress (:func:`draaw_mi.render`, :func:`draaw_mi.fit`, scene
+    loads, a batch frame rendered in this process), counted per thread, with the sequence number
+    of each thread's latest call (:func:`foreground_since`), and the ``dr.freeze`` replays of
+    background threads (a preview's worker, :func:`background_replay`). Dr.Jit 1.5 crashes
+    (a segmentation fault in a later replay, ``PyType_GetName`` inside ``FrozenFunction``) when a
+    background thread replays a recording after another thread rendered, fitted or updated a
+    scene: 1-2 runs in 3 of 15-20 s of renders or fits beside a preview, also with the calls
+    and the replays never overlapping in time; traced frames beside them never crashed (0 in 6
+    runs). So a background thread replays only recordings made since the latest draaw-mi call
+    of any other thread, and such a call waits for a replay in progress to end (a frame of a
+    few milliseconds) before it starts. Nested and re-entrant."""
+    __slots__ = ()
+    depth: dict = {}                    # thread ident -> nesting depth of its calls
+    latest: dict = {}                   # thread ident -> sequence number of its latest call
+    sequence = 0
+    replaying: dict = {}                # thread ident -> its replays in progress
+    cond = threading.Condition()
+
+    def __enter__(self):
+        cls, me = _Foreground, threading.get_ident()
+        with cls.cond:
+            cls.depth[me] = cls.depth.get(me, 0) + 1
+            if cls.depth[me] > 1:
+                return
+            cls.sequence += 1
+            cls.latest[me] = cls.sequence
+            if not cls.cond.wait_for(lambda: not any(t != me for t in cls.replaying), timeout=COLLECTION_WAIT_S):
+                warnings.warn(f"draaw_mi.guard: a call waited for a replay of another thread for "
+                              f"{COLLECTION_WAIT_S:g} s and went on", RuntimeWarning, stacklevel=2)
+
+    def __exit__(self, *exc):
+        cls, me = _Foreground, threading.get_ident()
+        with cls.cond:
+            n = cls.depth.pop(me) - 1
+            if n:
+                cls.depth[me] = n
+        return False
+
+
+#: ``with FOREGROUND:`` around a draaw-mi call of the caller's thread (see :class:`_Foreground`)
+FOREGROUND = _Foreground()
+
+
+def in_foreground(fn):
+    """``fn`` run inside :data:`FOREGROUND` (a decorator for draaw-mi's entry points)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with FOREGROUND:
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+def foreground_mark() -> tuple:
+    """Where draaw-mi's calls stand now, for a recording made now: the latest call's sequence
+    number, and whether a thread other than this one is inside a call."""
+    cls, me = _Foreground, threading.get_ident()
+    with cls.cond:
+        return cls.sequence, any(t != me for t in cls.depth)
+
+
+def foreground_moved(mark: tuple) -> bool:
+    """Whether a draaw-mi call began since ``mark`` (:func:`foreground_mark`), or one was in
+    progress beside it: a background thread no longer replays a recording made at ``mark``."""
+    return mark[1] or _Foreground.sequence > mark[0]
+
+
+def _others_since(mark: tuple, me: int) -> bool:
+    cls = _Foreground
+    return mark[1] or any(t != me and (n > mark[0] or t in cls.depth) for t, n in cls.latest.items())
+
+
+@contextlib.contextmanager
+def background_replay(mark: tuple, background: bool = True):
+    """Around a ``dr.freeze`` replay of a recording made at ``mark`` (:func:`foreground_mark`):
+    yields whether it may run. Always for a caller that is not ``background``; for a background
+    thread only when no other thread began a draaw-mi call since, or is in one (a call that
+    begins meanwhile waits for the replay to end; see :class:`_Foreground`)."""
+    if not background:
+        yield True
+        return
+    cls, me = _Foreground, threading.get_ident()
+    with cls.cond:
+        allowed = not _others_since(mark, me)
+        if allowed:
+            cls.replaying[me] = cls.replaying.get(me, 0) + 1
+    try:
+        yield allowed
+    finally:
+        if allowed:
+            with cls.cond:
+                n = cls.replaying.pop(me) - 1
+                if n:
+                    cls.replaying[me] = n
+                cls.cond.notify_all()
 
 
 def registry_changes() -> int:

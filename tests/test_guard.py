@@ -207,3 +207,41 @@ def test_a_scene_dropped_beside_a_render_is_freed_when_the_render_lets_go():
     t.join(10)
     gc.collect()
     assert seen == [base + 2] and len(LIVE_INSTANCES) == base
+
+
+def test_a_background_replay_is_refused_once_another_thread_began_a_call():
+    """A preview's worker replays a recording only while no other thread has begun a draaw-mi
+    call since it was made (Dr.Jit 1.5 crashed replaying after one); its own calls do not count."""
+    mark = guard.foreground_mark()
+    with guard.FOREGROUND:                                  # (this thread's own call)
+        pass
+    with guard.background_replay(mark) as allowed:
+        assert allowed
+    t = threading.Thread(target=lambda: guard.FOREGROUND.__enter__() or guard.FOREGROUND.__exit__())
+    t.start()
+    t.join(10)
+    with guard.background_replay(mark) as allowed:
+        assert not allowed
+    with guard.background_replay(mark, background=False) as allowed:
+        assert allowed                                      # (the main thread's own renders)
+    assert guard.foreground_moved(mark)
+    with guard.background_replay(guard.foreground_mark()) as allowed:
+        assert allowed                                      # (a recording made afresh)
+
+
+def test_a_call_waits_for_a_replay_of_another_thread():
+    """A draaw-mi call that begins while a background thread replays waits for the replay."""
+    events, inside = [], threading.Event()
+
+    def worker():
+        with guard.background_replay(guard.foreground_mark()) as allowed:
+            inside.set()
+            time.sleep(0.3)
+            events.append(("replay ended", allowed))
+    t = threading.Thread(target=worker)
+    t.start()
+    inside.wait(10)
+    with guard.FOREGROUND:
+        events.append(("call began", True))
+    t.join(10)
+    assert events == [("replay ended", True), ("call began", True)]

@@ -18,6 +18,7 @@ import drjit as dr
 import numpy as np
 
 from ..errors import DraawError, NonFiniteWarning, RenderError
+from ..guard import in_foreground
 from ..limits import HALF_MAX
 from ..rendering.film_colour import check_film_colour, scene_colour_names
 from ..rendering.renderer import MAX_PASS_SPP, render
@@ -240,6 +241,7 @@ def kernel_signature(entry: dict) -> str:
     return sig
 
 
+@in_foreground
 def safe_render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> dict:
     """:func:`render_frame` that reports a failure as ``{"error": ...}`` instead of raising
     (any exception: a failing frame must not stop the batch)."""

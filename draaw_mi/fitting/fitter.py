@@ -78,6 +78,7 @@ import numpy as np
 
 from .. import post as post_mod
 from ..errors import ParameterError
+from ..guard import in_foreground
 from ..integrators import is_draaw, resolve_version
 from ..progress import check_mode, progress_bar
 from ..rendering.frozen import owned_tensor
@@ -99,6 +100,7 @@ from .views import sampler_spp, view_sensors
 ZERO_GRADIENT_ITERATIONS = 5
 
 
+@in_foreground
 def fit(scene, references, params, version: str | None = None, spp: int = 16, iterations: int = 100,
         lr: float = 0.05, loss: str = "l2", views=None, post=None, progress: bool | str = True,
         seed: int = 0, exposure: str = "fixed", init: dict | None = None, max_depth: int | None = None,

@@ -22,7 +22,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import caused_by_interrupt, exception_chain
-from ..guard import COLLECTOR_PAUSED, registry_changes
+from ..guard import COLLECTOR_PAUSED, background_replay, foreground_mark, foreground_moved, registry_changes
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
 from ..sdf.scene import PROXY_PREFIX
@@ -225,7 +225,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     their renders through this. ``limit``: the recordings kept (see below). A recording is not
     replayed once scenes were made or let go since it was made (:func:`draaw_mi.guard.registry_changes`):
     the caller records anew, a ``background`` caller (a preview's worker) traces from then on
-    (``call.stale()`` says so: a new preview drops such recordings)."""
+    (``call.stale()`` says so: a new preview drops such recordings). A ``background`` caller
+    also traces once another thread has begun a draaw-mi call since the recording was made
+    (:func:`draaw_mi.guard.background_replay`: such replays crashed Dr.Jit 1.5)."""
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
@@ -256,6 +258,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     # (a replay of it segfaults in PyType_GetName within the next seconds; MUTATIONS.md)
     registry_seen = [registry_changes()]
     made_at = registry_changes()
+    # and where draaw-mi's calls stood: a background caller replays only while no other thread
+    # has begun one since (guard.background_replay: replays after one crashed Dr.Jit 1.5)
+    calls_at = foreground_mark()
 
     def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None,
              background: bool = False):
@@ -285,9 +290,12 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
                 frozen.clear()
                 registry_seen[0] = registry_changes()
             try:
-                with COLLECTOR_PAUSED:   # (a collection freeing Dr.Jit memory while it records aborts)
-                    return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live,
-                                  tuple(args))
+                # (a collection freeing Dr.Jit memory while it records aborts; a background
+                # replay beside another thread's draaw-mi call crashes: traced below instead)
+                with COLLECTOR_PAUSED, background_replay(calls_at, background) as allowed:
+                    if allowed:
+                        return frozen(mi_scene, scene_scalars(mi_scene, scene, cache), seed, state, live,
+                                      tuple(args))
             except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
                 if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
                     raise KeyboardInterrupt from None
@@ -307,6 +315,8 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
                     continue
                 error = e
                 break
+            else:                        # (not allowed: beside another thread's draaw-mi call)
+                return body(mi_scene, seed, *args)
         failed.append(str(error))
         warnings.warn(f"freeze_render: dr.freeze could not record this render "
                       f"({_first_cause(error)}); it is traced from now on", RuntimeWarning, stacklevel=2)
@@ -315,5 +325,5 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         return body(mi_scene, seed, *args)
     call.frozen = frozen
     # (a background caller traces it: a new preview drops it and records afresh)
-    call.stale = lambda: made_at != registry_changes()
+    call.stale = lambda: made_at != registry_changes() or foreground_moved(calls_at)
     return call

@@ -316,11 +316,11 @@ class Preview(PreviewWorker):
             settings = (self.version, self.max_depth, self.denoise)     # as configure() left them
         self._apply_pending()
         target = self._lo_scene() if interactive else self.scene
-        # an opaque seed: a new frame's seed is new data, not a new kernel
-        seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
         t0 = time.perf_counter()
         session = session_of(target)
         with holding(self.scene, target):    # (the scene's, then its reduced copy's)
+            # an opaque seed: a new frame's seed is new data, not a new kernel
+            seed = dr.opaque(mi.UInt32, pass_seed(self.seed, index + 1))
             img = session.render_pass(self._integrator_for(target, settings), 1, seed, freeze=self.freeze,
                                       background=True)
             arr = np.array(img, dtype=np.float32)

@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import post as post_mod
 from ..errors import NonFiniteWarning, RenderError
-from ..guard import RENDER_GUARD
+from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version, version_key
 from ..integrators.common import AOV_CHANNELS
 from ..integrators.features import detect_features
@@ -66,6 +66,7 @@ class RenderSettings:
     guide_aovs: list = field(default_factory=list)   # AOVs rendered only for the denoiser
 
 
+@in_foreground
 def render(scene, version: str | None = None, spp: int | None = None, seed: int | None = None,
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool | str = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,

@@ -19,7 +19,7 @@ import numpy as np
 import tomli_w
 
 from ..errors import ParameterError, SceneError, suggest
-from ..guard import let_go
+from ..guard import FOREGROUND, RENDER_GUARD, let_go
 from ..integrators.features import detect_features
 from ..materials import check_value
 from ..sdf.params import PREFIX, SDFParameters
@@ -75,7 +75,10 @@ class DraawScene:
     def params(self):
         """``mi.traverse`` of the scene (cached; call ``.update()`` after changing values)."""
         if self._params is None:
-            self._params = mi.traverse(self.mi_scene)
+            # (a traversal beside a preview's replay, which traverses live BSDFs too, crashed)
+            with RENDER_GUARD, FOREGROUND:
+                if self._params is None:
+                    self._params = mi.traverse(self.mi_scene)
         return self._params
 
     @property

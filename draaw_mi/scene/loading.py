@@ -26,7 +26,7 @@ except ImportError:              # pragma: no cover - Windows
 import mitsuba as mi
 
 from ..errors import DraawError, SceneError, raise_if_interrupted, suggest, user_stacklevel
-from ..guard import RENDER_GUARD
+from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, resolve_version
 from ..sdf.scene import find as find_sdf
 from .camera import auto_camera, clipped_away, filter_plugin, sampler_plugin
@@ -54,6 +54,7 @@ def _bare_mesh_description(path: str) -> dict:
             "lights": auto_light(lo, hi, camera["origin"])}
 
 
+@in_foreground
 def load_scene(source, defines: dict | None = None, **overrides) -> DraawScene:
     """Load a scene from a TOML/JSON/XML/mesh file, a description dict, a Mitsuba scene dict
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
