@@ -142,12 +142,18 @@ class _Foreground:
                               f"{COLLECTION_WAIT_S:g} s and went on", RuntimeWarning, stacklevel=2)
 
     def __exit__(self, *exc):
-        cls, me = _Foreground, threading.get_ident()
+        cls = _Foreground
         with cls.cond:
-            n = cls.depth.pop(me) - 1
-            if n:
-                cls.depth[me] = n
+            _count_out(cls.depth, threading.get_ident())
         return False
+
+
+def _count_out(counts: dict, me: int) -> int:
+    """One less for thread ``me`` in the per-thread ``counts`` (dropped at 0); what is left."""
+    n = counts.pop(me) - 1
+    if n:
+        counts[me] = n
+    return n
 
 
 #: ``with FOREGROUND:`` around a draaw-mi call of the caller's thread (see :class:`_Foreground`)
@@ -201,9 +207,7 @@ def background_replay(mark: tuple, background: bool = True):
     finally:
         if allowed:
             with cls.cond:
-                n = cls.replaying.pop(me) - 1
-                if n:
-                    cls.replaying[me] = n
+                _count_out(cls.replaying, me)
                 cls.cond.notify_all()
 
 
@@ -256,10 +260,7 @@ class _CollectorPaused:
     def __exit__(self, *exc):
         cls, me = _CollectorPaused, threading.get_ident()
         with cls.cond:
-            n = cls.depth.pop(me) - 1
-            if n:
-                cls.depth[me] = n
-            elif not cls.depth:
+            if not _count_out(cls.depth, me) and not cls.depth:
                 if cls.was_enabled:
                     gc.enable()
                 cls.cond.notify_all()

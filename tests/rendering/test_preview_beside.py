@@ -24,18 +24,23 @@ print("cells", n + 1, "error", repr(pa.error), "refined", pa.spp > 1, flush=True
 pa.stop()
 """
 
+#: (the scripts below) a tiny scene of one material "m" at roughness ``rough``
+TINY_SCENE = """
+import draaw_mi
+def mk(rough):
+    return draaw_mi.load_scene({"render": {"resolution": [16, 16], "filter": "box"},
+        "materials": {"m": {"roughness": rough}}, "shapes": [{"type": "sphere", "material": "m"}],
+        "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
+"""
+
 #: a Preview refines while another thread changes its roughness; the main thread loads a
 #: scene and lets it go, then loads one, fits it and lets it go, three times
-FITTED_BESIDE = """
+FITTED_BESIDE = TINY_SCENE + """
 import faulthandler, gc, threading, time; faulthandler.enable()
 import numpy as np
 import draaw_mi
 from draaw_mi.guard import RENDER_GUARD
 from draaw_mi.rendering.preview import Preview
-def mk(rough):
-    return draaw_mi.load_scene({"render": {"resolution": [16, 16], "filter": "box"},
-        "materials": {"m": {"roughness": rough}}, "shapes": [{"type": "sphere", "material": "m"}],
-        "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
 pa = Preview(mk(0.5), version="v4", max_depth=3, max_spp=10**9); pa.start(); pa.wait(spp=1)
 stop = False
 def slider():
@@ -65,15 +70,11 @@ pa.stop()
 
 #: a Preview refines; the main thread reads another scene's parameters, then renders and fits
 #: that scene (kept: no scene made or freed) for 8 seconds
-KEPT_BESIDE = """
+KEPT_BESIDE = TINY_SCENE + """
 import faulthandler, time; faulthandler.enable()
 import numpy as np
 import draaw_mi
 from draaw_mi.rendering.preview import Preview
-def mk(rough):
-    return draaw_mi.load_scene({"render": {"resolution": [16, 16], "filter": "box"},
-        "materials": {"m": {"roughness": rough}}, "shapes": [{"type": "sphere", "material": "m"}],
-        "lights": [{"type": "constant"}], "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]}})
 a, b = mk(0.5), mk(0.7)
 pa = Preview(a, version="v4", max_depth=3, max_spp=10**9); pa.start(); pa.wait(spp=1)
 key = b.key("m.roughness")                     # (b's parameters traversed beside the preview)
