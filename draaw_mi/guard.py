@@ -18,10 +18,11 @@ can wait on a preview of the scene that holds the lock and waits for the guard.
 
 Mitsuba's own integrators called directly (``mi.render`` with ``path``) and your own Dr.Jit
 work beside a running preview (a ``dr.backward`` of a differentiable render) are not
-guarded by draaw-mi: hold the guard around them::
+guarded by draaw-mi: hold the guard around them, and mark them as your work
+(:data:`FOREGROUND`: a preview traces beside it and records anew after it)::
 
-    from draaw_mi.guard import RENDER_GUARD
-    with RENDER_GUARD:
+    from draaw_mi.guard import FOREGROUND, RENDER_GUARD
+    with RENDER_GUARD, FOREGROUND:
         dr.backward(loss)
 
 Take it around such calls, never inside a Dr.Jit callback (an integrator's
@@ -74,13 +75,18 @@ class _RenderGuard:
         return got
 
     def release(self) -> None:
-        if self._depth == 1:
+        outermost = self._depth == 1
+        if outermost:
             while self._pending:        # (a free may let go of more: freed here too)
                 held = self._pending.pop()
                 del held
                 self.changes += 1
         self._depth -= 1
         self._lock.release()
+        # (what another thread let go just before this release, finding the guard held, is
+        # freed now by whoever takes it)
+        while outermost and self._pending and self.acquire(blocking=False):
+            self.release()
 
     def __enter__(self) -> bool:
         return self.acquire()

@@ -245,3 +245,41 @@ def test_a_call_waits_for_a_replay_of_another_thread():
         events.append(("call began", True))
     t.join(10)
     assert events == [("replay ended", True), ("call began", True)]
+
+
+def test_let_go_just_before_the_holder_releases_is_still_freed():
+    """A thing let go while the holder is between its last free and its release (the guard still
+    held, so ``let_go`` leaves it pending) is freed once the guard is released, not left until
+    the next render. The holder is paused there by a line tracer."""
+    import inspect
+    import sys
+    _Held.freed_on = []
+    code = guard._RenderGuard.release.__code__
+    lines, first = inspect.getsourcelines(guard._RenderGuard.release)
+    at = first + next(i for i, line in enumerate(lines) if "self._lock.release()" in line)
+    paused, go = threading.Event(), threading.Event()
+
+    def tracer(frame, event, arg):
+        if frame.f_code is not code:
+            return None
+
+        def local(frame, event, arg):
+            if event == "line" and frame.f_lineno == at and not paused.is_set():
+                paused.set()
+                go.wait(10)
+            return local
+        return local
+
+    def holder():
+        sys.settrace(tracer)
+        with guard.RENDER_GUARD:
+            pass
+        sys.settrace(None)
+    t = threading.Thread(target=holder)
+    t.start()
+    assert paused.wait(10)
+    guard.let_go(_owner_of_one())            # pending: the holder has not released yet
+    assert _Held.freed_on == []
+    go.set()
+    t.join(10)
+    assert len(_Held.freed_on) == 1 and not guard.RENDER_GUARD._pending

@@ -27,6 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError
+from ..guard import in_foreground
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from .views import view_sensors
@@ -165,6 +166,7 @@ def light_names(params) -> list:
     return sorted({k.split(".")[0] for k in params.keys() if k.endswith(EMISSION_SUFFIXES)})
 
 
+@in_foreground
 def render_capture(scene, capture: dict, spp: int = 64, version: str = "v4", seed: int = 0) -> np.ndarray:
     """Render ``scene`` (a :class:`~draaw_mi.scene.DraawScene`) as ``capture`` sees it: its
     camera, its lights and parameters; the scene's own values come back afterwards. The relit

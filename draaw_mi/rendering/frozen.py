@@ -224,10 +224,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     replay a stale table. The preview, the batch executor and the fit's gradient passes record
     their renders through this. ``limit``: the recordings kept (see below). A recording is not
     replayed once scenes were made or let go since it was made (:func:`draaw_mi.guard.registry_changes`):
-    the caller records anew, a ``background`` caller (a preview's worker) traces from then on
-    (``call.stale()`` says so: a new preview drops such recordings). A ``background`` caller
-    also traces once another thread has begun a draaw-mi call since the recording was made
-    (:func:`draaw_mi.guard.background_replay`: such replays crashed Dr.Jit 1.5)."""
+    it is recorded anew. A ``background`` caller (a preview's worker) also records anew once
+    another thread has begun a draaw-mi call since, and traces while such a call is in progress
+    (:func:`draaw_mi.guard.background_replay`: replays beside or after one crashed Dr.Jit 1.5)."""
     state_of = getattr(integrator, "freeze_state", None)
     use_state = getattr(integrator, "frozen_state", None)
 
@@ -253,13 +252,12 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     # another made can find as many entries as it recorded and call the freed ones (a
     # segmentation fault beside a notebook cell that loads a scene again), and one replayed
     # after a scene was made refuses ('The number of registry entries ... did not match'):
-    # the caller's thread records anew; a background thread (a preview's worker) traces from
-    # then on, because a recording it makes beside the main thread's fit crashes Dr.Jit 1.5
-    # (a replay of it segfaults in PyType_GetName within the next seconds; MUTATIONS.md)
+    # both record anew
     registry_seen = [registry_changes()]
+    # A background caller (a preview's worker) replays only a recording made since the latest
+    # change and the latest draaw-mi call of another thread (guard.background_replay: replays
+    # after one crashed Dr.Jit 1.5); with a call in progress it traces, else it records anew
     made_at = registry_changes()
-    # and where draaw-mi's calls stood: a background caller replays only while no other thread
-    # has begun one since (guard.background_replay: replays after one crashed Dr.Jit 1.5)
     calls_at = foreground_mark()
 
     def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None,
@@ -271,9 +269,13 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         first (its edge map is part of the state); ``before_retry``: called before a failed
         recording's pass is traced (a gradient pass puts its gradients back); ``background``:
         called from a thread other than the one that makes and frees scenes (a preview's)."""
-        nonlocal made_at
-        if failed or (background and made_at != registry_changes()):
+        nonlocal made_at, calls_at
+        if failed:
             return body(mi_scene, seed, *args)
+        if background and (made_at != registry_changes() or foreground_moved(calls_at)):
+            frozen.clear()              # (recorded anew below, or traced beside a call)
+            made_at = registry_seen[0] = registry_changes()
+            calls_at = foreground_mark()
         # every live Python BSDF that the scene does not hold itself (those it holds are
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
@@ -304,7 +306,7 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
                     registry_seen[0] = made_at = None
                     if before_retry is not None:
                         before_retry()
-                    if background:
+                    if background:       # (recorded anew at its next frame)
                         return body(mi_scene, seed, *args)
                     continue
                 if attempt == 1 and live and _release_held_media():
@@ -324,6 +326,4 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             before_retry()
         return body(mi_scene, seed, *args)
     call.frozen = frozen
-    # (a background caller traces it: a new preview drops it and records afresh)
-    call.stale = lambda: made_at != registry_changes() or foreground_moved(calls_at)
     return call

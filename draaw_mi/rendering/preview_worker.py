@@ -68,7 +68,6 @@ class PreviewWorker:
                 if other is not self and other.running:
                     other._supersede()
             session.add_worker(self)
-        session.forget_stale_recordings()
         if self._thread is not None and self._thread.is_alive():
             self._stop.clear()        # a worker that did not stop in time goes on: not a second
             return

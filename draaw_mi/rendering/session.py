@@ -339,13 +339,6 @@ class Session:
             fn = self.recordings[key] = freeze_render(integrator, render_once)
         return fn
 
-    def forget_stale_recordings(self) -> None:
-        """Drop the recordings made before scenes were made or let go, which a preview's worker
-        no longer replays (:func:`.frozen.freeze_render`): a new preview records afresh."""
-        with self.lock, RENDER_GUARD:
-            for key in [k for k, r in self.recordings.items() if getattr(r, "stale", bool)()]:
-                del self.recordings[key]
-
     # ------------------------------------------------------------------ workers and lifetime
     def add_worker(self, worker) -> None:
         """Register ``worker`` (an object with ``stop(timeout)``, e.g. a preview whose thread

@@ -431,10 +431,10 @@ def test_a_frame_callback_that_stops_the_preview_stops_it_quietly():
         pv.stop()
 
 
-def test_after_scenes_change_the_preview_traces_and_a_new_one_records_again(monkeypatch, no_collections):
-    """Once a scene is made or let go, a preview's frames no longer replay the recording made
-    before (freeze_render: a replay can call the freed scene's objects; recording anew beside a
-    fit crashed Dr.Jit): they are traced. A preview started afterwards records afresh."""
+def test_after_scenes_change_the_preview_records_anew(monkeypatch, no_collections):
+    """Once a scene is made or let go, a preview's frames do not replay the recording made
+    before (a replay can call the freed scene's objects): the next frame records anew, the
+    later ones replay it."""
     scene = draaw_mi.load_scene(tiny_description(resolution=[16, 16]))
     calls = []
     real = mi.render
@@ -447,13 +447,6 @@ def test_after_scenes_change_the_preview_traces_and_a_new_one_records_again(monk
     assert len(calls) == n                                   # replayed
     other = draaw_mi.load_scene(tiny_description(resolution=[8, 8]))
     del other
-    pv.step(), pv.step()
-    assert len(calls) == n + 2                               # traced
-    again = Preview(scene, version="v4", max_depth=3, max_spp=10**6)
-    again.start()
-    try:
-        frame = again.wait(spp=8, timeout=120)
-    finally:
-        again.stop()
-    assert frame is not None and frame.spp >= 8
-    assert len(calls) - (n + 2) <= 2                         # recorded (once or twice), replayed
+    for _ in range(3):
+        pv.step()
+    assert len(calls) == n + 1                               # recorded anew once, replayed

@@ -441,10 +441,14 @@ def test_a_recording_made_before_scenes_changed_is_made_anew(scene, monkeypatch,
     assert all(np.array_equal(a, b) for a, b in zip(again, first))
 
 
-def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch, no_collections):
-    """A preview's worker (``background``) does not record anew beside the main thread's work
-    (Dr.Jit 1.5 crashed replaying such a recording beside a fit): it replays while no scene was
-    made or let go since the recording, and traces from then on, with the same image."""
+def test_a_background_render_records_anew_when_free_and_traces_beside_a_call(scene, monkeypatch, no_collections):
+    """A preview's worker (``background``) replays a recording only while no scene was made or
+    let go and no other thread began a draaw-mi call since it was made (Dr.Jit 1.5 crashed
+    replaying after one); while another thread is inside such a call it traces, and once that
+    call is over it records anew and replays again. Same image throughout."""
+    import threading
+
+    from draaw_mi import guard
     calls = _counting_renders(monkeypatch)
     _record_afresh(scene, monkeypatch)
     session = session_of(scene)
@@ -454,13 +458,24 @@ def test_a_background_render_traces_once_scenes_changed(scene, monkeypatch, no_c
     np.array(session.render_pass(integ, 1, 5, freeze=True, background=True))
     assert len(calls) == n                                   # replayed
     _scene_made_and_let_go()
+    again = [np.array(session.render_pass(integ, 1, 5, freeze=True, background=True)) for _ in range(2)]
+    assert len(calls) == n + 1                               # recorded anew, replayed
+    inside, done = threading.Event(), threading.Event()
+
+    def a_call():
+        with guard.FOREGROUND:
+            inside.set()
+            done.wait(10)
+    t = threading.Thread(target=a_call)
+    t.start()
+    inside.wait(10)
     traced = [np.array(session.render_pass(integ, 1, 5, freeze=True, background=True)) for _ in range(2)]
-    assert len(calls) == n + 2                               # each pass traced
-    assert np.allclose(traced[0], replayed[0], rtol=1e-5, atol=1e-6) and np.array_equal(traced[0], traced[1])
-    np.array(session.render_pass(integ, 1, 5, freeze=True))
-    np.array(session.render_pass(integ, 1, 5, freeze=True))
-    np.array(session.render_pass(integ, 1, 5, freeze=True, background=True))
-    assert len(calls) == n + 4               # the main thread records anew; the worker traces
+    assert len(calls) == n + 3                               # beside the call: traced
+    done.set()
+    t.join(10)
+    after = [np.array(session.render_pass(integ, 1, 5, freeze=True, background=True)) for _ in range(2)]
+    assert len(calls) == n + 4                               # recorded anew, replayed
+    assert all(np.allclose(x, replayed[0], rtol=1e-5, atol=1e-6) for x in again + traced + after)
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")
