@@ -54,6 +54,7 @@ import warnings
 
 import drjit as dr
 
+
 class _RenderGuard:
     """A re-entrant lock (``with``, :meth:`acquire`, :meth:`release`) that also frees, while
     held, what :func:`let_go` was handed, and counts the frees and scene loads that change
@@ -119,7 +120,7 @@ def let_go(owner) -> None:
 class _Foreground:
     """The draaw-mi calls in progress (:func:`draaw_mi.render`, :func:`draaw_mi.fit`, scene
     loads, a batch frame rendered in this process), counted per thread, with the sequence number
-    of each thread's latest call (:func:`foreground_since`), and the ``dr.freeze`` replays of
+    of each thread's latest call (:func:`foreground_mark`), and the ``dr.freeze`` replays of
     background threads (a preview's worker, :func:`background_replay`). Dr.Jit 1.5 crashes
     (a segmentation fault in a later replay, ``PyType_GetName`` inside ``FrozenFunction``) when a
     background thread replays a recording after another thread rendered, fitted or updated a
@@ -229,9 +230,11 @@ def note_registry_change() -> None:
     holding :data:`RENDER_GUARD`."""
     RENDER_GUARD.changes += 1
 
+
 #: the longest a ``gc.collect()`` waits for a render pass of another thread to end (and a
-#: pass for a collection of another thread): then it goes on regardless, with a
-#: ``RuntimeWarning`` (a pass that long on a background thread is not a preview's)
+#: pass for a collection of another thread, a draaw-mi call for a replay of another thread):
+#: then it goes on regardless, with a ``RuntimeWarning`` (a pass that long on a background
+#: thread is not a preview's)
 COLLECTION_WAIT_S = 60.0
 
 

@@ -196,6 +196,9 @@ RECORDINGS_KEPT = 8
 #: what Dr.Jit 1.5's replay says when the registry of virtual-call targets changed
 _REGISTRY_CHANGED = "number of registry entries"
 
+#: a guard.foreground_mark() that a background caller never replays at (it records anew)
+_NO_CALLS_MARK = (-1, True)
+
 
 def _first_cause(e: BaseException) -> str:
     """The first line of the innermost exception ``e`` was raised from (Dr.Jit's recorder
@@ -252,12 +255,10 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     # another made can find as many entries as it recorded and call the freed ones (a
     # segmentation fault beside a notebook cell that loads a scene again), and one replayed
     # after a scene was made refuses ('The number of registry entries ... did not match'):
-    # both record anew
-    registry_seen = [registry_changes()]
-    # A background caller (a preview's worker) replays only a recording made since the latest
-    # change and the latest draaw-mi call of another thread (guard.background_replay: replays
-    # after one crashed Dr.Jit 1.5); with a call in progress it traces, else it records anew
-    made_at = registry_changes()
+    # both record anew. A background caller (a preview's worker) records anew too once another
+    # thread began a draaw-mi call since, and traces while one is in progress
+    # (guard.background_replay: replays after one crashed Dr.Jit 1.5)
+    registry_at = registry_changes()
     calls_at = foreground_mark()
 
     def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None,
@@ -269,13 +270,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         first (its edge map is part of the state); ``before_retry``: called before a failed
         recording's pass is traced (a gradient pass puts its gradients back); ``background``:
         called from a thread other than the one that makes and frees scenes (a preview's)."""
-        nonlocal made_at, calls_at
+        nonlocal registry_at, calls_at
         if failed:
             return body(mi_scene, seed, *args)
-        if background and (made_at != registry_changes() or foreground_moved(calls_at)):
-            frozen.clear()              # (recorded anew below, or traced beside a call)
-            made_at = registry_seen[0] = registry_changes()
-            calls_at = foreground_mark()
         # every live Python BSDF that the scene does not hold itself (those it holds are
         # traversed with it): without them the recording of a BSDF call fails (see
         # materials.draaw_bsdf.LIVE_INSTANCES); a change in the set re-records
@@ -288,9 +285,11 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             state = state_of(mi_scene, memo) if sensor is None else state_of(mi_scene, memo, sensor)
         for attempt in (1, 2):
             live = other_live_bsdfs(mi_scene, cache) + _held_media()
-            if registry_seen[0] != registry_changes():
-                frozen.clear()
-                registry_seen[0] = registry_changes()
+            if registry_at != registry_changes() or (background and foreground_moved(calls_at)):
+                frozen.clear()          # (recorded anew below, or traced beside a call)
+                registry_at = registry_changes()
+                if background:
+                    calls_at = foreground_mark()
             try:
                 # (a collection freeing Dr.Jit memory while it records aborts; a background
                 # replay beside another thread's draaw-mi call crashes: traced below instead)
@@ -303,7 +302,7 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
                     raise KeyboardInterrupt from None
                 if attempt == 1 and _REGISTRY_CHANGED in str(e):
                     # objects made outside draaw-mi's loads (a plain mi.load_dict): as above
-                    registry_seen[0] = made_at = None
+                    registry_at, calls_at = None, _NO_CALLS_MARK
                     if before_retry is not None:
                         before_retry()
                     if background:       # (recorded anew at its next frame)

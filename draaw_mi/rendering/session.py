@@ -270,8 +270,9 @@ class Session:
         (``mi.TensorXf`` (H, W, C), as ``mi.render`` gives it). ``params`` (``mi.traverse``
         parameters) makes it differentiable (traced; ``sensor`` as in ``mi.render``); otherwise it replays a recording where :meth:`freezes` says so. Same
         bits either way. ``background``: rendered by a thread beside the one that makes and frees
-        scenes (a preview's worker), which traces once scenes were made or freed since the
-        recording (:func:`.frozen.freeze_render`)."""
+        scenes (a preview's worker), which replays only a recording made since the latest scene
+        change and the latest draaw-mi call of another thread: it records anew, or traces while
+        such a call is in progress (:func:`.frozen.freeze_render`)."""
         scene = self.scene
         with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
             if params is None and sensor is None and self.freezes(spp, freeze):
