@@ -43,6 +43,8 @@ def check_value(who: str, name: str, key: str, v) -> None:
             # values in a scene file are); value_like checks their shape
             lo, hi = SCALAR_PARAMS[param][1:] if param in SCALAR_PARAMS else (0.0, FLOAT32_MAX)
             _check_texels(who, name, v, lo, hi)
+        else:                                     # (a normal map, an environment map, ...)
+            _check_texels(who, name, v, -FLOAT32_MAX, FLOAT32_MAX)
         return
     elif isinstance(v, (list, tuple, np.ndarray)):
         try:
@@ -75,15 +77,16 @@ def check_value(who: str, name: str, key: str, v) -> None:
 
 
 def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
-    """A material texture's texels: finite, in ``[lo, hi]``."""
+    """A texture's texels: finite, in ``[lo, hi]`` (+-``FLOAT32_MAX``: what float32 holds)."""
     a = np.asarray(texels, np.float64)
     with np.errstate(invalid="ignore"):
         bad = ~np.isfinite(a) | (a < lo) | (a > hi)
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside [{lo:g}, {hi:g}] "
-                             f"(the first, {float(a[first])!r}, at {list(first)}); expected finite values in "
-                             f"[{lo:g}, {hi:g}]")
+        span = "[" + ", ".join("3.4e38" if abs(x) == FLOAT32_MAX and x > 0 else "-3.4e38" if abs(x) == FLOAT32_MAX
+                               else f"{x:g}" for x in (lo, hi)) + "]"
+        raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside {span} "
+                             f"(the first, {float(a[first])!r}, at {list(first)}); expected finite values in {span}")
 
 
 def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:

@@ -31,7 +31,6 @@ from ..errors import NonFiniteWarning, RenderError
 from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version, version_key
 from ..integrators.common import AOV_CHANNELS
-from ..integrators.features import detect_features
 from ..io import channel_names
 from ..progress import check_mode, progress_bar
 from ..scene import DraawScene, load_scene
@@ -282,12 +281,10 @@ def _parameters_of(scene: DraawScene, params) -> bool:
 def _warn_non_finite(bad: int, rs: RenderSettings) -> None:
     """Say that an image holds NaN / inf values (``info["non_finite"]`` counts them too): a
     value set through ``scene.params`` that a scene file would refuse (a NaN colour, a negative
-    roughness) renders them, and a post chain or denoiser reads them as 0 and hides them. In a
-    scene with a participating medium, say it of such a value even when the image is finite: a
-    Henyey-Greenstein g past +-0.999 renders finite pixels that are wrong (negative past 1)."""
-    if not bad and not detect_features(rs.scene.mi_scene)["media"]:
-        return                                 # (read back only here: other renders are not slowed)
-    why = rs.scene.out_of_range(1)
+    roughness) renders them, and a post chain or denoiser reads them as 0 and hides them. Say
+    it of such a value set since the last render even when the image is finite: a NaN texel of
+    a roughness map, a Henyey-Greenstein g past +-0.999 render finite pixels that are wrong."""
+    why = rs.scene.out_of_range(1) if bad else rs.scene.out_of_range(1, changed_only=True)
     if bad:
         warnings.warn(f"render: {bad} value(s) of the {rs.version} render of {rs.scene.source} are NaN "
                       "or inf" + (f"; {why[0].removeprefix('out_of_range: ')} (set through scene.params: "

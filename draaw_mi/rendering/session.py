@@ -56,6 +56,7 @@ from ..guard import COLLECTOR_PAUSED, RENDER_GUARD, let_go
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
 from .frozen import freeze_render, freeze_supported
+from .gradient_body import gradient_body, gradients_of, host_key, restore_gradients
 from .passes import sample_passes
 from .plugins import integrator_props, make_plugin
 
@@ -317,14 +318,14 @@ class Session:
                     for old in kept[:max(0, len(kept) - GRADIENT_KEYS + 1)]:
                         del self.recordings[old]           # (a notebook's many fits of one scene)
                     fn = self.recordings[key] = freeze_render(
-                        integrator, _gradient_body(integrator, spp, spp_grad, loss), limit=GRADIENT_RECORDINGS)
+                        integrator, gradient_body(integrator, spp, spp_grad, loss), limit=GRADIENT_RECORDINGS)
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
-                saved = _gradients_of(params)
-                value, extras = fn(scene.mi_scene, seed, scene, self, args=(sensor, _host_key(sensor), tuple(inputs)),
-                                   sensor=sensor, before_retry=lambda: _restore_gradients(saved))
+                saved = gradients_of(params)
+                value, extras = fn(scene.mi_scene, seed, scene, self, args=(sensor, host_key(sensor), tuple(inputs)),
+                                   sensor=sensor, before_retry=lambda: restore_gradients(saved))
             else:
-                value, extras = _gradient_body(integrator, spp, spp_grad, loss, params)(
+                value, extras = gradient_body(integrator, spp, spp_grad, loss, params)(
                     scene.mi_scene, seed, sensor, None, tuple(inputs))
             dr.eval(value, extras)
         return value, extras
@@ -402,42 +403,6 @@ def interrupts_raised_as_such():
         if caused_by_interrupt(e):
             raise KeyboardInterrupt from None
         raise
-
-
-def _gradient_body(integrator, spp: int, spp_grad: int, loss, params=None):
-    """``body(mi_scene, seed, sensor, host_key, inputs) -> (loss value, extras)`` of
-    :meth:`Session.gradient_pass`: render, loss, backward. Without ``params`` the scene's are
-    traversed inside (a recording's body: its parameters are the scene's, an input);
-    ``host_key`` (:func:`_host_key`) is there for the recording's key only."""
-    def body(mi_scene, seed, sensor, host_key, inputs):
-        p = mi.traverse(mi_scene) if params is None else params
-        image = mi.render(mi_scene, p, sensor=sensor, integrator=integrator, seed=seed, spp=spp, spp_grad=spp_grad)
-        value, extras = loss(image, *inputs)
-        dr.backward(value)
-        return dr.detach(value), extras
-    return body
-
-
-def _host_key(sensor) -> tuple:
-    """What a recording's key must see of a sensor that ``dr.freeze`` does not: the host-side
-    values its kernels bake in (the film's size and crop window, the shutter). Its JIT values
-    (the camera's transforms) are inputs; a sensor made outside the scene is not part of
-    :func:`~.frozen.scene_scalars`."""
-    film = sensor.film()
-    return (tuple(film.size()), tuple(film.crop_offset()), tuple(film.crop_size()),
-            float(sensor.shutter_open_time()))
-
-
-def _gradients_of(params) -> list:
-    """``[(value, its gradient now)]`` for the parameters that track gradients."""
-    return [(v, dr.grad(v)) for v in dict(params).values() if dr.is_diff_v(v) and dr.grad_enabled(v)]
-
-
-def _restore_gradients(saved: list) -> None:
-    """Put back the gradients :func:`_gradients_of` saved: a recording that failed after its
-    backward pass began may have added to them, and the traced retry adds its own."""
-    for v, g in saved:
-        dr.set_grad(v, g)
 
 
 _SESSIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # DraawScene -> Session

@@ -260,6 +260,33 @@ def clipped_away(origin, near: float, far: float, boxes) -> str | None:
     return None
 
 
+_KEPT: dict = {}      # (sampler plugin, spp) -> the count it keeps
+
+
+def count_kept(sampler: str, spp: int) -> int:
+    """The sample count Mitsuba's ``sampler`` plugin keeps when given ``spp``: stratifying ones
+    round up (``ldsampler`` 5 -> 16, ``orthogonal`` 5 -> 9, ``multijitter`` 5 -> 6), and say
+    so in a raw log line at load. A sensor built with the kept count loads without it; a
+    render takes the samples it asks in passes the sampler keeps
+    (:func:`draaw_mi.rendering.passes.sample_passes`).
+
+    >>> count_kept("ldsampler", 5), count_kept("independent", 5)
+    (16, 5)
+    """
+    spp = int(spp)
+    if sampler == "independent" or spp < 1:
+        return spp
+    if (sampler, spp) not in _KEPT:
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)
+        try:
+            _KEPT[(sampler, spp)] = int(mi.load_dict({"type": sampler, "sample_count": spp}).sample_count())
+        finally:
+            logger.set_log_level(level)
+    return _KEPT[(sampler, spp)]
+
+
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
                 sampler: str = "independent") -> dict:
     """Mitsuba sensor dict: a perspective camera, ``sampler`` (a Mitsuba sampler plugin) with
@@ -273,7 +300,7 @@ def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,
         "near_clip": near,
         "far_clip": far,
         "to_world": look_at_transform(origin, target, up, mirror),
-        "sampler": {"type": sampler, "sample_count": spp},
+        "sampler": {"type": sampler, "sample_count": count_kept(sampler, spp)},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
                  "rfilter": {"type": rfilter} if isinstance(rfilter, str) else rfilter},
     }

@@ -31,6 +31,20 @@ from .sdf_dicts import write_back
 from .toml_edit import edited_toml
 
 
+class NotedParameters(mi.SceneParameters):
+    """``mi.traverse``'s parameters that note which keys were set (or changed in place and
+    found by ``update()``): :meth:`DraawScene.out_of_range` checks only those before a render
+    (reading every texture back before every render would cost more than a small render)."""
+
+    def __init__(self, properties=None, hierarchy=None):
+        super().__init__(properties, hierarchy)
+        self.changed: set[str] = set()
+
+    def set_dirty(self, key: str):
+        self.changed.add(key)
+        super().set_dirty(key)
+
+
 @dataclass(eq=False)
 class DraawScene:
     """A loaded scene: the Mitsuba scene plus draaw-mi's render settings and names.
@@ -78,7 +92,8 @@ class DraawScene:
             # (a traversal beside a preview's replay, which traverses live BSDFs too, crashed)
             with RENDER_GUARD, FOREGROUND:
                 if self._params is None:
-                    self._params = mi.traverse(self.mi_scene)
+                    found = mi.traverse(self.mi_scene)
+                    self._params = NotedParameters(found.properties, found.hierarchy)
         return self._params
 
     @property
@@ -108,28 +123,46 @@ class DraawScene:
         (:func:`draaw_mi.materials.check_value`). Nothing changes."""
         self.check_values(who, {name: (key, value)})
 
-    def out_of_range(self, limit: int = 3) -> list[str]:
+    def out_of_range(self, limit: int = 3, changed_only: bool = False) -> list[str]:
         """What is wrong with the scene's current parameter values, as :meth:`check_value` says
         it (at most ``limit`` messages): values set through :attr:`params` are not checked when
-        they are set, and one out of its range (a NaN colour, a negative roughness) renders
-        NaN or clamped pixels. Single values and colours are read back; textures are not.
+        they are set, and one out of its range (a NaN colour, a negative roughness, a NaN texel
+        of a roughness map) renders NaN, clamped or black pixels. Single values, colours,
+        textures and media grids are read back (a 4096x4096 RGB map in about 0.3 s).
+
+        ``changed_only``: only the values set through :attr:`params` since the last such call
+        (each ``draaw_mi.render`` asks so after its render); the ones found wrong stay to be
+        checked again.
 
         >>> # scene.params["white.base_color.value"] = mi.Color3f(float("nan")); scene.params.update()
         >>> # scene.out_of_range() -> ["out_of_range: white.base_color.value=[nan, nan, nan]; expected ..."]
         """
-        found = []
-        params = self.params
-        for key in params.keys():
+        if changed_only:
+            if self._params is None or not self._params.changed:
+                return []
+            keys = sorted(self._params.changed)
+            self._params.changed.clear()
+        else:
+            keys = list(self.params.keys())
+        found, params = [], self.params
+        for i, key in enumerate(keys):
             value = params[key]
-            if not (dr.is_array_v(value) and dr.is_float_v(value)) or dr.is_tensor_v(value) \
-                    or dr.width(value) != 1 or "Transform" in type(value).__name__:
-                continue                               # (textures, transforms, film sizes)
-            v = np.array(value, dtype=np.float64).ravel()
+            if not (dr.is_array_v(value) and dr.is_float_v(value)) or "Transform" in type(value).__name__ \
+                    or (dr.width(value) != 1 and not dr.is_tensor_v(value)):
+                continue                               # (transforms, film sizes, meshes' vertices)
+            v = np.array(value, dtype=np.float64)
+            if not dr.is_tensor_v(value):
+                v = v.ravel()
+                v = v.tolist() if v.size > 1 else float(v[0])
             try:
-                self.check_value("out_of_range", key, key, v.tolist() if v.size > 1 else float(v[0]))
+                self.check_value("out_of_range", key, key, v)
             except ParameterError as e:
+                if changed_only:
+                    self._params.changed.add(key)     # (still wrong at the next render)
                 found.append(str(e))
                 if len(found) >= limit:
+                    if changed_only:
+                        self._params.changed.update(keys[i + 1:])     # (not read this time)
                     break
         return found
 

@@ -2,11 +2,15 @@
 flags and to_string/repr (design.md §3, §7; guide §2, §7)."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 import drjit as dr
 import mitsuba as mi
+
+from draaw_mi.errors import ParameterError
 
 from _draaw_helpers import color_np, cornell, draaw, make_si
 
@@ -175,3 +179,19 @@ def test_check_value_refuses_a_negative_colour_or_light_value(key):
     with pytest.raises(ParameterError, match=r"expected values >= 0"):
         check_value("demo", key, key, [1.0, -5.0, 1.0])
     check_value("demo", key, key, [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("key, lo, hi", [("ball.roughness.data", "0", "1"),
+                                         ("ball.base_color.data", "0", "3.4e38"),
+                                         ("ball.normalmap.data", "-3.4e38", "3.4e38"),
+                                         ("sky.data", "-3.4e38", "3.4e38")])
+def test_check_value_refuses_a_texture_with_a_nan_texel(key, lo, hi):
+    """Every texture's texels are checked (a normal map's and an environment map's were not):
+    finite, in the parameter's range; the first bad texel is named."""
+    from draaw_mi.materials import check_value
+    texels = np.full((3, 4, 3), 0.5)
+    check_value("demo", key, key, texels)
+    texels[2, 1, 0] = np.nan
+    with pytest.raises(ParameterError, match=rf"demo: {re.escape(key)}: 1 texel value\(s\) outside "
+                                             rf"\[{re.escape(lo)}, {re.escape(hi)}\] \(the first, nan, at \[2, 1, 0\]\)"):
+        check_value("demo", key, key, texels)

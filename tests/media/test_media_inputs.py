@@ -137,7 +137,8 @@ def test_a_density_pushed_below_zero_through_params_is_no_medium(version):
     they are set). sigma_t and sigma_s are read as at least 0 (volume_tracking.coefficients),
     so the render is the empty medium's, pixel for pixel with the same seed; V1/V2's march
     had read exp(+0.5 dt) transmittances and negative scattering (pixels from -3.5 to 4.3,
-    mean -0.31, against 0 to 0.24)."""
+    mean -0.31, against 0 to 0.24). The render says which value a scene file would refuse."""
+    import warnings
     scene = draaw_mi.load_scene(SMOKE, resolution=(12, 9))
     key = next(k for k in scene.params.keys() if k.endswith("interior_medium.sigma_t.data"))
     shape = np.array(scene.params[key]).shape
@@ -145,7 +146,15 @@ def test_a_density_pushed_below_zero_through_params_is_no_medium(version):
     for value in (0.0, -0.5):
         scene.params[key] = mi.TensorXf(np.full(shape, value, np.float32))
         scene.params.update()
-        images.append(np.array(draaw_mi.render(scene, version=version, spp=4, seed=3, post=[]))[..., :3])
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            images.append(np.array(draaw_mi.render(scene, version=version, spp=4, seed=3, post=[]))[..., :3])
+        assert [str(w.message) for w in said if w.category is RuntimeWarning] == (
+            [] if value == 0 else [f"render: the {version} render of scenes/smoke.toml used {key}: "
+                                   f"{np.prod(shape)} value(s) outside [0, 3.40282e+38] (the first, -0.5, at "
+                                   "[0, 0, 0, 0]); expected densities in [0, 3.40282e+38]; its pixels are not to "
+                                   "be trusted (set through scene.params: scene.out_of_range() lists what a scene "
+                                   "file would refuse)"])
     empty, negative = images
     assert negative.min() >= 0.0
     np.testing.assert_allclose(negative, empty, atol=1e-6)

@@ -258,3 +258,59 @@ def test_a_render_with_nan_values_says_which_parameter_made_them(tiny_scene):
         p[key] = old
         p[tiny_scene.key("ground.roughness")] = mi.Float(0.9)
         p.update()
+
+
+def _roughness_map_scene():
+    d = tiny_description(resolution=[16, 12])
+    d["materials"]["ball"]["roughness"] = np.random.default_rng(4).random((4, 6))
+    return draaw_mi.load_scene(d)
+
+
+@pytest.mark.parametrize("version", ["v4", "path"])
+def test_a_nan_texel_set_through_params_is_said_by_the_render(version):
+    """A NaN texel of a roughness map set through scene.params renders finite but wrong pixels (V4
+    darker, some black) and said nothing; the render names the map, the count and the texel,
+    every render until the map is mended, and a good map renders without a word."""
+    import warnings
+    scene = _roughness_map_scene()
+    key = scene.key("ball.roughness")
+    good = np.array(scene.params[key])
+    bad = good.copy()
+    bad[1, 2, 0] = np.nan
+    scene.params[key] = mi.TensorXf(bad)
+    scene.params.update()
+    assert scene.out_of_range() == [f"out_of_range: {key}: 1 texel value(s) outside [0, 1] (the first, nan, "
+                                    "at [1, 2, 0]); expected finite values in [0, 1]"]
+    for _ in range(2):
+        with pytest.warns(RuntimeWarning, match=rf"render: the {version} render of .* used {re.escape(key)}: 1 "
+                                                r"texel value\(s\) outside \[0, 1\] \(the first, nan, at \[1, 2, 0\]\)"):
+            image, info = draaw_mi.render(scene, version=version, spp=2, post=[], return_info=True)
+        assert info["non_finite"] == 0 and np.isfinite(np.array(image)).all()
+    scene.params[key] = mi.TensorXf(good)
+    scene.params.update()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        draaw_mi.render(scene, version=version, spp=2, post=[])
+
+
+def test_a_render_reads_back_only_the_values_set_since_the_last_one(monkeypatch):
+    """Each render checks the values set through scene.params since the one before (reading every
+    map back before every render would cost more than a small render): none after a clean
+    render, then only the one key set after it; out_of_range() itself reads the whole scene."""
+    from draaw_mi.scene import draaw_scene
+    scene = _roughness_map_scene()
+    draaw_mi.render(scene, spp=1, post=[])
+    checked = []
+    real = draaw_scene.DraawScene.check_value
+    monkeypatch.setattr(draaw_scene.DraawScene, "check_value",
+                        lambda self, who, name, key, value: (checked.append(key), real(self, who, name, key, value)))
+    draaw_mi.render(scene, spp=1, post=[])
+    assert checked == []
+    key = scene.key("ground.roughness")
+    scene.params[key] = mi.Float(0.5)
+    scene.params.update()
+    draaw_mi.render(scene, spp=1, post=[])
+    assert checked == [key]
+    draaw_mi.render(scene, spp=1, post=[])
+    assert checked == [key]
+    assert scene.out_of_range() == [] and scene.key("ball.roughness") in checked and len(checked) > 10

@@ -27,6 +27,37 @@ def test_default_is_independent_and_the_setting_reaches_the_sensor():
     assert _sampler_name(o.with_resolution(16, 12)) == "LowDiscrepancySampler"
 
 
+@pytest.mark.parametrize("sampler, spp, kept", [("ldsampler", 5, 16), ("orthogonal", 5, 9),
+                                                ("multijitter", 5, 6), ("ldsampler", 16, 16)])
+def test_a_scene_with_a_rounding_sampler_loads_without_mitsubas_log_line(sampler, spp, kept):
+    """`--sampler ldsampler --spp 5` printed Mitsuba's raw "WARN [LowDiscrepancySampler] ...
+    rounding to 16" at load (the render then takes 8 samples in passes the sampler keeps, and
+    says so): the sensor is built with the count the sampler keeps."""
+    said = []
+
+    class Recorder(mi.Appender):
+        def append(self, level, text):
+            said.append(text)
+
+        def log_progress(self, *args):
+            pass
+
+    recorder = Recorder()
+    mi.logger().add_appender(recorder)
+    try:
+        scene = draaw_mi.load_scene(tiny_description(sampler=sampler, spp=spp))
+    finally:
+        mi.logger().remove_appender(recorder)
+    assert [t for t in said if "ampler" in t] == []
+    assert scene.mi_scene.sensors()[0].sampler().sample_count() == kept
+    mi.logger().add_appender(recorder)
+    try:
+        mi.load_dict({"type": sampler, "sample_count": spp})     # (the recorder hears Mitsuba's line)
+    finally:
+        mi.logger().remove_appender(recorder)
+    assert len(said) == (0 if kept == spp else 1)
+
+
 def test_bad_sampler_names_fail_with_the_choices():
     with pytest.raises(DraawError, match=r"render.sampler.*'sobol'.*multijitter"):
         draaw_mi.load_scene(tiny_description(sampler="sobol"))
