@@ -31,20 +31,6 @@ from .sdf_dicts import write_back
 from .toml_edit import edited_toml
 
 
-class NotedParameters(mi.SceneParameters):
-    """``mi.traverse``'s parameters that note which keys were set (or changed in place and
-    found by ``update()``): :meth:`DraawScene.out_of_range` checks only those before a render
-    (reading every texture back before every render would cost more than a small render)."""
-
-    def __init__(self, properties=None, hierarchy=None):
-        super().__init__(properties, hierarchy)
-        self.changed: set[str] = set()
-
-    def set_dirty(self, key: str):
-        self.changed.add(key)
-        super().set_dirty(key)
-
-
 @dataclass(eq=False)
 class DraawScene:
     """A loaded scene: the Mitsuba scene plus draaw-mi's render settings and names.
@@ -62,6 +48,10 @@ class DraawScene:
     description: dict | None = None
     _params: Any = None
     _all_params: Any = None
+    _watched: Any = None          # a traversal of its own for out_of_range (params may be kept())
+    # key -> (what tells it, the value) last found fine by out_of_range: holding the value keeps
+    # Dr.Jit from giving its variable's index to a new value (a replaced map) until the next check
+    _checked: dict = field(default_factory=dict)
 
     def __del__(self):
         # its Mitsuba objects leave Dr.Jit's registry under the render guard, never beside a
@@ -92,8 +82,7 @@ class DraawScene:
             # (a traversal beside a preview's replay, which traverses live BSDFs too, crashed)
             with RENDER_GUARD, FOREGROUND:
                 if self._params is None:
-                    found = mi.traverse(self.mi_scene)
-                    self._params = NotedParameters(found.properties, found.hierarchy)
+                    self._params = mi.traverse(self.mi_scene)
         return self._params
 
     @property
@@ -125,31 +114,30 @@ class DraawScene:
 
     def out_of_range(self, limit: int = 3, changed_only: bool = False) -> list[str]:
         """What is wrong with the scene's current parameter values, as :meth:`check_value` says
-        it (at most ``limit`` messages): values set through :attr:`params` are not checked when
-        they are set, and one out of its range (a NaN colour, a negative roughness, a NaN texel
-        of a roughness map) renders NaN, clamped or black pixels. Single values, colours,
-        textures and media grids are read back (a 4096x4096 RGB map in about 0.3 s).
+        it (at most ``limit`` messages): values set through :attr:`params` (or any traversal of
+        the scene) are not checked when they are set, and one out of its range (a NaN colour, a
+        negative roughness, a NaN texel of a roughness map) renders NaN, clamped or wrong
+        pixels. Single values, colours, textures and media grids are read back (a 4096x4096 RGB
+        map in about 0.3 s).
 
-        ``changed_only``: only the values set through :attr:`params` since the last such call
-        (each ``draaw_mi.render`` asks so after its render); the ones found wrong stay to be
-        checked again.
+        ``changed_only``: only what changed since it was last found fine, whichever traversal
+        set it: single values and colours are compared with the values found fine (about 4 us
+        each), textures and grids by their Dr.Jit variables, which a new array replaces. Each
+        ``draaw_mi.render`` asks so after its render: the first reads every texture, later
+        ones what was set since.
 
         >>> # scene.params["white.base_color.value"] = mi.Color3f(float("nan")); scene.params.update()
         >>> # scene.out_of_range() -> ["out_of_range: white.base_color.value=[nan, nan, nan]; expected ..."]
         """
         if changed_only:
-            if self._params is None or not self._params.changed:
-                return []
-            keys = sorted(self._params.changed)
-            self._params.changed.clear()
+            values = ((key, value, seen) for key, value, seen in self._watched_values()
+                      if self._checked.get(key, (None,))[0] != seen)
         else:
-            keys = list(self.params.keys())
-        found, params = [], self.params
-        for i, key in enumerate(keys):
-            value = params[key]
-            if not (dr.is_array_v(value) and dr.is_float_v(value)) or "Transform" in type(value).__name__ \
-                    or (dr.width(value) != 1 and not dr.is_tensor_v(value)):
-                continue                               # (transforms, film sizes, meshes' vertices)
+            params = self.params
+            values = [(key, params[key]) for key in params.keys()]
+            values = [(key, value, seen) for key, value in values if (seen := _seen(value)) is not None]
+        found = []
+        for key, value, seen in values:
             v = np.array(value, dtype=np.float64)
             if not dr.is_tensor_v(value):
                 v = v.ravel()
@@ -157,14 +145,40 @@ class DraawScene:
             try:
                 self.check_value("out_of_range", key, key, v)
             except ParameterError as e:
-                if changed_only:
-                    self._params.changed.add(key)     # (still wrong at the next render)
                 found.append(str(e))
                 if len(found) >= limit:
-                    if changed_only:
-                        self._params.changed.update(keys[i + 1:])     # (not read this time)
                     break
+            else:
+                # (a new Python array on the same variable: get_property may return the plugin's
+                # member itself, which a later set would move to another variable)
+                self._checked[key] = (seen, type(value)(value))
         return found
+
+    def _watched_values(self):
+        """``(key, value, seen)`` of every value :meth:`out_of_range` reads, through a traversal
+        of the scene's own (``params`` may be ``keep()``-ed): ``seen`` tells a changed value
+        (:func:`_seen`)."""
+        if self._watched is None:
+            with RENDER_GUARD, FOREGROUND:           # (as params: not beside a replay)
+                self._watched = mi.traverse(self.mi_scene)
+        watched = self._watched
+        for key, (cur, vtype, node, _) in watched.properties.items():
+            value = cur if vtype is None else watched.get_property(cur, vtype, node)
+            seen = _seen(value)
+            if seen is not None:
+                yield key, value, seen
+
+    def _carry_checks(self, src: "DraawScene") -> None:
+        """After :func:`~draaw_mi.scene.carry.carry_values` from ``src``: what ``src`` has
+        checked and still holds is checked here too (the copy's textures are new variables
+        with the same texels, not to be read back again); the rest is the file's, or set
+        since the last check and checked at this copy's first render."""
+        if not src._checked:
+            return
+        held = {key for key, _, seen in src._watched_values() if src._checked.get(key, (None,))[0] == seen}
+        for key, value, seen in self._watched_values():
+            if key in held:
+                self._checked[key] = (seen, type(value)(value))
 
     def check_values(self, who: str, values: dict) -> None:
         """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are
@@ -238,6 +252,7 @@ class DraawScene:
             scaled = DraawScene(load_mitsuba_file(xml["path"], xml["defines"], (int(width), int(height))),
                                 settings, self.source, self.info, None, self._tmp, self.description)
             carry_values(self, scaled)
+            scaled._carry_checks(self)
             return scaled
         if self.mi_dict is None:
             raise SceneError(f"{self.source}: cannot change the resolution of a scene given as "
@@ -249,6 +264,7 @@ class DraawScene:
         scaled = DraawScene(load_dict_or_error(d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
         carry_values(self, scaled)
+        scaled._carry_checks(self)
         return scaled
 
     def updated_description(self, values: dict, dest: str | None = None) -> dict:
@@ -371,3 +387,18 @@ def _emitter_name(em) -> str:
     if shape is not None and shape.id():
         return f"{shape.id()} ({kind})"
     return kind
+
+
+def _seen(value):
+    """What tells that a parameter's ``value`` changed, or ``None`` for a value
+    :meth:`DraawScene.out_of_range` does not read (a transform, a film size, a mesh's
+    vertices): a single value's or colour's numbers (plugins update some in place, keeping
+    their variables: the draaw BSDF's values, a uniform texture's colour), a texture's or
+    grid's Dr.Jit variables (a new array replaces them)."""
+    if not (dr.is_array_v(value) and dr.is_float_v(value)) or "Transform" in type(value).__name__:
+        return None
+    if dr.is_tensor_v(value):
+        return ("ids", *dr.detail.collect_indices(value))
+    if dr.width(value) != 1:
+        return None
+    return ("values", *np.array(value, dtype=np.float64).ravel().tolist())
