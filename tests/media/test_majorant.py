@@ -343,3 +343,24 @@ def test_a_medium_only_the_camera_is_in_is_stamped_and_seen_differentiated():
         assert float(np.max(np.array(diff.values))) == pytest.approx(DIFF_MAJORANT_FACTOR * 10 * top, rel=1e-5)
     finally:
         dr.disable_grad(p[key])
+
+
+def test_a_grid_set_again_and_again_gets_its_own_majorant():
+    """A density grid set 0-2 times with one density and then with a larger one before the next
+    render could come back under the variable index the table had been built for (Dr.Jit gives
+    a freed index to the next new array): the old majorant stayed, below the new densities, in
+    10 of 30 such renders (delta tracking is then biased). The stamp holds the grid it saw."""
+    import media_scenes as ms
+    from draaw_mi.integrators.volume import media_table
+    scene = ms.scene("uniform", res=8)
+    p = mi.traverse(scene)
+    key = next(k for k in p.keys() if k.endswith("sigma_t.data"))
+    grid = np.array(p[key])
+    top = float(np.max(np.array(media_table(scene).values)))
+    for i in range(12):
+        for _ in range(i % 3):
+            p[key] = mi.TensorXf(grid)
+            p.update()
+        p[key] = mi.TensorXf(grid * (2.0 + i))
+        p.update()
+        assert float(np.max(np.array(media_table(scene).values))) == pytest.approx((2.0 + i) * top, rel=1e-5), i

@@ -274,6 +274,7 @@ def test_volpath_records_after_a_smoke_scene_rendered_with_v4(monkeypatch):
     import gc
     from draaw_mi.integrators import volume
     monkeypatch.setattr(S, "FREEZE", True)
+    volume.release_tables()                         # (earlier tests' smokes: not this test's)
     T = mi.ScalarTransform4f
     smoke = mi.load_dict({
         "type": "scene", "integrator": {"type": "draaw_v4", "max_depth": 4},
