@@ -121,8 +121,8 @@ class DraawScene:
         map in about 0.3 s).
 
         ``changed_only``: only what changed since it was last found fine, whichever traversal
-        set it: single values and colours are compared with the values found fine (about 4 us
-        each), textures and grids by their Dr.Jit variables, which a new array replaces. Each
+        set it: single values and colours by their numbers, textures and grids by their Dr.Jit
+        variables, which a new array replaces (about 4 us a parameter). Each
         ``draaw_mi.render`` asks so after its render: the first reads every texture, later
         ones what was set since.
 
@@ -393,8 +393,9 @@ def _seen(value):
     """What tells that a parameter's ``value`` changed, or ``None`` for a value
     :meth:`DraawScene.out_of_range` does not read (a transform, a film size, a mesh's
     vertices): a single value's or colour's numbers (plugins update some in place, keeping
-    their variables: the draaw BSDF's values, a uniform texture's colour), a texture's or
-    grid's Dr.Jit variables (a new array replaces them)."""
+    their variables: the draaw BSDF's values, an ``hg``'s g), a texture's or grid's Dr.Jit
+    variables (a new array replaces them; the one found fine is held, so that Dr.Jit cannot
+    give their indices to another)."""
     if not (dr.is_array_v(value) and dr.is_float_v(value)) or "Transform" in type(value).__name__:
         return None
     if dr.is_tensor_v(value):

@@ -171,6 +171,18 @@ def test_with_resolution_keeps_parameter_edits(tiny_scene):
     np.testing.assert_allclose(img, ref, atol=1e-6)          # same seed, same scene: the same image
 
 
+def test_with_resolution_keeps_edits_after_params_keep(tiny_scene):
+    """``scene.params.keep([...])`` (Mitsuba's optimisation tutorials narrow the parameters so)
+    dropped every other key from what the copy was carried from: a roughness set before it went
+    back to the file's 0.9 in a copy at another resolution."""
+    tiny_scene.params["ground.roughness.value"] = mi.Float(0.2)
+    tiny_scene.params.update()
+    tiny_scene.params.keep(["ball.base_color.value"])
+    copy_ = tiny_scene.with_resolution(16, 12)
+    assert copy_.params["ground.roughness.value"][0] == pytest.approx(0.2)
+    np.testing.assert_allclose(np.array(copy_.params["ball.base_color.value"]), np.array(tiny_scene.params["ball.base_color.value"]))
+
+
 def test_with_resolution_keeps_texture_maps_and_their_edits():
     """A scene whose materials are arrays (texture maps) resizes, twice, with an edited texel
     carried over: the resized render equals that of the scene described at the new size with
