@@ -163,7 +163,8 @@ def release_tables() -> None:
 class _Held:
     """A value a stamp holds alive, equal to any other: while it lives, Dr.Jit cannot give its
     variables' indices to a new array (a density grid set twice between two renders came back
-    under the index of the one the table was built for: 10 of 30 tables stale)."""
+    under the index of the one the table was built for: 10 of 30 tables stale). It is held until
+    the table is built again or dropped (``_TABLES_MAX`` tables at most)."""
     __slots__ = ("value",)
 
     def __init__(self, value):

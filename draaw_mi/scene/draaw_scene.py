@@ -124,35 +124,37 @@ class DraawScene:
         set it: single values and colours by their numbers, textures and grids by their Dr.Jit
         variables, which a new array replaces (about 4 us a parameter). Each
         ``draaw_mi.render`` asks so after its render: the first reads every texture, later
-        ones what was set since.
+        ones what was set since. The map last found fine is held until the next check: a map
+        replaced before then (a fit's steps) keeps its old texels in memory until that render.
 
         >>> # scene.params["white.base_color.value"] = mi.Color3f(float("nan")); scene.params.update()
         >>> # scene.out_of_range() -> ["out_of_range: white.base_color.value=[nan, nan, nan]; expected ..."]
         """
-        if changed_only:
-            values = ((key, value, seen) for key, value, seen in self._watched_values()
-                      if self._checked.get(key, (None,))[0] != seen)
-        else:
-            params = self.params
-            values = [(key, params[key]) for key in params.keys()]
-            values = [(key, value, seen) for key, value in values if (seen := _seen(value)) is not None]
-        found = []
-        for key, value, seen in values:
-            v = np.array(value, dtype=np.float64)
-            if not dr.is_tensor_v(value):
-                v = v.ravel()
-                v = v.tolist() if v.size > 1 else float(v[0])
-            try:
-                self.check_value("out_of_range", key, key, v)
-            except ParameterError as e:
-                found.append(str(e))
-                if len(found) >= limit:
-                    break
+        with RENDER_GUARD:                           # (values read beside no replay)
+            if changed_only:
+                values = ((key, value, seen) for key, value, seen in self._watched_values()
+                          if self._checked.get(key, (None,))[0] != seen)
             else:
-                # (a new Python array on the same variable: get_property may return the plugin's
-                # member itself, which a later set would move to another variable)
-                self._checked[key] = (seen, type(value)(value))
-        return found
+                params = self.params
+                values = [(key, params[key]) for key in params.keys()]
+                values = [(key, value, seen) for key, value in values if (seen := _seen(value)) is not None]
+            found = []
+            for key, value, seen in values:
+                v = np.array(value, dtype=np.float64)
+                if not dr.is_tensor_v(value):
+                    v = v.ravel()
+                    v = v.tolist() if v.size > 1 else float(v[0])
+                try:
+                    self.check_value("out_of_range", key, key, v)
+                except ParameterError as e:
+                    found.append(str(e))
+                    if len(found) >= limit:
+                        break
+                else:
+                    # (a new Python array on the same variable: get_property may return the plugin's
+                    # member itself, which a later set would move to another variable)
+                    self._checked[key] = (seen, type(value)(value))
+            return found
 
     def _watched_values(self):
         """``(key, value, seen)`` of every value :meth:`out_of_range` reads, through a traversal
@@ -175,10 +177,11 @@ class DraawScene:
         since the last check and checked at this copy's first render."""
         if not src._checked:
             return
-        held = {key for key, _, seen in src._watched_values() if src._checked.get(key, (None,))[0] == seen}
-        for key, value, seen in self._watched_values():
-            if key in held:
-                self._checked[key] = (seen, type(value)(value))
+        with RENDER_GUARD:
+            held = {key for key, _, seen in src._watched_values() if src._checked.get(key, (None,))[0] == seen}
+            for key, value, seen in self._watched_values():
+                if key in held:
+                    self._checked[key] = (seen, type(value)(value))
 
     def check_values(self, who: str, values: dict) -> None:
         """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are
