@@ -40,6 +40,7 @@ import numpy as np
 
 from ..errors import ParameterError, RenderError
 from ..media.majorant import build_majorant
+from .stamps import stamp as value_stamp
 from . import volume_tracking as vt
 from .common import mis_weight
 from .features import scene_shapes
@@ -160,35 +161,6 @@ def release_tables() -> None:
     _TABLES.clear()
 
 
-class _Held:
-    """A value a stamp holds alive, equal to any other: while it lives, Dr.Jit cannot give its
-    variables' indices to a new array (a density grid set twice between two renders came back
-    under the index of the one the table was built for: 10 of 30 tables stale). It is held until
-    the table is built again or dropped (``_TABLES_MAX`` tables at most)."""
-    __slots__ = ("value",)
-
-    def __init__(self, value):
-        self.value = value
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, _Held)
-
-    __hash__ = None
-
-
-def _told(v) -> tuple:
-    """What tells, in a table's stamp, that a medium parameter ``v`` changed: a number itself;
-    a single value's numbers (a plugin may update one in place, keeping its variable); an
-    array's variable indices, with the array held (:class:`_Held`)."""
-    if isinstance(v, (float, int)):
-        return ("number", v)
-    if dr.is_array_v(v) and not dr.is_tensor_v(v) and dr.width(v) == 1:
-        return ("values", *np.array(v, dtype=np.float64).ravel().tolist())
-    if dr.is_array_v(v):
-        return ("ids", *dr.detail.collect_indices(v), _Held(type(v)(v)))
-    return ("other", repr(v))
-
-
 def media_table(scene: mi.Scene) -> MediaTable:
     """The scene's :class:`MediaTable`, rebuilt when medium parameters changed."""
     key = id(scene)
@@ -213,7 +185,7 @@ def media_table(scene: mi.Scene) -> MediaTable:
             for k in p.keys():
                 v = p[k]
                 if k.endswith("sigma_t.data") or k == "scale" or k.startswith("sigma_t."):
-                    stamp.append((k, *_told(v)))
+                    stamp.append((k, *value_stamp(v)))   # (holds an array it stamps)
                 diff |= not isinstance(v, (float, int)) and dr.grad_enabled(v)
     stamp.append(("differentiated", diff))
     hit = _TABLES.get(key)

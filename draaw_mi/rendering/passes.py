@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from ..scene.camera import count_kept
+
 _SAMPLES_TAKEN: dict = {}         # (sampler class, count asked) -> count taken; sample_passes
 
 
@@ -52,15 +54,7 @@ def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
     def taken(k: int) -> int:
         if kind is not None and (kind, k) in _SAMPLES_TAKEN:
             return _SAMPLES_TAKEN[(kind, k)]
-        f = sampler.fork()
-        logger = mi.logger()
-        level = logger.log_level()
-        logger.set_log_level(mi.LogLevel.Error)       # the probe's "rounded up" warnings
-        try:
-            f.set_sample_count(k)
-        finally:
-            logger.set_log_level(level)
-        got = int(f.sample_count())
+        got = count_kept(sampler, k)
         if kind is not None:
             _SAMPLES_TAKEN[(kind, k)] = got
         return got

@@ -263,28 +263,35 @@ def clipped_away(origin, near: float, far: float, boxes) -> str | None:
 _KEPT: dict = {}      # (sampler plugin, spp) -> the count it keeps
 
 
-def count_kept(sampler: str, spp: int) -> int:
-    """The sample count Mitsuba's ``sampler`` plugin keeps when given ``spp``: stratifying ones
-    round up (``ldsampler`` 5 -> 16, ``orthogonal`` 5 -> 9, ``multijitter`` 5 -> 6), and say
-    so in a raw log line at load. A sensor built with the kept count loads without it; a
-    render takes the samples it asks in passes the sampler keeps
+def count_kept(sampler, spp: int) -> int:
+    """The sample count a Mitsuba sampler keeps when given ``spp``: stratifying ones round up
+    (``ldsampler`` 5 -> 16, ``orthogonal`` 5 -> 9, ``multijitter`` 5 -> 6) and say so in a raw
+    log line, which this asks without. ``sampler``: a plugin name (answers remembered) or a
+    ``mi.Sampler`` (a fork of it is asked). A sensor built with the kept count loads without
+    the line; a render takes the samples it asks in passes the sampler keeps
     (:func:`draaw_mi.rendering.passes.sample_passes`).
 
     >>> count_kept("ldsampler", 5), count_kept("independent", 5)
     (16, 5)
     """
     spp = int(spp)
-    if sampler == "independent" or spp < 1:
+    named = isinstance(sampler, str)
+    if named and (sampler == "independent" or spp < 1):
         return spp
-    if (sampler, spp) not in _KEPT:
-        logger = mi.logger()
-        level = logger.log_level()
-        logger.set_log_level(mi.LogLevel.Error)
-        try:
-            _KEPT[(sampler, spp)] = int(mi.load_dict({"type": sampler, "sample_count": spp}).sample_count())
-        finally:
-            logger.set_log_level(level)
-    return _KEPT[(sampler, spp)]
+    if named and (sampler, spp) in _KEPT:
+        return _KEPT[(sampler, spp)]
+    logger = mi.logger()
+    level = logger.log_level()
+    logger.set_log_level(mi.LogLevel.Error)
+    try:
+        probe = mi.load_dict({"type": sampler}) if named else sampler.fork()
+        probe.set_sample_count(spp)
+    finally:
+        logger.set_log_level(level)
+    kept = int(probe.sample_count())
+    if named:
+        _KEPT[(sampler, spp)] = kept
+    return kept
 
 
 def sensor_dict(look_at, width: int, height: int, spp: int, rfilter,

@@ -13,7 +13,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
-from ..guard import FOREGROUND, RENDER_GUARD
+from ..guard import RENDER_GUARD
 from .camera import scene_fov, x_fov
 
 #: traverse keys not carried besides the films (what changes): faces cannot be edited
@@ -49,9 +49,7 @@ def carry_values(src, dst) -> None:
     another resolution, and update ``dst``. Keys ``dst`` lacks (Mitsuba's generated names of
     unnamed objects) are skipped; the sensor's ``x_fov`` is converted so that the file's
     ``fov_axis`` keeps its angle (:func:`fov_for_aspect`)."""
-    with RENDER_GUARD, FOREGROUND:      # (a traversal of its own: src.params may be keep()-ed)
-        sp = mi.traverse(src.mi_scene)
-    dp = dst.params
+    sp, dp = src.own_traversal, dst.params        # (src.params may be keep()-ed)
     axis = scene_fov(src)[1]
     changed = False
     for key in dp.keys():

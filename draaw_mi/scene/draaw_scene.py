@@ -20,6 +20,7 @@ import tomli_w
 
 from ..errors import ParameterError, SceneError, suggest
 from ..guard import FOREGROUND, RENDER_GUARD, let_go
+from ..integrators.stamps import stamp
 from ..integrators.features import detect_features
 from ..materials import check_value
 from ..sdf.params import PREFIX, SDFParameters
@@ -48,9 +49,9 @@ class DraawScene:
     description: dict | None = None
     _params: Any = None
     _all_params: Any = None
-    _watched: Any = None          # a traversal of its own for out_of_range (params may be kept())
-    # key -> (what tells it, the value) last found fine by out_of_range: holding the value keeps
-    # Dr.Jit from giving its variable's index to a new value (a replaced map) until the next check
+    _own: Any = None              # own_traversal's
+    # key -> the stamp of the value out_of_range last found fine (an array's stamp holds it:
+    # Dr.Jit cannot give its variable's index to a new value before the next check)
     _checked: dict = field(default_factory=dict)
 
     def __del__(self):
@@ -131,15 +132,10 @@ class DraawScene:
         >>> # scene.out_of_range() -> ["out_of_range: white.base_color.value=[nan, nan, nan]; expected ..."]
         """
         with RENDER_GUARD:                           # (values read beside no replay)
-            if changed_only:
-                values = ((key, value, seen) for key, value, seen in self._watched_values()
-                          if self._checked.get(key, (None,))[0] != seen)
-            else:
-                params = self.params
-                values = [(key, params[key]) for key in params.keys()]
-                values = [(key, value, seen) for key, value in values if (seen := _seen(value)) is not None]
             found = []
-            for key, value, seen in values:
+            for key, value, seen in self._watched_values():
+                if changed_only and self._checked.get(key) == seen:
+                    continue
                 v = np.array(value, dtype=np.float64)
                 if not dr.is_tensor_v(value):
                     v = v.ravel()
@@ -151,21 +147,25 @@ class DraawScene:
                     if len(found) >= limit:
                         break
                 else:
-                    # (a new Python array on the same variable: get_property may return the plugin's
-                    # member itself, which a later set would move to another variable)
-                    self._checked[key] = (seen, type(value)(value))
+                    self._checked[key] = seen
             return found
 
-    def _watched_values(self):
-        """``(key, value, seen)`` of every value :meth:`out_of_range` reads, through a traversal
-        of the scene's own (``params`` may be ``keep()``-ed): ``seen`` tells a changed value
-        (:func:`_seen`)."""
-        if self._watched is None:
+    @property
+    def own_traversal(self):
+        """``mi.traverse`` of the scene made once for draaw-mi's own reads (the values out of
+        range, a copy's carried values): :attr:`params` may have been narrowed by the user
+        (``params.keep([...])``); its values are the plugins' current ones all the same."""
+        if self._own is None:
             with RENDER_GUARD, FOREGROUND:           # (as params: not beside a replay)
-                self._watched = mi.traverse(self.mi_scene)
-        watched = self._watched
-        for key, (cur, vtype, node, _) in watched.properties.items():
-            value = cur if vtype is None else watched.get_property(cur, vtype, node)
+                if self._own is None:
+                    self._own = mi.traverse(self.mi_scene)
+        return self._own
+
+    def _watched_values(self):
+        """``(key, value, stamp)`` of every value :meth:`out_of_range` reads (:func:`_seen`)."""
+        own = self.own_traversal
+        for key, (cur, vtype, node, _) in own.properties.items():
+            value = cur if vtype is None else own.get_property(cur, vtype, node)
             seen = _seen(value)
             if seen is not None:
                 yield key, value, seen
@@ -178,10 +178,10 @@ class DraawScene:
         if not src._checked:
             return
         with RENDER_GUARD:
-            held = {key for key, _, seen in src._watched_values() if src._checked.get(key, (None,))[0] == seen}
-            for key, value, seen in self._watched_values():
+            held = {key for key, _, seen in src._watched_values() if src._checked.get(key) == seen}
+            for key, _, seen in self._watched_values():
                 if key in held:
-                    self._checked[key] = (seen, type(value)(value))
+                    self._checked[key] = seen
 
     def check_values(self, who: str, values: dict) -> None:
         """:meth:`check_value` of ``{name: (key, value)}`` set together: the SDF values are
@@ -393,19 +393,11 @@ def _emitter_name(em) -> str:
 
 
 def _seen(value):
-    """What tells that a parameter's ``value`` changed, or ``None`` for a value
+    """The :func:`~draaw_mi.integrators.stamps.stamp` of a parameter's ``value``, or ``None`` for a value
     :meth:`DraawScene.out_of_range` does not read (a transform, a film size, a mesh's
-    vertices): a single value's or colour's numbers (plugins update some in place, keeping
-    their variables: the draaw BSDF's values, an ``hg``'s g), a texture's or grid's Dr.Jit
-    variables (a new array replaces them; the one found fine is held, so that Dr.Jit cannot
-    give their indices to another)."""
+    vertices)."""
     if not (dr.is_array_v(value) and dr.is_float_v(value)) or "Transform" in type(value).__name__:
         return None
-    if dr.is_tensor_v(value):
-        return ("ids", *dr.detail.collect_indices(value))
-    if dr.width(value) != 1:
+    if not dr.is_tensor_v(value) and dr.width(value) != 1:
         return None
-    if dr.depth_v(value) > 2:                   # (a matrix: rare)
-        return ("values", *np.array(value, dtype=np.float64).ravel().tolist())
-    first = dr.slice(value, 0)                  # (a tenth of a numpy read's time)
-    return ("values", *(first if dr.depth_v(value) == 2 else (first,)))
+    return stamp(value)
