@@ -368,9 +368,10 @@ def test_a_copy_at_another_resolution_checks_only_what_its_scene_had_not(monkeyp
 
 
 def test_a_value_set_twice_between_renders_is_still_checked():
-    """Dr.Jit gives a freed variable's index to the next new one: a value set twice between two
-    renders could come back under the index of the value last found fine and pass unread (a
-    phase g past its bound did) unless that value is held until the next check."""
+    """A single value set twice between two renders, the second time out of range, is said at
+    every render until it is mended (a wrong value is never recorded as found fine), and the
+    good value after it renders without a word. (Single values are told by their numbers: by
+    their variable indices, a phase g past its bound once passed unread.)"""
     import warnings
     scene = _roughness_map_scene()
     key = scene.key("constant_light1.radiance")
@@ -382,6 +383,8 @@ def test_a_value_set_twice_between_renders_is_still_checked():
         scene.params.update()
         with pytest.warns(RuntimeWarning, match=rf"used {re.escape(key)}=\[0\.2.*expected values >= 0"):
             draaw_mi.render(scene, spp=1, post=[])
+        with pytest.warns(RuntimeWarning, match=rf"used {re.escape(key)}=\[0\.2.*expected values >= 0"):
+            draaw_mi.render(scene, spp=1, post=[])                      # (still wrong: said again)
         scene.params[key] = mi.Color3f(0.2)
         scene.params.update()
         with warnings.catch_warnings():
