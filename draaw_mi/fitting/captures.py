@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, SceneError
 from ..guard import in_foreground
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
@@ -176,10 +176,14 @@ def render_capture(scene, capture: dict, spp: int = 64, version: str = "v4", see
 
         img = render_capture(scene, {"camera": {"origin": [2, 1, 3]}, "lights": {"sun": 0.0}})
     """
-    (c,) = parse_captures([capture], references=[None])
     p = scene.params
-    over = CaptureOverrides.build(p, [c], [], light_names(p))
-    sensor = view_sensors(scene, [c["camera"]])[0]
+    try:                       # (the checks a fit's captures pass, in this function's words)
+        (c,) = parse_captures([capture], references=[None])
+        over = CaptureOverrides.build(p, [c], [], light_names(p))
+        sensor = view_sensors(scene, [c["camera"]])[0]
+    except (ParameterError, SceneError) as e:
+        said = str(e).removeprefix("fit: ").replace("captures[0]", "capture").replace("views[0]", "capture.camera")
+        raise type(e)(f"render_capture: {said}") from None
     session = session_of(scene)
     integrator = session.integrator(version, scene.settings["max_depth"], scene.settings.get("hide_emitters", False))
     with holding(scene):

@@ -56,6 +56,8 @@ def fit_parameters(scene, params, init):
         value = as_given
         if given and prm[k].shape is not None:
             value = texture_start(names[k], value, prm[k].shape)
+        elif given:
+            value = value_start(names[k], value, p[k])
         check_start(scene, k, names[k], prm[k], value, given, as_given)
         if given:
             initial[k] = value
@@ -83,6 +85,49 @@ def texture_start(name: str, value, shape: tuple) -> np.ndarray:
     what = f"an array of shape {tuple(v.shape)}" if v.ndim else "a value"
     raise ParameterError(f"fit: init {name}: {what}; expected one number, {shape[-1]} (a value per "
                          f"channel) or an array of the texture's shape {tuple(shape)}")
+
+
+def value_start(name: str, value, like):
+    """A single value's or a vector's ``init`` (not a texture's) as a value of the type of
+    ``like``, the parameter's value in the scene: as many numbers as it holds (a colour: one
+    number, a grey, or three); else a :class:`ParameterError` naming them (a string or a wrong
+    count had failed in Dr.Jit, inside the fit's first render).
+
+    >>> value_start("m.base_color", 0.5, mi.Color3f(0.1, 0.2, 0.3))
+    [[0.5, 0.5, 0.5]]
+    >>> value_start("m.roughness", "0.5", mi.Float(0.3))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: init m.roughness='0.5' (a str); expected a number
+    >>> value_start("m.base_color", [0.1, 0.2], mi.Color3f(0.1, 0.2, 0.3))
+    Traceback (most recent call last):
+    ...
+    draaw_mi.errors.ParameterError: fit: init m.base_color=[0.1, 0.2] (2 numbers); expected one number or 3 (a value per channel)
+    """
+    t = type(like)
+    channels = dr.size_v(t) if dr.depth_v(t) > 1 else 1
+    width = dr.width(like)
+    count = channels * width
+    colour = t.__name__.startswith("Color")          # (mi.Color3f; a point or vector is not one)
+    expected = ("a number" if count == 1 else
+                f"one number or {channels} (a value per channel)" if width == 1 and colour else
+                f"{count} numbers")
+    v = None
+    if not isinstance(value, (str, bytes, bool, dict)):
+        try:
+            v = np.asarray(np.array(value) if dr.is_array_v(value) else value)
+        except (TypeError, ValueError):
+            v = None
+    if v is None or v.dtype.kind not in "iuf":
+        raise ParameterError(f"fit: init {name}={value!r} (a {type(value).__name__}); expected {expected}")
+    v = v.astype(np.float64).ravel()
+    if v.size == 1 and width == 1 and colour:
+        v = np.repeat(v, channels)
+    if v.size != count:
+        raise ParameterError(f"fit: init {name}={shown(value)} ({v.size} numbers); expected {expected}")
+    if channels == 1:
+        return t(v.tolist()) if width > 1 else t(float(v[0]))
+    return t(*[v[c::channels].tolist() if width > 1 else float(v[c]) for c in range(channels)])
 
 
 def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, as_given=None) -> None:

@@ -13,6 +13,7 @@ the scene's :class:`~draaw_mi.rendering.session.Session` (``cache`` below: its `
 """
 from __future__ import annotations
 
+import contextlib
 import gc
 import sys
 import warnings
@@ -21,7 +22,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import caused_by_interrupt, exception_chain
+from ..errors import RenderError, caused_by_interrupt, exception_chain
 from ..guard import COLLECTOR_PAUSED, background_replay, foreground_mark, foreground_moved, registry_changes
 from ..integrators.features import scene_shapes
 from ..materials.draaw_bsdf import LIVE_INSTANCES
@@ -219,6 +220,33 @@ def _first_cause(e: BaseException) -> str:
     return f"{type(e).__name__}: {lines[0] if lines else ''}"[:200]
 
 
+def widened_error(scene, error: BaseException):
+    """A :class:`~draaw_mi.errors.RenderError` naming the parameter to blame for ``error``, a
+    failed render of ``scene`` (a :class:`DraawScene`, or ``None``), where one of its single
+    values holds more than one value (:meth:`DraawScene.widened_values`); else ``None``."""
+    if scene is None or caused_by_interrupt(error) or not hasattr(scene, "widened_values"):
+        return None
+    wide = scene.widened_values(1)
+    if not wide:
+        return None
+    return RenderError(f"render of {scene.source}: {wide[0]}; expected one, as its plugin takes "
+                       "(a single value or a colour, set through scene.params: give it a value of width 1)")
+
+
+@contextlib.contextmanager
+def widened_named(scene):
+    """Re-raise a render's failure as :func:`widened_error`'s error where it has one."""
+    try:
+        yield
+    except RenderError:
+        raise
+    except Exception as e:
+        why = widened_error(scene, e)
+        if why is None:
+            raise
+        raise why from e
+
+
 def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     """``dr.freeze(body)`` for ``body(mi_scene, seed, *args) -> result`` rendering with
     ``integrator``, with the integrator's scene-dependent state (V4's light-selection table and
@@ -226,8 +254,8 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     an input. Without it the recording would run a different sampler than a traced render, or
     replay a stale table. The preview, the batch executor and the fit's gradient passes record
     their renders through this. ``limit``: the recordings kept (see below). A recording is not
-    replayed once scenes were made or let go since it was made (:func:`draaw_mi.guard.registry_changes`):
-    it is recorded anew. A ``background`` caller (a preview's worker) also records anew once
+    replayed once scenes were made or let go since it was made (:func:`draaw_mi.guard.registry_changes`),
+    or once ``dr.set_thread_count`` changed the thread count: it is recorded anew. A ``background`` caller (a preview's worker) also records anew once
     another thread has begun a draaw-mi call since, and traces while such a call is in progress
     (:func:`draaw_mi.guard.background_replay`: replays beside or after one crashed Dr.Jit 1.5)."""
     state_of = getattr(integrator, "freeze_state", None)
@@ -260,6 +288,11 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
     # (guard.background_replay: replays after one crashed Dr.Jit 1.5)
     registry_at = registry_changes()
     calls_at = foreground_mark()
+    # Dr.Jit's thread count as it was when the recordings were made: after a
+    # dr.set_thread_count the recorder records anew, and a later return to the first count
+    # replays the first recording, which crashed Dr.Jit 1.5 (2 -> 1 -> 2 threads: a segmentation
+    # fault, plain mi.render under dr.freeze too); they are recorded anew instead
+    threads_at = dr.thread_count()
 
     def call(mi_scene, seed, scene=None, cache=None, args: tuple = (), sensor=None, before_retry=None,
              background: bool = False):
@@ -270,7 +303,7 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
         first (its edge map is part of the state); ``before_retry``: called before a failed
         recording's pass is traced (a gradient pass puts its gradients back); ``background``:
         called from a thread other than the one that makes and frees scenes (a preview's)."""
-        nonlocal registry_at, calls_at
+        nonlocal registry_at, calls_at, threads_at
         if failed:
             return body(mi_scene, seed, *args)
         # every live Python BSDF that the scene does not hold itself (those it holds are
@@ -285,9 +318,10 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             state = state_of(mi_scene, memo) if sensor is None else state_of(mi_scene, memo, sensor)
         for attempt in (1, 2):
             live = other_live_bsdfs(mi_scene, cache) + _held_media()
-            if registry_at != registry_changes() or (background and foreground_moved(calls_at)):
+            if (registry_at != registry_changes() or threads_at != dr.thread_count()
+                    or (background and foreground_moved(calls_at))):
                 frozen.clear()          # (recorded anew below, or traced beside a call)
-                registry_at = registry_changes()
+                registry_at, threads_at = registry_changes(), dr.thread_count()
                 if background:
                     calls_at = foreground_mark()
             try:
@@ -300,6 +334,9 @@ def freeze_render(integrator, body, limit: int = RECORDINGS_KEPT):
             except RuntimeError as e:    # a scene the recorder cannot hold: trace it instead
                 if caused_by_interrupt(e):                # (Ctrl-C: not the recorder's failure)
                     raise KeyboardInterrupt from None
+                why = widened_error(scene, e)             # (the scene's fault, not the recorder's)
+                if why is not None:
+                    raise why from e
                 if attempt == 1 and _REGISTRY_CHANGED in str(e):
                     # objects made outside draaw-mi's loads (a plain mi.load_dict): as above
                     registry_at, calls_at = None, _NO_CALLS_MARK

@@ -55,7 +55,7 @@ from ..errors import RenderError, caused_by_interrupt
 from ..guard import COLLECTOR_PAUSED, RENDER_GUARD, let_go
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
-from .frozen import freeze_render, freeze_supported
+from .frozen import freeze_render, freeze_supported, widened_named
 from .gradient_body import gradient_body, gradients_of, host_key, restore_gradients
 from .passes import sample_passes
 from .plugins import integrator_props, make_plugin
@@ -275,7 +275,7 @@ class Session:
         change and the latest draaw-mi call of another thread: it records anew, or traces while
         such a call is in progress (:func:`.frozen.freeze_render`)."""
         scene = self.scene
-        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
+        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such(), widened_named(scene):
             if params is None and sensor is None and self.freezes(spp, freeze):
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
@@ -308,7 +308,7 @@ class Session:
         scene = self.scene
         spp_grad = spp if spp_grad is None else spp_grad
         adaptive = getattr(integrator, "adaptive_applies", None)
-        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such():
+        with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such(), widened_named(scene):
             if (freeze and self.freezes(spp, True)
                     and not (adaptive is not None and adaptive(scene.mi_scene, sensor, seed, spp))):
                 key = ("gradient", id(integrator), int(spp), int(spp_grad), loss)

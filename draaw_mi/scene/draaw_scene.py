@@ -32,6 +32,10 @@ from .sdf_dicts import write_back
 from .toml_edit import edited_toml
 
 
+#: the draaw material's options that are settings, fixed when the scene loads (not parameters)
+SETTINGS = ("two_sided", "normalmap_encoding", "alpha_min")
+
+
 @dataclass(eq=False)
 class DraawScene:
     """A loaded scene: the Mitsuba scene plus draaw-mi's render settings and names.
@@ -150,6 +154,29 @@ class DraawScene:
                     self._checked[key] = seen
             return found
 
+    def widened_values(self, limit: int = 3) -> list[str]:
+        """The parameters, other than a mesh's arrays and textures, that hold more than one
+        value (at most ``limit``, each as ``"KEY holds N values"``): a plugin's single value or
+        colour set through :attr:`params` to a wider array (``mi.Float([0.2, 0.3])``) renders
+        nothing, failing inside Dr.Jit with words that name none of them ("size of output
+        variable r2153 is 2 (must be 1)"). Read when a render fails.
+
+        >>> # scene.params["white.roughness.value"] = mi.Float([0.2, 0.3]); scene.params.update()
+        >>> # scene.widened_values() -> ['white.roughness.value holds 2 values']
+        """
+        found = []
+        with RENDER_GUARD:
+            own = self.own_traversal
+            for key, (cur, vtype, node, _) in own.properties.items():
+                if isinstance(node, mi.Mesh):
+                    continue
+                value = cur if vtype is None else own.get_property(cur, vtype, node)
+                if dr.is_jit_v(value) and not dr.is_tensor_v(value) and dr.width(value) > 1:
+                    found.append(f"{key} holds {dr.width(value)} values")
+                    if len(found) >= limit:
+                        break
+        return found
+
     @property
     def own_traversal(self):
         """``mi.traverse`` of the scene made once for draaw-mi's own reads (the values out of
@@ -229,6 +256,11 @@ class DraawScene:
             raise SceneError(f"{self.source}: no parameter {name!r}: material {material!r} is copied into "
                              "the voxels of the [[volumes]] that use it, which have no parameters of their own; "
                              "change the material in the scene file")
+        setting = name.rsplit(".", 1)[-1]
+        if setting in SETTINGS and material in (self.info.get("materials") or ()):
+            raise SceneError(f"{self.source}: no parameter {name!r}: {setting} is a setting of material "
+                             f"{material!r}, read when the scene loads, not a parameter (no gradient, not in "
+                             "mi.traverse); change it in the scene file")
         hint = suggest(name, short)
         if "; did you mean" not in hint:
             hint = suggest(name, keys)

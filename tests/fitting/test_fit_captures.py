@@ -114,6 +114,18 @@ def test_bad_captures_are_refused_before_any_render(captures, message, reference
                      progress=False)
 
 
+def test_render_capture_names_itself_and_the_capture_in_its_errors():
+    """render_capture's bad input was reported as a fit's ("fit: captures[0].lights names 'kee'",
+    "fit: views[0].orgin"): the user called render_capture with one capture."""
+    from draaw_mi.errors import SceneError
+    from draaw_mi.fitting.captures import render_capture
+    scene = draaw_mi.load_scene(tile(TRUTH_C, TRUTH_R, TRUTH_M))
+    with pytest.raises(ParameterError, match=r"^render_capture: capture.lights names 'kee', which is not a light"):
+        render_capture(scene, {"lights": {"kee": 0.0}}, spp=1)
+    with pytest.raises(SceneError, match=r"^render_capture: capture.camera.orgin: unknown key 'orgin'; did you mean"):
+        render_capture(scene, {"camera": {"orgin": [2, 1, 3]}}, spp=1)
+
+
 def test_views_and_captures_together_are_refused(references):
     with pytest.raises(ParameterError, match="give views or captures, not both"):
         draaw_mi.fit(start_scene(), references[:1], ["m.roughness"], captures=[{}], views=[None],

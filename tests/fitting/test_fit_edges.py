@@ -192,3 +192,37 @@ def test_an_init_out_of_range_is_shown_as_given():
         with pytest.raises(ParameterError, match=rf"fit: init ball.base_color={shown}; expected values in \[0.0, 1.0\]"):
             draaw_mi.fit(draaw_mi.load_scene(d), np.zeros((6, 8, 3), np.float32), ["ball.base_color"],
                          iterations=1, spp=2, progress=False, init={"ball.base_color": given})
+
+
+def test_an_init_of_the_wrong_type_or_count_names_the_parameter():
+    """A string, a list of two for one number, two numbers for a colour or one too many for an
+    SDF centre had failed inside the fit's first render, with Dr.Jit's words ("Could not
+    construct from sequence", "dr.while_loop(): encountered an exception"); one number for a
+    colour starts it grey."""
+    from conftest import tiny_description
+    d = tiny_description(resolution=[8, 6])
+    scene = draaw_mi.load_scene(d)
+    ref = np.zeros((6, 8, 3), np.float32)
+    bad = [("ball.roughness", "0.5", r"ball.roughness='0.5' \(a str\); expected a number"),
+           ("ball.roughness", [0.2, 0.3], r"ball.roughness=\[0.2, 0.3\] \(2 numbers\); expected a number"),
+           ("ball.base_color", [0.1, 0.2], r"\(2 numbers\); expected one number or 3 \(a value per channel\)"),
+           ("ball.base_color", {"r": 1}, r"\(a dict\); expected one number or 3")]
+    for name, value, message in bad:
+        with pytest.raises(ParameterError, match=rf"fit: init {message}" if message.startswith("ball") else message):
+            draaw_mi.fit(scene, ref, [name], iterations=1, spp=2, progress=False, init={name: value})
+    result = draaw_mi.fit(scene, ref, ["ball.base_color"], iterations=1, spp=2, progress=False,
+                          init={"ball.base_color": 0.25}, lr=1e-9)
+    assert np.allclose(result.history[0]["values"]["ball.base_color"], [0.25, 0.25, 0.25], atol=1e-6)
+
+
+def test_a_vector_init_takes_its_count_of_numbers_and_no_grey():
+    """A point (an SDF object's centre) takes exactly its three numbers, in order; one number is
+    not spread over it as over a colour."""
+    import mitsuba as mi
+    from draaw_mi.fitting.start import value_start
+    like = mi.Point3f(0.0, 0.0, 0.0)
+    assert np.allclose(np.array(value_start("sdf.a.center", (1, 2, 3.5), like)).ravel(), [1, 2, 3.5])
+    assert type(value_start("sdf.a.center", np.array([1.0, 2.0, 3.0]), like)) is mi.Point3f
+    for value in (0.5, [1, 2], [1, 2, 3, 4]):
+        with pytest.raises(ParameterError, match=r"fit: init sdf.a.center=.*; expected 3 numbers"):
+            value_start("sdf.a.center", value, like)

@@ -415,3 +415,34 @@ def test_a_map_set_again_and_again_between_renders_is_still_checked():
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             draaw_mi.render(scene, spp=1, post=[])
+
+
+@pytest.mark.parametrize("freeze", [True, False])
+def test_a_single_value_set_to_two_values_is_named_when_the_render_fails(freeze, monkeypatch):
+    """A roughness set through scene.params to ``mi.Float([0.2, 0.3])`` failed inside Dr.Jit
+    ("dr.while_loop(): encountered an exception", "size of output variable r2153 is 2 (must be
+    1)") and, recorded, left the recording failed for good (traced from then on): the error
+    names the value, and the value put back renders as before, replayed."""
+    from draaw_mi.rendering import session as S
+    monkeypatch.setattr(S, "FREEZE", freeze)
+    scene = draaw_mi.load_scene(tiny_description(resolution=[12, 8]))
+    before = np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1, post=[]))
+    p = scene.params
+    key = scene.key("ball.roughness")
+    old = type(p[key])(p[key])
+    p[key] = mi.Float([0.2, 0.3])
+    p.update()
+    assert scene.widened_values() == [f"{key} holds 2 values"]
+    with pytest.raises(draaw_mi.RenderError, match=rf"render of .*: {re.escape(key)} holds 2 values; expected one"):
+        draaw_mi.render(scene, version="v4", spp=2, seed=1, post=[])
+    p[key] = old
+    p.update()
+    assert scene.widened_values() == []
+    for _ in range(2):                   # (a changed value records anew, up to twice)
+        again = np.array(draaw_mi.render(scene, version="v4", spp=2, seed=1, post=[]))
+        assert np.array_equal(again, before)
+    calls = []
+    real = mi.render
+    monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
+    draaw_mi.render(scene, version="v4", spp=2, seed=1, post=[])
+    assert len(calls) == (0 if freeze else 1)        # replayed: the recording did not fail

@@ -517,3 +517,45 @@ def test_a_replay_refused_for_a_changed_registry_records_anew(scene, monkeypatch
     monkeypatch.setattr(S, "FREEZE", False)
     traced = np.array(session.render_pass(integ, 1, 4, freeze=True))
     assert np.allclose(images[4], traced, rtol=1e-5, atol=1e-6)
+
+
+THREAD_COUNTS = """
+import draaw_mi, drjit as dr, numpy as np
+dr.set_thread_count(2)
+scene = draaw_mi.load_scene("scenes/fit_sphere.toml", resolution=(16, 16), spp=4)
+images = []
+for n in (2, 1, 2):
+    dr.set_thread_count(n)
+    images.append(np.array(draaw_mi.render(scene, version="v1", spp=8, seed=3, post=[])))
+print("ok", all(np.array_equal(images[0], i) for i in images))
+"""
+
+
+def test_a_thread_count_changed_between_renders_records_anew(scene, monkeypatch, no_collections):
+    """Dr.Jit's recorder records anew after ``dr.set_thread_count`` and, back at the first
+    count, replays the first recording: that replay crashed Dr.Jit 1.5 (2 -> 1 -> 2 threads: a
+    segmentation fault, 3 runs in 3). A changed count records anew, and the images stay the
+    same. The crash in a child process; the recordings counted here."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", THREAD_COUNTS], cwd=root, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.split() == ["ok", "True"], out.stderr[-2000:]
+
+    calls = _counting_renders(monkeypatch)
+    _record_afresh(scene, monkeypatch)
+    session = session_of(scene)
+    integ = session.integrator("v4", 3)
+    before = dr.thread_count()
+    try:
+        first = [np.array(session.render_pass(integ, 1, s, freeze=True)) for s in range(3)]
+        n = len(calls)
+        dr.set_thread_count(before + 1)
+        again = np.array(session.render_pass(integ, 1, 0, freeze=True))
+        assert len(calls) == n + 1                           # recorded anew
+        fn = session.recordings[(id(integ), 1)]
+        assert fn.frozen.n_recordings == 1                   # the old recording let go
+    finally:
+        dr.set_thread_count(before)
+    assert np.array_equal(again, first[0])

@@ -538,6 +538,10 @@ def test_a_parameter_name_without_its_material_lists_the_materials_that_have_it(
         scene.key("r0m0.metalic")
     with pytest.raises(SceneError, match=r"`draaw-mi info` lists the scene's materials$"):
         scene.key("zzz")
+    # a material's setting, documented beside its parameters, was "missing; did you mean ..."
+    with pytest.raises(SceneError, match=r"no parameter 'r0m0.two_sided': two_sided is a setting of "
+                                         r"material 'r0m0', read when the scene loads, not a parameter"):
+        scene.key("r0m0.two_sided")
 
 
 def test_a_scene_shows_in_one_line_and_checks_what_it_is_given():
