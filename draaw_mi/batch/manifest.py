@@ -213,6 +213,10 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: 
         aovs = jd["aovs"]
         if not isinstance(aovs, list) or not all(isinstance(a, str) and a for a in aovs):
             raise (where / "aovs").error(f"{aovs!r} is not a list of AOV names")
+        twice = sorted({a for a in aovs if aovs.count(a) > 1})
+        if twice:                    # (a frame would hold it once: the list said otherwise)
+            raise (where / "aovs").error(f"{aovs!r} names {', '.join(map(repr, twice))} twice; "
+                                         "expected each AOV once")
         job.aovs = list(aovs)
     if "post" in jd:
         job.post = _check_post(jd["post"], where / "post")

@@ -151,13 +151,58 @@ def _draaw(version: str) -> bool:
         return True                      # (an unknown version fails later, with its own message)
 
 
+def same_file(path: str) -> str:
+    """``path`` as plan() tells files apart: absolute, links followed, without case (x/0001.exr
+    and x/0001.EXR are one file on macOS or Windows)."""
+    return os.path.normcase(os.path.realpath(path)).casefold()
+
+
+def input_files(manifest: Manifest, cache) -> dict[str, str]:
+    """What a run reads, as :func:`same_file` names it -> what it is: the manifest, each
+    job's scene file and every file that scene reads (``scene.info["files"]``: meshes,
+    textures, environment maps). No frame, preview, contact sheet or log may be one of them:
+    the run would overwrite its own input (a frame written over the environment map it lit,
+    rendered again from itself at every run; a log appended to the scene file)."""
+    found = {}
+    if not manifest.path.startswith("<"):
+        found[same_file(manifest.path)] = "the manifest"
+    for job in manifest.jobs:
+        if os.path.isfile(job.scene):
+            found.setdefault(same_file(job.scene), f"the scene file of job {job.name!r}")
+        try:
+            entry = cache.get(job.scene, job.resolution)
+        except DraawError as e:                    # (as plan() says it)
+            raise SceneError(f"{manifest.path}: job {job.name!r}: {e}") from None
+        for f in entry.scene.info.get("files", []):
+            found.setdefault(same_file(f), f"a file the scene of job {job.name!r} reads")
+    return found
+
+
+def check_file_name(where: str, path: str, what: str) -> None:
+    """Refuse an output ``path`` with a name longer than its file system takes (255 bytes on
+    Linux and macOS): the frame would render, then fail as it is written."""
+    folder = os.path.dirname(path) or "."
+    while not os.path.isdir(folder) and os.path.dirname(folder) != folder:
+        folder = os.path.dirname(folder)
+    try:
+        longest = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        longest = 255
+    for part in path.split(os.sep):
+        if len(os.fsencode(part)) > longest:
+            raise SceneError(f"{where}: output pattern gives {what} a name of {len(os.fsencode(part))} bytes "
+                             f"({part[:24]}...); expected at most {longest}, the file system's limit")
+
+
 # --------------------------------------------------------------------------- plan
 def plan(manifest: Manifest, cache=None) -> list[dict]:
-    """Every frame of every job as a spec dict, validated against the loaded scenes."""
+    """Every frame of every job as a spec dict, validated against the loaded scenes and the
+    files the run reads (:func:`input_files`)."""
     cache = cache if cache is not None else SceneCache()
     vers = versions()
     specs, seen = [], {}
     where = manifest.path
+    inputs = input_files(manifest, cache)
     for ji, job in enumerate(manifest.jobs):
         loc = f"{where}: job {job.name!r}"
         try:
@@ -218,6 +263,10 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             # x/0001.exr and x/0001.EXR share a preview, and are one file on macOS or Windows
             files = [out] + ([os.path.splitext(out)[0] + ".png"] if job.previews else [])
             for path in files:
+                check_file_name(where, path, f"job {job.name!r} frame {f}")
+                if same_file(path) in inputs:
+                    raise SceneError(f"{where}: output pattern gives {path!r} for job {job.name!r} frame {f}, "
+                                     f"which is {inputs[same_file(path)]}; give the frames names of their own")
                 if path.casefold() in seen:
                     raise SceneError(f"{where}: output pattern gives the same file {path!r} for "
                                      f"{seen[path.casefold()]} and job {job.name!r} frame {f}")
@@ -246,6 +295,9 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
     if manifest.contact_sheet:
         for spec in (sp for sp in specs if sp["frame"] == 0):
             path = sheet_path(spec)
+            if same_file(path) in inputs:
+                raise SceneError(f"{where}: job {spec['job']!r}'s contact sheet {path!r} is "
+                                 f"{inputs[same_file(path)]}; rename the job or change the output pattern")
             if path.casefold() in seen:
                 raise SceneError(f"{where}: job {spec['job']!r}'s contact sheet {path!r} is the file of "
                                  f"{seen[path.casefold()]}; rename the job or change the output pattern")

@@ -59,8 +59,8 @@ from .exr import MANIFEST_ATTR, frame_status, preview_path, read_frame, read_hea
 from .frame import SceneCache
 from .lock import output_locks, running_pid
 from .manifest import Manifest, fixed_folder, parse_manifest
-from .planner import check_writable, plan, prepare_outputs
-from .sheet import contact_sheets
+from .planner import check_writable, input_files, plan, prepare_outputs, same_file
+from .sheet import contact_sheets, sheet_path
 
 TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png", ".draaw-probe-*")   # atomic writes, folder probes
 PROBE_GRACE_S = 60.0          # a folder probe younger than this may be another run's
@@ -117,7 +117,7 @@ def load(manifest, out: str | None = None, cache=None, allow_outside_out: bool =
     m = manifest if isinstance(manifest, Manifest) else parse_manifest(manifest, out, allow_outside_out)
     cache = cache if cache is not None else SceneCache()
     specs = plan(m, cache)
-    _check_log(m, specs)
+    _check_log(m, specs, input_files(m, cache))
     _check_confined(m, specs)
     return m, specs, cache
 
@@ -140,17 +140,19 @@ def _check_confined(m: Manifest, specs: list) -> None:
     check_inside(log_path(m), m.root, m.path, "the log")
 
 
-def _check_log(m: Manifest, specs: list) -> None:
-    """The log must be a file of its own: a ``log`` key naming a frame's EXR would append JSON
-    to the finished frame (which ``--status`` then fails to decode); one naming a folder would
-    raise IsADirectoryError from the run."""
+def _check_log(m: Manifest, specs: list, inputs: dict) -> None:
+    """The log must be a file of its own, not a frame, a contact sheet or one of ``inputs``
+    (:func:`~draaw_mi.batch.planner.input_files`: JSON lines appended to a scene broke its next
+    load), nor a folder (IsADirectoryError from the run)."""
     path = log_path(m)
-
-    def same(p):                 # one file, told apart as plan() tells the outputs apart
-        return os.path.normcase(os.path.abspath(p)).casefold()
-    log = same(path)
+    log = same_file(path)
+    if log in inputs:
+        raise SceneError(f"{m.path}: log {path!r} is {inputs[log]}; give the log a name of its own")
     for s in specs:
-        if any(same(f) == log for f in [s["output"]] + ([preview_path(s)] if s["preview"] else [])):
+        files = [s["output"]] + ([preview_path(s)] if s["preview"] else [])
+        if m.contact_sheet and s["frame"] == 0:
+            files.append(sheet_path(s))
+        if any(same_file(f) == log for f in files):
             raise SceneError(f"{m.path}: log {path!r} is an output of job {s['job']!r} frame "
                              f"{s['frame']}; give the log a name of its own")
     if os.path.isdir(path):

@@ -391,6 +391,16 @@ def _main(argv) -> int:
     except ImportError as e:
         print(f"draaw-mi: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader left (`draaw-mi info --json ... | head`): end quietly, as a shell tool
+        # does on SIGPIPE, with standard output sent nowhere so that Python's flush at exit
+        # does not fail on the closed pipe again
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):       # (a stdout without a file: a test's)
+            pass
+        return 128 + signal.SIGPIPE
     except Exception as e:  # noqa: BLE001 - environment problems (DraawError at import) are one line too
         if any(c.__name__ == "DraawError" for c in type(e).__mro__):
             print(f"draaw-mi: error: {e}", file=sys.stderr)

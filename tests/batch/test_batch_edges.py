@@ -179,3 +179,68 @@ def test_a_frame_post_processed_in_place_is_no_longer_done(tmp_path):
     assert batch.status(a, out=out)["frames"][0]["status"] == "foreign"
     with pytest.raises(SceneError, match="made by draaw-mi post"):
         batch.run(a, out=out, progress=False)
+
+
+def test_the_log_may_name_no_file_the_run_reads_or_writes(tmp_path):
+    """A ``log`` naming the job's scene or the manifest had JSON lines appended to it (every
+    later load: "malformed TOML"); one naming a contact sheet was renamed over (the log's
+    records lost). Each is refused before anything is written."""
+    import tomli_w
+    doc = _one_frame(tmp_path)
+    scene = doc["jobs"][0]["scene"]
+    path = os.path.join(str(tmp_path), "m.toml")
+    with open(scene, "rb") as fh:
+        scene_bytes = fh.read()
+    for log, what in ((scene, "the scene file of job 'job0'"), (path, "the manifest")):
+        with open(path, "wb") as fh:
+            tomli_w.dump(dict(doc, log=os.path.basename(log)), fh)
+        with open(path, "rb") as fh:
+            manifest_bytes = fh.read()
+        with pytest.raises(SceneError, match=f"log .* is {what}; give the log a name of its own"):
+            batch.run(path, out=str(tmp_path), progress=False)
+        for file, before in ((scene, scene_bytes), (path, manifest_bytes)):
+            with open(file, "rb") as fh:
+                assert fh.read() == before
+    out = str(tmp_path / "o")
+    with pytest.raises(SceneError, match="is an output of job 'job0' frame 0"):
+        batch.run(dict(doc, log="job0/job0_contact.png", contact_sheet=True), out=out, progress=False)
+    assert not os.path.exists(os.path.join(out, "job0"))
+
+
+def test_a_frame_may_not_be_written_over_a_file_its_scene_reads(tmp_path):
+    """An output pattern naming the scene's environment map replaced it with the frame, and
+    every later run rendered the frame again from its previous output (its input files' hash
+    changed each time): refused at planning, the map untouched."""
+    from batch_helpers import tiny_description
+    from draaw_mi.io import write_exr
+    import tomli_w
+    env = str(tmp_path / "env.exr")
+    write_exr(env, np.full((8, 16, 3), 0.5, np.float32))
+    d = tiny_description()
+    d["lights"] = [{"type": "envmap", "file": "env.exr"}]
+    scene = str(tmp_path / "lit.toml")
+    with open(scene, "wb") as fh:
+        tomli_w.dump(d, fh)
+    with open(env, "rb") as fh:
+        before = fh.read()
+    doc = {"output": "env.exr", "jobs": [{"name": "j", "scene": scene, "frames": 1, "spp": 2}]}
+    for dry in (True, False):
+        with pytest.raises(SceneError, match=r"output pattern gives '.*env.exr' for job 'j' frame 0, which is "
+                                             r"a file the scene of job 'j' reads"):
+            batch.run(doc, out=str(tmp_path), progress=False, dry_run=dry)
+    with open(env, "rb") as fh:
+        assert fh.read() == before
+
+
+def test_a_file_name_longer_than_the_file_system_takes_is_refused_before_rendering(tmp_path):
+    """A 300-byte name passed planning and --dry-run; each frame then rendered and failed as it
+    was written ("File name too long")."""
+    doc = _one_frame(tmp_path)
+    doc["output"] = "x" * 300 + "_{frame}.exr"
+    out = str(tmp_path / "o")
+    with pytest.raises(SceneError, match=r"a name of 306 bytes \(xxxx.*\.\.\.\); expected at most 255"):
+        batch.run(doc, out=out, progress=False, dry_run=True)
+    doc["output"] = "{frame:>300}.exr"
+    with pytest.raises(SceneError, match=r"a name of 304 bytes"):
+        batch.run(doc, out=out, progress=False)
+    assert not os.path.exists(out) or not os.listdir(out)

@@ -108,6 +108,9 @@ def test_unwritable_output_folder_is_a_file(tmp_path, capsys):
 def test_bad_version_aov_and_camera(tmp_path, capsys):
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(version="v9"), ["jobs[0].version", "v9"])
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(aovs=["dpeth"]), ["dpeth", "did you mean 'depth'?"])
+    # (the frame held it once, silently)
+    _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(aovs=["depth", "normal", "depth"]),
+         ["jobs[0].aovs", "names 'depth' twice; expected each AOV once"])
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"orbit": {"radius": 2}, "look_at": []}),
          ["exactly one of"])
     _bad(tmp_path, capsys, lambda d, _: d["jobs"][0].update(camera={"keyframes": [[0, 0, 0, 1]]}),

@@ -154,6 +154,23 @@ def test_info_json_describes_the_setup_and_the_scene(tiny_file, capsys):
     assert isinstance(s["features"], dict) and s["features"]
 
 
+def test_a_reader_that_leaves_ends_the_command_quietly(tiny_file, monkeypatch, capsys):
+    """``draaw-mi info --json SCENE | head -3`` (or a batch --dry-run's listing) ended in a
+    BrokenPipeError traceback: the command now ends as a shell tool does on SIGPIPE."""
+    import signal
+    import sys
+
+    class Gone:                                  # a pipe whose reader has left
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            pass
+    monkeypatch.setattr(sys, "stdout", Gone())
+    assert main(["info", "--json", tiny_file]) == 128 + signal.SIGPIPE
+    assert "Traceback" not in capsys.readouterr().err
+
+
 def test_bench_quick_with_a_camera_path(tmp_path, tiny_file, capsys):
     keys = [[0.0, 1.0, 5.0, 0.0, 0.0], [1.0, 1.2, 4.0, 0.2, 0.1]]
     (tmp_path / "keys.json").write_text(json.dumps(keys))
