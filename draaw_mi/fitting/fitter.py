@@ -135,7 +135,9 @@ def fit(scene, references, params, version: str | None = None, spp: int = 16, it
             The scene's ``hide_emitters`` holds too: a reference rendered from the scene file
             is then one the fit can render.
         exposure: ``"fixed"`` or ``"fit"`` (see the module docstring).
-        init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``); default the
+        init: starting values by parameter name (e.g. ``{"gold.roughness": 0.5}``): a number
+            for a single value, one number (a grey) or three for a colour, three for a point, and
+            for a texture one number, one per channel or an array of its shape; default the
             scene's current values.
         seed: seed of the run; iteration ``i`` renders with an independent seed derived from it,
             and the gradient pass with another one (Mitsuba decorrelates primal and adjoint).
