@@ -117,7 +117,10 @@ def go_draaw_spheres(spheres: list, material_slot=None, scale: float = 1.0, wher
                 4: lambda: cubic_smooth_intersection(sp, o, k, name=nm),
                 5: lambda: subtraction(o, sp, name=nm),
                 6: lambda: cubic_smooth_subtraction(o, sp, k, name=nm),
-                7: lambda: lse_intersection(sp, o, name=nm),
+                # GO-Draaw's log(e^a + e^b) in its own units: at `scale`, a temperature of
+                # `scale` (a fixed 1 shrank a list scaled by 1/75 by up to ln 2 world units)
+                7: lambda: (lse_intersection(sp, o, name=nm) if scale == 1.0
+                            else smooth_lse_intersection(sp, o, scale, name=nm)),
                 8: lambda: smooth_lse_intersection(sp, o, k, name=nm)}[t]()
         if t == 9:
             node.slot = sp.slot

@@ -237,7 +237,6 @@ class LSEIntersection(Operator):
     """``k log(e^(a/k) + e^(b/k))``, evaluated as ``max + k log1p(e^(-|a-b|/k))``."""
     kind = "lse_intersection"
     smooth = False
-    temperature = None
 
     def combine(self, da, db):
         k = 1.0 if not self.smooth else self._k()

@@ -152,6 +152,28 @@ def test_go_draaw_smooth_union_leaves_a_gap_open_as_go_draaw_does():
     assert _d(go_draaw_spheres(recs), [0, 0, 0]) == pytest.approx(1.5 - 8 / 6, abs=1e-5)
 
 
+@pytest.mark.parametrize("scale", [1.0, 1 / 75, 10.0])
+def test_a_scaled_sphere_list_is_go_draaws_shape_scaled(scale):
+    """Every operator at ``scale`` gives GO-Draaw's distance (in its units) times ``scale``:
+    the "addition" (sdfType 7, ``ln(e^a + e^b)``) kept a temperature of 1 world unit, so a
+    list scaled by 1/75 read +0.587 at the lens's centre where -0.097 was due, and rendered
+    nothing."""
+    d = lambda c, r, p: float(np.linalg.norm(np.subtract(p, c)) - r)   # noqa: E731
+    for t in (7, 8, 2):
+        # each sphere combined with the other, so that every part of the shape is an operator's
+        recs = [{"centerX": -6, "radius": 16, "indexOfOtherSphere": 1, "sdfType": t, "amount": 1},
+                {"centerX": 6, "radius": 16, "indexOfOtherSphere": 0, "sdfType": t, "amount": 1}]
+        root = go_draaw_spheres(recs, scale=scale)
+        for p in ([0, 0, 0], [0, 12, 0], [0, 13.5, 0], [-25, 0, 0]):
+            a, b = d([-6, 0, 0], 16, p), d([6, 0, 0], 16, p)
+            if t == 2:                                       # go-draaw-spec.md §5.2: cubic
+                h = max(1 - abs(a - b), 0)
+                go = min(a, b) - h ** 3 / 6
+            else:                                            # ln(e^a + e^b) (amount 1)
+                go = np.logaddexp(a, b)
+            assert _d(root, [float(x) * scale for x in p]) == pytest.approx(go * scale, rel=1e-4, abs=1e-6), (t, p)
+
+
 def test_go_draaw_entry_in_scene_blends_colours():
     s = draaw_mi.load_scene(_desc([{"type": "go_draaw_spheres", "spheres": GO_SPHERES[:2], "scale": 0.02}]))
     assert len(s.sdf.slots) == 2
