@@ -106,7 +106,9 @@ def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
         raise ParameterError(f"draaw BSDF: {name} texture array of shape {arr.shape}; expected (H, W), "
                              "(H, W, 1) or (H, W, 3)")
-    return mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True},
+    # (a Bitmap, not a tensor: a tensor three texels high made nanobind print "implicit
+    # conversion ... failed!" three times as Mitsuba's parser tried it as a vector and colours)
+    return mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(arr)), "raw": True},
                         parallel=False)
 
 

@@ -133,7 +133,19 @@ def _tensors_shared(d):
     (False, (2,))
     """
     if isinstance(d, dict):
-        return {k: _tensors_shared(v) for k, v in d.items()}
+        out = {k: _tensors_shared(v) for k, v in d.items()}
+        data = out.get("data")
+        if out.get("type") in ("bitmap", "gridvolume") and dr.is_tensor_v(data) and data.shape[:1] == (3,):
+            # Mitsuba's dict parser tries a value of length 3 (a texture three texels high, a
+            # grid three deep) as a vector and a colour before a tensor, and nanobind prints
+            # "implicit conversion ... failed!" for each try: given as the object the plugin
+            # makes of the tensor instead (the same values, the same "data" parameter)
+            del out["data"]
+            if out["type"] == "bitmap":
+                out["bitmap"] = mi.Bitmap(np.array(data))
+            else:
+                out["grid"] = mi.VolumeGrid(np.array(data))
+        return out
     if dr.is_tensor_v(d):
         return type(d)(d)
     return d
