@@ -19,6 +19,7 @@ fit: 4/4 it (100 %)
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 
@@ -67,6 +68,30 @@ def progress_bar(total: int, desc: str, unit: str, mode, *, leave: bool = True, 
         return LineProgress(total, desc, unit, file=file, every=every)
     from tqdm.auto import tqdm  # (27 ms, and it probes for ipywidgets: paid by bars only)
     return tqdm(total=total, desc=desc, unit=unit, leave=leave, dynamic_ncols=True, file=file)
+
+
+@contextlib.contextmanager
+def closed_after(bar):
+    """``bar`` (a :func:`progress_bar`, or ``None``) closed however the block ends: a render
+    stopped by Ctrl-C or an error had left its bar open (the next bar drawn a line lower, a
+    log's last line never written); :class:`LineProgress` ends with ``stopped``.
+
+    >>> import io
+    >>> out = io.StringIO()
+    >>> try:
+    ...     with closed_after(progress_bar(4, "render", "spp", "lines", file=out, every=60.0)) as bar:
+    ...         bar.update(1)
+    ...         raise KeyboardInterrupt
+    ... except KeyboardInterrupt:
+    ...     pass
+    >>> out.getvalue().split(", ")[0], out.getvalue().split(", ")[2].strip()
+    ('render: 1/4 spp (25 %)', 'stopped')
+    """
+    try:
+        yield bar
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def watched(stream) -> bool:

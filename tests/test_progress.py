@@ -114,3 +114,37 @@ def test_true_is_a_bar_where_someone_watches_and_lines_in_a_log(monkeypatch):
     OutStream = type("OutStream", (io.StringIO,), {"__module__": "ipykernel.iostream"})
     assert P.watched(OutStream()) and progress_bar(3, "fit", "it", True, file=OutStream()) == "bar"
     assert progress_bar(3, "fit", "it", "bar", file=log) == "bar" and len(bars) == 3   # asked for
+
+
+@pytest.mark.parametrize("mode", ["lines", "bar"])
+def test_an_interrupted_render_closes_its_bar(mode, monkeypatch, capsys):
+    """A render stopped by Ctrl-C (or a pass's error) left its bar open: in a terminal the next
+    bar was drawn a line lower, and a log never got the last line. Its bar is closed (the
+    log's last line says ``stopped``), as is a tqdm bar."""
+    import sys
+    import draaw_mi
+    from draaw_mi.rendering.session import Session
+    sys.path.insert(0, "tests")
+    from conftest import tiny_description
+    import tqdm.auto
+    made = []
+    real_tqdm = tqdm.auto.tqdm
+    monkeypatch.setattr(tqdm.auto, "tqdm", lambda **k: made.append(real_tqdm(**k)) or made[-1])
+    scene = draaw_mi.load_scene(tiny_description(resolution=[8, 6]))
+    real = Session.render_pass
+    passes = []
+
+    def third_is_interrupted(self, *a, **k):
+        passes.append(1)
+        if len(passes) == 3:
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
+    monkeypatch.setattr(Session, "render_pass", third_is_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        draaw_mi.render(scene, spp=8, pass_spp=1, progress=mode, post=[])
+    assert len(passes) == 3
+    if mode == "lines":
+        last = capsys.readouterr().err.strip().splitlines()[-1]
+        assert last.startswith("render v4: 2/8 spp (25 %)") and "stopped" in last, last
+    else:
+        assert len(made) == 1 and made[0].disable               # (tqdm's close disables it)

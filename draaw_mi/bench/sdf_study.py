@@ -28,7 +28,7 @@ import numpy as np
 
 from ..io import write_text
 from ..plotting import save, subplots
-from ..progress import check_mode, progress_bar
+from ..progress import check_mode, closed_after, progress_bar
 from ..rendering.renderer import render
 from ..scene import load_scene
 from ..sdf.tracer import TracerOptions, march
@@ -85,24 +85,22 @@ def run_sdf_study(scene, out_dir: str, settings=None, spp: int = 16, repeats: in
     seeds = [11 + 7 * r for r in range(repeats)]
     refs = [_render(scene, REFERENCE, spp, s) for s in seeds]
     ref_hit, ref_steps = camera_march(scene, REFERENCE)
-    bar = progress_bar(len(settings) * (repeats + 1), f"sdf study {name}", "render", progress,
-                       where="sdf study")
-    for s in settings:                               # warm-up (compilation)
-        _render(scene, s, spp, 1)
-        if bar is not None:
-            bar.update(1)
-    times = {i: [] for i in range(len(settings))}
-    errs = {i: [] for i in range(len(settings))}
-    for r, seed in enumerate(seeds):                 # interleaved round-robin
-        for i, s in enumerate(settings):
-            t0 = time.perf_counter()
-            img = _render(scene, s, spp, seed)
-            times[i].append(time.perf_counter() - t0)
-            errs[i].append(float(np.sqrt(np.mean((img - refs[r]) ** 2))))
+    with closed_after(progress_bar(len(settings) * (repeats + 1), f"sdf study {name}", "render", progress,
+                                   where="sdf study")) as bar:
+        for s in settings:                               # warm-up (compilation)
+            _render(scene, s, spp, 1)
             if bar is not None:
                 bar.update(1)
-    if bar is not None:
-        bar.close()
+        times = {i: [] for i in range(len(settings))}
+        errs = {i: [] for i in range(len(settings))}
+        for r, seed in enumerate(seeds):                 # interleaved round-robin
+            for i, s in enumerate(settings):
+                t0 = time.perf_counter()
+                img = _render(scene, s, spp, seed)
+                times[i].append(time.perf_counter() - t0)
+                errs[i].append(float(np.sqrt(np.mean((img - refs[r]) ** 2))))
+                if bar is not None:
+                    bar.update(1)
     n_ref = max(int(ref_hit.sum()), 1)
     rows = []
     for i, s in enumerate(settings):

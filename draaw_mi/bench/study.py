@@ -45,7 +45,7 @@ from .. import load_scene
 from ..errors import DraawError
 from ..integrators import SCENE_VERSION, resolve_version
 from ..io import read_exr, write_exr
-from ..progress import check_mode, progress_bar
+from ..progress import check_mode, closed_after, progress_bar
 from ..rendering.renderer import render
 from ..rendering.session import BLIND, session_of
 from ..scene.camera import go_draaw_look_at, look_at_transform, scene_fov, sensor_keys, x_fov
@@ -323,53 +323,51 @@ def run_study(scenes, versions=DEFAULT_VERSIONS, spps=(1, 2, 4, 8, 16, 32, 64, 1
             key = (s, reference_version(s), ground_truth_depth(max_depths or [s.settings["max_depth"]]))
             if key not in conv_plan:
                 conv_plan.append(key)
-    bar = progress_bar(len(plan) + len(loaded) + len(conv_plan), "bench", "setting", progress,
-                       where="bench.run_study")
-    rows, images, gts, gt_depths = [], {}, {}, {}
-    for s in loaded:
-        name = os.path.splitext(os.path.basename(s.source))[0]
-        gt_depths[name] = d = ground_truth_depth(max_depths or [s.settings["max_depth"]])
-        if bar is not None:
-            bar.set_postfix_str(f"{name}: ground truth ({gt_spp} spp, max_depth {d})")
-        gts[name] = ground_truth(s, gt_spp, max_depth=d, cache_dir=cache_dir)
-        if bar is not None:
-            bar.update(1)
-    # the versions at one (scene, spp, depth, adaptive, denoise) are timed round-robin; the
-    # rows keep the plan's order (version by version) for the report
-    order = {(id(s), setting): i for i, (s, setting) in enumerate(plan)}
-    groups: dict = {}
-    for s, setting in plan:
-        key = (id(s), setting.spp, setting.max_depth, setting.adaptive, setting.denoise)
-        groups.setdefault(key, (s, []))[1].append(setting)
-    for s, settings in groups.values():
-        name = os.path.splitext(os.path.basename(s.source))[0]
-        if bar is not None:
-            first = settings[0]
-            bar.set_postfix_str(f"{name}: {first.spp} spp depth {first.max_depth}, "
-                                f"{len(settings)} version(s)")
-        for setting, (row, img) in zip(settings, measure_group(s, settings, gts[name], repeats, seed)):
-            row["scene"] = name
-            row["resolution"] = list(s.resolution)
-            rows.append((order[(id(s), setting)], row))
-            images[(name, setting)] = img
-        if bar is not None:
-            bar.update(len(settings))
-    rows = [row for _, row in sorted(rows, key=lambda p: p[0])]
-    refs = {os.path.splitext(os.path.basename(s.source))[0]: reference_version(s) for s in loaded}
-    bias = estimate_bias(rows, gt_spp, refs)
-    halves = {}
-    for s, v, d in conv_plan:
-        name = os.path.splitext(os.path.basename(s.source))[0]
-        if bar is not None:
-            bar.set_postfix_str(f"{name}: {v} converged ({gt_spp} spp, max_depth {d})")
-        halves[(name, v, d)] = converged_halves(s, v, gt_spp, d, cache_dir=cache_dir)
-        if bar is not None:
-            bar.update(1)
-    for (name, v, d), hv in halves.items():
-        gt_halves = halves.get((name, refs[name], gt_depths[name]))
-        bias[(name, v, d)] = converged_bias(hv, gts[name], gt_halves)
-    if bar is not None:
-        bar.close()
+    with closed_after(progress_bar(len(plan) + len(loaded) + len(conv_plan), "bench", "setting", progress,
+                                   where="bench.run_study")) as bar:
+        rows, images, gts, gt_depths = [], {}, {}, {}
+        for s in loaded:
+            name = os.path.splitext(os.path.basename(s.source))[0]
+            gt_depths[name] = d = ground_truth_depth(max_depths or [s.settings["max_depth"]])
+            if bar is not None:
+                bar.set_postfix_str(f"{name}: ground truth ({gt_spp} spp, max_depth {d})")
+            gts[name] = ground_truth(s, gt_spp, max_depth=d, cache_dir=cache_dir)
+            if bar is not None:
+                bar.update(1)
+        # the versions at one (scene, spp, depth, adaptive, denoise) are timed round-robin; the
+        # rows keep the plan's order (version by version) for the report
+        order = {(id(s), setting): i for i, (s, setting) in enumerate(plan)}
+        groups: dict = {}
+        for s, setting in plan:
+            key = (id(s), setting.spp, setting.max_depth, setting.adaptive, setting.denoise)
+            groups.setdefault(key, (s, []))[1].append(setting)
+        for s, settings in groups.values():
+            name = os.path.splitext(os.path.basename(s.source))[0]
+            if bar is not None:
+                first = settings[0]
+                bar.set_postfix_str(f"{name}: {first.spp} spp depth {first.max_depth}, "
+                                    f"{len(settings)} version(s)")
+            for setting, (row, img) in zip(settings, measure_group(s, settings, gts[name], repeats, seed)):
+                row["scene"] = name
+                row["resolution"] = list(s.resolution)
+                rows.append((order[(id(s), setting)], row))
+                images[(name, setting)] = img
+            if bar is not None:
+                bar.update(len(settings))
+        rows = [row for _, row in sorted(rows, key=lambda p: p[0])]
+        refs = {os.path.splitext(os.path.basename(s.source))[0]: reference_version(s) for s in loaded}
+        bias = estimate_bias(rows, gt_spp, refs)
+        halves = {}
+        for s, v, d in conv_plan:
+            name = os.path.splitext(os.path.basename(s.source))[0]
+            if bar is not None:
+                bar.set_postfix_str(f"{name}: {v} converged ({gt_spp} spp, max_depth {d})")
+            halves[(name, v, d)] = converged_halves(s, v, gt_spp, d, cache_dir=cache_dir)
+            if bar is not None:
+                bar.update(1)
+        for (name, v, d), hv in halves.items():
+            gt_halves = halves.get((name, refs[name], gt_depths[name]))
+            bias[(name, v, d)] = converged_bias(hv, gts[name], gt_halves)
     for r in rows:
         r["bias_rmse"], r["bias_resolved"] = bias.get((r["scene"], r["label"], r["max_depth"]), (None, None))
         r["bias_method"] = ("converged" if (r["scene"], r["label"], r["max_depth"]) in halves
@@ -441,32 +439,30 @@ def frame_times(scene, keyframes, versions=DEFAULT_VERSIONS, frames: int = 60, s
                       RuntimeWarning, stacklevel=2)
     out = []
     versions = scene_versions(scene, versions)
-    bar = progress_bar(len(versions) * len(path), "frame times", "frame", progress,
-                       where="bench.frame_times")
-    for v in versions:
-        set_camera(path[0])
-        render(scene, version=v, spp=spp, post=[])          # warm-up (compilation)
-        times, errs = [], []
-        for i, p in enumerate(path):
-            set_camera(p)
-            t0 = time.perf_counter()
-            img = render(scene, version=v, spp=spp, seed=i, post=[])
-            dr.eval(img)
-            dr.sync_thread()
-            times.append(time.perf_counter() - t0)
-            if i in gts:
-                errs.append(errors(np.array(img), gts[i]))
-            if bar is not None:
-                bar.update(1)
-        t = np.array(times)
-        row = {"version": v, "frames": len(t), "spp": spp, "mean_s": float(t.mean()),
-               "std_s": float(t.std(ddof=1)) if len(t) > 1 else 0.0, "min_s": float(t.min()),
-               "p10_s": float(np.quantile(t, 0.1)), "median_s": float(np.median(t)),
-               "p90_s": float(np.quantile(t, 0.9)), "max_s": float(t.max())}
-        if errs:
-            row["rmse"] = float(np.mean([e["rmse"] for e in errs]))
-            row["ciede2000"] = float(np.mean([e["ciede2000"] for e in errs]))
-        out.append(row)
-    if bar is not None:
-        bar.close()
+    with closed_after(progress_bar(len(versions) * len(path), "frame times", "frame", progress,
+                                   where="bench.frame_times")) as bar:
+        for v in versions:
+            set_camera(path[0])
+            render(scene, version=v, spp=spp, post=[])          # warm-up (compilation)
+            times, errs = [], []
+            for i, p in enumerate(path):
+                set_camera(p)
+                t0 = time.perf_counter()
+                img = render(scene, version=v, spp=spp, seed=i, post=[])
+                dr.eval(img)
+                dr.sync_thread()
+                times.append(time.perf_counter() - t0)
+                if i in gts:
+                    errs.append(errors(np.array(img), gts[i]))
+                if bar is not None:
+                    bar.update(1)
+            t = np.array(times)
+            row = {"version": v, "frames": len(t), "spp": spp, "mean_s": float(t.mean()),
+                   "std_s": float(t.std(ddof=1)) if len(t) > 1 else 0.0, "min_s": float(t.min()),
+                   "p10_s": float(np.quantile(t, 0.1)), "median_s": float(np.median(t)),
+                   "p90_s": float(np.quantile(t, 0.9)), "max_s": float(t.max())}
+            if errs:
+                row["rmse"] = float(np.mean([e["rmse"] for e in errs]))
+                row["ciede2000"] = float(np.mean([e["ciede2000"] for e in errs]))
+            out.append(row)
     return out

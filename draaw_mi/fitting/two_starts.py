@@ -42,7 +42,7 @@ import time
 import numpy as np
 
 from ..errors import ParameterError
-from ..progress import progress_bar
+from ..progress import closed_after, progress_bar
 from ..rendering.frozen import owned_tensor
 from ..rendering.session import holding, session_of
 from ..scene import DraawScene, load_scene
@@ -191,18 +191,17 @@ def merge(scene, base: dict, other: dict, base_error: float, metal: list, error,
     takes it: a step per region (each one ``error`` call: 8-10 s at the benchmark's size)."""
     # (a swap changes only its own material's maps, so no map's regions move while another's merge)
     regions = [(n, r) for n in metal for r in _regions(base[n][..., 0] > 0.5, other[n][..., 0] > 0.5, min_texels)]
-    bar = progress_bar(len(regions), "two starts: merge", "region", progress, where="fit_two_starts")
-    taken = 0
-    for n, region in regions:
-        cand = _swap(base, other, region, scene.key(n), scene)
-        e = error(cand)
-        if e < base_error:
-            base, base_error, taken = cand, e, taken + 1
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(taken=taken)
-    if bar is not None:
-        bar.close()
+    with closed_after(progress_bar(len(regions), "two starts: merge", "region", progress,
+                                   where="fit_two_starts")) as bar:
+        taken = 0
+        for n, region in regions:
+            cand = _swap(base, other, region, scene.key(n), scene)
+            e = error(cand)
+            if e < base_error:
+                base, base_error, taken = cand, e, taken + 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(taken=taken)
     return base, base_error, len(regions), taken
 
 

@@ -32,7 +32,7 @@ from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version, version_key
 from ..integrators.common import AOV_CHANNELS
 from ..io import channel_names
-from ..progress import check_mode, progress_bar
+from ..progress import check_mode, closed_after, progress_bar
 from ..scene import DraawScene, load_scene
 from ..scene.schema import Where
 from ..scene.schema import resolution as parse_res
@@ -140,26 +140,25 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         total = sum(counts)
     else:                # (as many as the budget allows of up to 2^32 - 1: not listed up front)
         counts, n_passes, total = _budget_passes(session, rs.spp, rs.pass_spp), None, rs.spp
-    bar = progress_bar(total, f"render {rs.version}", "spp", progress, leave=False, where="render")
-    acc, done, passes, t0 = None, 0, 0, time.perf_counter()
-    with session.lock:                         # the passes of one render see one scene
-        for i, count in enumerate(counts):
-            img = session.render_pass(integrator, count, pass_seed(rs.seed, i), params=params)
-            if n_passes == 1:
-                acc = img                      # one pass: no extra scaling kernels (small renders)
-            else:
-                with RENDER_GUARD:
-                    acc = img * count if acc is None else acc + img * count
-                    dr.eval(acc)
-                    dr.sync_thread()
-            done += count
-            passes += 1
-            if bar is not None:
-                bar.update(count)              # (the bar shows the time itself)
-            if time_budget is not None and time.perf_counter() - t0 >= time_budget:
-                break
-    if bar is not None:
-        bar.close()
+    with closed_after(progress_bar(total, f"render {rs.version}", "spp", progress, leave=False,
+                                   where="render")) as bar:
+        acc, done, passes, t0 = None, 0, 0, time.perf_counter()
+        with session.lock:                         # the passes of one render see one scene
+            for i, count in enumerate(counts):
+                img = session.render_pass(integrator, count, pass_seed(rs.seed, i), params=params)
+                if n_passes == 1:
+                    acc = img                      # one pass: no extra scaling kernels (small renders)
+                else:
+                    with RENDER_GUARD:
+                        acc = img * count if acc is None else acc + img * count
+                        dr.eval(acc)
+                        dr.sync_thread()
+                done += count
+                passes += 1
+                if bar is not None:
+                    bar.update(count)              # (the bar shows the time itself)
+                if time_budget is not None and time.perf_counter() - t0 >= time_budget:
+                    break
     image, names, bad, raw = _finish(rs, integrator, acc, done, summed=n_passes != 1)
     _warn_non_finite(bad, rs)
     if return_info:
@@ -395,11 +394,11 @@ def _render_adaptive(rs: RenderSettings, session, block, params, return_info, pr
         raise RenderError(f"render: adaptive subsampling cannot see {what} ({rs.scene.source}); drop adaptive=")
     integrator = session.integrator(rs.version, rs.max_depth, rs.hide_emitters, (), **rs.options)
     t0 = time.perf_counter()
-    bar = progress_bar(rs.spp, f"render {rs.version} adaptive", "spp", progress, leave=False, where="render")
-    image, stats = render_adaptive(rs.scene, block=block, spp=rs.spp, seed=rs.seed, integrator=integrator)
-    if bar is not None:                        # one launch: the bar fills at once
-        bar.update(rs.spp)
-        bar.close()
+    with closed_after(progress_bar(rs.spp, f"render {rs.version} adaptive", "spp", progress, leave=False,
+                                   where="render")) as bar:
+        image, stats = render_adaptive(rs.scene, block=block, spp=rs.spp, seed=rs.seed, integrator=integrator)
+        if bar is not None:                    # one launch: the bar fills at once
+            bar.update(rs.spp)
     bad = non_finite_count(image)                            # before the chain: see _finish
     _warn_non_finite(bad, rs)
     if rs.chain:
