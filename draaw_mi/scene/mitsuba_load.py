@@ -135,7 +135,8 @@ def _tensors_shared(d):
     if isinstance(d, dict):
         out = {k: _tensors_shared(v) for k, v in d.items()}
         data = out.get("data")
-        if out.get("type") in ("bitmap", "gridvolume") and dr.is_tensor_v(data) and data.shape[:1] == (3,):
+        if (out.get("type") in ("bitmap", "gridvolume") and data is not None and dr.is_tensor_v(data)
+                and data.shape[:1] == (3,)):
             # Mitsuba's dict parser tries a value of length 3 (a texture three texels high, a
             # grid three deep) as a vector and a colour before a tensor, and nanobind prints
             # "implicit conversion ... failed!" for each try: given as the object the plugin
