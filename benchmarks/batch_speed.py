@@ -80,9 +80,10 @@ def _xml(name, value, indent) -> list[str]:
             inner = {"type": "principled"}
             inner.update({k: value[k] for k in ("base_color", "roughness", "metallic", "specular") if k in value})
             return _xml(name, {"type": "twosided", "bsdf": inner}, indent)
-        lines = [f'{pad}<{_tag(t)} type="{t}"{attr}>']
+        ident = f' id="{value["id"]}"' if "id" in value else ""    # (a TOML light's black surface)
+        lines = [f'{pad}<{_tag(t)} type="{t}"{ident}{attr}>']
         for k, v in value.items():
-            if k != "type":
+            if k not in ("type", "id"):
                 lines += _xml(k if not (t == "twosided" and k == "bsdf") else "", v, indent + 4)
         return lines + [f"{pad}</{_tag(t)}>"]
     if isinstance(value, bool):

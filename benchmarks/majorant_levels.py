@@ -47,9 +47,10 @@ from draaw_mi.media.mitsuba_dicts import smoke_shape  # noqa: E402
 NEW_LEVEL = majorant.choose_level
 
 
-def faces_dilated_level(data, lo, hi, resolution=16):
+def faces_dilated_level(data, lo, hi, resolution=16, factor=1.0):
     """The scheme before: ``min(16, n)`` cells per axis with faces on voxel faces, each the
-    maximum over the voxels it overlaps dilated by one (a reference kept for this comparison)."""
+    maximum over the voxels it overlaps dilated by one (a reference kept for this comparison;
+    ``factor``, the tracker's scale of the bounds, does not change its cells)."""
     n = np.asarray(data.shape)
     res = [int(min(resolution, s)) for s in n]
     out = data

@@ -32,6 +32,7 @@ import mitsuba as mi
 
 import importlib
 from draaw_mi.rendering.session import session_of  # noqa: E402
+from draaw_mi.guard import COLLECTOR_PAUSED  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -134,7 +135,7 @@ def step_rows(scene, args) -> list:
             t.append(time.perf_counter())
             state = None if state_of is None else state_of(scene.mi_scene, session.memo)
             t.append(time.perf_counter())
-            with F._PAUSED:                        # as freeze_render's call does
+            with COLLECTOR_PAUSED:                        # as freeze_render's call does
                 img = call.frozen(scene.mi_scene, scalars, dr.opaque(mi.UInt32, 5000 + i), state, live, ())
             t.append(time.perf_counter())
             dr.eval(img)

@@ -21,8 +21,9 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-#: the subpackages of draaw_mi whose code shapes a rendered image
-RENDER_CODE = ("integrators", "materials", "media", "scene", "sdf")
+#: the subpackages of draaw_mi whose code shapes a rendered image (``rendering``: a reference of
+#: many passes is their weighted mean, made there)
+RENDER_CODE = ("integrators", "materials", "media", "rendering", "scene", "sdf")
 
 
 def code_digest(root: str | None = None) -> str:

@@ -12,7 +12,7 @@ from ..bench import study as bench
 from ..bench import suite as speed_suite
 from ..bench.sdf_study import has_sdf, run_sdf_study
 from ..errors import DraawError, suggest
-from ..integrators import resolve_version
+from ..integrators import SCENE_VERSION, resolve_version
 from ..io import write_text
 from ..rendering.denoiser import load_pyoidn
 from ..scene import load_scene
@@ -78,6 +78,10 @@ def _cmd_speed_suite(args) -> int:
                        "--versions, --spp, --gt-spp, --repeats, --resolution, --out); leave "
                        f"{'it' if len(ignored) == 1 else 'them'} out")
     versions = args.versions.split(",") if args.versions else ["v4"]
+    for v in versions:
+        if resolve_version(v) == SCENE_VERSION:   # (it failed after the reference had rendered)
+            raise CliError(f"bench --suite speed: --versions {v!r}: the suite's scenes are built in "
+                           "Python and name no integrator of their own; give v1..v4, path or prb")
     plugins = ["path"] + [resolve_version(v) for v in versions if resolve_version(v) != "path"]
     ref_spp = 1024 if args.gt_spp is None else args.gt_spp        # (the suite's own default)
     repeats = 3 if args.repeats is None else args.repeats
@@ -112,18 +116,43 @@ def _cmd_speed_suite(args) -> int:
         raise CliError("bench --suite speed: every requested scene was skipped (the GO-Draaw data "
                        f"is absent: looked for {speed_suite.GO_DRAAW}/monkey.obj); nothing to measure")
     _check_out_folder(args.out)
-    os.makedirs(args.out, exist_ok=True)
+    _make_out_folder(args.out)
     return speed_bench.main(argv, command="draaw-mi " + shlex.join(args.argv))
 
 
 def _check_out_folder(out: str) -> None:
-    """``--out`` names a folder (made if missing), not a file: ``os.makedirs`` had raised a
-    FileExistsError traceback."""
+    """``--out`` names a folder (made if missing), not a file, nor a folder under a file:
+    ``os.makedirs`` had raised a FileExistsError or NotADirectoryError traceback."""
     if os.path.exists(out) and not os.path.isdir(out):
         raise CliError(f"bench --out {out!r}: exists and is not a folder; name a folder (made if missing)")
+    above = os.path.dirname(os.path.abspath(out))
+    while not os.path.exists(above):
+        above = os.path.dirname(above)
+    if not os.path.isdir(above):
+        raise CliError(f"bench --out {out!r}: {above!r} is a file, not a folder; name a folder (made if missing)")
+
+
+def _make_out_folder(out: str) -> None:
+    """Make ``--out`` once every other check passed, or say in one line why it cannot be made
+    (a read-only place, /proc)."""
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        raise CliError(f"bench --out {out!r}: cannot be made ({e.strerror or e}); name a folder you can "
+                       "write") from None
+
+
+#: bench's options that take text: an empty one (``--spp "$SPP"``, SPP unset) is refused, not
+#: read as "the default" (the full 66-setting grid had started)
+_TEXT_OPTIONS = ("versions", "spp", "max_depth", "resolution", "camera_path", "denoise", "out")
 
 
 def cmd_bench(args) -> int:
+    for name in _TEXT_OPTIONS:
+        value = getattr(args, name, None)
+        if value is not None and not str(value).strip():
+            raise CliError(f"bench: --{name.replace('_', '-')} {value!r}: empty; give a value, or leave "
+                           "the option out for its default")
     if args.suite == "speed":
         return _cmd_speed_suite(args)
 
@@ -187,6 +216,7 @@ def cmd_bench(args) -> int:
         if frames < 2:
             raise CliError(f"bench: --frames {frames}; a camera path needs at least 2 frames")
     sdf_scenes, scenes = _split_sdf_scenes(args, scenes)
+    _make_out_folder(args.out)
     progress = progress_mode(args.no_progress)
     _bench_sdf_scenes(args, sdf_scenes, res, progress)          # SDF scenes: tracer study
     if not scenes:

@@ -214,6 +214,9 @@ def test_bench_checks_its_camera_path_before_the_study(tmp_path, tiny_file, caps
     (["--spp", "0"], "--spp '0'; expected one integer >= 1"),
     (["--spp", "abc"], "--spp 'abc': expected comma-separated integers"),
     (["--repeats", "0"], "--repeats 0"),
+    # (the reference rendered, then Mitsuba refused the suite's scene dict for 'scene')
+    (["--versions", "scene"], "--versions 'scene': the suite's scenes are built in Python"),
+    (["--spp", ""], "--spp '': empty"),                 # (was the default, silently)
 ])
 def test_bench_suite_speed_checks_its_flags(tmp_path, capsys, flags, message):
     rc = main(["bench", "--suite", "speed", "metal_018", "--out", str(tmp_path / "s")] + flags)
@@ -462,7 +465,11 @@ def test_bench_refuses_what_it_would_measure_wrongly_before_anything_runs(tmp_pa
                        ([tiny_file, "--out", str(tmp_path / "afile")], "--out '" + str(tmp_path / "afile") + "': exists and is not a folder"),
                        ([str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")], "does not exist"),
                        ([tiny_file, "--frames", "5"], "--frames 5 times the frames of a --camera-path"),
-                       ([tiny_file, "--versions", "v4,v9"], "bench --versions: render version 'v9' is unknown")):
+                       ([tiny_file, "--versions", "v4,v9"], "bench --versions: render version 'v9' is unknown"),
+                       # (a NotADirectoryError traceback; an empty value ran the whole grid)
+                       ([tiny_file, "--out", str(tmp_path / "afile" / "sub")], "afile' is a file, not a folder"),
+                       ([tiny_file, "--versions", ""], "--versions '': empty"),
+                       ([tiny_file, "--spp", " "], "--spp ' ': empty")):
         rc = main(["bench", *argv, "--quick", "--no-progress"] + ([] if "--out" in argv else ["--out", str(tmp_path / "o")]))
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and said in err, err
