@@ -28,7 +28,8 @@ def main(study=os.path.join(HERE, "study_denoise", "results.json"), out=os.path.
              "`benchmarks/denoise_study.py`. Ground truth: Mitsuba `path`, "
              f"{result['ground_truth_spp']} spp. 128x128, max_depth 6, errors averaged over "
              f"{result['repeats']} independent seeds, times are medians.", "",
-             f"Machine: {load_note()}; OIDN's threads compete with Dr.Jit's, so the times are noisy; "
+             f"Machine: {result.get('load') or load_note()}; OIDN's threads compete with Dr.Jit's, so the "
+             "times are noisy; "
              "the errors are not affected.", "",
              f"| scene | version | metric | {few} spp raw | {few} spp + OIDN | {many} spp raw | lower of the last two |",
              "|---|---|---|---:|---:|---:|---|"]

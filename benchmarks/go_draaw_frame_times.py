@@ -28,7 +28,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=600)
     ap.add_argument("--spp", type=int, default=1)
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "go_draaw_frame_times.md"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "go_draaw_frame_times_latest.md"))
     args = ap.parse_args()
     if not os.path.isdir(DATA):
         raise SystemExit(f"GO-Draaw data not found at {DATA}")

@@ -191,7 +191,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--spp", type=int, default=64)
-    ap.add_argument("--ref-spp", type=int, default=4096)
+    ap.add_argument("--ref-spp", type=int, default=4096,
+                    help="the reference's spp: 1..256 or a multiple of 256 (256-spp passes)")
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--max-verify-spp", type=int, default=2048)
@@ -203,6 +204,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.quick:
         args.res, args.ref_spp, args.repeats = 128, 1024, 3
+    if args.ref_spp < 1 or (args.ref_spp > 256 and args.ref_spp % 256):
+        # (1000 rendered 768 samples under a header that said 1000)
+        ap.error(f"--ref-spp {args.ref_spp}: expected 1..256 or a multiple of 256 (256-spp passes)")
     if args.threads:
         dr.set_thread_count(args.threads)
     results = [bench_scene(n, args) for n in args.scenes.split(",")]

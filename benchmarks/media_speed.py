@@ -127,7 +127,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", default=os.path.join(HERE, "results", "media_speed.md"))
+    ap.add_argument("--out", default=os.path.join(HERE, "results", "media_speed_latest.md"))
     a = ap.parse_args(argv)
     if a.quick:
         a.res, a.spp, a.repeats, a.ref_spp = 32, 16, 3, 1024

@@ -36,7 +36,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-OUT = os.path.join(HERE, "results", "preview_latency.md")
+OUT = os.path.join(HERE, "results", "preview_latency_latest.md")
 
 CONFIGS = [  # name, Preview options
     ("plain", dict(freeze=False)),

@@ -19,6 +19,14 @@ import sys
 import tempfile
 import warnings
 
+USAGE = ("usage: render_hashes.py OUT.json [all|render|denoise|fit|batch]   (hashes of the renders, written to OUT.json)\n"
+         "       render_hashes.py --compare A.json B.json")
+if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help") or (sys.argv[1].startswith("-") and sys.argv[1] != "--compare"):
+    # (without OUT.json it rendered everything, then failed; --help was taken for a file name)
+    print(USAGE, file=sys.stderr if len(sys.argv) < 2 else sys.stdout)
+    sys.exit(2 if len(sys.argv) < 2 else 0)
+if sys.argv[1] == "--compare" and len(sys.argv) != 4:
+    sys.exit(USAGE)
 if len(sys.argv) == 4 and sys.argv[1] == "--compare":
     a, b = (json.load(open(p)) for p in sys.argv[2:])
     differ = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))

@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     ap.add_argument("--res", type=int, default=1024)
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_memory.md"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_memory_latest.md"))
     args = ap.parse_args(argv)
     peaks = {"path": [], "v4": []}
     walls = {"path": [], "v4": []}

@@ -193,7 +193,7 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=100)
     ap.add_argument("--versions", default="v1,v2,v3,v4,path")
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_overhead.md"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "render_overhead_latest.md"))
     args = ap.parse_args(argv)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     scene = draaw_mi.load_scene(os.path.join(ROOT, "scenes", "cornell.toml"),

@@ -70,7 +70,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "sdf_speed.md"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "sdf_speed_latest.md"))
     args = ap.parse_args(argv)
     dr.set_thread_count(2)
     lines = ["# SDF sphere tracing: cost", "",

@@ -55,7 +55,7 @@ from draaw_mi.fitting.views import LOSSES  # noqa: E402
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "go-draaw")
 PARAMS = ["obj.base_color", "obj.roughness", "obj.metallic"]
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "svbrdf_fit.md")
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "svbrdf_fit_latest.md")
 
 
 def truth_maps(n: int, seed: int = 1):

@@ -271,10 +271,12 @@ IMAGE = re.compile(r"!\[([^\]]*)\]\(([^)\s]+)\)")
 def _results_pages() -> list[tuple[str, str]]:
     """(page name, source Markdown path) of every recorded result, sorted."""
     pages = []
-    results = os.path.join(ROOT, "benchmarks", "results")
-    for name in sorted(os.listdir(results)):
-        if name.endswith(".md"):
-            pages.append((name[:-3], os.path.join(results, name)))
+    for folder in (os.path.join(ROOT, "benchmarks", "results"), os.path.join(ROOT, "benchmarks")):
+        # (the four records beside the scripts were left out; a script's *_latest.md run is not
+        # a record, and the folder's README is its index, not a result)
+        for name in sorted(os.listdir(folder)):
+            if name.endswith(".md") and not name.endswith("_latest.md") and name != "README.md":
+                pages.append((name[:-3], os.path.join(folder, name)))
     for study in sorted(os.listdir(os.path.join(ROOT, "benchmarks"))):
         summary = os.path.join(ROOT, "benchmarks", study, "summary.md")
         if study.startswith("study") and os.path.isfile(summary):

@@ -1,6 +1,7 @@
 """Reports of the benchmark study: JSON, CSV, Markdown summary, error-vs-time plots, error images."""
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -80,8 +81,9 @@ def error_vs_time_figure(rows, scene, depth):
     """The error-vs-time plot of one scene and depth: per setting its mean RMSE over the
     repeats against the median time, bars from the lowest to the highest repeat, hollow
     markers where the error is a few fireflies (``fireflies``), and per version a dashed
-    line at its bias (the RMSE it converges to against the ground truth; dotted: an upper
-    bound). The legend is outside the axes."""
+    horizontal line at its bias (the RMSE it converges to against the ground truth; dotted: an
+    upper bound). Curves: plain settings solid, adaptive ones dashed, denoised ones dotted (the
+    legend's title says both). The legend is outside the axes."""
     sel = [r for r in rows if r["scene"] == scene and r["max_depth"] == depth]
     fig, ax = subplots(figsize=(9.4, 5.0))
     labels = sorted({r["label"] for r in sel})
@@ -120,7 +122,8 @@ def error_vs_time_figure(rows, scene, depth):
     ax.grid(True, which="both", alpha=0.3)
     # outside the axes, on the right: it covered the data inside them
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
-              title="bias (converged error): dashed;\ndotted: an upper bound", title_fontsize=6)
+              title="curves: solid, +adaptive dashed, +oidn dotted;\nhorizontal lines: a version's bias "
+                    "(converged\nerror), dashed; dotted: an upper bound", title_fontsize=6)
     if any_fireflies:
         fig.text(0.01, 0.01, FIREFLY_NOTE, fontsize=6.5, ha="left", va="bottom")
     fig.tight_layout(rect=(0, 0.03 if any_fireflies else 0, 1, 1))
@@ -229,16 +232,26 @@ def rewrite_summary(out_dir: str) -> None:
 
 
 def write_report(result: dict, images: dict, gts: dict, out_dir: str) -> None:
+    """The study's files in ``out_dir``: the plots first, then ``results.csv``,
+    ``results.json`` and last ``summary.md``, the page that shows the rest; a previous run's
+    ``results.json`` and ``summary.md`` go before anything is written, so a run stopped
+    midway leaves no summary of another run's numbers beside its own plots."""
     os.makedirs(out_dir, exist_ok=True)
-    write_text(os.path.join(out_dir, "results.json"), json.dumps(result, indent=1, default=str))
+    for name in ("summary.md", "results.json"):
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(out_dir, name))
+    _write_plots(result["rows"], images, gts, out_dir)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore")
     w.writeheader()
     for r in result["rows"]:
         w.writerow(r)
     write_text(os.path.join(out_dir, "results.csv"), buf.getvalue())
+    write_text(os.path.join(out_dir, "results.json"), json.dumps(result, indent=1, default=str))
     write_text(os.path.join(out_dir, "summary.md"), summary_markdown(result))
-    rows = result["rows"]
+
+
+def _write_plots(rows: list, images: dict, gts: dict, out_dir: str) -> None:
     for sc in sorted({r["scene"] for r in rows}):
         for d in sorted({r["max_depth"] for r in rows if r["scene"] == sc}):
             _plot_error_vs_time(rows, sc, d, os.path.join(out_dir, f"error_vs_time_{sc}_d{d}.png"))

@@ -484,3 +484,19 @@ def test_the_ground_truth_key_follows_the_files_a_scene_reads(tmp_path):
     assert _scene_key(draaw_mi.load_scene(str(tmp_path / "s.json")), 16, 3) == before
     mesh.write_text("v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n")
     assert _scene_key(draaw_mi.load_scene(str(tmp_path / "s.json")), 16, 3) != before
+
+
+def test_a_report_stopped_midway_leaves_no_summary_of_the_run_before(tmp_path, monkeypatch):
+    """A rerun into an existing --out stopped after results.json kept the old plots beside the
+    new numbers, and a summary that embedded them: the old summary and results go first, the
+    plots are made next, the summary last."""
+    from draaw_mi.bench import report
+    (tmp_path / "summary.md").write_text("the run before")
+    (tmp_path / "results.json").write_text("{}")
+
+    def stopped(*a):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(report, "_write_plots", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_report({"rows": []}, {}, {}, str(tmp_path))
+    assert not (tmp_path / "summary.md").exists() and not (tmp_path / "results.json").exists()
