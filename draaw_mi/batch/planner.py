@@ -157,24 +157,40 @@ def same_file(path: str) -> str:
     return os.path.normcase(os.path.realpath(path)).casefold()
 
 
-def input_files(manifest: Manifest, cache) -> dict[str, str]:
-    """What a run reads, as :func:`same_file` names it -> what it is: the manifest, each
-    job's scene file and every file that scene reads (``scene.info["files"]``: meshes,
-    textures, environment maps). No frame, preview, contact sheet or log may be one of them:
-    the run would overwrite its own input (a frame written over the environment map it lit,
-    rendered again from itself at every run; a log appended to the scene file)."""
+def file_identity(path: str):
+    """``(device, inode)`` of the file at ``path`` (links followed), or ``None`` where there is
+    none: two names are one file exactly when they give the same identity (``Env.exr`` and
+    ``env.exr`` on macOS, not on Linux)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+def input_files(manifest: Manifest, cache) -> dict:
+    """What a run reads, by :func:`file_identity` -> what it is: the manifest, each job's scene
+    file and every file that scene reads (``scene.info["files"]``: meshes, textures,
+    environment maps). No frame, preview, contact sheet or log may be one of them: the run
+    would overwrite its own input (a frame written over the environment map it lit, rendered
+    again from itself at every run; a log appended to the scene file). A name with no file
+    behind it yet is none of them."""
     found = {}
+
+    def add(path, what):
+        ident = file_identity(path)
+        if ident is not None:
+            found.setdefault(ident, what)
     if not manifest.path.startswith("<"):
-        found[same_file(manifest.path)] = "the manifest"
+        add(manifest.path, "the manifest")
     for job in manifest.jobs:
-        if os.path.isfile(job.scene):
-            found.setdefault(same_file(job.scene), f"the scene file of job {job.name!r}")
+        add(job.scene, f"the scene file of job {job.name!r}")
         try:
             entry = cache.get(job.scene, job.resolution)
         except DraawError as e:                    # (as plan() says it)
             raise SceneError(f"{manifest.path}: job {job.name!r}: {e}") from None
         for f in entry.scene.info.get("files", []):
-            found.setdefault(same_file(f), f"a file the scene of job {job.name!r} reads")
+            add(f, f"a file the scene of job {job.name!r} reads")
     return found
 
 
@@ -264,9 +280,9 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             files = [out] + ([os.path.splitext(out)[0] + ".png"] if job.previews else [])
             for path in files:
                 check_file_name(where, path, f"job {job.name!r} frame {f}")
-                if same_file(path) in inputs:
+                if file_identity(path) in inputs:
                     raise SceneError(f"{where}: output pattern gives {path!r} for job {job.name!r} frame {f}, "
-                                     f"which is {inputs[same_file(path)]}; give the frames names of their own")
+                                     f"which is {inputs[file_identity(path)]}; give the frames names of their own")
                 if path.casefold() in seen:
                     raise SceneError(f"{where}: output pattern gives the same file {path!r} for "
                                      f"{seen[path.casefold()]} and job {job.name!r} frame {f}")
@@ -295,9 +311,10 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
     if manifest.contact_sheet:
         for spec in (sp for sp in specs if sp["frame"] == 0):
             path = sheet_path(spec)
-            if same_file(path) in inputs:
+            check_file_name(where, path, f"the contact sheet of job {spec['job']!r}")
+            if file_identity(path) in inputs:
                 raise SceneError(f"{where}: job {spec['job']!r}'s contact sheet {path!r} is "
-                                 f"{inputs[same_file(path)]}; rename the job or change the output pattern")
+                                 f"{inputs[file_identity(path)]}; rename the job or change the output pattern")
             if path.casefold() in seen:
                 raise SceneError(f"{where}: job {spec['job']!r}'s contact sheet {path!r} is the file of "
                                  f"{seen[path.casefold()]}; rename the job or change the output pattern")

@@ -59,7 +59,7 @@ from .exr import MANIFEST_ATTR, frame_status, preview_path, read_frame, read_hea
 from .frame import SceneCache
 from .lock import output_locks, running_pid
 from .manifest import Manifest, fixed_folder, parse_manifest
-from .planner import check_writable, input_files, plan, prepare_outputs, same_file
+from .planner import check_writable, file_identity, input_files, plan, prepare_outputs, same_file
 from .sheet import contact_sheets, sheet_path
 
 TEMP_PATTERNS = (".draaw-*.exr", ".draaw-*.png", ".draaw-probe-*")   # atomic writes, folder probes
@@ -144,14 +144,12 @@ def _check_log(m: Manifest, specs: list, inputs: dict) -> None:
     """The log must be a file of its own, not a frame, a contact sheet or one of ``inputs``
     (:func:`~draaw_mi.batch.planner.input_files`: JSON lines appended to a scene broke its next
     load), nor a folder (IsADirectoryError from the run)."""
-    path = log_path(m)
-    log = same_file(path)
-    if log in inputs:
-        raise SceneError(f"{m.path}: log {path!r} is {inputs[log]}; give the log a name of its own")
+    path, log = log_path(m), same_file(log_path(m))
+    if file_identity(path) in inputs:
+        raise SceneError(f"{m.path}: log {path!r} is {inputs[file_identity(path)]}; give it a name of its own")
     for s in specs:
-        files = [s["output"]] + ([preview_path(s)] if s["preview"] else [])
-        if m.contact_sheet and s["frame"] == 0:
-            files.append(sheet_path(s))
+        files = [s["output"], *([preview_path(s)] if s["preview"] else []),
+                 *([sheet_path(s)] if m.contact_sheet and s["frame"] == 0 else [])]
         if any(same_file(f) == log for f in files):
             raise SceneError(f"{m.path}: log {path!r} is an output of job {s['job']!r} frame "
                              f"{s['frame']}; give the log a name of its own")

@@ -120,14 +120,24 @@ def value_start(name: str, value, like):
             v = None
     if v is None or v.dtype.kind not in "iuf":
         raise ParameterError(f"fit: init {name}={value!r} (a {type(value).__name__}); expected {expected}")
-    v = v.astype(np.float64).ravel()
-    if v.size == 1 and width == 1 and colour:
-        v = np.repeat(v, channels)
+    v = v.astype(np.float64)
+    if channels > 1 and width > 1:
+        # channel by channel, as Dr.Jit gives such a value ((C, N)); or as rows of C numbers
+        # ((N, C), as a user writes points); flattened, the channels of one point are neighbours
+        v = (v if v.shape == (channels, width) and dr.is_array_v(value) else
+             v.T if v.shape == (width, channels) else
+             v if v.shape == (channels, width) else v.reshape(-1, channels).T if v.size == count else v)
+    else:
+        v = v.ravel()
+        if v.size == 1 and width == 1 and colour:
+            v = np.repeat(v, channels)
     if v.size != count:
         raise ParameterError(f"fit: init {name}={shown(value)} ({v.size} numbers); expected {expected}")
     if channels == 1:
         return t(v.tolist()) if width > 1 else t(float(v[0]))
-    return t(*[v[c::channels].tolist() if width > 1 else float(v[c]) for c in range(channels)])
+    if width == 1:
+        return t(*[float(x) for x in v])
+    return t(*[row.tolist() for row in v])
 
 
 def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, as_given=None) -> None:

@@ -226,6 +226,10 @@ def widened_error(scene, error: BaseException):
     values holds more than one value (:meth:`DraawScene.widened_values`); else ``None``."""
     if scene is None or caused_by_interrupt(error) or not hasattr(scene, "widened_values"):
         return None
+    # only a failure that speaks of sizes ("size of output variable r2153 is 2 (must be 1)"):
+    # any other goes on to the recorder's retry and fallback, or to the caller, as it was
+    if not any("size" in str(e).lower() for e in exception_chain(error)):
+        return None
     wide = scene.widened_values(1)
     if not wide:
         return None

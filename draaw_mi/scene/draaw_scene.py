@@ -155,8 +155,8 @@ class DraawScene:
             return found
 
     def widened_values(self, limit: int = 3) -> list[str]:
-        """The parameters, other than a mesh's arrays and textures, that hold more than one
-        value (at most ``limit``, each as ``"KEY holds N values"``): a plugin's single value or
+        """The parameters, other than a shape's (a mesh's or a curve's arrays) and textures,
+        that hold more than one value (at most ``limit``, each as ``"KEY holds N values"``): a plugin's single value or
         colour set through :attr:`params` to a wider array (``mi.Float([0.2, 0.3])``) renders
         nothing, failing inside Dr.Jit with words that name none of them ("size of output
         variable r2153 is 2 (must be 1)"). Read when a render fails.
@@ -168,7 +168,7 @@ class DraawScene:
         with RENDER_GUARD:
             own = self.own_traversal
             for key, (cur, vtype, node, _) in own.properties.items():
-                if isinstance(node, mi.Mesh):
+                if isinstance(node, mi.Shape):          # (their arrays are wide by design)
                     continue
                 value = cur if vtype is None else own.get_property(cur, vtype, node)
                 if dr.is_jit_v(value) and not dr.is_tensor_v(value) and dr.width(value) > 1:

@@ -122,6 +122,11 @@ def load_mitsuba_dict(d: dict):
     return scene
 
 
+#: the channel counts Mitsuba's plugins take as ``data`` tensors: given to them as a Bitmap or a
+#: VolumeGrid where the tensor is three high or deep (see :func:`_tensors_shared`)
+_QUIET_CHANNELS = {"bitmap": (1, 3), "gridvolume": (1, 3, 6)}
+
+
 def _tensors_shared(d):
     """``d`` with every tensor a new reference to the same data. Mitsuba's ``bitmap`` moves
     the tensor it is given out of the dict, leaving it empty (shape ``()``), so loading ``d``
@@ -135,12 +140,15 @@ def _tensors_shared(d):
     if isinstance(d, dict):
         out = {k: _tensors_shared(v) for k, v in d.items()}
         data = out.get("data")
-        if (out.get("type") in ("bitmap", "gridvolume") and data is not None and dr.is_tensor_v(data)
-                and data.shape[:1] == (3,)):
+        kind = out.get("type")
+        if (kind in _QUIET_CHANNELS and data is not None and dr.is_tensor_v(data) and data.shape[:1] == (3,)
+                and data.shape[-1] in _QUIET_CHANNELS[kind] and not dr.grad_enabled(data)):
             # Mitsuba's dict parser tries a value of length 3 (a texture three texels high, a
             # grid three deep) as a vector and a colour before a tensor, and nanobind prints
             # "implicit conversion ... failed!" for each try: given as the object the plugin
-            # makes of the tensor instead (the same values, the same "data" parameter)
+            # makes of the tensor instead (the same values, the same "data" parameter), where
+            # the plugin's data path would take it (its channel counts; not a tensor tracking
+            # gradients, which the copy would drop): anything else keeps Mitsuba's own error
             del out["data"]
             if out["type"] == "bitmap":
                 out["bitmap"] = mi.Bitmap(np.array(data))

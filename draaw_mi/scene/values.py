@@ -50,10 +50,11 @@ def check_like(current, value, key: str) -> None:
     """
     if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
         raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
-    if hasattr(value, "matrix") and not dr.is_tensor_v(value):  # a transform (a camera's to_world)
-        if not np.all(np.isfinite(np.array(value.matrix, dtype=np.float64))):
+    matrix = getattr(value, "matrix", value if "Matrix" in type(value).__name__ else None)
+    if matrix is not None and not dr.is_tensor_v(value):      # a transform or matrix (a to_world)
+        if not np.all(np.isfinite(np.array(matrix, dtype=np.float64))):
             # (rendered a frame of NaN without a word; a zero matrix fails in Mitsuba, said)
-            raise RenderError(f"params[{key!r}]: a transform with NaN or infinite entries; expected "
+            raise RenderError(f"params[{key!r}]: a transform or matrix with NaN or infinite entries; expected "
                               "finite numbers")
     if dr.is_tensor_v(current):
         if not dr.is_float_v(current):

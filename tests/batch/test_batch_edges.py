@@ -196,7 +196,7 @@ def test_the_log_may_name_no_file_the_run_reads_or_writes(tmp_path):
             tomli_w.dump(dict(doc, log=os.path.basename(log)), fh)
         with open(path, "rb") as fh:
             manifest_bytes = fh.read()
-        with pytest.raises(SceneError, match=f"log .* is {what}; give the log a name of its own"):
+        with pytest.raises(SceneError, match=f"log .* is {what}; give it a name of its own"):
             batch.run(path, out=str(tmp_path), progress=False)
         for file, before in ((scene, scene_bytes), (path, manifest_bytes)):
             with open(file, "rb") as fh:
@@ -230,6 +230,14 @@ def test_a_frame_may_not_be_written_over_a_file_its_scene_reads(tmp_path):
             batch.run(doc, out=str(tmp_path), progress=False, dry_run=dry)
     with open(env, "rb") as fh:
         assert fh.read() == before
+    # another file whose name differs only in case is not the map where the file system tells
+    # them apart (it was refused as "a file the scene reads")
+    other = str(tmp_path / "ENV.exr")
+    if not os.path.exists(other):                  # (a case-sensitive file system)
+        doc["output"] = "ENV.exr"
+        assert batch.run(doc, out=str(tmp_path), progress=False).complete
+        with open(env, "rb") as fh:
+            assert fh.read() == before
 
 
 def test_a_file_name_longer_than_the_file_system_takes_is_refused_before_rendering(tmp_path):
@@ -242,5 +250,12 @@ def test_a_file_name_longer_than_the_file_system_takes_is_refused_before_renderi
         batch.run(doc, out=out, progress=False, dry_run=True)
     doc["output"] = "{frame:>300}.exr"
     with pytest.raises(SceneError, match=r"a name of 304 bytes"):
+        batch.run(doc, out=out, progress=False)
+    assert not os.path.exists(out) or not os.listdir(out)
+    # a contact sheet's name (the job's name + _contact.png) too: its frames had rendered first
+    doc = _one_frame(tmp_path)
+    doc["jobs"][0]["name"] = "j" * 250
+    doc["contact_sheet"] = True
+    with pytest.raises(SceneError, match=r"gives the contact sheet of job 'j+' a name of 262 bytes"):
         batch.run(doc, out=out, progress=False)
     assert not os.path.exists(out) or not os.listdir(out)

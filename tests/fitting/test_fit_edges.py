@@ -226,3 +226,8 @@ def test_a_vector_init_takes_its_count_of_numbers_and_no_grey():
     for value in (0.5, [1, 2], [1, 2, 3, 4]):
         with pytest.raises(ParameterError, match=r"fit: init sdf.a.center=.*; expected 3 numbers"):
             value_start("sdf.a.center", value, like)
+    # two points: as rows of three numbers, as Dr.Jit holds them (channel by channel) or flat,
+    # the channels of each point stay together (they were read across points)
+    two = mi.Point3f([0.0, 0.0], [0.0, 0.0], [0.0, 0.0])
+    for value in ([[1, 2, 3], [4, 5, 6]], mi.Point3f([1, 4], [2, 5], [3, 6]), [1, 2, 3, 4, 5, 6]):
+        assert np.array(value_start("p", value, two)).T.tolist() == [[1, 2, 3], [4, 5, 6]], value

@@ -111,11 +111,16 @@ def test_interactive_first_frame_is_low_resolution_and_not_accumulated():
     ({"ball.base_color": [0.1, -0.2, 0.3]}, ">= 0"),
     ({"ball.roughnes": 0.3}, "did you mean"),
     # (a frame of NaN was published without a word)
-    ({"sensor.to_world": "nan_transform"}, r"Preview.update: sensor.to_world: .*a transform with NaN"),
+    ({"sensor.to_world": "nan_transform"}, r"Preview.update: sensor.to_world: .*a transform or matrix with NaN"),
+    ({"sensor.to_world": "nan_matrix"}, r"Preview.update: sensor.to_world: .*a transform or matrix with NaN"),
 ])
 def test_bad_values_are_rejected_before_rendering(values, match):
     if values.get("sensor.to_world") == "nan_transform":
         values = {"sensor.to_world": mi.ScalarTransform4f(np.full((4, 4), np.nan))}
+    elif values.get("sensor.to_world") == "nan_matrix":           # (a matrix, not a transform)
+        m = np.eye(4)
+        m[0, 3] = np.nan
+        values = {"sensor.to_world": mi.ScalarMatrix4f(m)}
     pv = Preview(draaw_mi.load_scene(tiny_description()), version="v4", max_depth=4, freeze=False)
     g = pv.generation
     with pytest.raises(DraawError, match=match):

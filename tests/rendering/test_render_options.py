@@ -446,3 +446,28 @@ def test_a_single_value_set_to_two_values_is_named_when_the_render_fails(freeze,
     monkeypatch.setattr(mi, "render", lambda *a, **k: (calls.append(1), real(*a, **k))[1])
     draaw_mi.render(scene, version="v4", spp=2, seed=1, post=[])
     assert len(calls) == (0 if freeze else 1)        # replayed: the recording did not fail
+
+
+def test_a_curves_arrays_are_not_taken_for_widened_values(tmp_path):
+    """A curve's control points and segment indices are wide by design: they were named as
+    widened single values, and every failed render of such a scene was blamed on them (the
+    recorder's retry and fallback skipped). Shapes are left out, and only a failure that speaks
+    of sizes is explained so."""
+    from draaw_mi.rendering.frozen import widened_error
+    (tmp_path / "curve.txt").write_text("-1 0 0 0.1\n-0.3 0.5 0 0.1\n0.3 0.5 0 0.1\n1 0 0 0.1\n")
+    d = {"type": "scene", "integrator": {"type": "path"},
+         "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8},
+                    "to_world": mi.ScalarTransform4f().look_at([0, 0.5, 4], [0, 0.5, 0], [0, 1, 0])},
+         "c": {"type": "linearcurve", "filename": str(tmp_path / "curve.txt")},
+         "e": {"type": "constant"}}
+    scene = draaw_mi.load_scene(d)
+    assert "c.control_points" in scene.params.keys()
+    assert scene.widened_values() == []
+    assert widened_error(scene, RuntimeError("jit_llvm_compile(): out of memory")) is None
+    # a widened value, and a failure that is not about sizes: not explained as one
+    tiny = draaw_mi.load_scene(tiny_description(resolution=[8, 6]))
+    p = tiny.params
+    p[tiny.key("ball.roughness")] = mi.Float([0.2, 0.3])
+    p.update()
+    assert widened_error(tiny, RuntimeError("jit_llvm_compile(): out of memory")) is None
+    assert widened_error(tiny, RuntimeError("size of output variable r1 is 2 (must be 1)")) is not None

@@ -129,6 +129,16 @@ def test_a_texture_three_texels_high_and_a_grid_three_deep_load_quietly(capfd):
     sigma_t = [np.array(t) for t in given(scene.mi_dict) if np.array(t).shape == (3, 3, 3, 1)]
     assert len(sigma_t) == 1 and np.array_equal(np.array(scene.params[loaded[1]]), sigma_t[0])
     assert sorted(sigma_t[0].ravel() * 27) == pytest.approx(np.arange(27.0), abs=1e-4)
+    # what the plugins' data path refuses (4 channels), or a tensor tracking gradients, stays a
+    # tensor: Mitsuba says its own error, and the gradients are kept (not copied away)
+    import mitsuba as mi
+    from draaw_mi.scene.mitsuba_load import _tensors_shared
+    rgba = mi.TensorXf(np.ones((3, 4, 4), np.float32))
+    assert "data" in _tensors_shared({"type": "bitmap", "data": rgba})
+    tracked = mi.TensorXf(np.ones((3, 4, 3), np.float32))
+    dr.enable_grad(tracked)
+    assert "data" in _tensors_shared({"type": "bitmap", "data": tracked})
+    assert "grid" in _tensors_shared({"type": "gridvolume", "data": mi.TensorXf(np.ones((3, 2, 2, 6), np.float32))})
     p = scene.params
     dr.enable_grad(p[key])
     p.update()
