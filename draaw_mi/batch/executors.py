@@ -26,7 +26,7 @@ import uuid
 
 import drjit as dr
 
-from ..errors import DraawError
+from ..errors import DraawError, RenderError
 from .frame import safe_render_frame
 from .worker import dask_render_frame
 
@@ -105,6 +105,19 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, tls: d
     return client, cluster, threads
 
 
+def refuse_in_a_workers_import() -> None:
+    """Raise :class:`~draaw_mi.errors.RenderError` when called while a spawned process (a Dask
+    worker) imports the main script again (``__main__`` named ``__mp_main__``): a script that
+    runs a batch at its top level, without ``if __name__ == "__main__":``, would run it once more
+    in every worker, each stopped at the output folder's lock."""
+    frame = sys._getframe(1)
+    while frame is not None and frame.f_globals.get("__name__") != "__mp_main__":
+        frame = frame.f_back             # (the script runs as __mp_main__ before it is __main__)
+    if frame is not None:
+        raise RenderError("batch.run: called while a worker process imports your script again; run "
+                          "the batch under `if __name__ == \"__main__\":`")
+
+
 def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None = None,
              client=None, retries: int = DEFAULT_RETRIES, dashboard: bool = False, tls: dict | None = None,
              scratch: str | None = None) -> None:
@@ -118,8 +131,21 @@ def run_dask(specs, on_result, workers: int | None = None, scheduler: str | None
     own = client is None
     cluster, threads = None, getattr(client, "draaw_drjit_threads", None)
     if own:
-        client, cluster, threads = dask_client(workers, scheduler, tls=tls, dashboard=dashboard, retries=retries,
-                                               scratch=scratch)
+        try:
+            client, cluster, threads = dask_client(workers, scheduler, tls=tls, dashboard=dashboard,
+                                                   retries=retries, scratch=scratch)
+        except RuntimeError as e:
+            if scratch:            # (the folder the failed cluster made: removed on every path)
+                shutil.rmtree(scratch, ignore_errors=True)
+            if "failed to start" not in str(e) or scheduler is not None:
+                raise
+            # spawned workers import the main script again: one that calls batch.run at its top
+            # level runs it in every worker, which stops at the output lock ("Nanny failed to
+            # start", pages of tracebacks)
+            raise RenderError("batch: Dask's worker processes failed to start. A script that runs a "
+                             "batch with the dask executor must do it under `if __name__ == "
+                             "\"__main__\":` (each worker imports the script again); the workers' "
+                             "own errors are above") from None
         if dashboard and cluster is not None:
             print(f"batch: Dask dashboard at {client.dashboard_link}", file=sys.stderr, flush=True)
     # task keys unique to this run: a key that names only the frame's content (its hash) is

@@ -54,7 +54,7 @@ import numpy as np
 from ..errors import DraawError, ParameterError, SceneError, suggest
 from ..progress import check_mode, progress_bar
 from .confine import check_inside
-from .executors import DEFAULT_RETRIES, EXECUTORS, TLS_KEYS, run_dask, run_inprocess
+from .executors import DEFAULT_RETRIES, EXECUTORS, TLS_KEYS, refuse_in_a_workers_import, run_dask, run_inprocess
 from .exr import MANIFEST_ATTR, frame_status, preview_path, read_frame, read_header, write_preview
 from .frame import SceneCache
 from .lock import output_locks, running_pid
@@ -280,7 +280,7 @@ def run(manifest, out: str | None = None, executor: str = "inprocess", workers: 
     """Render every unfinished frame of ``manifest``; see the module docstring. A run with
     contact sheets verifies the finished frames (it decodes each of them for the sheets)."""
     check_mode(progress, "batch.run")
-
+    refuse_in_a_workers_import()
     if executor not in EXECUTORS:
         raise ParameterError(f"batch.run: executor={executor!r}{suggest(executor, EXECUTORS)}")
     _check_workers(workers, scheduler, client, executor)

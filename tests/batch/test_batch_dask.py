@@ -128,3 +128,26 @@ def test_a_runs_own_cluster_keeps_its_scratch_under_the_output_folder(tmp_path, 
     assert not os.path.exists(os.path.join(log["dir"], ".draaw-dask-scratch"))
     # (the scenes' own scratch folders, draaw-mi-PID-*, live while this process holds them)
     assert [n for n in os.listdir(system_tmp) if not n.startswith("draaw-mi-")] == []
+
+
+def test_a_cluster_that_fails_to_start_says_why_and_leaves_no_scratch(tmp_path, monkeypatch):
+    """A script that called batch.run at its top level ran it again in every spawned worker
+    (each stopped at the output lock), and the run ended in pages of "Nanny failed to start"
+    tracebacks with `.draaw-dask-scratch` left under --out: the workers' imports are refused
+    in one line, the run says what a script needs, and the scratch folder goes."""
+    from draaw_mi.batch import executors
+    from draaw_mi.errors import RenderError
+    scratch = tmp_path / ".draaw-dask-scratch"
+
+    def failing(*a, **k):
+        scratch.mkdir()
+        raise RuntimeError("Nanny failed to start.")
+    monkeypatch.setattr(executors, "dask_client", failing)
+    with pytest.raises(RenderError, match=r'failed to start\. A script .* under `if __name__ == "__main__":`'):
+        executors.run_dask([], lambda r: None, workers=1, scratch=str(scratch))
+    assert not scratch.exists()
+    # a worker importing the script again (it runs as __mp_main__): refused in one line
+    code = "from draaw_mi.batch.executors import refuse_in_a_workers_import\nrefuse_in_a_workers_import()\n"
+    with pytest.raises(RenderError, match=r"batch.run: called while a worker process imports your script"):
+        exec(compile(code, "script.py", "exec"), {"__name__": "__mp_main__"})
+    exec(compile(code, "script.py", "exec"), {"__name__": "__main__"})           # a script's own run
