@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import DraawError, suggest
 from ..integrators import resolve_version
+from ..integrators.common import AOV_CHANNELS
 from ..post import load_chain
 from ..sdf.scene import PROXY_PREFIX
 from . import camera as cam
@@ -94,6 +95,9 @@ def parse_settings(desc: dict, where: Where) -> dict:
         aovs = render["aovs"]
         if not isinstance(aovs, list) or not all(isinstance(a, str) for a in aovs):
             raise (w / "aovs").error(f"{aovs!r} is not a list of AOV names")
+        for name in aovs:         # (a misspelt one failed at the render, naming neither file nor key)
+            if name not in AOV_CHANNELS and name != "all":
+                raise (w / "aovs").error(f"{name!r} is not an AOV{suggest(name, list(AOV_CHANNELS) + ['all'])}")
         s["aovs"] = list(aovs)
     return s
 
@@ -107,7 +111,12 @@ def to_world(table: dict, where: Where):
             if k in table:
                 raise (where / k).error("cannot be combined with 'matrix'")
         m = table["matrix"]
-        arr = np.array(m, dtype=float) if isinstance(m, list) else None
+        # four rows of four numbers (not a word, a bool or a numeric string, which numpy reads:
+        # "a" raised a ValueError traceback, "1" rendered)
+        numbers = (isinstance(m, list) and len(m) == 4
+                   and all(isinstance(r, list) and len(r) == 4 for r in m)
+                   and all(isinstance(x, (int, float)) and not isinstance(x, bool) for r in m for x in r))
+        arr = np.array(m, dtype=float) if numbers else None
         if arr is None or arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
             raise (where / "matrix").error(f"{m!r} is not a 4x4 list of finite numbers")
         if abs(np.linalg.det(arr[:3, :3])) < 1e-12:
@@ -137,6 +146,9 @@ def _matrix_of(t) -> np.ndarray:
 # --------------------------------------------------------------------------- shapes
 def _emitter(shape: dict, where: Where) -> dict | None:
     if "emission" not in shape:
+        if "emission_color" in shape:           # (it was ignored: nothing emitted, no word)
+            raise (where / "emission_color").error("given without 'emission'; give the shape's "
+                                                   "emission too (the colour multiplies it)")
         return None
     e = shape["emission"]
     color = vector(shape.get("emission_color", [1.0, 1.0, 1.0]), where / "emission_color", lo=0.0)

@@ -145,3 +145,29 @@ def test_a_texture_three_texels_high_and_a_grid_three_deep_load_quietly(capfd):
     img = draaw_mi.render(scene, version="v4", spp=2, params=p, post=[])
     dr.backward(dr.mean(img, axis=None))
     assert np.abs(np.array(dr.grad(p[key]))).sum() > 0
+
+
+@pytest.mark.parametrize("change, match", [
+    # a word or a short row in a matrix: a ValueError traceback (exit 1); a numeric string rendered
+    ({"shapes": [{"type": "sphere", "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, "a"]]}]},
+     r"shapes\[0\]\.matrix: .* is not a 4x4 list of finite numbers"),
+    ({"shapes": [{"type": "sphere", "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1]]}]},
+     r"shapes\[0\]\.matrix: .* is not a 4x4 list of finite numbers"),
+    ({"shapes": [{"type": "sphere", "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, "1"]]}]},
+     r"shapes\[0\]\.matrix: .* is not a 4x4 list of finite numbers"),
+    ({"shapes": [{"type": "sphere", "matrix": [[True, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]},
+     r"shapes\[0\]\.matrix: .* is not a 4x4 list of finite numbers"),
+    # a misspelt AOV loaded and failed at the render, naming neither file nor key
+    ({"render": {"aovs": ["albdo"]}}, r"render\.aovs: 'albdo' is not an AOV; did you mean 'albedo'\?"),
+    # a colour for an emission never given: ignored without a word
+    ({"shapes": [{"type": "sphere", "emission_color": [1, 0, 0]}]},
+     r"shapes\[0\]\.emission_color: given without 'emission'"),
+])
+def test_what_a_scene_file_cannot_mean_is_said_at_load(change, match):
+    with pytest.raises(SceneError, match=match):
+        draaw_mi.load_scene(dict(BASE, **change))
+    # the same keys given right load
+    good = {"shapes": [{"type": "sphere", "emission": [1, 1, 1], "emission_color": [1, 0, 0],
+                        "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}],
+            "render": {"aovs": ["albedo", "all"][:1]}}
+    draaw_mi.load_scene(dict(BASE, **good))
