@@ -41,6 +41,28 @@ def _unreferenced_message(text: str) -> str | None:
             f"of {what}{hint}")
 
 
+#: Mitsuba's BSDF and texture plugins, for a misspelt one's "did you mean" (those this build has)
+_PLUGIN_NAMES = ("diffuse", "dielectric", "thindielectric", "roughdielectric", "conductor", "roughconductor",
+                 "plastic", "roughplastic", "pplastic", "principled", "principledthin", "twosided", "bumpmap",
+                 "normalmap", "blendbsdf", "mask", "null", "hair", "measured", "polarizer", "retarder",
+                 "circular", "bitmap", "checkerboard", "mesh_attribute", "volume")
+
+
+def _unknown_plugin_message(text: str) -> str | None:
+    """Mitsuba's "At dictionary node "glass": failed to instantiate unknown plugin of type
+    "dielectirc": [PluginManager] Plugin "dielectirc" not found!" as one line naming the node and
+    the closest of Mitsuba's plugins (a TOML material of another BSDF goes to Mitsuba as is)."""
+    m = re.search(r'Plugin "([^"]+)" not found', text)
+    if m is None:
+        return None
+    node = re.search(r'At dictionary node "([^"]+)"', text)
+    manager = mi.PluginManager.instance()
+    known = [n for n in _PLUGIN_NAMES if manager.plugin_type(n) != mi.ObjectType.Unknown]
+    hint = suggest(m.group(1), known)
+    return (f"{node.group(1)!r}: " if node else "") + f"no Mitsuba plugin of type {m.group(1)!r}" + \
+        (hint if "did you mean" in hint else "")
+
+
 def mitsuba_error_message(err: Exception) -> str:
     """The useful line of a Mitsuba loader error (our own DraawError text when it is inside)."""
     text = str(err)
@@ -52,7 +74,7 @@ def mitsuba_error_message(err: Exception) -> str:
     if unused:                                  # (a define, -D NAME=VALUE, of no $NAME)
         names = ", ".join("$" + u.split("=", 1)[0] for u in unused)
         return f"define {', '.join(u.strip() for u in unused)}: the file and its includes use no {names}"
-    unknown = _unreferenced_message(text)
+    unknown = _unreferenced_message(text) or _unknown_plugin_message(text)
     if unknown:
         return unknown
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]

@@ -171,3 +171,15 @@ def test_what_a_scene_file_cannot_mean_is_said_at_load(change, match):
                         "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}],
             "render": {"aovs": ["albedo", "all"][:1]}}
     draaw_mi.load_scene(dict(BASE, **good))
+
+
+def test_a_misspelt_mitsuba_plugin_of_a_material_is_named_with_the_closest():
+    """A TOML material of another Mitsuba BSDF goes to Mitsuba as is: a misspelt type said only
+    '[PluginManager] Plugin "dielectirc" not found!', without a suggestion as draaw materials,
+    lights and shapes get."""
+    with pytest.raises(SceneError, match=r"'glass': no Mitsuba plugin of type 'dielectirc'; did you mean 'dielectric'\?$"):
+        draaw_mi.load_scene(dict(BASE, materials={"glass": {"type": "dielectirc"}},
+                                 shapes=[{"type": "sphere", "material": "glass"}]))
+    with pytest.raises(SceneError, match=r"'glass': no Mitsuba plugin of type 'xyzzy'$"):
+        draaw_mi.load_scene(dict(BASE, materials={"glass": {"type": "xyzzy"}},
+                                 shapes=[{"type": "sphere", "material": "glass"}]))
