@@ -166,12 +166,10 @@ class DraawScene:
         """
         found = []
         with RENDER_GUARD:
-            own = self.own_traversal
-            for key, (cur, vtype, node, _) in own.properties.items():
-                if isinstance(node, mi.Shape):          # (their arrays are wide by design)
-                    continue
-                value = cur if vtype is None else own.get_property(cur, vtype, node)
-                if dr.is_jit_v(value) and not dr.is_tensor_v(value) and dr.width(value) > 1:
+            for key, value, node in self._own_values():
+                # (a shape's arrays are wide by design)
+                if (not isinstance(node, mi.Shape) and dr.is_jit_v(value) and not dr.is_tensor_v(value)
+                        and dr.width(value) > 1):
                     found.append(f"{key} holds {dr.width(value)} values")
                     if len(found) >= limit:
                         break
@@ -188,11 +186,16 @@ class DraawScene:
                     self._own = mi.traverse(self.mi_scene)
         return self._own
 
-    def _watched_values(self):
-        """``(key, value, stamp)`` of every value :meth:`out_of_range` reads (:func:`_seen`)."""
+    def _own_values(self):
+        """``(key, value, plugin object)`` of every parameter of :attr:`own_traversal`, each
+        value read from its plugin now."""
         own = self.own_traversal
         for key, (cur, vtype, node, _) in own.properties.items():
-            value = cur if vtype is None else own.get_property(cur, vtype, node)
+            yield key, (cur if vtype is None else own.get_property(cur, vtype, node)), node
+
+    def _watched_values(self):
+        """``(key, value, stamp)`` of every value :meth:`out_of_range` reads (:func:`_seen`)."""
+        for key, value, _ in self._own_values():
             seen = _seen(value)
             if seen is not None:
                 yield key, value, seen
