@@ -79,6 +79,10 @@ def _cmd_speed_suite(args) -> int:
                        f"{'it' if len(ignored) == 1 else 'them'} out")
     versions = args.versions.split(",") if args.versions else ["v4"]
     for v in versions:
+        try:
+            resolve_version(v)
+        except DraawError as e:
+            raise CliError(f"bench --suite speed: --versions {args.versions!r}: {e}") from None
         if resolve_version(v) == SCENE_VERSION:   # (it failed after the reference had rendered)
             raise CliError(f"bench --suite speed: --versions {v!r}: the suite's scenes are built in "
                            "Python and name no integrator of their own; give v1..v4, path or prb")

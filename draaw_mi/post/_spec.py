@@ -22,6 +22,8 @@ import numpy as np
 from ..errors import ParameterError, suggest
 from ._util import as_image, finite_rgb, join_alpha, split_alpha
 
+MIN_ALPHA = 2.0 ** -63       # alpha at or below this counts as 0 (c / a and a^2 stay finite)
+
 #: Boundary modes of the neighbourhood filters, named as in ``scipy.ndimage`` / ``dr.convolve``.
 BOUNDARIES = ("reflect", "nearest", "mirror", "wrap", "zero")
 
@@ -254,11 +256,14 @@ class FilterSpec:
         RGBA, as EXR stores it): a ``straight`` effect (a display curve: sRGB, GO-Draaw's grades)
         acts on the colour itself, ``c / a``, and the result is multiplied
         by ``a`` again; an encoding of ``c a`` had stored ``srgb(0.125 c)`` for a pixel an
-        eighth covered (dark fringes). Alpha-0 pixels keep their colour as it is."""
+        eighth covered (dark fringes). Pixels of alpha at most :data:`MIN_ALPHA` (2^-63) keep
+        their colour as it is."""
         if alpha is None or not self.straight or params["amount"] == 0.0:
             return self.run_rgb(rgb, params)
-        # (alpha as write_png reads it: in [0, 1]; an infinite one had made 0 * inf = NaN)
-        a = dr.select((alpha.array > 0.0) & dr.isfinite(alpha.array), dr.minimum(alpha.array, 1.0), 1.0)
+        # (alpha as write_png reads it: in [0, 1]; an infinite one had made 0 * inf = NaN.
+        # Below MIN_ALPHA the pixel counts as uncovered: a subnormal alpha, flushed to 0 by the
+        # vector kernel, made c / a infinite and the colour NaN, and a**2 in the gradient 0)
+        a = dr.select((alpha.array > MIN_ALPHA) & dr.isfinite(alpha.array), dr.minimum(alpha.array, 1.0), 1.0)
         a3 = mi.TensorXf(dr.repeat(a, 3), rgb.shape)       # (one alpha per colour value)
         return self.run_rgb(rgb / a3, params) * a3
 

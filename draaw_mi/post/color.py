@@ -185,10 +185,14 @@ QUANT_TOLERANCE = 2.0 ** -22
 def _color_mapping(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
     # N·(1 + 2⁻²²): quantised values k/N (rounded to float32) map back to k, so the filter is
     # idempotent; it moves the level boundaries by a relative 2.4e-7 only
+    # a true division, by an opaque N: k * (1/N) (which Dr.Jit makes of a division by a
+    # literal) rounded levels k past ~2^21 off k/N, and a second pass moved them up a level
     n = per_channel(rgb, [v * (1.0 + QUANT_TOLERANCE) for v in p.levels])
-    inv = per_channel(rgb, [1.0 / v for v in p.levels])
+    levels = per_channel(rgb, [float(v) for v in p.levels])
+    if isinstance(levels, float):
+        levels = dr.opaque(mi.Float, levels)
     x = rgb.array
-    q = dr.floor(x * n) * inv
+    q = dr.floor(x * n) / levels
     # straight-through estimator: forward = quantised, backward = identity
     return mi.TensorXf(dr.replace_grad(q, x), rgb.shape)
 
@@ -205,8 +209,10 @@ def color_mapping(image: Any, levels: int | Sequence[int] = 16, *, amount: float
 
     ``f(c) = floor(c · N · (1 + 2⁻²²)) / N`` per channel with N = ``levels`` (or
     ``levels[channel]``); the 2⁻²² tolerance makes quantised values fixed points despite float32
-    rounding (``f(f(c)) = f(c)``). The result is ``lerp(c, f(c), amount)``, repeated
-    ``multipass`` times. HDR values quantise to the same 1/N grid above 1.
+    rounding (``f(f(c)) = f(c)`` while ``c · N < 2^21``, and up to ``2.8e6`` where measured:
+    c < 32 at 65535 levels, c < 8224 at 255; above that float32's rounding outgrows the
+    tolerance). The result is
+    ``lerp(c, f(c), amount)``, repeated ``multipass`` times. HDR values quantise to the same 1/N grid above 1.
 
     Gradients pass straight through (``dr.replace_grad``): ∂f/∂c is taken as 1, so the whole
     filter has gradient 1 for any ``amount`` (the true derivative of ``floor`` is 0 almost

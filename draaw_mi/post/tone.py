@@ -41,7 +41,8 @@ def _linear(rgb: mi.TensorXf, p: SimpleNamespace) -> mi.TensorXf:
 
 
 _GAMMA = Param("gamma", 0.25, lo=0.0, hi=1.0, lo_open=True, aliases=("Gamma",))
-_SCALE = Param("scale", 255.0, lo=0.0, lo_open=True)
+# (float32 kernels: 1 / scale and scale * c stay normal numbers; 1e-39 had made black NaN)
+_SCALE = Param("scale", 255.0, lo=1e-6, hi=1e6)
 _CLAMP = Param("clamp", True, "bool")
 
 LINEAR = FilterSpec("linear", (_GAMMA, _SCALE, _CLAMP), _linear, aliases=("lin", "gamma"), straight=True)
@@ -60,7 +61,7 @@ def linear(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool
         image: (H, W, 3) or (H, W, 4) tensor or float array, linear radiance, 1.0 = white.
         gamma: GO-Draaw's "Gamma" γ. Default 0.25, range (0, 1] (γ → 0 is a step function).
         scale: white level of GO-Draaw's colour scale. Default 255; 1 applies
-            ``c^(1/(3γ))`` directly. Range (0, inf).
+            ``c^(1/(3γ))`` directly. Range [1e-6, 1e6].
         clamp: clamp the curve at 1 (GO-Draaw's ``sat8``). Default True.
         amount: blend with the input, default 1.0, range [0, 1].
         multipass: number of passes, default 1, range [1, 100].
@@ -117,7 +118,7 @@ def log(image: Any, gamma: float = 0.25, *, scale: float = 255.0, clamp: bool = 
     Args:
         image: (H, W, 3) or (H, W, 4) tensor or float array, 1.0 = white.
         gamma: GO-Draaw's "Gamma" γ. Default 0.25, range (0, 1].
-        scale: white level of GO-Draaw's colour scale. Default 255, range (0, inf).
+        scale: white level of GO-Draaw's colour scale. Default 255, range [1e-6, 1e6].
         clamp: clamp the curve at 1 (GO-Draaw's ``sat8``). Default True.
         amount: blend with the input, default 1.0, range [0, 1].
         multipass: number of passes, default 1, range [1, 100].

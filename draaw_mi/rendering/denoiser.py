@@ -21,8 +21,8 @@ Parameter          Meaning
 ``clean_aux``      True when ``albedo`` / ``normal`` are noise-free (many-spp AOVs)
 =================  ===========================================================================
 
-The result has the input's type (``mi.TensorXf`` in, ``mi.TensorXf`` out; numpy in, numpy out)
-and shape. Non-finite input values are replaced by 0 before denoising (OIDN would spread them).
+The result has the input's shape, and its type where it is a numpy array (numpy in, numpy
+out); any other input (a tensor, nested lists) gives an ``mi.TensorXf``. Non-finite input values are replaced by 0 before denoising (OIDN would spread them).
 
 Example (skipped when ``pyoidn`` is missing)::
 
@@ -180,6 +180,9 @@ class Denoiser:
     def __init__(self, hdr: bool = True, quality: str = "high", clean_aux: bool = False):
         if quality not in QUALITIES:
             raise ParameterError(f"Denoiser: quality={quality!r}; expected one of {', '.join(QUALITIES)}")
+        for flag, value in (("hdr", hdr), ("clean_aux", clean_aux)):
+            if not isinstance(value, bool):
+                raise ParameterError(f"Denoiser: {flag}={value!r}; expected True or False")
         self.hdr, self.quality, self.clean_aux = hdr, quality, clean_aux
 
     def __call__(self, image, albedo=None, normal=None):

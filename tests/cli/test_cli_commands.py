@@ -216,6 +216,7 @@ def test_bench_checks_its_camera_path_before_the_study(tmp_path, tiny_file, caps
     (["--repeats", "0"], "--repeats 0"),
     # (the reference rendered, then Mitsuba refused the suite's scene dict for 'scene')
     (["--versions", "scene"], "--versions 'scene': the suite's scenes are built in Python"),
+    (["--versions", "v4,,path"], "bench --suite speed: --versions 'v4,,path': render version ''"),
     (["--spp", ""], "--spp '': empty"),                 # (was the default, silently)
 ])
 def test_bench_suite_speed_checks_its_flags(tmp_path, capsys, flags, message):

@@ -29,8 +29,8 @@ BAD_VALUES = {
     "edge_detection": [("distance", 33.0), ("color", "red")],
     "lighten": [("strength", -2.0)],
     "crt": [("base", 1.5), ("glow", 81.0), ("radius", 101.0), ("seed", -1), ("seed", 0.5)],
-    "linear": [("gamma", 0.0), ("gamma", 1.5), ("scale", 0.0)],
-    "log": [("gamma", -0.1)],
+    "linear": [("gamma", 0.0), ("gamma", 1.5), ("scale", 0.0), ("scale", 1e39)],
+    "log": [("gamma", -0.1), ("scale", 1e-39), ("scale", 2e6)],
     "srgb": [("inverse", "sometimes")],
 }
 

@@ -100,3 +100,14 @@ def test_quantised_values_are_fixed_points_for_every_level_count():
                                       err_msg=f"levels={n}")
     np.testing.assert_array_equal(post.color_mapping(img, 100, multipass=3).numpy(),
                                   post.color_mapping(img, 100).numpy())
+
+
+def test_quantised_hdr_values_are_fixed_points_up_to_2_5e6_levels():
+    """HDR values up to c N = 2.55e6 are fixed points too: k * (1/N), which Dr.Jit made of a
+    division by the literal N, rounded 6 of these levels (k past 2^21) off k / N, and a
+    second pass moved them a level up."""
+    x = np.linspace(0.0, 10000.0, 12288, dtype=np.float32)
+    img = np.repeat(x[:, None, None], 3, axis=2)
+    once = post.color_mapping(img, 255).numpy()
+    np.testing.assert_array_equal(post.color_mapping(once, 255).numpy(), once)
+

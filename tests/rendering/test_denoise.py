@@ -90,6 +90,15 @@ def test_bad_arguments_name_the_argument(kwargs, match):
         draaw_mi.denoise(**args)
 
 
+@pytest.mark.parametrize("kwargs, match", [({"quality": "best"}, "Denoiser: quality='best'"),
+                                           ({"hdr": "no"}, "Denoiser: hdr='no'"),
+                                           ({"clean_aux": 3}, "Denoiser: clean_aux=3")])
+def test_the_denoiser_class_checks_its_options_when_made(kwargs, match):
+    """hdr and clean_aux were taken as given and failed at the first call, named 'denoise'."""
+    with pytest.raises(ParameterError, match=match):
+        Denoiser(**kwargs)
+
+
 def test_missing_pyoidn_is_one_clear_error(monkeypatch, tmp_path, capsys, cornell):
     monkeypatch.setitem(sys.modules, "pyoidn", None)          # import pyoidn -> ImportError
     with pytest.raises(DenoiserMissing, match=r"pip install 'draaw-mi\[denoise\]'"):
