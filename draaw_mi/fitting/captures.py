@@ -19,6 +19,7 @@ overrides is set to this capture's value, or back to the scene's own.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import dataclass, field
 
@@ -176,6 +177,8 @@ def render_capture(scene, capture: dict, spp: int = 64, version: str = "v4", see
 
         img = render_capture(scene, {"camera": {"origin": [2, 1, 3]}, "lights": {"sun": 0.0}})
     """
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed <= 0xFFFFFFFF:
+        raise ParameterError(f"render_capture: seed={seed!r}; expected an integer in [0, {0xFFFFFFFF}]")
     p = scene.params
     try:                       # (the checks a fit's captures pass, in this function's words)
         (c,) = parse_captures([capture], references=[None])

@@ -90,7 +90,7 @@ from .polish import POLISH_LR, joined, polish_maps, polish_samples
 from .reference import check_reference_size, display_encoded_post, is_display_reference, load_reference, unclipped_mask
 from .problem import FitProblem, PassLoss
 from .history import history_entry, progress_values
-from .report import report
+from .report import leave_in_callers_scene, report
 from .result import FitResult
 from .settings import FitSettings, validate
 from .start import fit_parameters
@@ -219,6 +219,9 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
     """The scene at the references' size, its views, the integrator and the parameters."""
     if isinstance(params, str):
         params = [params]
+    if not isinstance(params, (list, tuple)) or not all(isinstance(k, str) for k in params):
+        hint = " (start values go in init=)" if isinstance(params, dict) else ""
+        raise ParameterError(f"fit: params={params!r}; expected a name or a list of names{hint}")
     if not params:
         raise ParameterError("fit: params is empty; name at least one parameter, e.g. 'mat.roughness'")
     if not isinstance(scene, DraawScene):
@@ -249,7 +252,7 @@ def _set_up(scene, references, params, views, s: FitSettings, captures) -> FitPr
             raise ParameterError(f"fit: resolution {tuple(s.resolution)} differs from the references' {w}x{h}")
         check_reference_size(scene, w, h, given[0])
         scene = scene.with_resolution(w, h)
-    sensors = view_sensors(scene, views)
+    sensors = view_sensors(scene, views, cameras_of_captures=captures is not None)
     spp = sampler_spp(scene, s.spp, "spp")
     spp_grad = None if s.spp_grad is None else sampler_spp(scene, s.spp_grad, "spp_grad")
     if len(sensors) != len(refs):
@@ -394,6 +397,7 @@ def _iterate(problem: FitProblem, s: FitSettings, opt):
             problem.overrides.restore(p)
             with holding(problem.scene):
                 p.update()
+            leave_in_callers_scene(problem, keys)
     return history, compiles
 
 

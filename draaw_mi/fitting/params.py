@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 if TYPE_CHECKING:
@@ -16,9 +17,16 @@ RANGES = {
     "roughness": (0.0, 1.0), "metallic": (0.0, 1.0), "specular": (0.0, 1.0),
     "reflection": (0.0, 1.0), "direct_to_scatter": (0.0, 1.0), "base_color": (0.0, 1.0),
     "reflectance": (0.0, 1.0), "alpha": (1e-3, 1.0), "radiance": (0.0, None), "intensity": (0.0, None),
+    # Mitsuba's own BSDFs (roughplastic, roughconductor, principled, dielectric, conductor)
+    "diffuse_reflectance": (0.0, 1.0), "specular_reflectance": (0.0, 1.0),
+    "specular_transmittance": (0.0, 1.0), "alpha_u": (1e-3, 1.0), "alpha_v": (1e-3, 1.0),
+    "spec_tint": (0.0, 1.0), "anisotropic": (0.0, 1.0), "sheen": (0.0, 1.0),
+    "sheen_tint": (0.0, 1.0), "clearcoat": (0.0, 1.0), "clearcoat_gloss": (0.0, 1.0),
+    "spec_trans": (0.0, 1.0), "flatness": (0.0, 1.0), "eta": (1e-3, None), "k": (0.0, None),
+    "albedo": (0.0, 1.0), "sigma_t": (0.0, None),
 }
 # parameter name suffix -> space Adam works in ("log": the optimiser moves log(value))
-SPACES = {"roughness": "log", "alpha": "log"}
+SPACES = {"roughness": "log", "alpha": "log", "alpha_u": "log", "alpha_v": "log"}
 # Smallest roughness the log-space optimiser visits, as a multiple of sqrt(alpha_min): with
 # alpha = sqrt(roughness^4 + alpha_min^2) (draaw BSDF), roughness 0.6 * sqrt(alpha_min) gives
 # alpha = 1.06 * alpha_min, so every roughness below it renders the same (0.019 for the default
@@ -57,6 +65,8 @@ class FitParam:
         # a texture (a tensor): its shape, to give the scene back a value it takes
         self.shape = tuple(value.shape) if dr.is_tensor_v(value) else None
         self.lo, self.hi = range_for(key, scene)
+        if self.lo is None and self.hi is None and isinstance(value, mi.Color3f):
+            self.lo = 0.0          # a colour with no entry above: at least not negative
         self.space = space_for(key)
         if self.space == "log":
             floor = self.lo if self.lo else 0.0

@@ -80,6 +80,9 @@ class PassLoss:
         img = image[:, :, :3] if image.shape[2] > 3 else image
         if self.smooth:
             flat = dr.detach(img)
+            # a non-finite pixel leaves the mean as it was (it had stayed NaN for the rest
+            # of the run: every later loss NaN, the fit never settled)
+            flat = dr.select(dr.isfinite(flat), flat, mean)
             mean = mean + w * (flat - mean)
             img = mean + (img - flat)      # the mean's value, the current render's derivative
         if self.chain is not None:

@@ -65,14 +65,7 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
         if ref.lower().endswith(".exr"):
             arr = _exr_colour(ref, *read_exr(ref, with_names=True), who)
         elif ref.lower().endswith(DISPLAY_SUFFIXES):
-            import matplotlib.image  # (0.16 s to import: PNG/JPEG references only)
-            try:
-                arr = matplotlib.image.imread(ref)
-            except Exception as e:  # noqa: BLE001
-                raise IOFailure(f"{who}: cannot read reference {ref!r}: {e}") from None
-            arr = arr.astype(np.float32) / (255.0 if np.issubdtype(arr.dtype, np.integer) else 1.0)
-            if arr.ndim == 3 and arr.shape[2] in (2, 4):
-                arr = arr[..., :-1]                    # (grey or colour) + alpha
+            arr = _display_file(ref, who)
             if not encoded:
                 arr = srgb_decode(arr)
         else:
@@ -91,6 +84,24 @@ def load_reference(ref, encoded: bool = False, who: str = "fit") -> np.ndarray:
         what = f"reference {ref!r}" if isinstance(ref, str) else "a reference image"
         raise ParameterError(f"{who}: {what} has {bad} pixel(s) with NaN or Inf (first at x={x}, y={y})")
     return arr
+
+
+def _display_file(path: str, who: str) -> np.ndarray:
+    """A PNG or JPEG reference's values as stored, in [0, 1] (sRGB-encoded), alpha dropped: read
+    by Mitsuba's bitmap, which keeps a 16-bit file's precision (matplotlib's reader had cut a
+    16-bit RGB PNG to 8 bits)."""
+    try:
+        bitmap = mi.Bitmap(path)
+    except Exception as e:  # noqa: BLE001  (a missing or corrupt file: Mitsuba's message)
+        raise IOFailure(f"{who}: cannot read reference {path!r}: {e}") from None
+    pf = mi.Bitmap.PixelFormat
+    fmt = bitmap.pixel_format()
+    if fmt not in (pf.Y, pf.YA, pf.RGB, pf.RGBA):
+        raise ParameterError(f"{who}: reference {path!r} has {bitmap.channel_count()} channels "
+                             f"({fmt.name}); expected a grey or colour image")
+    target = pf.Y if fmt in (pf.Y, pf.YA) else pf.RGB
+    out = bitmap.convert(target, mi.Struct.Type.Float32, srgb_gamma=bool(bitmap.srgb_gamma()))
+    return np.array(out, dtype=np.float32).reshape(out.height(), out.width(), -1)
 
 
 def _exr_colour(path: str, arr: np.ndarray, names: list, who: str) -> np.ndarray:
@@ -121,7 +132,14 @@ def _array_reference(ref, who: str) -> np.ndarray:
         raise ParameterError(f"{who}: reference mi.Bitmap of component format {ref.component_format()}; "
                              "expected float values (linear): pass the PNG file, or "
                              "bitmap.convert(component_format=mi.Struct.Type.Float32, srgb_gamma=False)")
-    raw = np.asarray(ref) if not isinstance(ref, (mi.TensorXf, mi.Bitmap)) else None
+    try:
+        raw = np.asarray(ref) if not isinstance(ref, (mi.TensorXf, mi.Bitmap)) else None
+    except ValueError:                               # (nested lists of unequal lengths)
+        raw = np.asarray(ref, dtype=object)
+    if raw is not None and (raw.dtype == object or raw.ndim not in (2, 3)):
+        stacked = " (one reference per view: pass a list of (H, W, C) arrays)" if raw.ndim == 4 else ""
+        raise ParameterError(f"{who}: reference of shape {raw.shape} and dtype {raw.dtype}; expected "
+                             f"an (H, W) or (H, W, C) array of floats{stacked}")
     if raw is not None and not np.issubdtype(raw.dtype, np.floating):
         raise ParameterError(f"{who}: reference array of dtype {raw.dtype}; expected float values "
                              "(linear): divide 8-bit values by 255 and decode sRGB, or pass the PNG file")

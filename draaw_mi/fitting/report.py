@@ -22,6 +22,20 @@ def averaged_count(s: FitSettings) -> int:
     return max(1, int(round(s.iterations * s.average_last)))
 
 
+def leave_in_callers_scene(problem: FitProblem, keys) -> None:
+    """The fitted ``keys`` of ``problem.scene`` copied into the scene the caller gave, where the
+    fit ran on a copy at the references' size (at the end of a fit, and when it is interrupted)."""
+    if problem.callers_scene is problem.scene:
+        return
+    p = problem.scene.all_params
+    with holding(problem.callers_scene):            # (no render of it sees half the values)
+        q = problem.callers_scene.all_params
+        for k in keys:
+            q[k] = type(p[k])(p[k])
+        q.update()
+        session_of(problem.callers_scene).scene_changed()
+
+
 def report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: int, t0: float) -> FitResult:
     """The iterates averaged over the last ``average_last`` of the run, set in the scene (and
     in the caller's, when the fit rendered a copy), a final render and the result."""
@@ -73,13 +87,7 @@ def report(problem: FitProblem, s: FitSettings, opt, history: list, compiles: in
     if problem.chain is not None:
         final = apply_chain(final, problem.chain)
     final = np.array(final)
-    if problem.callers_scene is not scene:          # fitted at the references' size: a copy
-        with holding(problem.callers_scene):        # (no render of it sees half the values)
-            q = problem.callers_scene.all_params
-            for k in keys:
-                q[k] = type(p[k])(p[k])
-            q.update()
-            session_of(problem.callers_scene).scene_changed()
+    leave_in_callers_scene(problem, keys)
     return FitResult(values=fitted, history=history, image=final[..., :3], converged=settled(history, s.tol),
                      iterations=s.iterations, seconds=time.perf_counter() - t0, kernel_compiles=compiles,
                      exposure_stops=float(np.mean([h["exposure_stops"] for h in history[-n_avg:]]))

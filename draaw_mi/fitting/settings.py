@@ -84,6 +84,10 @@ def validate(s: FitSettings) -> FitSettings:
         raise ParameterError(f"fit: tol={s.tol!r}; expected a number >= 0")
     if s.batch is not None and (isinstance(s.batch, bool) or not isinstance(s.batch, numbers.Integral) or s.batch < 1):
         raise ParameterError(f"fit: batch={s.batch!r}; expected an integer >= 1 (views per iteration) or None")
+    if s.max_depth is not None and (isinstance(s.max_depth, bool) or not isinstance(s.max_depth, numbers.Integral)
+                                    or s.max_depth < -1):
+        raise ParameterError(f"fit: max_depth={s.max_depth!r}; expected an integer >= -1 (-1: unbounded) "
+                             "or None (the scene's)")
     if s.smooth is not None and not isinstance(s.smooth, (bool, np.bool_)):
         raise ParameterError(f"fit: smooth={s.smooth!r}; expected True, False or None")
     return s

@@ -300,7 +300,8 @@ def _captures_error(view, values: dict, caps: list, refs: list, masks: list, ver
     for i, (c, ref, mask) in enumerate(zip(caps, refs, masks)):
         setup = {k: v for k, v in c.items() if k != "reference"}
         target = np.asarray(ref)[..., :3]
-        a, b = (render_capture(view, setup, spp=spp, version=version, seed=seed + i + k).astype(np.float64) - target
+        a, b = (render_capture(view, setup, spp=spp, version=version,
+                               seed=(seed + i + k) & 0xFFFFFFFF).astype(np.float64) - target
                 for k in (0, SECOND_RENDER))
         if mask is not None:
             m = np.asarray(mask)[..., :a.shape[2]]

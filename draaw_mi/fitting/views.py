@@ -20,9 +20,10 @@ if TYPE_CHECKING:
 LOSSES = ("l2", "l1", "relative_l2")
 
 
-def view_sensors(scene: DraawScene, views):
+def view_sensors(scene: DraawScene, views, cameras_of_captures: bool = False):
     """Sensors for each view: the scene's own camera, or camera tables as in [camera] (a view
-    of None: the scene's camera)."""
+    of None: the scene's camera). ``cameras_of_captures``: the views are the ``camera`` of
+    each of fit's ``captures`` (and named so in errors)."""
     if views is None:
         return [scene.mi_scene.sensors()[0]]
     if not isinstance(views, (list, tuple)) or not views:
@@ -52,7 +53,8 @@ def view_sensors(scene: DraawScene, views):
                 raise ParameterError(f"fit: views[{i}] has fov_axis but no fov; give both, or neither "
                                  "for the scene camera's")
             v = {**v, "fov": x_fov, "fov_axis": "x"}
-        look = camera_to_look_at(v, Where("fit") / "views" / i)
+        where = Where("fit") / "captures" / i / "camera" if cameras_of_captures else Where("fit") / "views" / i
+        look = camera_to_look_at(v, where)
         out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], rfilter,
                                             scene.settings.get("sampler", "independent"))))
     return out

@@ -231,3 +231,114 @@ def test_a_vector_init_takes_its_count_of_numbers_and_no_grey():
     two = mi.Point3f([0.0, 0.0], [0.0, 0.0], [0.0, 0.0])
     for value in ([[1, 2, 3], [4, 5, 6]], mi.Point3f([1, 4], [2, 5], [3, 6]), [1, 2, 3, 4, 5, 6]):
         assert np.array(value_start("p", value, two)).T.tolist() == [[1, 2, 3], [4, 5, 6]], value
+
+
+def _plain_scene(bsdf: dict) -> "draaw_mi.DraawScene":
+    T = mi.ScalarTransform4f
+    return draaw_mi.load_scene({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 30,
+                   "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 16, "height": 16, "rfilter": {"type": "gaussian"}},
+                   "sampler": {"type": "independent", "sample_count": 4}},
+        "obj": {"type": "sphere", "bsdf": bsdf},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}})
+
+
+def test_a_mitsuba_materials_parameters_keep_their_range():
+    """roughplastic's diffuse_reflectance and roughconductor's alpha_u had no range: fitted
+    towards a black reference (darker than the plastic's specular alone) the colour went to
+    -0.19, and alpha_u below 0; both are projected now (alpha_u in log space, as alpha)."""
+    from draaw_mi.fitting.params import range_for, space_for
+    assert range_for("obj.bsdf.alpha_u.value") == (1e-3, 1.0) and space_for("obj.bsdf.alpha_v.value") == "log"
+    assert range_for("obj.bsdf.specular_transmittance.value") == (0.0, 1.0)
+    s = _plain_scene({"type": "roughplastic", "alpha": 0.3,
+                      "diffuse_reflectance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}})
+    key = next(k for k in s.params.keys() if "diffuse_reflectance" in k)
+    res = draaw_mi.fit(s, np.zeros((16, 16, 3), np.float32), [key], iterations=12, spp=4, lr=0.05,
+                       progress=False, version="prb")
+    assert min(min(h["values"][key]) for h in res.history) >= 0.0
+
+
+def test_a_non_finite_pixel_leaves_the_running_mean_as_it_was():
+    """With smooth on, one NaN pixel entered the running mean of renders and stayed: every
+    later loss NaN, the fit never settled."""
+    from draaw_mi.fitting.problem import PassLoss
+    ref = mi.TensorXf(np.full((2, 2, 3), 0.5, np.float32))
+    mean = mi.TensorXf(np.full((2, 2, 3), 0.4, np.float32))
+    bad = np.full((2, 2, 3), 0.6, np.float32)
+    bad[1, 1, 0] = np.nan
+    _, (_, mean) = PassLoss("l2", "fixed", 1.0, smooth=True)(mi.TensorXf(bad), ref, None, mean, 0.5)
+    got = mean.numpy()
+    assert np.all(np.isfinite(got)) and got[1, 1, 0] == pytest.approx(0.4) and got[0, 0, 0] == pytest.approx(0.5)
+    good = mi.TensorXf(np.full((2, 2, 3), 0.6, np.float32))
+    value, _ = PassLoss("l2", "fixed", 1.0, smooth=True)(good, ref, None, mean, 0.5)
+    assert np.isfinite(float(value[0]))
+
+
+def test_an_interrupted_fit_of_a_resized_copy_leaves_its_iterate_in_the_callers_scene(monkeypatch):
+    """Ctrl-C in a fit whose references are smaller than the scene's film (the fit renders a
+    copy) left the caller's scene at its start values; the end of a fit had copied them."""
+    from draaw_mi.fitting import fitter
+    orig = fitter.history_entry
+
+    def interrupting(problem, s, opt, it, *a):
+        if it == 3:
+            raise KeyboardInterrupt
+        return orig(problem, s, opt, it, *a)
+
+    monkeypatch.setattr(fitter, "history_entry", interrupting)
+    scene = draaw_mi.load_scene(_scene())                         # 16 x 16
+    start = float(np.array(scene.params[scene.key("target.roughness")])[0])
+    with pytest.raises(KeyboardInterrupt):
+        draaw_mi.fit(scene, np.zeros((8, 8, 3), np.float32), P, iterations=10, spp=1, lr=0.1, progress=False)
+    assert float(np.array(scene.params[scene.key("target.roughness")])[0]) != pytest.approx(start)
+
+
+def test_the_two_starts_merge_takes_the_largest_seed():
+    """fit() takes seeds up to 2^32 - 1, but the merge of fit_two_starts rendered seed + i +
+    SECOND_RENDER unmasked: a nanobind TypeError after both fits had run."""
+    from draaw_mi.fitting.captures import render_capture
+    from draaw_mi.fitting.two_starts import _captures_error
+    scene = draaw_mi.load_scene(_scene(resolution=[8, 8]))
+    caps = [{"camera": None, "lights": {}, "params": {}}]
+    ref = np.full((8, 8, 3), 0.2, np.float32)
+    assert np.isfinite(_captures_error(scene, {"target.roughness": 0.4}, caps, [ref], [None], "v4", 1, 0xFFFFFFFF))
+    with pytest.raises(ParameterError, match=r"render_capture: seed=-1; expected an integer"):
+        render_capture(scene, {}, spp=1, seed=-1)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"params": {"target.roughness": 0.9}}, r"params=\{'target.roughness': 0.9\}; expected a name or a list "
+                                            r"of names \(start values go in init=\)"),
+    ({"params": 3}, r"params=3; expected a name or a list of names"),
+    ({"max_depth": "4"}, r"max_depth='4'; expected an integer >= -1"),
+    ({"max_depth": True}, r"max_depth=True"),
+    ({"max_depth": 2.7}, r"max_depth=2.7"),
+    ({"references": np.zeros((2, 16, 16, 3), np.float32)}, r"shape \(2, 16, 16, 3\).*one reference per view"),
+    ({"references": [[0.1, 0.2], [0.3]]}, r"references\[0\]: reference of shape \(2,\)"),
+    ({"references": None, "captures": [{"reference": np.zeros((16, 16, 3), np.float32),
+                                        "camera": {"origin": "x"}}]}, r"fit: captures\[0\]\.camera\.origin"),
+])
+def test_what_fit_is_given_is_checked_by_name(kw, match):
+    """A dict of params dropped its values silently, an int raised a bare TypeError; max_depth
+    of any type passed; a stacked array of references named to_numpy; a capture's camera was
+    named views[0]."""
+    args = {"references": np.zeros((16, 16, 3), np.float32), "params": P}
+    args.update(kw)
+    with pytest.raises(DraawError, match=match):
+        draaw_mi.fit(_scene(), args.pop("references"), args.pop("params"), iterations=1, spp=1,
+                     progress=False, **args)
+
+
+def test_a_16_bit_png_reference_keeps_its_precision(tmp_path):
+    """matplotlib's reader cut a 16-bit RGB PNG to 8 bits (40000 / 65535 read 0.6118 for 0.6104);
+    grey kept its 16 bits."""
+    from draaw_mi.fitting.reference import load_reference
+    for fmt, arr in (("Y", np.full((4, 4), 40000, np.uint16)), ("RGB", np.full((4, 4, 3), 40000, np.uint16)),
+                     ("RGBA", np.full((4, 4, 4), 40000, np.uint16))):
+        path = str(tmp_path / f"r_{fmt}.png")
+        mi.Bitmap(arr, pixel_format=getattr(mi.Bitmap.PixelFormat, fmt)).write(path)
+        got = load_reference(path, encoded=True)
+        assert got.shape == (4, 4, 3)
+        np.testing.assert_allclose(got, 40000 / 65535, rtol=1e-6, err_msg=fmt)
