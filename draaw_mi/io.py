@@ -99,13 +99,17 @@ def atomic_path(path: str, suffix: str):
     hold an intact header over zeroed data (a batch would then count a broken frame as done).
     """
     path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
+    # the folder as the OS resolves it (symbolic links followed, then ".."), and the file
+    # renamed into that same folder: "d/missing/../x.exr" is d/x.exr for both (abspath alone
+    # folded the ".." while os.replace, given the literal path, needed "missing" to exist)
+    folder = os.path.realpath(os.path.dirname(path) or os.curdir)
+    target = os.path.join(folder, os.path.basename(path))
     if not os.path.isdir(folder):
         try:
             os.makedirs(folder, exist_ok=True)
         except OSError as e:
             raise IOFailure(f"cannot create folder {folder!r} for {path!r}: {e.strerror}") from None
-    if os.path.isdir(path):
+    if os.path.isdir(target):
         raise IOFailure(f"cannot write {path!r}: it is a folder")
     try:
         fd, tmp = tempfile.mkstemp(prefix=".draaw-", suffix=suffix, dir=folder)
@@ -115,14 +119,18 @@ def atomic_path(path: str, suffix: str):
     try:
         yield tmp
         try:                                 # a file replaced keeps its mode (as sed -i does:
-            mode = stat.S_IMODE(os.stat(path).st_mode)      # a read-only or group-readable
+            mode = stat.S_IMODE(os.stat(target).st_mode)    # a read-only or group-readable
         except OSError:                                     # output stays so, not 0644)
             umask = os.umask(0)
             os.umask(umask)
             mode = 0o666 & ~umask            # mkstemp makes 0600 files; give the usual mode
         os.chmod(tmp, mode)
         _fsync(tmp)
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, target)
+        except OSError as e:
+            raise IOFailure(f"cannot write {path!r}: renaming the finished file onto it failed: "
+                            f"{e.strerror}") from None
         _fsync(folder, folder=True)
     finally:
         if os.path.exists(tmp):
@@ -352,7 +360,8 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     out. Without them an image of R, G, B and one AOV (``aovs = ["depth"]``) would be taken
     for RGBA, and X, Y, Z for R, G, B.
 
-    ``exposure`` is in stops (the image is multiplied by 2**exposure before encoding);
+    ``exposure`` is in stops, a finite number (the image is multiplied by 2**exposure before
+    encoding);
     ``encoded``: the image is display-encoded already (a post chain that ends in ``srgb`` or a
     GO-Draaw grade, :func:`draaw_mi.post.display_encoded`; a render of a scene whose ``[[post]]`` does:
     ``encoded=display_encoded(info["post"])`` with ``render(..., return_info=True)``) and is
@@ -365,6 +374,10 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
     if not os.fspath(path).lower().endswith(".png"):
         # (no 8-bit PNG under an .exr name; write_exr refuses the mirror case)
         raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
+    # a finite number of stops (NaN wrote a black image, Inf a white one)
+    if isinstance(exposure, (bool, np.bool_)) or not isinstance(exposure, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(exposure):
+        raise IOFailure(f"write_png({path!r}): exposure={exposure!r}; expected a finite number of stops")
     arr = to_numpy(image, f"write_png({path!r})")
     if channels is not None:
         names = list(channels)

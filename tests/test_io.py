@@ -324,3 +324,38 @@ def test_an_interrupt_during_the_openexr_import_is_not_a_missing_package(monkeyp
                         if name == "OpenEXR" else real_import(name, *a, **k))
     with pytest.raises(IOFailure, match="write_exr: EXR files need the OpenEXR package"):
         openexr("write_exr")
+
+
+@pytest.mark.parametrize("writer, name", [("write_exr", "x.exr"), ("write_png", "x.png"), ("write_text", "r.md")])
+def test_a_path_through_a_missing_folder_and_back_is_written_where_it_resolves(tmp_path, writer, name):
+    """``d/missing/../x.exr``: the temporary file and the rename both go to the folder the
+    path resolves to (d/); abspath folded the ".." for the one, os.replace took the literal
+    path for the other and raised a bare FileNotFoundError."""
+    from draaw_mi import io
+    path = os.path.join(str(tmp_path), "missing", os.pardir, name)
+    data = "x" if writer == "write_text" else np.ones((2, 2, 3), np.float32)
+    getattr(io, writer)(path, data)
+    assert sorted(os.listdir(tmp_path)) == [name]
+
+
+def test_a_failed_rename_is_an_io_failure_naming_the_path(tmp_path, monkeypatch):
+    from draaw_mi import io
+
+    def refuse(src, dst):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(io.os, "replace", refuse)
+    path = str(tmp_path / "x.exr")
+    with pytest.raises(IOFailure, match=rf"cannot write '{path}': renaming the finished file onto it failed: "
+                                        r"Permission denied"):
+        draaw_mi.write_exr(path, np.ones((2, 2, 3), np.float32))
+    assert not list(tmp_path.iterdir())                  # (the temporary file is removed)
+
+
+@pytest.mark.parametrize("exposure", [float("nan"), float("inf"), -float("inf"), "1", None])
+def test_png_exposure_must_be_a_finite_number(tmp_path, exposure):
+    """NaN stops wrote a black image and Inf a white one."""
+    path = str(tmp_path / "e.png")
+    with pytest.raises(IOFailure, match=rf"write_png\('{path}'\): exposure={exposure!r}; expected a finite "
+                                        r"number of stops"):
+        draaw_mi.write_png(path, np.full((2, 2, 3), 0.2, np.float32), exposure=exposure)
+    assert not list(tmp_path.iterdir())

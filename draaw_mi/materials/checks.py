@@ -8,7 +8,14 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..limits import FLOAT32_MAX, FOV_RANGE, HG_G_MAX
-from .draaw_bsdf import SCALAR_PARAMS
+from .draaw_bsdf import NORMALMAP_SLACK, SCALAR_PARAMS
+
+# the parameters whose values check_value knows (a texture nested in one of them holds its
+# values: ``m.roughness.color0.value`` is a checkerboard's colour, a roughness)
+KNOWN_PARAMS = (*SCALAR_PARAMS, "base_color", "normalmap", "radiance", "intensity", "irradiance")
+# a normal map's range when its encoding is not known here: the signed encoding's, with the
+# slack a scene file allows (unsigned maps are in [0, 1], inside it)
+NORMALMAP_RANGE = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK)
 
 
 def check_value(who: str, name: str, key: str, v) -> None:
@@ -28,8 +35,12 @@ def check_value(who: str, name: str, key: str, v) -> None:
     draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
     """
     parts = key.split(".")
-    # the material parameter a ``<shape>.<param>.value`` / ``.data`` key sets (None otherwise)
-    param = parts[-2] if len(parts) >= 3 and parts[-1] in ("value", "data") else None
+    # the material parameter a ``<shape>.<param>.value`` / ``.data`` key sets, also through a
+    # nested texture (``<shape>.<param>.color0.value``): the first known name after the
+    # object's; None otherwise
+    param = None
+    if len(parts) >= 3 and parts[-1] in ("value", "data"):
+        param = next((p for p in parts[1:-1] if p in KNOWN_PARAMS), parts[-2])
     nums = None
     if isinstance(v, (bool, np.bool_, str, bytes)) or v is None:
         raise ParameterError(f"{who}: {name}={v!r}; expected a number")
@@ -43,7 +54,9 @@ def check_value(who: str, name: str, key: str, v) -> None:
             # values in a scene file are); value_like checks their shape
             lo, hi = SCALAR_PARAMS[param][1:] if param in SCALAR_PARAMS else (0.0, FLOAT32_MAX)
             _check_texels(who, name, v, lo, hi)
-        else:                                     # (a normal map, an environment map, ...)
+        elif param == "normalmap":                # (a texel of 1e30 renders black patches)
+            _check_texels(who, name, v, *NORMALMAP_RANGE)
+        else:                                     # (an environment map, ...)
             _check_texels(who, name, v, -FLOAT32_MAX, FLOAT32_MAX)
         return
     elif isinstance(v, (list, tuple, np.ndarray)):
@@ -72,6 +85,10 @@ def check_value(who: str, name: str, key: str, v) -> None:
         lo, hi = SCALAR_PARAMS[param][1:]
         if not all(lo <= x <= hi for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")
+    elif param == "normalmap":
+        lo, hi = NORMALMAP_RANGE
+        if not all(lo <= x <= hi for x in nums):
+            raise ParameterError(f"{who}: {name}={v!r}; expected normal-map components in [{lo:g}, {hi:g}]")
     elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
         raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
 

@@ -67,6 +67,14 @@ Plugin parameters
    - |float|
    - Smallest GGX alpha, in (0, 0.1]. (Default: 1e-3)
 
+A Mitsuba ``bitmap`` texture nested for a data parameter (roughness, metallic, specular,
+reflection, direct_to_scatter, normalmap: XML ``<texture type="bitmap" name="roughness">`` or a
+dict) must be ``raw`` when Mitsuba would sRGB-decode it (8/16-bit PNG, JPEG; half floats):
+without ``<boolean name="raw" value="true"/>`` (``"raw": True``) it raises
+:class:`ParameterError`; a file name (``<string name="roughness" value="rough.png"/>``) is
+read raw. The values of any nested texture (a bitmap's texels, a ``checkerboard``'s colours)
+are checked against the parameter's range.
+
 Values set at load time outside their range raise :class:`ParameterError`; values set by an
 optimiser through ``mi.traverse`` are clamped into range when evaluated, with a straight-through
 gradient (the derivative of the unclamped value), so an optimiser sitting exactly on a bound —

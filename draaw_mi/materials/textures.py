@@ -125,6 +125,49 @@ def texture_values(tex: mi.Texture):
     return None
 
 
+def nested_values(tex: mi.Texture) -> list:
+    """``(key, values)`` for every ``value`` / ``data`` parameter of ``tex`` (key "" for the
+    texture's own, e.g. "color0.value" for a checkerboard's colour): a texture nested in a
+    material holds its numbers there (8/16-bit texels mapped onto [0, 1], as eval() reads them)."""
+    own = texture_values(tex)
+    if own is not None:
+        return [("", own)]
+    params = mi.traverse(tex)
+    out = []
+    for key in params.keys():
+        if key.split(".")[-1] in ("value", "data"):
+            arr = np.array(params[key]).ravel()
+            if np.issubdtype(arr.dtype, np.integer):
+                arr = arr.astype(np.float64) / np.iinfo(arr.dtype).max
+            out.append((key, arr))
+    return out
+
+
+def _refuse_decoded_bitmap(name: str, tex: mi.Texture) -> None:
+    """Refuse a Mitsuba ``bitmap`` texture for the data parameter ``name`` (roughness, a
+    normal map, ...) that Mitsuba sRGB-decodes: not ``raw`` (Mitsuba's default) and of integer
+    or half-float texels, what an 8/16-bit PNG or JPEG becomes (a roughness file's 0.4 would be
+    looked up as 0.133, a flat normal map tilt 39 degrees). A float32 file (EXR) is never
+    decoded and passes; a half-float EXR is refused too (its texels cannot be told from a
+    16-bit PNG's decoded ones here), and ``raw`` changes nothing for it."""
+    if not tex.class_name().startswith("BitmapTexture"):
+        return
+    params = mi.traverse(tex)
+    # (Mitsuba 3.9's bitmap texture states its raw flag only in its description)
+    if "data" not in params.keys() or "raw = 0" not in str(tex):
+        return
+    kind = type(params["data"]).__name__
+    if kind.endswith("Xf") or kind.endswith("Xf64"):      # float32 texels: read as they are
+        return
+    bits = "8-bit" if "u8" in kind else "16-bit (or half-float)"
+    file = str(tex).split('"')[1] if '"' in str(tex) else "an image"      # (its name = "...")
+    raise ParameterError(f"draaw BSDF: {name}: a bitmap texture of {bits} texels ({file}) read without "
+                         "raw: Mitsuba would sRGB-decode this data map (0.4 in the file looked up as "
+                         "0.133); expected raw: add <boolean name=\"raw\" value=\"true\"/> to the "
+                         "<texture> (\"raw\": True in a dict), or give the file name as "
+                         f"<string name=\"{name}\" value=\"...\"/> (read raw)")
+
+
 def channels(tex) -> int | None:
     """The channel count of a bitmap texture's texels (None for any other texture)."""
     params = mi.traverse(tex) if isinstance(tex, mi.Texture) else None
@@ -142,9 +185,12 @@ def texture_property(props: mi.Properties, name: str, default, lo, hi, color: bo
     value = props[name]
     if isinstance(value, mi.Texture):
         tex = value
-        vals = texture_values(tex)
-        if vals is not None:                 # finite always; the range where there is one
-            _check_range(name, lo, hi, vals, "texture values")
+        if name in RAW_BY_DEFAULT:
+            _refuse_decoded_bitmap(name, tex)
+        # every value of it (a bitmap's texels, a constant, each of a checkerboard's colours):
+        # finite always; in the parameter's range where there is one
+        for key, vals in nested_values(tex):
+            _check_range(name, lo, hi, vals, "texture values" if not key else f"texture's {key}")
         return tex
     if isinstance(value, bool):
         raise ParameterError(f"draaw BSDF: {name}={value!r}; expected a number or a texture")

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import user_stacklevel
 from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
-from ..materials.draaw_bsdf import COLOR_PARAMS, OPTIONS, SCALAR_PARAMS
+from ..materials.draaw_bsdf import COLOR_PARAMS, NORMALMAP_SLACK, OPTIONS, SCALAR_PARAMS
 from ..materials.textures import linear_image
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
@@ -24,6 +24,19 @@ if TYPE_CHECKING:
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".bmp", ".tga", ".pfm", ".ppm")
 # negative values a resampled image keeps (Lanczos overshoot) and that are let through
 NEGATIVE_SLACK = 1e-2
+
+# Ranges (lo, hi, lo_open) of plain Mitsuba BSDFs' numeric parameters, for a number or an
+# array given in a scene file: outside them Mitsuba renders without an error yet wrongly
+# (int_ior = 0: most pixels NaN; principled metallic = 3: brighter than its light; a
+# negative alpha). Image files and nested textures of them are passed as they are.
+_POSITIVE, _NONNEG, _UNIT = (0.0, None, True), (0.0, None, False), (0.0, 1.0, False)
+PLAIN_RANGES = {"int_ior": _POSITIVE, "ext_ior": _POSITIVE,
+                "alpha": _NONNEG, "alpha_u": _NONNEG, "alpha_v": _NONNEG}
+# Mitsuba 3.9's principled and principledthin: their weights in [0, 1] (diff_trans in [0, 2])
+_PRINCIPLED = {**dict.fromkeys(("metallic", "roughness", "specular", "spec_tint", "spec_trans",
+                                "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "anisotropic",
+                                "flatness"), _UNIT), "eta": _POSITIVE}
+PLUGIN_RANGES = {"principled": _PRINCIPLED, "principledthin": {**_PRINCIPLED, "diff_trans": (0.0, 2.0, False)}}
 
 
 def check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":
@@ -80,12 +93,10 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
         raw = table.setdefault("raw", not is_colour(name))
         if not isinstance(raw, bool):
             raise (where / "raw").error(f"{shown(raw)}; expected true or false")
-        table.update(image_file(table.pop("filename"), raw, ctx, where, nonneg=is_colour(name) and not linear,
-                                linear=linear))
+        table.update(image_file(table.pop("filename"), raw, ctx, where, nonneg=is_colour(name), linear=linear))
         return table
     if isinstance(value, str):
-        return image_file(value, not is_colour(name), ctx, where, nonneg=is_colour(name) and not linear,
-                          linear=linear)
+        return image_file(value, not is_colour(name), ctx, where, nonneg=is_colour(name), linear=linear)
     if is_nested(value):
         value = nested_array(value, where)
     if isinstance(value, np.ndarray):
@@ -123,17 +134,21 @@ def plain(value, where: Where):
 
 def image_file(file: str, raw: bool, ctx: BuildContext, where: Where, nonneg: bool, linear: bool) -> dict:
     """The ``bitmap`` texture entries for the image ``file`` (found from the scene's folder):
-    ``filename`` and ``raw``, or with ``linear`` its texels (:func:`linear_image`) as ``data``."""
+    ``filename`` and ``raw``, or with ``linear`` its texels (:func:`linear_image`) as ``data``,
+    with ``nonneg`` (a colour) those in [-NEGATIVE_SLACK, 0) as 0 (a resampled EXR's overshoot,
+    let through as a ``diffuse`` reflectance's file is; the draaw BSDF refuses values < 0)."""
     path = ctx.path(file)
     if not os.path.isfile(path):
         raise where.error(f"texture file {file!r} does not exist (looked for {path!r})")
     if not path.lower().endswith(IMAGE_SUFFIXES):
         raise where.error(f"{file!r} is not an image file; expected one of {', '.join(IMAGE_SUFFIXES)}")
-    # (a draaw material's ranges are checked by the BSDF, naming the parameter's range)
+    # (a draaw material's ranges are checked by material_dict, naming the file)
     bitmap = check_image_values(path, file, where, "texture", nonneg)
     if not linear:
         return {"type": "bitmap", "filename": path, "raw": raw}
     data = linear_image(bitmap, raw)
+    if nonneg:
+        data = np.maximum(data, np.float32(0.0))
     return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data)), "raw": True}
 
 
@@ -166,6 +181,33 @@ def nested_array(value, where: Where) -> np.ndarray:
     return arr
 
 
+def check_texels(entry, value, lo: float | None, hi: float | None, lo_open: bool = False,
+                 where: Where | None = None) -> None:
+    """Refuse a draaw material's image file or array (``entry``: its ``bitmap`` dict, ``value``:
+    as the scene gave it) with a texel outside [lo, hi], naming the scene key and the file (or
+    the array) and the first bad texel: the BSDF's own check names neither. ``lo_open``: lo
+    itself is refused too (an index of refraction > 0)."""
+    data = entry.get("data", entry.get("value")) if isinstance(entry, dict) else None
+    if data is None or isinstance(data, (int, float)):       # (numbers: checked by number())
+        return
+    arr = np.asarray(data, dtype=np.float64).reshape(np.shape(data)[:2] + (-1,) if np.ndim(data) >= 2 else (1, 1, -1))
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(arr) | (arr > (np.inf if hi is None else hi))
+        if lo is not None:
+            bad |= (arr <= lo) if lo_open else (arr < lo)
+    if not bad.any():
+        return
+    y, x, c = (int(i[0]) for i in np.nonzero(bad))
+    expected = f"{'>' if lo_open else '>='} {lo:g}" if hi is None else f"in [{lo:g}, {hi:g}]"
+    if np.ndim(data) < 2:                                       # an RGB triple
+        raise where.error(f"{shown(value)} has the component {float(arr[y, x, c]):g}; expected finite "
+                          f"values {expected}")
+    file = value.get("filename") if isinstance(value, dict) else value
+    what = f"texture file {file!r}" if isinstance(file, str) else "texture array"
+    raise where.error(f"{what} has the value {float(arr[y, x, c]):g} at pixel (x={x}, y={y}), channel {c}; "
+                      f"expected finite values {expected}")
+
+
 def _above_one(where: Where, what: str) -> None:
     """Warn of a colour above 1: reflecting more than arrives is allowed, as Mitsuba allows
     it, yet it is what GO-Draaw's 0-255 colours (or a PNG's 8-bit values) give when copied
@@ -191,8 +233,11 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             value = plain(value, wk)
             if key in SCALAR_PARAMS:
                 lo, hi = SCALAR_PARAMS[key][1:]
-                out[key] = number(value, wk, lo=lo, hi=hi) if isinstance(value, (int, float))\
-                    else texture_value(value, key, ctx, wk, linear=True)
+                if isinstance(value, (int, float)):
+                    out[key] = number(value, wk, lo=lo, hi=hi)
+                else:
+                    out[key] = texture_value(value, key, ctx, wk, linear=True)
+                    check_texels(out[key], value, lo, hi, where=wk)
             elif key in COLOR_PARAMS:
                 if isinstance(value, (int, float, list, tuple)) and not isinstance(value, bool)\
                         and not is_nested(value):
@@ -202,6 +247,7 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                     out[key] = {"type": "rgb", "value": rgb}
                 else:
                     out[key] = texture_value(value, key, ctx, wk, linear=True)
+                    check_texels(out[key], value, 0.0, None, where=wk)
                     data = out[key].get("data") if isinstance(value, (list, tuple, np.ndarray)) else None
                     if data is not None and np.nanmax(np.asarray(data)) > 1.0:
                         _above_one(wk, f"an array of values up to {float(np.nanmax(np.asarray(data))):g}")
@@ -217,6 +263,10 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
                 out[key] = boolean(value, wk)
             elif key == "alpha_min":
                 out[key] = number(value, wk, lo=0.0, hi=0.1, lo_open=True)
+        if "normalmap" in out:           # (in its encoding's range, as the BSDF has it)
+            lo, hi = (-1.0, 1.0) if out.get("normalmap_encoding") == "signed" else (0.0, 1.0)
+            check_texels(out["normalmap"], plain(table["normalmap"], where), lo - NORMALMAP_SLACK,
+                         hi + NORMALMAP_SLACK, where=where / "normalmap")
         return out
     # Any other Mitsuba BSDF: pass the parameters through, colours and files as textures,
     # whose values must be finite (a NaN texel of a diffuse reflectance renders NaN pixels in
@@ -228,7 +278,14 @@ def material_dict(name: str, table: dict, ctx: BuildContext, where: Where, two_s
             if isinstance(value, str) and not value.lower().endswith(IMAGE_SUFFIXES):
                 out[key] = value      # a plugin's own string: material = "Au", int_ior = "bk7",
                 continue              # distribution = "beckmann" (none is a texture file)
+            rng = PLUGIN_RANGES.get(kind, {}).get(key) or PLAIN_RANGES.get(key)
+            value = plain(value, where / key)
+            if rng is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+                out[key] = number(value, where / key, lo=rng[0], hi=rng[1], lo_open=rng[2])
+                continue
             out[key] = texture_value(value, key, ctx, where / key, lo=0.0 if nonneg else None)
+            if rng is not None:                    # an array of it (rows, numpy)
+                check_texels(out[key], value, *rng, where=where / key)
             if isinstance(out[key], dict) and "data" in out[key]:     # an array (numpy or rows)
                 arr = np.asarray(out[key]["data"], dtype=np.float64)
                 if not np.isfinite(arr).all() or (nonneg and (arr < -NEGATIVE_SLACK).any()):

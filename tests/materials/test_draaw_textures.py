@@ -290,3 +290,48 @@ def test_a_normal_map_texel_below_the_surface_falls_back_to_the_normal(texel):
     plain = draaw(base_color=0.6, roughness=0.4)
     a, b = (color_np(m.eval(CTX, make_si(wi), vec3(wo))) for m in (mapped, plain))
     assert b.max() > 0 and np.allclose(a, b, rtol=1e-5, atol=1e-7)
+
+
+def _png8(path, value, channels=1):
+    """An 8-bit sRGB-tagged PNG (what an image editor writes) of one value."""
+    from PIL import Image
+    arr = np.full((4, 4, channels), value, np.uint8)
+    Image.fromarray(arr[..., 0] if channels == 1 else arr, "L" if channels == 1 else "RGB").save(path)
+    return str(path)
+
+
+@pytest.mark.parametrize("name, value, channels", [("roughness", 102, 1), ("metallic", 102, 1),
+                                                   ("normalmap", (128, 128, 255), 3)])
+def test_a_nested_bitmap_of_a_data_parameter_must_be_raw(tmp_path, name, value, channels):
+    """A Mitsuba ``bitmap`` nested for a data parameter (XML ``<texture type="bitmap">``, a
+    dict) is sRGB-decoded by Mitsuba unless raw: roughness 0.4 was looked up as 0.133 and a
+    flat normal map tilted 39 degrees, silently. Without raw it is refused, naming the
+    parameter and the fix; with raw it loads and reads the file's 0.4; a colour parameter's
+    bitmap is decoded as a colour should be."""
+    path = _png8(tmp_path / f"{name}.png", value if channels == 1 else np.array(value), channels)
+    with pytest.raises(RuntimeError, match=rf"ParameterError: draaw BSDF: {name}: a bitmap texture of 8-bit texels "
+                                             r"\(.*\.png\) read without raw.*<boolean name=\"raw\" value=\"true\"/>"):
+        mi.load_dict({"type": "draaw", name: {"type": "bitmap", "filename": path}})
+    xml = (f'<bsdf version="3.0.0" type="draaw"><texture type="bitmap" name="{name}">'
+           f'<string name="filename" value="{path}"/></texture></bsdf>')
+    with pytest.raises(RuntimeError, match=rf"ParameterError: draaw BSDF: {name}: a bitmap texture of 8-bit"):
+        mi.load_string(xml)
+    b = mi.load_dict({"type": "draaw", name: {"type": "bitmap", "filename": path, "raw": True}})
+    if channels == 1:                    # (looked up as 102/255 = 0.4, not 0.133)
+        si = make_si([[0.0, 0.0, 1.0]], uv=[[0.5, 0.5]])
+        assert float(np.array(b.eval_attribute_1(name, si))[0]) == pytest.approx(value / 255, abs=1e-6)
+    mi.load_dict({"type": "draaw", "base_color": {"type": "bitmap", "filename": _png8(tmp_path / "c.png", 188, 3)}})
+
+
+@pytest.mark.parametrize("name, table, match", [
+    ("roughness", {"color0": float("nan"), "color1": 0.5}, r"roughness=nan \(texture's color0\.value\) is not finite"),
+    ("metallic", {"color0": 7.0, "color1": 0.5}, r"metallic=7 \(texture's color0\.value\) is above 1\.0"),
+    ("metallic", {"color0": 0.5, "color1": -3.0}, r"metallic=-3 \(texture's color1\.value\) is below 0\.0"),
+])
+def test_a_nested_checkerboards_values_are_range_checked(name, table, match):
+    """A texture that is not a bitmap (a checkerboard) holds its values as ``color0.value``
+    and ``color1.value``: each is held to the parameter's range (a NaN roughness and a
+    metallic of 7 and -3 loaded without a word)."""
+    with pytest.raises(RuntimeError, match="ParameterError: draaw BSDF: " + match):
+        mi.load_dict({"type": "draaw", name: {"type": "checkerboard", **table}})
+    mi.load_dict({"type": "draaw", name: {"type": "checkerboard", "color0": 0.2, "color1": 0.9}})
