@@ -35,15 +35,15 @@ import numpy as np
 
 from ..errors import DraawError, SceneError, suggest
 from ..integrators.features import textured_parameters
-from ..sdf.node import NAME_PATTERN, SDFNode, is_infinite
-from ..sdf.operators import OPERATORS
+from ..sdf.node import FLOAT32_TINY, NAME_PATTERN, SDFNode, is_infinite
+from ..sdf.operators import K_DEFAULT, OPERATORS
 from ..sdf.primitives import PRIMITIVE_KEYS, PRIMITIVES
 from ..sdf.scene import SDFScene
 from ..sdf.transforms import Transform, rotation_matrix
 from .go_draaw_spheres import go_draaw_entry
 from .material_dicts import material_dict
 from .meshes import write_ply
-from .schema import check_keys, number, rotations, string, vector
+from .schema import check_keys, number, rotations, shown, string, vector
 
 COMMON_KEYS = ("type", "name", "material", "translate", "rotate", "scale")
 OPERATOR_KEYS = ("children", "k")
@@ -85,10 +85,18 @@ def write_back(entries, key: str, value) -> None:
 
 
 # --------------------------------------------------------------------------- parsing
+def _point(value, where, key: str) -> list[float]:
+    """A list of 3 numbers: a point, normal or translation. One number is refused (the Python
+    API refuses it too): ``center = 2`` is not (2, 2, 2); only a ``size`` (a cube) broadcasts."""
+    if isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and key != "size":
+        raise where.error(f"{shown(value)} is one number; expected a list of 3 numbers for {key!r}")
+    return vector(value, where)
+
+
 def _transform_of(entry: dict, where, node: SDFNode) -> SDFNode:
     if not any(k in entry for k in ("translate", "rotate", "scale")):
         return node
-    t = vector(entry.get("translate", [0, 0, 0]), where / "translate")
+    t = _point(entry.get("translate", [0, 0, 0]), where / "translate", "translate")
     R = np.eye(3)
     for axis, angle in rotations(entry, where):
         R = rotation_matrix(axis, angle) @ R
@@ -100,6 +108,9 @@ def _transform_of(entry: dict, where, node: SDFNode) -> SDFNode:
                                           "under uniform scale (give one number)")
         s = v[0]
     s = number(s, where / "scale", lo=0.0, lo_open=True)
+    if s < FLOAT32_TINY:                          # (subnormal: 1 / s is inf, the distances NaN)
+        raise (where / "scale").error(f"{shown(s)} is below the smallest normal float32; expected a "
+                                      f"scale >= {FLOAT32_TINY:.9g}")
     return Transform(node, translate=t, rotation=R, scale=s, name=f"{node.name}_xf")
 
 
@@ -111,7 +122,7 @@ def _primitive(entry: dict, kind: str, name: str, where) -> SDFNode:
             continue
         v = entry[key]
         if key in ("center", "size", "a", "b", "normal"):
-            kw[key] = vector(v, where / key)
+            kw[key] = _point(v, where / key, key)
         else:
             lo = None if key == "offset" else 0.0
             # (a round box's radius may be 0, a sharp box, as RoundBox itself allows)
@@ -185,7 +196,7 @@ def build_nodes(entries: list, material_slot, where, resolve=None) -> tuple[list
                     raise (w / "children").error(f"no SDF named {k!r}{suggest(k, tables)}")
                 referenced.add(k)
             cls = OPERATORS[kind]
-            k = number(entry.get("k", 0.1), w / "k", lo=0.0) if cls.smooth else None
+            k = number(entry.get("k", K_DEFAULT), w / "k", lo=0.0) if cls.smooth else None
             if not cls.smooth and "k" in entry:
                 raise (w / "k").error(f"{kind!r} is not a smooth operator and takes no 'k'")
             node = build(kids[0])

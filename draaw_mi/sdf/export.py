@@ -12,8 +12,9 @@ The scene loader builds its own nodes from the tables (with the same names, so t
 modified. Transforms fold into the ``translate`` / ``rotate`` / ``scale`` keys of the node they
 wrap (nested transforms are composed), so a transform's own name is not kept: in the scene its
 keys are ``"sdf.NAME_xf.translate"`` and ``"sdf.NAME_xf.scale"`` after the node it wraps (a
-``RuntimeWarning`` says so where it was named otherwise). Nodes with the same name get ``_1``,
-``_2``... suffixes.
+``RuntimeWarning`` says so where it was named otherwise). A node whose name (or, moved, whose
+``NAME_xf``) an earlier table took gets the first ``_1``, ``_2``... suffix that no table and no
+node of the trees has; a node shared by two operators is one table named by both.
 """
 from __future__ import annotations
 
@@ -52,15 +53,35 @@ def to_entries(*roots: SDFNode) -> list[dict]:
     roots    one or more :class:`~draaw_mi.sdf.SDFNode` trees
     returns  a list of dicts, children before their operators
     ======== =====================================================================
+
+    A node that two operators share (the same object, under the same transforms) is one
+    table that both name as a child, so it stays one node (one ``sdf.NAME.radius``) in the
+    scene; under different transforms it is written once per transform (a
+    ``RuntimeWarning`` says that the copies become independent).
     """
     entries: list[dict] = []
-    used: dict[str, int] = {}
+    # every name the trees give their nodes, so that a made-up NAME_N takes none of them
+    # (s, s, s_1: the second s becomes s_2, not a second s_1)
+    wanted = {n.name for r in roots if isinstance(r, SDFNode) for n in r.nodes()
+              if not isinstance(n, Transform)}
+    taken: set[str] = set()                      # the tables' names and their NAME_xf
+    done: dict[tuple, str] = {}                  # (id(node), transform, material) -> its table
+    first: dict[int, tuple] = {}                 # id(node) -> the key of its first table
+    split: list[str] = []                        # shared nodes written twice (other transforms)
     renamed: list[tuple[str, str]] = []          # (a transform's own name, the node it folds into)
 
-    def unique(name: str) -> str:
-        n = used.get(name, 0)
-        used[name] = n + 1
-        return name if n == 0 else f"{name}_{n}"
+    def unique(name: str, moved: bool) -> str:
+        """``name`` if no table took it, else the first ``name_N`` that neither a table nor a
+        node of the trees has; a moved node's ``NAME_xf`` (the loader's transform node) the same."""
+        def free(cand: str, own: bool) -> bool:
+            return cand not in taken and (own or cand not in wanted)
+        n = 0
+        while True:
+            cand = name if n == 0 else f"{name}_{n}"
+            if free(cand, n == 0) and not (moved and not free(f"{cand}_xf", n == 0)):
+                taken.update((cand, f"{cand}_xf") if moved else (cand,))
+                return cand
+            n += 1
 
     def emit(node: SDFNode) -> str:
         s, R, t = 1.0, np.eye(3), np.zeros(3)
@@ -77,6 +98,11 @@ def to_entries(*roots: SDFNode) -> list[dict]:
             node = node.child
         if not isinstance(node, SDFNode):
             raise ParameterError(f"sdf.export: {node!r} is not an SDF node")
+        key = (id(node), s, tuple(R.ravel()), tuple(t), node.material or material)
+        if key in done:                            # a shared child: one table, named twice
+            return done[key]
+        if first.setdefault(id(node), key) != key:
+            split.append(node.name)
         if isinstance(node, Operator):
             kids = [emit(node.a), emit(node.b)]
             e = {"type": node.kind, "children": kids}
@@ -84,12 +110,12 @@ def to_entries(*roots: SDFNode) -> list[dict]:
                 e["k"] = _f(scalar_of(node.k))
         elif node.kind in PRIMITIVE_KEYS:
             e = {"type": node.kind}
-            for key in PRIMITIVE_KEYS[node.kind]:
-                e[key] = _value(getattr(node, key))
+            for k in PRIMITIVE_KEYS[node.kind]:
+                e[k] = _value(getattr(node, k))
         else:
             raise ParameterError(f"sdf.export: node {node.name!r} of kind {node.kind!r} has no table form")
-        e["name"] = unique(node.name)
-        moves = np.any(t != 0) or not np.allclose(R, np.eye(3)) or s != 1.0
+        moves = bool(np.any(t != 0)) or not np.allclose(R, np.eye(3)) or s != 1.0
+        e["name"] = unique(node.name, moves)
         if names and moves:                        # (an identity transform makes no keys at all)
             renamed.append((names[0], e["name"]))
         if node.material or material:
@@ -102,6 +128,7 @@ def to_entries(*roots: SDFNode) -> list[dict]:
         if s != 1.0:
             e["scale"] = s
         entries.append(e)
+        done[key] = e["name"]
         return e["name"]
 
     for r in roots:
@@ -111,4 +138,8 @@ def to_entries(*roots: SDFNode) -> list[dict]:
         warnings.warn(f"to_entries: the transform {own!r} becomes the translate/rotate/scale of {name!r}{more}; "
                       f"its keys in the scene are sdf.{name}_xf.translate and sdf.{name}_xf.scale",
                       RuntimeWarning, stacklevel=2)
+    if split:
+        warnings.warn(f"to_entries: node {split[0]!r} is shared under different transforms or materials; "
+                      "a table holds one transform, so it is written once per transform and the copies' "
+                      "parameters are independent in the scene", RuntimeWarning, stacklevel=2)
     return entries

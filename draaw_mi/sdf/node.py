@@ -12,7 +12,8 @@ Every node of an SDF tree (primitive, transform or operator) evaluates
   (infinite for a plane);
 * ``node.params()`` -- ``{"NAME.PARAM": Dr.Jit array}`` of the differentiable parameters of
   the subtree (radius, centre, size, smooth ``k``, translation, scale), to be used with
-  ``dr.enable_grad`` and ``node.set(...)`` / :meth:`SDFNode.set_param`.
+  ``dr.enable_grad`` and :meth:`SDFNode.set_param` (``node.set_param("radius", value)``; in a
+  scene, ``SDFScene.set("NODE.PARAM", value)``).
 
 Parameters are stored as *opaque* Dr.Jit arrays (``dr.opaque``), so a new value does not
 recompile the render kernel.
@@ -29,6 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError, suggest
+from ..limits import FLOAT32_MAX
 
 #: what a node's name may be (it is part of the keys ``sdf.NAME.PARAM``)
 NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
@@ -36,6 +38,9 @@ NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 INF = float("inf")
 # how far inside an open lower bound (radius > 0) an optimiser's projection stays
 OPEN_MARGIN = 1e-4
+#: the smallest normal float32: a positive parameter (radius > 0, scale > 0) is at least this,
+#: since a smaller one is subnormal (1 / scale is inf, its distances NaN)
+FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 
 
 def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
@@ -50,6 +55,9 @@ def _vec3(value, where: str, name: str) -> tuple[float, float, float]:
         raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise ParameterError(f"{where}: {name}={value!r}; expected 3 finite numbers")
+    if any(abs(x) > FLOAT32_MAX for x in v):     # (stored as float32: inf, the object gone)
+        raise ParameterError(f"{where}: {name}={value!r}; expected 3 numbers within float32 "
+                             "(|x| <= 3.4e38)")
     return v
 
 
@@ -67,6 +75,10 @@ def _as_point3(value):
 def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool = False) -> float:
     if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
         value = float(value)               # numpy scalars too (np.float32(0.5))
+    elif isinstance(value, np.ndarray):
+        # one number of any shape (np.array(0.5), np.array([[0.5]])); not a bool
+        if value.size == 1 and value.dtype.kind in "iuf":
+            value = float(value.reshape(-1)[0])
     elif not isinstance(value, (str, bytes, bool, np.bool_)):
         try:
             value = float(value[0]) if len(value) == 1 else value   # 1-element Dr.Jit array
@@ -74,9 +86,14 @@ def _scalar(value, where: str, name: str, lo: float | None = None, lo_open: bool
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ParameterError(f"{where}: {name}={value!r}; expected a finite number")
+    if abs(value) > FLOAT32_MAX:           # (stored as float32: inf, then -inf or NaN distances)
+        raise ParameterError(f"{where}: {name}={value!r}; expected a number within float32 (|x| <= 3.4e38)")
     if lo is not None and (value < lo or (lo_open and value == lo)):
         op = ">" if lo_open else ">="
         raise ParameterError(f"{where}: {name}={value!r}; expected a number {op} {lo}")
+    if lo == 0 and lo_open and value < FLOAT32_TINY:
+        raise ParameterError(f"{where}: {name}={value!r}; expected a number >= {FLOAT32_TINY:.9g} "
+                             "(the smallest normal float32; a subnormal one gives NaN distances)")
     return float(value)
 
 
@@ -240,6 +257,10 @@ class SDFNode:
                         f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number > {lo} "
                         f"(clamp an optimiser's value before the update, e.g. "
                         f"opt[k] = dr.maximum(opt[k], 1e-3))")
+                if lo == 0 and low < FLOAT32_TINY:
+                    raise ParameterError(
+                        f"sdf.{self.kind} {self.name!r}: {key}={low!r}; expected a number >= "
+                        f"{FLOAT32_TINY:.9g} (the smallest normal float32; a subnormal one gives NaN distances)")
             if not np.all(np.isfinite(vals)):
                 raise ParameterError(f"sdf.{self.kind} {self.name!r}: {key}={vals.ravel().tolist()!r}; "
                                      "expected finite values")

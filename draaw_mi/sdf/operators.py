@@ -47,6 +47,8 @@ from ..errors import ParameterError
 from .node import SDFNode, box, infinite_box, is_infinite, pad, scalar_of
 
 K_MIN = 1e-12
+#: the blend radius of every smooth operator given no ``k`` (functions, classes, ``[[sdf]]`` tables)
+K_DEFAULT = 0.1
 
 
 def _union_box(a, b):
@@ -90,7 +92,7 @@ class Operator(SDFNode):
         super().__init__(name, material)
         self.a, self.b = a, b
         if self.smooth:
-            self.k = self._scalar_param("k", 0.1 if k is None else k, lo=0.0)
+            self.k = self._scalar_param("k", K_DEFAULT if k is None else k, lo=0.0)
             self._lower_bounds = {}
 
     def children(self):
@@ -270,22 +272,22 @@ def subtraction(a, b, *, name=None, material=None):
     return Subtraction(a, b, name=name, material=material)
 
 
-def smooth_union(a, b, k=0.1, *, name=None, material=None):
+def smooth_union(a, b, k=K_DEFAULT, *, name=None, material=None):
     """Polynomial smooth union with blend radius ``k`` >= 0 (k = 0: ``union``)."""
     return SmoothUnion(a, b, k, name=name, material=material)
 
 
-def smooth_intersection(a, b, k=0.1, *, name=None, material=None):
+def smooth_intersection(a, b, k=K_DEFAULT, *, name=None, material=None):
     """Polynomial smooth intersection (k = 0: ``intersection``)."""
     return SmoothIntersection(a, b, k, name=name, material=material)
 
 
-def smooth_subtraction(a, b, k=0.1, *, name=None, material=None):
+def smooth_subtraction(a, b, k=K_DEFAULT, *, name=None, material=None):
     """``a`` with ``b`` cut away, smoothed (k = 0: ``subtraction``)."""
     return SmoothSubtraction(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_union(a, b, k=0.1, *, name=None, material=None):
+def cubic_smooth_union(a, b, k=K_DEFAULT, *, name=None, material=None):
     """GO-Draaw's cubic smooth union, ``min(a, b) - h^3 k / 6`` with ``h = max(k - |a - b|,
     0) / k`` (k = 0: ``union``).
 
@@ -298,12 +300,12 @@ def cubic_smooth_union(a, b, k=0.1, *, name=None, material=None):
     return CubicSmoothUnion(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_intersection(a, b, k=0.1, *, name=None, material=None):
+def cubic_smooth_intersection(a, b, k=K_DEFAULT, *, name=None, material=None):
     """GO-Draaw's smoothIntersection with its sign fixed, ``max(a, b) + h^3 k / 6``."""
     return CubicSmoothIntersection(a, b, k, name=name, material=material)
 
 
-def cubic_smooth_subtraction(a, b, k=0.1, *, name=None, material=None):
+def cubic_smooth_subtraction(a, b, k=K_DEFAULT, *, name=None, material=None):
     """``a`` with ``b`` cut away, cubic-smoothed (GO-Draaw's smoothSubtraction, fixed)."""
     return CubicSmoothSubtraction(a, b, k, name=name, material=material)
 
@@ -313,7 +315,7 @@ def lse_intersection(a, b, *, name=None, material=None):
     return LSEIntersection(a, b, name=name, material=material)
 
 
-def smooth_lse_intersection(a, b, k=1.0, *, name=None, material=None):
+def smooth_lse_intersection(a, b, k=K_DEFAULT, *, name=None, material=None):
     """GO-Draaw's "smoothAddition": ``k log(e^(a/k) + e^(b/k))`` (k -> 0: ``intersection``)."""
     return SmoothLSEIntersection(a, b, k, name=name, material=material)
 

@@ -42,19 +42,24 @@ from ..errors import ParameterError
 from .node import is_infinite
 
 FAR = 1e7
+#: the most steps a ray may take (``max_steps``): the loop counts them in a 32-bit integer
+MAX_STEPS_LIMIT = 2**31 - 1
 _TETRA = ((1.0, -1.0, -1.0), (-1.0, -1.0, 1.0), (-1.0, 1.0, -1.0), (1.0, 1.0, 1.0))
 
 
 class TracerOptions:
     """Sphere-tracer knobs (see the module docstring)."""
     def __init__(self, hit_epsilon: float = 1e-5, max_steps: int = 256, relaxation: float = 1.0):
-        if not (isinstance(hit_epsilon, (int, float)) and 0 < hit_epsilon <= 5e-5):
+        # (a bool is an int to Python: True would pass as relaxation 1 or max_steps 1)
+        if isinstance(hit_epsilon, bool) or not (isinstance(hit_epsilon, (int, float)) and 0 < hit_epsilon <= 5e-5):
             raise ParameterError(f"sdf tracer: hit_epsilon={hit_epsilon!r}; expected a number in "
                                  "(0, 5e-5] (relative to the objects' size plus the distance; Mitsuba offsets rays "
                                  "by ~9e-5)")
-        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
-            raise ParameterError(f"sdf tracer: max_steps={max_steps!r}; expected a whole number >= 1")
-        if not (isinstance(relaxation, (int, float)) and 1.0 <= relaxation < 2.0):
+        if (isinstance(max_steps, bool) or not isinstance(max_steps, int)
+                or not 1 <= max_steps <= MAX_STEPS_LIMIT):
+            raise ParameterError(f"sdf tracer: max_steps={max_steps!r}; expected a whole number >= 1 and "
+                                 f"<= {MAX_STEPS_LIMIT} (the step counter is a 32-bit integer)")
+        if isinstance(relaxation, bool) or not (isinstance(relaxation, (int, float)) and 1.0 <= relaxation < 2.0):
             raise ParameterError(f"sdf tracer: relaxation={relaxation!r}; expected a number in [1, 2)")
         self.hit_epsilon = float(hit_epsilon)
         self.max_steps = int(max_steps)

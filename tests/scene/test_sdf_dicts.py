@@ -330,3 +330,26 @@ def test_a_material_only_an_sdf_object_uses_is_in_the_scene():
     s = draaw_mi.load_scene(_desc(CSG))
     assert "ball" in s.info["materials"] and "ball" not in s.info["unused_materials"]
     assert "ball.base_color.value" in s.params.keys()
+
+
+@pytest.mark.parametrize("table,key", [
+    ({"type": "plane", "normal": 1, "offset": 0}, "normal"), ({"type": "capsule", "a": 0, "b": [0, 1, 0]}, "a"),
+    ({"type": "capsule", "b": 1}, "b"), ({"type": "sphere", "center": 2}, "center"),
+    ({"type": "sphere", "translate": 1}, "translate")])
+def test_one_number_for_a_point_normal_or_translation_is_refused(table, key):
+    """``center = 2`` was broadcast to (2, 2, 2) (as for a colour) where the Python API says
+    "expected 3 numbers"; a ``size`` of one number is a cube."""
+    with pytest.raises(SceneError, match=rf"sdf\[0\]\.{key}: \d is one number; expected a list of 3 numbers"):
+        draaw_mi.load_scene(_desc([table]))
+    sc = draaw_mi.load_scene(_desc([{"type": "box", "name": "cube", "size": 0.5}]))
+    assert [float(c[0]) for c in sc.sdf.nodes["cube"].size] == [0.5, 0.5, 0.5]
+
+
+def test_a_subnormal_scale_is_refused_and_a_table_without_k_has_the_python_default():
+    """``scale = 1e-39`` loaded and gave NaN distances (1 / scale is inf in float32)."""
+    with pytest.raises(SceneError, match=r"sdf\[0\]\.scale: 1e-39 is below the smallest normal float32"):
+        draaw_mi.load_scene(_desc([{"type": "sphere", "scale": 1e-39}]))
+    from draaw_mi.sdf import Sphere, smooth_lse_intersection
+    sc = draaw_mi.load_scene(_desc([{"type": "sphere", "name": "a"}, {"type": "sphere", "name": "b"},
+                                    {"type": "smooth_lse_intersection", "name": "s", "children": ["a", "b"]}]))
+    assert float(sc.sdf.nodes["s"].k[0]) == float(smooth_lse_intersection(Sphere(), Sphere()).k[0])

@@ -81,3 +81,35 @@ def test_transform_helpers_name_the_bad_value():
         rotate(Sphere(), "y", 30)
     with pytest.raises(ParameterError, match="axis=3"):
         rotate(Sphere(), 3, 30)
+
+
+def test_values_beyond_float32_or_subnormal_are_refused():
+    """Sphere(radius=1e39) gave -inf distances and scale(Sphere(), 1e-39) NaN ones (the object
+    vanished) where the scene loader refuses |x| > 3.4e38."""
+    import drjit as dr
+    cases = [(lambda: Sphere(radius=1e39), r"radius=1e\+39; expected a number within float32"),
+             (lambda: Sphere(center=(1e39, 0, 0)), r"center=\(1e\+39, 0, 0\); expected 3 numbers within float32"),
+             (lambda: smooth_union(Sphere(), Box(), k=-1e39), r"k=-1e\+39; expected a number within float32"),
+             (lambda: scale(Sphere(), 1e-39), r"scale=1e-39; expected a number >= 1\.17549435e-38"),
+             (lambda: Sphere(radius=1e-40), r"radius=1e-40; expected a number >= 1\.17549435e-38")]
+    for make, match in cases:
+        with pytest.raises(ParameterError, match=match):
+            make()
+    s = Sphere()
+    with pytest.raises(ParameterError, match=r"radius=1\.0\d*e-39; expected a number >= 1\.17549435e-38"):
+        s.set_param("radius", dr.opaque(mi.Float, 1e-39))              # an optimiser's array
+    assert scalar_of(s.radius) == 1.0
+    assert scalar_of(scale(Sphere(), 1.2e-38).scale) > 0               # the smallest normal is taken
+
+
+def test_a_numpy_array_of_one_number_is_a_number_whatever_its_shape():
+    """np.array(0.5) (0-d) was "not a finite number" where np.array([0.5]) was taken."""
+    for v in (np.array(0.5), np.array([0.5]), np.array([[0.5]]), np.array(0.5, dtype=np.float32)):
+        assert scalar_of(Sphere(radius=v).radius) == 0.5
+    assert scalar_of(smooth_union(Sphere(), Box(), k=np.array(0.25)).k) == 0.25
+    s = Sphere()
+    s.set_param("radius", np.array(0.75))
+    assert scalar_of(s.radius) == 0.75
+    for bad in (np.array(True), np.array([0.5, 0.6]), np.array([])):
+        with pytest.raises(ParameterError, match="radius="):
+            Sphere(radius=bad)

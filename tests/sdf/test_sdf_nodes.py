@@ -453,3 +453,15 @@ def test_an_operator_of_a_childs_name_hides_none_of_its_values():
     from draaw_mi.sdf import union
     keys = union(Sphere(name="ball"), Sphere((1, 0, 0), name="other"), name="ball").params()
     assert sorted(keys) == ["ball.center", "ball.radius", "other.center", "other.radius"]
+
+
+def test_every_smooth_operator_has_the_same_default_k():
+    """``smooth_lse_intersection(a, b)`` took k = 1.0 while its class and an ``[[sdf]]`` table
+    without ``k`` took 0.1 (the same tree, two shapes)."""
+    import inspect
+    from draaw_mi.sdf import operators
+    a, b = Sphere((-0.3, 0, 0), 0.6), Sphere((0.3, 0, 0), 0.6)
+    assert float(smooth_lse_intersection(a, b).k[0]) == float(operators.SmoothLSEIntersection(a, b).k[0])
+    fns = [smooth_union, smooth_intersection, smooth_subtraction, cubic_smooth_union, cubic_smooth_intersection,
+           cubic_smooth_subtraction, smooth_lse_intersection]
+    assert {inspect.signature(f).parameters["k"].default for f in fns} == {operators.K_DEFAULT}

@@ -253,3 +253,14 @@ def test_get_of_an_unknown_sdf_key_gives_the_default():
     assert params.get("sdf.bal.radius") is None and params.get("sdf.ball.radius")[0] == pytest.approx(0.5)
     with pytest.raises(ParameterError, match=r"parameters\['sdf\.'\]: sdf: no node ''"):
         params["sdf."]
+
+
+def test_the_node_docstring_names_methods_that_exist():
+    """The module docstring said ``node.set(...)``, which no node has."""
+    import re
+    from draaw_mi.sdf import node as node_mod
+    from draaw_mi.sdf.scene import SDFScene
+    doc = node_mod.__doc__
+    called = re.findall(r"\bnode\.(\w+)\(", doc)
+    assert "set_param" in called and all(hasattr(node_mod.SDFNode, m) for m in called), called
+    assert all(hasattr(SDFScene, m) for m in re.findall(r"\bSDFScene\.(\w+)\(", doc))

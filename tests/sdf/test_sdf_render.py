@@ -389,3 +389,24 @@ def test_a_let_go_sdf_scene_leaves_the_registry_and_a_live_one_still_renders():
     assert isinstance(raised.value.__cause__, SceneError)
     assert re.match(r"mi.render of an mi_scene with a draaw integrator: the SDF object 'obj' .*" + keep,
                     str(raised.value.__cause__))
+
+
+@pytest.mark.parametrize("opts,match", [
+    ({"sdf_max_steps": 2**31}, r"sdf_max_steps=2147483648; expected a whole number >= 1 and <= 2147483647"),
+    ({"sdf_max_steps": 10**10}, r"sdf_max_steps=10000000000; expected a whole number >= 1 and <= 2147483647"),
+    ({"sdf_relaxation": True}, r"sdf_relaxation=True; expected a number in \[1, 2\)"),
+    ({"sdf_epsilon": True}, r"sdf_epsilon=True; expected a number in \(0, 5e-5\]"),
+])
+def test_tracer_options_beyond_32_bits_or_bools_are_refused_by_name(opts, match):
+    """sdf_max_steps above 2^32 - 1 passed the check and failed deep in Dr.Jit ("Could not
+    initialize element with a value of type 'int'"); sdf_relaxation = True rendered as 1."""
+    d = base_description((8, 8))
+    d["sdf"] = [{"type": "sphere", "name": "ball", "material": "ball"}]
+    scene = draaw_mi.load_scene(d)
+    with pytest.raises(draaw_mi.RenderError, match=rf"draaw_v2: {match}"):
+        draaw_mi.render(scene, version="v2", spp=1, integrator_options=opts)
+    from draaw_mi.errors import ParameterError
+    for kw in ({"relaxation": True}, {"hit_epsilon": True}, {"max_steps": 2**31}):
+        with pytest.raises(ParameterError, match=f"{next(iter(kw))}="):
+            TracerOptions(**kw)
+    assert TracerOptions(max_steps=2**31 - 1).max_steps == 2**31 - 1
