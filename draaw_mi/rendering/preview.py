@@ -108,6 +108,17 @@ def _scale(value, where: str) -> float:
     return float(value)
 
 
+def _check_rigid(name: str, to_world) -> None:
+    """Refuse a camera transform that scales or shears (Mitsuba's perspective camera refuses it
+    when the frame renders, on the worker thread, with the frame's other values)."""
+    m = np.array(to_world.matrix if hasattr(to_world, "matrix") else to_world, dtype=np.float64)
+    r = m.reshape(4, 4)[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-3):
+        raise ParameterError(f"Preview.update: {name}: a camera transform with scale or shear "
+                             f"(singular values {np.round(np.linalg.svd(r, compute_uv=False), 4).tolist()}); "
+                             "expected a rigid transform (rotation and translation)")
+
+
 class Preview(PreviewWorker):
     """Progressive running-mean renderer of one scene (see the module docstring).
 
@@ -171,10 +182,15 @@ class Preview(PreviewWorker):
         guides = GUIDES if denoise and is_draaw(version) else ()
         return session.integrator(version, max_depth, bool(self.scene.settings.get("hide_emitters", False)), guides)
 
+    def _check_open(self, who: str) -> None:
+        if self.scene is None:
+            raise DraawError(f"{who}: this preview was closed (Preview.close); make a new one")
+
     def configure(self, **options):
         """Change ``version``, ``max_depth``, ``denoise``, ``post``, ``max_spp`` or
         ``interactive_scale`` and restart the accumulation (a new version or depth compiles
         its kernel once)."""
+        self._check_open("Preview.configure")
         allowed = ("version", "max_depth", "denoise", "post", "max_spp", "interactive_scale")
         for k in options:
             if k not in allowed:
@@ -203,13 +219,18 @@ class Preview(PreviewWorker):
                 self._lo = None                 # made again at the new scale
             self._bump()
 
+    def _sensor_ids(self) -> set:
+        return {sensor.id() for sensor in self.scene.mi_scene.sensors()}
+
     def key(self, name: str) -> str:
         """``material.parameter`` or a full ``mi.traverse`` key -> the traverse key."""
+        self._check_open("Preview.key")
         return self.scene.key(name)
 
     def update(self, values: dict) -> int:
         """Queue parameter changes (``{"gold.roughness": 0.3, "sensor.x_fov": 40}``); the next
         frame shows them and the mean restarts. Returns the new generation number."""
+        self._check_open("Preview.update")
         named = {name: (self.key(name), v) for name, v in values.items()}
         self.scene.check_values("Preview.update", named)       # (SDF values with each other)
         checked = {key: v for key, v in named.values()}
@@ -221,6 +242,8 @@ class Preview(PreviewWorker):
                 check_like(p[key], v, key)
             except DraawError as e:
                 raise ParameterError(f"Preview.update: {name}: {e}") from None
+            if key.endswith("to_world") and key.rsplit(".", 1)[0] in self._sensor_ids():
+                _check_rigid(name, v)        # (Mitsuba refused a scale on the worker thread)
             if key == "sensor.to_world":
                 self.check_camera_outside_smoke(name, v)
         with self._lock:
@@ -232,6 +255,7 @@ class Preview(PreviewWorker):
         ``name`` in the message) puts the camera inside a ``[[volumes]]`` smoke box, as a scene
         file's or a batch path's camera is refused (the smoke would be missing around it).
         :meth:`update` checks ``sensor.to_world``; the tuner checks before its lights follow."""
+        self._check_open("Preview.check_camera_outside_smoke")
         volumes = self.scene.info.get("volumes", [])
         if not volumes:
             return

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,7 +110,11 @@ class PreviewWorker:
                     self._wake.notify_all()
                     callbacks = list(self._error_callbacks)
                 for cb in callbacks:
-                    cb(e)
+                    try:
+                        cb(e)
+                    except Exception as cb_error:  # noqa: BLE001 - the worker waits on, for the next change
+                        warnings.warn(f"Preview: an on_error callback raised {cb_error!r} (for the "
+                                      f"frame's {e!r}); the preview goes on", RuntimeWarning, stacklevel=1)
 
     def stop(self, timeout: float = 10.0, why: str | None = None):
         """Ask the worker to stop after its current frame and wait for it (at most

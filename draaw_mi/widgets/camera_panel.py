@@ -9,6 +9,7 @@ describe the same camera. It is given the callbacks it uses (see its docstring).
 from __future__ import annotations
 
 import json
+import numbers
 
 import ipywidgets as W
 import numpy as np
@@ -18,6 +19,8 @@ from ..limits import FOV_RANGE
 from ..scene.camera import go_draaw_look_at, look_at_transform, sensor_keys
 from ..scene.camera_path import interpolate
 from . import tuning
+
+MAX_PATH_FRAMES = 100_000        # frames a camera path of the panel may have
 
 
 def slider(desc, value, lo, hi, step=0.01):
@@ -81,8 +84,9 @@ class CameraPanel:
 
     def load_camera_path(self, keys, frames: int = 120):
         """Load keyframes (a GO-Draaw ``camera_positions.json`` file name or a list of
-        ``(x, y, z, theta, phi)`` / dicts) and interpolate ``frames`` frames along them; the
-        *path frame* slider and its play button then move the camera."""
+        ``(x, y, z, theta, phi)`` / dicts) and interpolate ``frames`` frames along them (an
+        integer in [2, :data:`MAX_PATH_FRAMES`]); the *path frame* slider and its play button
+        then move the camera."""
         if isinstance(keys, str):
             if not keys:
                 raise DraawError("camera path: no file name given")
@@ -91,7 +95,13 @@ class CameraPanel:
                     keys = json.load(fh)
             except (OSError, json.JSONDecodeError) as e:
                 raise DraawError(f"camera path {keys!r}: {e}") from None
-        path = interpolate(keys, duration=frames, fps=1)         # one frame per step: all of them
+        if isinstance(frames, bool) or not isinstance(frames, numbers.Integral) \
+                or not 2 <= frames <= MAX_PATH_FRAMES:
+            # (frames were passed on as seconds at 1 fps: "duration=0", 2.7 rounded, 1e9
+            # allocated 7.5 GiB)
+            raise DraawError(f"MaterialTuner.load_camera_path: frames={frames!r}; expected an "
+                             f"integer in [2, {MAX_PATH_FRAMES}]")
+        path = interpolate(keys, duration=int(frames), fps=1)    # one frame per step: all of them
         self._path = path
         for w in (self.path_frame, self.path_play):
             w.max = len(path) - 1
@@ -166,6 +176,8 @@ class CameraPanel:
                     if v is not None:
                         w.value = min(max(float(v), w.min), w.max)
 
+        moved = []
+
         def move():
             try:
                 self.set_camera()
@@ -174,8 +186,11 @@ class CameraPanel:
                 if undo is not None:
                     undo()
                 raise
+            moved.append(True)
         put((yaw, pitch, distance))
         self._guard(move)()
+        if not moved:                # refused (a closed or superseded panel): sliders as they were
+            put(old)
 
     def get_camera(self):
         """The orbited camera as a ``[camera]`` table, also shown as JSON in the panel."""

@@ -61,6 +61,7 @@ DEGREES_PER_WIDTH = 180.0
 MIN_DISPLAY = 256
 #: distance factor per wheel pixel (a notch is about 100 px: a factor of 1.22)
 WHEEL_RATE = 0.002
+WHEEL_EXP_MAX = 50.0          # a wheel step zooms by at most e^50 (the zoom clamps anyway)
 
 
 class OrbitCanvas(RemoteFrameBuffer):
@@ -180,8 +181,8 @@ class OrbitCanvas(RemoteFrameBuffer):
             self._end_drag()
         elif kind == "wheel" and self.on_zoom:
             dy = float(event.get("dy", 0.0))
-            if dy:
-                self.on_zoom(math.exp(WHEEL_RATE * dy))
+            if dy and math.isfinite(dy):        # (exp of a step of 1e6 overflowed)
+                self.on_zoom(math.exp(min(max(WHEEL_RATE * dy, -WHEEL_EXP_MAX), WHEEL_EXP_MAX)))
         elif kind == "double_click" and self.on_reset:
             self.on_reset()
 

@@ -111,7 +111,7 @@ class MaterialTuner:
         self.rest_after = float(rest_after)
         self._options = dict(version=version or self.scene.settings["version"], max_spp=int(max_spp),
                              denoise=bool(denoise), interactive_scale=_scale(interactive_scale, "MaterialTuner"),
-                             freeze=bool(freeze))
+                             freeze=bool(freeze), max_depth=None)
         self._last_change = time.perf_counter()
         self._syncing = False
         self._textures: dict = {}
@@ -180,8 +180,10 @@ class MaterialTuner:
 
     def _new_preview(self, scene, chain) -> Preview:
         o = self._options
-        pv = Preview(scene, version=o["version"], max_spp=o["max_spp"], denoise=o["denoise"], post=chain,
-                     interactive_scale=o["interactive_scale"], freeze=o["freeze"])
+        # (max_depth: the slider's, which a rebuilt XML scene's own depth would replace)
+        pv = Preview(scene, version=o["version"], max_depth=o["max_depth"], max_spp=o["max_spp"],
+                     denoise=o["denoise"], post=chain, interactive_scale=o["interactive_scale"],
+                     freeze=o["freeze"])
         pv.on_frame(self._current_only(pv, self._show))
         pv.on_error(self._current_only(pv, self._show_error))
         return pv
@@ -199,14 +201,20 @@ class MaterialTuner:
         def run(*args):
             if self._syncing:
                 return
+            # a refused change is put back on its control (else save() and document(), which
+            # read the controls, would write what the preview never showed)
             if self._closed:            # (its preview has no scene to change)
                 self.message.value = _error_html(_closed_text("MaterialTuner"))
+                with self._quiet():
+                    _revert(args)
                 return
             if isinstance(self.preview.error, PreviewSuperseded):
                 # (a change here would go into the scene the newer panel shows, unrendered here,
                 # and clear this panel's only word of why it has stopped)
                 self.message.value = _error_html(f"{self.preview.error}; this panel no longer "
                                                  "changes the scene")
+                with self._quiet():
+                    _revert(args)
                 return
             self.message.value = ""
             try:

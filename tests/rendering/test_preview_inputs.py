@@ -2,6 +2,9 @@
 failed change never outlives itself (the preview and the scene go on with valid ones)."""
 from __future__ import annotations
 
+import time
+
+import mitsuba as mi
 import numpy as np
 import pytest
 
@@ -108,3 +111,63 @@ def test_a_change_that_fails_at_the_update_is_undone(monkeypatch):
     np.testing.assert_array_equal(np.array(pv.scene.params[key]), good)
     pv.update({"ball.roughness": 0.3})
     assert pv.step() is not None and pv.error is None
+
+
+def test_a_camera_transform_with_scale_is_refused_at_the_update():
+    """Mitsuba's camera refuses a scaled to_world only when the frame renders, on the worker
+    thread, in its own words; the values queued with it were dropped."""
+    pv = _preview()
+    try:
+        m = np.array(pv.scene.params["sensor.to_world"].matrix, dtype=np.float64).reshape(4, 4)
+        m[:3, :3] *= 2.0
+        with pytest.raises(ParameterError, match=r"Preview.update: sensor.to_world: a camera transform with "
+                                                 r"scale or shear.*expected a rigid transform"):
+            pv.update({"sensor.to_world": mi.ScalarTransform4f(m)})
+        m[:3, :3] /= 2.0
+        pv.update({"sensor.to_world": mi.ScalarTransform4f(m)})     # rigid: taken
+    finally:
+        pv.close()
+
+
+def test_a_closed_preview_says_so_from_every_method():
+    """update, configure, key and check_camera_outside_smoke failed with AttributeError /
+    TypeError after close(), where start and step said the preview was closed."""
+    pv = _preview()
+    pv.close()
+    for who, call in (("Preview.update", lambda: pv.update({"ball.roughness": 0.3})),
+                      ("Preview.configure", lambda: pv.configure(max_spp=2)),
+                      ("Preview.key", lambda: pv.key("ball.roughness")),
+                      ("Preview.check_camera_outside_smoke",
+                       lambda: pv.check_camera_outside_smoke("x", np.eye(4)))):
+        with pytest.raises(draaw_mi.errors.DraawError, match=f"{who}: this preview was closed"):
+            call()
+
+
+def test_an_error_callback_that_raises_does_not_stop_the_worker():
+    """A raising on_error callback ended the worker thread: later changes never rendered."""
+    pv = _preview()
+    seen = []
+
+    def bad_frame(frame):
+        if frame.generation == 1:
+            raise RuntimeError("frame callback bug")
+
+    def bad_error(e):
+        seen.append(e)
+        raise ValueError("error callback bug")
+
+    pv.on_frame(bad_frame)
+    pv.on_error(bad_error)
+    try:
+        with pytest.warns(RuntimeWarning, match="on_error callback raised"):
+            pv.start()
+            g = pv.update({"ball.roughness": 0.3})
+            deadline = time.time() + 60
+            while not seen and time.time() < deadline:
+                time.sleep(0.05)
+        assert seen and pv.running
+        g = pv.update({"ball.roughness": 0.5})
+        assert pv.wait(g, spp=1, timeout=60) is not None
+    finally:
+        pv.close()
+

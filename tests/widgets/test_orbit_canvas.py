@@ -151,6 +151,15 @@ def test_the_wheel_scales_the_distance_and_a_double_click_resets(tuner):
     np.testing.assert_allclose(_origin(tuner), want, atol=1e-5)
 
 
+def test_a_huge_or_non_finite_wheel_step_is_clamped_or_ignored(tuner):
+    """exp(WHEEL_RATE * 1e6) raised OverflowError out of the event handler."""
+    tuner.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": 1e6, "x": 5, "y": 5})
+    assert tuner.camera_panel.distance.value == tuner.camera_panel.distance.max
+    tuner.canvas.handle_event({"type": "wheel", "dx": 0.0, "dy": float("nan"), "x": 5, "y": 5})
+    assert tuner.camera_panel.distance.value == tuner.camera_panel.distance.max
+    assert np.isfinite(_origin(tuner)).all()
+
+
 def test_a_resized_view_changes_the_degrees_per_pixel(tuner):
     tuner.canvas.handle_event({"type": "resize", "width": 360.0, "height": 270.0, "ratio": 1.0})
     tuner.canvas.handle_event(_press(0, 0))

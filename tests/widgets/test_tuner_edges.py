@@ -398,3 +398,48 @@ def test_a_closed_panel_still_saves_its_values_and_refuses_changes_in_words(tmp_
         t.save_panel.base_scene.mi_scene
     t.close()                                              # (again: nothing to do)
     assert t.document(dest) == before
+
+
+def test_the_depth_slider_survives_the_rebuild_of_an_xml_scene():
+    """The resolution slider rebuilds an XML scene with with_resolution, and its preview took
+    the file's max_depth (6) while the slider still showed the tuned one."""
+    import os
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sc = draaw_mi.load_scene(os.path.join(root, "scenes", "mitsuba_cbox.xml"), defines={"res": 16, "spp": 4})
+    t = _tuner(sc, version="v4")
+    try:
+        t.controls_render["max_depth"].value = 2
+        t.controls_render["scale"].value = 0.5
+        assert t.preview.scene.resolution == (8, 8) and t.preview.max_depth == 2
+    finally:
+        t.close()
+
+
+def test_a_refused_change_on_a_closed_panel_is_put_back_on_its_control(tmp_path):
+    """A closed (or superseded) panel refused a change in red but left it on the control, and
+    an orbit moved the sliders before the refusal: save() then wrote values the preview never
+    showed."""
+    t = _tuner(draaw_mi.load_scene(tiny_description()))
+    before = t.document()
+    yaw, fov, scale = t.camera_panel.yaw.value, t.camera_panel.fov.value, t.lights_panel.light_scale.value
+    t.close()
+    t.camera_panel.fov.value = 90.0
+    t.lights_panel.light_scale.value = 8.0
+    t.camera_panel.drag_start()
+    t.camera_panel.drag_orbit(60.0, 20.0)
+    t.camera_panel.zoom(2.0)
+    assert "panel was closed" in t.message.value
+    assert (t.camera_panel.yaw.value, t.camera_panel.fov.value, t.lights_panel.light_scale.value) == (yaw, fov, scale)
+    assert t.document() == before
+
+
+@pytest.mark.parametrize("frames", [0, 2.7, True, "10", 10 ** 9])
+def test_a_camera_paths_frames_are_an_integer_in_range(frames):
+    """frames went on as seconds at 1 fps ("duration=0"), 2.7 was rounded, 1e9 allocated 7.5 GiB."""
+    t = _tuner(draaw_mi.load_scene(tiny_description()))
+    try:
+        with pytest.raises(draaw_mi.errors.DraawError, match=r"load_camera_path: frames=.*expected an integer in \[2, "):
+            t.load_camera_path([(0, 1, 5, 0, 0), (1, 1, 5, 0, 0)], frames)
+    finally:
+        t.close()
+
