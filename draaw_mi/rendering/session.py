@@ -55,6 +55,7 @@ from ..errors import RenderError, caused_by_interrupt
 from ..guard import COLLECTOR_PAUSED, RENDER_GUARD, let_go
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
+from ..scene.loading import integrator_depth, integrator_version
 from .frozen import freeze_render, freeze_supported, widened_named
 from .gradient_body import gradient_body, gradients_of, host_key, restore_gradients
 from .passes import sample_passes
@@ -130,7 +131,7 @@ class Session:
             return integrator
         if resolve_version(version) == SCENE_VERSION:
             return self._own_integrator(aovs, options)
-        declared = self._declared_draaw(version, max_depth, hide_emitters, aovs, options)
+        declared = self._declared(version, max_depth, hide_emitters, aovs, options)
         if declared is not None:
             if fast is not None:
                 self._integrators[("declared",)] = declared
@@ -146,20 +147,20 @@ class Session:
             self._integrator_keys[fast] = key
         return self._integrators[key]
 
-    def _declared_draaw(self, version: str, max_depth: int, hide_emitters: bool, aovs, options):
-        """An XML scene's own ``draaw_v*`` integrator where a render asks for that version with
-        the file's ``max_depth`` and ``hide_emitters`` and nothing else, so that the file's
-        other properties (``stratify``, ``light_selection``, ...) hold; a new default plugin had
+    def _declared(self, version: str, max_depth: int, hide_emitters: bool, aovs, options):
+        """The integrator object an XML file, dict or ``mi.Scene`` declares where a render asks
+        for the version that is it (``draaw_v4``, ``path``, ``prb``, ``volpath``, ...) with its
+        ``max_depth`` and ``hide_emitters`` and nothing else, so that its other properties
+        (``stratify``, ``light_selection``, ``rr_depth``, ...) hold; a new default plugin had
         rendered it. ``None`` otherwise."""
-        if aovs or options or not self.scene.info.get("xml"):
+        if aovs or options or not self.scene.info.get("integrator"):
             return None
         declared = self.scene.mi_scene.integrator()
-        plugin = resolve_version(version)
-        if declared is None or not plugin.startswith("draaw_v") or \
-                type(declared).__name__ != f"DraawV{plugin[-1]}Integrator":
+        if declared is None or integrator_version(declared) != resolve_version(version):
             return None
-        depth = -1 if declared.max_depth == 0xFFFFFFFF else int(declared.max_depth)
-        return declared if depth == max_depth and bool(declared.hide_emitters) == bool(hide_emitters) else None
+        same = integrator_depth(declared) == max_depth and \
+            bool(getattr(declared, "hide_emitters", False)) == bool(hide_emitters)
+        return declared if same else None
 
     def _own_integrator(self, aovs, options):
         """Version ``"scene"``: the integrator object the scene declares, with its file's

@@ -127,7 +127,9 @@ def to_world(table: dict, where: Where):
     # chained transforms apply right to left: the list is walked backwards so that its first
     # rotation acts first, as for SDF objects (schema.rotations)
     for axis, angle in reversed(rotations(table, where)):
-        t = t.rotate(axis=axis, angle=angle)
+        # (a unit axis: Mitsuba's rotate takes the axis as given, and [1, 1, 0] stretched the
+        # shape; the SDF objects' rotations normalise it too)
+        t = t.rotate(axis=list(np.divide(axis, np.linalg.norm(axis))), angle=angle)
     if "scale" in table:
         sc = vector(table["scale"], where / "scale")
         if any(v == 0 for v in sc):
@@ -236,8 +238,40 @@ def shape_dicts(shape: dict, index: int, materials: dict, ctx: BuildContext, whe
             raise (where / "p1").error("equals 'p0'; a cylinder needs a non-zero axis")
     else:
         d = {"type": kind, "to_world": transform}
+    if kind in ("sphere", "cylinder"):
+        _check_round(kind, name, d, shape, transform, where)
     out[name] = finish(d, None)
     return out
+
+
+def _check_round(kind: str, name: str, d: dict, shape: dict, transform, where: Where) -> None:
+    """Raise a :class:`SceneError` at the shape's ``scale`` (or ``matrix``) when its transform
+    stretches a sphere unevenly, or a cylinder unevenly across its axis: Mitsuba keeps one
+    radius (it only logs "'to_world' transform shouldn't contain non-uniform scaling"), so the
+    shape would render round, unlike the one described.
+
+    The transform's linear part ``L`` keeps a sphere round where ``L^T L = a I``, and a
+    cylinder of axis ``u`` round where ``L^T L = a I + (b - a) u u^T`` (``u`` stretched by
+    itself, the plane across it evenly)."""
+    lin = _matrix_of(transform)[:3, :3]
+    gram = lin.T @ lin
+    if kind == "sphere":
+        even = np.trace(gram) / 3 * np.eye(3)
+    else:
+        u = np.subtract(d["p1"], d["p0"], dtype=float)
+        u /= np.linalg.norm(u)
+        across = np.linalg.svd(np.eye(3) - np.outer(u, u))[0][:, 0]   # (a unit vector across u)
+        a, b = across @ gram @ across, u @ gram @ u
+        even = a * np.eye(3) + (b - a) * np.outer(u, u)
+    if np.abs(gram - even).max() <= 1e-5 * np.abs(gram).max():
+        return
+    key = "matrix" if "matrix" in shape else "scale"
+    what = "unevenly" if kind == "sphere" else "unevenly across its axis"
+    raise (where / key).error(
+        f"{shape.get(key)!r} stretches {kind} {name!r} {what}, which Mitsuba's {kind} cannot "
+        f"show (it keeps one radius: a round {kind} would render); scale it evenly"
+        + (" (or along its axis: p0 to p1)" if kind == "cylinder" else "")
+        + ", or give the shape as a mesh (a file of the stretched shape)")
 
 
 # --------------------------------------------------------------------------- lights

@@ -30,6 +30,7 @@ from .mitsuba_load import load_dict_or_error, load_mitsuba_file
 from .schema import Where, resolution
 from .sdf_dicts import write_back
 from .toml_edit import edited_toml
+from .xml_film import CROP, scaled_crop
 
 
 #: the draaw material's options that are settings, fixed when the scene loads (not parameters)
@@ -76,8 +77,9 @@ class DraawScene:
 
     @property
     def resolution(self) -> tuple[int, int]:
-        """(width, height) of the film."""
-        size = self.mi_scene.sensors()[0].film().size()
+        """(width, height) of the images it renders: the film's crop window (the whole film
+        where it has none)."""
+        size = self.mi_scene.sensors()[0].film().crop_size()
         return int(size[0]), int(size[1])
 
     @property
@@ -297,7 +299,10 @@ class DraawScene:
                              "mi.Scene; edit its film instead (or load it from its XML file or dict)")
         d = dict(self.mi_dict)
         sensor = dict(d["sensor"])
-        sensor["film"] = dict(sensor["film"], width=int(width), height=int(height))
+        film = sensor["film"]
+        # (a crop window renders the new size, showing the same part of the view)
+        sized = scaled_crop(film, width, height) if set(film) & set(CROP) else {"width": width, "height": height}
+        sensor["film"] = dict(film, **{k: int(v) for k, v in sized.items()})
         d["sensor"] = sensor
         scaled = DraawScene(load_dict_or_error(d, self.source), settings, self.source, self.info, d, self._tmp,
                           self.description)
@@ -345,7 +350,7 @@ class DraawScene:
         ``.json``). A TOML scene written to TOML keeps its file's comments and layout: only the
         lines of the values that changed are edited (:mod:`~draaw_mi.scene.toml_edit`; the file
         is read again, and where it changed since it was loaded it is written in full)."""
-        desc = self.updated_description(values, dest=dest)
+        desc = plain(self.updated_description(values, dest=dest), Where(self.source))
         if not dest.lower().endswith(".toml"):
             return json.dumps(desc, indent=2)
         if self.source.lower().endswith(".toml") and os.path.isfile(self.source):
@@ -413,6 +418,33 @@ def _rebased(node, files: dict, folder: str):
     if isinstance(node, str) and node in files:
         return os.path.relpath(files[node], folder)
     return node
+
+
+def plain(node, where: Where):
+    """``node`` (a description) with the numbers and arrays :func:`load_scene` takes besides
+    Python's own (numpy scalars and arrays, Dr.Jit arrays) as Python numbers and nested lists,
+    which JSON and TOML write (a texture given as an array is written as its rows); a
+    :class:`SceneError` naming the key of a value neither can hold.
+
+    >>> plain({"m": {"roughness": np.float32(0.5), "base_color": np.full((1, 2, 3), 0.5)}}, Where("s"))
+    {'m': {'roughness': 0.5, 'base_color': [[[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]]]}}
+    """
+    if isinstance(node, dict):
+        return {k: plain(v, where / k) for k, v in node.items()}
+    if isinstance(node, (list, tuple)):
+        return [plain(v, where / i) for i, v in enumerate(node)]
+    if node is None or isinstance(node, (str, bool, int, float)):
+        return node
+    if isinstance(node, np.generic) and isinstance(node.item(), (bool, int, float, str)):
+        return node.item()
+    try:
+        arr = np.asarray(node)
+    except Exception:  # noqa: BLE001 - whatever the object's __array__ raises
+        arr = None
+    if arr is not None and arr.dtype.kind in "biuf":
+        return arr.tolist()
+    raise where.error(f"{type(node).__name__} {str(node)[:60]!r} cannot be written to a scene file; "
+                      "expected numbers, lists, numpy arrays or strings")
 
 
 def _emitter_name(em) -> str:

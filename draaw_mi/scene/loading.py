@@ -97,8 +97,9 @@ def _load_scene(source, defines, **overrides) -> DraawScene:
         return _wrapped(source)
     if isinstance(source, dict):
         if source.get("type") == "scene":
-            return _from_mitsuba_scene(load_dict_or_error(source, "<dict>"), "<dict>", overrides, source,
-                                       named_integrator="integrator" in source)
+            # (whatever key holds its integrator: Mitsuba's own dicts say "integrator", and
+            # {"my_integrator": {"type": "direct"}} declares one as well)
+            return _from_mitsuba_scene(load_dict_or_error(source, "<dict>"), "<dict>", overrides, source)
         refuse_manifest(source, "<dict>")
         return from_description(source, "<dict>", os.getcwd(), overrides)
     if not isinstance(source, (str, os.PathLike)):
@@ -356,21 +357,39 @@ _INTEGRATOR_VERSIONS = {"PathIntegrator": "path", "PRBIntegrator": "prb",
                         **{f"DraawV{i}Integrator": f"draaw_v{i}" for i in range(1, 5)}}
 
 
+def integrator_version(integrator) -> str | None:
+    """The render version the Mitsuba integrator object is (``path``, ``prb``, ``volpath``,
+    ``prbvolpath``, ``draaw_v1`` .. ``draaw_v4``); ``None`` for another (``direct``, ``aov``, ...)."""
+    return _INTEGRATOR_VERSIONS.get(str(integrator).split("[", 1)[0].strip())
+
+
+def integrator_depth(integrator) -> int | None:
+    """The ``max_depth`` of a Mitsuba integrator object (-1: unlimited), ``None`` where it has
+    none. C++ integrators expose it only through to_string(), -1 printed unsigned."""
+    m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integrator))
+    if m is None:
+        return None
+    depth = int(m.group(1))
+    return depth - 2 ** 32 if depth >= 2 ** 31 else depth
+
+
 def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | None = None,
-                        named_integrator: bool = False, files: list | None = None,
+                        named_integrator: bool = True, files: list | None = None,
                         xml: dict | None = None) -> DraawScene:
-    """``named_integrator``: the XML file or dict names its integrator, which then becomes
-    the scene's render version: the version that is it (``path``, ``prb``, ``draaw_v4``, ...)
-    or, for another of Mitsuba's (``direct``, ``aov``, ...), ``"scene"``: the scene's own
-    integrator object, with the file's settings. A scene without one renders with
-    draaw-mi's default. ``files``: the files the scene reads besides its own
+    """The integrator an XML file, a dict or an ``mi.Scene`` declares (Mitsuba 3.9 gives a
+    scene that declares none no integrator: ``scene.integrator()`` is ``None``; an XML file's
+    ``named_integrator`` says whether it or an include names one) becomes the scene's render
+    version: the version that is it (``path``, ``prb``, ``draaw_v4``, ...) or, for another of
+    Mitsuba's (``direct``, ``aov``, ...), ``"scene"``: the scene's own integrator object, with
+    the file's settings. A scene without one renders with draaw-mi's default. ``files``: the
+    files the scene reads besides its own
     (``info["files"]``); ``xml``: the XML file and defines it was loaded from
     (``info["xml"]``, for reloads at another size)."""
     sensors = scene.sensors()
     if not sensors:
         raise SceneError(f"{source}: the scene has no sensor (camera)")
     settings = dict(DEFAULT_SETTINGS)
-    size = sensors[0].film().size()
+    size = sensors[0].film().crop_size()          # (what renders: the crop window)
     settings["resolution"] = (int(size[0]), int(size[1]))
     settings["spp"] = int(sensors[0].sampler().sample_count())
     settings["sampler"] = sampler_plugin(sensors[0].sampler())
@@ -378,18 +397,15 @@ def _from_mitsuba_scene(scene, source: str, overrides: dict, mi_dict: dict | Non
     # 'info' nor in fit's extra views)
     settings["filter"] = filter_plugin(sensors[0].film().rfilter())
     integ = scene.integrator()
-    if integ is not None:      # C++ integrators expose max_depth only through to_string()
-        m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
-        if m:
-            depth = int(m.group(1))
-            settings["max_depth"] = depth - 2 ** 32 if depth >= 2 ** 31 else depth   # -1 prints unsigned
+    if integ is not None:
+        if integrator_depth(integ) is not None:
+            settings["max_depth"] = integrator_depth(integ)
         # (the file's hide_emitters is kept: the sky it hides would render, mean 0.95 for 0.05)
         settings["hide_emitters"] = bool(getattr(integ, "hide_emitters", False))
         if named_integrator:
-            kind = str(integ).split("[", 1)[0].strip()
             # (not one of the versions: the scene's own, as Mitsuba would render it; a version
             # given to render() or --version replaces it)
-            settings["version"] = _INTEGRATOR_VERSIONS.get(kind, SCENE_VERSION)
+            settings["version"] = integrator_version(integ) or SCENE_VERSION
     settings["post"] = []
     checked = _checked(overrides, source)
     if checked.get("sampler") not in (None, settings["sampler"]):

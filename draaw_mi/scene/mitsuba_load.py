@@ -209,7 +209,12 @@ def load_mitsuba_file(path: str, defines: dict | None = None, size: tuple | None
         copy = os.path.join(folder, os.path.basename(path))
         with open(copy, "w", encoding="utf-8") as fh:
             fh.write(text)
-        return _load_file(copy, path, defines)
+        try:
+            return _load_file(copy, path, defines)
+        except RuntimeError as e:          # (Mitsuba's errors name the file it read: the user's)
+            if copy not in str(e):
+                raise
+            raise RuntimeError(str(e).replace(copy, path)) from None
 
 
 def _load_file(path: str, source: str, defines: dict):

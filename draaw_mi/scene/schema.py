@@ -218,9 +218,11 @@ def read_document(path: str, what: str = "scene file") -> dict:
     except OSError as e:
         raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
     try:
+        # (utf-8-sig: a byte-order mark, which editors on Windows write, is not part of the text)
+        text = raw.decode("utf-8-sig")
         if path.lower().endswith(".toml"):
-            return tomllib.loads(raw.decode("utf-8"))
-        return json.loads(raw.decode("utf-8"))
+            return tomllib.loads(text)
+        return json.loads(text)
     except UnicodeDecodeError:
         raise SceneError(f"{path}: not a UTF-8 text file") from None
     except tomllib.TOMLDecodeError as e:

@@ -7,7 +7,10 @@ values (``draaw-mi render -D res=64``, ``load_scene(path, defines={"res": 64})``
 The film's size is not a scene parameter (``mi.traverse`` does not list it), so a scene is
 loaded at another resolution from a copy of its text whose first sensor's film has that
 ``width`` and ``height`` (:func:`film_sized_xml`); the copy names the original's folder in a
-``<path>`` tag, so that its relative meshes, textures and includes are found as before.
+``<path>`` tag, so that its relative meshes, textures and includes are found as before. A
+film with a crop window (``crop_*``) renders its window: the size asked for is the window's,
+and the film and the window's offset are scaled with it (:func:`scaled_crop`), so the image
+shows the same part of the view.
 
 Example::
 
@@ -23,12 +26,54 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 import xml.etree.ElementTree as ET
 
-from ..errors import SceneError
+from ..errors import SceneError, user_stacklevel
 from .xml_text import parse_xml_file, parse_xml_text
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+#: a film's crop window (Mitsuba's ``crop_*`` properties)
+CROP = ("crop_offset_x", "crop_offset_y", "crop_width", "crop_height")
+FILM_SIZE = ("width", "height") + CROP
+#: Mitsuba's film size where a film gives none
+DEFAULT_FILM = (768, 576)
+
+
+def scaled_crop(film: dict, width: int, height: int) -> dict:
+    """The ``width``, ``height`` and ``crop_*`` of a film whose crop window renders a ``width``
+    x ``height`` image of the part of the view that the crop window of ``film`` (its
+    ``width``, ``height`` and ``crop_*`` as ints; an absent one Mitsuba's default) shows: the
+    film and the window's offset are scaled by the ratio of the new window to the old one,
+    rounded, with the window inside the film.
+
+    >>> scaled_crop({"width": 32, "height": 32, "crop_width": 16, "crop_height": 16,
+    ...              "crop_offset_x": 8, "crop_offset_y": 8}, 24, 12)
+    {'width': 48, 'height': 24, 'crop_offset_x': 12, 'crop_offset_y': 6, 'crop_width': 24, 'crop_height': 12}
+    """
+    out: dict = {}
+    for axis, (size, crop, offset, want, default) in enumerate(
+            (("width", "crop_width", "crop_offset_x", width, DEFAULT_FILM[0]),
+             ("height", "crop_height", "crop_offset_y", height, DEFAULT_FILM[1]))):
+        full = film.get(size) if film.get(size) is not None else default
+        window = film.get(crop) if film.get(crop) is not None else full
+        ratio = want / max(int(window), 1)
+        out[size] = max(int(want), round(full * ratio))
+        out[offset] = min(round((film.get(offset) or 0) * ratio), out[size] - int(want))
+        out[crop] = int(want)
+    return {k: out[k] for k in ("width", "height") + CROP}
+
+
+def _int_value(value: str, known: dict) -> int | None:
+    """A film property's integer: a number, or ``$name`` of a known define or default;
+    ``None`` otherwise."""
+    m = re.fullmatch(r"\s*\$([A-Za-z_][A-Za-z0-9_]*)\s*", value)
+    if m:
+        value = known.get(m.group(1))
+    try:
+        return int(str(value).strip())
+    except (TypeError, ValueError):
+        return None
 
 
 def check_defines(defines, source: str) -> dict:
@@ -90,12 +135,33 @@ def film_sized_xml_text(text: str, folder: str, width: int, height: int, defines
     film = sensor.find("film")
     if film is None:                                  # (Mitsuba's default film)
         film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
-    replaced: set[str] = set()          # the $names in the film's width and height
-    for name, value in (("width", width), ("height", height)):
-        node = next((n for n in film if n.get("name") == name), None)
+    nodes = {n.get("name"): n for n in film if n.get("name") in FILM_SIZE}
+    sizes = {"width": int(width), "height": int(height)}
+    if set(nodes) & set(CROP):                        # a crop window: scaled with the film
+        known = dict(defines)                         # (defines win over <default>s)
+        for node in root.findall("default"):
+            known.setdefault(node.get("name"), node.get("value"))
+        read = {name: _int_value(node.get("value", ""), known) for name, node in nodes.items()}
+        unread = sorted(name for name, value in read.items() if value is None)
+        if unread:
+            bad = ", ".join(f"{k}={nodes[k].get('value')!r}" for k in unread)
+            warnings.warn(f"{source}: film {bad}: cannot read its crop window, so it is dropped at "
+                          f"resolution {width}x{height} (the whole view renders); expected numbers or "
+                          "$names of <default>s or defines", RuntimeWarning, stacklevel=user_stacklevel())
+            sizes = {"width": int(width), "height": int(height), **{k: None for k in CROP}}
+        else:
+            sizes = scaled_crop(read, int(width), int(height))
+    replaced: set[str] = set()          # the $names of the film's size and crop it rewrites
+    for name, value in sizes.items():
+        node = nodes.get(name)
         if node is None:
+            if value is None:
+                continue
             node = ET.SubElement(film, "integer", {"name": name})
         replaced.update(re.findall(r"\$([A-Za-z_][A-Za-z0-9_]*)", node.get("value", "")))
+        if value is None:                             # (a crop window dropped)
+            film.remove(node)
+            continue
         node.tag = "integer"
         node.set("value", str(int(value)))
     root.insert(0, ET.Element("path", {"value": folder}))

@@ -284,3 +284,25 @@ def test_the_cli_exits_130_when_the_integrator_is_interrupted_as_it_is_made(tmp_
     _interrupted_init(DraawV4Integrator, monkeypatch)
     assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "--no-progress", "--version", "v4"]) == 130
     assert capsys.readouterr().err == "draaw-mi: interrupted\n"
+
+
+@pytest.mark.parametrize("plugin", ["path", "prb"])
+def test_a_declared_mitsuba_integrator_renders_with_its_own_settings(tmp_path, plugin):
+    """An XML file's path integrator with rr_depth 1 rendered with a new plugin's rr_depth 5."""
+    path = tmp_path / "s.xml"
+    path.write_text(
+        f'<scene version="3.0.0"><integrator type="{plugin}"><integer name="max_depth" value="3"/>'
+        '<integer name="rr_depth" value="1"/></integrator><sensor type="perspective">'
+        '<film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>'
+        '</sensor><shape type="sphere"/><emitter type="constant"/></scene>')
+    scene = draaw_mi.load_scene(str(path))
+    own = scene.mi_scene.integrator()
+    session = session_of(scene)
+    s = scene.settings
+    assert s["version"] == plugin and session.integrator(plugin, s["max_depth"], s["hide_emitters"]) is own
+    # another depth, hide_emitters or option: a plugin of its own
+    assert session.integrator(plugin, 2, s["hide_emitters"]) is not own
+    assert session.integrator(plugin, s["max_depth"], True) is not own
+    assert session.integrator(plugin, s["max_depth"], s["hide_emitters"], rr_depth=2) is not own
+    img = np.array(draaw_mi.render(scene, seed=0))
+    assert img.shape == (8, 8, 3) and np.isfinite(img).all()

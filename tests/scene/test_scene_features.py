@@ -393,3 +393,29 @@ def test_a_material_no_shape_uses_is_left_out_and_info_says_so(tmp_path, capsys)
     p.write_text(json.dumps(d))
     assert main(["info", str(p)]) == 0
     assert "volumes: extra (copied into the volumes' voxels)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("shape, key", [
+    ({"type": "sphere", "scale": [1, 3, 1]}, "scale"),
+    ({"type": "sphere", "matrix": [[1, 0, 0, 0], [0, 2, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}, "matrix"),
+    ({"type": "cylinder", "scale": [1, 3, 1], "rotate": {"axis": [1, 0, 0], "angle": 45}}, "scale"),
+    ({"type": "cylinder", "p1": [1, 0, 0], "scale": [1, 1, 3]}, "scale"),
+])
+def test_a_sphere_or_cylinder_stretched_unevenly_is_refused(shape, key):
+    """Such a shape loaded as a round one (only Mitsuba's log said so)."""
+    with pytest.raises(SceneError, match=rf"<dict>: shapes\[0\]\.{key}: .* stretches {shape['type']} "
+                                         rf"'{shape['type']}0' unevenly.*as a mesh"):
+        draaw_mi.load_scene({"render": {"resolution": [8, 8]}, "shapes": [shape]})
+
+
+@pytest.mark.parametrize("shape", [
+    {"type": "sphere", "scale": 2, "rotate": {"axis": [1, 1, 0], "angle": 33}},
+    {"type": "cylinder", "scale": [2, 2, 5], "rotate": {"axis": [1, 0, 0], "angle": 45}},
+    {"type": "cylinder", "p1": [1, 0, 0], "scale": [4, 1, 1]},          # (along its axis)
+])
+def test_a_sphere_or_cylinder_scaled_evenly_loads(shape):
+    # (a rotation axis of any length is a unit one: Mitsuba's rotate stretched by its length)
+    scene = draaw_mi.load_scene({"render": {"resolution": [8, 8]}, "shapes": [shape]})
+    box = scene.mi_scene.shapes()[0].bbox()
+    if shape["type"] == "sphere":
+        assert np.allclose(box.min, [-2, -2, -2], atol=1e-4) and np.allclose(box.max, [2, 2, 2], atol=1e-4)

@@ -228,3 +228,49 @@ def test_resolution_keeps_the_defines_of_includes_of_includes(tmp_path, defines)
     mine, theirs = (np.array(mi.render(s, spp=4, seed=0)) for s in (scene.mi_scene, ref))
     assert mine.shape == (16, 16, 3) and theirs.mean() > 0.5
     np.testing.assert_allclose(mine, theirs, rtol=1e-5, atol=1e-6)
+
+
+def _cropped(tmp_path, crop: str = "16", offset: str = "8") -> str:
+    """crop.xml: a 32x32 film whose crop window is ``crop`` pixels square at ``offset``."""
+    (tmp_path / "crop.xml").write_text(
+        '<scene version="3.0.0"><default name="cw" value="16"/><integrator type="path"/>'
+        '<sensor type="perspective"><float name="fov" value="40"/><transform name="to_world">'
+        '<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>'
+        '<sampler type="independent"><integer name="sample_count" value="1"/></sampler>'
+        '<film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>'
+        f'<integer name="crop_width" value="{crop}"/><integer name="crop_height" value="{crop}"/>'
+        f'<integer name="crop_offset_x" value="{offset}"/><integer name="crop_offset_y" value="{offset}"/>'
+        '<rfilter type="box"/></film></sensor>'
+        '<shape type="sphere"><bsdf type="diffuse"/></shape><emitter type="constant"/></scene>')
+    return str(tmp_path / "crop.xml")
+
+
+def _film(scene):
+    film = scene.mi_scene.sensors()[0].film()
+    return list(film.size()), list(film.crop_size()), list(film.crop_offset())
+
+
+@pytest.mark.parametrize("crop", ["16", "$cw"])
+def test_an_xml_films_crop_window_is_its_resolution_and_resizes_with_it(tmp_path, crop):
+    """A 32x32 film cropped to 16x16 at (8, 8) said resolution (32, 32) and rendered 16x16;
+    resolution=(24, 24) kept the 16x16 window, and (8, 8) failed (the window outside the film)."""
+    path = _cropped(tmp_path, crop)
+    scene = draaw_mi.load_scene(path)
+    assert scene.resolution == (16, 16) and scene.settings["resolution"] == (16, 16)
+    assert np.array(draaw_mi.render(scene, seed=0)).shape == (16, 16, 3)
+    for size in (24, 8):
+        # the same part of the view: the film and the offset scaled with the window
+        for resized in (draaw_mi.load_scene(path, resolution=(size, size)), scene.with_resolution(size, size)):
+            assert resized.resolution == (size, size) and resized.settings["resolution"] == (size, size)
+            assert _film(resized) == ([2 * size] * 2, [size] * 2, [size // 2] * 2)
+            assert np.array(draaw_mi.render(resized, seed=0)).shape == (size, size, 3)
+
+
+def test_a_load_error_of_a_resized_xml_scene_names_the_users_file(tmp_path):
+    """It named the temporary copy the resized film was loaded from (/tmp/draaw-mi-xml-.../)."""
+    path = tmp_path / "bad.xml"
+    with open(_cropped(tmp_path)) as fh:
+        path.write_text(fh.read().replace('value="40"', 'value="forty"'))
+    with pytest.raises(draaw_mi.SceneError) as info:
+        draaw_mi.load_scene(str(path), resolution=(8, 8))
+    assert "draaw-mi-xml-" not in str(info.value) and str(info.value).count(str(path)) >= 2, str(info.value)
