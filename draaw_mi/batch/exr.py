@@ -80,8 +80,8 @@ def metadata(spec: dict, seconds: float, post: list | None = None) -> dict:
 def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     """The ``draaw:*`` header attributes of one ``draaw-mi render`` EXR, as batch frames carry
     them: the scene (and its file's SHA-256), the integrator, sampler, spp, seed, depth, time,
-    the post chain applied (``post``: a chain or a list of filter dicts; none: no attribute) and
-    the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
+    the post chain applied (``post``: a chain or a list of filter dicts; none: no attribute), an
+    XML scene's ``$name`` defines (``draaw:defines``) and the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
     return_info=True)`` returned."""
     meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["version"],
             "draaw:integrator": info["integrator"],
@@ -92,6 +92,9 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     if os.path.isfile(scene_file):
         meta["draaw:scene_sha256"] = file_hash(scene_file)
     meta["draaw:sampler"] = str(scene.settings.get("sampler") or "independent")
+    defines = (scene.info.get("xml") or {}).get("defines")
+    if defines:                              # (two -D values: two images, one header)
+        meta["draaw:defines"] = json.dumps(defines, sort_keys=True, default=str)
     if post:
         meta["draaw:post"] = json.dumps(load_chain(post).to_list())
     meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})

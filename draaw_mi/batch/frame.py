@@ -81,7 +81,7 @@ class CachedScene:
         bad = 0
         if chain:                             # counted before the chain: it reads NaN/inf as 0
             bad = non_finite_count(image)
-            image = apply_post(image, chain)
+            image = apply_post(image, chain, colour + list(integrator.aov_names()))
         return image, {"channels": colour + list(integrator.aov_names()), "non_finite": bad, "post": chain}
 
     def _prepare(self, integrator, spec: dict) -> None:

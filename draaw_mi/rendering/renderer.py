@@ -27,10 +27,10 @@ import mitsuba as mi
 import numpy as np
 
 from .. import post as post_mod
-from ..errors import NonFiniteWarning, RenderError
+from ..errors import DraawError, NonFiniteWarning, RenderError
 from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, VERSION_GRADES, is_draaw, resolve_version, version_key
-from ..integrators.common import AOV_CHANNELS
+from ..integrators.common import AOV_CHANNELS, parse_aovs
 from ..io import channel_names
 from ..progress import check_mode, closed_after, progress_bar
 from ..scene import DraawScene, load_scene
@@ -125,6 +125,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         given = "time_budget" if time_budget is not None else "pass_spp"
         raise RenderError(f"render: adaptive= renders every sample in one launch, without passes; "
                           f"drop {given}= or adaptive=")
+    if not isinstance(return_info, (bool, np.bool_)):
+        raise RenderError(f"render: return_info={return_info!r}; expected True or False")
     rs = _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
                    hide_emitters, aovs, integrator_options, adaptive, denoise)
     session = session_of(rs.scene)
@@ -228,8 +230,9 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
         pass_spp = min(spp, 16 if time_budget else MAX_PASS_SPP)
     pass_spp = _check_int("pass_spp", pass_spp, 1)
     hide = s.get("hide_emitters", False) if hide_emitters is None else hide_emitters
-    if not isinstance(hide, (bool, np.bool_)):             # a truthy string is not True
-        raise RenderError(f"render: hide_emitters={hide!r}; expected True or False")
+    for name, flag in (("hide_emitters", hide), ("denoise", denoise)):
+        if not isinstance(flag, (bool, np.bool_)):         # a truthy string is not True
+            raise RenderError(f"render: {name}={flag!r}; expected True or False")
     if integrator_options is not None and not isinstance(integrator_options, dict):
         raise RenderError(f"render: integrator_options={integrator_options!r}; expected a dict of "
                           "integrator plugin properties, e.g. {'rr_depth': 8}")
@@ -241,6 +244,13 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
             aovs = []
     elif isinstance(aovs, str):
         aovs = [aovs]                          # "depth" or "all", not its characters
+    if not isinstance(aovs, (list, tuple)) or not all(isinstance(a, str) for a in aovs):
+        raise RenderError(f"render: aovs={aovs!r}; expected a list of AOV names "
+                          f"({', '.join(AOV_CHANNELS)}) or 'all'")
+    try:                                       # (names: the integrator's own check, in render's words)
+        parse_aovs("render", ",".join(aovs))
+    except DraawError as e:
+        raise RenderError(str(e)) from None
     if params is not None and aovs:
         # (Mitsuba's adjoint pass splats AOVs with a Python float among them: a TypeError
         # from ImageBlock.put inside dr.backward)
@@ -321,7 +331,7 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, summed: bool):
                 raw = np.array(image)[..., :3].copy()
                 image, names = _denoised(image, names, rs.guide_aovs)
             if rs.chain:
-                image = apply_post(image, rs.loaded)
+                image = apply_post(image, rs.loaded, names)
     return image, names, bad, raw
 
 
@@ -360,7 +370,7 @@ def _render_denoised_apart(rs: RenderSettings, progress, return_info, time_budge
         out[..., :3] += emission
         image = mi.TensorXf(np.ascontiguousarray(out))
         if rs.chain:
-            image = apply_post(image, rs.loaded)
+            image = apply_post(image, rs.loaded, names)
     if return_info:
         info.update({"channels": names, "denoised": True, "post": rs.chain, "raw": raw,
                      "seconds": time.perf_counter() - t0,
@@ -401,8 +411,8 @@ def _render_adaptive(rs: RenderSettings, session, block, params, return_info, pr
             bar.update(rs.spp)
     bad = non_finite_count(image)                            # before the chain: see _finish
     _warn_non_finite(bad, rs)
-    if rs.chain:
-        image = apply_post(image, rs.loaded)
+    if rs.chain:                               # (colour only: no AOVs in an adaptive render)
+        image = apply_post(image, rs.loaded, scene_colour_names(rs.scene))
     if return_info:
         return image, {"non_finite": bad, "spp": rs.spp, "passes": 1, "seconds": time.perf_counter() - t0,
                        "channels": ["R", "G", "B"], "version": rs.version,

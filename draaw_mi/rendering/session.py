@@ -466,13 +466,16 @@ def close_all(timeout: float = WORKER_STOP_S, why: str | None = CLOSED_NOTICE) -
 atexit.register(close_all, why=None)
 
 
-def apply_post(image, chain):
+def apply_post(image, chain, names):
     """``image`` with the post chain ``chain`` (a loaded :class:`~draaw_mi.post.Chain`)
-    applied to its colour channels; AOV channels beyond the fourth pass through."""
-    if image.shape[2] <= 4:
+    applied to its colour: R, G, B, and A where ``names`` (the image's channel names) has it
+    fourth; AOV channels pass through. (Told by count, an RGB image with one AOV had its AOV
+    read as alpha, and an RGBA image with AOVs had its colour encoded premultiplied.)"""
+    colour = 4 if len(names) > 3 and names[3] == "A" else 3
+    if image.shape[2] == colour:
         return post.apply(image, chain)
-    color = post.apply(image[:, :, :3], chain)
-    return dr.concat([color, image[:, :, 3:]], axis=2)
+    color = post.apply(image[:, :, :colour], chain)
+    return dr.concat([color, image[:, :, colour:]], axis=2)
 
 
 def non_finite_count(image) -> int:

@@ -92,14 +92,19 @@ def parse_settings(desc: dict, where: Where) -> dict:
     if "hide_emitters" in render:
         s["hide_emitters"] = boolean(render["hide_emitters"], w / "hide_emitters")
     if "aovs" in render:
-        aovs = render["aovs"]
-        if not isinstance(aovs, list) or not all(isinstance(a, str) for a in aovs):
-            raise (w / "aovs").error(f"{aovs!r} is not a list of AOV names")
-        for name in aovs:         # (a misspelt one failed at the render, naming neither file nor key)
-            if name not in AOV_CHANNELS and name != "all":
-                raise (w / "aovs").error(f"{name!r} is not an AOV{suggest(name, list(AOV_CHANNELS) + ['all'])}")
-        s["aovs"] = list(aovs)
+        s["aovs"] = aov_list(render["aovs"], w / "aovs")
     return s
+
+
+def aov_list(aovs, where: Where) -> list:
+    """A list of AOV names (or ``["all"]``), checked: a misspelt one failed at the render,
+    naming neither file nor key."""
+    if not isinstance(aovs, list) or not all(isinstance(a, str) for a in aovs):
+        raise where.error(f"{aovs!r} is not a list of AOV names")
+    for name in aovs:
+        if name not in AOV_CHANNELS and name != "all":
+            raise where.error(f"{name!r} is not an AOV{suggest(name, list(AOV_CHANNELS) + ['all'])}")
+    return list(aovs)
 
 
 # --------------------------------------------------------------------------- transforms

@@ -388,6 +388,7 @@ class DraawScene:
                                                   if not sh.id().startswith("__sdf_")],
             "lights": self.info.get("lights") or [_emitter_name(em) for em in s.emitters()],
             "materials": self.info.get("materials", []),
+            "described": self.description is not None,   # (materials: the default draaw one)
             # materials no shape uses, left out of the Mitsuba scene (their code would enter
             # every kernel)
             "unused_materials": self.info.get("unused_materials", []),
@@ -450,10 +451,11 @@ def plain(node, where: Where):
 def _emitter_name(em) -> str:
     """An emitter's id; an area light without one is named by its shape's id (an XML file
     gives the ``<shape>`` the id, not the ``<emitter>`` inside it); else its class name."""
-    if em.id():
-        return em.id()
     kind = str(em).split("[", 1)[0]
     shape = em.get_shape()                     # (None but for area lights)
+    # (a description's emitting shape holds its emitter under the dict key "emitter")
+    if em.id() and not (shape is not None and shape.id() and em.id() == "emitter"):
+        return em.id()
     if shape is not None and shape.id():
         return f"{shape.id()} ({kind})"
     return kind

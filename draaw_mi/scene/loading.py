@@ -30,13 +30,13 @@ from ..guard import RENDER_GUARD, in_foreground
 from ..integrators import SCENE_VERSION, resolve_version
 from ..sdf.scene import find as find_sdf
 from .camera import auto_camera, clipped_away, filter_plugin, sampler_plugin
-from .description import DEFAULT_SETTINGS, SAMPLERS, TOP_KEYS, build_mitsuba_dict
+from .description import DEFAULT_SETTINGS, FILTERS, SAMPLERS, TOP_KEYS, aov_list, build_mitsuba_dict
 from .draaw_scene import DraawScene
 from .light_dicts import auto_light
 from .meshes import MESH_SUFFIXES, bounds, load_mesh_parts
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file, mitsuba_error_message
 from .mitsuba_xml import integrator_name, shape_names, xml_references
-from .schema import Where, number, read_document, resolution, string
+from .schema import Where, boolean, number, read_document, resolution, string
 from .sdf_dicts import refuse_textured_materials
 from .xml_film import check_defines, declared_defaults
 
@@ -60,7 +60,9 @@ def load_scene(source, defines: dict | None = None, **overrides) -> DraawScene:
     (``{"type": "scene", ...}``) or an ``mi.Scene``.
 
     ``overrides`` replace render settings: ``resolution=(W, H)``, ``spp``, ``max_depth``,
-    ``version``, ``seed``, ``filter``, ``sampler`` (descriptions only). ``defines``: values
+    ``version``, ``seed``, ``hide_emitters``, ``aovs``, ``filter``, ``sampler`` (the last two
+    for descriptions only). A loaded :class:`DraawScene` takes ``resolution=`` alone (a copy at
+    that size). ``defines``: values
     of a Mitsuba XML file's ``$name`` parameters (its ``<default>`` values), e.g.
     ``{"res": 64, "spp": 16}`` (``draaw-mi render -D res=64``). An XML scene's
     ``resolution=`` sizes its first sensor's film. Errors are :class:`SceneError` naming the
@@ -90,7 +92,15 @@ def _load_scene(source, defines, **overrides) -> DraawScene:
                          "file; this is not one (give a TOML scene's values in the file, or as "
                          "overrides such as resolution=, spp=)")
     if isinstance(source, DraawScene):
-        return source
+        if not overrides:
+            return source
+        if set(overrides) == {"resolution"}:
+            return source.with_resolution(*resolution(overrides["resolution"],
+                                                      Where("load_scene") / "resolution"))
+        # (they were dropped without a word: the scene came back as it was)
+        raise SceneError(f"load_scene: a loaded DraawScene takes resolution= only, not "
+                         f"{', '.join(sorted(set(overrides) - {'resolution'}))}; give them to "
+                         "render (render(scene, spp=..., version=...)), or load the file again with them")
     if isinstance(source, mi.Scene):
         if overrides:
             return _from_mitsuba_scene(source, "<mi.Scene>", overrides)
@@ -343,6 +353,14 @@ def _checked(overrides: dict, source: str) -> dict:
             out[key] = number(out[key], where / key, lo=lo, hi=OVERRIDE_MAXIMA.get(key), integer=True)
     if out.get("sampler") is not None:
         out["sampler"] = string(out["sampler"], where / "sampler", SAMPLERS)
+    if out.get("filter") is not None:
+        out["filter"] = string(out["filter"], where / "filter", FILTERS)
+    if out.get("hide_emitters") is not None:
+        out["hide_emitters"] = boolean(out["hide_emitters"], where / "hide_emitters")
+    if out.get("aovs") is not None:          # ("depth" is one name, not its letters)
+        aovs = out["aovs"]
+        out["aovs"] = aov_list([aovs] if isinstance(aovs, str) else list(aovs) if isinstance(aovs, tuple)
+                               else aovs, where / "aovs")
     if out.get("version") is not None:       # (refused now, not at the first render)
         try:
             resolve_version(out["version"])

@@ -475,3 +475,35 @@ def test_bench_refuses_what_it_would_measure_wrongly_before_anything_runs(tmp_pa
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and said in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_render_records_an_xml_scenes_defines(tmp_path):
+    """Two renders of one XML file with other -D values gave other images under the same
+    draaw:* header."""
+    from draaw_mi.batch.exr import read_header
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><default name="res" value="8"/><default name="r" value="0.5"/>'
+                   '<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="$res"/>'
+                   '<integer name="height" value="$res"/></film></sensor>'
+                   '<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="$r, 0.5, 0.5"/>'
+                   '</bsdf></shape><emitter type="constant"/></scene>')
+    out = str(tmp_path / "a.exr")
+    assert main(["render", str(xml), "-o", out, "--spp", "1", "-D", "r=0.9", "--no-progress"]) == 0
+    assert json.loads(read_header(out)["draaw:defines"]) == {"r": "0.9"}
+    plain = str(tmp_path / "b.exr")
+    assert main(["render", str(xml), "-o", plain, "--spp", "1", "--no-progress"]) == 0
+    assert "draaw:defines" not in read_header(plain)
+
+
+def test_info_names_an_emitting_shape_and_the_default_material(tmp_path, capsys):
+    """info said 'lights: emitter' (the dict key of the shape's emitter) and 'materials: (from
+    the file)' for a TOML scene whose shapes take the default draaw material."""
+    import tomli_w
+    desc = {"render": {"resolution": [8, 8]}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+            "shapes": [{"type": "rectangle", "name": "lamp", "emission": 5.0, "translate": [0, 2, 0]},
+                       {"type": "sphere", "name": "ball"}]}
+    path = tmp_path / "e.toml"
+    path.write_text(tomli_w.dumps(desc))
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "lights: lamp (AreaLight)" in out and "materials: (the default draaw material)" in out

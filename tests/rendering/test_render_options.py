@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import draaw_mi
+from draaw_mi.errors import DraawError
 
 from conftest import SCENES, tiny_description
 
@@ -471,3 +472,41 @@ def test_a_curves_arrays_are_not_taken_for_widened_values(tmp_path):
     p.update()
     assert widened_error(tiny, RuntimeError("jit_llvm_compile(): out of memory")) is None
     assert widened_error(tiny, RuntimeError("size of output variable r1 is 2 (must be 1)")) is not None
+
+
+@pytest.mark.parametrize("rgba", [False, True], ids=["rgb", "rgba"])
+def test_a_post_chain_treats_the_colour_alike_with_or_without_aovs(rgba):
+    """apply_post told colour from AOVs by the channel count: an RGB film with a depth AOV had
+    its depth read as alpha (srgb divided the colour by it: 0.56 for 0.75), an RGBA film with an
+    AOV its alpha passed over (the colour encoded premultiplied)."""
+    T = mi.ScalarTransform4f
+    film = {"type": "hdrfilm", "width": 16, "height": 16, "rfilter": {"type": "gaussian"}}
+    if rgba:
+        film["pixel_format"] = "rgba"
+    scene = draaw_mi.load_scene({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "film": film,
+                   "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "sampler": {"type": "independent", "sample_count": 4}},
+        "sphere": {"type": "sphere", "bsdf": {"type": "diffuse"}},
+        "light": {"type": "point", "position": [0, 0, 4], "intensity": {"type": "rgb", "value": 20}}})
+    chain = [{"type": "srgb"}]
+    plain, info = draaw_mi.render(scene, version="v4", spp=4, seed=0, post=chain, return_info=True)
+    with_aov, info_aov = draaw_mi.render(scene, version="v4", spp=4, seed=0, aovs=["depth"], post=chain,
+                                         return_info=True)
+    colour = 4 if rgba else 3
+    assert info_aov["channels"][:colour] == info["channels"] and info_aov["channels"][colour] == "depth.Z"
+    np.testing.assert_allclose(np.array(with_aov)[..., :colour], np.array(plain), atol=1e-5)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"denoise": "no"}, r"render: denoise='no'; expected True or False"),
+    ({"return_info": "yes"}, r"render: return_info='yes'; expected True or False"),
+    ({"aovs": [1]}, r"render: aovs=\[1\]; expected a list of AOV names"),
+    ({"aovs": ["dpth"]}, r"dpth"),
+])
+def test_renders_flags_and_aov_names_are_checked(kw, match):
+    """denoise='no' denoised (a biased image), return_info took any truthy value, and an AOV
+    that is not a string raised a bare TypeError from str.join."""
+    with pytest.raises(DraawError, match=match):
+        draaw_mi.render(draaw_mi.load_scene(tiny_description(resolution=[8, 8])), spp=1, **kw)

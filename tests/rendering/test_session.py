@@ -153,7 +153,7 @@ def test_freeze_rules(scene, monkeypatch):
 
 def test_apply_post_leaves_aov_channels_alone():
     img = mi.TensorXf(np.full((2, 2, 6), 0.25, np.float32))
-    out = np.array(apply_post(img, [{"type": "contrast", "contrast": 2.0}]))
+    out = np.array(apply_post(img, [{"type": "contrast", "contrast": 2.0}], ["R", "G", "B", "N.X", "N.Y", "N.Z"]))
     assert np.array_equal(out[..., 3:], np.full((2, 2, 3), 0.25, np.float32))
     assert not np.allclose(out[..., :3], 0.25)
 

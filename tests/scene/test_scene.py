@@ -628,3 +628,30 @@ def test_a_dict_scene_holding_numpy_values_is_written_back(tmp_path, suffix):
     assert np.allclose(again.params["m.metallic.value"], 0.25) and np.allclose(again.params["m.roughness.value"], 0.125)
     with pytest.raises(SceneError, match=r"s: m\.tex: object .* cannot be written to a scene file"):
         plain({"m": {"tex": object()}}, Where("s"))
+
+
+def test_a_loaded_scene_takes_a_resolution_and_refuses_other_overrides(tiny_desc):
+    """load_scene(scene, resolution=..., spp=..., version=...) gave the scene back as it was,
+    every override dropped without a word."""
+    scene = draaw_mi.load_scene(tiny_desc)
+    assert draaw_mi.load_scene(scene) is scene
+    assert draaw_mi.load_scene(scene, resolution=(8, 4)).resolution == (8, 4)
+    with pytest.raises(SceneError, match=r"takes resolution= only, not spp, version; give them to render"):
+        draaw_mi.load_scene(scene, resolution=(8, 4), spp=2, version="v1")
+
+
+@pytest.mark.parametrize("override, match", [
+    ({"filter": "nope"}, r"override.filter: 'nope' is not one of box, gaussian"),
+    ({"hide_emitters": "no"}, r"override.hide_emitters: 'no' is not true or false"),
+    ({"aovs": ["dpth"]}, r"override.aovs: 'dpth' is not an AOV; did you mean 'depth'"),
+    ({"aovs": [1]}, r"override.aovs: \[1\] is not a list of AOV names"),
+])
+def test_load_scenes_filter_hide_emitters_and_aovs_overrides_are_checked(tiny_desc, override, match):
+    """They were taken as given and failed at the render (a string of AOVs read letter by
+    letter, a filter in Mitsuba's words)."""
+    with pytest.raises(SceneError, match=match):
+        draaw_mi.load_scene(tiny_desc, **override)
+
+
+def test_one_aov_name_as_an_override_is_one_aov(tiny_desc):
+    assert draaw_mi.load_scene(tiny_desc, aovs="depth").settings["aovs"] == ["depth"]
