@@ -77,8 +77,8 @@ class DraawScene:
 
     @property
     def resolution(self) -> tuple[int, int]:
-        """(width, height) of the images it renders: the film's crop window (the whole film
-        where it has none)."""
+        """The size of the images it renders, ``(width, height)``: the film's crop window (the
+        whole film where it has none)."""
         size = self.mi_scene.sensors()[0].film().crop_size()
         return int(size[0]), int(size[1])
 
