@@ -25,6 +25,7 @@ one that is not an area emitter) and are not differentiated (their adjoints are 
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import drjit as dr
 import mitsuba as mi
@@ -236,8 +237,19 @@ class DraawIntegrator(RBIntegrator):
         notebook's preview beside its main thread) then waits for this one instead of
         breaking its ``dr.freeze`` recording. The gradient passes (``render_forward``,
         ``render_backward``) run inside Dr.Jit's AD traversal, where the guard is not taken."""
-        with RENDER_GUARD:
+        with RENDER_GUARD, self.rendering(scene, sensor):
             return self.render_primal(scene, sensor, seed, spp, develop, evaluate)
+
+    @contextmanager
+    def rendering(self, scene, sensor):
+        """While a pass runs, :attr:`render_sensor` is the sensor it renders (``sensor`` an index
+        or a Sensor, as ``mi.render`` takes it): media scenes start camera rays in its medium."""
+        prev = getattr(self, "render_sensor", None)
+        self.render_sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        try:
+            yield
+        finally:
+            self.render_sensor = prev
 
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """:meth:`render` itself: Mitsuba's path-replay primal render."""
@@ -260,7 +272,7 @@ class DraawIntegrator(RBIntegrator):
         the outline and shadow-edge terms (:mod:`~draaw_mi.integrators.silhouettes`)."""
         self._check_differentiable(scene)
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        with silhouettes.boundary_band(self, scene, sensor) as band:
+        with self.rendering(scene, sensor), silhouettes.boundary_band(self, scene, sensor) as band:
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
             if band is not None:
                 silhouettes.backward(self, scene, grad_in, sensor, seed, spp)
@@ -270,7 +282,7 @@ class DraawIntegrator(RBIntegrator):
         the outline and shadow-edge terms."""
         self._check_differentiable(scene)
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        with silhouettes.boundary_band(self, scene, sensor) as band:
+        with self.rendering(scene, sensor), silhouettes.boundary_band(self, scene, sensor) as band:
             grad = super().render_forward(scene, params, sensor, seed, spp)
             if band is not None:
                 grad = grad + silhouettes.forward(self, scene, sensor, seed, spp)

@@ -14,7 +14,7 @@ Estimator (the same expectation as Mitsuba's ``volpath``, tested per pixel):
   (power heuristic, as ``volpath``; weight 1 on camera rays and after delta bounces).
 * Surfaces: any Mitsuba BSDF through ``sample`` / ``eval``; ``null`` BSDFs are crossed
   without counting a bounce (as ``volpath``); ``interior`` / ``exterior`` media switch at
-  medium transitions; a camera inside a medium starts in the sensor's medium.
+  medium transitions; a camera inside a medium starts in the rendered sensor's medium.
 * SDF objects (feature ``sdf``, :mod:`draaw_mi.sdf.integration`): every segment ends at the
   nearer of the mesh hit and the sphere-traced SDF hit (free flights stop there), SDF hits
   scatter with their slot's BSDF without changing the current medium (SDFs are opaque
@@ -76,19 +76,21 @@ class MediaTable:
                     names.append(f"{shape.id()}.{side}" if shape.id() else None)
                     bb = shape.bbox()
                     inside.append(0.5 * (np.array(bb.min) + np.array(bb.max)))
-        self.sensor_media = {}
-        for k, sensor in enumerate(scene.sensors()):
+        # every sensor of the scene with its medium (None: in vacuum), looked up by identity
+        # (camera_medium): a render from sensor k starts its camera rays in k's medium
+        self.sensor_media = []
+        for sensor in scene.sensors():
             m = sensor.get_medium()
-            if m is not None:
-                if all(m is not x for x in media):
-                    media.append(m)
-                    names.append(f"{sensor.id()}.medium" if sensor.id() else None)
-                    inside.append(np.array(sensor.world_transform().translation(), float).ravel())
-                self.sensor_media[k] = m
+            if m is not None and all(m is not x for x in media):
+                media.append(m)
+                names.append(f"{sensor.id()}.medium" if sensor.id() else None)
+                inside.append(np.array(sensor.world_transform().translation(), float).ravel())
+            self.sensor_media.append((sensor, m))
         self.media = media
         self.majorants = [build_majorant(m, inside=p, factor=factor, name=n) for m, p, n in zip(media, inside, names)]
-        for m in media:
+        for m, mj, n in zip(media, self.majorants, names):
             self._check_grey(m)
+            self._check_global(m, mj, n, factor)
         kinds = [mj.kind for mj in self.majorants]
         self.has_homogeneous = "homogeneous" in kinds
         self.has_tracked = any(k != "homogeneous" for k in kinds)
@@ -111,6 +113,25 @@ class MediaTable:
         self.is_homog = mi.Bool(np.array([mj.kind == "homogeneous" for mj in self.majorants] or [False]))
 
     @staticmethod
+    def _check_global(medium, mj, name, factor) -> None:
+        """Refuse a medium under one global bound (a rotated / mirrored grid, a non-clamp wrap
+        mode: :mod:`draaw_mi.media.majorant`) whose ``bound * box diagonal`` -- the null steps
+        a flight across its box may take -- exceeds half the trackers' step budget: its
+        flights would run out of steps and count as absorbed (a hot voxel of 2e5 in a rotated
+        grid darkened the image 17-fold)."""
+        steps = factor * float(mj.values.max()) * mj.diagonal
+        if mj.kind == "global" and steps > 0.5 * vt.MAX_TRACKING_STEPS:
+            raise RenderError(
+                f"draaw_v3/draaw_v4: medium {name or medium.id() or medium.class_name()!r} is bounded by one "
+                f"global majorant ({mj.note}): sigma_t up to {float(mj.values.max()):.4g}"
+                f"{' (x' + format(factor, 'g') + ' while differentiated)' if factor != 1 else ''} over a box "
+                f"diagonal of {mj.diagonal:.4g} needs up to {steps:.3g} tracking steps per crossing; expected "
+                f"at most {0.5 * vt.MAX_TRACKING_STEPS:g} (half of MAX_TRACKING_STEPS, past which a flight "
+                "counts as absorbed). Place the grid with an axis-aligned, unmirrored to_world (rotate or "
+                "flip the data array instead), use wrap_mode 'clamp', lower its densest voxels, or render "
+                "with volpath")
+
+    @staticmethod
     def _check_grey(medium) -> None:
         params = mi.traverse(medium)
         for key in params.keys():
@@ -123,6 +144,21 @@ class MediaTable:
                 if key.endswith("value") and v.size == 3 and not np.allclose(v, v.ravel()[0]):
                     raise ParameterError(f"draaw_v3/draaw_v4: medium {medium.id() or medium} has RGB "
                                          f"sigma_t {v.ravel().tolist()}; expected grey extinction")
+
+    def camera_medium(self, sensor):
+        """The medium of ``sensor`` (the rendered one, ``render_sensor``; ``None``: sensor 0,
+        as in a ``sample()`` call outside a render pass), or ``None`` for vacuum."""
+        if sensor is None:
+            return self.sensor_media[0][1] if self.sensor_media else None
+        for s, m in self.sensor_media:
+            if s is sensor:
+                return m
+        m = sensor.get_medium()          # a sensor that is not the scene's
+        if m is not None and all(m is not x for x in self.media):
+            raise RenderError(f"draaw_v3/draaw_v4: sensor {sensor.id() or sensor.class_name()} is not one "
+                              "of the scene's sensors and has a medium the scene does not know; "
+                              "add the sensor to the scene (its medium then gets a majorant)")
+        return m
 
     def index(self, medium: mi.MediumPtr) -> mi.UInt32:
         idx = mi.UInt32(0)
@@ -259,8 +295,9 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     prev_it = dr.zeros(mi.Interaction3f)      # last real scattering vertex (for MIS)
     prev_pdf = mi.Float(1.0)                  # its BSDF / phase pdf of the sampled direction
     medium = dr.zeros(mi.MediumPtr)
-    if dr.hint(0 in table.sensor_media, mode="scalar"):
-        medium = dr.select(active, mi.MediumPtr(table.sensor_media[0]), medium)
+    cam_medium = table.camera_medium(getattr(integ, "render_sensor", None))
+    if dr.hint(cam_medium is not None, mode="scalar"):      # camera rays start in its medium
+        medium = dr.select(active, mi.MediumPtr(cam_medium), medium)
     first = mi.Bool(True)
 
     while dr.hint(active, label=f"{integ.PLUGIN} media ({mode.name})"):

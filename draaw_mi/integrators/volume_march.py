@@ -15,6 +15,8 @@ the whole box chord regardless of where the light is, and ignores surfaces. Here
 * the first opaque surface adds its emission and direct light (the BSDF's ``eval``, one
   emitter sample, marched transmittance), attenuated by ``T``. No multiple scattering and no
   indirect light: biased by design (the cheap rung), ``medium_steps`` is the knob.
+* Rays cross up to ``MAX_SEGMENTS`` (1024) null surfaces: a shadow ray still crossing at
+  that cap counts as blocked, a camera ray ends there (what lies behind is not seen).
 * SDF objects (feature ``sdf``): the march of a segment stops at the nearer of the mesh and
   SDF hits, SDF surfaces are lit like opaque surfaces, and SDFs block the shadow rays.
 * An unbounded medium (a ``homogeneous`` one as the camera's medium) is marched up to a
@@ -37,7 +39,11 @@ from ..errors import RenderError
 from .volume_tracking import coefficients, medium_interaction, partly_null
 from .volume_tracking import scatters as vt_scatters
 
-MAX_SEGMENTS = 16
+# null-surface crossings per ray (index-matched boundaries, masks). A shadow ray still live at
+# the cap counts as blocked (T = 0: no light leaks through a blocker behind many null
+# surfaces); a camera ray ends there, its pixel keeping what it gathered before (what lies
+# behind more null surfaces than this is not seen; documented in docs/guides/voxels.md)
+MAX_SEGMENTS = 1024
 
 
 def _segment_end(scene, ray, t0, t1, active):
@@ -78,7 +84,8 @@ def _coeffs(medium, ray, t, active):
 def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.Float, active,
                           partial: bool = False):
     """``exp(-integral sigma_t)`` along ``ray`` up to ``dist`` by ``steps`` samples per medium
-    segment (offset ``u``), through null surfaces; 0 if an opaque surface blocks."""
+    segment (offset ``u``), through null surfaces; 0 if an opaque surface blocks, or if the ray
+    would cross more than ``MAX_SEGMENTS`` null surfaces."""
     T = mi.Float(1.0)
     r = mi.Ray3f(ray)
     rem = mi.Float(dist)
@@ -113,7 +120,9 @@ def marched_transmittance(scene, ray: mi.Ray3f, dist, medium, steps: int, u: mi.
         rem[null] = rem - si.t
         r[null] = si.spawn_ray(r.d)
         n += 1
-        live &= null & (T > 0) & (n < MAX_SEGMENTS)
+        live &= null & (T > 0)
+        T[live & (n >= MAX_SEGMENTS)] = 0.0       # still crossing at the cap: blocked
+        live &= n < MAX_SEGMENTS
     return T
 
 
@@ -148,9 +157,14 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
     L = mi.Spectrum(0.0)
     T = mi.Spectrum(1.0)
     medium = dr.zeros(mi.MediumPtr)
-    sensor_media = [s.get_medium() for s in scene.sensors()]
-    if dr.hint(len(sensor_media) > 0 and sensor_media[0] is not None, mode="scalar"):
-        medium = dr.select(active, mi.MediumPtr(sensor_media[0]), medium)
+    # camera rays start in the rendered sensor's medium (render_sensor, set by the render
+    # passes; sensor 0 when sample() is called outside them)
+    sensor = getattr(integ, "render_sensor", None)
+    if sensor is None and len(scene.sensors()) > 0:
+        sensor = scene.sensors()[0]
+    cam_medium = None if sensor is None else sensor.get_medium()
+    if dr.hint(cam_medium is not None, mode="scalar"):
+        medium = dr.select(active, mi.MediumPtr(cam_medium), medium)
     live = mi.Bool(active)
     valid = mi.Bool(False)
     n = mi.UInt32(0)

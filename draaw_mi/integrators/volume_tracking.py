@@ -23,6 +23,10 @@ from .features import scene_shapes
 # never end (NaN distances), far above honest flights: one voxel of optical depth 5000 at the
 # finest majorant level, scaled x2 in a differentiated render, takes ~10^4 null steps per cell.
 MAX_TRACKING_STEPS = 1 << 16
+# null-surface crossings per shadow ray (index-matched boundaries, masks); a shadow ray still
+# live at the cap counts as blocked (T = 0), as an exhausted flight counts as absorbed: light
+# never leaks through an opaque blocker behind many null surfaces
+MAX_NULL_CROSSINGS = 1024
 RATIO_RR = 0.1                # ratio tracking: Russian roulette on T below this
 
 # the lobes that scatter light (a BSDF with Null and any of these lets light through in part)
@@ -264,7 +268,8 @@ def transmittance(table, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Float, medium:
                   sampler: mi.Sampler, active: mi.Bool, adjoint=None) -> mi.Float:
     """Transmittance along ``ray`` over ``dist`` (inf: to infinity), starting in ``medium``:
     ratio tracking in media, crossing ``null`` surfaces (switching media), 0 at other
-    surfaces. ``adjoint``: ``(δL, contribution)`` for the replay with gradients."""
+    surfaces. ``adjoint``: ``(δL, contribution)`` for the replay with gradients. A ray that
+    would cross more than ``MAX_NULL_CROSSINGS`` null surfaces counts as blocked (T = 0)."""
     T = mi.Float(1.0)
     remaining = mi.Float(dist)
     med = dr.select(active, medium, dr.zeros(mi.MediumPtr))
@@ -308,7 +313,9 @@ def transmittance(table, scene: mi.Scene, ray: mi.Ray3f, dist: mi.Float, medium:
         remaining[null] = remaining - si.t
         r[null] = si.spawn_ray(r.d)
         n += 1
-        live &= null & (T > 0) & (n < 64)
+        live &= null & (T > 0)
+        T[live & (n >= MAX_NULL_CROSSINGS)] = 0.0       # still crossing at the cap: blocked
+        live &= n < MAX_NULL_CROSSINGS
     return T
 
 

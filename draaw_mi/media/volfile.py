@@ -30,6 +30,18 @@ from ..io import atomic_path
 _HEADER = struct.Struct("<3sBiiiii6f")          # 48 bytes
 
 
+def vol_box(path: str, lo, hi, bbox_min=None, bbox_max=None) -> tuple:
+    """The world box of a grid read from ``path``: ``bbox_min`` / ``bbox_max`` where given, else
+    the header's ``lo .. hi``; a header box that is empty on some axis (Mitsuba ignores it and
+    may write zeros) is refused when no bounds replace it, saying where it came from."""
+    if bbox_min is None and bbox_max is None and (np.asarray(hi) <= np.asarray(lo)).any():
+        raise ParameterError(f"VoxelGrid.from_vol({path!r}): the file's header box "
+                             f"{np.asarray(lo).tolist()}..{np.asarray(hi).tolist()} is empty (Mitsuba "
+                             "ignores it and may leave it so); expected bbox_min < bbox_max on every axis: "
+                             "give the grid's bounds (bbox_min=, bbox_max=; 'bounds' in a [[volumes]] entry)")
+    return (lo if bbox_min is None else bbox_min), (hi if bbox_max is None else bbox_max)
+
+
 def read_vol(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a ``.vol`` file: ``(data (Z, Y, X, C) float32, bbox_min (3,), bbox_max (3,))``.
 

@@ -31,8 +31,10 @@ import numpy as np
 from ..errors import IOFailure, ParameterError
 from ..io import atomic_path
 from ..limits import FLOAT32_MAX, grid_size_problem
+from .grid_checks import check_density
+from .grid_checks import resolution as _resolution
 from .pick import traverse
-from .volfile import read_vol, write_vol
+from .volfile import read_vol, vol_box, write_vol
 from .voxelize import load_triangles, voxelize
 
 Index = tuple[int, int, int]
@@ -123,7 +125,10 @@ class VoxelGrid:
         if occupied is not None:
             g.occupied = np.asarray(occupied, bool).copy()
         if density is not None:
-            g.density = np.array(density, np.float32)
+            # checked in float64 first: a cast would turn 1e39 into inf (an overflow warning)
+            d64 = np.asarray(density, np.float64)
+            check_density(d64, "VoxelGrid.from_arrays")
+            g.density = d64.astype(np.float32)
         for name, a in (("color", color), ("smoke_color", smoke_color)):
             if a is None:
                 continue
@@ -224,15 +229,7 @@ class VoxelGrid:
                 # (above 1, a solid colour would amplify light and a smoke albedo be clipped unsaid)
                 raise ParameterError(f"{where}: {name} has values outside [0, 1] or non-finite ones; "
                                      "expected colours in [0, 1]")
-        d = self.density
-        if not np.all(np.isfinite(d)):
-            bad = np.argwhere(~np.isfinite(d))[0]
-            raise ParameterError(f"{where}: density[{', '.join(map(str, bad))}] = {d[tuple(bad)]}; "
-                                 "expected finite values >= 0")
-        if np.any(d < 0):
-            bad = np.argwhere(d < 0)[0]
-            raise ParameterError(f"{where}: density[{', '.join(map(str, bad))}] = {d[tuple(bad)]}; "
-                                 "expected values >= 0")
+        check_density(self.density, where)
         lo, hi = self.bbox_min, self.bbox_max
         if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)):
             raise ParameterError(f"{where}: bounds {lo.tolist()}..{hi.tolist()}; expected two finite 3-vectors")
@@ -461,9 +458,9 @@ class VoxelGrid:
                                  f"what={what!r} reads {want}{hint}")
         arr = data.transpose(2, 1, 0, 3)                       # (Z, Y, X, C) -> [ix, iy, iz, c]
         kw = {"density": arr[..., 0]} if what == "density" else {"smoke_color": arr}
+        lo, hi = vol_box(path, lo, hi, bbox_min, bbox_max)
         try:
-            return cls.from_arrays(bbox_min=lo if bbox_min is None else bbox_min,
-                                   bbox_max=hi if bbox_max is None else bbox_max, seed=seed, **kw)
+            return cls.from_arrays(bbox_min=lo, bbox_max=hi, seed=seed, **kw)
         except ParameterError as e:
             raise ParameterError(f"VoxelGrid.from_vol({path!r}): {e}") from None
 
@@ -481,17 +478,3 @@ class VoxelGrid:
             raise ParameterError(f"VoxelGrid.save_vol: what={what!r}; expected 'density' or 'smoke_color'")
         write_vol(path, np.ascontiguousarray(arr.transpose(2, 1, 0, 3)), self.bbox_min, self.bbox_max)
 
-
-def _resolution(value, where: str) -> Index:
-    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        value = (int(value),) * 3
-    try:
-        t = tuple(int(v) for v in value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{where}: resolution {value!r}; expected an int or (nx, ny, nz)") from None
-    if len(t) != 3 or min(t) < 1 or any(v != w for v, w in zip(t, value)):
-        raise ParameterError(f"{where}: resolution {value!r}; expected an int or (nx, ny, nz) of ints >= 1")
-    too_large = grid_size_problem(t)
-    if too_large:
-        raise ParameterError(f"{where}: resolution {too_large}")
-    return t

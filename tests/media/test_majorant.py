@@ -364,3 +364,28 @@ def test_a_grid_set_again_and_again_gets_its_own_majorant():
         p[key] = mi.TensorXf(grid * (2.0 + i))
         p.update()
         assert float(np.max(np.array(media_table(scene).values))) == pytest.approx((2.0 + i) * top, rel=1e-5), i
+
+
+@pytest.mark.parametrize("mirrored", [True, False])
+def test_a_mirrored_grid_with_a_large_dynamic_range_is_caught(mirrored):
+    """Two voxels of 1e6 that are mirror images of each other and a block of density 5 on one
+    side, mirrored in x by the to_world: the placement check's tolerance was 1e-5 x max(data)
+    = 10 for every probe, so the block (5 where the mirrored lookup reads 0) passed, and its
+    bounds were placed unmirrored (density-5 smoke under cells bounded by 0). Each probe's
+    tolerance now scales with the voxels around it: the mirrored grid falls back to one bound,
+    the same grid unmirrored keeps its local bounds."""
+    d = np.zeros((16, 16, 16))                                   # [ix, iy, iz]
+    d[2, 8, 8] = d[13, 8, 8] = 1e6
+    d[0:4, 2:6, 2:6] = 5.0
+    d[0:4, 10:14, 2:14] = 3.0
+    xf = (mi.ScalarTransform4f().translate([0.5, -0.5, -0.5]).scale([-1, 1, 1]) if mirrored
+          else mi.ScalarTransform4f().translate([-0.5, -0.5, -0.5]))
+    medium = mi.load_dict({"type": "heterogeneous", "sigma_t": {
+        "type": "gridvolume", "to_world": xf,
+        "data": mi.TensorXf(np.ascontiguousarray(d.transpose(2, 1, 0)[..., None], np.float32))}})
+    maj = mj.build_majorant(medium, inside=(0.0, 0.0, 0.0))
+    assert maj.kind == ("global" if mirrored else "grid"), maj.note
+    if not mirrored:                      # the local bounds hold at random points
+        pts = np.random.default_rng(0).uniform(-0.49, 0.49, (20000, 3))
+        c = cell_of(maj, pts)
+        assert np.all(sigma_at(medium, pts) <= maj.values[c[:, 0], c[:, 1], c[:, 2]] * (1 + 1e-5) + 1e-6)

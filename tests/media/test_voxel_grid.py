@@ -419,12 +419,16 @@ def test_a_vol_is_read_as_the_kind_it_holds(tmp_path):
 
 def test_a_vol_with_an_empty_header_box_is_placed_by_the_box_given(tmp_path):
     """Mitsuba ignores a .vol's header box, and a file may leave it empty: with bbox_min /
-    bbox_max given the file is read (it had been refused for the box it was not to use)."""
+    bbox_max given the file is read (it had been refused for the box it was not to use);
+    without them the error says the empty box is the file header's and to give bounds (it
+    said only "VoxelGrid: bounds ... are empty")."""
     import struct
     p = tmp_path / "flat.vol"
     vals = np.arange(8, dtype="<f4")
     p.write_bytes(struct.pack("<3sBiiiii6f", b"VOL", 3, 1, 2, 2, 2, 1, 0, 0, 0, 0, 0, 0) + vals.tobytes())
-    with pytest.raises(ParameterError, match=r"from_vol\(.*flat\.vol'\): .*bounds .* are empty"):
+    with pytest.raises(ParameterError, match=r"from_vol\(.*flat\.vol'\): the file's header box \[0\.0, 0\.0, "
+                                             r"0\.0\]\.\.\[0\.0, 0\.0, 0\.0\] is empty.*give the grid's bounds "
+                                             r"\(bbox_min=, bbox_max="):
         VoxelGrid.from_vol(p)
     g = VoxelGrid.from_vol(p, bbox_min=(-1, 0, 0), bbox_max=(1, 2, 3))
     assert g.bbox_min.tolist() == [-1, 0, 0] and g.bbox_max.tolist() == [1, 2, 3]
@@ -480,3 +484,15 @@ def test_a_smoke_colour_is_where_its_voxel_is():
         np.testing.assert_allclose(np.array(vol.eval(it)).ravel(), want, atol=1e-6)
     assert g.index_of((4.0, 4.0, 4.0)) == (3, 3, 3)          # the max face belongs to the last cell
     assert g.index_of((4.0, 2.5, 0.0)) == (3, 2, 0)
+
+
+def test_an_inline_density_past_float32_is_named_as_given(recwarn):
+    """A density of 1e39 was cast to float32 first: reported as ``inf`` after numpy's overflow
+    warning. It is checked in float64 before the cast: named with its value and the float32
+    limit, and no warning."""
+    d = np.zeros((2, 2, 2))
+    d[1, 0, 1] = 1e39
+    with pytest.raises(ParameterError, match=r"VoxelGrid.from_arrays: density\[1, 0, 1\] = 1e\+39; expected "
+                                             r"finite values >= 0 up to the float32 limit 3\.40282"):
+        VoxelGrid.from_arrays(density=d)
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in recwarn]

@@ -164,7 +164,8 @@ def test_a_vol_with_an_empty_header_box_loads_at_the_entrys_bounds(tmp_path):
     data = np.array(mi.traverse(s.mi_scene)["v.interior_medium.sigma_t.data"])
     assert np.array_equal(data.reshape(-1), vals)
     del desc["volumes"][0]["bounds"]
-    with pytest.raises(SceneError, match=r"volumes\[0\]: VoxelGrid.from_vol\(.*flat\.vol'\).*are empty"):
+    with pytest.raises(SceneError, match=r"volumes\[0\]: VoxelGrid.from_vol\(.*flat\.vol'\): the file's header box .* is "
+                                         r"empty.*give the grid's bounds"):
         draaw_mi.load_scene(desc)
 
 
