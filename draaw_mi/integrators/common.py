@@ -35,7 +35,7 @@ from ..guard import RENDER_GUARD
 from ..sdf.integration import hook
 from ..sdf.tracer import TracerOptions
 from . import silhouettes
-from .features import detect_features
+from .features import detect_features, refuse_border_sampling
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
 
@@ -135,16 +135,14 @@ def parse_aovs(plugin: str, spec) -> tuple[str, ...]:
         raise ParameterError(f"{plugin}: aovs={spec!r}; expected a comma-separated string "
                              f"of {', '.join(AOV_CHANNELS)} or 'all'")
     names = [s.strip() for s in spec.split(",") if s.strip()]
-    if names == ["all"]:
-        return tuple(AOV_CHANNELS)
     out = []
     for n in names:
-        if n not in AOV_CHANNELS:
+        if n not in AOV_CHANNELS and n != "all":     # ("all" beside others: all of them)
             raise ParameterError(f"{plugin}: aovs entry {n!r} is unknown"
                                  f"{suggest(n, list(AOV_CHANNELS) + ['all'])}")
         if n not in out:
             out.append(n)
-    return tuple(n for n in AOV_CHANNELS if n in out)
+    return tuple(n for n in AOV_CHANNELS if n in out or "all" in out)
 
 
 SHARED_PARAMETERS = """
@@ -246,6 +244,7 @@ class DraawIntegrator(RBIntegrator):
         or a Sensor, as ``mi.render`` takes it): media scenes start camera rays in its medium."""
         prev = getattr(self, "render_sensor", None)
         self.render_sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        refuse_border_sampling(self.render_sensor, self.PLUGIN, RenderError)
         try:
             yield
         finally:

@@ -239,16 +239,25 @@ def filter_plugin(rfilter) -> str:
 
 def sensor_gated_speedups(sensor) -> str | None:
     """What ``draaw_v4`` leaves off because of ``sensor``'s film or lens, as one sentence, or
-    ``None``. Every pixel filter keeps them (:mod:`~draaw_mi.integrators.film_splat`); a film
-    that samples beyond its border turns adaptive sampling off (those samples belong to no
-    pixel's count), a lens aperture or an open shutter turns emission splitting off (its
-    extra rays leave through a pinhole at the shutter's opening)."""
+    ``None``. Every pixel filter keeps them (:mod:`~draaw_mi.integrators.film_splat`); a lens
+    aperture or an open shutter turns emission splitting off (its extra rays leave through a
+    pinhole at the shutter's opening). (A film that samples beyond its border is refused:
+    :func:`refuse_border_sampling`.)"""
     off = []
-    if sensor.film().sample_border():
-        off.append("adaptive sampling is off: the film samples beyond its border (sample_border)")
     if sensor.needs_aperture_sample() or sensor.shutter_open_time() > 0:
         off.append("emission splitting is off: the camera samples a lens aperture or an open shutter")
     return "; ".join(off) or None
+
+
+def refuse_border_sampling(sensor, who: str, error) -> None:
+    """Raise ``error`` (an exception class) where ``sensor``'s film samples beyond its border
+    (``sample_border = true``): Mitsuba 3.9.1 then writes those samples past the end of its
+    image block (Dr.Jit's debug mode: writes at 788 of 396 values), corrupting the heap, with
+    its own ``path`` and ``prb`` as with V1..V4 ("corrupted size vs. prev_size", a segfault)."""
+    if sensor.film().sample_border():
+        raise error(f"{who}: the film samples beyond its border (sample_border = true), which "
+                    "Mitsuba 3.9.1 writes past the end of its image block (memory corruption, with "
+                    "path and prb too); set sample_border to false")
 
 
 def sampler_plugin(sampler) -> str:

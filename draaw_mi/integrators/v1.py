@@ -4,6 +4,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..errors import ParameterError
 from .common import (
     DraawIntegrator,
     emitter_sample_one,
@@ -19,6 +20,7 @@ from .phong import mirror_dir, phong_eval, phong_material
 
 # Light from every emitter individually up to this many emitters (else one random emitter).
 MAX_UNROLLED_EMITTERS = 8
+MAX_SCATTER = 64                 # gather rays per shading point at most (unrolled)
 
 
 @with_shared_parameters
@@ -40,8 +42,9 @@ class DraawV1Integrator(DraawIntegrator):
      * - scatter
        - |int|
        - Cosine-weighted gather rays per shading point (GO-Draaw "scatter"); each collects
-         the direct light reflected by the surface it hits. 0 disables indirect light.
-         (Default: 4)
+         the direct light reflected by the surface it hits. 0 disables indirect light. At
+         most 64: each ray is unrolled into the kernel (64 compile in ~7 s; more spp gather
+         more). (Default: 4)
 
      * - rr_depth
        - |int|
@@ -109,6 +112,10 @@ class DraawV1Integrator(DraawIntegrator):
 
     def __init__(self, props: mi.Properties):
         self.scatter = parse_int(props, self.PLUGIN, "scatter", 4, 0)
+        if self.scatter > MAX_SCATTER:   # (each gather ray is unrolled into the kernel)
+            raise ParameterError(f"{self.PLUGIN}: scatter={self.scatter}; expected an integer in "
+                                 f"[0, {MAX_SCATTER}] (each gather ray enters the kernel: 64 take ~7 s "
+                                 "to compile, 256 ~90 s; more samples per pixel gather more)")
         # media scenes: march steps per medium segment (draaw_mi.integrators.volume_march)
         self.medium_steps = parse_int(props, self.PLUGIN, "medium_steps", 12, 1)
         super().__init__(props)

@@ -210,8 +210,8 @@ class DraawV4Integrator(V4Passes):
         if not (0.0 < self.rr_min <= 1.0):
             raise ParameterError(f"draaw_v4: rr_min={self.rr_min}; expected a value in (0, 1]")
         self.rr_threshold = parse_float(props, "draaw_v4", "rr_threshold", RR_THRESHOLD)
-        if not (self.rr_threshold > 0.0):
-            raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a value > 0")
+        if not (0.0 < self.rr_threshold < float("inf")):     # (inf: every path rouletted at rr_min)
+            raise ParameterError(f"draaw_v4: rr_threshold={self.rr_threshold}; expected a finite value > 0")
         self.adaptive = parse_bool(props, "draaw_v4", "adaptive", True)
         self.stratify = parse_bool(props, "draaw_v4", "stratify", True)
         self._stratify_scene = None    # the scene of the primal render, for prepare() (_sampling)

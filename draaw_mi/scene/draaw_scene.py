@@ -21,7 +21,7 @@ import tomli_w
 from ..errors import ParameterError, SceneError, suggest
 from ..guard import FOREGROUND, RENDER_GUARD, let_go
 from ..integrators.stamps import stamp
-from ..integrators.features import detect_features
+from ..integrators.features import detect_features, refuse_border_sampling
 from ..materials import check_value
 from ..sdf.params import PREFIX, SDFParameters
 from .carry import carry_values
@@ -58,6 +58,10 @@ class DraawScene:
     # key -> the stamp of the value out_of_range last found fine (an array's stamp holds it:
     # Dr.Jit cannot give its variable's index to a new value before the next check)
     _checked: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for sensor in self.mi_scene.sensors():     # (each render would corrupt memory)
+            refuse_border_sampling(sensor, self.source, SceneError)
 
     def __del__(self):
         # its Mitsuba objects leave Dr.Jit's registry under the render guard, never beside a

@@ -233,10 +233,24 @@ def test_info_says_what_the_sensor_gates(tmp_path, capsys):
     assert main(["info", str(path)]) == 0
     assert "v4 note" not in capsys.readouterr().out
     d = rs.cornell_draaw(res=8, spp=4)
-    d["sensor"]["film"]["sample_border"] = True
+    d["sensor"].update(type="thinlens", aperture_radius=0.1, focus_distance=3.0)
     from draaw_mi.integrators.features import sensor_gated_speedups
     said = sensor_gated_speedups(mi.load_dict(d).sensors()[0])
-    assert said.startswith("adaptive sampling is off: the film samples beyond its border")
+    assert said.startswith("emission splitting is off: the camera samples a lens aperture")
+
+
+def test_a_film_that_samples_beyond_its_border_is_refused():
+    """Mitsuba 3.9.1 writes a sample_border film's border samples past the end of its image
+    block (Dr.Jit's debug mode: a write at 788 of 396 values, with its own path too): the heap
+    was corrupted ("corrupted size vs. prev_size", a segfault at a later render)."""
+    d = rs.cornell_draaw(res=8, spp=4)
+    d["sensor"]["film"]["sample_border"] = True
+    scene = mi.load_dict(d)
+    with pytest.raises(draaw_mi.errors.RenderError, match=r"draaw_v4: the film samples beyond its border "
+                                                          r"\(sample_border = true\).*set sample_border to false"):
+        integrator("draaw_v4", max_depth=2).render(scene, spp=2)      # (as mi.render calls it)
+    with pytest.raises(draaw_mi.errors.SceneError, match=r"<dict>: the film samples beyond its border"):
+        draaw_mi.load_scene(d)
 
 
 def test_a_crop_window_renders_adaptively_with_paths_expectation(monkeypatch):
