@@ -16,6 +16,7 @@ Example::
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import stat
 import tempfile
@@ -25,7 +26,7 @@ from typing import Sequence
 import mitsuba as mi
 import numpy as np
 
-from .errors import IOFailure, raise_if_interrupted
+from .errors import IOFailure, ParameterError, raise_if_interrupted
 from .limits import HALF_MAX
 
 DEFAULT_NAMES = {1: ["Y"], 2: ["Y", "A"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}
@@ -347,6 +348,19 @@ def xyz_to_srgb_matrix() -> np.ndarray:
     return np.array([np.array(mi.xyz_to_srgb(mi.Color3f(*map(float, e)))).ravel() for e in np.eye(3)]).T
 
 
+def _stops(exposure, path) -> float:
+    """``write_png``'s exposure as a float: one finite number (a numpy or Dr.Jit value of one
+    element too); NaN had written a black image, Inf a white one."""
+    try:
+        ok = not isinstance(exposure, (bool, np.bool_, str)) and np.size(exposure) == 1
+        value = float(np.asarray(exposure, dtype=np.float64).reshape(-1)[0]) if ok else math.nan
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        raise ParameterError(f"write_png({path!r}): exposure={exposure!r}; expected a finite number of stops")
+    return value
+
+
 def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
               encoded: bool = False, channels: Sequence[str] | None = None) -> None:
     """Write the first 3 (or 4) channels as an 8-bit sRGB PNG, atomically: 1 (grey), 2 (grey,
@@ -375,9 +389,7 @@ def write_png(path: str, image, exposure: float = 0.0, text: dict | None = None,
         # (no 8-bit PNG under an .exr name; write_exr refuses the mirror case)
         raise IOFailure(f"write_png({path!r}): expected a '.png' name (write_exr writes EXRs)")
     # a finite number of stops (NaN wrote a black image, Inf a white one)
-    if isinstance(exposure, (bool, np.bool_)) or not isinstance(exposure, (int, float, np.integer, np.floating)) \
-            or not np.isfinite(exposure):
-        raise IOFailure(f"write_png({path!r}): exposure={exposure!r}; expected a finite number of stops")
+    exposure = _stops(exposure, path)
     arr = to_numpy(image, f"write_png({path!r})")
     if channels is not None:
         names = list(channels)

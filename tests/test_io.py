@@ -4,11 +4,12 @@ from __future__ import annotations
 import os
 import stat
 
+import mitsuba as mi
 import numpy as np
 import pytest
 
 import draaw_mi
-from draaw_mi.errors import IOFailure
+from draaw_mi.errors import IOFailure, ParameterError
 from draaw_mi.io import channel_names, srgb_encode
 
 
@@ -355,7 +356,16 @@ def test_a_failed_rename_is_an_io_failure_naming_the_path(tmp_path, monkeypatch)
 def test_png_exposure_must_be_a_finite_number(tmp_path, exposure):
     """NaN stops wrote a black image and Inf a white one."""
     path = str(tmp_path / "e.png")
-    with pytest.raises(IOFailure, match=rf"write_png\('{path}'\): exposure={exposure!r}; expected a finite "
-                                        r"number of stops"):
+    with pytest.raises(ParameterError, match=rf"write_png\('{path}'\): exposure={exposure!r}; expected a finite "
+                                             r"number of stops"):
         draaw_mi.write_png(path, np.full((2, 2, 3), 0.2, np.float32), exposure=exposure)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("exposure", [np.array(1.0), np.float32(1.0), mi.Float(1.0), [1.0]])
+def test_png_exposure_of_one_numpy_or_drjit_value_is_a_number(tmp_path, exposure):
+    path = str(tmp_path / "e.png")
+    draaw_mi.write_png(path, np.full((2, 2, 3), 0.2, np.float32), exposure=exposure)
+    plain = str(tmp_path / "p.png")
+    draaw_mi.write_png(plain, np.full((2, 2, 3), 0.2, np.float32), exposure=1.0)
+    assert open(path, "rb").read() == open(plain, "rb").read()

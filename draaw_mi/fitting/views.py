@@ -36,6 +36,7 @@ def view_sensors(scene: DraawScene, views, cameras_of_captures: bool = False):
     # the film's own filter object, not its name: a gaussian's stddev or a lanczos' lobes that
     # an XML scene sets reach the other views too
     rfilter = scene.mi_scene.sensors()[0].film().rfilter()
+    medium = scene.mi_scene.sensors()[0].get_medium()      # the medium the views stand in
     out = []
     for i, v in enumerate(views):
         if v is None:                          # (a capture without a camera: the scene's)
@@ -55,8 +56,10 @@ def view_sensors(scene: DraawScene, views, cameras_of_captures: bool = False):
             v = {**v, "fov": x_fov, "fov_axis": "x"}
         where = Where("fit") / "captures" / i / "camera" if cameras_of_captures else Where("fit") / "views" / i
         look = camera_to_look_at(v, where)
-        out.append(mi.load_dict(sensor_dict(look, w, h, scene.settings["spp"], rfilter,
-                                            scene.settings.get("sampler", "independent"))))
+        d = sensor_dict(look, w, h, scene.settings["spp"], rfilter, scene.settings.get("sampler", "independent"))
+        if medium is not None:           # (a view inside the scene camera's fog sees the fog)
+            d["medium"] = medium
+        out.append(mi.load_dict(d))
     return out
 
 

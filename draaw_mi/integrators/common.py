@@ -34,7 +34,7 @@ from ..errors import ParameterError, RenderError, suggest
 from ..guard import RENDER_GUARD
 from ..sdf.integration import hook
 from ..sdf.tracer import TracerOptions
-from . import silhouettes
+from . import pass_sensor, silhouettes
 from .features import detect_features, refuse_border_sampling
 
 RBIntegrator = mi.ad.integrators.common.RBIntegrator
@@ -240,15 +240,11 @@ class DraawIntegrator(RBIntegrator):
 
     @contextmanager
     def rendering(self, scene, sensor):
-        """While a pass runs, :attr:`render_sensor` is the sensor it renders (``sensor`` an index
-        or a Sensor, as ``mi.render`` takes it): media scenes start camera rays in its medium."""
-        prev = getattr(self, "render_sensor", None)
-        self.render_sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        refuse_border_sampling(self.render_sensor, self.PLUGIN, RenderError)
-        try:
+        """A pass of ``sensor`` (an index or a Sensor): :func:`.pass_sensor.sensor_of` gives it to
+        the media code on this thread; a film sampling beyond its border is refused."""
+        with pass_sensor.rendering(self, scene, sensor) as obj:
+            refuse_border_sampling(obj, self.PLUGIN, RenderError)
             yield
-        finally:
-            self.render_sensor = prev
 
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """:meth:`render` itself: Mitsuba's path-replay primal render."""

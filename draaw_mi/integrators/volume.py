@@ -34,14 +34,17 @@ extinction (a one-channel ``sigma_t``; the albedo may be RGB).
 """
 from __future__ import annotations
 
+import warnings
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..errors import ParameterError, RenderError
 from ..media.majorant import build_majorant
-from .stamps import stamp as value_stamp
+from . import pass_sensor
 from . import volume_tracking as vt
+from .stamps import stamp as value_stamp
 from .common import mis_weight
 from .features import scene_shapes
 from .volume_tracking import _bw, coefficients, medium_interaction
@@ -51,6 +54,7 @@ from .volume_tracking import _bw, coefficients, medium_interaction
 # majorant equals sigma_t (a uniform region) there are none, so the density gradient would
 # silently miss the d/dsigma of the transmittance (prbvolpath has this bias on uniform grids).
 DIFF_MAJORANT_FACTOR = 2.0
+FREE_PATHS = 8.0              # free paths at the median density a global bound's flight takes at most
 MEDIA_RR_DEPTH = 5            # first depth at which Russian roulette may stop a path (v4)
 
 
@@ -114,22 +118,26 @@ class MediaTable:
 
     @staticmethod
     def _check_global(medium, mj, name, factor) -> None:
-        """Refuse a medium under one global bound (a rotated / mirrored grid, a non-clamp wrap
-        mode: :mod:`draaw_mi.media.majorant`) whose ``bound * box diagonal`` -- the null steps
-        a flight across its box may take -- exceeds half the trackers' step budget: its
-        flights would run out of steps and count as absorbed (a hot voxel of 2e5 in a rotated
-        grid darkened the image 17-fold)."""
-        steps = factor * float(mj.values.max()) * mj.diagonal
-        if mj.kind == "global" and steps > 0.5 * vt.MAX_TRACKING_STEPS:
-            raise RenderError(
+        """Warn of a medium under one global bound (a rotated / mirrored grid, a non-clamp wrap
+        mode: :mod:`draaw_mi.media.majorant`) whose flights may run out of tracking steps and
+        count as absorbed (a hot voxel of 2e5 in thin smoke, rotated: the image 17x darker).
+        The steps a flight takes: the bound times the shorter of the box's diagonal and a few
+        free paths at the grid's median density (a medium dense throughout collides early)."""
+        if mj.kind != "global":
+            return
+        bound = factor * float(mj.values.max())
+        reach = mj.diagonal if mj.median <= 0 else min(mj.diagonal, FREE_PATHS / mj.median)
+        steps = bound * reach
+        if steps > 0.5 * vt.MAX_TRACKING_STEPS:
+            warnings.warn(
                 f"draaw_v3/draaw_v4: medium {name or medium.id() or medium.class_name()!r} is bounded by one "
                 f"global majorant ({mj.note}): sigma_t up to {float(mj.values.max()):.4g}"
-                f"{' (x' + format(factor, 'g') + ' while differentiated)' if factor != 1 else ''} over a box "
-                f"diagonal of {mj.diagonal:.4g} needs up to {steps:.3g} tracking steps per crossing; expected "
-                f"at most {0.5 * vt.MAX_TRACKING_STEPS:g} (half of MAX_TRACKING_STEPS, past which a flight "
-                "counts as absorbed). Place the grid with an axis-aligned, unmirrored to_world (rotate or "
-                "flip the data array instead), use wrap_mode 'clamp', lower its densest voxels, or render "
-                "with volpath")
+                f"{' (x' + format(factor, 'g') + ' while differentiated)' if factor != 1 else ''} where its "
+                f"median is {mj.median:.4g}, over a box diagonal of {mj.diagonal:.4g}: a flight may take "
+                f"{steps:.3g} tracking steps, past the {0.5 * vt.MAX_TRACKING_STEPS:g} after which flights are "
+                "cut short and count as absorbed (the medium renders too dark). Place the grid with an "
+                "axis-aligned, unmirrored to_world (rotate or flip the data array instead), use wrap_mode "
+                "'clamp', lower its densest voxels, or render with volpath", RuntimeWarning, stacklevel=2)
 
     @staticmethod
     def _check_grey(medium) -> None:
@@ -146,7 +154,7 @@ class MediaTable:
                                          f"sigma_t {v.ravel().tolist()}; expected grey extinction")
 
     def camera_medium(self, sensor):
-        """The medium of ``sensor`` (the rendered one, ``render_sensor``; ``None``: sensor 0,
+        """The medium of ``sensor`` (the rendered one, :func:`.pass_sensor.sensor_of`; ``None``: sensor 0,
         as in a ``sample()`` call outside a render pass), or ``None`` for vacuum."""
         if sensor is None:
             return self.sensor_media[0][1] if self.sensor_media else None
@@ -295,7 +303,7 @@ def _sample(integ, mode, scene, sampler, ray, δL, state_in, active, russian_rou
     prev_it = dr.zeros(mi.Interaction3f)      # last real scattering vertex (for MIS)
     prev_pdf = mi.Float(1.0)                  # its BSDF / phase pdf of the sampled direction
     medium = dr.zeros(mi.MediumPtr)
-    cam_medium = table.camera_medium(getattr(integ, "render_sensor", None))
+    cam_medium = table.camera_medium(pass_sensor.sensor_of(integ))
     if dr.hint(cam_medium is not None, mode="scalar"):      # camera rays start in its medium
         medium = dr.select(active, mi.MediumPtr(cam_medium), medium)
     first = mi.Bool(True)

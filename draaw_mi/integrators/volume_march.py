@@ -36,6 +36,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import RenderError
+from . import pass_sensor
 from .volume_tracking import coefficients, medium_interaction, partly_null
 from .volume_tracking import scatters as vt_scatters
 
@@ -157,9 +158,9 @@ def sample(integ, mode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, act
     L = mi.Spectrum(0.0)
     T = mi.Spectrum(1.0)
     medium = dr.zeros(mi.MediumPtr)
-    # camera rays start in the rendered sensor's medium (render_sensor, set by the render
+    # camera rays start in the rendered sensor's medium (pass_sensor, kept by the render
     # passes; sensor 0 when sample() is called outside them)
-    sensor = getattr(integ, "render_sensor", None)
+    sensor = pass_sensor.sensor_of(integ)
     if sensor is None and len(scene.sensors()) > 0:
         sensor = scene.sensors()[0]
     cam_medium = None if sensor is None else sensor.get_medium()

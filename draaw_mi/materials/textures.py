@@ -143,13 +143,17 @@ def nested_values(tex: mi.Texture) -> list:
     return out
 
 
+#: image files Mitsuba reads as linear values (never sRGB-decoded)
+LINEAR_FILES = (".exr", ".hdr", ".pfm")
+
+
 def _refuse_decoded_bitmap(name: str, tex: mi.Texture) -> None:
     """Refuse a Mitsuba ``bitmap`` texture for the data parameter ``name`` (roughness, a
     normal map, ...) that Mitsuba sRGB-decodes: not ``raw`` (Mitsuba's default) and of integer
     or half-float texels, what an 8/16-bit PNG or JPEG becomes (a roughness file's 0.4 would be
-    looked up as 0.133, a flat normal map tilt 39 degrees). A float32 file (EXR) is never
-    decoded and passes; a half-float EXR is refused too (its texels cannot be told from a
-    16-bit PNG's decoded ones here), and ``raw`` changes nothing for it."""
+    looked up as 0.133, a flat normal map tilt 39 degrees). Float texels and the files of
+    linear formats (:data:`LINEAR_FILES`: EXR, HDR, PFM, whose half floats are never decoded)
+    pass."""
     if not tex.class_name().startswith("BitmapTexture"):
         return
     params = mi.traverse(tex)
@@ -159,8 +163,10 @@ def _refuse_decoded_bitmap(name: str, tex: mi.Texture) -> None:
     kind = type(params["data"]).__name__
     if kind.endswith("Xf") or kind.endswith("Xf64"):      # float32 texels: read as they are
         return
-    bits = "8-bit" if "u8" in kind else "16-bit (or half-float)"
     file = str(tex).split('"')[1] if '"' in str(tex) else "an image"      # (its name = "...")
+    if file.lower().endswith(LINEAR_FILES):     # (half floats of an EXR are never decoded)
+        return
+    bits = "8-bit" if "u8" in kind else "16-bit"
     raise ParameterError(f"draaw BSDF: {name}: a bitmap texture of {bits} texels ({file}) read without "
                          "raw: Mitsuba would sRGB-decode this data map (0.4 in the file looked up as "
                          "0.133); expected raw: add <boolean name=\"raw\" value=\"true\"/> to the "

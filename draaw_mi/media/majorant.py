@@ -26,10 +26,11 @@ integrators walk it with a DDA and track within each coarse cell against its own
   rotated or mirrored ``to_world``, a wrap mode other than ``clamp``, a Python medium,
   spectral data) the medium falls back to one global majorant (Mitsuba's own
   bound, ``scale * max(sigma_t)`` everywhere in its box). That bound is correct but costs
-  ``bound * chord`` null steps per crossing: where a hot voxel makes ``bound * diagonal``
-  (``Majorant.diagonal``, the located box's) reach the trackers' step budget, flights run out
-  of steps and count as absorbed (a dark image), so the integrators refuse such a medium
-  (:class:`draaw_mi.integrators.volume.MediaTable`) rather than render it wrong.
+  ``bound * chord`` null steps per crossing: where a hot voxel in thin smoke makes ``bound *
+  diagonal`` (``Majorant.diagonal``, the located box's) reach the trackers' step budget,
+  flights run out of steps and count as absorbed (a dark image), which the integrators say in a
+  ``RuntimeWarning`` (:class:`draaw_mi.integrators.volume.MediaTable`). A medium dense
+  throughout (``Majorant.median``) ends its flights in a few steps and is not warned of.
 * Values are plain numbers: the majorant is *detached* from any gradient (guide §3.4).
 
     >>> import numpy as np, mitsuba as mi, draaw_mi
@@ -71,6 +72,7 @@ class Majorant:
     bbox_max: np.ndarray
     note: str = ""
     diagonal: float = 0.0
+    median: float = 0.0        # the grid's median sigma_t (a typical flight's density), else 0
 
 
 def _probe_box(medium, inside) -> tuple[np.ndarray, np.ndarray] | None:
@@ -231,6 +233,7 @@ def build_majorant(medium, resolution: int = 16, inside=None, factor: float = 1.
     # at least 0, as the trackers read sigma_t (volume_tracking.coefficients): a density an
     # optimiser step set below 0 through the parameters is no medium there
     data = scale * np.maximum(raw[..., 0], 0.0).transpose(2, 1, 0)   # -> [ix, iy, iz]
+    fallback.median = float(np.median(data))
     box = None
     for p in ([inside] if inside is not None else []) + [np.zeros(3)]:
         box = _probe_box(medium, np.asarray(p, float))

@@ -97,7 +97,7 @@ def denoise(image, albedo=None, normal=None, *, hdr: bool = True, quality: str =
     if quality not in QUALITIES:
         raise ParameterError(f"denoise: quality={quality!r}; expected one of {', '.join(QUALITIES)}")
     for flag, value in (("hdr", hdr), ("clean_aux", clean_aux)):
-        if not isinstance(value, bool):
+        if not isinstance(value, (bool, np.bool_)):
             raise ParameterError(f"denoise: {flag}={value!r}; expected True or False")
     if normal is not None and albedo is None:
         raise ParameterError("denoise: normal given without albedo; OIDN uses the normal only "
@@ -181,7 +181,7 @@ class Denoiser:
         if quality not in QUALITIES:
             raise ParameterError(f"Denoiser: quality={quality!r}; expected one of {', '.join(QUALITIES)}")
         for flag, value in (("hdr", hdr), ("clean_aux", clean_aux)):
-            if not isinstance(value, bool):
+            if not isinstance(value, (bool, np.bool_)):
                 raise ParameterError(f"Denoiser: {flag}={value!r}; expected True or False")
         self.hdr, self.quality, self.clean_aux = hdr, quality, clean_aux
 

@@ -244,6 +244,8 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
             aovs = []
     elif isinstance(aovs, str):
         aovs = [aovs]                          # "depth" or "all", not its characters
+    elif isinstance(aovs, np.ndarray):         # (numpy strings are strings)
+        aovs = [str(a) if isinstance(a, np.str_) else a for a in aovs.tolist()]
     if not isinstance(aovs, (list, tuple)) or not all(isinstance(a, str) for a in aovs):
         raise RenderError(f"render: aovs={aovs!r}; expected a list of AOV names "
                           f"({', '.join(AOV_CHANNELS)}) or 'all'")

@@ -24,6 +24,7 @@ except ImportError:              # pragma: no cover - Windows
     fcntl = None
 
 import mitsuba as mi
+import numpy as np
 
 from ..errors import DraawError, SceneError, raise_if_interrupted, suggest, user_stacklevel
 from ..guard import RENDER_GUARD, in_foreground
@@ -92,6 +93,7 @@ def _load_scene(source, defines, **overrides) -> DraawScene:
                          "file; this is not one (give a TOML scene's values in the file, or as "
                          "overrides such as resolution=, spp=)")
     if isinstance(source, DraawScene):
+        overrides = {k: v for k, v in overrides.items() if v is not None}    # (None: the scene's)
         if not overrides:
             return source
         if set(overrides) == {"resolution"}:
@@ -359,8 +361,9 @@ def _checked(overrides: dict, source: str) -> dict:
         out["hide_emitters"] = boolean(out["hide_emitters"], where / "hide_emitters")
     if out.get("aovs") is not None:          # ("depth" is one name, not its letters)
         aovs = out["aovs"]
-        out["aovs"] = aov_list([aovs] if isinstance(aovs, str) else list(aovs) if isinstance(aovs, tuple)
-                               else aovs, where / "aovs")
+        out["aovs"] = aov_list([aovs] if isinstance(aovs, str) else
+                               [str(a) if isinstance(a, np.str_) else a for a in aovs]
+                               if isinstance(aovs, (tuple, np.ndarray)) else aovs, where / "aovs")
     if out.get("version") is not None:       # (refused now, not at the first render)
         try:
             resolve_version(out["version"])

@@ -189,8 +189,10 @@ class CameraPanel:
             moved.append(True)
         put((yaw, pitch, distance))
         self._guard(move)()
-        if not moved:                # refused (a closed or superseded panel): sliders as they were
+        if not moved:                # refused (a closed or superseded panel): as it was
             put(old)
+            if undo is not None:
+                undo()
 
     def get_camera(self):
         """The orbited camera as a ``[camera]`` table, also shown as JSON in the panel."""

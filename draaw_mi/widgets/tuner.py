@@ -176,6 +176,9 @@ class MaterialTuner:
     def load_camera_path(self, keys, frames: int = 120):
         """Move the camera along GO-Draaw keyframes (:meth:`CameraPanel.load_camera_path`)."""
         self._check_open("load_camera_path")
+        if isinstance(self.preview.error, PreviewSuperseded):
+            raise DraawError(f"MaterialTuner.load_camera_path: {self.preview.error}; this panel no longer "
+                             "changes the scene")
         return self.camera_panel.load_camera_path(keys, frames)
 
     def _new_preview(self, scene, chain) -> Preview:

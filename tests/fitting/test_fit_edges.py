@@ -342,3 +342,22 @@ def test_a_16_bit_png_reference_keeps_its_precision(tmp_path):
         got = load_reference(path, encoded=True)
         assert got.shape == (4, 4, 3)
         np.testing.assert_allclose(got, 40000 / 65535, rtol=1e-6, err_msg=fmt)
+
+
+def test_a_fits_views_stand_in_the_scene_cameras_medium():
+    """A view made from a camera table had no medium: inside the scene camera's fog it rendered
+    the scene as if the fog were not there (once V1-V4 took each sensor's own medium)."""
+    from draaw_mi.fitting.views import view_sensors
+    T = mi.ScalarTransform4f
+    scene = draaw_mi.load_scene({
+        "type": "scene", "fog": {"type": "homogeneous", "sigma_t": 0.5, "albedo": 0.0},
+        "sensor": {"type": "perspective", "fov": 40, "medium": {"type": "ref", "id": "fog"},
+                   "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "ball": {"type": "sphere"}, "light": {"type": "constant"}})
+    (view,) = view_sensors(scene, [{"origin": [0, 1, 5], "target": [0, 0, 0]}])
+    assert view.get_medium() is not None
+    own = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3}), spp=8))
+    seen = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3}),
+                              sensor=view, spp=8))
+    assert seen.mean() < 0.2 and own.mean() < 0.2          # (0.88 without the fog)

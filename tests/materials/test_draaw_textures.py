@@ -323,6 +323,15 @@ def test_a_nested_bitmap_of_a_data_parameter_must_be_raw(tmp_path, name, value, 
     mi.load_dict({"type": "draaw", "base_color": {"type": "bitmap", "filename": _png8(tmp_path / "c.png", 188, 3)}})
 
 
+def test_a_nested_half_float_exr_of_a_data_parameter_needs_no_raw(tmp_path):
+    """Mitsuba never decodes an EXR; its half floats were refused as if they were a 16-bit PNG's."""
+    path = str(tmp_path / "rough_half.exr")
+    mi.Bitmap(np.full((4, 4, 1), 0.4, np.float16)).write(path)
+    b = mi.load_dict({"type": "draaw", "roughness": {"type": "bitmap", "filename": path}})
+    si = make_si([[0.0, 0.0, 1.0]], uv=[[0.5, 0.5]])
+    assert float(np.array(b.eval_attribute_1("roughness", si))[0]) == pytest.approx(0.4, abs=1e-3)
+
+
 @pytest.mark.parametrize("name, table, match", [
     ("roughness", {"color0": float("nan"), "color1": 0.5}, r"roughness=nan \(texture's color0\.value\) is not finite"),
     ("metallic", {"color0": 7.0, "color1": 0.5}, r"metallic=7 \(texture's color0\.value\) is above 1\.0"),

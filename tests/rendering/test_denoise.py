@@ -97,6 +97,7 @@ def test_the_denoiser_class_checks_its_options_when_made(kwargs, match):
     """hdr and clean_aux were taken as given and failed at the first call, named 'denoise'."""
     with pytest.raises(ParameterError, match=match):
         Denoiser(**kwargs)
+    assert Denoiser(hdr=np.True_, clean_aux=np.False_).hdr          # (numpy's booleans are booleans)
 
 
 def test_missing_pyoidn_is_one_clear_error(monkeypatch, tmp_path, capsys, cornell):

@@ -510,3 +510,9 @@ def test_renders_flags_and_aov_names_are_checked(kw, match):
     that is not a string raised a bare TypeError from str.join."""
     with pytest.raises(DraawError, match=match):
         draaw_mi.render(draaw_mi.load_scene(tiny_description(resolution=[8, 8])), spp=1, **kw)
+
+
+def test_aov_names_in_a_numpy_array_are_names():
+    _, info = draaw_mi.render(draaw_mi.load_scene(tiny_description(resolution=[8, 8])), spp=1,
+                              aovs=np.array(["depth"]), return_info=True)
+    assert info["channels"][-1] == "depth.Z"

@@ -635,6 +635,7 @@ def test_a_loaded_scene_takes_a_resolution_and_refuses_other_overrides(tiny_desc
     every override dropped without a word."""
     scene = draaw_mi.load_scene(tiny_desc)
     assert draaw_mi.load_scene(scene) is scene
+    assert draaw_mi.load_scene(scene, spp=None, resolution=None) is scene     # (None: the scene's)
     assert draaw_mi.load_scene(scene, resolution=(8, 4)).resolution == (8, 4)
     with pytest.raises(SceneError, match=r"takes resolution= only, not spp, version; give them to render"):
         draaw_mi.load_scene(scene, resolution=(8, 4), spp=2, version="v1")
@@ -655,3 +656,4 @@ def test_load_scenes_filter_hide_emitters_and_aovs_overrides_are_checked(tiny_de
 
 def test_one_aov_name_as_an_override_is_one_aov(tiny_desc):
     assert draaw_mi.load_scene(tiny_desc, aovs="depth").settings["aovs"] == ["depth"]
+    assert draaw_mi.load_scene(tiny_desc, aovs=np.array(["depth", "normal"])).settings["aovs"] == ["depth", "normal"]

@@ -412,6 +412,9 @@ def test_a_sphere_or_cylinder_stretched_unevenly_is_refused(shape, key):
     {"type": "sphere", "scale": 2, "rotate": {"axis": [1, 1, 0], "angle": 33}},
     {"type": "cylinder", "scale": [2, 2, 5], "rotate": {"axis": [1, 0, 0], "angle": 45}},
     {"type": "cylinder", "p1": [1, 0, 0], "scale": [4, 1, 1]},          # (along its axis)
+    # (round to what files write: a rotation to 4 decimals, a scale off by 1e-5)
+    {"type": "sphere", "matrix": [[1.4142, -1.4142, 0, 0], [1.4142, 1.4142, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]]},
+    {"type": "sphere", "scale": [2, 2, 2.00002]},
 ])
 def test_a_sphere_or_cylinder_scaled_evenly_loads(shape):
     # (a rotation axis of any length is a unit one: Mitsuba's rotate stretched by its length)

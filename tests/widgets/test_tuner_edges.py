@@ -443,3 +443,26 @@ def test_a_camera_paths_frames_are_an_integer_in_range(frames):
     finally:
         t.close()
 
+
+
+def test_a_superseded_panel_keeps_its_camera_when_a_path_is_loaded():
+    """A superseded panel's path step set its camera and then had its orbit refused: the
+    sliders went back, the camera did not, and save() wrote the path's camera."""
+    import time
+    from draaw_mi.rendering.preview import PreviewSuperseded
+    sc = draaw_mi.load_scene(tiny_description(resolution=[8, 8]))
+    old = MaterialTuner(sc, max_spp=1, frame_channel="image", interactive_scale=1.0)
+    new = MaterialTuner(sc, max_spp=1, frame_channel="image", interactive_scale=1.0)
+    try:
+        deadline = time.time() + 60
+        while not isinstance(old.preview.error, PreviewSuperseded) and time.time() < deadline:
+            time.sleep(0.05)
+        before = list(old.camera_panel.current()["origin"])
+        keys = [(0, 0, 9, 0, 0), (3, 0, 9, 0, 0)]
+        with pytest.raises(draaw_mi.errors.DraawError, match=r"load_camera_path: stopped: a newer preview"):
+            old.load_camera_path(keys, frames=2)
+        old.camera_panel.load_camera_path(keys, frames=2)       # (the panel's own: its orbit refused)
+        assert list(old.camera_panel.current()["origin"]) == before
+    finally:
+        old.close()
+        new.close()
