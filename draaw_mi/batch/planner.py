@@ -21,8 +21,9 @@ import drjit as dr
 import numpy as np
 
 from ..errors import DraawError, SceneError
-from ..integrators import is_draaw, resolve_version
+from ..integrators import SCENE_VERSION, is_draaw, resolve_version
 from ..post import display_encoded
+from ..rendering.film_colour import scene_colour_names
 from ..rendering.session import session_of
 from ..scene import value_like
 from ..scene.camera import check_look_at, go_draaw_look_at, sensor_reach, x_fov
@@ -67,10 +68,32 @@ def frame_hash(spec: dict) -> str:
         # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored, so its
         # frames hashed without this key are stale; the others keep their hash)
         keys += ("scene_camera_mirror",)
+    keys += tuple(k for k in CHANGED_KEYS if spec.get(k))     # (likewise: _changed_since_hashed)
     values = {k: spec.get(k) for k in keys}
     values["version"] = canonical_version(values["version"])
     text = json.dumps(values, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+#: frame-hash keys of renders whose pixels changed since frames were hashed without them
+CHANGED_KEYS = ("declared_integrator", "post_by_channel_names")
+
+
+def _changed_since_hashed(scene, version: str, integrator, chain) -> dict:
+    """The :data:`CHANGED_KEYS` of a job's frames: ``declared_integrator``, the settings of
+    the Mitsuba integrator a scene declares, where a frame now renders with it (``path`` of
+    ``rr_depth`` 2 had rendered with a default ``path``); ``post_by_channel_names`` where a
+    post chain once took an AOV for alpha (an RGB film with one AOV channel) or alpha for an
+    AOV (an RGBA film with AOVs). Empty for every other frame, whose hash stays."""
+    out = {}
+    if not is_draaw(version) and integrator is scene.mi_scene.integrator() \
+            and resolve_version(version) != SCENE_VERSION:
+        out["declared_integrator"] = str(integrator)
+    if chain and is_draaw(version):
+        colour, aov = len(scene_colour_names(scene)), len(integrator.aov_names())
+        if (colour == 3 and aov == 1) or (colour == 4 and aov > 0):
+            out["post_by_channel_names"] = True
+    return out
 
 
 # --------------------------------------------------------------------------- cameras
@@ -236,10 +259,11 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
         encoded = display_encoded(s.get("post", []) if job.post is None else job.post)
         try:
             session = session_of(scene)
-            session.integrator(version, max_depth, s.get("hide_emitters", False), aovs)
+            integ = session.integrator(version, max_depth, s.get("hide_emitters", False), aovs)
             session.check_version_sees(version)
         except DraawError as e:
             raise SceneError(f"{loc}: {e}") from None
+        changed = _changed_since_hashed(scene, version, integ, s.get("post", []) if job.post is None else job.post)
         keys = {}
         for name in job.params:
             try:
@@ -298,6 +322,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                 "max_depth": int(max_depth), "aovs": list(aovs), "post": job.post,
                 "camera": cams[f] if cams else None,
                 "scene_camera_mirror": not cams and bool(scene.info.get("camera", {}).get("mirror")),
+                **changed,
                 "params": {keys[n]: param_value(k, d, f, job.frames) for n, (k, d) in job.params.items()},
                 "half": job.half, "preview": job.previews, "output": out, "versions": vers,
                 "encoded": encoded,

@@ -13,6 +13,23 @@ from .draaw_bsdf import NORMALMAP_SLACK, SCALAR_PARAMS
 # the parameters whose values check_value knows (a texture nested in one of them holds its
 # values: ``m.roughness.color0.value`` is a checkerboard's colour, a roughness)
 KNOWN_PARAMS = (*SCALAR_PARAMS, "base_color", "normalmap", "radiance", "intensity", "irradiance")
+# Ranges (lo, hi, lo_open) of plain Mitsuba BSDFs' numeric parameters, for a number or an
+# array given in a scene file: outside them Mitsuba renders without an error yet wrongly
+# (int_ior = 0: most pixels NaN; principled metallic = 3: brighter than its light; a
+# negative alpha). Image files and nested textures of them are passed as they are.
+_POSITIVE, _NONNEG, _UNIT = (0.0, None, True), (0.0, None, False), (0.0, 1.0, False)
+PLAIN_RANGES = {"int_ior": _POSITIVE, "ext_ior": _POSITIVE,
+                "alpha": _NONNEG, "alpha_u": _NONNEG, "alpha_v": _NONNEG}
+# Mitsuba 3.9's principled and principledthin: their weights in [0, 1] (diff_trans in [0, 2])
+_PRINCIPLED = {**dict.fromkeys(("metallic", "roughness", "specular", "spec_tint", "spec_trans",
+                                "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "anisotropic",
+                                "flatness"), _UNIT), "eta": _POSITIVE}
+PLUGIN_RANGES = {"principled": _PRINCIPLED, "principledthin": {**_PRINCIPLED, "diff_trans": (0.0, 2.0, False)}}
+# any of their names, as check_value finds it in a parameter's key (they name nothing else)
+MITSUBA_RANGES = {**PLAIN_RANGES, **PLUGIN_RANGES["principledthin"]}
+# Mitsuba's colour parameters that are at least 0 (a diffuse reflectance of -0.5 rendered
+# negative pixels)
+NONNEG_COLOURS = ("reflectance", "diffuse_reflectance", "specular_reflectance", "specular_transmittance")
 # a normal map's range when its encoding is not known here: the signed encoding's, with the
 # slack a scene file allows (unsigned maps are in [0, 1], inside it)
 NORMALMAP_RANGE = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK)
@@ -91,6 +108,16 @@ def check_value(who: str, name: str, key: str, v) -> None:
             raise ParameterError(f"{who}: {name}={v!r}; expected normal-map components in [{lo:g}, {hi:g}]")
     elif param in ("base_color", "radiance", "intensity", "irradiance") and min(nums) < 0:
         raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
+    else:                  # Mitsuba's own BSDFs, as a scene file's plain materials are checked
+        names = parts[1:-1] if parts[-1] in ("value", "data") else parts[1:]     # (dielectric.eta)
+        plain = next((p for p in names if p in MITSUBA_RANGES), None)
+        if plain is not None:
+            lo, hi, lo_open = MITSUBA_RANGES[plain]
+            if not all((x > lo if lo_open else x >= lo) and (hi is None or x <= hi) for x in nums):
+                span = f"{'(' if lo_open else '['}{lo:g}, {'inf)' if hi is None else format(hi, 'g') + ']'}"
+                raise ParameterError(f"{who}: {name}={v!r}; expected a number in {span}")
+        elif any(p in NONNEG_COLOURS for p in names) and min(nums) < 0:
+            raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
 
 
 def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:

@@ -14,6 +14,7 @@ from ..errors import user_stacklevel
 from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, NORMALMAP_SLACK, OPTIONS, SCALAR_PARAMS
+from ..materials.checks import PLAIN_RANGES, PLUGIN_RANGES
 from ..materials.textures import linear_image
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
@@ -25,18 +26,6 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".bmp", ".tga", ".pfm
 # negative values a resampled image keeps (Lanczos overshoot) and that are let through
 NEGATIVE_SLACK = 1e-2
 
-# Ranges (lo, hi, lo_open) of plain Mitsuba BSDFs' numeric parameters, for a number or an
-# array given in a scene file: outside them Mitsuba renders without an error yet wrongly
-# (int_ior = 0: most pixels NaN; principled metallic = 3: brighter than its light; a
-# negative alpha). Image files and nested textures of them are passed as they are.
-_POSITIVE, _NONNEG, _UNIT = (0.0, None, True), (0.0, None, False), (0.0, 1.0, False)
-PLAIN_RANGES = {"int_ior": _POSITIVE, "ext_ior": _POSITIVE,
-                "alpha": _NONNEG, "alpha_u": _NONNEG, "alpha_v": _NONNEG}
-# Mitsuba 3.9's principled and principledthin: their weights in [0, 1] (diff_trans in [0, 2])
-_PRINCIPLED = {**dict.fromkeys(("metallic", "roughness", "specular", "spec_tint", "spec_trans",
-                                "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "anisotropic",
-                                "flatness"), _UNIT), "eta": _POSITIVE}
-PLUGIN_RANGES = {"principled": _PRINCIPLED, "principledthin": {**_PRINCIPLED, "diff_trans": (0.0, 2.0, False)}}
 
 
 def check_image_values(path: str, label: str, where: Where, what: str, nonneg: bool = True) -> "mi.Bitmap":

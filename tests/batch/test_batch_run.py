@@ -147,6 +147,34 @@ def test_frames_of_a_scenes_own_mirrored_go_draaw_camera_are_rehashed(tmp_path, 
     assert (spec["hash"] != before) is mirrored
 
 
+CBOX_PATH = """<scene version="3.0.0"><integrator type="path"><integer name="max_depth" value="6"/>
+<integer name="rr_depth" value="2"/></integrator><sensor type="perspective"><film type="hdrfilm">
+<integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+<shape type="sphere"><bsdf type="diffuse"/></shape><emitter type="constant"/></scene>"""
+
+
+@pytest.mark.parametrize("job, key", [
+    ({"version": "path", "max_depth": 6}, "declared_integrator"),
+    ({"version": "v4", "max_depth": 6, "aovs": ["depth"], "post": [{"type": "srgb"}]}, "post_by_channel_names"),
+    ({"version": "v4", "max_depth": 6, "aovs": ["depth", "normal"], "post": [{"type": "srgb"}]}, None),
+    ({"version": "path", "max_depth": 3}, None),
+])
+def test_frames_whose_pixels_changed_since_they_were_hashed_are_rehashed(tmp_path, job, key):
+    """A declared ``path`` (rr_depth 2) now renders with its file's settings, and a post chain
+    no longer takes an RGB film's single AOV for alpha: frames made before kept their hash,
+    and a resumed batch kept them as done. They are re-hashed; other frames keep their hash
+    (a depth of 3 is not the file's: a default path renders it, as before)."""
+    from draaw_mi.batch.planner import CHANGED_KEYS, frame_hash
+    scene = tmp_path / "s.xml"
+    scene.write_text(CBOX_PATH)
+    doc = {"output": os.path.join("out", "{job}", "{frame:04d}.exr"),
+           "jobs": [{"name": "j", "scene": str(scene), "frames": 1, "spp": 1, **job}]}
+    spec = batch.load(doc)[1][0]
+    assert [k for k in CHANGED_KEYS if spec.get(k)] == ([key] if key else [])
+    before = frame_hash({k: v for k, v in spec.items() if k not in CHANGED_KEYS})
+    assert (spec["hash"] != before) is (key is not None)
+
+
 def test_look_at_keyframes_take_mirror_as_a_scene_camera_does(tmp_path):
     """The README says a look-at camera takes mirror = true (the tuner saves mirrored GO-Draaw
     cameras so); a batch look_at keyframe refused it ("unknown key 'mirror'"). The mirrored

@@ -227,3 +227,21 @@ def test_check_value_of_a_nested_textures_value_is_its_parameters(key, value, ma
     with pytest.raises(ParameterError, match=match):
         check_value("demo", key, key, value)
     check_value("demo", key, key, [0.3, 0.3, 0.3] if "base_color" in key else 0.3)
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("metal.alpha.value", -0.3, r"metal\.alpha=-0\.3; expected a number in \[0, inf\)"),
+    ("pr.sheen.value", 3.0, r"pr\.sheen=3\.0; expected a number in \[0, 1\]"),
+    ("glass.eta", 0.0, r"glass\.eta=0\.0; expected a number in \(0, inf\)"),
+    ("white.reflectance.value", [-0.5, -0.5, -0.5], r"white\.reflectance=\[-0\.5, -0\.5, -0\.5\]; expected values >= 0"),
+])
+def test_check_value_holds_mitsubas_own_bsdfs_to_a_scene_files_ranges(key, value, match):
+    """A batch override (or the preview's) of a plain Mitsuba BSDF's alpha, principled weight,
+    eta or reflectance was taken as given, though a scene file refuses it: a diffuse
+    reflectance of -0.5 rendered negative pixels."""
+    from draaw_mi.materials import check_value
+    name = key.removesuffix(".value")
+    with pytest.raises(ParameterError, match=match):
+        check_value("demo", name, key, value)
+    check_value("demo", name, key, [0.5, 0.5, 0.5] if isinstance(value, list) else 0.5)
+
