@@ -9,6 +9,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..materials.checks import PLUGIN_RANGES
+
 if TYPE_CHECKING:
     from ..scene import DraawScene
 
@@ -17,13 +19,12 @@ RANGES = {
     "roughness": (0.0, 1.0), "metallic": (0.0, 1.0), "specular": (0.0, 1.0),
     "reflection": (0.0, 1.0), "direct_to_scatter": (0.0, 1.0), "base_color": (0.0, 1.0),
     "reflectance": (0.0, 1.0), "alpha": (1e-3, 1.0), "radiance": (0.0, None), "intensity": (0.0, None),
-    # Mitsuba's own BSDFs (roughplastic, roughconductor, principled, dielectric, conductor)
+    # Mitsuba's own BSDFs (roughplastic, roughconductor, dielectric, conductor); principled's
+    # weights as a scene file holds them (materials.checks.PLUGIN_RANGES)
+    **{k: (lo, hi) for k, (lo, hi, _) in PLUGIN_RANGES["principledthin"].items() if hi is not None},
     "diffuse_reflectance": (0.0, 1.0), "specular_reflectance": (0.0, 1.0),
     "specular_transmittance": (0.0, 1.0), "alpha_u": (1e-3, 1.0), "alpha_v": (1e-3, 1.0),
-    "spec_tint": (0.0, 1.0), "anisotropic": (0.0, 1.0), "sheen": (0.0, 1.0),
-    "sheen_tint": (0.0, 1.0), "clearcoat": (0.0, 1.0), "clearcoat_gloss": (0.0, 1.0),
-    "spec_trans": (0.0, 1.0), "flatness": (0.0, 1.0), "eta": (1e-3, None), "k": (0.0, None),
-    "albedo": (0.0, 1.0), "sigma_t": (0.0, None),
+    "eta": (1e-3, None), "k": (0.0, None), "albedo": (0.0, 1.0), "sigma_t": (0.0, None),
 }
 # parameter name suffix -> space Adam works in ("log": the optimiser moves log(value))
 SPACES = {"roughness": "log", "alpha": "log", "alpha_u": "log", "alpha_v": "log"}

@@ -120,17 +120,35 @@ def check_value(who: str, name: str, key: str, v) -> None:
             raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
 
 
-def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
-    """A texture's texels: finite, in ``[lo, hi]`` (+-``FLOAT32_MAX``: what float32 holds)."""
+def bad_texels(texels, lo: float | None, hi: float | None, lo_open: bool = False):
+    """``(count, index of the first, its value)`` of the values of ``texels`` that are not finite
+    or lie outside ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``; ``None``: no bound), else ``None``.
+
+    >>> bad_texels([[0.5, 2.0], [float("nan"), 0.1]], 0.0, 1.0)
+    (2, (0, 1), 2.0)
+    """
     a = np.asarray(texels, np.float64)
     with np.errstate(invalid="ignore"):
-        bad = ~np.isfinite(a) | (a < lo) | (a > hi)
-    if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        bad = ~np.isfinite(a)
+        if hi is not None:
+            bad |= a > hi
+        if lo is not None:
+            bad |= (a <= lo) if lo_open else (a < lo)
+    if not bad.any():
+        return None
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    return int(bad.sum()), first, float(a[first])
+
+
+def _check_texels(who: str, name: str, texels, lo: float, hi: float) -> None:
+    """A texture's texels: finite, in ``[lo, hi]`` (+-``FLOAT32_MAX``: what float32 holds)."""
+    found = bad_texels(texels, lo, hi)
+    if found is not None:
+        count, first, value = found
         span = "[" + ", ".join("3.4e38" if abs(x) == FLOAT32_MAX and x > 0 else "-3.4e38" if abs(x) == FLOAT32_MAX
                                else f"{x:g}" for x in (lo, hi)) + "]"
-        raise ParameterError(f"{who}: {name}: {int(bad.sum())} texel value(s) outside {span} "
-                             f"(the first, {float(a[first])!r}, at {list(first)}); expected finite values in {span}")
+        raise ParameterError(f"{who}: {name}: {count} texel value(s) outside {span} "
+                             f"(the first, {value!r}, at {list(first)}); expected finite values in {span}")
 
 
 def _check_medium_grid(who: str, name: str, key: str, grid: np.ndarray) -> None:

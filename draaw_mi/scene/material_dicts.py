@@ -14,7 +14,7 @@ from ..errors import user_stacklevel
 from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, NORMALMAP_SLACK, OPTIONS, SCALAR_PARAMS
-from ..materials.checks import PLAIN_RANGES, PLUGIN_RANGES
+from ..materials.checks import PLAIN_RANGES, PLUGIN_RANGES, bad_texels
 from ..materials.textures import linear_image
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
@@ -180,20 +180,16 @@ def check_texels(entry, value, lo: float | None, hi: float | None, lo_open: bool
     if data is None or isinstance(data, (int, float)):       # (numbers: checked by number())
         return
     arr = np.asarray(data, dtype=np.float64).reshape(np.shape(data)[:2] + (-1,) if np.ndim(data) >= 2 else (1, 1, -1))
-    with np.errstate(invalid="ignore"):
-        bad = ~np.isfinite(arr) | (arr > (np.inf if hi is None else hi))
-        if lo is not None:
-            bad |= (arr <= lo) if lo_open else (arr < lo)
-    if not bad.any():
+    found = bad_texels(arr, lo, hi, lo_open)
+    if found is None:
         return
-    y, x, c = (int(i[0]) for i in np.nonzero(bad))
+    _, (y, x, c), bad = found
     expected = f"{'>' if lo_open else '>='} {lo:g}" if hi is None else f"in [{lo:g}, {hi:g}]"
     if np.ndim(data) < 2:                                       # an RGB triple
-        raise where.error(f"{shown(value)} has the component {float(arr[y, x, c]):g}; expected finite "
-                          f"values {expected}")
+        raise where.error(f"{shown(value)} has the component {bad:g}; expected finite values {expected}")
     file = value.get("filename") if isinstance(value, dict) else value
     what = f"texture file {file!r}" if isinstance(file, str) else "texture array"
-    raise where.error(f"{what} has the value {float(arr[y, x, c]):g} at pixel (x={x}, y={y}), channel {c}; "
+    raise where.error(f"{what} has the value {bad:g} at pixel (x={x}, y={y}), channel {c}; "
                       f"expected finite values {expected}")
 
 
