@@ -56,6 +56,7 @@ from ..guard import COLLECTOR_PAUSED, RENDER_GUARD, let_go
 from ..integrators import SCENE_VERSION, resolve_version
 from ..integrators.features import detect_features
 from ..scene.loading import integrator_depth, integrator_version
+from .film_channels import film_channels, named_by_film
 from .frozen import freeze_render, freeze_supported, widened_named
 from .gradient_body import gradient_body, gradients_of, host_key, restore_gradients
 from .passes import sample_passes
@@ -276,14 +277,17 @@ class Session:
         change and the latest draaw-mi call of another thread: it records anew, or traces while
         such a call is in progress (:func:`.frozen.freeze_render`)."""
         scene = self.scene
+        by_film = params is None and named_by_film(integrator)
         with self.lock, RENDER_GUARD, COLLECTOR_PAUSED, interrupts_raised_as_such(), widened_named(scene):
-            if params is None and sensor is None and self.freezes(spp, freeze):
+            if params is None and sensor is None and not by_film and self.freezes(spp, freeze):
                 if isinstance(seed, int):
                     seed = dr.opaque(mi.UInt32, seed)
                 image = self.recording(integrator, spp)(scene.mi_scene, seed, scene, self, background=background)
             else:
                 image = mi.render(scene.mi_scene, params, sensor=0 if sensor is None else sensor,
                                   integrator=integrator, seed=seed, spp=spp)
+                if by_film:                        # (mi.render's tensor leaves channels out)
+                    image = film_channels(scene.mi_scene, 0 if sensor is None else sensor)
             dr.eval(image)
             dr.sync_thread()
         return image

@@ -274,3 +274,43 @@ def test_a_load_error_of_a_resized_xml_scene_names_the_users_file(tmp_path):
     with pytest.raises(draaw_mi.SceneError) as info:
         draaw_mi.load_scene(str(path), resolution=(8, 8))
     assert "draaw-mi-xml-" not in str(info.value) and str(info.value).count(str(path)) >= 2, str(info.value)
+
+
+_AOV_XML = """<scene version="3.0.0">
+  <integrator type="aov">
+    <string name="aovs" value="dd.y:depth,nn:sh_normal"/>
+    {nested}
+  </integrator>
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
+      <string name="pixel_format" value="{fmt}"/></film>
+    <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+  </sensor>
+  <shape type="sphere"><bsdf type="diffuse"/></shape>
+  <emitter type="constant"/>
+</scene>"""
+
+
+@pytest.mark.parametrize("fmt, nested", [("rgb", '<integrator type="path" name="img"/>'), ("rgba", ""),
+                                         ("rgb", "")])
+def test_an_xml_scenes_aov_integrator_renders_every_channel_named(tmp_path, fmt, nested):
+    """Mitsuba's ``aov`` integrator in an XML file failed in ``render`` and batch frames ("7
+    channels with 8 AOV names"): ``mi.render``'s tensor leaves its nested integrator's R, G, B,
+    A out (and the colour, where it nests none). Every channel is now rendered, named as
+    Mitsuba writes them to an EXR; the depth and normals are Mitsuba's, sample for sample."""
+    path = tmp_path / "aov.xml"
+    path.write_text(_AOV_XML.format(fmt=fmt, nested=nested))
+    img, info = draaw_mi.render(draaw_mi.load_scene(str(path)), seed=3, spp=4, return_info=True)
+    img = np.array(img)
+    colour = ["R", "G", "B", "A"] if fmt == "rgba" else ["R", "G", "B"]
+    inner = ["img.R", "img.G", "img.B", "img.A"] if nested else []
+    assert info["channels"] == colour + inner + ["dd.y.T", "nn.X", "nn.Y", "nn.Z"]
+    own = np.array(mi.render(mi.load_file(str(path)), seed=3, spp=4))   # (its last 4: depth, normal)
+    assert np.allclose(img[..., -4:], own[..., -4:], atol=1e-5)
+    depth = img[..., info["channels"].index("dd.y.T")]
+    assert 2.9 < depth[3, 4] < 3.1 and depth[0, 0] < 0.1    # (the sphere's front at 3; sky)
+    if nested:                                                  # the nested image is the colour
+        assert np.allclose(img[..., :3], img[..., 3:6], atol=1e-5) and img[3, 4, 0] > 0.1
+    else:
+        assert np.all(img[..., :3] == 0)
