@@ -136,23 +136,29 @@ def test_gradients_on_official_cornell(key, h):
 
 
 _MEMORY_SCRIPT = r"""
-import resource, sys
+import re, sys
 sys.path.insert(0, {here!r})
 from integrators_helpers import *
+
+def kib(field):
+    return int(re.search(field + r":\s+(\d+)", open("/proc/self/status").read()).group(1))
+
 scene = mi.load_dict(rs.gradient_plane(res=64, spp=16))
 integ = integrator({kind!r}, max_depth=4)
 ad_gradient(scene, integ, "plane.bsdf.roughness.value", 16, 0)
 ad_gradient(scene, integ, "plane.bsdf.roughness.value", 16, 1)
-r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+with open("/proc/self/clear_refs", "w") as f:   # the peak from here on: earlier ones (loading,
+    f.write("5")                                # compiling) hid a pass's growth
+r0 = kib("VmRSS")
 ad_gradient(scene, integ, "plane.bsdf.roughness.value", {spp}, 2)
-r1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print((r1 - r0) * 1024.0)
+print((kib("VmHWM") - r0) * 1024.0)
 """
 
 
 def _growth_per_sample(kind, spp):
-    """Peak-RSS growth of a backward pass at ``spp`` over one at 16 spp (64x64), in units of
-    one 32-bit float per sample of the large pass."""
+    """Peak-RSS growth of a backward pass at ``spp`` (64x64) over the resident memory before it,
+    after two passes at 16 spp, in units of one 32-bit float per sample of the large pass (the
+    peak is reset before it: a whole-process peak read 0 growth for ``path`` once)."""
     here = os.path.dirname(os.path.abspath(__file__))
     out = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT.format(here=here, kind=kind, spp=spp)],
                          capture_output=True, text=True, timeout=600)
