@@ -163,6 +163,14 @@ def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, a
               else f"a texture with {int(np.sum(~np.isfinite(flat)))} non-finite texels")
         raise ParameterError(f"fit: {name} starts at {at} (its value in the scene); expected {expected}, "
                              f"or give init={{{name!r}: ...}}")
+    medium_part = next((part for part in key.split(".") if part in ("albedo", "sigma_t")), None)
+    if medium_part is not None and not np.any(v):
+        # (a real collision with sigma_s = 0 ends the path, and a density of 0 everywhere
+        # samples no collision: either way no path carries the derivative; voxels guide)
+        warnings.warn(f"fit: {name} starts at 0 everywhere, where its gradient is exactly 0 (no path "
+                      f"{'scatters' if medium_part == 'albedo' else 'collides'} in the medium to carry it): "
+                      f"the fit cannot move it; start it from a small value, e.g. init={{{name!r}: 0.05}}",
+                      RuntimeWarning, stacklevel=5)
     if prm.space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm.lo:
         # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
         # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)

@@ -361,3 +361,44 @@ def test_a_fits_views_stand_in_the_scene_cameras_medium():
     seen = np.array(mi.render(scene.mi_scene, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 3}),
                               sensor=view, spp=8))
     assert seen.mean() < 0.2 and own.mean() < 0.2          # (0.88 without the fog)
+
+
+def _fog_scene(albedo, sigma_t=1.0):
+    T = mi.ScalarTransform4f
+    return draaw_mi.load_scene({
+        "type": "scene", "fog": {"type": "homogeneous", "sigma_t": sigma_t, "albedo": albedo},
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "box": {"type": "cube", "interior": {"type": "ref", "id": "fog"}, "bsdf": {"type": "null"}},
+        "light": {"type": "constant"}})
+
+
+@pytest.mark.parametrize("part", ["albedo", "sigma_t"])
+def test_a_medium_albedo_or_density_started_at_0_is_warned_about(part):
+    """Their gradient is exactly 0 there (a real collision with sigma_s = 0 ends the path; with
+    sigma_t = 0 no collision is sampled), so a fit from 0 keeps them at 0: said in a warning,
+    which says what to do (the fit's later "zero gradient" warning asked whether the parameter
+    was visible). The gradient is measured at both starts: 0 at 0, not at 0.05."""
+    name = f"fog.{part}.value"
+    scene_at = (lambda v: _fog_scene(v)) if part == "albedo" else (lambda v: _fog_scene(0.8, v))
+    ref = np.full((8, 8, 3), 0.3, np.float32)
+    with pytest.warns(RuntimeWarning, match=rf"fit: {name} starts at 0 everywhere, where its gradient is "
+                                            rf"exactly 0 .*init=\{{'{name}': 0.05\}}"):
+        r = draaw_mi.fit(scene_at(0.0), ref, [name], iterations=1, spp=4, progress=False)
+    assert np.all(np.array(r.values[name]) == 0.0)                      # (the fit kept it)
+    grads = {}
+    for start in (0.0, 0.05):
+        scene = scene_at(start)
+        key = scene.key(name)
+        p = scene.params
+        dr.enable_grad(p[key])
+        p.update()
+        img = mi.render(scene.mi_scene, p, integrator=mi.load_dict({"type": "draaw_v4", "max_depth": 4}), spp=16)
+        dr.backward(dr.mean(img, axis=None))
+        grads[start] = float(np.abs(np.array(dr.grad(p[key]))).sum())
+    assert grads[0.0] == 0.0 and grads[0.05] > 1e-3, grads
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        draaw_mi.fit(scene_at(0.0), ref, [name], init={name: 0.05}, iterations=1, spp=4, progress=False)
