@@ -140,18 +140,21 @@ _ANY = object()          # SceneCache.get: any hash of the scene's files will do
 
 
 class SceneCache:
-    """Scenes loaded once per process, keyed by (file, resolution); reloaded if the file changes."""
+    """Scenes loaded once per process, keyed by (file, resolution, an XML scene's defines);
+    reloaded if the file changes."""
     def __init__(self):
         self._scenes: dict = {}
         self._guard = threading.Lock()
 
-    def get(self, path: str, resolution=None, digest: str | None = None, files=_ANY) -> CachedScene:
+    def get(self, path: str, resolution=None, digest: str | None = None, files=_ANY,
+            defines: dict | None = None) -> CachedScene:
         """The scene of ``path`` at ``resolution``; ``digest`` / ``files``: the hashes of the
         scene file and of the files it reads that the caller planned with (a cached scene
         whose files changed since it was loaded is loaded again: a long-lived Dask worker)."""
 
         where = os.path.abspath(path)
-        key = (where, tuple(resolution) if resolution else None)
+        named = tuple(sorted((defines or {}).items()))
+        key = (where, tuple(resolution) if resolution else None, named)
         with self._guard:
             entry = self._scenes.get(key)
             if entry is not None and (digest is None or entry.hash == digest)\
@@ -165,12 +168,13 @@ class SceneCache:
                 for k in [k for k, e in self._scenes.items() if e is entry]:
                     del self._scenes[k]
                 entry = None
-            scene = load_scene(path, **({"resolution": tuple(resolution)} if resolution else {}))
+            scene = load_scene(path, **({"resolution": tuple(resolution)} if resolution else {}),
+                               **({"defines": dict(defines)} if defines else {}))
             entry = self._scenes[key] = CachedScene(scene, current)
             # the same scene under the resolution it has: planning asks without one (the
             # scene's own), frames ask with the spec's; a second copy would take a second load
             # and its memory (and, live beside the first, other kernels)
-            self._scenes.setdefault((where, tuple(scene.resolution)), entry)
+            self._scenes.setdefault((where, tuple(scene.resolution), named), entry)
             return entry
 
 
@@ -181,7 +185,8 @@ def render_frame(spec: dict, cache: SceneCache, track_kernels: bool = False) -> 
     for a frame that cannot be finished; the file is then not written.
     """
     t0 = time.perf_counter()
-    entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"], spec.get("files_hash"))
+    entry = cache.get(spec["scene"], spec["resolution"], spec["scene_hash"], spec.get("files_hash"),
+                      spec.get("defines"))
     if entry.files_hash != spec.get("files_hash"):
         raise RenderError(f"{spec['scene']}: a file the scene reads (texture, mesh, ...) changed since "
                           "the batch was planned; re-run the batch")

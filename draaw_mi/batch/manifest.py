@@ -26,6 +26,8 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     aovs = ["depth", "normal"]
     camera = { orbit = { target = [0, 0.1, 0], radius = 9.3, height = 2.2, degrees = 360 } }
     params = { "r0m0.roughness" = { from = 0.05, to = 0.95 } }
+    # a Mitsuba XML scene's $name parameters (its <default>s), as draaw-mi render -D sets them:
+    # defines = { max_depth = 8, albedo = "0.2, 0.5, 0.8" }
 
 Camera tables (one of): ``orbit``; ``keyframes`` (GO-Draaw ``[x, y, z, theta, phi]`` rows,
 interpolated as in :mod:`draaw_mi.scene.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
@@ -49,17 +51,18 @@ import os
 import string as _string
 from dataclasses import dataclass, field
 
-from ..errors import ParameterError, SceneError, suggest
+from ..errors import DraawError, ParameterError, SceneError, suggest
 from ..integrators import resolve_version
 from ..post import load_chain
 from ..scene.camera import check_look_at
 from ..scene.camera_path import as_keyframes
 from ..scene.schema import Where, boolean, check_keys, number, read_document, resolution, string, vector
+from ..scene.xml_film import check_defines
 from .confine import check_relative
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
 JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
-            "post", "camera", "params", "output", "half", "previews", "freeze")
+            "post", "camera", "params", "output", "half", "previews", "freeze", "defines")
 CAMERA_KEYS = ("orbit", "keyframes", "file", "look_at", "faithful", "fov")
 ORBIT_KEYS = ("target", "radius", "height", "degrees", "start", "up")
 LOOK_AT_KEYS = ("origin", "target", "up", "mirror")
@@ -87,6 +90,7 @@ class Job:
     half: bool = False
     previews: bool = False
     freeze: bool = True           # replay a frozen render after the first frame (dr.freeze)
+    defines: dict = field(default_factory=dict)  # an XML scene's $name values, as strings
 
 
 @dataclass
@@ -195,6 +199,8 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: 
     if not os.path.isfile(scene):
         raise (where / "scene").error(f"scene file {scene!r} does not exist")
     job = Job(name=name, scene=scene, frames=1, output="")
+    if "defines" in jd:
+        job.defines = _defines(jd["defines"], where / "defines", scene)
     if jd.get("version") is not None:
         job.version = string(jd["version"], where / "version")
         try:
@@ -229,6 +235,20 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: 
     job.frames = _frames(jd, job, where)
     job.output = _pattern(jd.get("output", DEFAULT_OUTPUT), where / "output", out_base, job, confined)
     return job
+
+
+def _defines(defines, where: Where, scene: str) -> dict:
+    """A job's ``defines``: the ``$name`` values of a Mitsuba XML scene (as ``load_scene``'s
+    ``defines`` takes them; only an XML scene has such parameters)."""
+    if not scene.lower().endswith(".xml"):
+        raise where.error(f"sets $name parameters of a Mitsuba XML scene; {os.path.basename(scene)!r} "
+                          "is not one (give the values through params)")
+    if not isinstance(defines, dict):
+        raise where.error(f"{defines!r}; expected a table of $name values, e.g. {{ res = 64 }}")
+    try:
+        return check_defines(defines, "")
+    except DraawError as e:
+        raise where.error(str(e).removeprefix(": ")) from None
 
 
 def _check_post(chain, where: Where) -> list:

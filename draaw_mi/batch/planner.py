@@ -64,6 +64,8 @@ def frame_hash(spec: dict) -> str:
             "camera", "params", "half", "versions")
     if spec.get("files_hash"):     # (only then: frames of scenes that read no file keep their hash)
         keys += ("files_hash",)
+    if spec.get("defines"):        # (likewise: jobs without an XML scene's defines)
+        keys += ("defines",)
     if spec.get("scene_camera_mirror"):
         # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored, so its
         # frames hashed without this key are stale; the others keep their hash)
@@ -209,7 +211,7 @@ def input_files(manifest: Manifest, cache) -> dict:
     for job in manifest.jobs:
         add(job.scene, f"the scene file of job {job.name!r}")
         try:
-            entry = cache.get(job.scene, job.resolution)
+            entry = cache.get(job.scene, job.resolution, defines=job.defines)
         except DraawError as e:                    # (as plan() says it)
             raise SceneError(f"{manifest.path}: job {job.name!r}: {e}") from None
         for f in entry.scene.info.get("files", []):
@@ -245,7 +247,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
     for ji, job in enumerate(manifest.jobs):
         loc = f"{where}: job {job.name!r}"
         try:
-            entry = cache.get(job.scene, job.resolution)
+            entry = cache.get(job.scene, job.resolution, defines=job.defines)
         except DraawError as e:
             raise SceneError(f"{loc}: {e}") from None
         scene = entry.scene
@@ -314,6 +316,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             spec = {
                 "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
                 "scene": job.scene, "scene_hash": entry.hash, "files_hash": entry.files_hash,
+                "defines": dict(job.defines),
                 "resolution": list(scene.resolution),
                 "version": version, "spp": int(spp), "sampler": s.get("sampler"),
                 # (a job without a seed takes its scene's, as render() does: two scenes
