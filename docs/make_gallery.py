@@ -37,16 +37,32 @@ def scene_files() -> list[str]:
 
 
 def summary(path: str) -> str:
-    """The scene file's first comment line (what it shows), without the ``#``."""
+    """The first sentence of the scene file's opening comment (what it shows), without the
+    ``#``s: its lines joined up to the first full stop (a first line alone had been cut
+    mid-sentence).
+
+    >>> import tempfile, os
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     f = os.path.join(d, "s.toml")
+    ...     _ = open(f, "w").write("# A ball (radius 0.5)\\n# on a tile. More.\\n[render]\\n")
+    ...     summary(f)
+    'A ball (radius 0.5) on a tile.'
+    """
+    words = []
     with open(path, encoding="utf-8") as fh:
         for line in fh:
-            if line.startswith("#"):
-                text = line.lstrip("#").strip()
-                if text and not text.startswith("draaw-mi "):
-                    return text
-            elif line.strip():
-                break
-    return ""
+            text = line.lstrip("#").strip() if line.startswith("#") else line.strip() or None
+            if text is None or not line.startswith("#"):
+                if words or text is not None:       # (blank lines before the comment: skipped)
+                    break
+            elif not text:
+                if words:                           # (an empty comment line ends the paragraph)
+                    break
+            elif not text.startswith("draaw-mi "):
+                words.append(text)
+    joined = " ".join(words)
+    end = joined.find(". ")
+    return joined if end < 0 else joined[:end + 1]
 
 
 def small_resolution(resolution, size: int) -> tuple[int, int]:
@@ -86,14 +102,23 @@ def main(argv=None) -> int:
         entries.append((name, summary(path), res, version))
         del scene
 
+    write_page(entries, args.spp, args.raw)
+    print(f"wrote {PAGE} and {len(entries)} images in {OUT}")
+    return 0
+
+
+def write_page(entries, spp: int, raw: bool) -> None:
+    """Write ``gallery.md``: for each ``(name, summary, (w, h), version)`` its image and the
+    command that renders it (the image's size, samples and seed)."""
     lines = ["# Gallery of the sample scenes", "",
              "The scenes of `scenes/`, each rendered as its file sets it (render version, depth, post",
-             f"chain) at a small size, {args.spp} samples per pixel, seed 0"
-             + ("." if args.raw else ", denoised with Intel OIDN (`--denoise`: albedo and normal guides, "
+             f"chain) at a small size, {spp} samples per pixel, seed 0"
+             + ("." if raw else ", denoised with Intel OIDN (`--denoise`: albedo and normal guides, "
                 "the lights seen directly added undenoised; a denoised image is biased)."),
              "The images are stored in `docs/_static/gallery/`; `docs/make_gallery.py` renders them and",
-             "writes this page. Each command renders the scene at its own size and sample count.", ""]
-    flag = "" if args.raw else " --denoise"
+             "writes this page. Each command renders the image above it; without `--resolution`,",
+             "`--spp` and `--seed` it renders the scene at its own size and sample count.", ""]
+    flag = "" if raw else " --denoise"
     for name, text, res, version in entries:
         lines += [f"## `scenes/{name}.toml`", ""]
         if text:
@@ -102,12 +127,11 @@ def main(argv=None) -> int:
                   f":alt: scenes/{name}.toml rendered at {res[0]}x{res[1]}",
                   "```", "",
                   "```sh",
-                  f"draaw-mi render scenes/{name}.toml -o out/{name}.exr --png out/{name}.png{flag}",
+                  f"draaw-mi render scenes/{name}.toml -o out/{name}.exr --png out/{name}.png "
+                  f"--resolution {res[0]}x{res[1]} --spp {spp} --seed 0{flag}",
                   "```", ""]
     with open(PAGE, "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines).rstrip() + "\n")
-    print(f"wrote {PAGE} and {len(entries)} images in {OUT}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -141,7 +141,7 @@ class DraawV4Integrator(V4Passes):
       ``draaw_mi.scene.loading.release_wrapped()`` lets go of the bare ``mi.Scene`` objects
       ``draaw_mi.render`` keeps for replays).
 
-    What is on by default and why (``benchmarks/results/speed_suite.md``, ten scenes of
+    What is on by default and why (``benchmarks/results/speed_suite.md``, eighteen scenes of
     different kinds, time to reach ``path``'s 64-spp error): the roulette threshold because
     ``path``-style roulette from depth 2 costs up to 1.7x the time in environment-lit scenes
     (stopping bright paths adds variance) while never roulette costs speed in enclosed
