@@ -35,7 +35,7 @@ NONNEG_COLOURS = ("reflectance", "diffuse_reflectance", "specular_reflectance", 
 NORMALMAP_RANGE = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK)
 
 
-def check_value(who: str, name: str, key: str, v) -> None:
+def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> None:
     """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
     wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
     parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
@@ -43,7 +43,8 @@ def check_value(who: str, name: str, key: str, v) -> None:
     ``scale`` >= 0, ``albedo`` in [0, 1]; a g of 1.5 would render negative pixels). Raises
     :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
     range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
-    planner check their overrides with it.
+    planner check their overrides with it. ``conductor``: ``key`` is a conductor's, whose
+    ``eta`` may be 0 (Mitsuba's default material ``none``, a perfect mirror: eta 0, k 1).
 
     >>> check_value("demo", "ball.roughness", "ball.roughness.value", 0.3)
     >>> check_value("demo", "ball.roughness", "ball.roughness.value", 3.0)
@@ -112,7 +113,7 @@ def check_value(who: str, name: str, key: str, v) -> None:
         names = parts[1:-1] if parts[-1] in ("value", "data") else parts[1:]     # (dielectric.eta)
         plain = next((p for p in names if p in MITSUBA_RANGES), None)
         if plain is not None:
-            lo, hi, lo_open = MITSUBA_RANGES[plain]
+            lo, hi, lo_open = _NONNEG if conductor and plain == "eta" else MITSUBA_RANGES[plain]
             if not all((x > lo if lo_open else x >= lo) and (hi is None or x <= hi) for x in nums):
                 span = f"{'(' if lo_open else '['}{lo:g}, {'inf)' if hi is None else format(hi, 'g') + ']'}"
                 raise ParameterError(f"{who}: {name}={v!r}; expected a number in {span}")

@@ -230,12 +230,18 @@ class DraawScene:
                 sdf[node_param] = value
                 names.append(name)
             else:
-                check_value(who, name, key, value)
+                check_value(who, name, key, value, conductor=self._conductor_eta(key))
         if sdf:
             try:
                 self.sdf.check_many(sdf)
             except ParameterError as e:
                 raise ParameterError(f"{who}: {', '.join(names)}: {e}") from None
+
+    def _conductor_eta(self, key: str) -> bool:
+        """Whether ``key`` is a conductor's ``eta`` (its BSDF has a ``k`` beside it: only
+        Mitsuba's conductors do)."""
+        head, sep, tail = key.rpartition(".eta.")
+        return bool(sep) and tail in ("value", "data") and f"{head}.k.{tail}" in self.params.properties
 
     def key(self, name: str) -> str:
         """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's

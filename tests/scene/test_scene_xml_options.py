@@ -314,3 +314,31 @@ def test_an_xml_scenes_aov_integrator_renders_every_channel_named(tmp_path, fmt,
         assert np.allclose(img[..., :3], img[..., 3:6], atol=1e-5) and img[3, 4, 0] > 0.1
     else:
         assert np.all(img[..., :3] == 0)
+
+
+def test_mitsubas_default_conductor_renders_without_an_out_of_range_warning(tmp_path):
+    """A conductor without a material is Mitsuba's 'none', a perfect mirror of eta 0 and k 1:
+    every render of it warned that eta=0 was out of (0, inf) and its pixels not to be trusted.
+    A conductor's eta may be 0; a negative one, and a dielectric's eta of 0, stay refused."""
+    import warnings
+    path = tmp_path / "mirror.xml"
+    path.write_text('<scene version="3.0.0"><integrator type="path"/><sensor type="perspective">'
+                    '<transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>'
+                    '<film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>'
+                    '</film></sensor><emitter type="constant"/>'
+                    '<shape type="sphere" id="ball"><bsdf type="roughconductor"/></shape>'
+                    '<shape type="sphere" id="glass"><transform name="to_world"><translate x="3"/></transform>'
+                    '<bsdf type="dielectric"/></shape></scene>')
+    scene = draaw_mi.load_scene(str(path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        draaw_mi.render(scene, version="v4", spp=2)
+    assert scene.out_of_range() == []
+    eta = scene.params["ball.bsdf.eta.value"]
+    scene.params["ball.bsdf.eta.value"] = type(eta)(-0.5)
+    scene.params.update()
+    found = scene.out_of_range()
+    assert any("ball.bsdf.eta.value=-0.5; expected a number in [0, inf)" in m for m in found), found
+    scene.check_value("demo", "ball.eta", "ball.bsdf.eta.value", 0.0)        # (taken: a mirror)
+    with pytest.raises(draaw_mi.errors.ParameterError, match=r"demo: glass.eta=0.0; expected a number in \(0, inf\)"):
+        scene.check_value("demo", "glass.eta", "glass.bsdf.eta", 0.0)
