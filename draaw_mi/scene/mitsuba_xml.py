@@ -144,13 +144,33 @@ def _add(files: list[str], path: str) -> None:
         files.append(path)
 
 
+# Mitsuba integrators whose printed or class name is not their plugin name
+_PLUGIN_NAMES = {"VolumetricSimplePathIntegrator": "volpath", "VolumetricMisPathIntegrator": "volpathmis",
+                 "ParticleTracerIntegrator": "ptracer", "BasicPRBIntegrator": "prb_basic",
+                 "PRBVolpathIntegrator": "prbvolpath", "DirectProjectiveIntegrator": "direct_projective",
+                 "PathProjectiveIntegrator": "prb_projective", "MomentIntegrator": "moment",
+                 "AOVIntegrator": "aov"}
+
+
 def integrator_name(integrator) -> str:
-    """The plugin name of a loaded Mitsuba integrator, from its class (``DirectIntegrator``
-    -> ``direct``)."""
+    """The plugin name of a loaded Mitsuba integrator, from what it prints or its C++ class
+    (``DirectIntegrator`` -> ``direct``; ``moment`` prints its nested scene, ``volpath`` a
+    class of another name).
+
+    >>> import mitsuba as mi
+    >>> [integrator_name(mi.load_dict({"type": t, "n": {"type": "path"}} if t == "moment" else {"type": t}))
+    ...  for t in ("direct", "volpath", "ptracer", "moment", "prb_basic")]
+    ['direct', 'volpath', 'ptracer', 'moment', 'prb_basic']
+    """
     kind = str(integrator).split("[", 1)[0].strip()
     draaw = re.fullmatch(r"DraawV(\d)Integrator", kind)
     if draaw:                                   # (draaw_v4, as --version and the XML spell it)
         return f"draaw_v{draaw.group(1)}"
+    for name in (kind, integrator.class_name()):
+        if name in _PLUGIN_NAMES:
+            return _PLUGIN_NAMES[name]
+    if not kind.endswith("Integrator"):         # (what it prints is not its class)
+        kind = integrator.class_name()
     return kind.removesuffix("Integrator").lower() or kind
 
 
