@@ -33,7 +33,7 @@ def freeze_supported(mi_scene) -> bool:
     """Whether renders of ``mi_scene`` may be recorded with ``dr.freeze``: not when the scene
     has SDF objects (the tracer reads node parameters while it is traced) or participating
     media (the volume code launches host-side work that a recording cannot hold; Dr.Jit 1.5
-    aborts the process). The preview and the batch executor ask this too."""
+    aborts the process), nor a thin-lens camera's. The preview and the batch executor ask this too."""
     # flags and ids only (no JIT reads): a check between replays must not disturb the
     # recording's inputs; a shape group's members (with a medium) are found by a traversal,
     # made only where the scene has an instance (features.scene_shapes)
@@ -42,7 +42,9 @@ def freeze_supported(mi_scene) -> bool:
             return False                               # SDF proxies
         if sh.interior_medium() is not None or sh.exterior_medium() is not None:
             return False
-    return all(s.get_medium() is None for s in mi_scene.sensors())
+    # a thin lens's camera reads state a recording does not capture ("created before
+    # recording was started"): its renders are traced
+    return all(s.get_medium() is None and not s.needs_aperture_sample() for s in mi_scene.sensors())
 
 
 # Host-side parameters that no kernel reads (silhouette weights serve projective gradients,

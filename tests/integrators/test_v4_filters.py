@@ -227,6 +227,25 @@ def test_a_thin_lens_is_said_once_to_turn_emission_splitting_off():
     assert not [w for w in seen if "is off" in str(w.message)]
 
 
+def test_a_thin_lens_scene_renders_traced_without_a_recorders_message():
+    """A recording of a thin lens's render failed at every first render ("Variable r170 ...
+    was created before recording was started"), which every version said in a warning of
+    Dr.Jit's internals before tracing it: such scenes are traced from the start."""
+    from draaw_mi.rendering.frozen import freeze_supported
+    d = rs.cornell_draaw(res=8, spp=4)
+    d["sensor"].update(type="thinlens", aperture_radius=0.1, focus_distance=3.0)
+    scene = draaw_mi.load_scene(d)
+    assert not freeze_supported(scene.mi_scene)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        for version in ("path", "v1", "v4"):
+            assert np.isfinite(np.array(draaw_mi.render(scene, version=version, spp=4))).all()
+    assert not [w for w in seen if "freeze" in str(w.message)], [str(w.message) for w in seen]
+    d["sensor"].update(type="perspective")
+    del d["sensor"]["aperture_radius"], d["sensor"]["focus_distance"]
+    assert freeze_supported(draaw_mi.load_scene(d).mi_scene)          # (a pinhole is recorded)
+
+
 def test_info_says_what_the_sensor_gates(tmp_path, capsys):
     path = tmp_path / "g.json"
     path.write_text(json.dumps(tiny_description(filter="gaussian")))
