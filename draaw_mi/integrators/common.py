@@ -244,7 +244,12 @@ class DraawIntegrator(RBIntegrator):
         the media code on this thread; a film sampling beyond its border is refused."""
         with pass_sensor.rendering(self, scene, sensor) as obj:
             refuse_border_sampling(obj, self.PLUGIN, RenderError)
+            self.before_pass(self, scene)
             yield
+
+    #: ``before_pass(integrator, scene)``, called as each pass starts: what a version says of
+    #: the scene (V1 / V2: :func:`.phong.say_diffuse_only`)
+    before_pass = staticmethod(lambda integrator, scene: None)
 
     def render_primal(self, scene, sensor, seed, spp, develop, evaluate):
         """:meth:`render` itself: Mitsuba's path-replay primal render."""

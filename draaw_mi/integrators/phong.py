@@ -4,12 +4,14 @@ evaluation, lobe choice, pdf and sampling."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import drjit as dr
 import mitsuba as mi
 
-from ..materials.draaw_bsdf import clamp_st
+from ..materials.draaw_bsdf import DraawBSDF, clamp_st
 from .common import INV_PI, INV_TWO_PI, lum
+from .features import is_black, scene_shapes
 
 # Largest Phong exponent of the legacy model (roughness below ~0.12 gives this lobe).
 PHONG_MAX_EXPONENT = 1e4
@@ -132,3 +134,45 @@ def phong_sample(mat: PhongMaterial, wi: mi.Vector3f, s1: mi.Float, s2: mi.Point
     wo = dr.select(is_mirror, r, dr.select(is_glossy, wo_g, wo_d))
     pdf = phong_smooth_pdf(mat, p_d, p_g, wi, wo)
     return wo, is_mirror, pdf, p_m
+
+
+def diffuse_only_bsdfs(scene: mi.Scene) -> list[str]:
+    """The BSDFs of ``scene``, other than ``draaw``'s, of which the legacy model keeps the
+    diffuse reflectance alone and drops glossy or delta lobes (a ``conductor`` or
+    ``dielectric`` renders black, a ``plastic`` without its coat), each as ``"id (class)"``.
+
+    >>> d = {"type": "scene", "a": {"type": "sphere", "bsdf": {"type": "conductor", "id": "gold"}},
+    ...      "b": {"type": "sphere", "bsdf": {"type": "diffuse"}}}
+    >>> diffuse_only_bsdfs(mi.load_dict(d))
+    ['gold (SmoothConductor)']
+    """
+    found = []
+    for shape in scene_shapes(scene):
+        bsdf = shape.bsdf()
+        if bsdf is None or isinstance(bsdf, DraawBSDF) or is_black(bsdf) or bsdf.class_name() == "Null":
+            continue
+        flags = bsdf.flags()
+        if mi.has_flag(flags, mi.BSDFFlags.Glossy) or mi.has_flag(flags, mi.BSDFFlags.Delta):
+            # (a dict's nested BSDF is named "bsdf", an XML one's nothing: named by the shape)
+            own = bsdf.id() not in ("", "bsdf") and not bsdf.id().startswith("object_")
+            name = (f"{bsdf.id()} ({bsdf.class_name()})" if own else
+                    f"the {bsdf.class_name()} of {shape.id() or 'an unnamed shape'}")
+            if name not in found:
+                found.append(name)
+    return found
+
+
+def say_diffuse_only(integrator, scene) -> None:
+    """V1 / V2's :meth:`~.common.DraawIntegrator.before_pass`: a ``RuntimeWarning``, once per
+    integrator and set of BSDFs, that the legacy model reads Mitsuba's other BSDFs as their
+    diffuse reflectance alone (an XML scene's metals and glass had rendered black without a
+    word)."""
+    names = diffuse_only_bsdfs(scene)
+    said = integrator.__dict__.setdefault("_said_diffuse_only", set())
+    if names and tuple(names) not in said:
+        said.add(tuple(names))
+        shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+        warnings.warn(f"{integrator.PLUGIN}: the legacy Phong model reads Mitsuba's BSDFs by their diffuse "
+                      f"reflectance alone: {shown} lose their glossy or mirror lobes (a conductor or "
+                      "dielectric renders black); render with v3 or v4, or give them draaw materials",
+                      RuntimeWarning, stacklevel=5)

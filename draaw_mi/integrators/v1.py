@@ -16,7 +16,7 @@ from .common import (
     side_sign,
     with_shared_parameters,
 )
-from .phong import mirror_dir, phong_eval, phong_material
+from .phong import say_diffuse_only, mirror_dir, phong_eval, phong_material
 
 # Light from every emitter individually up to this many emitters (else one random emitter).
 MAX_UNROLLED_EMITTERS = 8
@@ -109,6 +109,7 @@ class DraawV1Integrator(DraawIntegrator):
     READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
     DIFFERENTIATES_MEDIA = False       # (volume_march: a primal single-scattering march)
     PLUGIN = "draaw_v1"
+    before_pass = staticmethod(say_diffuse_only)
 
     def __init__(self, props: mi.Properties):
         self.scatter = parse_int(props, self.PLUGIN, "scatter", 4, 0)

@@ -16,7 +16,7 @@ from .common import (
     side_sign,
     with_shared_parameters,
 )
-from .phong import phong_eval, phong_material, phong_sample
+from .phong import say_diffuse_only, phong_eval, phong_material, phong_sample
 
 
 @with_shared_parameters
@@ -105,6 +105,7 @@ class DraawV2Integrator(DraawIntegrator):
     READS_NORMAL_MAPS = False          # (the Phong model: common.DraawIntegrator.ray_flags)
     DIFFERENTIATES_MEDIA = False       # (volume_march: a primal single-scattering march)
     PLUGIN = "draaw_v2"
+    before_pass = staticmethod(say_diffuse_only)
 
     def __init__(self, props: mi.Properties):
         self.scatter = parse_int(props, self.PLUGIN, "scatter", 1, 0)

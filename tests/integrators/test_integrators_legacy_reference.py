@@ -176,3 +176,35 @@ def test_v2s_direct_to_scatter_weighs_only_the_diffuse_indirect_light():
            for m in (1.0, 0.0) for d in (0.2, 1.0)}
     assert np.allclose(img[1.0, 0.2], img[1.0, 1.0], rtol=1e-5, atol=1e-6)
     assert img[0.0, 0.2].mean() < img[0.0, 1.0].mean() - 0.01 * img[0.0, 1.0].mean()
+
+
+def test_v1_v2_say_once_which_mitsuba_bsdfs_they_read_as_diffuse():
+    """The legacy model reads a Mitsuba BSDF by its diffuse reflectance alone: an XML scene's
+    conductor and glass rendered black without a word. Said once per integrator (a preview's
+    every frame is a render); V3 / V4, which render them, and a scene of draaw and diffuse
+    materials say nothing."""
+    import warnings
+    T = mi.ScalarTransform4f
+    d = {"type": "scene", "sensor": {"type": "perspective", "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                                     "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+         "light": {"type": "constant"},
+         "gold": {"type": "sphere", "center": [-1.2, 0, 0], "bsdf": {"type": "conductor", "id": "gold_metal"}},
+         "glass": {"type": "sphere", "center": [1.2, 0, 0], "radius": 0.5, "bsdf": {"type": "dielectric"}},
+         "chalk": {"type": "sphere", "center": [0, 1.2, 0], "radius": 0.3, "bsdf": {"type": "diffuse"}},
+         "paint": {"type": "sphere", "center": [0, -1.2, 0], "radius": 0.3, "bsdf": {"type": "draaw", "metallic": 1.0}}}
+    scene = mi.load_dict(d)
+
+    def said(kind, scene, times=1):
+        integ = integrator(kind, max_depth=3)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            for _ in range(times):
+                mi.render(scene, integrator=integ, spp=1)
+        return [str(w.message) for w in seen if "diffuse reflectance alone" in str(w.message)]
+    for kind in ("draaw_v1", "draaw_v2"):
+        (msg,) = said(kind, scene, times=2)
+        assert msg.startswith(f"{kind}: the legacy Phong model reads Mitsuba's BSDFs by their diffuse reflectance "
+                              "alone: gold_metal (SmoothConductor), the SmoothDielectric of glass lose"), msg
+    assert said("draaw_v4", scene) == [] and said("draaw_v3", scene) == []
+    del d["gold"], d["glass"]
+    assert said("draaw_v1", mi.load_dict(d)) == []
