@@ -167,6 +167,10 @@ def say_diffuse_only(integrator, scene) -> None:
     integrator and set of BSDFs, that the legacy model reads Mitsuba's other BSDFs as their
     diffuse reflectance alone (an XML scene's metals and glass had rendered black without a
     word)."""
+    looked = integrator.__dict__.setdefault("_diffuse_only_looked", set())
+    if id(scene) in looked:                    # (once per scene: a walk over every shape)
+        return
+    looked.add(id(scene))
     names = diffuse_only_bsdfs(scene)
     said = integrator.__dict__.setdefault("_said_diffuse_only", set())
     if names and tuple(names) not in said:
