@@ -108,9 +108,10 @@ def _cmd_render(args) -> int:
         post = _load_chain(args.post)
     # (render's pass layout does not follow the progress mode: the same image in a terminal
     # as in a pipe)
+    sensor = int(args.sensor) if args.sensor.isdigit() else args.sensor
     image, info = render(scene, version=args.version, time_budget=args.time_budget, post=post,
                                   progress=progress_mode(args.no_progress), return_info=True,
-                                  denoise=args.denoise)
+                                  denoise=args.denoise, sensor=sensor)
     arr = np.array(image)
     del image
     dr.flush_malloc_cache()      # the render's cached buffers, before the EXR's own copies

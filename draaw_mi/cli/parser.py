@@ -47,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--post", help="post-processing chain (JSON file) applied after rendering")
     r.add_argument("--threads", type=int, help="Dr.Jit worker threads (default: all cores)")
     r.add_argument("--no-progress", action="store_true", help=PROGRESS_HELP)
+    r.add_argument("--sensor", default="0",
+                   help="which of the scene's sensors renders: its index or its id (default 0, the first)")
     r.add_argument("--denoise", action="store_true",
                    help="denoise with Intel OIDN guided by albedo/normal AOVs (biased; needs pyoidn)")
 

@@ -254,6 +254,8 @@ def cmd_info(args) -> int:
         print(f"\nscene {s['source']}: {s['resolution'][0]}x{s['resolution'][1]}")
         print(f"    shapes: {len(s['shapes'])} ({', '.join(s['shapes'][:12])}{' ...' if len(s['shapes']) > 12 else ''})")
         print(f"    lights: {', '.join(s['lights']) or 'none'}")
+        if len(s["sensors"]) > 1:
+            print(f"   sensors: {', '.join(s['sensors'])} (the first renders; another with --sensor)")
         none = "(the default draaw material)" if s.get("described") else "(from the file)"
         print(f" materials: {', '.join(s['materials']) or none}")
         if s.get("volume_materials"):

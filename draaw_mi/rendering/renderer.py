@@ -38,7 +38,7 @@ from ..scene.schema import Where
 from ..scene.schema import resolution as parse_res
 from ..sdf.params import SDFParameters
 from .denoiser import AUX_AOVS, denoise_aovs, load_pyoidn
-from .film_colour import check_film_colour, scene_colour_names
+from .film_colour import check_film_colour, scene_colour_names, sensor_index
 from .passes import pass_seed
 from .session import apply_post, non_finite_count, session_of
 from .subsample import render_adaptive
@@ -63,6 +63,7 @@ class RenderSettings:
     loaded: object = None              # ... and loaded (a draaw_mi.post.Chain), or None
     denoise: bool = False
     guide_aovs: list = field(default_factory=list)   # AOVs rendered only for the denoiser
+    sensor: int = 0                    # the index of the sensor that renders
 
 
 @in_foreground
@@ -70,7 +71,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
            max_depth: int | None = None, resolution=None, *, params=None, progress: bool | str = False,
            time_budget: float | None = None, pass_spp: int | None = None, post=None,
            hide_emitters: bool | None = None, aovs=None, return_info: bool = False,
-           integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False):
+           integrator_options: dict | None = None, adaptive: int | None = None, denoise: bool = False,
+           sensor: int | str = 0):
     """Render ``scene`` and return an (H, W, C) ``mi.TensorXf`` (C = the film's colour channels,
     R, G, B, or an XML film's R, G, B, A / X, Y, Z[, A] / Y[, A], + AOV channels).
 
@@ -111,6 +113,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
             version and emitters shown, the emitters seen directly are rendered apart and
             added undenoised (OIDN smears a bright emitter's edge); ``return_info`` holds
             the undenoised colour as ``info["raw"]`` (with any version).
+        sensor: which of the scene's sensors renders: its index, or its id in the scene file
+            (an XML scene's ``<sensor id="top">``); default the first.
 
     Example::
 
@@ -128,7 +132,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if not isinstance(return_info, (bool, np.bool_)):
         raise RenderError(f"render: return_info={return_info!r}; expected True or False")
     rs = _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
-                   hide_emitters, aovs, integrator_options, adaptive, denoise)
+                   hide_emitters, aovs, integrator_options, adaptive, denoise, sensor)
     session = session_of(rs.scene)
     if adaptive is not None:
         return _render_adaptive(rs, session, adaptive, params, return_info, progress)
@@ -147,7 +151,8 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         acc, done, passes, t0 = None, 0, 0, time.perf_counter()
         with session.lock:                         # the passes of one render see one scene
             for i, count in enumerate(counts):
-                img = session.render_pass(integrator, count, pass_seed(rs.seed, i), params=params)
+                img = session.render_pass(integrator, count, pass_seed(rs.seed, i), params=params,
+                                          sensor=rs.sensor or None)
                 if n_passes == 1:
                     acc = img                      # one pass: no extra scaling kernels (small renders)
                 else:
@@ -166,7 +171,7 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
     if return_info:
         info = {"spp": done, "passes": passes, "seconds": time.perf_counter() - t0,
                 "channels": names, "version": rs.version, "integrator": session_of(rs.scene).plugin_name(rs.version),
-                "denoised": rs.denoise, "non_finite": bad, "post": rs.chain}
+                "denoised": rs.denoise, "non_finite": bad, "post": rs.chain, "sensor": rs.sensor}
         if raw is not None:
             info["raw"] = raw
         return image, info
@@ -189,7 +194,7 @@ def _budget_passes(session, spp: int, pass_spp: int):
 
 
 def _settings(scene, version, spp, seed, max_depth, resolution, params, time_budget, pass_spp, post,
-              hide_emitters, aovs, integrator_options, adaptive, denoise) -> RenderSettings:
+              hide_emitters, aovs, integrator_options, adaptive, denoise, sensor=0) -> RenderSettings:
     """:func:`render`'s arguments checked and resolved against the scene's settings (nothing
     renders before every argument is known to be good)."""
     if not isinstance(scene, DraawScene):
@@ -211,6 +216,10 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
                               "`scene.with_resolution(w, h)` and traverse that instead")
         scene = scene.with_resolution(*size)
     version = s["version"] if version is None else version
+    sensor = sensor_index(scene, sensor)
+    if sensor and adaptive is not None:
+        raise RenderError(f"render: adaptive subsampling renders the first sensor; sensor={sensor} with "
+                          "adaptive=: drop one")
     if resolve_version(version) == SCENE_VERSION:
         ignored = [f"{n}={v!r}" for n, v in (("max_depth", max_depth), ("hide_emitters", hide_emitters))
                    if v is not None]
@@ -268,12 +277,12 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
     loaded = post_mod.load_chain(chain) if chain else None
     _warn_grade_left_out(version, loaded)
     if (chain or denoise) and adaptive is None:
-        check_film_colour(scene, "a post chain" if chain else "denoising")
+        check_film_colour(scene, "a post chain" if chain else "denoising", sensor)
     guides: list = []
     if denoise:                                # check early, render the guide AOVs with the image
         aovs, guides = _denoise_aovs(params, adaptive, aovs, version)
     return RenderSettings(scene, version, spp, seed, max_depth, pass_spp, bool(hide), list(aovs),
-                          dict(integrator_options or {}), chain, loaded, bool(denoise), guides)
+                          dict(integrator_options or {}), chain, loaded, bool(denoise), guides, sensor)
 
 
 def _parameters_of(scene: DraawScene, params) -> bool:
@@ -316,7 +325,7 @@ def _finish(rs: RenderSettings, integrator, acc, done: int, summed: bool):
     would hide them; the undenoised colour (H, W, 3) is kept where denoising was asked for (any
     version: ``info["raw"]``, the CLI's ``raw.R/G/B``)."""
     aov_names = integrator.aov_names()
-    colour = scene_colour_names(rs.scene)
+    colour = scene_colour_names(rs.scene, rs.sensor)
     names = (colour + aov_names if len(colour) + len(aov_names) == acc.shape[2]
              else channel_names(acc.shape[2], aov_names))
     image = acc
@@ -341,7 +350,7 @@ def _emission_apart(rs: RenderSettings, session) -> bool:
     """Whether ``denoise=True`` keeps the emitters seen directly out of the denoiser: draaw
     versions (the guides), emitters shown, an RGB film, no media."""
     return (rs.denoise and is_draaw(rs.version) and not rs.hide_emitters
-            and scene_colour_names(rs.scene) == ["R", "G", "B"] and not session.holds()["media"])
+            and scene_colour_names(rs.scene, rs.sensor) == ["R", "G", "B"] and not session.holds()["media"])
 
 
 def _render_denoised_apart(rs: RenderSettings, progress, return_info, time_budget=None):
@@ -357,7 +366,7 @@ def _render_denoised_apart(rs: RenderSettings, progress, return_info, time_budge
     passes the full render did (the same seeds and counts: the first passes of the spp
     asked); AOVs asked for come with the full render."""
     common = dict(version=rs.version, seed=rs.seed, pass_spp=rs.pass_spp, post=[],
-                  integrator_options=rs.options or None)
+                  integrator_options=rs.options or None, sensor=rs.sensor)
     t0 = time.perf_counter()
     full, info = render(rs.scene, max_depth=rs.max_depth, hide_emitters=False, aovs=rs.aovs, spp=rs.spp,
                         time_budget=time_budget, progress=progress, return_info=True, **common)

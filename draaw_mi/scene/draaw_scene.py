@@ -392,6 +392,9 @@ class DraawScene:
         return {
             "source": self.source,
             "resolution": list(self.resolution),
+            # every sensor: "id (plugin, WxH)"; render(sensor=) / --sensor picks one
+            "sensors": [f"{sn.id() or i} ({sn.class_name()}, {sn.film().crop_size()[0]}x{sn.film().crop_size()[1]})"
+                        for i, sn in enumerate(s.sensors())],
             # the description's names, or for a Mitsuba scene each shape's id, else what its
             # file says of it ("merged mesh of 3 shapes: ..."; mitsuba_xml.shape_names)
             "shapes": self.info.get("shapes") or [sh.id() or "unnamed" for sh in s.shapes()
