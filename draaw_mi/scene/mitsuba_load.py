@@ -2,6 +2,7 @@
 and equal materials kept apart, and Mitsuba's errors cut to their useful line."""
 from __future__ import annotations
 
+import difflib
 import hashlib
 import os
 import re
@@ -20,6 +21,25 @@ from .xml_film import film_sized_xml
 from .xml_text import parse_xml_file
 
 
+_ROUGH = "distribution alpha alpha_u alpha_v sample_visible"
+_IOR = "int_ior ext_ior"
+#: parameters of Mitsuba 3.9's common BSDFs (its documentation), for a misspelt one's "did you mean"
+_BSDF_PARAMETERS = {
+    "diffuse": "reflectance",
+    "dielectric": f"{_IOR} specular_reflectance specular_transmittance",
+    "thindielectric": f"{_IOR} specular_reflectance specular_transmittance",
+    "roughdielectric": f"{_ROUGH} {_IOR} specular_reflectance specular_transmittance",
+    "conductor": "material eta k specular_reflectance",
+    "roughconductor": f"{_ROUGH} material eta k specular_reflectance",
+    "plastic": f"{_IOR} diffuse_reflectance specular_reflectance nonlinear",
+    "roughplastic": f"distribution alpha sample_visible {_IOR} diffuse_reflectance specular_reflectance nonlinear",
+    "principled": "base_color roughness anisotropic metallic spec_trans eta specular spec_tint sheen sheen_tint "
+                  "flatness clearcoat clearcoat_gloss",
+    "principledthin": "base_color roughness anisotropic spec_trans eta spec_tint sheen sheen_tint flatness "
+                      "diff_trans",
+    "blendbsdf": "weight", "mask": "opacity", "bumpmap": "scale", "normalmap": "normalmap"}
+
+
 def _unreferenced_message(text: str) -> str | None:
     """Mitsuba's "Found N unreferenced properties in bsdf plugin of type "dielectric": - float
     "int_iro": 1.5" as one line naming the object, its plugin and each unknown parameter (with
@@ -36,6 +56,9 @@ def _unreferenced_message(text: str) -> str | None:
     what, hint = f"Mitsuba's {plugin!r} {kind}" if kind and kind != "unknown" else f"the {plugin!r} plugin", ""
     if plugin == "draaw":                   # ours: its parameters are known
         what, hint = "the 'draaw' BSDF", suggest(names[0], ALL_PARAMS + OPTIONS) if names else ""
+    elif names and plugin in _BSDF_PARAMETERS:       # Mitsuba's: a close name only (the table is partial)
+        close = difflib.get_close_matches(names[0], _BSDF_PARAMETERS[plugin].split(), n=1, cutoff=0.6)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
     listed = ", ".join(repr(n) for n in names) or "?"
     return (f"{place}{listed} {'is not a parameter' if len(names) == 1 else 'are not parameters'} "
             f"of {what}{hint}")

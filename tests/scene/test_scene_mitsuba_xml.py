@@ -2,6 +2,7 @@
 declared in an included file (draaw_mi.scene.mitsuba_xml)."""
 import os
 
+import mitsuba as mi
 import numpy as np
 import pytest
 
@@ -235,13 +236,18 @@ def test_batch_frames_name_the_films_colour_as_render_does(tmp_path, pixel_forma
 
 @pytest.mark.parametrize("bsdf, match", [
     ('<bsdf type="dielectric"><float name="int_iro" value="1.5"/></bsdf>',
-     r"line \d+, col \d+: 'int_iro' is not a parameter of Mitsuba's 'dielectric' bsdf$"),
+     r"line \d+, col \d+: 'int_iro' is not a parameter of Mitsuba's 'dielectric' bsdf; did you mean 'int_ior'\?$"),
+    ('<bsdf type="roughconductor"><float name="alph" value="0.1"/></bsdf>',
+     r"'alph' is not a parameter of Mitsuba's 'roughconductor' bsdf; did you mean 'alpha'\?$"),
+    ('<bsdf type="dielectric"><float name="zzz" value="1.5"/></bsdf>',
+     r"'zzz' is not a parameter of Mitsuba's 'dielectric' bsdf$"),
     ('<bsdf type="draaw"><float name="roughnes" value="0.3"/></bsdf>',
      r"'roughnes' is not a parameter of the 'draaw' BSDF; did you mean 'roughness'\?"),
 ])
 def test_a_misspelt_bsdf_parameter_is_named_with_its_plugin(tmp_path, bsdf, match):
     """Mitsuba lists unknown parameters on lines of their own; only the last line was kept
-    (``- float "int_iro": 1.5``), naming neither the material nor the problem."""
+    (``- float "int_iro": 1.5``), naming neither the material nor the problem. A close name
+    among a common Mitsuba BSDF's parameters is suggested, as the draaw BSDF's is."""
     path = tmp_path / "s.xml"
     path.write_text(f'<scene version="3.0.0"><shape type="sphere">{bsdf}</shape>{SENSOR}</scene>')
     with pytest.raises(draaw_mi.SceneError, match=match):
@@ -283,3 +289,21 @@ def test_an_xml_scenes_own_draaw_v4_renders_it_with_its_properties(tmp_path, cap
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "integrator: path (declared" in out and "v4 samples: stratified" in out and "v4 lights:" in out
+
+
+def test_the_suggested_mitsuba_bsdf_parameters_are_ones_mitsuba_takes():
+    """Each name of the suggestion table loads in its plugin (a wrong entry would suggest a
+    parameter that Mitsuba refuses in turn)."""
+    from draaw_mi.scene.mitsuba_load import _BSDF_PARAMETERS
+    values = {"distribution": "ggx", "material": "Au", "sample_visible": True, "nonlinear": True, "int_ior": 1.5,
+              "ext_ior": 1.0, "k": 1.0, "eta": 1.5}
+    nested = {"blendbsdf": {"a": {"type": "diffuse"}, "b": {"type": "diffuse"}}, "mask": {"b": {"type": "diffuse"}},
+              "bumpmap": {"b": {"type": "diffuse"}, "t": {"type": "checkerboard"}},
+              "normalmap": {"b": {"type": "diffuse"}}}
+    flat = {"type": "bitmap", "raw": True, "bitmap": mi.Bitmap(np.full((2, 2, 3), 0.5, np.float32))}
+    for plugin, names in _BSDF_PARAMETERS.items():
+        for name in names.split():
+            d = {"type": plugin, **nested.get(plugin, {})}
+            d.update({"alpha_u": 0.1, "alpha_v": 0.2} if name in ("alpha_u", "alpha_v") else
+                     {name: flat} if plugin == "normalmap" else {name: values.get(name, 0.5)})
+            mi.load_dict(d)                       # (raises on a parameter the plugin does not take)
