@@ -66,12 +66,12 @@ class CachedScene:
                                         spec["aovs"])               # the one render() uses too
         self._prepare(integrator, spec)
         if (not spec.get("freeze", True) or spp > MAX_PASS_SPP or not session.freezes(spp, True)
-                or session.sample_passes(spp, MAX_PASS_SPP) != [spp]):
+                or session.sample_passes(spp, MAX_PASS_SPP) != [spp] or spec.get("sensor")):
             with warnings.catch_warnings():      # (the NaN guard below says it, failing the frame)
                 warnings.simplefilter("ignore", NonFiniteWarning)
                 return render(self.scene, version=spec["version"], spp=spp, seed=spec["seed"],
                               max_depth=spec["max_depth"], aovs=spec["aovs"], post=spec["post"],
-                              return_info=True)
+                              return_info=True, sensor=spec.get("sensor", 0))
         # the film's colour checked and named as render() does it
         chain = s.get("post", []) if spec["post"] is None else spec["post"]
         if chain:

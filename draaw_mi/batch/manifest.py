@@ -28,6 +28,7 @@ the job then expands into one job per combination (named ``job-v4-16`` and so on
     params = { "r0m0.roughness" = { from = 0.05, to = 0.95 } }
     # a Mitsuba XML scene's $name parameters (its <default>s), as draaw-mi render -D sets them:
     # defines = { max_depth = 8, albedo = "0.2, 0.5, 0.8" }
+    # sensor = "top"                         # another of the scene's sensors (index or id)
 
 Camera tables (one of): ``orbit``; ``keyframes`` (GO-Draaw ``[x, y, z, theta, phi]`` rows,
 interpolated as in :mod:`draaw_mi.scene.camera_path`, ``faithful`` for GO-Draaw's exact quirks);
@@ -62,7 +63,7 @@ from .confine import check_relative
 
 TOP_KEYS = ("output", "half", "previews", "contact_sheet", "log", "defaults", "jobs")
 JOB_KEYS = ("name", "scene", "frames", "version", "spp", "seed", "max_depth", "resolution", "aovs",
-            "post", "camera", "params", "output", "half", "previews", "freeze", "defines")
+            "post", "camera", "params", "output", "half", "previews", "freeze", "defines", "sensor")
 CAMERA_KEYS = ("orbit", "keyframes", "file", "look_at", "faithful", "fov")
 ORBIT_KEYS = ("target", "radius", "height", "degrees", "start", "up")
 LOOK_AT_KEYS = ("origin", "target", "up", "mirror")
@@ -91,6 +92,7 @@ class Job:
     previews: bool = False
     freeze: bool = True           # replay a frozen render after the first frame (dr.freeze)
     defines: dict = field(default_factory=dict)  # an XML scene's $name values, as strings
+    sensor: int | str = 0         # the scene's sensor that renders (an index or an id)
 
 
 @dataclass
@@ -201,6 +203,12 @@ def _job(jd: dict, where: Where, base: str, out_base: str, name: str, confined: 
     job = Job(name=name, scene=scene, frames=1, output="")
     if "defines" in jd:
         job.defines = _defines(jd["defines"], where / "defines", scene)
+    if "sensor" in jd:
+        sensor = jd["sensor"]
+        if isinstance(sensor, bool) or not (isinstance(sensor, int) and sensor >= 0
+                                            or isinstance(sensor, str) and sensor.strip()):
+            raise (where / "sensor").error(f"{sensor!r}; expected a sensor's index (0 the first) or its id")
+        job.sensor = sensor
     if jd.get("version") is not None:
         job.version = string(jd["version"], where / "version")
         try:

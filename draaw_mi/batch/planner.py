@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import DraawError, SceneError
 from ..integrators import SCENE_VERSION, is_draaw, resolve_version
 from ..post import display_encoded
-from ..rendering.film_colour import scene_colour_names
+from ..rendering.film_colour import scene_colour_names, sensor_index
 from ..rendering.session import session_of
 from ..scene import value_like
 from ..scene.camera import check_look_at, go_draaw_look_at, sensor_reach, x_fov
@@ -66,6 +66,8 @@ def frame_hash(spec: dict) -> str:
         keys += ("files_hash",)
     if spec.get("defines"):        # (likewise: jobs without an XML scene's defines)
         keys += ("defines",)
+    if spec.get("sensor"):         # (likewise: jobs of the first sensor)
+        keys += ("sensor",)
     if spec.get("scene_camera_mirror"):
         # (only then: a scene's own GO-Draaw camera with sin(phi) > 0 renders mirrored, so its
         # frames hashed without this key are stale; the others keep their hash)
@@ -282,6 +284,13 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                                  "field of view; give camera.fov, or drop the camera table")
             _check_shape(loc, name, job.params[name], scene.all_params[keys[name]], keys[name])
         _check_values(loc, keys, job.params, job.frames, scene)
+        try:
+            sensor = sensor_index(scene, job.sensor, loc)
+        except DraawError as e:
+            raise SceneError(str(e)) from None
+        if sensor and job.camera is not None:
+            raise SceneError(f"{loc}: camera: a camera table moves the scene's first sensor; sensor = "
+                             f"{job.sensor!r} renders another: drop one")
         cams = None
         if job.camera is not None:
             if entry.camera_key is None:
@@ -316,7 +325,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             spec = {
                 "job": job.name, "job_index": ji, "frame": f, "frames": job.frames,
                 "scene": job.scene, "scene_hash": entry.hash, "files_hash": entry.files_hash,
-                "defines": dict(job.defines),
+                "defines": dict(job.defines), "sensor": sensor,
                 "resolution": list(scene.resolution),
                 "version": version, "spp": int(spp), "sampler": s.get("sampler"),
                 # (a job without a seed takes its scene's, as render() does: two scenes

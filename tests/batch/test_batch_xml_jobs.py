@@ -1,5 +1,6 @@
-"""A job's ``defines``: the ``$name`` parameters of a Mitsuba XML scene, as ``draaw-mi render -D``
-sets them (a batch of an XML scene had rendered every frame with the file's ``<default>``s)."""
+"""Jobs of Mitsuba XML scenes: ``defines``, the ``$name`` parameters, as ``draaw-mi render -D``
+sets them (a batch of an XML scene had rendered every frame with the file's ``<default>``s), and
+``sensor``, another of a scene's sensors."""
 from __future__ import annotations
 
 import pytest
@@ -73,3 +74,39 @@ def test_bad_defines_are_refused_naming_the_field(tmp_path, defines, match):
         match = r"jobs\[0\]\.defines: sets \$name parameters of a Mitsuba XML scene; 'tiny.toml' is not one"
     with pytest.raises(DraawError, match=match):
         batch.load(_doc(scene, a=defines))
+
+
+TWO = """<scene version="3.0.0">
+  <sensor type="perspective" id="front"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="8"/><rfilter type="box"/></film></sensor>
+  <sensor type="orthographic" id="top"><transform name="to_world"><lookat origin="0,4,0" target="0,0,0" up="0,0,1"/>
+    <scale value="1.5"/></transform>
+    <film type="hdrfilm"><integer name="width" value="6"/><integer name="height" value="6"/><rfilter type="box"/></film></sensor>
+  <emitter type="constant"/><shape type="sphere"><bsdf type="diffuse"/></shape></scene>"""
+
+
+def test_a_jobs_sensor_renders_another_of_the_scenes_sensors(tmp_path, monkeypatch):
+    """As render(sensor=) does: a job's frames of an XML scene's second sensor (the first had
+    rendered whatever the job said); frames of the first keep their hash."""
+    monkeypatch.chdir(tmp_path)
+    scene = tmp_path / "two.xml"
+    scene.write_text(TWO)
+    doc = {"output": "out/{job}/{frame:04d}.exr",
+           "jobs": [{"name": n, "scene": str(scene), "frames": 1, "spp": 4, "version": "v4", **extra}
+                    for n, extra in (("front", {}), ("top", {"sensor": "top"}), ("one", {"sensor": 1}))]}
+    res = batch.run(doc, progress=False)
+    assert res.complete and res.rendered == 3
+    top = draaw_mi.read_exr("out/top/0000.exr")
+    ref = np.array(draaw_mi.render(draaw_mi.load_scene(str(scene)), version="v4", seed=frame_seed(0, 0), spp=4,
+                                   sensor="top"))
+    assert top.shape == (6, 6, 3) and np.array_equal(top, ref)
+    assert np.array_equal(draaw_mi.read_exr("out/one/0000.exr"), top)
+    assert draaw_mi.read_exr("out/front/0000.exr").shape == (8, 12, 3)
+    _, specs, _ = batch.load(doc)
+    _, plain, _ = batch.load({**doc, "jobs": [{**doc["jobs"][0], "sensor": 0}]})
+    assert specs[0]["hash"] == plain[0]["hash"] and specs[1]["hash"] != specs[0]["hash"]
+    for bad, match in (({"sensor": "side"}, r"job 'front': sensor='side'; .* has 2 sensor\(s\)"),
+                       ({"sensor": -1}, r"jobs\[0\]\.sensor: -1; expected a sensor's index"),
+                       ({"sensor": 1, "camera": {"orbit": {"radius": 4.0}}}, r"a camera table moves the scene's first")):
+        with pytest.raises(DraawError, match=match):
+            batch.load({**doc, "jobs": [{**doc["jobs"][0], **bad}]})
