@@ -139,7 +139,9 @@ def phong_sample(mat: PhongMaterial, wi: mi.Vector3f, s1: mi.Float, s2: mi.Point
 def diffuse_only_bsdfs(scene: mi.Scene) -> list[str]:
     """The BSDFs of ``scene``, other than ``draaw``'s, of which the legacy model keeps the
     diffuse reflectance alone and drops glossy or delta lobes (a ``conductor`` or
-    ``dielectric`` renders black, a ``plastic`` without its coat), each as ``"id (class)"``.
+    ``dielectric`` renders black, a ``roughconductor`` as a diffuse surface of its reflectance
+    seen head-on, a ``plastic`` without its coat), each as ``"id (class)"``; a ``mask``'s
+    cut-outs (its null lobe) V1 / V2 follow.
 
     >>> d = {"type": "scene", "a": {"type": "sphere", "bsdf": {"type": "conductor", "id": "gold"}},
     ...      "b": {"type": "sphere", "bsdf": {"type": "diffuse"}}}
@@ -151,8 +153,9 @@ def diffuse_only_bsdfs(scene: mi.Scene) -> list[str]:
         bsdf = shape.bsdf()
         if bsdf is None or isinstance(bsdf, DraawBSDF) or is_black(bsdf) or bsdf.class_name() == "Null":
             continue
-        flags = bsdf.flags()
-        if mi.has_flag(flags, mi.BSDFFlags.Glossy) or mi.has_flag(flags, mi.BSDFFlags.Delta):
+        flags = bsdf.flags()      # (not Null: a mask's cut-outs, which V1 / V2 follow)
+        if any(mi.has_flag(flags, f) for f in (mi.BSDFFlags.Glossy, mi.BSDFFlags.DeltaReflection,
+                                               mi.BSDFFlags.DeltaTransmission)):
             # (a dict's nested BSDF is named "bsdf", an XML one's nothing: named by the shape)
             own = bsdf.id() not in ("", "bsdf") and not bsdf.id().startswith("object_")
             name = (f"{bsdf.id()} ({bsdf.class_name()})" if own else
@@ -177,6 +180,7 @@ def say_diffuse_only(integrator, scene) -> None:
         said.add(tuple(names))
         shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
         warnings.warn(f"{integrator.PLUGIN}: the legacy Phong model reads Mitsuba's BSDFs by their diffuse "
-                      f"reflectance alone: {shown} lose their glossy or mirror lobes (a conductor or "
-                      "dielectric renders black); render with v3 or v4, or give them draaw materials",
+                      f"reflectance alone: {shown} lose their glossy or mirror lobes (a smooth conductor or "
+                      "dielectric renders black, a rough one as a diffuse surface of its reflectance seen "
+                      "head-on); render with v3 or v4, or give them draaw materials",
                       RuntimeWarning, stacklevel=5)

@@ -181,8 +181,8 @@ def test_v2s_direct_to_scatter_weighs_only_the_diffuse_indirect_light():
 def test_v1_v2_say_once_which_mitsuba_bsdfs_they_read_as_diffuse():
     """The legacy model reads a Mitsuba BSDF by its diffuse reflectance alone: an XML scene's
     conductor and glass rendered black without a word. Said once per integrator (a preview's
-    every frame is a render); V3 / V4, which render them, and a scene of draaw and diffuse
-    materials say nothing."""
+    every frame is a render); V3 / V4, which render them, and a scene of draaw, diffuse and
+    masked diffuse materials (a mask's null lobe: cut-outs V1 / V2 follow) say nothing."""
     import warnings
     T = mi.ScalarTransform4f
     d = {"type": "scene", "sensor": {"type": "perspective", "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
@@ -191,7 +191,9 @@ def test_v1_v2_say_once_which_mitsuba_bsdfs_they_read_as_diffuse():
          "gold": {"type": "sphere", "center": [-1.2, 0, 0], "bsdf": {"type": "conductor", "id": "gold_metal"}},
          "glass": {"type": "sphere", "center": [1.2, 0, 0], "radius": 0.5, "bsdf": {"type": "dielectric"}},
          "chalk": {"type": "sphere", "center": [0, 1.2, 0], "radius": 0.3, "bsdf": {"type": "diffuse"}},
-         "paint": {"type": "sphere", "center": [0, -1.2, 0], "radius": 0.3, "bsdf": {"type": "draaw", "metallic": 1.0}}}
+         "paint": {"type": "sphere", "center": [0, -1.2, 0], "radius": 0.3, "bsdf": {"type": "draaw", "metallic": 1.0}},
+         "card": {"type": "rectangle", "to_world": T().translate([0, 0, -2]),       # (cut-outs V1/V2 follow)
+                  "bsdf": {"type": "mask", "opacity": 0.5, "bsdf": {"type": "diffuse"}}}}
     scene = mi.load_dict(d)
 
     def said(kind, scene, times=1):
