@@ -25,6 +25,7 @@ RANGES = {
     "diffuse_reflectance": (0.0, 1.0), "specular_reflectance": (0.0, 1.0),
     "specular_transmittance": (0.0, 1.0), "alpha_u": (1e-3, 1.0), "alpha_v": (1e-3, 1.0),
     "eta": (1e-3, None), "k": (0.0, None), "albedo": (0.0, 1.0), "sigma_t": (0.0, None),
+    "weight": (0.0, 1.0),              # blendbsdf's (Mitsuba clips it: past a bound nothing changes)
 }
 # parameter name suffix -> space Adam works in ("log": the optimiser moves log(value))
 SPACES = {"roughness": "log", "alpha": "log", "alpha_u": "log", "alpha_v": "log"}

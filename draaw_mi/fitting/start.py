@@ -171,6 +171,12 @@ def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, a
                       f"{'scatters' if medium_part == 'albedo' else 'collides'} in the medium to carry it): "
                       f"the fit cannot move it; start it from a small value, e.g. init={{{name!r}: 0.05}}",
                       RuntimeWarning, stacklevel=5)
+    _warn_black_surface(scene, key, name, v)
+    _warn_partial_gradient(scene, key, name)
+    if "weight" in key.split(".") and v.size == 1 and float(v.ravel()[0]) in (lo, hi):
+        warnings.warn(f"fit: {name} starts at {float(v.ravel()[0]):g}, where Mitsuba's blendbsdf clips its "
+                      "weight: its gradient is exactly 0 there and the fit keeps it; start inside, e.g. "
+                      f"init={{{name!r}: 0.5}}", RuntimeWarning, stacklevel=5)
     if prm.space == "log" and v.size == 1 and float(v.ravel()[0]) <= 2.0 * prm.lo:
         # (from roughness 0 or 0.02 a fit towards 0.26 reached 0.066 in 150 iterations; from
         # 0.1, 0.258: below about twice the floor the alpha clamp leaves little gradient)
@@ -178,3 +184,46 @@ def check_start(scene, key: str, name: str, prm: FitParam, value, given: bool, a
                       "value renders alike (the BSDF's alpha clamp): its gradient is small there and the "
                       f"fit may stay near it; start it higher, e.g. init={{{name!r}: 0.3}}",
                       RuntimeWarning, stacklevel=5)
+
+
+def _warn_black_surface(scene, key: str, name: str, v) -> None:
+    """Warn where a draaw material's ``base_color`` starts at exactly 0 in some channel on a
+    material whose other lobe is off too (metallic 1, or specular 0): the BSDF is 0 there,
+    path replay stops at a zero BSDF value, and the light it would reflect carries no
+    gradient (measured: d image / d base_color 0.0 in V3, 0.01 in V4, against 0.05 by finite
+    differences; at 1e-3 they agree)."""
+    head, sep, _ = key.partition(".base_color.")
+    if not sep or not np.any(v == 0):
+        return
+    p = scene.all_params
+    other = {part: np.array(p[f"{head}.{part}.value"], dtype=float).ravel()
+             for part in ("metallic", "specular") if f"{head}.{part}.value" in p.properties}
+    if not (np.any(other.get("metallic", 0.0) >= 1.0) or np.any(other.get("specular", 1.0) <= 0.0)):
+        return
+    warnings.warn(f"fit: {name} starts with {int(np.sum(v == 0))} value(s) at exactly 0 on a material of "
+                  f"{'metallic 1' if np.any(other.get('metallic', 0.0) >= 1.0) else 'specular 0'}, where the BSDF "
+                  "is 0: path replay stops there and the light it would reflect gives no gradient, so the "
+                  f"fit moves it slowly or not at all; start from a small value, e.g. init={{{name!r}: 0.02}}",
+                  RuntimeWarning, stacklevel=6)
+
+
+#: Mitsuba 3.9.1 plugins whose parameter is differentiated in part only: (class, parameter) ->
+#: what was measured
+PARTIAL_GRADIENTS = {("RoughPlastic", "alpha"): "its diffuse term's dependence on alpha is computed outside "
+                                                "automatic differentiation: prb's gradient of an image's mean "
+                                                "read -0.0062 against -0.080 by finite differences"}
+
+
+def _warn_partial_gradient(scene, key: str, name: str) -> None:
+    """Warn of a parameter whose plugin differentiates it only in part (Mitsuba's own code):
+    a fit of it settles where the partial gradient vanishes, not at the best value."""
+    entry = scene.params.properties.get(key) if key in scene.params.properties else None
+    node = entry[2] if entry is not None else None
+    part = key.split(".")[-1] if key.split(".")[-1] not in ("value", "data") else key.split(".")[-2]
+    why = PARTIAL_GRADIENTS.get((node.class_name() if node is not None else None, part))
+    if why is not None:
+        warnings.warn(f"fit: {name} is a {node.class_name()} {part}, which Mitsuba 3.9.1 differentiates only in "
+                      f"part ({why}): the fit may settle away from the best value; fit a roughconductor, "
+                      "principled or draaw material's roughness instead where you can", RuntimeWarning,
+                      stacklevel=6)
+

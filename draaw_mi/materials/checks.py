@@ -19,7 +19,8 @@ KNOWN_PARAMS = (*SCALAR_PARAMS, "base_color", "normalmap", "radiance", "intensit
 # negative alpha). Image files and nested textures of them are passed as they are.
 _POSITIVE, _NONNEG, _UNIT = (0.0, None, True), (0.0, None, False), (0.0, 1.0, False)
 PLAIN_RANGES = {"int_ior": _POSITIVE, "ext_ior": _POSITIVE,
-                "alpha": _NONNEG, "alpha_u": _NONNEG, "alpha_v": _NONNEG}
+                "alpha": _NONNEG, "alpha_u": _NONNEG, "alpha_v": _NONNEG,
+                "weight": _UNIT}           # blendbsdf's (it clips: 2 renders as 1, a fit drifts past)
 # Mitsuba 3.9's principled and principledthin: their weights in [0, 1] (diff_trans in [0, 2])
 _PRINCIPLED = {**dict.fromkeys(("metallic", "roughness", "specular", "spec_tint", "spec_trans",
                                 "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "anisotropic",

@@ -402,3 +402,121 @@ def test_a_medium_albedo_or_density_started_at_0_is_warned_about(part):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         draaw_mi.fit(scene_at(0.0), ref, [name], init={name: 0.05}, iterations=1, spp=4, progress=False)
+
+
+def _blend_scene(weight):
+    T = mi.ScalarTransform4f
+    return draaw_mi.load_scene({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}}},
+        "ball": {"type": "sphere", "bsdf": {"type": "blendbsdf", "weight": weight,
+                                            "a": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.1, 0.1]}},
+                                            "b": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.1, 0.1, 0.9]}}}},
+        "light": {"type": "constant"}})
+
+
+def test_a_blend_weight_is_fitted_within_0_and_1():
+    """Mitsuba's blendbsdf clips its weight: a fit towards 1 went on to 1.32 (every value past
+    1 renders alike, Adam's momentum kept pushing), one towards 0 to -0.30, and init 2.0 was
+    taken. The weight is now projected onto [0, 1]; a start on a bound, where its gradient is
+    0, is warned of."""
+    ref = np.array(draaw_mi.render(_blend_scene(1.0), version="v4", spp=16, seed=1))
+    r = draaw_mi.fit(_blend_scene(0.6), ref, ["ball.bsdf.weight"], iterations=30, spp=8, lr=0.2, progress=False)
+    w = float(np.ravel(r.values["ball.bsdf.weight"])[0])
+    assert 0.85 < w <= 1.0, w
+    with pytest.raises(ParameterError, match=r"init ball.bsdf.weight=2.0; expected values in \[0.0, 1.0\]"):
+        draaw_mi.fit(_blend_scene(0.6), ref, ["ball.bsdf.weight"], init={"ball.bsdf.weight": 2.0}, iterations=1,
+                     progress=False)
+    with pytest.warns(RuntimeWarning, match=r"ball.bsdf.weight starts at 0, where Mitsuba's blendbsdf clips"):
+        draaw_mi.fit(_blend_scene(0.0), ref, ["ball.bsdf.weight"], iterations=1, spp=2, progress=False)
+    with pytest.raises(draaw_mi.SceneError, match=r"weight"):
+        bad = {"render": {"resolution": [4, 4]}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+               "materials": {"m": {"type": "blendbsdf", "weight": 1.5, "a": {"type": "diffuse"},
+                                   "b": {"type": "diffuse"}}},
+               "shapes": [{"type": "sphere", "material": "m"}], "lights": [{"type": "constant"}]}
+        draaw_mi.load_scene(bad)
+
+
+def _black_ball(**material):
+    return draaw_mi.load_scene({
+        "render": {"resolution": [8, 8], "max_depth": 4, "filter": "box"},
+        "camera": {"origin": [0, 1, 4], "target": [0, 0.3, 0], "fov": 40},
+        "materials": {"m": {"base_color": [0, 0, 0], "roughness": 0.4, **material},
+                      "g": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.8}},
+        "shapes": [{"name": "ball", "type": "sphere", "material": "m", "center": [0, 0.5, 0], "radius": 0.5},
+                   {"name": "floor", "type": "rectangle", "material": "g", "rotate": {"axis": [1, 0, 0], "angle": -90},
+                    "scale": 4.0}],
+        "lights": [{"name": "key", "type": "area", "position": [1, 3, 2], "target": [0, 0, 0], "size": [1, 1],
+                    "intensity": 10}, {"name": "sky", "type": "constant", "intensity": 0.2}]})
+
+
+@pytest.mark.parametrize("material, warned", [({"metallic": 1.0}, True), ({"specular": 0.0}, True),
+                                              ({"metallic": 0.0}, False)])
+def test_a_black_base_color_whose_bsdf_is_0_is_warned_about(material, warned):
+    """At base_color 0 with metallic 1 (or specular 0) the draaw BSDF is 0 (f90 = min(1, 50 f0)):
+    path replay stops there and the base colour's gradient misses the light it would reflect
+    (V3 read 0.0 against 0.05 by finite differences). Measured here on V3: the gradient at 0
+    is far below the one at 1e-3, where AD and FD agree. A dielectric of specular 0.5 keeps its
+    specular lobe (f > 0): not warned."""
+    import warnings
+    ref = np.full((8, 8, 3), 0.2, np.float32)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        draaw_mi.fit(_black_ball(**material), ref, ["m.base_color"], version="v3", iterations=1, spp=2, progress=False)
+    said = [str(w.message) for w in seen if "at exactly 0 on a material of" in str(w.message)]
+    assert len(said) == (1 if warned else 0), said
+    if not warned:
+        return
+    grads = []
+    for c in (0.0, 1e-3):
+        scene = _black_ball(**material)
+        x = mi.Color3f(c)
+        dr.enable_grad(x)
+        scene.params["m.base_color.value"] = x
+        scene.params.update()
+        dr.backward(dr.mean(draaw_mi.render(scene, version="v3", spp=64, seed=0, params=scene.params), axis=None))
+        grads.append(float(np.array(dr.grad(x)).sum()))
+    assert grads[0] < 0.85 * grads[1], grads
+
+
+def test_a_roughplastic_alpha_fit_is_warned_of_its_partial_gradient():
+    """Mitsuba 3.9.1's roughplastic differentiates its alpha in part only: prb's gradient of an
+    image's mean -0.0062 against -0.080 by finite differences (measured here too, below: under
+    a fifth). A roughconductor's alpha is differentiated whole: not warned."""
+    import warnings
+    T = mi.ScalarTransform4f
+
+    def scene(kind):
+        return draaw_mi.load_scene({
+            "type": "scene",
+            "sensor": {"type": "perspective", "to_world": T().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                       "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}}},
+            "ball": {"type": "sphere", "bsdf": {"type": kind, "alpha": 0.4}},
+            "light": {"type": "point", "position": [2, 2, 3], "intensity": {"type": "rgb", "value": [20, 20, 20]}},
+            "env": {"type": "constant", "radiance": {"type": "rgb", "value": [0.2, 0.2, 0.2]}}})
+    ref = np.full((8, 8, 3), 0.2, np.float32)
+    for kind, warned in (("roughplastic", True), ("roughconductor", False)):
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            draaw_mi.fit(scene(kind), ref, ["ball.bsdf.alpha"], iterations=1, spp=2, progress=False)
+        said = [str(w.message) for w in seen if "differentiates only in part" in str(w.message)]
+        assert len(said) == (1 if warned else 0), (kind, said)
+    s = scene("roughplastic")
+    p, key = s.params, s.key("ball.bsdf.alpha")
+    integ = mi.load_dict({"type": "prb", "max_depth": 3})
+    ad, fd = [], []
+    for seed in range(3):
+        p[key] = 0.4
+        dr.enable_grad(p[key])
+        p.update()
+        dr.backward(dr.mean(mi.render(s.mi_scene, p, integrator=integ, spp=32, seed=seed), axis=None))
+        ad.append(float(np.array(dr.grad(p[key])).ravel()[0]))
+        dr.disable_grad(p[key])
+        v = []
+        for a in (0.41, 0.39):
+            p[key] = a
+            p.update()
+            v.append(float(np.array(mi.render(s.mi_scene, integrator=integ, spp=32, seed=seed)).mean()))
+        fd.append((v[0] - v[1]) / 0.02)
+    assert np.mean(fd) < 0 and abs(np.mean(ad)) < 0.2 * abs(np.mean(fd)), (ad, fd)
