@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -253,11 +254,15 @@ class DraawScene:
             raise ParameterError(f"{self.source}: parameter name {name!r}; expected a string such as "
                                  "'metal.roughness'")
         keys = list(self.all_params.keys())
-        for cand in (name, f"{name}.value", f"{name}.data"):
+        # (a medium's albedo: "fog.albedo.value.value", a texture of a spectrum)
+        for cand in (name, f"{name}.value", f"{name}.data", f"{name}.value.value"):
             if cand in keys:
                 return cand
+        emitter_key = self._emitter_key(name)
+        if emitter_key is not None:
+            return emitter_key
         # the names people write: material.parameter (not Mitsuba's .value / .data keys)
-        short = sorted({k.removesuffix(".value").removesuffix(".data") for k in keys})
+        short = sorted({re.sub(r"(\.value|\.data)+$", "", k) for k in keys})
         ending = [k for k in short if k.endswith("." + name)]
         if ending:                 # a bare parameter name ("roughness"): the materials that have it
             shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
@@ -282,6 +287,26 @@ class DraawScene:
         if hint.startswith("; valid:") and len(short) > 12:
             hint = "; `draaw-mi info` lists the scene's materials"
         raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
+
+    def _emitter_key(self, name: str) -> str | None:
+        """The key of ``ID.PARAM`` where ``ID`` is an emitter's or a medium's own id (an XML
+        area light or medium in a shape without an id, whose keys Mitsuba names
+        ``object_<address>.emitter...``, a name that changes from run to run), else ``None``."""
+        light, sep, param = name.partition(".")
+        if not sep:
+            return None
+        media = [m for sh in self.mi_scene.shapes() for m in (sh.interior_medium(), sh.exterior_medium())
+                 if m is not None]
+        for obj in list(self.mi_scene.emitters()) + media:
+            if obj.id() != light:
+                continue
+            own = mi.traverse(obj)
+            for cand in (param, f"{param}.value", f"{param}.data", f"{param}.value.value"):
+                if cand in own.keys():
+                    node = own.properties[cand][2]
+                    return next((k for k, entry in self.params.properties.items()
+                                 if entry[2] is node and k.endswith("." + cand)), None)
+        return None
 
     @property
     def resizable(self) -> bool:

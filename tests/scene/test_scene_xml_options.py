@@ -342,3 +342,33 @@ def test_mitsubas_default_conductor_renders_without_an_out_of_range_warning(tmp_
     scene.check_value("demo", "ball.eta", "ball.bsdf.eta.value", 0.0)        # (taken: a mirror)
     with pytest.raises(draaw_mi.errors.ParameterError, match=r"demo: glass.eta=0.0; expected a number in \(0, inf\)"):
         scene.check_value("demo", "glass.eta", "glass.bsdf.eta", 0.0)
+
+
+SENSOR_8 = ('<sensor type="perspective"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/>'
+            '</transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>'
+            '</film></sensor>')
+
+
+def test_lights_and_media_are_named_by_their_own_ids(tmp_path):
+    """An XML area light or medium inside a shape without an id has keys Mitsuba names
+    ``object_<address>...``, which change from run to run: ``lamp.radiance`` (the name `info`
+    shows) was refused. A medium's albedo (``...albedo.value.value``) was not found by its
+    short name, and the hint named ``scale``."""
+    path = tmp_path / "lamp.xml"
+    path.write_text(f'<scene version="3.0.0">{SENSOR_8}'
+                    '<shape type="rectangle"><transform name="to_world"><translate z="-1"/></transform>'
+                    '<emitter type="area" id="lamp"><rgb name="radiance" value="2"/></emitter></shape>'
+                    '<shape type="sphere" id="ball"><bsdf type="diffuse"/></shape>'
+                    '<shape type="cube" id="box"><transform name="to_world"><scale value="5"/></transform>'
+                    '<bsdf type="null"/><medium name="interior" type="homogeneous" id="fog">'
+                    '<rgb name="albedo" value="0.8, 0.5, 0.3"/><float name="sigma_t" value="0.05"/></medium></shape>'
+                    '</scene>')
+    scene = draaw_mi.load_scene(str(path))
+    lamp = scene.key("lamp.radiance")
+    assert lamp.startswith("object_") and lamp.endswith(".emitter.radiance.value")
+    assert scene.key("fog.albedo") == scene.key("box.interior_medium.albedo") == "box.interior_medium.albedo.value.value"
+    res = draaw_mi.fit(scene, np.full((8, 8, 3), 0.5, np.float32), ["lamp.radiance"], version="v4", iterations=2,
+                       spp=2, progress=False)
+    assert "lamp.radiance" in res.values
+    with pytest.raises(draaw_mi.SceneError, match="no parameter 'lamp.radiancee'"):
+        scene.key("lamp.radiancee")
