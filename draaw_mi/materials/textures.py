@@ -85,6 +85,12 @@ def linear_image(bitmap: mi.Bitmap, raw: bool, name: str = "texture") -> np.ndar
     return np.array(out, dtype=np.float32).reshape(out.height(), out.width(), -1)
 
 
+#: why a texture narrower than 2 texels is refused, and what to give instead
+TOO_SMALL = ("Mitsuba's bitmap takes no new values below 2x2 texels (a fit, the preview, --set "
+             "and batch overrides fail on it): give one number (or an RGB triple) for a constant, "
+             "or at least 2x2 texels")
+
+
 def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     """A bitmap texture from a file name (its pixels as :func:`linear_image` gives them) or an
     (H, W[, C]) array (values as given, linear): float32 texels either way."""
@@ -106,6 +112,9 @@ def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
         raise ParameterError(f"draaw BSDF: {name} texture array of shape {arr.shape}; expected (H, W), "
                              "(H, W, 1) or (H, W, 3)")
+    if min(arr.shape[:2]) < 2:
+        raise ParameterError(f"draaw BSDF: {name} is a texture of {arr.shape[1]}x{arr.shape[0]} texels; "
+                             f"{TOO_SMALL}")
     # (a Bitmap, not a tensor: a tensor three texels high made nanobind print "implicit
     # conversion ... failed!" three times as Mitsuba's parser tried it as a vector and colours)
     return mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(arr)), "raw": True},

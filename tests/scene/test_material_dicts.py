@@ -30,7 +30,7 @@ def _load(materials):
     ({"type": "roughconductor", "alpha": -0.2}, r"materials\.m\.alpha: -0\.2 is out of range; expected >= 0"),
     ({"type": "roughplastic", "alpha": -0.3}, r"materials\.m\.alpha: -0\.3 is out of range"),
     ({"type": "roughconductor", "alpha_u": -0.1, "alpha_v": 0.1}, r"materials\.m\.alpha_u: -0\.1"),
-    ({"type": "roughconductor", "alpha": [[0.1, -0.5]]},
+    ({"type": "roughconductor", "alpha": [[0.1, -0.5], [0.1, 0.1]]},
      r"materials\.m\.alpha: texture array has the value -0\.5 at pixel \(x=1, y=0\), channel 0; "
      r"expected finite values >= 0"),
     ({"type": "principled", "metallic": 3.0},
@@ -121,3 +121,25 @@ def test_the_scene_file_default_of_two_sided_is_documented():
     for guide in ("material.md", "scenes.md"):
         text = " ".join(open(os.path.join(ROOT, "docs", "guides", guide), encoding="utf-8").read().split())
         assert "draaw` materials are two-sided" in text and "`two_sided = false`" in text, guide
+
+
+@pytest.mark.parametrize("material, key", [({"roughness": [[0.4]]}, "roughness"),
+                                           ({"base_color": [[[0.5, 0.5, 0.5], [0.2, 0.2, 0.2]]]}, "base_color"),
+                                           ({"type": "diffuse", "reflectance": [[0.4]]}, "reflectance")])
+def test_a_texture_below_2x2_texels_is_refused_at_load(material, key):
+    """A 1x1 (or 1-row) texture loaded and rendered, then every new value failed: the CLI's
+    --set with a traceback and exit 1, a fit or the preview in Mitsuba's words ("must be at
+    least 2x2 pixels in size"). Refused at load, saying what to give."""
+    desc = {"render": {"resolution": [4, 4]}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+            "materials": {"m": material}, "shapes": [{"type": "sphere", "material": "m"}],
+            "lights": [{"type": "constant"}]}
+    with pytest.raises(SceneError, match=rf"materials\.m\.{key}: a texture of \dx1 texels; Mitsuba's bitmap takes "
+                                         r"no new values below 2x2 texels .*give one number"):
+        draaw_mi.load_scene(desc)
+    # 2x2 loads and takes new values (what 1x1 could not)
+    big = {k: ([[0.4, 0.4], [0.4, 0.4]] if k != "base_color" else [[[0.5] * 3] * 2] * 2) if k != "type" else v
+           for k, v in material.items()}
+    scene = draaw_mi.load_scene({**desc, "materials": {"m": big}})
+    k = scene.key(f"m.{key}")
+    scene.params[k] = type(scene.params[k])(np.array(scene.params[k]) * 0.5)
+    scene.params.update()
