@@ -143,3 +143,7 @@ def test_a_texture_below_2x2_texels_is_refused_at_load(material, key):
     k = scene.key(f"m.{key}")
     scene.params[k] = type(scene.params[k])(np.array(scene.params[k]) * 0.5)
     scene.params.update()
+    if "type" not in material:                 # the draaw plugin given the array itself
+        import mitsuba as mi
+        with pytest.raises(draaw_mi.errors.ParameterError, match=rf"draaw BSDF: {key} is a texture of \dx1 texels"):
+            mi.load_dict({"type": "draaw", **material})
