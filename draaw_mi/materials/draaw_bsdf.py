@@ -78,7 +78,11 @@ are checked against the parameter's range.
 Values set at load time outside their range raise :class:`ParameterError`; values set by an
 optimiser through ``mi.traverse`` are clamped into range when evaluated, with a straight-through
 gradient (the derivative of the unclamped value), so an optimiser sitting exactly on a bound —
-metallic = 0, roughness = 1 — is not stuck there with a zero gradient.
+metallic = 0, roughness = 1 — is not stuck there with a zero gradient. Two starts are: roughness
+0, where ``alpha = sqrt(roughness^4 + alpha_min^2)`` is flat (its derivative is exactly 0; a fit
+moves roughness in log space from above its floor, and warns of a start near it), and a black
+``base_color`` with metallic 1 or specular 0, where the BSDF is 0 and path replay stops (a fit
+warns of it: start from 0.02).
 
 Example::
 
