@@ -254,8 +254,16 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             raise SceneError(f"{loc}: {e}") from None
         scene = entry.scene
         s = scene.settings
+        try:
+            sensor = sensor_index(scene, job.sensor, loc)
+        except DraawError as e:
+            raise SceneError(str(e)) from None
+        if sensor and job.resolution is not None:
+            raise SceneError(f"{loc}: resolution sizes the scene's first film; sensor = {job.sensor!r} renders "
+                             "another at its own size: drop resolution")
         version = job.version or s["version"]
-        spp = job.spp or s["spp"]
+        # (the scene's render.spp is its first sensor's; another renders its own sampler's count)
+        spp = job.spp or (int(scene.mi_scene.sensors()[sensor].sampler().sample_count()) if sensor else s["spp"])
         max_depth = s["max_depth"] if job.max_depth is None else job.max_depth
         aovs = list(s.get("aovs", [])) if job.aovs is None else job.aovs
         if job.aovs is None and aovs and not _draaw(version):
@@ -284,10 +292,6 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
                                  "field of view; give camera.fov, or drop the camera table")
             _check_shape(loc, name, job.params[name], scene.all_params[keys[name]], keys[name])
         _check_values(loc, keys, job.params, job.frames, scene)
-        try:
-            sensor = sensor_index(scene, job.sensor, loc)
-        except DraawError as e:
-            raise SceneError(str(e)) from None
         if sensor and job.camera is not None:
             raise SceneError(f"{loc}: camera: a camera table moves the scene's first sensor; sensor = "
                              f"{job.sensor!r} renders another: drop one")

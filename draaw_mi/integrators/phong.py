@@ -153,6 +153,8 @@ def diffuse_only_bsdfs(scene: mi.Scene) -> list[str]:
         bsdf = shape.bsdf()
         if bsdf is None or isinstance(bsdf, DraawBSDF) or is_black(bsdf) or bsdf.class_name() == "Null":
             continue
+        if bsdf.class_name() == "TwoSidedBRDF" and "DraawBSDF[" in str(bsdf):
+            continue          # (it forwards the draaw attributes phong_material reads: read as draaw)
         flags = bsdf.flags()      # (not Null: a mask's cut-outs, which V1 / V2 follow)
         if any(mi.has_flag(flags, f) for f in (mi.BSDFFlags.Glossy, mi.BSDFFlags.DeltaReflection,
                                                mi.BSDFFlags.DeltaTransmission)):

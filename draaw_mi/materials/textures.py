@@ -85,10 +85,17 @@ def linear_image(bitmap: mi.Bitmap, raw: bool, name: str = "texture") -> np.ndar
     return np.array(out, dtype=np.float32).reshape(out.height(), out.width(), -1)
 
 
-#: why a texture narrower than 2 texels is refused, and what to give instead
-TOO_SMALL = ("Mitsuba's bitmap takes no new values below 2x2 texels (a fit, the preview, --set "
-             "and batch overrides fail on it): give one number (or an RGB triple) for a constant, "
-             "or at least 2x2 texels")
+def at_least_2x2(arr: np.ndarray) -> np.ndarray:
+    """``arr`` (H, W, C) with an axis of one texel repeated to two. Mitsuba's bitmap takes no
+    new values below 2x2 texels ("must be at least 2x2 pixels in size": a fit, the preview,
+    ``--set`` and batch overrides of a 1x1 texture, or a mesh's 4x1 palette, failed); its
+    lookups are the same, a texel's copy beside it.
+
+    >>> at_least_2x2(np.zeros((1, 4, 3))).shape, at_least_2x2(np.zeros((3, 3, 1))).shape
+    ((2, 4, 3), (3, 3, 1))
+    """
+    reps = (2 if arr.shape[0] == 1 else 1, 2 if arr.shape[1] == 1 else 1) + (1,) * (arr.ndim - 2)
+    return np.tile(arr, reps) if max(reps) > 1 else arr
 
 
 def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
@@ -112,9 +119,7 @@ def bitmap_texture(source, raw: bool, name: str = "texture") -> mi.Texture:
     if arr.ndim != 3 or arr.shape[2] not in (1, 3) or arr.shape[0] < 1 or arr.shape[1] < 1:
         raise ParameterError(f"draaw BSDF: {name} texture array of shape {arr.shape}; expected (H, W), "
                              "(H, W, 1) or (H, W, 3)")
-    if min(arr.shape[:2]) < 2:
-        raise ParameterError(f"draaw BSDF: {name} is a texture of {arr.shape[1]}x{arr.shape[0]} texels; "
-                             f"{TOO_SMALL}")
+    arr = at_least_2x2(arr)
     # (a Bitmap, not a tensor: a tensor three texels high made nanobind print "implicit
     # conversion ... failed!" three times as Mitsuba's parser tried it as a vector and colours)
     return mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(arr)), "raw": True},

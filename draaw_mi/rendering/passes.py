@@ -32,11 +32,12 @@ def pass_seed(seed: int, i: int) -> int:
     return seed if i == 0 else (seed * 0x9E3779B1 + 0x632BE5AB * i) & 0xFFFFFFFF
 
 
-def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
+def sample_passes(mi_scene, spp: int, pass_spp: int, sensor: int = 0) -> list[int]:
     """Samples per pass: at most ``pass_spp`` each, ``spp`` in all, each a count the scene's
     sampler takes as it is. Stratifying samplers round other counts up (``multijitter``
     renders 35 samples when asked for 32, ``ldsampler`` rounds to powers of four), which
-    would make a render take more samples than it says; 32 becomes 30 + 2 instead. Where a
+    would make a render take more samples than it says; 32 becomes 30 + 2 instead (the
+    sampler of the scene's sensor ``sensor``, an index). Where a
     sampler takes no count below some size (``ldsampler``: 4), the last pass is rounded up.
 
     >>> import mitsuba as mi
@@ -45,7 +46,7 @@ def sample_passes(mi_scene, spp: int, pass_spp: int) -> list[int]:
     >>> sample_passes(scene, 32, 256), sample_passes(scene, 40, 16)
     ([30, 2], [16, 16, 8])
     """
-    sampler = mi_scene.sensors()[0].sampler()
+    sampler = mi_scene.sensors()[sensor].sampler()
     # Mitsuba's own samplers round by their kind alone: remember what each takes (probing
     # costs a fork and two log-level switches, about 40 us a render). A Python sampler may
     # round by its own options, so it is probed every time.

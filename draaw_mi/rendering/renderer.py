@@ -140,12 +140,12 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
         return _render_denoised_apart(rs, progress, return_info, time_budget)
     integrator = session.integrator(rs.version, rs.max_depth, rs.hide_emitters, rs.aovs, **rs.options)
     if time_budget is None:
-        counts = session.sample_passes(rs.spp, rs.pass_spp)
+        counts = session.sample_passes(rs.spp, rs.pass_spp, rs.sensor)
         n_passes = len(counts)
         # (the samples taken: a sampler rounds spp up to its pattern, 5 -> 8 of ldsampler)
         total = sum(counts)
     else:                # (as many as the budget allows of up to 2^32 - 1: not listed up front)
-        counts, n_passes, total = _budget_passes(session, rs.spp, rs.pass_spp), None, rs.spp
+        counts, n_passes, total = _budget_passes(session, rs.spp, rs.pass_spp, rs.sensor), None, rs.spp
     with closed_after(progress_bar(total, f"render {rs.version}", "spp", progress, leave=False,
                                    where="render")) as bar:
         acc, done, passes, t0 = None, 0, 0, time.perf_counter()
@@ -182,13 +182,13 @@ def render(scene, version: str | None = None, spp: int | None = None, seed: int 
 MAX_SPP = 2 ** 32 - 1
 
 
-def _budget_passes(session, spp: int, pass_spp: int):
+def _budget_passes(session, spp: int, pass_spp: int, sensor: int = 0):
     """The pass counts of ``spp`` samples, as :meth:`Session.sample_passes` gives them, made
     4096 passes at a time: a time budget ends a render early, and 4e9 spp asked for in
     passes of 16 listed up front took 1.4 GB and the budget before a pass rendered."""
     left = spp
     while left > 0:
-        part = session.sample_passes(min(left, pass_spp * 4096), pass_spp)
+        part = session.sample_passes(min(left, pass_spp * 4096), pass_spp, sensor)
         yield from part
         left -= sum(part)
 
@@ -207,6 +207,9 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
     if params is not None and not _parameters_of(scene, params):
         raise RenderError(f"render: params belong to another scene than {scene.source} (a scene loaded "
                           "again, say): gradients would not reach them; pass this scene's scene.params")
+    if resolution is not None and sensor_index(scene, sensor):
+        raise RenderError(f"render: resolution={resolution!r} sizes the scene's first film; sensor={sensor!r} "
+                          "renders another at its own size: drop resolution=")
     if resolution is not None:
         size = tuple(parse_res(resolution, Where("render") / "resolution"))
         if params is not None and size != scene.resolution:
@@ -220,6 +223,8 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
     if sensor and adaptive is not None:
         raise RenderError(f"render: adaptive subsampling renders the first sensor; sensor={sensor} with "
                           "adaptive=: drop one")
+    if sensor and spp is None:                 # (the scene's render.spp is its first sensor's)
+        spp = int(scene.mi_scene.sensors()[sensor].sampler().sample_count())
     if resolve_version(version) == SCENE_VERSION:
         ignored = [f"{n}={v!r}" for n, v in (("max_depth", max_depth), ("hide_emitters", hide_emitters))
                    if v is not None]

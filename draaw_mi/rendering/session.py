@@ -231,18 +231,19 @@ class Session:
                                   f"steps a ray (at most {VOLPATH_MAX_STEPS:g}); pick v1..v4, whose "
                                   "majorant grid steps over it")
 
-    def sample_passes(self, spp: int, pass_spp: int) -> list[int]:
-        """:func:`~draaw_mi.rendering.passes.sample_passes` of the scene, remembered where its
-        sampler is one of Mitsuba's (they round counts by their kind alone)."""
-        counts = self.passes.get((spp, pass_spp))
+    def sample_passes(self, spp: int, pass_spp: int, sensor: int = 0) -> list[int]:
+        """:func:`~draaw_mi.rendering.passes.sample_passes` of the scene's sensor ``sensor`` (an
+        index), remembered where its sampler is one of Mitsuba's (they round counts by their
+        kind alone)."""
+        counts = self.passes.get((spp, pass_spp, sensor))
         if counts is None:
             mi_scene = self.scene.mi_scene
             with RENDER_GUARD:                # (probing forks the sampler: a plugin call)
-                counts = sample_passes(mi_scene, spp, pass_spp)
-            if type(mi_scene.sensors()[0].sampler()) is mi.Sampler:
+                counts = sample_passes(mi_scene, spp, pass_spp, sensor)
+            if type(mi_scene.sensors()[sensor].sampler()) is mi.Sampler:
                 if len(self.passes) >= 64:
                     self.passes.clear()
-                self.passes[(spp, pass_spp)] = counts
+                self.passes[(spp, pass_spp, sensor)] = counts
         return list(counts)
 
     # ------------------------------------------------------------------ one pass

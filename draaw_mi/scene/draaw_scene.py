@@ -242,7 +242,8 @@ class DraawScene:
         """Whether ``key`` is a conductor's ``eta`` (its BSDF has a ``k`` beside it: only
         Mitsuba's conductors do)."""
         head, sep, tail = key.rpartition(".eta.")
-        return bool(sep) and tail in ("value", "data") and f"{head}.k.{tail}" in self.params.properties
+        # (in the whole traversal: the user's params may be narrowed by keep())
+        return bool(sep) and tail in ("value", "data") and f"{head}.k.{tail}" in self.own_traversal.properties
 
     def key(self, name: str) -> str:
         """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's

@@ -15,7 +15,7 @@ from ..guard import exr_reading_threads
 from ..materials.draaw_bsdf import ALL_PARAMS as DRAAW_PARAMS
 from ..materials.draaw_bsdf import COLOR_PARAMS, NORMALMAP_SLACK, OPTIONS, SCALAR_PARAMS
 from ..materials.checks import PLAIN_RANGES, PLUGIN_RANGES, bad_texels
-from ..materials.textures import TOO_SMALL, linear_image
+from ..materials.textures import at_least_2x2, linear_image
 from .context import BuildContext
 from .schema import Where, boolean, check_keys, number, shown, string, vector
 
@@ -96,9 +96,7 @@ def texture_value(value, name: str, ctx: BuildContext, where: Where, lo: float |
         arr = value.astype(np.float32)
         if arr.ndim == 2:
             arr = arr[..., None]
-        if arr.ndim == 3 and min(arr.shape[:2]) < 2:
-            raise where.error(f"a texture of {arr.shape[1]}x{arr.shape[0]} texels; {TOO_SMALL}")
-        return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(arr)), "raw": True}
+        return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(at_least_2x2(arr))), "raw": True}
     if isinstance(value, (list, tuple)):
         return {"type": "rgb", "value": vector(value, where, lo=lo)}
     if isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -137,7 +135,7 @@ def image_file(file: str, raw: bool, ctx: BuildContext, where: Where, nonneg: bo
     bitmap = check_image_values(path, file, where, "texture", nonneg)
     if not linear:
         return {"type": "bitmap", "filename": path, "raw": raw}
-    data = linear_image(bitmap, raw)
+    data = at_least_2x2(linear_image(bitmap, raw))
     if nonneg:
         data = np.maximum(data, np.float32(0.0))
     return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data)), "raw": True}

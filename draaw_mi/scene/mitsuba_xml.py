@@ -152,6 +152,10 @@ _PLUGIN_NAMES = {"VolumetricSimplePathIntegrator": "volpath", "VolumetricMisPath
                  "AOVIntegrator": "aov"}
 
 
+#: the classes a Python integrator reports (its own name is what it prints: a ``Tracer``)
+_BASE_CLASSES = ("SamplingIntegrator", "MonteCarloIntegrator", "AdjointIntegrator", "Integrator")
+
+
 def integrator_name(integrator) -> str:
     """The plugin name of a loaded Mitsuba integrator, from what it prints or its C++ class
     (``DirectIntegrator`` -> ``direct``; ``moment`` prints its nested scene, ``volpath`` a
@@ -166,11 +170,12 @@ def integrator_name(integrator) -> str:
     draaw = re.fullmatch(r"DraawV(\d)Integrator", kind)
     if draaw:                                   # (draaw_v4, as --version and the XML spell it)
         return f"draaw_v{draaw.group(1)}"
-    for name in (kind, integrator.class_name()):
+    cls = integrator.class_name()
+    for name in (kind, cls):
         if name in _PLUGIN_NAMES:
             return _PLUGIN_NAMES[name]
-    if not kind.endswith("Integrator"):         # (what it prints is not its class)
-        kind = integrator.class_name()
+    if not kind.endswith("Integrator") and cls not in _BASE_CLASSES:
+        kind = cls                              # (what it prints is not its class)
     return kind.removesuffix("Integrator").lower() or kind
 
 

@@ -107,6 +107,7 @@ def test_a_jobs_sensor_renders_another_of_the_scenes_sensors(tmp_path, monkeypat
     assert specs[0]["hash"] == plain[0]["hash"] and specs[1]["hash"] != specs[0]["hash"]
     for bad, match in (({"sensor": "side"}, r"job 'front': sensor='side'; .* has 2 sensor\(s\)"),
                        ({"sensor": -1}, r"jobs\[0\]\.sensor: -1; expected a sensor's index"),
-                       ({"sensor": 1, "camera": {"orbit": {"radius": 4.0}}}, r"a camera table moves the scene's first")):
+                       ({"sensor": 1, "camera": {"orbit": {"radius": 4.0}}}, r"a camera table moves the scene's first"),
+                       ({"sensor": 1, "resolution": [16, 16]}, r"resolution sizes the scene's first film; sensor = 1")):
         with pytest.raises(DraawError, match=match):
             batch.load({**doc, "jobs": [{**doc["jobs"][0], **bad}]})

@@ -193,7 +193,9 @@ def test_v1_v2_say_once_which_mitsuba_bsdfs_they_read_as_diffuse():
          "chalk": {"type": "sphere", "center": [0, 1.2, 0], "radius": 0.3, "bsdf": {"type": "diffuse"}},
          "paint": {"type": "sphere", "center": [0, -1.2, 0], "radius": 0.3, "bsdf": {"type": "draaw", "metallic": 1.0}},
          "card": {"type": "rectangle", "to_world": T().translate([0, 0, -2]),       # (cut-outs V1/V2 follow)
-                  "bsdf": {"type": "mask", "opacity": 0.5, "bsdf": {"type": "diffuse"}}}}
+                  "bsdf": {"type": "mask", "opacity": 0.5, "bsdf": {"type": "diffuse"}}},
+         "wrapped": {"type": "sphere", "center": [0, 0, -1], "radius": 0.2,           # (read as draaw)
+                     "bsdf": {"type": "twosided", "bsdf": {"type": "draaw", "metallic": 1.0}}}}
     scene = mi.load_dict(d)
 
     def said(kind, scene, times=1):

@@ -64,10 +64,10 @@ def test_a_time_budget_of_the_most_samples_lists_its_passes_as_it_goes(tiny_scen
     asked = []
     real = Session.sample_passes
 
-    def spy(self, spp, pass_spp):
+    def spy(self, spp, pass_spp, sensor=0):
         asked.append(spp)
         assert spp <= 16 * 4096, f"sample_passes asked for {spp} spp at once"
-        return real(self, spp, pass_spp)
+        return real(self, spp, pass_spp, sensor)
     monkeypatch.setattr(Session, "sample_passes", spy)
     img, info = draaw_mi.render(tiny_scene, version="path", spp=2 ** 32 - 1, time_budget=1e-6, seed=3,
                                 return_info=True)

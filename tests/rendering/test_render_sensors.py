@@ -69,3 +69,22 @@ def test_the_cli_renders_and_lists_the_sensors(two_sensors, tmp_path, capsys):
             "another with --sensor)") in capsys.readouterr().out
     assert main(["render", two_sensors, "--sensor", "side", "-o", out, "--spp", "2", "--no-progress"]) == 2
     assert "sensor='side'" in capsys.readouterr().err
+
+
+def test_another_sensor_takes_its_own_samplers_count_and_sizes(tmp_path):
+    """Passes were planned with the first sensor's sampler and the default spp was its count:
+    a multijitter sensor of 64 spp rendered 4 (the first's), and 32 asked of it rendered 35
+    (multijitter rounds 32 up) while the info said 32. A resolution= sized the first film
+    and the other rendered at its own size without a word: refused."""
+    path = tmp_path / "two.xml"
+    path.write_text(XML.replace('<rfilter type="box"/></film></sensor>',
+                                '<rfilter type="box"/></film><sampler type="multijitter">'
+                                '<integer name="sample_count" value="64"/></sampler></sensor>'))
+    scene = draaw_mi.load_scene(str(path))
+    _, info = draaw_mi.render(scene, version="path", sensor="top", return_info=True)
+    assert info["spp"] == 64 and info["passes"] == 1
+    _, info = draaw_mi.render(scene, version="path", sensor="top", spp=32, return_info=True)
+    assert info["spp"] == 32 and info["passes"] == 2                 # (30 + 2: counts it takes as they are)
+    with pytest.raises(draaw_mi.RenderError, match=r"resolution=\(16, 16\) sizes the scene's first film; "
+                                                   r"sensor='top' renders another"):
+        draaw_mi.render(scene, sensor="top", resolution=(16, 16), spp=1)

@@ -126,24 +126,53 @@ def test_the_scene_file_default_of_two_sided_is_documented():
 @pytest.mark.parametrize("material, key", [({"roughness": [[0.4]]}, "roughness"),
                                            ({"base_color": [[[0.5, 0.5, 0.5], [0.2, 0.2, 0.2]]]}, "base_color"),
                                            ({"type": "diffuse", "reflectance": [[0.4]]}, "reflectance")])
-def test_a_texture_below_2x2_texels_is_refused_at_load(material, key):
+def test_a_texture_below_2x2_texels_takes_new_values(material, key):
     """A 1x1 (or 1-row) texture loaded and rendered, then every new value failed: the CLI's
     --set with a traceback and exit 1, a fit or the preview in Mitsuba's words ("must be at
-    least 2x2 pixels in size"). Refused at load, saying what to give."""
-    desc = {"render": {"resolution": [4, 4]}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+    least 2x2 pixels in size"); a mesh's 4x1 palette likewise. Its one-texel axis is repeated
+    to two: it takes new values, and renders as the texture given (a copy of each texel
+    beside it; here as the constant of its mean, the same lookups)."""
+    desc = {"render": {"resolution": [8, 8], "filter": "box"}, "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
             "materials": {"m": material}, "shapes": [{"type": "sphere", "material": "m"}],
             "lights": [{"type": "constant"}]}
-    with pytest.raises(SceneError, match=rf"materials\.m\.{key}: a texture of \dx1 texels; Mitsuba's bitmap takes "
-                                         r"no new values below 2x2 texels .*give one number"):
-        draaw_mi.load_scene(desc)
-    # 2x2 loads and takes new values (what 1x1 could not)
-    big = {k: ([[0.4, 0.4], [0.4, 0.4]] if k != "base_color" else [[[0.5] * 3] * 2] * 2) if k != "type" else v
-           for k, v in material.items()}
-    scene = draaw_mi.load_scene({**desc, "materials": {"m": big}})
+    scene = draaw_mi.load_scene(desc)
     k = scene.key(f"m.{key}")
-    scene.params[k] = type(scene.params[k])(np.array(scene.params[k]) * 0.5)
+    texels = np.array(scene.params[k])
+    assert texels.shape[:2] == (2, 2)
+    img = np.array(draaw_mi.render(scene, spp=16, seed=1))
+    if key != "base_color":                   # a 1x1 texture renders as its constant
+        const = np.array(draaw_mi.render(draaw_mi.load_scene(
+            {**desc, "materials": {"m": {**material, key: 0.4}}}), spp=16, seed=1))
+        # (the same samples; V4 specialises its kernel to a constant roughness, so pixels of
+        # the draaw one differ by up to 0.02 where the means agree to 2e-6)
+        assert abs(img.mean() - const.mean()) < 1e-4 * const.mean()
+        assert key == "roughness" or np.allclose(img, const, atol=1e-6)
+    scene.params[k] = type(scene.params[k])(texels * 0.5)           # (Mitsuba had refused this)
     scene.params.update()
+    assert np.isfinite(np.array(draaw_mi.render(scene, spp=1))).all()
     if "type" not in material:                 # the draaw plugin given the array itself
         import mitsuba as mi
-        with pytest.raises(RuntimeError, match=rf"draaw BSDF: {key} is a texture of \dx1 texels"):  # (Mitsuba wraps it)
-            mi.load_dict({"type": "draaw", key: mi.TensorXf(np.array(material[key], np.float32))})
+        bsdf = mi.load_dict({"type": "draaw", key: mi.TensorXf(np.array(material[key], np.float32))})
+        assert np.array(mi.traverse(bsdf)[f"{key}.data"]).shape[:2] == (2, 2)
+
+
+def test_a_meshs_one_row_palette_texture_loads_and_takes_new_values(tmp_path):
+    """An OBJ whose MTL maps a 4x1 palette PNG (common in exported models): a refusal of
+    textures below 2x2 had stopped it loading; it renders its palette's colours across the quad
+    and its texels take new values."""
+    import mitsuba as mi
+    mi.Bitmap(np.array([[[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0]]], np.uint8)).write(str(tmp_path / "pal.png"))
+    (tmp_path / "quad.mtl").write_text("newmtl pal\nKd 1 1 1\nmap_Kd pal.png\n")
+    (tmp_path / "quad.obj").write_text("mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+                                       "vt 0.1 0.5\nvt 0.9 0.5\nvt 0.9 0.5\nvt 0.1 0.5\nusemtl pal\n"
+                                       "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    scene = draaw_mi.load_scene({"render": {"resolution": [16, 16], "filter": "box"},
+                                 "camera": {"origin": [0, 0, 4], "target": [0, 0, 0]},
+                                 "shapes": [{"name": "q", "file": str(tmp_path / "quad.obj")}],
+                                 "lights": [{"type": "constant", "intensity": 1.0}]})
+    row = np.array(draaw_mi.render(scene, version="v4", spp=4, seed=0))[8, 4:13:4, :3]
+    assert np.ptp(row, axis=0).max() > 0.3              # the palette's colours, not one colour
+    assert row[1, 2] > row[1, 0] and row[2, 0] > row[2, 2]            # blue mid-way, yellow to the right
+    key = next(k for k in scene.params.keys() if k.endswith("base_color.data"))
+    scene.params[key] = type(scene.params[key])(np.array(scene.params[key]) * 0.5)
+    scene.params.update()                                               # (Mitsuba had refused a 4x1 map)

@@ -334,6 +334,8 @@ def test_mitsubas_default_conductor_renders_without_an_out_of_range_warning(tmp_
         warnings.simplefilter("error")
         draaw_mi.render(scene, version="v4", spp=2)
     assert scene.out_of_range() == []
+    scene.params.keep(["ball.bsdf.eta.value"])            # (its k out of the user's params)
+    assert scene.out_of_range() == []
     eta = scene.params["ball.bsdf.eta.value"]
     scene.params["ball.bsdf.eta.value"] = type(eta)(-0.5)
     scene.params.update()
@@ -372,3 +374,16 @@ def test_lights_and_media_are_named_by_their_own_ids(tmp_path):
     assert "lamp.radiance" in res.values
     with pytest.raises(draaw_mi.SceneError, match="no parameter 'lamp.radiancee'"):
         scene.key("lamp.radiancee")
+
+
+def test_a_python_integrator_is_named_by_what_it_prints():
+    """A registered Python integrator whose class name lacks 'Integrator' was called 'sampling'
+    (its C++ base class) in info, the CLI's note and the EXR header."""
+    import mitsuba as mi
+    from draaw_mi.scene.mitsuba_xml import integrator_name
+
+    class Tracer(mi.ad.integrators.common.RBIntegrator):
+        def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
+            return mi.Spectrum(0.0), mi.Bool(False), [], None
+    mi.register_integrator("session75_tracer", lambda props: Tracer(props))
+    assert integrator_name(mi.load_dict({"type": "session75_tracer"})) == "tracer"
