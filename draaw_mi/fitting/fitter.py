@@ -447,5 +447,6 @@ def _warn_unmoved(names: list, iterations: int) -> None:
     if names:
         warnings.warn(f"fit: {', '.join(names)} got a zero gradient in all of the first {iterations} "
                       "iterations: the renders do not depend on it through anything this version "
-                      "differentiates (is it visible? differentiable?); it keeps its value",
+                      "differentiates (is it visible? differentiable? at a start where its gradient is 0, "
+                      "which a warning before the fit names?); it keeps its value",
                       RuntimeWarning, stacklevel=4)
