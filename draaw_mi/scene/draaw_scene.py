@@ -10,7 +10,6 @@ from __future__ import annotations
 import copy
 import json
 import os
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,7 +18,7 @@ import mitsuba as mi
 import numpy as np
 import tomli_w
 
-from ..errors import ParameterError, SceneError, suggest
+from ..errors import ParameterError, SceneError
 from ..guard import FOREGROUND, RENDER_GUARD, let_go
 from ..integrators.stamps import stamp
 from ..integrators.features import detect_features, refuse_border_sampling
@@ -28,14 +27,11 @@ from ..sdf.params import PREFIX, SDFParameters
 from .carry import carry_values
 from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file
+from .param_keys import resolve_key
 from .schema import Where, resolution
 from .sdf_dicts import write_back
 from .toml_edit import edited_toml
 from .xml_film import CROP, scaled_crop
-
-
-#: the draaw material's options that are settings, fixed when the scene loads (not parameters)
-SETTINGS = ("two_sided", "normalmap_encoding", "alpha_min")
 
 
 @dataclass(eq=False)
@@ -246,68 +242,13 @@ class DraawScene:
         return bool(sep) and tail in ("value", "data") and f"{head}.k.{tail}" in self.own_traversal.properties
 
     def key(self, name: str) -> str:
-        """Resolve ``material.parameter`` (or a full traverse key, or an SDF object's
-        ``sdf.NODE.PARAM``) to a key of :attr:`all_params`.
+        """Resolve ``material.parameter`` (or a full traverse key, an SDF object's
+        ``sdf.NODE.PARAM``, or a light's or medium's own id: ``lamp.radiance``) to a key of
+        :attr:`all_params` (:func:`~draaw_mi.scene.param_keys.resolve_key`).
 
         >>> # scene.key("gold.roughness") -> "gold.roughness.value"
         """
-        if not isinstance(name, str):
-            raise ParameterError(f"{self.source}: parameter name {name!r}; expected a string such as "
-                                 "'metal.roughness'")
-        keys = list(self.all_params.keys())
-        # (a medium's albedo: "fog.albedo.value.value", a texture of a spectrum)
-        for cand in (name, f"{name}.value", f"{name}.data", f"{name}.value.value"):
-            if cand in keys:
-                return cand
-        emitter_key = self._emitter_key(name)
-        if emitter_key is not None:
-            return emitter_key
-        # the names people write: material.parameter (not Mitsuba's .value / .data keys)
-        short = sorted({re.sub(r"(\.value|\.data)+$", "", k) for k in keys})
-        ending = [k for k in short if k.endswith("." + name)]
-        if ending:                 # a bare parameter name ("roughness"): the materials that have it
-            shown = ", ".join(repr(k) for k in ending[:6]) + (", ..." if len(ending) > 6 else "")
-            raise SceneError(f"{self.source}: no parameter {name!r}; name the material too: {shown}")
-        material = name.split(".")[0]
-        if material in self.info.get("unused_materials", ()):
-            raise SceneError(f"{self.source}: no parameter {name!r}: material {material!r} is used by no "
-                             "shape, so it is left out of the scene; give a shape material = "
-                             f"{material!r} to tune it")
-        if material in self.info.get("volume_materials", ()):
-            raise SceneError(f"{self.source}: no parameter {name!r}: material {material!r} is copied into "
-                             "the voxels of the [[volumes]] that use it, which have no parameters of their own; "
-                             "change the material in the scene file")
-        setting = name.rsplit(".", 1)[-1]
-        if setting in SETTINGS and material in (self.info.get("materials") or ()):
-            raise SceneError(f"{self.source}: no parameter {name!r}: {setting} is a setting of material "
-                             f"{material!r}, read when the scene loads, not a parameter (no gradient, not in "
-                             "mi.traverse); change it in the scene file")
-        hint = suggest(name, short)
-        if "; did you mean" not in hint:
-            hint = suggest(name, keys)
-        if hint.startswith("; valid:") and len(short) > 12:
-            hint = "; `draaw-mi info` lists the scene's materials"
-        raise SceneError(f"{self.source}: no parameter {name!r}{hint}")
-
-    def _emitter_key(self, name: str) -> str | None:
-        """The key of ``ID.PARAM`` where ``ID`` is an emitter's or a medium's own id (an XML
-        area light or medium in a shape without an id, whose keys Mitsuba names
-        ``object_<address>.emitter...``, a name that changes from run to run), else ``None``."""
-        light, sep, param = name.partition(".")
-        if not sep:
-            return None
-        media = [m for sh in self.mi_scene.shapes() for m in (sh.interior_medium(), sh.exterior_medium())
-                 if m is not None]
-        for obj in list(self.mi_scene.emitters()) + media:
-            if obj.id() != light:
-                continue
-            own = mi.traverse(obj)
-            for cand in (param, f"{param}.value", f"{param}.data", f"{param}.value.value"):
-                if cand in own.keys():
-                    node = own.properties[cand][2]
-                    return next((k for k, entry in self.params.properties.items()
-                                 if entry[2] is node and k.endswith("." + cand)), None)
-        return None
+        return resolve_key(self, name)
 
     @property
     def resizable(self) -> bool:
