@@ -81,7 +81,8 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
     """The ``draaw:*`` header attributes of one ``draaw-mi render`` EXR, as batch frames carry
     them: the scene (and its file's SHA-256), the integrator, sampler, spp, seed, depth, time,
     the post chain applied (``post``: a chain or a list of filter dicts; none: no attribute), an
-    XML scene's ``$name`` defines (``draaw:defines``) and the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
+    XML scene's ``$name`` defines (``draaw:defines``), the sensor where not the first
+    (``draaw:sensor``: its index and id) and the versions of draaw-mi, Mitsuba and Dr.Jit. ``info``: what ``render(...,
     return_info=True)`` returned."""
     meta = {"draaw:scene": os.path.abspath(scene_file), "draaw:version": info["version"],
             "draaw:integrator": info["integrator"],
@@ -97,6 +98,9 @@ def render_metadata(scene_file, scene, info: dict, post=None) -> dict:
         meta["draaw:defines"] = json.dumps(defines, sort_keys=True, default=str)
     if post:
         meta["draaw:post"] = json.dumps(load_chain(post).to_list())
+    if info.get("sensor"):                   # (another of the scene's sensors: --sensor)
+        sensor = scene.mi_scene.sensors()[int(info["sensor"])]
+        meta["draaw:sensor"] = f"{int(info['sensor'])} {sensor.id()}".strip()
     meta.update({f"draaw:{k}": str(v) for k, v in versions().items()})
     return meta
 

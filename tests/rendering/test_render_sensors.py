@@ -61,6 +61,8 @@ def test_the_cli_renders_and_lists_the_sensors(two_sensors, tmp_path, capsys):
     out = str(tmp_path / "t.exr")
     assert main(["render", two_sensors, "--sensor", "top", "-o", out, "--spp", "2", "--no-progress"]) == 0
     assert draaw_mi.read_exr(out).shape == (6, 6, 4)
+    from draaw_mi.batch.exr import read_header
+    assert read_header(out).get("draaw:sensor") == "1 top"        # (the header says which)
     assert main(["render", two_sensors, "--sensor", "1", "-o", out, "--spp", "2", "--no-progress"]) == 0
     assert draaw_mi.read_exr(out).shape == (6, 6, 4)
     capsys.readouterr()
