@@ -36,7 +36,8 @@ NONNEG_COLOURS = ("reflectance", "diffuse_reflectance", "specular_reflectance", 
 NORMALMAP_RANGE = (-1.0 - NORMALMAP_SLACK, 1.0 + NORMALMAP_SLACK)
 
 
-def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> None:
+def check_value(who: str, name: str, key: str, v, conductor: bool = False, medium: bool = False,
+                emitter: bool = False) -> None:
     """Check a value about to be written to the scene parameter ``key`` (``name`` as the user
     wrote it): finite numbers, three for a colour, and the draaw BSDF's ranges for its
     parameters (roughness in [0, 1], ...; colours and light intensities >= 0), and a medium's
@@ -45,7 +46,10 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> No
     :class:`~draaw_mi.errors.ParameterError` naming ``who`` (the caller), the value and the
     range. Mitsuba values (transforms, colours) pass as they are. The preview and the batch
     planner check their overrides with it. ``conductor``: ``key`` is a conductor's, whose
-    ``eta`` may be 0 (Mitsuba's default material ``none``, a perfect mirror: eta 0, k 1).
+    ``eta`` may be 0 (Mitsuba's default material ``none``, a perfect mirror: eta 0, k 1);
+    ``medium`` / ``emitter``: ``key`` is a medium's or an emitter's where its name does not say
+    so (an XML ``<medium id="fog">``'s ``fog.phase_function.g``, an envmap's ``sky.scale``).
+    Dr.Jit values (a ``TensorXf`` of texels, a ``Color3f``) are read and checked as numbers are.
 
     >>> check_value("demo", "ball.roughness", "ball.roughness.value", 0.3)
     >>> check_value("demo", "ball.roughness", "ball.roughness.value", 3.0)
@@ -54,6 +58,12 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> No
     draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
     """
     parts = key.split(".")
+    if type(v).__module__.split(".")[0] in ("drjit", "mitsuba") and getattr(v, "matrix", None) is None \
+            and "Matrix" not in type(v).__name__ and "Transform" not in type(v).__name__:
+        v = np.array(v, dtype=np.float64)       # (NaN texels as a TensorXf had gone unchecked)
+        v = v.reshape(-1) if v.ndim == 2 and v.shape[1] == 1 else v     # (a Color3f: (3, 1))
+        v = float(v.reshape(-1)[0]) if v.size == 1 else v               # (a Float of one value)
+    in_medium = medium or any(p.endswith("medium") for p in parts[:-1])
     # the material parameter a ``<shape>.<param>.value`` / ``.data`` key sets, also through a
     # nested texture (``<shape>.<param>.color0.value``): the first known name after the
     # object's; None otherwise
@@ -66,7 +76,7 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> No
     if isinstance(v, (int, float, np.number)) or (isinstance(v, np.ndarray) and v.ndim == 0):
         nums = [float(v)]                    # (numpy scalars too: np.float32(7) is checked as 7.0)
     elif isinstance(v, np.ndarray) and v.ndim > 1:
-        if any(p.endswith("medium") for p in parts[:-1]):
+        if in_medium:
             _check_medium_grid(who, name, key, v)    # (NaN or negative densities render NaN)
         elif param in SCALAR_PARAMS or param == "base_color":
             # a material texture's texels (NaN texels are refused, not zeroed, as the same
@@ -75,6 +85,8 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> No
             _check_texels(who, name, v, lo, hi)
         elif param == "normalmap":                # (a texel of 1e30 renders black patches)
             _check_texels(who, name, v, *NORMALMAP_RANGE)
+        elif emitter or param in ("radiance", "intensity", "irradiance") or any(p in NONNEG_COLOURS for p in parts):
+            _check_texels(who, name, v, 0.0, FLOAT32_MAX)     # (texels of -5 had lit the frame negative)
         else:                                     # (an environment map, ...)
             _check_texels(who, name, v, -FLOAT32_MAX, FLOAT32_MAX)
         return
@@ -97,9 +109,13 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False) -> No
             raise ParameterError(f"{who}: {name}={v!r}; expected a field of view in "
                                  f"[{FOV_RANGE[0]}, {FOV_RANGE[1]}] degrees")
         return
-    if any(p.endswith("medium") for p in parts[:-1]):
+    if in_medium:
         _check_medium_value(who, name, parts, v, nums)
         return
+    if (parts[-1] == "sampling_weight" or (emitter and parts[-1] == "scale")) and min(nums) < 0:
+        raise ParameterError(f"{who}: {name}={v!r}; expected values >= 0")
+    if parts[-1] == "near_clip" and min(nums) <= 0:        # (Mitsuba refuses it at load; later: blank)
+        raise ParameterError(f"{who}: {name}={v!r}; expected a near clip distance > 0")
     if param in SCALAR_PARAMS:
         lo, hi = SCALAR_PARAMS[param][1:]
         if not all(lo <= x <= hi for x in nums):
@@ -182,3 +198,5 @@ def _check_medium_value(who: str, name: str, parts: list, v, nums: list) -> None
     elif "albedo" in parts:
         if not all(0.0 <= x <= 1.0 for x in nums):
             raise ParameterError(f"{who}: {name}={v!r}; expected values in [0, 1]")
+    elif "sigma_t" in parts and min(nums) < 0:
+        raise ParameterError(f"{who}: {name}={v!r}; expected an extinction >= 0")

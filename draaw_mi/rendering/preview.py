@@ -46,6 +46,7 @@ import numbers
 import operator
 import threading
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -54,7 +55,7 @@ import numpy as np
 from .. import post as _post
 from ..errors import DraawError, ParameterError, suggest
 from ..guard import RENDER_GUARD
-from ..integrators import is_draaw
+from ..integrators import SCENE_VERSION, is_draaw, resolve_version
 from ..post import load_chain
 from ..scene import DraawScene, check_like, load_scene, value_like
 from ..scene.camera import sensor_reach
@@ -168,6 +169,8 @@ class Preview(PreviewWorker):
         self._delivered: PreviewFrame | None = None     # the last frame its callbacks have had
         self.error: Exception | None = None
         self._integrator_for(self.scene)
+        if max_depth is not None:
+            _warn_depth_not_applied(self.version, self.max_depth, "Preview")
 
     # ------------------------------------------------------------------ configuration
     def _integrator_for(self, scene, settings=None):
@@ -218,6 +221,8 @@ class Preview(PreviewWorker):
             if "interactive_scale" in options:
                 self._lo = None                 # made again at the new scale
             self._bump()
+        if "max_depth" in options:
+            _warn_depth_not_applied(self.version, self.max_depth, "Preview.configure")
 
     def _sensor_ids(self) -> set:
         return {sensor.id() for sensor in self.scene.mi_scene.sensors()}
@@ -284,6 +289,11 @@ class Preview(PreviewWorker):
                 self._callbacks.clear()
                 self._error_callbacks.clear()
                 held, self.scene, self._lo = (self.scene, self._lo), None, None
+                if self.error is not None:
+                    # (its traceback's frames held the scene: kept alive past close(), then
+                    # freed by a later collection outside the guard)
+                    self.error = self.error.with_traceback(None)
+                    self.error.__context__ = self.error.__cause__ = None
             del held
 
     def reset(self) -> int:
@@ -410,3 +420,13 @@ class Preview(PreviewWorker):
     @property
     def spp(self) -> int:
         return self._spp
+
+
+def _warn_depth_not_applied(version: str, max_depth: int, who: str) -> None:
+    """Say that a depth asked of version ``scene`` (the integrator a scene declares, with its
+    own settings) is not applied, as :func:`draaw_mi.render` says it: the frames had stayed as
+    they were without a word (the tuner's depth slider too)."""
+    if resolve_version(version) == SCENE_VERSION:
+        warnings.warn(f"{who}: version 'scene' renders with the integrator the scene declares, with its own "
+                      f"settings: max_depth={max_depth} not applied (give a version such as 'v4' or 'path' "
+                      "to set it)", RuntimeWarning, stacklevel=3)

@@ -52,6 +52,7 @@ class DraawScene:
     _params: Any = None
     _all_params: Any = None
     _own: Any = None              # own_traversal's
+    _ids: Any = None              # _object_ids's
     # key -> the stamp of the value out_of_range last found fine (an array's stamp holds it:
     # Dr.Jit cannot give its variable's index to a new value before the next check)
     _checked: dict = field(default_factory=dict)
@@ -227,12 +228,25 @@ class DraawScene:
                 sdf[node_param] = value
                 names.append(name)
             else:
-                check_value(who, name, key, value, conductor=self._conductor_eta(key))
+                head = key.split(".")[0]
+                media, emitters = self._object_ids()
+                check_value(who, name, key, value, conductor=self._conductor_eta(key), medium=head in media,
+                            emitter=head in emitters or "emitter" in key.split("."))
         if sdf:
             try:
                 self.sdf.check_many(sdf)
             except ParameterError as e:
                 raise ParameterError(f"{who}: {', '.join(names)}: {e}") from None
+
+    def _object_ids(self) -> tuple[set, set]:
+        """The ids of the scene's media and emitters, found once (an XML ``<medium id="fog">``'s
+        keys are ``fog.*``: checked as a medium's)."""
+        if self._ids is None:
+            s = self.mi_scene
+            media = {m.id() for sh in s.shapes() for m in (sh.interior_medium(), sh.exterior_medium()) if m is not None}
+            media |= {sn.get_medium().id() for sn in s.sensors() if sn.get_medium() is not None}
+            self._ids = (media - {""}, {e.id() for e in s.emitters()} - {""})
+        return self._ids
 
     def _conductor_eta(self, key: str) -> bool:
         """Whether ``key`` is a conductor's ``eta`` (its BSDF has a ``k`` beside it: only

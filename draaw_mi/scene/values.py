@@ -56,6 +56,14 @@ def check_like(current, value, key: str) -> None:
             # (rendered a frame of NaN without a word; a zero matrix fails in Mitsuba, said)
             raise RenderError(f"params[{key!r}]: a transform or matrix with NaN or infinite entries; expected "
                               "finite numbers")
+    if (dr.is_array_v(current) and not dr.is_tensor_v(current) and dr.depth_v(current) == 1
+            and dr.width(current) == 1 and dr.is_float_v(current) and matrix is None):
+        try:
+            n = np.size(np.array(value, dtype=np.float64))
+        except (TypeError, ValueError):
+            n = 1                              # (refused by the numbers' own check)
+        if n > 1:           # (a uniform value given 3 numbers failed at the next frame, in Mitsuba's words)
+            raise RenderError(f"params[{key!r}] = {value!r}: {key} holds one number; expected one")
     if dr.is_tensor_v(current):
         if not dr.is_float_v(current):
             raise RenderError(f"params[{key!r}]: an image texture of {type(current).__name__} (8/16-bit "

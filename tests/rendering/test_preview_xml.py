@@ -1,0 +1,108 @@
+"""A preview of a Mitsuba user's own XML scene: values refused at update() whatever their type
+or where their object's name comes from, a failed frame that does not outlive close(), and a
+depth that version 'scene' does not apply said so."""
+from __future__ import annotations
+
+import gc
+import warnings
+import weakref
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import draaw_mi
+from draaw_mi.errors import ParameterError
+from draaw_mi.rendering.preview import Preview
+
+XML = """<scene version="3.0.0">
+  <integrator type="path"/>
+  <sensor type="perspective" id="cam"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+  <shape type="rectangle"><transform name="to_world"><translate z="-1"/></transform>
+    <emitter type="area" id="lamp"><rgb name="radiance" value="2"/></emitter></shape>
+  <shape type="sphere" id="ball"><bsdf type="roughconductor" id="metal"><float name="alpha" value="0.2"/></bsdf></shape>
+  <medium type="homogeneous" id="fog"><rgb name="albedo" value="0.8"/>
+    <float name="sigma_t" value="0.05"/><phase type="hg"><float name="g" value="0.3"/></phase></medium>
+  <shape type="cube"><transform name="to_world"><scale value="3"/></transform><bsdf type="null"/>
+    <ref name="interior" id="fog"/></shape>
+  <emitter type="envmap" id="sky"><string name="filename" value="{sky}"/></emitter>
+</scene>"""
+
+
+@pytest.fixture
+def xml_scene(tmp_path):
+    sky = tmp_path / "sky.exr"
+    mi.Bitmap(np.full((4, 8, 3), 0.5, np.float32)).write(str(sky))
+    path = tmp_path / "s.xml"
+    path.write_text(XML.format(sky=sky))
+    return str(path)
+
+
+@pytest.mark.parametrize("name, value, match", [
+    ("fog.phase_function.g", 1.5, r"expected a Henyey-Greenstein g"),        # (rendered pixels of -0.41)
+    ("fog.sigma_t", -1.0, r"expected an extinction >= 0"),
+    ("fog.albedo", 1.5, r"expected values in \[0, 1\]"),
+    ("fog.scale", -1.0, r"expected a density scale >= 0"),
+    ("sky.scale", -1.0, r"expected values >= 0"),                           # (the whole frame negative)
+    ("sky.data", "negative", r"value\(s\) outside \[0,"),                      # (texels of -5)
+    ("sky.data", "nan", r"value\(s\) outside"),                               # (a TensorXf of NaN)
+    ("ball.bsdf.alpha", [0.1, 0.2, 0.3], r"holds one number; expected one"),  # (Mitsuba's words at the frame)
+    ("cam.near_clip", -1.0, r"expected a near clip distance > 0"),          # (every frame blank)
+    ("sky.sampling_weight", -1.0, r"expected values >= 0"),
+])
+def test_bad_values_of_an_xml_scene_are_refused_at_the_update(xml_scene, name, value, match):
+    """Each was taken and rendered wrong frames (negative, NaN, blank) or failed at the next
+    frame in Mitsuba's words: a medium declared at the top of an XML file has keys of its own id
+    (``fog.*``: no 'medium' in them), Dr.Jit texels went unchecked, negative texels of a light
+    were let through. The preview goes on after each refusal."""
+    pv = Preview(draaw_mi.load_scene(xml_scene), version="v4", max_depth=3, freeze=False)
+    try:
+        key = pv.key(name)
+        if isinstance(value, str):            # texels of the envmap's shape
+            shape = np.array(pv.scene.params[key]).shape
+            value = (np.full(shape, -5.0, np.float32) if value == "negative"
+                     else mi.TensorXf(np.full(shape, np.nan, np.float32)))
+        with pytest.raises(ParameterError, match=match):
+            pv.update({name: value})
+        assert pv.step() is not None and pv.error is None
+    finally:
+        pv.close()
+
+
+def test_a_failed_frame_does_not_keep_the_scene_after_close(xml_scene):
+    """The error a failed frame left in ``Preview.error`` held, through its traceback, the
+    list of scenes the worker was updating: the scene outlived close() and was freed later,
+    outside the render guard."""
+    scene = draaw_mi.load_scene(xml_scene)
+    pv = Preview(scene, version="v4", max_depth=3, freeze=False)
+    pv.step()
+    key = scene.key("ball.bsdf.alpha")
+    pv._pending[key] = mi.TensorXf(np.zeros(3, np.float32))   # (past the checks: fails at the frame)
+    try:
+        pv._apply_pending()                    # (what the worker runs; it keeps the error)
+    except Exception as e:  # noqa: BLE001
+        pv.error = e
+    assert pv.error is not None and pv.error.__traceback__ is not None
+    pv.close()
+    alive = weakref.ref(scene)
+    del scene
+    gc.collect()
+    assert alive() is None
+    assert pv.error is not None and pv.error.__traceback__ is None
+
+
+def test_a_depth_for_version_scene_is_said_not_to_apply(xml_scene):
+    """The frames stayed as they were (the scene's integrator keeps its own depth), and the
+    tuner's depth slider moved without effect: said, as render() says it."""
+    with pytest.warns(RuntimeWarning, match=r"Preview: version 'scene' renders with the integrator the scene "
+                                            r"declares.*max_depth=1 not applied"):
+        pv = Preview(draaw_mi.load_scene(xml_scene), version="scene", max_depth=1, freeze=False)
+    try:
+        with pytest.warns(RuntimeWarning, match=r"Preview.configure: .*max_depth=2 not applied"):
+            pv.configure(max_depth=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            pv.configure(version="v4", max_depth=2)                   # (a version that takes it)
+    finally:
+        pv.close()
