@@ -5,7 +5,9 @@ import difflib
 import os
 import re
 import sys
-from typing import Iterable
+from typing import Any, Iterable
+
+import numpy as np
 
 _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 
@@ -67,6 +69,35 @@ def suggest(name: str, valid: Iterable[str]) -> str:
     if close:
         return f"; did you mean {close[0]!r}?"
     return "; valid: " + ", ".join(valid)
+
+
+def shown(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters, for error messages (a texture given
+    inline as nested lists would print thousands of numbers).
+
+    >>> shown([[0.5, 0.5, 0.5]] * 64)
+    '[[0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.5, 0. ... (a list of 64)'
+    >>> shown(0.25)
+    '0.25'
+    >>> import numpy as np; shown(np.full((8, 8, 3), np.nan))
+    'an array of shape (8, 8, 3), all NaN or inf'
+    >>> shown(np.full((8, 8, 3), 1.5))
+    'an array of shape (8, 8, 3) in [1.5, 1.5]'
+    """
+    shape = getattr(value, "shape", None)
+    if isinstance(shape, tuple) and len(shape) >= 2 and hasattr(value, "dtype"):
+        a = np.asarray(value, dtype=np.float64)      # (an array: its shape and range, not its repr)
+        bad = int(np.sum(~np.isfinite(a)))
+        finite = a[np.isfinite(a)]
+        if not finite.size:
+            return f"an array of shape {shape}, all NaN or inf"
+        rng = f"[{finite.min():.4g}, {finite.max():.4g}]"
+        return f"an array of shape {shape}" + (f": {bad} NaN or inf, the rest in {rng}" if bad else f" in {rng}")
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    size = f" (a {type(value).__name__} of {len(value)})" if hasattr(value, "__len__") else ""
+    return text[:limit] + " ..." + size
 
 
 def exception_chain(error: BaseException, suppressed: bool = False) -> list[BaseException]:

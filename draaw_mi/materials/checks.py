@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, shown
 from ..limits import FLOAT32_MAX, FOV_RANGE, HG_G_MAX
 from .draaw_bsdf import NORMALMAP_SLACK, SCALAR_PARAMS
 
@@ -58,7 +58,15 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False, mediu
     draaw_mi.errors.ParameterError: demo: ball.roughness=3.0; expected a number in [0.0, 1.0]
     """
     parts = key.split(".")
-    if type(v).__module__.split(".")[0] in ("drjit", "mitsuba") and getattr(v, "matrix", None) is None \
+    if "film" in parts and parts[-1] in ("size", "crop_size", "crop_offset"):
+        raise ParameterError(f"{who}: {name}={shown(v)}: the film's size is the scene's resolution, not a "
+                             "parameter; give load_scene(..., resolution=(w, h)) or scene.with_resolution(w, h)")
+    if isinstance(v, list) and v and isinstance(v[0], list) and parts[-1] == "data":
+        try:                                    # texels as nested lists: checked as an array
+            v = np.array(v, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{who}: {name}={shown(v)}; expected texels of numbers") from None
+    if type(v).__module__.split(".")[0] in ("drjit", "mitsuba") \
             and "Matrix" not in type(v).__name__ and "Transform" not in type(v).__name__:
         v = np.array(v, dtype=np.float64)       # (NaN texels as a TensorXf had gone unchecked)
         v = v.reshape(-1) if v.ndim == 2 and v.shape[1] == 1 else v     # (a Color3f: (3, 1))
@@ -94,7 +102,8 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False, mediu
         try:
             nums = [float(x) for x in v]
         except (TypeError, ValueError):
-            raise ParameterError(f"{who}: {name}={v!r}; expected numbers") from None
+            raise ParameterError(f"{who}: {name}={shown(v)}; expected numbers"
+                                 + (" (a transform: mi.ScalarTransform4f)" if parts[-1] == "to_world" else "")) from None
         if param in SCALAR_PARAMS and len(nums) != 1:     # (3 numbers would make a 3-wide Float)
             lo, hi = SCALAR_PARAMS[param][1:]
             raise ParameterError(f"{who}: {name}={v!r}; expected a number in [{lo}, {hi}]")

@@ -50,7 +50,8 @@ def check_like(current, value, key: str) -> None:
     """
     if isinstance(value, (str, bytes)) or value is None:       # (TensorXf("0.3") is a tensor)
         raise RenderError(f"params[{key!r}] = {value!r}: expected a number or numbers")
-    matrix = getattr(value, "matrix", value if "Matrix" in type(value).__name__ else None)
+    kind = type(value).__name__
+    matrix = (getattr(value, "matrix", None) if "Transform" in kind else value if "Matrix" in kind else None)
     if matrix is not None and not dr.is_tensor_v(value):      # a transform or matrix (a to_world)
         if not np.all(np.isfinite(np.array(matrix, dtype=np.float64))):
             # (rendered a frame of NaN without a word; a zero matrix fails in Mitsuba, said)

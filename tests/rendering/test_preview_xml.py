@@ -50,6 +50,9 @@ def xml_scene(tmp_path):
     ("ball.bsdf.alpha", [0.1, 0.2, 0.3], r"holds one number; expected one"),  # (Mitsuba's words at the frame)
     ("cam.near_clip", -1.0, r"expected a near clip distance > 0"),          # (every frame blank)
     ("sky.sampling_weight", -1.0, r"expected values >= 0"),
+    ("sky.data", "negative list", r"texel value\(s\) outside \[0,"),     # (a 1154-character "expected numbers")
+    ("lamp.radiance", "nan colour", r"expected finite numbers"),          # (had said "a transform or matrix")
+    ("cam.film.size", [8, 8], r"the film's size is the scene's resolution"),   # (had said "an RGB colour")
 ])
 def test_bad_values_of_an_xml_scene_are_refused_at_the_update(xml_scene, name, value, match):
     """Each was taken and rendered wrong frames (negative, NaN, blank) or failed at the next
@@ -59,9 +62,12 @@ def test_bad_values_of_an_xml_scene_are_refused_at_the_update(xml_scene, name, v
     pv = Preview(draaw_mi.load_scene(xml_scene), version="v4", max_depth=3, freeze=False)
     try:
         key = pv.key(name)
-        if isinstance(value, str):            # texels of the envmap's shape
+        if value == "nan colour":
+            value = mi.Color3f(float("nan"), 0.0, 0.0)
+        elif isinstance(value, str):          # texels of the envmap's shape
             shape = np.array(pv.scene.params[key]).shape
             value = (np.full(shape, -5.0, np.float32) if value == "negative"
+                     else np.full(shape, -5.0).tolist() if value == "negative list"
                      else mi.TensorXf(np.full(shape, np.nan, np.float32)))
         with pytest.raises(ParameterError, match=match):
             pv.update({name: value})
