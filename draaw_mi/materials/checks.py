@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 
 from ..errors import ParameterError, shown
@@ -66,8 +67,9 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False, mediu
             v = np.array(v, dtype=np.float64)
         except (TypeError, ValueError):
             raise ParameterError(f"{who}: {name}={shown(v)}; expected texels of numbers") from None
-    if type(v).__module__.split(".")[0] in ("drjit", "mitsuba") \
-            and "Matrix" not in type(v).__name__ and "Transform" not in type(v).__name__:
+    if type(v).__module__.split(".")[0] in ("drjit", "mitsuba") and (dr.is_tensor_v(v) or (
+            dr.is_array_v(v) and dr.width(v) == 1 and "Matrix" not in type(v).__name__)):
+        # (a tensor of texels, one number or one colour; a mesh's vertex array passes as it is)
         v = np.array(v, dtype=np.float64)       # (NaN texels as a TensorXf had gone unchecked)
         v = v.reshape(-1) if v.ndim == 2 and v.shape[1] == 1 else v     # (a Color3f: (3, 1))
         v = float(v.reshape(-1)[0]) if v.size == 1 else v               # (a Float of one value)

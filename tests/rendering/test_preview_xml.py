@@ -112,3 +112,12 @@ def test_a_depth_for_version_scene_is_said_not_to_apply(xml_scene):
             pv.configure(version="v4", max_depth=2)                   # (a version that takes it)
     finally:
         pv.close()
+
+
+def test_a_meshs_vertex_array_passes_as_it_is():
+    """Dr.Jit values are read as numbers where they are one number, one colour or texels; a
+    mesh's vertex array (an override of a batch or a preview) is not a colour of 12 numbers."""
+    from draaw_mi.materials.checks import check_value
+    check_value("demo", "m.vertex_positions", "m.vertex_positions", mi.Float(np.arange(12.0)))
+    with pytest.raises(ParameterError, match=r"demo: l.radiance=.*expected finite numbers"):
+        check_value("demo", "l.radiance", "l.emitter.radiance.value", mi.Color3f(float("nan"), 0.0, 0.0))
