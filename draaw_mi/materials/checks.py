@@ -95,8 +95,8 @@ def check_value(who: str, name: str, key: str, v, conductor: bool = False, mediu
             _check_texels(who, name, v, lo, hi)
         elif param == "normalmap":                # (a texel of 1e30 renders black patches)
             _check_texels(who, name, v, *NORMALMAP_RANGE)
-        elif emitter or param in ("radiance", "intensity", "irradiance") or any(p in NONNEG_COLOURS for p in parts):
-            _check_texels(who, name, v, 0.0, FLOAT32_MAX)     # (texels of -5 had lit the frame negative)
+        elif any(p in NONNEG_COLOURS for p in parts):
+            _check_texels(who, name, v, 0.0, FLOAT32_MAX)     # (reflectance texels of -2 rendered negative)
         else:                                     # (an environment map, ...)
             _check_texels(who, name, v, -FLOAT32_MAX, FLOAT32_MAX)
         return

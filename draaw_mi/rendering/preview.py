@@ -289,11 +289,13 @@ class Preview(PreviewWorker):
                 self._callbacks.clear()
                 self._error_callbacks.clear()
                 held, self.scene, self._lo = (self.scene, self._lo), None, None
-                if self.error is not None:
-                    # (its traceback's frames held the scene: kept alive past close(), then
-                    # freed by a later collection outside the guard)
-                    self.error = self.error.with_traceback(None)
-                    self.error.__context__ = self.error.__cause__ = None
+                # (a failed frame's tracebacks held the scene: kept alive past close(), then
+                # freed by a later collection outside the guard; the chain of causes stays)
+                error, seen = self.error, set()
+                while error is not None and id(error) not in seen:
+                    seen.add(id(error))
+                    error.__traceback__ = None
+                    error = error.__cause__ or error.__context__
             del held
 
     def reset(self) -> int:

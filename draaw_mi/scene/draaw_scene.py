@@ -239,13 +239,24 @@ class DraawScene:
                 raise ParameterError(f"{who}: {', '.join(names)}: {e}") from None
 
     def _object_ids(self) -> tuple[set, set]:
-        """The ids of the scene's media and emitters, found once (an XML ``<medium id="fog">``'s
-        keys are ``fog.*``: checked as a medium's)."""
+        """The names that head the keys of the scene's top-level media and emitters (an XML
+        ``<medium id="fog">``'s keys are ``fog.*``, with no "medium" in them: checked as a
+        medium's), found once. Only a key of one dot whose object is the medium or emitter
+        itself counts: a nested one's id is its dict key (``interior``, ``emitter``), which a
+        material may be named too."""
         if self._ids is None:
             s = self.mi_scene
-            media = {m.id() for sh in s.shapes() for m in (sh.interior_medium(), sh.exterior_medium()) if m is not None}
-            media |= {sn.get_medium().id() for sn in s.sensors() if sn.get_medium() is not None}
-            self._ids = (media - {""}, {e.id() for e in s.emitters()} - {""})
+            media = [m for sh in s.shapes() for m in (sh.interior_medium(), sh.exterior_medium()) if m is not None]
+            media += [sn.get_medium() for sn in s.sensors() if sn.get_medium() is not None]
+            emitters = list(s.emitters())
+            heads: tuple[set, set] = (set(), set())
+            for key, entry in self.own_traversal.properties.items():
+                head, sep, rest = key.partition(".")
+                if sep and "." not in rest:
+                    for found, objects in zip(heads, (media, emitters)):
+                        if any(entry[2] is obj for obj in objects):
+                            found.add(head)
+            self._ids = heads
         return self._ids
 
     def _conductor_eta(self, key: str) -> bool:

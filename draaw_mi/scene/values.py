@@ -5,7 +5,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from ..errors import RenderError
+from ..errors import RenderError, shown
 
 
 def value_like(current, value, key: str):
@@ -64,7 +64,8 @@ def check_like(current, value, key: str) -> None:
         except (TypeError, ValueError):
             n = 1                              # (refused by the numbers' own check)
         if n > 1:           # (a uniform value given 3 numbers failed at the next frame, in Mitsuba's words)
-            raise RenderError(f"params[{key!r}] = {value!r}: {key} holds one number; expected one")
+            raise RenderError(f"params[{key!r}] = {shown(value)}: {key} holds one number (a uniform value; it "
+                              "cannot become a texture here); expected one")
     if dr.is_tensor_v(current):
         if not dr.is_float_v(current):
             raise RenderError(f"params[{key!r}]: an image texture of {type(current).__name__} (8/16-bit "
@@ -76,7 +77,7 @@ def check_like(current, value, key: str) -> None:
         if len(shape) == 0 or (len(shape) == 1 and shape[0] in (1, channels)):
             return
         if len(shape) != current.ndim or shape[-1] != channels:
-            shown = f"{value!r}" if len(shape) == 1 else f"texels of shape {shape}"
-            raise RenderError(f"params[{key!r}] = {shown}: {key} is a texture of shape "
+            given = f"{value!r}" if len(shape) == 1 else f"texels of shape {shape}"
+            raise RenderError(f"params[{key!r}] = {given}: {key} is a texture of shape "
                               f"{tuple(current.shape)}; give one number or {channels} (filling it), or "
                               f"texels of shape (H, W, {channels})")
