@@ -481,7 +481,10 @@ def test_a_frame_that_fails_is_shown_in_red_and_a_change_recovers(tuner, monkeyp
                             lambda *a, **k: (_ for _ in ()).throw(RuntimeError("kernel exploded")))
         g = tuner.preview.update({"ball.roughness": 0.3})
         deadline = time.time() + 30
-        while "render failed" not in tuner.message.value and time.time() < deadline:
+        # (until the changed frame fails: a frame in flight before the change may have failed
+        # first, said so, and had its error cleared by the change)
+        while (tuner.preview.error is None or "render failed" not in tuner.message.value) \
+                and time.time() < deadline:
             time.sleep(0.02)
         assert "render failed: kernel exploded" in tuner.message.value
         assert tuner.preview.error is not None
