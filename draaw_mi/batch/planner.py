@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import DraawError, SceneError
 from ..integrators import SCENE_VERSION, is_draaw, resolve_version
 from ..post import display_encoded
-from ..rendering.film_colour import scene_colour_names, sensor_index
+from ..rendering.film_colour import scene_colour_names, sensor_index, sensor_spp
 from ..rendering.session import session_of
 from ..scene import value_like
 from ..scene.camera import check_look_at, go_draaw_look_at, sensor_reach, x_fov
@@ -262,8 +262,7 @@ def plan(manifest: Manifest, cache=None) -> list[dict]:
             raise SceneError(f"{loc}: resolution sizes the scene's first film; sensor = {job.sensor!r} renders "
                              "another at its own size: drop resolution")
         version = job.version or s["version"]
-        # (the scene's render.spp is its first sensor's; another renders its own sampler's count)
-        spp = job.spp or (int(scene.mi_scene.sensors()[sensor].sampler().sample_count()) if sensor else s["spp"])
+        spp = job.spp or sensor_spp(scene, sensor)
         max_depth = s["max_depth"] if job.max_depth is None else job.max_depth
         aovs = list(s.get("aovs", [])) if job.aovs is None else job.aovs
         if job.aovs is None and aovs and not _draaw(version):

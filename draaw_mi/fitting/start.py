@@ -217,7 +217,7 @@ PARTIAL_GRADIENTS = {("RoughPlastic", "alpha"): "its diffuse term's dependence o
 def _warn_partial_gradient(scene, key: str, name: str) -> None:
     """Warn of a parameter whose plugin differentiates it only in part (Mitsuba's own code):
     a fit of it settles where the partial gradient vanishes, not at the best value."""
-    entry = scene.params.properties.get(key) if key in scene.params.properties else None
+    entry = scene.params.properties.get(key)
     node = entry[2] if entry is not None else None
     part = key.split(".")[-1] if key.split(".")[-1] not in ("value", "data") else key.split(".")[-2]
     why = PARTIAL_GRADIENTS.get((node.class_name() if node is not None else None, part))

@@ -56,6 +56,14 @@ def sensor_index(scene, sensor, who: str = "render") -> int:
                       f"index in [0, {len(sensors) - 1}] or an id ({', '.join(map(repr, ids))})")
 
 
+def sensor_spp(scene, sensor: int) -> int:
+    """The samples per pixel a render of the scene's sensor ``sensor`` (an index) takes by
+    default: the scene's ``render.spp`` for the first, another's own sampler's count."""
+    if not sensor:
+        return int(scene.settings["spp"])
+    return int(scene.mi_scene.sensors()[sensor].sampler().sample_count())
+
+
 def check_film_colour(scene, what: str, sensor: int = 0) -> None:
     """A post chain and the denoiser read R, G, B (and A) colour: a film storing luminance or
     XYZ (an XML scene's pixel_format) is refused before the render, not after it (else a post

@@ -38,7 +38,7 @@ from ..scene.schema import Where
 from ..scene.schema import resolution as parse_res
 from ..sdf.params import SDFParameters
 from .denoiser import AUX_AOVS, denoise_aovs, load_pyoidn
-from .film_colour import check_film_colour, scene_colour_names, sensor_index
+from .film_colour import check_film_colour, scene_colour_names, sensor_index, sensor_spp
 from .passes import pass_seed
 from .session import apply_post, non_finite_count, session_of
 from .subsample import render_adaptive
@@ -207,8 +207,9 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
     if params is not None and not _parameters_of(scene, params):
         raise RenderError(f"render: params belong to another scene than {scene.source} (a scene loaded "
                           "again, say): gradients would not reach them; pass this scene's scene.params")
-    if resolution is not None and sensor_index(scene, sensor):
-        raise RenderError(f"render: resolution={resolution!r} sizes the scene's first film; sensor={sensor!r} "
+    given, sensor = sensor, sensor_index(scene, sensor)
+    if resolution is not None and sensor:
+        raise RenderError(f"render: resolution={resolution!r} sizes the scene's first film; sensor={given!r} "
                           "renders another at its own size: drop resolution=")
     if resolution is not None:
         size = tuple(parse_res(resolution, Where("render") / "resolution"))
@@ -219,12 +220,11 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
                               "`scene.with_resolution(w, h)` and traverse that instead")
         scene = scene.with_resolution(*size)
     version = s["version"] if version is None else version
-    sensor = sensor_index(scene, sensor)
     if sensor and adaptive is not None:
         raise RenderError(f"render: adaptive subsampling renders the first sensor; sensor={sensor} with "
                           "adaptive=: drop one")
-    if sensor and spp is None:                 # (the scene's render.spp is its first sensor's)
-        spp = int(scene.mi_scene.sensors()[sensor].sampler().sample_count())
+    if spp is None:
+        spp = sensor_spp(scene, sensor)
     if resolve_version(version) == SCENE_VERSION:
         ignored = [f"{n}={v!r}" for n, v in (("max_depth", max_depth), ("hide_emitters", hide_emitters))
                    if v is not None]
@@ -232,7 +232,7 @@ def _settings(scene, version, spp, seed, max_depth, resolution, params, time_bud
             warnings.warn(f"render: version 'scene' renders with the integrator the scene declares, "
                           f"with its own settings: {', '.join(ignored)} not applied (give a version "
                           "such as 'v4' or 'path' to set them)", RuntimeWarning, stacklevel=3)
-    spp = _check_int("spp", s["spp"] if spp is None else spp, 1, MAX_SPP)
+    spp = _check_int("spp", spp, 1, MAX_SPP)
     seed = _check_int("seed", s["seed"] if seed is None else seed, 0, 2 ** 32 - 1)     # a UInt32
     max_depth = _check_int("max_depth", s["max_depth"] if max_depth is None else max_depth, -1)
     if time_budget is not None and (isinstance(time_budget, bool) or not (

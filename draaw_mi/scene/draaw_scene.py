@@ -27,7 +27,7 @@ from ..sdf.params import PREFIX, SDFParameters
 from .carry import carry_values
 from .light_values import RGB_PARAMS, SCALAR_PARAMS, light_names, write_light
 from .mitsuba_load import load_dict_or_error, load_mitsuba_file
-from .param_keys import resolve_key
+from .param_keys import resolve_key, scene_media
 from .schema import Where, resolution
 from .sdf_dicts import write_back
 from .toml_edit import edited_toml
@@ -246,9 +246,7 @@ class DraawScene:
         material may be named too."""
         if self._ids is None:
             s = self.mi_scene
-            media = [m for sh in s.shapes() for m in (sh.interior_medium(), sh.exterior_medium()) if m is not None]
-            media += [sn.get_medium() for sn in s.sensors() if sn.get_medium() is not None]
-            emitters = list(s.emitters())
+            media, emitters = scene_media(s), list(s.emitters())
             heads: tuple[set, set] = (set(), set())
             for key, entry in self.own_traversal.properties.items():
                 head, sep, rest = key.partition(".")

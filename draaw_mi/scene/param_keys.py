@@ -14,6 +14,14 @@ from ..errors import ParameterError, SceneError, suggest
 SETTINGS = ("two_sided", "normalmap_encoding", "alpha_min")
 
 
+def scene_media(mi_scene) -> list:
+    """The media of ``mi_scene``'s shapes (inside and outside) and sensors, each as often as
+    it is held."""
+    media = [m for sh in mi_scene.shapes() for m in (sh.interior_medium(), sh.exterior_medium())]
+    media += [sn.get_medium() for sn in mi_scene.sensors()]
+    return [m for m in media if m is not None]
+
+
 def resolve_key(scene, name: str) -> str:
     """``name`` (``material.parameter``, a full traverse key, an SDF object's
     ``sdf.NODE.PARAM``, or ``ID.PARAM`` of a light's or medium's own id) as a key of
@@ -70,9 +78,7 @@ def _own_id_key(scene, name: str) -> str | None:
     light, sep, param = name.partition(".")
     if not sep:
         return None
-    media = [m for sh in scene.mi_scene.shapes() for m in (sh.interior_medium(), sh.exterior_medium())
-             if m is not None]
-    for obj in list(scene.mi_scene.emitters()) + media:
+    for obj in list(scene.mi_scene.emitters()) + scene_media(scene.mi_scene):
         if obj.id() != light:
             continue
         own = mi.traverse(obj)
