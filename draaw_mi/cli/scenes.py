@@ -221,7 +221,7 @@ def cmd_info(args) -> int:
     if args.scene:
         loaded = load_for_cli(args)
         out["scene"] = loaded.summary()
-        gated = samples = lights = None
+        gated = samples = lights = reuse = None
         # (for any scene, not only one whose version is v4: a Mitsuba XML scene's is its own
         # integrator's, and --version v4 renders it)
         if loaded.mi_scene.sensors():
@@ -232,7 +232,11 @@ def cmd_info(args) -> int:
             v4 = session_of(loaded).integrator("v4", int(st["max_depth"]), bool(st.get("hide_emitters", False)), [])
             samples = stratify.describe(v4, loaded.mi_scene, sensor, int(out["scene"]["settings"]["spp"]))
             lights = describe_selection(loaded.mi_scene, v4.light_selection)
+            table, why = v4.reuse_decision(loaded.mi_scene, sensor, int(st["spp"]))
+            reuse = (f"2x2 pixel tiles share the light after a bounce off Lambertian surfaces ({why}; "
+                     "not in guided renders)" if table is not None else f"off ({why})")
         out["scene"]["v4_gated"] = gated
+        out["scene"]["v4_reuse"] = reuse
         out["scene"]["v4_samples"] = samples
         out["scene"]["v4_lights"] = lights
     if args.json:
@@ -283,6 +287,8 @@ def cmd_info(args) -> int:
             print(f"v4 samples: {s['v4_samples']}")
         if s.get("v4_lights"):
             print(f" v4 lights: {s['v4_lights']}")
+        if s.get("v4_reuse"):
+            print(f"  v4 reuse: {s['v4_reuse']}")
         if s.get("v4_gated"):
             print(f"   v4 note: {s['v4_gated']}")
     return 0

@@ -160,15 +160,28 @@ def render_uniform(integrator, scene: mi.Scene, sensor: mi.Sensor, seed, spp: in
     extra rays splatted through the film's filter (see the module docstring)."""
     if not develop:
         raise ValueError("render_uniform: develop=False; AD integrators render with develop=True")
-    film = sensor.film()
+    img = splat_pass(integrator, scene, sensor, seed, spp, None, own_emission=True).develop()
+    if evaluate:
+        dr.eval(img)
+    return img
+
+
+def splat_pass(integrator, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int,
+               splat: FilmSplat | None, own_emission: bool) -> FilmSplat:
+    """One uniform pass of ``spp`` samples per pixel into ``splat`` (``None``: a new one, for
+    the film as this pass prepares it), evaluated; returns the splat. With
+    ``own_emission`` the emission seen at the first hit goes to its own block (a filter other
+    than box with a light's edges in view); else ``sample()`` adds it to the path's light."""
     with dr.suspend_grad():
         sampler, spp = integrator.prepare(sensor=sensor, seed=seed, spp=spp, aovs=integrator.aov_names())
+        if splat is None:
+            splat = FilmSplat(sensor.film(), len(integrator.aov_names()))
         ray, weight, pos = integrator.sample_rays(scene, sensor, sampler)
-        splat = FilmSplat(film, len(integrator.aov_names()))
         one = mi.Float(1.0)
-        scale, offset = film_mapping(film)
-        integrator.set_primary_rays(PrimaryRays(ray, sensor, dr.floor(pos), scale, offset, weight,
-                                                splat=(splat, one, pos)))
+        if own_emission:
+            scale, offset = film_mapping(sensor.film())
+            integrator.set_primary_rays(PrimaryRays(ray, sensor, dr.floor(pos), scale, offset, weight,
+                                                    splat=(splat, one, pos)))
         try:
             L, valid, aovs, _ = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler,
                                                   ray=ray, depth=mi.UInt32(0), δL=None, δaovs=None,
@@ -177,7 +190,5 @@ def render_uniform(integrator, scene: mi.Scene, sensor: mi.Sensor, seed, spp: in
             integrator.set_primary_rays(None)
         splat.put(pos, L * weight, dr.select(valid, 1.0, 0.0), one, aovs)
         del sampler, ray, weight, L, valid, aovs
-        img = splat.develop()
-        if evaluate:
-            dr.eval(img)
-        return img
+        dr.eval(splat.tensors())
+    return splat

@@ -35,10 +35,12 @@ def survival_probability(beta_max: mi.Float, eta: mi.Float, threshold: float,
 
 
 def roulette(beta: mi.Spectrum, eta: mi.Float, depth: mi.UInt32, rr_depth: int,
-             threshold: float, rr_min: float, u: mi.Float, active: mi.Bool):
+             threshold: float, rr_min: float, u: mi.Float, active: mi.Bool, also=None):
     """Russian roulette after the path has ``rr_depth`` segments (``depth + 1 >= rr_depth``).
 
-    Returns ``(beta, active)``: survivors re-weighted by ``1 / q``, stopped paths inactive.
+    Returns ``(beta, active)``: survivors re-weighted by ``1 / q``, stopped paths inactive;
+    with ``also`` (a throughput of part of the path), ``(beta, active, also)``, ``also``
+    re-weighted alike.
     """
     beta_max = dr.max(beta)
     active = active & (beta_max != 0)
@@ -46,7 +48,10 @@ def roulette(beta: mi.Spectrum, eta: mi.Float, depth: mi.UInt32, rr_depth: int,
     q = survival_probability(beta_max, eta, threshold, rr_min)
     rr_active &= q < 1.0
     beta = dr.select(rr_active, beta * dr.rcp(q), beta)
-    return beta, active & (~rr_active | (u < q))
+    alive = active & (~rr_active | (u < q))
+    if also is None:
+        return beta, alive
+    return beta, alive, dr.select(rr_active, also * dr.rcp(q), also)
 
 
 def only_constant_environment(scene: mi.Scene) -> bool:

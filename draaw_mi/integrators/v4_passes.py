@@ -21,8 +21,8 @@ import drjit as dr
 import mitsuba as mi
 
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat, glints, stratify
-from .features import sensor_gated_speedups
+from . import emission_split, film_splat, glints, guiding, pixel_reuse, stratify
+from .features import scene_shapes, sensor_gated_speedups
 from .light_tables import LightTables
 from .strata_sampler import strata_sampler
 
@@ -166,15 +166,106 @@ class V4Passes(LightTables):
             return super().render_forward(scene, params, sensor, seed, spp)
 
     def _render_uniform(self, scene, sensor, seed, spp, develop, evaluate):
+        own_emission = (develop and not sensor.film().rfilter().is_box_filter()
+                        and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
+                                                   self.features(scene))
+                        and self.edge_map(scene, sensor) is not None)
+        table = self.reuse_table(scene, sensor, spp) if develop else None
         try:
-            if (develop and not sensor.film().rfilter().is_box_filter()
-                    and emission_split.applies(self.emission_split, self.hide_emitters, sensor,
-                                               self.features(scene))
-                    and self.edge_map(scene, sensor) is not None):
+            if table is not None:
+                return self._render_shared(scene, sensor, seed, spp, evaluate, own_emission, table)
+            if own_emission:
                 return film_splat.render_uniform(self, scene, sensor, seed, spp, develop, evaluate)
             return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
         finally:
-            self._primary = None
+            self._primary = self._reuse_layout = None
+
+    def _render_shared(self, scene, sensor, seed, spp, evaluate, own_emission, table):
+        """A uniform render whose paths share their light within 2x2 pixel tiles
+        (:mod:`~draaw_mi.integrators.pixel_reuse`), in passes of at most
+        :data:`~.pixel_reuse.PASS_LANES` lanes (the tiles' exchange keeps each lane's second
+        vertex in memory) splatted into one film: each pass the next part of a stratified
+        pattern, or with its own seed."""
+        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        size = sensor.film().crop_size()
+        per_pass = max(1, pixel_reuse.PASS_LANES // (int(size[0]) * int(size[1])))
+        stratified = self.stratified(scene, sensor, n)
+        given = self._strata_part
+        pattern, offset = given or (n, 0)
+        splat = None
+        try:
+            for i, start in enumerate(range(0, n, per_pass)):
+                count = min(per_pass, n - start)
+                self._strata_part = (pattern, offset + start)
+                self._reuse_layout = pixel_reuse.Layout.of(sensor, count, table)
+                splat = film_splat.splat_pass(self, scene, sensor,
+                                              seed if stratified else pixel_reuse.pass_seed(seed, i),
+                                              count, splat, own_emission)
+        finally:
+            self._strata_part = given
+        img = splat.develop()
+        if evaluate:
+            dr.eval(img)
+        return img
+
+    def reuse_table(self, scene, sensor, spp):
+        """The table of Lambertian BSDFs (:func:`~.pixel_reuse.lambertian_table`) for a
+        uniform primal pass of ``spp`` samples per pixel (0: the sensor's) that shares the
+        light reflected at its first vertices within 2x2 pixel tiles
+        (:mod:`~draaw_mi.integrators.pixel_reuse`), else ``None`` (:meth:`reuse_decision`)."""
+        return self.reuse_decision(scene, sensor, spp)[0]
+
+    def reuse_decision(self, scene, sensor, spp) -> tuple:
+        """``(table | None, why)``: :meth:`reuse_table` and the reason in a few words
+        (``draaw-mi info``). ``pixel_reuse``: ``on``, or ``auto`` where the scene's indirect
+        share (guiding's pilot) is at least :data:`~.pixel_reuse.SHARE_MIN` in renders as
+        large as guiding's, unless only environments light it
+        (:func:`~.pixel_reuse.sky_only`); never in ``dr.freeze`` recordings, with media,
+        ``max_depth`` 2 or less, or without a Lambertian surface that is not a light."""
+        if self.pixel_reuse == "off":
+            return None, "pixel_reuse=off"
+        if dr.flag(dr.JitFlag.FreezingScope):
+            return None, "a frozen render"
+        if self.features(scene)["media"]:
+            return None, "participating media"
+        if 0 <= self.max_depth <= 2:
+            return None, f"max_depth={self.max_depth}: no light after a bounce"
+        table = self._lambertian_table(scene)
+        if table is None:
+            return None, "no Lambertian surface (Mitsuba's diffuse) but lights"
+        if self.pixel_reuse == "on":
+            return table, "pixel_reuse=on"
+        n = int(spp) if spp else int(sensor.sampler().sample_count())
+        size = sensor.film().crop_size()
+        if not pixel_reuse.large_enough(n, n * int(size[0]) * int(size[1])):
+            return None, (f"auto: renders from {guiding.AUTO_MIN_SPP} spp and "
+                          f"2^{guiding.PILOTED_MIN_SAMPLES.bit_length() - 1} samples")
+        if pixel_reuse.sky_only(scene):
+            return None, "auto: only environments light the scene"
+        key = self.selection_key(scene)
+        share = self.guides.share(key)
+        if share is None:
+            share = self._reuse_share(scene, key)
+        if share < pixel_reuse.SHARE_MIN:
+            return None, f"auto: {share:.0%} of the light arrives after a bounce (< {pixel_reuse.SHARE_MIN:.0%})"
+        return table, f"auto: {share:.0%} of the light arrives after a bounce"
+
+    def _reuse_share(self, scene, key) -> float:
+        """guiding's indirect share of ``scene``, measured once where the guide cache has none."""
+        memo = self._reuse_shares
+        if key not in memo:
+            if len(memo) >= 4:
+                memo.pop(next(iter(memo)))
+            memo[key] = guiding.indirect_share(self, scene)
+        return memo[key]
+
+    def _lambertian_table(self, scene):
+        """:func:`~.pixel_reuse.lambertian_table` of ``scene``, kept for its next render."""
+        key = self.selection_key(scene)
+        memo = self._lambertian_memo
+        if memo is None or memo[0] != key:
+            memo = self._lambertian_memo = (key, pixel_reuse.lambertian_table(scene_shapes(scene)))
+        return memo[1]
 
     def _say_sensor_gates(self, sensor) -> None:
         """A ``RuntimeWarning``, once per integrator and reason, when the film or the lens

@@ -1,0 +1,259 @@
+"""Path reuse among neighbouring pixels: the light a camera path's first vertex receives after a
+bounce, estimated from the paths of the pixels of its 2x2 tile (Bekaert, Sbert and Halton 2002,
+"Accelerating path tracing by re-using paths").
+
+A camera path's first vertex ``x1`` (a point seen in pixel ``c``) receives the light reflected
+towards it by the surfaces around: ``I_c = int f_c(x2) G(x1, x2) V(x1, x2) Lr(x2) dA(x2)`` over
+the surfaces' points ``x2`` (``f_c``: the BSDF at ``x1`` with its cosine, ``G``: the cosine at
+``x2`` over the squared distance, ``Lr``: the light ``x2`` reflects; its emission is the direct
+light, which the path's own multiple importance sampling estimates). ``path`` estimates it with
+one sample, the point its BSDF sample finds, and the path traced on from there. Where ``x2`` is
+Lambertian, ``Lr(x2)`` is the same towards every point on the side it was seen from, so the
+point and its estimate serve the other pixels of the tile too: each sees it from its own
+``x1`` (a shadow ray, its own BSDF value). The four pixels' samples are combined by the balance
+heuristic over the four pixels' sampling densities (all in area measure at ``x2``)::
+
+    I_c ~ sum_k f_c(y_k) G_ck V_ck Lr_k / sum_j p_j(y_k)
+
+which is multiple importance sampling with one sample per technique, so unbiased wherever the
+pixel's own technique covers its integrand (its BSDF samples every direction it reflects from).
+A pixel whose first vertex has a delta lobe (glass, a mirror, smooth plastic) takes no part: it
+keeps its own sample, as do samples whose ``x2`` is not Lambertian (glossy, textured with a
+normal map the side test cannot see, transmissive), which its own pixel alone estimates. The
+pixel filter is untouched: each camera sample's radiance estimate stays unbiased given its ray.
+
+The price: three shadow rays, four BSDF evaluations and a few gathers a sample, which pays where
+most of the light arrives after the first bounce: a room lit through a doorway.
+Measured in ``benchmarks/results/speed_suite.md``.
+
+The four lanes of a tile are the same sample index of four pixels, in the lane order of
+Mitsuba's ``sample_rays`` (pixel-major, the samples of a pixel consecutive), which
+:class:`Layout` names.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from . import guiding
+
+TILE = 2            # tile side in pixels: 3 extra shadow rays a sample
+PASS_LANES = 1 << 18  # lanes a pass, or one sample of every pixel where more (about 140 B a lane)
+SHARE_MIN = 0.15    # ``auto`` shares where guiding's indirect share is at least this
+
+
+def large_enough(spp: int, samples: int) -> bool:
+    """Whether ``auto`` considers a render of ``spp`` samples per pixel, ``samples`` in all:
+    as large as those ``auto`` guiding considers (its pilot then costs a few per cent, once
+    per scene; previews, fits and small test renders do not pay it)."""
+    return spp >= guiding.AUTO_MIN_SPP and samples >= guiding.PILOTED_MIN_SAMPLES
+
+
+def sky_only(scene: mi.Scene) -> bool:
+    """Whether only environments light ``scene``: their light after a bounce is smooth, and
+    the balance heuristic's sum over four pixels adds more than it takes off (a diffuse floor
+    and wall under a constant sky, 16^2 x 64 spp: 1.13x the variance of each pixel's own
+    sample with a box filter, 1.55x with a gaussian; a point light over them: 0.43x), so
+    ``auto`` leaves such scenes unshared."""
+    emitters = scene.emitters()
+    return len(emitters) > 0 and all(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) and
+                                     not mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in emitters)
+
+
+def pass_seed(seed: int, i: int) -> int:
+    """The seed of a render's ``i``-th pass where its sampler is not stratified across passes
+    (the first keeps ``seed``)."""
+    return seed if i == 0 else (seed ^ (0x85EBCA6B * i + 0x27D4EB2F)) & 0xFFFFFFFF
+
+
+class Layout:
+    """The lanes of a primal pass that shares: ``width x height`` pixels (the film's crop),
+    ``spp`` consecutive lanes a pixel, and the scene's Lambertian BSDFs (``table``:
+    :func:`lambertian_table`)."""
+    __slots__ = ("width", "height", "spp", "table")
+
+    def __init__(self, width: int, height: int, spp: int, table: mi.Bool):
+        self.width, self.height, self.spp, self.table = int(width), int(height), int(spp), table
+
+    @property
+    def lanes(self) -> int:
+        return self.width * self.height * self.spp
+
+    @classmethod
+    def of(cls, sensor: mi.Sensor, spp: int, table: mi.Bool) -> "Layout":
+        size = sensor.film().crop_size()     # (films that sample their border are refused)
+        return cls(size[0], size[1], spp, table)
+
+
+_LAMBERTIAN = "SmoothDiffuse"          # Mitsuba's ``diffuse``
+
+
+def is_lambertian(bsdf: mi.BSDF) -> bool:
+    """Whether ``bsdf`` reflects the same light towards every direction of a side: Mitsuba's
+    ``diffuse``, alone or as both sides of a ``twosided`` (textured or not). By class, not by
+    flags: a normal or bump map over a ``diffuse`` has its flags, but the light it reflects
+    depends on the direction (zero below the perturbed normal's horizon).
+
+    >>> is_lambertian(mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse"}}))
+    True
+    >>> is_lambertian(mi.load_dict({"type": "roughplastic"}))
+    False
+    """
+    name = bsdf.class_name()
+    if name == _LAMBERTIAN:
+        return True
+    if name != "TwoSidedBRDF":
+        return False
+    nested = [n for n in mi.traverse(bsdf).hierarchy if isinstance(n, mi.BSDF) and n is not bsdf]
+    return len(nested) > 0 and all(n.class_name() == _LAMBERTIAN for n in nested)
+
+
+def lambertian_table(shapes) -> mi.Bool | None:
+    """A table of the BSDFs of ``shapes`` (by their registry index) that
+    :func:`is_lambertian`, or ``None`` where no shape but lights has one: nothing worth
+    sharing (a shape without a BSDF of its own, as a light often is, has Mitsuba's default
+    ``diffuse``)."""
+    ids, surfaces = set(), False
+    for shape in shapes:
+        bsdf = shape.bsdf()
+        if bsdf is not None and is_lambertian(bsdf):
+            ids.add(int(dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(bsdf))[0]))
+            surfaces |= not shape.is_emitter()
+    if not surfaces:
+        return None
+    table = [False] * (max(ids) + 1)
+    for i in ids:
+        table[i] = True
+    return mi.Bool(table)
+
+
+def lambertian(table: mi.Bool, bsdf: mi.BSDFPtr, active: mi.Bool) -> mi.Bool:
+    """Whether the BSDFs ``bsdf`` are in ``table`` (:func:`lambertian_table`)."""
+    index = dr.reinterpret_array(mi.UInt32, bsdf)
+    active = active & (bsdf != None) & (index < dr.width(table))  # noqa: E711
+    return dr.gather(mi.Bool, table, index, active)
+
+
+def takes_part(bsdf: mi.BSDFPtr, valid: mi.Bool) -> mi.Bool:
+    """Whether a first vertex with ``bsdf`` takes part in its tile's estimate: a surface hit
+    without delta lobes (its BSDF sampling has a density over the whole sphere)."""
+    return valid & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+
+
+class SecondVertex:
+    """What a path keeps of its second vertex ``x2`` for its tile: the point, and its geometric
+    and shading normals turned towards the first vertex (the side a neighbour must see it
+    from). Filled by :meth:`record` within the path loop."""
+    DRJIT_STRUCT = {"p": mi.Point3f, "n": mi.Vector3f, "sh_n": mi.Vector3f}
+
+    def __init__(self, p=None, n=None, sh_n=None):
+        self.p = mi.Point3f(0.0) if p is None else p
+        self.n = mi.Vector3f(0.0) if n is None else n
+        self.sh_n = mi.Vector3f(0.0) if sh_n is None else sh_n
+
+    def record(self, si: mi.SurfaceInteraction3f, d: mi.Vector3f, active: mi.Bool) -> None:
+        """``si``: the second vertex, reached along ``d``, where ``active``."""
+        self.p = dr.select(active, si.p, self.p)
+        self.n = dr.select(active, dr.mulsign(si.n, -dr.dot(si.n, d)), self.n)
+        sh_n = si.sh_frame.n
+        self.sh_n = dr.select(active, dr.mulsign(sh_n, -dr.dot(sh_n, d)), self.sh_n)
+
+
+class SharedLight:
+    """A path's part in its tile's estimate, as ``draaw_v4``'s loop state: whether its light
+    after the second vertex is the tile's (``shared``: its first vertex takes part, its second
+    is Lambertian), the throughput from the second vertex on (``β``), the light the second
+    vertex reflects (``L``, its emission left out) and the vertex (``x2``)."""
+    DRJIT_STRUCT = {"shared": mi.Bool, "β": mi.Spectrum, "L": mi.Spectrum, "x2": SecondVertex}
+
+    def __init__(self, shared=None, β=None, L=None, x2=None):
+        self.shared = mi.Bool(False) if shared is None else shared
+        self.β = mi.Spectrum(1.0) if β is None else β
+        self.L = mi.Spectrum(0.0) if L is None else L
+        self.x2 = SecondVertex() if x2 is None else x2
+
+    def visit(self, table: mi.Bool, depth: mi.UInt32, active: mi.Bool, si: mi.SurfaceInteraction3f,
+              bsdf: mi.BSDFPtr, d: mi.Vector3f) -> None:
+        """At each vertex ``si`` (reached along ``d``): the first says whether it takes part,
+        the second whether it is Lambertian (``table``: :func:`lambertian_table`) and where."""
+        self.shared = dr.select(active & (depth == 0), takes_part(bsdf, si.is_valid()), self.shared)
+        at_x2 = active & (depth == 1)
+        self.shared &= ~at_x2 | lambertian(table, bsdf, at_x2 & si.is_valid())
+        self.x2.record(si, d, at_x2)
+
+    def own_part(self, depth: mi.UInt32, Le: mi.Spectrum, Lr: mi.Spectrum, Le_raw, Lr_raw) -> mi.Spectrum:
+        """The part of a vertex's light that stays the path's own: all of it before a shared
+        path's second vertex, and there the emission it shows (direct light, weighted against
+        the first vertex's light sample); the rest (``Le_raw``, ``Lr_raw``: the emission and
+        light sample without the path's throughput, ``None`` where the scene has none) goes
+        to :attr:`L`."""
+        rel = self.shared & (depth >= 1)
+        if Le_raw is not None:
+            self.L += dr.select(rel & (depth >= 2), self.β * Le_raw, 0.0)
+        if Lr_raw is not None:
+            self.L += dr.select(rel, self.β * Lr_raw, 0.0)
+        return dr.select(rel, dr.select(depth == 1, Le, 0.0), Le + Lr)
+
+    def bounce(self, depth: mi.UInt32, weight: mi.Spectrum) -> None:
+        """A BSDF sample's weight, counted from the second vertex on."""
+        self.β = dr.select(depth >= 1, self.β * weight, self.β)
+
+
+def tile_estimate(scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
+                  flags: mi.RayFlags, active: mi.Bool, shared: mi.Bool, x2: SecondVertex,
+                  Lr: mi.Spectrum) -> mi.Spectrum:
+    """The reflected light at each lane's first vertex from its tile's shared samples (the
+    sum over ``k`` in the module docstring). ``ray``, ``pi``: the camera rays and their first
+    intersections; ``shared``: whether a lane's own sample is shared (its first vertex takes
+    part, its second is Lambertian); ``x2``, ``Lr``: its second vertex and the light that
+    vertex reflects (estimated by the rest of its path, its emission left out)."""
+    n = dr.width(shared)
+    if n != layout.lanes:
+        raise ValueError(f"pixel_reuse.tile_estimate: {n} lanes; expected {layout.lanes} "
+                         f"({layout.width}x{layout.height} pixels x {layout.spp} spp)")
+    si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
+    bsdf = si.bsdf(ray)
+    part = active & takes_part(bsdf, si.is_valid())
+    ctx = mi.BSDFContext()
+
+    lane = dr.arange(mi.UInt32, n)
+    pixel = lane // layout.spp
+    s = lane - pixel * layout.spp
+    py = pixel // layout.width
+    px = pixel - py * layout.width
+    tx, ty = px - px % TILE, py - py % TILE
+    members, inside = [], []
+    for k in range(TILE * TILE):
+        qx, qy = tx + k % TILE, ty + k // TILE
+        inside.append((qx < layout.width) & (qy < layout.height))
+        members.append(dr.select(inside[-1], (qy * layout.width + qx) * layout.spp + s, lane))
+
+    # this lane's BSDF value and density towards each member's x2 (area measure at x2)
+    f, p = [], []
+    for k, m in enumerate(members):
+        own = m == lane
+        q = dr.gather(SecondVertex, x2, m)
+        ok = part & inside[k] & dr.gather(mi.Bool, shared, m)
+        v = q.p - si.p
+        d2 = dr.squared_norm(v)
+        d = v * dr.rsqrt(dr.maximum(d2, 1e-30))
+        cos2 = dr.abs(dr.dot(q.n, d))
+        # a neighbour sees x2 from the side its own path did, unoccluded (the own path: by
+        # construction, and its sample counts here whatever rounding says)
+        seen = (d2 > 0) & (dr.dot(q.n, d) < 0) & (dr.dot(q.sh_n, d) < 0)
+        ok &= own | (seen & ~scene.ray_test(si.spawn_ray_to(q.p), ok & seen & ~own))
+        value, pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
+        g = cos2 / dr.maximum(d2, 1e-30)
+        f.append(dr.select(ok, value * g, 0.0))
+        p.append(dr.select(ok, pdf * g, 0.0))
+    dr.eval(f, p)
+
+    # the balance heuristic's denominator for member k's sample: every member's density
+    out = mi.Spectrum(0.0)
+    for k, m in enumerate(members):
+        total = mi.Float(0.0)
+        for j, mj in enumerate(members):
+            total += dr.select(inside[j], dr.gather(mi.Float, p[k], mj), 0.0)
+        lr = dr.gather(mi.Spectrum, Lr, m)
+        out += dr.select(total > 0, f[k] * lr / dr.maximum(total, 1e-30), 0.0)
+    return out

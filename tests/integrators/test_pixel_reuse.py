@@ -1,0 +1,211 @@
+"""``draaw_v4``'s path reuse among 2x2 pixel tiles (``draaw_mi.integrators.pixel_reuse``):
+``path``'s expectation per pixel under the suite's filters, lower variance where light arrives
+after a bounce, passes of a bounded size, and no code where the scene has nothing to share."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from integrators_helpers import check_same_expectation, integrator, render_np, seed_stack
+
+from draaw_mi.bench import suite as ss
+from draaw_mi.integrators import pixel_reuse
+
+
+# the suite's scenes with Lambertian surfaces: box (doorway, glossy_diffuse), tent
+# (mitsuba_cbox, as shipped), gaussian (spot_and_area, whose normal-mapped diffuse panel is
+# not shared)
+@pytest.mark.parametrize("name", ["doorway", "mitsuba_cbox", "spot_and_area", "glossy_diffuse"])
+def test_shared_paths_keep_paths_expectation(name):
+    scene = ss.load(name, 10)
+    depth = ss.max_depth(name)
+    K, spp = 24, 512
+    ref = seed_stack(scene, integrator("path", max_depth=depth, hide_emitters=True), spp, range(K))
+    v4 = integrator("draaw_v4", max_depth=depth, hide_emitters=True, pixel_reuse="on")
+    assert v4.reuse_table(scene, scene.sensors()[0], spp) is not None
+    st = seed_stack(scene, v4, spp, range(300, 300 + K))
+    assert np.isfinite(st).all()
+    check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)
+
+
+def _doorway(width, height, rfilter="box"):
+    d = ss.build("doorway", 16)
+    d["sensor"]["film"].update(width=width, height=height, rfilter={"type": rfilter})
+    return mi.load_dict(d)
+
+
+def test_odd_films_in_passes_keep_paths_expectation(monkeypatch):
+    """A film of odd size (tiles cut at its right and bottom edges), a gaussian filter, and
+    the render in four passes (the parts of one stratified pattern)."""
+    monkeypatch.setattr(pixel_reuse, "PASS_LANES", 9 * 7 * 64)
+    scene = _doorway(9, 7, "gaussian")
+    K, spp = 24, 256
+    ref = seed_stack(scene, integrator("path"), spp, range(K))
+    st = seed_stack(scene, integrator("draaw_v4", pixel_reuse="on"), spp, range(300, 300 + K))
+    assert np.isfinite(st).all()
+    check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)
+
+
+@pytest.mark.parametrize("stratify", [True, False])
+def test_passes_take_the_parts_of_one_pattern_or_their_own_seeds(monkeypatch, stratify):
+    """A render of 64 spp in passes of 16: with V4's stratified sampler each pass draws the
+    next quarter of the one 64-sample pattern; with independent samples each its own seed."""
+    from draaw_mi.integrators import film_splat
+    seen, real = [], film_splat.splat_pass
+
+    def spy(integ, scene, sensor, seed, spp, splat, own_emission):
+        seen.append((integ._strata_part if stratify else seed, spp, integ._reuse_layout.lanes))
+        return real(integ, scene, sensor, seed, spp, splat, own_emission)
+
+    monkeypatch.setattr(film_splat, "splat_pass", spy)
+    monkeypatch.setattr(pixel_reuse, "PASS_LANES", 16 * 16 * 16)
+    scene = _doorway(16, 16)
+    img = render_np(scene, integrator("draaw_v4", pixel_reuse="on", stratify=stratify, adaptive=False), 64, 5)
+    assert np.isfinite(img).all()
+    lanes = 16 * 16 * 16
+    if stratify:
+        assert seen == [((64, 0), 16, lanes), ((64, 16), 16, lanes), ((64, 32), 16, lanes), ((64, 48), 16, lanes)]
+    else:
+        assert [s[1:] for s in seen] == [(16, lanes)] * 4 and len({s[0] for s in seen}) == 4
+
+
+def test_sharing_lowers_the_doorways_variance():
+    """The doorway's light arrives after a bounce: the tile's four samples of it take its
+    per-pixel variance to about a third (measured 0.35x at 128^2; 0.6x allows for 8 renders)."""
+    scene = _doorway(32, 32)
+    on = seed_stack(scene, integrator("draaw_v4", pixel_reuse="on"), 16, range(8))
+    off = seed_stack(scene, integrator("draaw_v4", pixel_reuse="off"), 16, range(8))
+    ratio = on.var(0, ddof=1).mean() / off.var(0, ddof=1).mean()
+    assert ratio < 0.6, ratio
+
+
+@pytest.mark.parametrize("bsdf, expected", [
+    ({"type": "diffuse"}, True),
+    ({"type": "diffuse", "reflectance": {"type": "checkerboard"}}, True),
+    ({"type": "twosided", "bsdf": {"type": "diffuse"}}, True),
+    ({"type": "twosided", "bsdf": {"type": "diffuse"}, "bsdf2": {"type": "roughplastic"}}, False),
+    ({"type": "normalmap", "bsdf": {"type": "diffuse"},
+      "normalmap": {"type": "bitmap", "raw": True, "bitmap": mi.Bitmap(np.full((2, 2, 3), 0.5, np.float32))}}, False),
+    ({"type": "bumpmap", "bsdf": {"type": "diffuse"}, "arg": {"type": "checkerboard"}}, False),
+    ({"type": "roughplastic"}, False),
+    ({"type": "draaw", "roughness": 1.0, "metallic": 0.0}, False),
+])
+def test_only_lambertian_surfaces_are_shared(bsdf, expected):
+    # (a normal or bump map has its nested diffuse's flags, but reflects nothing below its
+    # perturbed horizon: the light it reflects depends on where it is seen from)
+    assert pixel_reuse.is_lambertian(mi.load_dict(bsdf)) is expected
+
+
+def test_lights_alone_give_nothing_to_share():
+    lights_only = ss.load("metals", 8)            # draaw materials; the lights' default diffuse
+    assert pixel_reuse.lambertian_table(lights_only.shapes()) is None
+    table = pixel_reuse.lambertian_table(ss.load("doorway", 8).shapes())
+    assert table is not None and dr.any(table)
+
+
+def _kernel_ops(scene, integ, spp=16):
+    mi.render(scene, integrator=integ, spp=spp, seed=1)       # traced and compiled
+    dr.kernel_history()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        img = mi.render(scene, integrator=integ, spp=spp, seed=2)
+        dr.eval(img)
+        return sorted(k["operation_count"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT)
+
+
+def test_no_sharing_code_where_the_scene_has_nothing_to_share():
+    metals = ss.load("metals", 16)
+    assert _kernel_ops(metals, integrator("draaw_v4", max_depth=5, pixel_reuse="on")) == \
+        _kernel_ops(metals, integrator("draaw_v4", max_depth=5, pixel_reuse="off"))
+    doorway = _doorway(16, 16)
+    assert _kernel_ops(doorway, integrator("draaw_v4", pixel_reuse="on")) != \
+        _kernel_ops(doorway, integrator("draaw_v4", pixel_reuse="off"))
+
+
+def test_auto_shares_where_the_light_arrives_after_a_bounce():
+    """``auto``: the doorway (indirect share about 0.45) and Mitsuba's Cornell box (0.23)
+    share in a render of 128^2 x 64; the spot beside an area light (0.09) does not, and no
+    scene does in a small render (below guiding's sizes)."""
+    for name, expected in (("doorway", True), ("mitsuba_cbox", True), ("spot_and_area", False)):
+        scene = ss.load(name, 128)
+        v4 = integrator("draaw_v4", max_depth=ss.max_depth(name), guiding="off")
+        sensor = scene.sensors()[0]
+        assert (v4.reuse_table(scene, sensor, 64) is not None) is expected, name
+        assert v4.reuse_table(scene, sensor, 16) is None, name
+
+
+def test_gradient_passes_do_not_share():
+    """A differentiable render's image shares; its gradient pass samples as before (the
+    layout is only set around uniform primal passes): the same gradient as without sharing."""
+    grads = []
+    for mode in ("on", "off"):
+        scene = _doorway(16, 16)
+        params = mi.traverse(scene)
+        key = next(k for k in params.keys() if k.endswith("reflectance.value") and dr.all(params[k] > 0, axis=None))
+        dr.enable_grad(params[key])
+        params.update()
+        img = mi.render(scene, params, integrator=integrator("draaw_v4", pixel_reuse=mode), spp=16, seed=3)
+        dr.backward(dr.mean(img, axis=None))
+        grads.append(np.array(dr.grad(params[key])))
+    assert np.isfinite(grads[0]).all() and np.abs(grads[0]).sum() > 0
+    np.testing.assert_array_equal(grads[0], grads[1])
+
+
+def test_a_panel_seen_edge_on_shares_each_side_with_its_own():
+    """A two-sided panel seen edge-on, lit on one side only: the floor's tiles astride its
+    line see the panel's lit face from one side and its dark face from the other, and each
+    side's light is shared only with the pixels on that side."""
+    T = mi.ScalarTransform4f
+    white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.8}}}
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 30,
+                   "to_world": T().look_at(origin=[0, 1.5, 4], target=[0, 0.3, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 10, "height": 10, "rfilter": {"type": "box"}}},
+        "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(3), "bsdf": white},
+        "panel": {"type": "rectangle", "bsdf": white,
+                  "to_world": T().translate([0, 1.5, 0]).rotate([0, 1, 0], 90).scale([3, 1.5, 1])},
+        "lamp": {"type": "rectangle", "to_world": T().translate([1.5, 2.5, 0]).rotate([1, 0, 0], 90).scale(0.3),
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 40.0}}},
+    })
+    K, spp = 24, 512
+    ref = seed_stack(scene, integrator("path", max_depth=4), spp, range(K))
+    st = seed_stack(scene, integrator("draaw_v4", max_depth=4, pixel_reuse="on"), spp, range(300, 300 + K))
+    check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)
+
+
+def _floor_and_wall(light: dict):
+    T = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "scene", "light": light,
+        "sensor": {"type": "perspective", "to_world": T().look_at(origin=[0, 1, 3], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 16, "height": 16, "rfilter": {"type": "box"}}},
+        "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(3), "bsdf": {"type": "diffuse"}},
+        "wall": {"type": "rectangle", "to_world": T().translate([0, 1, -1]).scale(3), "bsdf": {"type": "diffuse"}}})
+
+
+def test_a_sky_is_left_unshared_and_a_lamp_is_not():
+    """Under a constant sky the light after a bounce is smooth and sharing adds variance (the
+    balance heuristic's sum of four pixels' samples): ``auto`` leaves it; a point light's
+    light after a bounce is shared, with less variance."""
+    sky = _floor_and_wall({"type": "constant", "radiance": 1.0})
+    lamp = _floor_and_wall({"type": "point", "position": [0, 1, 0.5], "intensity": 5.0})
+    assert pixel_reuse.sky_only(sky) and not pixel_reuse.sky_only(lamp)
+    var = {}
+    for name, scene in (("sky", sky), ("lamp", lamp)):
+        for mode in ("on", "off"):
+            var[name, mode] = seed_stack(scene, integrator("draaw_v4", pixel_reuse=mode), 64, range(12)).var(0, ddof=1).mean()
+    assert var["sky", "on"] > 1.05 * var["sky", "off"], var     # (1.13x measured)
+    assert var["lamp", "on"] < 0.7 * var["lamp", "off"], var
+
+
+def test_info_says_whether_v4_shares(capsys):
+    from draaw_mi.cli import main
+    cbox = ss.os.path.join(ss.ROOT, "scenes", "mitsuba_cbox.xml")
+    assert main(["info", cbox, "-D", "res=128", "-D", "spp=64"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("v4 reuse:"))
+    assert "2x2 pixel tiles share" in line and "auto: 2" in line, line      # (23 % after a bounce)
+    assert main(["info", cbox, "-D", "res=128", "-D", "spp=16"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("v4 reuse:"))
+    assert line.strip() == "v4 reuse: off (auto: renders from 64 spp and 2^20 samples)", line
