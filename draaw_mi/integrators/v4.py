@@ -252,6 +252,7 @@ class DraawV4Integrator(V4Passes):
         self.guides = guide_cache.GuideCache(mode)
         self._guide = self._guide_records = None    # set around guided primal renders (guiding.py)
         self._reuse_layout = None      # pixel_reuse.Layout of a uniform primal pass that shares
+        self._reuse_table = None       # its Lambertian BSDFs (Held: not loop state) while a shared render runs
         self._lambertian_memo = None   # (scene's selection_key, its Lambertian BSDFs' table | None)
         self._reuse_shares = {}        # selection_key -> indirect share, where guiding measured none
         self.pixel_reuse = str(props.get("pixel_reuse", "auto"))

@@ -22,7 +22,7 @@ import mitsuba as mi
 
 from . import adaptive_sampling as ads
 from . import emission_split, film_splat, glints, guiding, pixel_reuse, stratify
-from .features import scene_shapes, sensor_gated_speedups
+from .features import sampler_plugin, scene_shapes, sensor_gated_speedups
 from .light_tables import LightTables
 from .strata_sampler import strata_sampler
 
@@ -152,6 +152,8 @@ class V4Passes(LightTables):
         pass that adds the boundary terms of SDF shapes (all of it: they reseed their sampler
         for the rays of a band); else the sensor's."""
         sampler, n = super().prepare(sensor, seed, spp, list(aovs))   # (the film prepared)
+        if self._reuse_table is not None:      # a pass of a shared render: its lanes as taken
+            self._reuse_layout = pixel_reuse.Layout.of(sensor, n, self._reuse_table.value)
         scene = self._stratify_scene
         if scene is not None and self.sdf_band is None and self.stratified(scene, sensor, n):
             return strata_sampler(n, seed, sampler.wavefront_size(), self._strata_part), n
@@ -178,7 +180,7 @@ class V4Passes(LightTables):
                 return film_splat.render_uniform(self, scene, sensor, seed, spp, develop, evaluate)
             return super().render_primal(scene, sensor, seed, spp, develop, evaluate)
         finally:
-            self._primary = self._reuse_layout = None
+            self._primary = self._reuse_layout = self._reuse_table = None
 
     def _render_shared(self, scene, sensor, seed, spp, evaluate, own_emission, table):
         """A uniform render whose paths share their light within 2x2 pixel tiles
@@ -193,11 +195,11 @@ class V4Passes(LightTables):
         given = self._strata_part
         pattern, offset = given or (n, 0)
         splat = None
-        try:
+        self._reuse_table = emission_split.Held(table)   # (prepare() sets each pass's layout,
+        try:                        # with the count its sampler takes: ldsampler rounds 11 up to 16)
             for i, start in enumerate(range(0, n, per_pass)):
                 count = min(per_pass, n - start)
                 self._strata_part = (pattern, offset + start)
-                self._reuse_layout = pixel_reuse.Layout.of(sensor, count, table)
                 splat = film_splat.splat_pass(self, scene, sensor,
                                               seed if stratified else pixel_reuse.pass_seed(seed, i),
                                               count, splat, own_emission)
@@ -219,15 +221,21 @@ class V4Passes(LightTables):
         """``(table | None, why)``: :meth:`reuse_table` and the reason in a few words
         (``draaw-mi info``). ``pixel_reuse``: ``on``, or ``auto`` where the scene's indirect
         share (guiding's pilot) is at least :data:`~.pixel_reuse.SHARE_MIN` in renders as
-        large as guiding's, unless only environments light it
-        (:func:`~.pixel_reuse.sky_only`); never in ``dr.freeze`` recordings, with media,
-        ``max_depth`` 2 or less, or without a Lambertian surface that is not a light."""
+        large as guiding's of images up to :data:`~.pixel_reuse.AUTO_MAX_PIXELS` pixels with
+        the independent sampler (V4's stratified one in its place; other samplers round each
+        pass's count up: ``on`` then takes more samples than asked), unless only environments
+        light it (:func:`~.pixel_reuse.sky_only`); never in guided renders,
+        ``dr.freeze`` recordings, with media or SDF objects, ``max_depth`` 2 or less, or
+        without a Lambertian surface that is not a light."""
         if self.pixel_reuse == "off":
             return None, "pixel_reuse=off"
+        if self._guide is not None or self.guides.mode == "on":
+            return None, "a guided render"
         if dr.flag(dr.JitFlag.FreezingScope):
             return None, "a frozen render"
-        if self.features(scene)["media"]:
-            return None, "participating media"
+        feats = self.features(scene)
+        if feats["media"] or feats["sdf"]:
+            return None, "participating media" if feats["media"] else "SDF objects"
         if 0 <= self.max_depth <= 2:
             return None, f"max_depth={self.max_depth}: no light after a bounce"
         table = self._lambertian_table(scene)
@@ -240,6 +248,12 @@ class V4Passes(LightTables):
         if not pixel_reuse.large_enough(n, n * int(size[0]) * int(size[1])):
             return None, (f"auto: renders from {guiding.AUTO_MIN_SPP} spp and "
                           f"2^{guiding.PILOTED_MIN_SAMPLES.bit_length() - 1} samples")
+        if int(size[0]) * int(size[1]) > pixel_reuse.AUTO_MAX_PIXELS:
+            return None, (f"auto: images up to 2^{pixel_reuse.AUTO_MAX_PIXELS.bit_length() - 1} pixels "
+                          "(a pass keeps one sample of every pixel)")
+        kind = sampler_plugin(sensor.sampler())
+        if kind != "independent":
+            return None, f"auto: the scene's {kind} sampler (which would round each pass's count)"
         if pixel_reuse.sky_only(scene):
             return None, "auto: only environments light the scene"
         key = self.selection_key(scene)

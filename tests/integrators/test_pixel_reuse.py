@@ -56,8 +56,9 @@ def test_passes_take_the_parts_of_one_pattern_or_their_own_seeds(monkeypatch, st
     seen, real = [], film_splat.splat_pass
 
     def spy(integ, scene, sensor, seed, spp, splat, own_emission):
+        out = real(integ, scene, sensor, seed, spp, splat, own_emission)
         seen.append((integ._strata_part if stratify else seed, spp, integ._reuse_layout.lanes))
-        return real(integ, scene, sensor, seed, spp, splat, own_emission)
+        return out
 
     monkeypatch.setattr(film_splat, "splat_pass", spy)
     monkeypatch.setattr(pixel_reuse, "PASS_LANES", 16 * 16 * 16)
@@ -209,3 +210,56 @@ def test_info_says_whether_v4_shares(capsys):
     assert main(["info", cbox, "-D", "res=128", "-D", "spp=16"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("v4 reuse:"))
     assert line.strip() == "v4 reuse: off (auto: renders from 64 spp and 2^20 samples)", line
+
+
+def test_auto_leaves_images_above_1024_squared_unshared():
+    """A pass keeps one sample of every pixel: ``auto`` shares up to 2^20 pixels (a 1024^2
+    render peaks at 1.8x ``path``'s memory; 2048^2 would add 0.6 GiB), ``on`` above too."""
+    scene = _doorway(1024, 1025)
+    sensor = scene.sensors()[0]
+    table, why = integrator("draaw_v4", guiding="off").reuse_decision(scene, sensor, 64)
+    assert table is None and why.startswith("auto: images up to 2^20 pixels"), why
+    assert integrator("draaw_v4", pixel_reuse="on").reuse_table(scene, sensor, 64) is not None
+
+
+def test_a_guided_render_renders_in_one_pass_unshared(monkeypatch):
+    """Guided paths are not shared (``sample()`` leaves them), so a guided render takes
+    Mitsuba's one pass, not the shared render's passes."""
+    from draaw_mi.integrators import film_splat
+    calls = []
+    real = film_splat.splat_pass
+    monkeypatch.setattr(film_splat, "splat_pass", lambda *a, **k: calls.append(1) or real(*a, **k))
+    scene = _doorway(16, 16)
+    img = render_np(scene, integrator("draaw_v4", pixel_reuse="on", guiding="on"), 64, 1)
+    assert np.isfinite(img).all() and calls == []
+    render_np(scene, integrator("draaw_v4", pixel_reuse="on", guiding="off"), 64, 1)
+    assert calls == [1]
+
+
+@pytest.mark.parametrize("sampler", ["ldsampler", "stratified", "multijitter"])
+def test_a_scenes_own_sampler_that_rounds_its_count_shares_the_lanes_it_takes(monkeypatch, sampler):
+    """Passes of 3 spp, which these samplers round up (to 4 or 6): each pass's tiles are laid
+    out by the count its sampler takes."""
+    d = ss.build("doorway", 8)
+    d["sensor"]["sampler"] = {"type": sampler, "sample_count": 12}
+    scene = mi.load_dict(d)
+    monkeypatch.setattr(pixel_reuse, "PASS_LANES", 8 * 8 * 3)
+    img = render_np(scene, integrator("draaw_v4", pixel_reuse="on"), 12, 1)
+    assert np.isfinite(img).all() and img.mean() > 0
+
+
+def test_a_drjit_seed_renders_in_passes(monkeypatch):
+    monkeypatch.setattr(pixel_reuse, "PASS_LANES", 8 * 8 * 4)
+    scene = _doorway(8, 8)
+    v4 = integrator("draaw_v4", pixel_reuse="on", stratify=False, adaptive=False)
+    img = np.array(mi.render(scene, integrator=v4, spp=16, seed=mi.UInt32(3)))
+    assert np.isfinite(img).all() and img.mean() > 0
+    assert pixel_reuse.pass_seed(mi.UInt32(3), 2)[0] != 3
+
+
+def test_auto_keeps_a_scenes_own_sampler_unshared():
+    d = ss.build("doorway", 128)
+    d["sensor"]["sampler"] = {"type": "ldsampler", "sample_count": 64}
+    scene = mi.load_dict(d)
+    table, why = integrator("draaw_v4", guiding="off").reuse_decision(scene, scene.sensors()[0], 64)
+    assert table is None and "ldsampler" in why, why
