@@ -244,6 +244,8 @@ class V4Passes(LightTables):
         if self.pixel_reuse == "on":
             return table, "pixel_reuse=on"
         n = int(spp) if spp else int(sensor.sampler().sample_count())
+        if self._strata_part is not None:       # the rest of a pattern after adaptive sampling's
+            n = self._strata_part[0]            # pilot: the render's count decides
         size = sensor.film().crop_size()
         if not pixel_reuse.large_enough(n, n * int(size[0]) * int(size[1])):
             return None, (f"auto: renders from {guiding.AUTO_MIN_SPP} spp and "

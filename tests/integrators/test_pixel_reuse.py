@@ -263,3 +263,16 @@ def test_auto_keeps_a_scenes_own_sampler_unshared():
     scene = mi.load_dict(d)
     table, why = integrator("draaw_v4", guiding="off").reuse_decision(scene, scene.sensors()[0], 64)
     assert table is None and "ldsampler" in why, why
+
+
+def test_a_scenes_first_render_shares_after_its_pilot(monkeypatch):
+    """A scene's first render (one ``draaw-mi render``): adaptive sampling's pilot decides on
+    guiding, then the rest of each pixel's pattern (60 of 64) renders uniformly, and shares:
+    the render is 64 spp, as large as ``auto`` asks."""
+    from draaw_mi.integrators import film_splat
+    calls = []
+    real = film_splat.splat_pass
+    monkeypatch.setattr(film_splat, "splat_pass", lambda *a, **k: calls.append(a[4]) or real(*a, **k))
+    scene = ss.load("doorway", 128)
+    img = render_np(scene, integrator("draaw_v4"), 64, 1)
+    assert np.isfinite(img).all() and sum(calls) == 60, calls
