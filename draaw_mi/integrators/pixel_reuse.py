@@ -15,8 +15,10 @@ heuristic over the four pixels' sampling densities (all in area measure at ``x2`
 
     I_c ~ sum_k f_c(y_k) G_ck V_ck Lr_k / sum_j p_j(y_k)
 
-which is multiple importance sampling with one sample per technique, so unbiased wherever the
-pixel's own technique covers its integrand (its BSDF samples every direction it reflects from).
+which is multiple importance sampling with one sample per technique, so unbiased where the
+pixel's own technique covers its integrand (its BSDF samples every direction it reflects from)
+and each density counted is that of a sample its pixel delivers: a pixel's path stops where its
+first vertex reflects nothing (black), so there its density counts for nothing.
 A pixel whose first vertex has a delta lobe (glass, a mirror, smooth plastic) takes no part: it
 keeps its own sample, as do samples whose ``x2`` is not Lambertian (glossy, textured with a
 normal map the side test cannot see, transmissive), which its own pixel alone estimates. The
@@ -255,7 +257,10 @@ def tile_estimate(scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.Preli
         value, pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
         g = cos2 / dr.maximum(d2, 1e-30)
         f.append(dr.select(ok, value * g, 0.0))
-        p.append(dr.select(ok, pdf * g, 0.0))
+        # a density counts where this pixel's path would carry the sample on: where its BSDF
+        # reflects (a black first vertex, as a light's default BSDF or a black texel, stops
+        # its path there, and counting its density would darken the tile)
+        p.append(dr.select(ok & (dr.max(value) > 0), pdf * g, 0.0))
     dr.eval(f, p)
 
     # the balance heuristic's denominator for member k's sample: every member's density

@@ -105,12 +105,16 @@ class DraawV4Integrator(V4Passes):
        - Path reuse in primal renders (:mod:`~draaw_mi.integrators.pixel_reuse`): the light
          a path's first vertex receives after a bounce off a Lambertian surface (Mitsuba's
          ``diffuse``) is shared among the four pixels of a 2x2 tile, each seeing the others'
-         second vertices through a shadow ray, combined by the balance heuristic (unbiased).
-         ``auto`` shares in renders as large as guiding's (64 spp, 2^20 samples) of scenes with
-         a Lambertian surface other than a light where a pilot finds at least 15 % of the light
-         arriving after the first bounce (once per scene), and not in guided renders; ``on``
-         in every uniform primal render with such a surface; ``off`` never. Gradient passes
-         do not share. (Default: ``auto``)
+         second vertices through a shadow ray, combined by the balance heuristic (the
+         expectation stays ``path``'s). ``auto`` shares in renders of at least 64 spp and 2^20
+         samples, images up to 2^20 pixels, with the independent sampler (V4's stratified one
+         in its place), of scenes with a Lambertian surface other than a light, not lit by
+         environments alone, where a pilot finds at least 15 % of the light arriving after the
+         first bounce (once per scene); ``on`` wherever sharing can run; ``off`` never. It
+         never runs in guided renders (and with ``guiding = "on"``), adaptive sampling's
+         passes, gradient passes, ``dr.freeze`` recordings, or with media, SDF objects or
+         ``max_depth`` <= 2 (``draaw-mi info SCENE`` says whether and why).
+         (Default: ``auto``)
 
      * - hide_emitters
        - |bool|
@@ -253,7 +257,7 @@ class DraawV4Integrator(V4Passes):
         self._guide = self._guide_records = None    # set around guided primal renders (guiding.py)
         self._reuse_layout = None      # pixel_reuse.Layout of a uniform primal pass that shares
         self._reuse_table = None       # its Lambertian BSDFs (Held: not loop state) while a shared render runs
-        self._lambertian_memo = None   # (scene's selection_key, its Lambertian BSDFs' table | None)
+        self._lambertian_memo = None   # (scene's selection_key, Lambertian table | None, why not | None)
         self._reuse_shares = {}        # selection_key -> indirect share, where guiding measured none
         self.pixel_reuse = str(props.get("pixel_reuse", "auto"))
         if self.pixel_reuse not in ("auto", "on", "off"):

@@ -276,3 +276,40 @@ def test_a_scenes_first_render_shares_after_its_pilot(monkeypatch):
     scene = ss.load("doorway", 128)
     img = render_np(scene, integrator("draaw_v4"), 64, 1)
     assert np.isfinite(img).all() and sum(calls) == 60, calls
+
+
+def _room(extra=None, camera=None):
+    T = mi.ScalarTransform4f
+    white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.7}}}
+    d = {"type": "scene",
+         "sensor": camera or {"type": "perspective", "fov": 60,
+                              "to_world": T().look_at(origin=[0, 1, 2.5], target=[0, 1.2, 0], up=[0, 1, 0])},
+         "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(2), "bsdf": white},
+         "ceiling": {"type": "rectangle", "to_world": T().translate([0, 2, 0]).rotate([1, 0, 0], 90).scale(2), "bsdf": white},
+         "back": {"type": "rectangle", "to_world": T().translate([0, 1, -1]).scale(2), "bsdf": white},
+         "light": {"type": "rectangle", "to_world": T().translate([0, 1.99, 0]).rotate([1, 0, 0], 90).scale(0.6),
+                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 10.0}}}}
+    d["sensor"]["film"] = {"type": "hdrfilm", "width": 12, "height": 12, "rfilter": {"type": "box"}}
+    d.update(extra or {})
+    return mi.load_dict(d)
+
+
+@pytest.mark.parametrize("case", ["light in view", "black texels"])
+def test_black_first_vertices_leave_their_tiles_unbiased(case):
+    """A first vertex that reflects nothing (a light's default black BSDF seen directly; a black
+    texel) stops its path: its density must not count in its tile's balance heuristic, which
+    darkened the light's neighbours (z -10) and a checkerboard wall's white texels (z -20)."""
+    if case == "light in view":
+        scene = _room()
+    else:
+        T = mi.ScalarTransform4f
+        checker = {"type": "diffuse", "reflectance": {
+            "type": "checkerboard", "color0": {"type": "rgb", "value": 0.0},
+            "color1": {"type": "rgb", "value": 0.8}, "to_uv": T().scale([4, 4, 1])}}
+        scene = _room({"back": {"type": "rectangle", "to_world": T().translate([0, 1, -1]).scale(1), "bsdf": checker}},
+                      {"type": "perspective", "fov": 40,
+                       "to_world": T().look_at(origin=[0, 0.8, 3.5], target=[0, 0.8, -1], up=[0, 1, 0])})
+    K, spp = 24, 64
+    ref = seed_stack(scene, integrator("path"), spp, range(K))
+    st = seed_stack(scene, integrator("draaw_v4", pixel_reuse="on"), spp, range(600, 600 + K))
+    check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)
