@@ -106,8 +106,8 @@ class DraawV4Integrator(V4Passes):
          a path's first vertex receives after a bounce off a Lambertian surface (Mitsuba's
          ``diffuse``) is shared among the four pixels of a 2x2 tile, each seeing the others'
          second vertices through a shadow ray, combined by the balance heuristic (the
-         expectation stays ``path``'s). ``auto`` shares in renders of at least 64 spp and 2^20
-         samples, images up to 2^20 pixels, with the independent sampler (V4's stratified one
+         expectation stays ``path``'s). ``auto`` shares in renders of 2^20 samples or more
+         (any spp), images up to 2^20 pixels, with the independent sampler (V4's stratified one
          in its place), of scenes with a Lambertian surface other than a light, not lit by
          environments alone, where a pilot finds at least 15 % of the light arriving after the
          first bounce (once per scene); ``on`` wherever sharing can run; ``off`` never. It

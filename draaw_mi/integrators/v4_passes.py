@@ -220,9 +220,9 @@ class V4Passes(LightTables):
     def reuse_decision(self, scene, sensor, spp) -> tuple:
         """``(table | None, why)``: :meth:`reuse_table` and the reason in a few words
         (``draaw-mi info``). ``pixel_reuse``: ``on``, or ``auto`` where the scene's indirect
-        share (guiding's pilot) is at least :data:`~.pixel_reuse.SHARE_MIN` in renders as
-        large as guiding's of images up to :data:`~.pixel_reuse.AUTO_MAX_PIXELS` pixels with
-        the independent sampler (V4's stratified one in its place; other samplers round each
+        share (guiding's pilot) is at least :data:`~.pixel_reuse.SHARE_MIN` in renders of 2^20
+        samples or more (:func:`~.pixel_reuse.large_enough`) of images up to
+        :data:`~.pixel_reuse.AUTO_MAX_PIXELS` pixels with the independent sampler (V4's stratified one in its place; other samplers round each
         pass's count up: ``on`` then takes more samples than asked), unless only environments
         light it (:func:`~.pixel_reuse.sky_only`); never in guided renders,
         ``dr.freeze`` recordings, with media or SDF objects, ``max_depth`` 2 or less, or
@@ -246,9 +246,8 @@ class V4Passes(LightTables):
         if self._strata_part is not None:       # the rest of a pattern after adaptive sampling's
             n = self._strata_part[0]            # pilot: the render's count decides
         size = sensor.film().crop_size()
-        if not pixel_reuse.large_enough(n, n * int(size[0]) * int(size[1])):
-            return None, (f"auto: renders from {guiding.AUTO_MIN_SPP} spp and "
-                          f"2^{guiding.PILOTED_MIN_SAMPLES.bit_length() - 1} samples")
+        if not pixel_reuse.large_enough(n * int(size[0]) * int(size[1])):
+            return None, f"auto: renders of 2^{guiding.PILOTED_MIN_SAMPLES.bit_length() - 1} samples or more"
         if int(size[0]) * int(size[1]) > pixel_reuse.AUTO_MAX_PIXELS:
             return None, (f"auto: images up to 2^{pixel_reuse.AUTO_MAX_PIXELS.bit_length() - 1} pixels "
                           "(a pass keeps one sample of every pixel)")

@@ -126,14 +126,16 @@ def test_no_sharing_code_where_the_scene_has_nothing_to_share():
 
 def test_auto_shares_where_the_light_arrives_after_a_bounce():
     """``auto``: the doorway (indirect share about 0.45) and Mitsuba's Cornell box (0.23)
-    share in a render of 128^2 x 64; the spot beside an area light (0.09) does not, and no
-    scene does in a small render (below guiding's sizes)."""
+    share in a render of 128^2 x 64, and at 256^2 x 16; the spot beside an area light (0.09)
+    does not, and no scene does in a render of fewer than 2^20 samples."""
     for name, expected in (("doorway", True), ("mitsuba_cbox", True), ("spot_and_area", False)):
         scene = ss.load(name, 128)
         v4 = integrator("draaw_v4", max_depth=ss.max_depth(name), guiding="off")
         sensor = scene.sensors()[0]
         assert (v4.reuse_table(scene, sensor, 64) is not None) is expected, name
         assert v4.reuse_table(scene, sensor, 16) is None, name
+    scene = ss.load("doorway", 256)
+    assert integrator("draaw_v4").reuse_table(scene, scene.sensors()[0], 16) is not None
 
 
 def test_gradient_passes_do_not_share():
@@ -150,7 +152,8 @@ def test_gradient_passes_do_not_share():
         dr.backward(dr.mean(img, axis=None))
         grads.append(np.array(dr.grad(params[key])))
     assert np.isfinite(grads[0]).all() and np.abs(grads[0]).sum() > 0
-    np.testing.assert_array_equal(grads[0], grads[1])
+    # (equal up to the order of the gradient's atomic sums over two threads)
+    np.testing.assert_allclose(grads[0], grads[1], rtol=1e-5)
 
 
 def test_a_panel_seen_edge_on_shares_each_side_with_its_own():
@@ -209,7 +212,7 @@ def test_info_says_whether_v4_shares(capsys):
     assert "2x2 pixel tiles share" in line and "auto: 2" in line, line      # (23 % after a bounce)
     assert main(["info", cbox, "-D", "res=128", "-D", "spp=16"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("v4 reuse:"))
-    assert line.strip() == "v4 reuse: off (auto: renders from 64 spp and 2^20 samples)", line
+    assert line.strip() == "v4 reuse: off (auto: renders of 2^20 samples or more)", line
 
 
 def test_auto_leaves_images_above_1024_squared_unshared():
