@@ -74,6 +74,7 @@ class GuideCache:
     def __init__(self, mode: str):
         self.mode = mode
         self._entries = {}        # key -> (emitter array, guiding.Guide | None, indirect share)
+        self._measured = {}       # key -> (emitter array, indirect share) measured before a decision
 
     def wanted(self, sensor: mi.Sensor, spp: int, piloted: bool = False) -> bool:
         """Whether a primal render of ``spp`` samples per pixel through ``sensor`` looks for a
@@ -138,9 +139,24 @@ class GuideCache:
             return None
         entry = self._entries.get(key)
         if entry is None:
-            share = guiding.indirect_share(integrator, scene) if self.mode == "auto" else 1.0
+            share = self.indirect_share(integrator, scene, key) if self.mode == "auto" else 1.0
             return self.decide(integrator, scene, key, share, samples)
         return entry[1]
+
+    def indirect_share(self, integrator, scene: mi.Scene, key: tuple) -> float:
+        """The indirect share of the scene of ``key``: the one guiding decided on, or
+        :func:`~.guiding.indirect_share`'s pilot, run once per scene (V4's path reuse asks
+        for it where guiding has not decided, and a later decision takes it)."""
+        entry = self._entries.get(key)
+        if entry is not None:
+            return entry[2]
+        measured = self._measured.get(key)
+        if measured is None:
+            if len(self._measured) >= 4:
+                self._measured.pop(next(iter(self._measured)))
+            # (the entry holds the emitter array, as _entries' do: a dead scene's key is never reused)
+            measured = self._measured[key] = (scene.emitters_dr(), guiding.indirect_share(integrator, scene))
+        return measured[1]
 
     def decide(self, integrator, scene: mi.Scene, key: tuple, share: float,
                samples: int | None = None, first: guiding.Records | None = None) -> guiding.Guide | None:
@@ -164,3 +180,5 @@ class GuideCache:
     def forget(self, scene_id: int) -> None:
         for key in [k for k in self._entries if k[0] == scene_id]:
             del self._entries[key]
+        for key in [k for k in self._measured if k[0] == scene_id]:
+            del self._measured[key]

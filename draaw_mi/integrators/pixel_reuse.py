@@ -69,7 +69,10 @@ def sky_only(scene: mi.Scene) -> bool:
 
 def pass_seed(seed, i: int):
     """The seed of a render's ``i``-th pass where its sampler is not stratified across passes
-    (the first keeps ``seed``; an int or, as ``mi.render`` takes, a Dr.Jit ``UInt32``).
+    (the first keeps ``seed``; an int or, as ``mi.render`` takes, a Dr.Jit ``UInt32``). Not
+    :func:`draaw_mi.rendering.passes.pass_seed`'s sequence, on purpose: a long render's own
+    passes take that one, and with it the second part of its first pass would repeat its second
+    pass's seed (the same random numbers for the same lanes).
 
     >>> pass_seed(7, 0), pass_seed(7, 1) != pass_seed(7, 2)
     (7, True)

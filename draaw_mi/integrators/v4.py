@@ -258,7 +258,6 @@ class DraawV4Integrator(V4Passes):
         self._reuse_layout = None      # pixel_reuse.Layout of a uniform primal pass that shares
         self._reuse_table = None       # its Lambertian BSDFs (Held: not loop state) while a shared render runs
         self._lambertian_memo = None   # (scene's selection_key, Lambertian table | None, why not | None)
-        self._reuse_shares = {}        # selection_key -> indirect share, where guiding measured none
         self.pixel_reuse = str(props.get("pixel_reuse", "auto"))
         if self.pixel_reuse not in ("auto", "on", "off"):
             raise ParameterError(f"draaw_v4: pixel_reuse={self.pixel_reuse!r}; expected 'auto', 'on' or 'off'")

@@ -256,22 +256,10 @@ class V4Passes(LightTables):
             return None, f"auto: the scene's {kind} sampler (which would round each pass's count)"
         if pixel_reuse.sky_only(scene):
             return None, "auto: only environments light the scene"
-        key = self.selection_key(scene)
-        share = self.guides.share(key)
-        if share is None:
-            share = self._reuse_share(scene, key)
+        share = self.guides.indirect_share(self, scene, self.selection_key(scene))
         if share < pixel_reuse.SHARE_MIN:
             return None, f"auto: {share:.0%} of the light arrives after a bounce (< {pixel_reuse.SHARE_MIN:.0%})"
         return table, f"auto: {share:.0%} of the light arrives after a bounce"
-
-    def _reuse_share(self, scene, key) -> float:
-        """guiding's indirect share of ``scene``, measured once where the guide cache has none."""
-        memo = self._reuse_shares
-        if key not in memo:
-            if len(memo) >= 4:
-                memo.pop(next(iter(memo)))
-            memo[key] = guiding.indirect_share(self, scene)
-        return memo[key]
 
     def _lambertian_table(self, scene) -> tuple:
         """``(table, why not)`` of ``scene``, kept for its next renders:

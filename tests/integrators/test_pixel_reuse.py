@@ -316,3 +316,19 @@ def test_black_first_vertices_leave_their_tiles_unbiased(case):
     ref = seed_stack(scene, integrator("path"), spp, range(K))
     st = seed_stack(scene, integrator("draaw_v4", pixel_reuse="on"), spp, range(600, 600 + K))
     check_same_expectation(ref, st, max_frac3=0.03, max_mean=0.35)
+
+
+def test_the_indirect_share_is_measured_once_for_sharing_and_guiding(monkeypatch):
+    """Where guiding has not decided, ``auto`` sharing measures the scene's indirect share
+    with guiding's pilot, once: later renders and guiding's own decision take that value."""
+    from draaw_mi.integrators import guiding
+    calls, real = [], guiding.indirect_share
+    monkeypatch.setattr(guiding, "indirect_share", lambda *a, **k: calls.append(1) or real(*a, **k))
+    scene = ss.load("doorway", 128)
+    v4 = integrator("draaw_v4")
+    for _ in range(2):
+        assert v4.reuse_table(scene, scene.sensors()[0], 64) is not None
+    key = v4.selection_key(scene)
+    assert v4.guides.share(key) is None               # (guiding has not decided)
+    v4.guides.guide(v4, scene, key)
+    assert calls == [1] and v4.guides.share(key) == pytest.approx(0.45, abs=0.05)
