@@ -20,13 +20,18 @@ pixel's own technique covers its integrand (its BSDF samples every direction it 
 and each density counted is that of a sample its pixel delivers: a pixel's path stops where its
 first vertex reflects nothing (black), so there its density counts for nothing.
 A pixel whose first vertex has a delta lobe (glass, a mirror, smooth plastic) takes no part: it
-keeps its own sample, as do samples whose ``x2`` is not Lambertian (glossy, textured with a
-normal map the side test cannot see, transmissive), which its own pixel alone estimates. The
-pixel filter is untouched: each camera sample's radiance estimate stays unbiased given its ray.
+keeps its own sample, as do samples whose ``x2`` has one. Where ``x2``'s BSDF is not
+Lambertian (glossy, a normal map the side test cannot see, transmissive) the light it reflects
+depends on the direction it is seen from: :mod:`~.reconnection` evaluates that BSDF again
+towards each pixel and weighs the samples by the densities of the whole connection (what
+:class:`ShareTable` calls :data:`REEVALUATED`). The pixel filter is untouched: each camera
+sample's radiance estimate stays unbiased given its ray.
 
-The price: three shadow rays, four BSDF evaluations and a few gathers a sample, which pays where
-most of the light arrives after the first bounce: a room lit through a doorway.
-Measured in ``benchmarks/results/speed_suite.md``.
+The price: three shadow rays, four BSDF evaluations and a few gathers a sample (and, with
+re-evaluated BSDFs, eight more BSDF evaluations and a ray for each path that brought light back
+to ``x2``), which pays where most of the light arrives after the first bounce: a room lit
+through a doorway, a floor lit by a glossy panel. Measured in
+``benchmarks/results/speed_suite.md``.
 
 The four lanes of a tile are the same sample index of four pixels, in the lane order of
 Mitsuba's ``sample_rays`` (pixel-major, the samples of a pixel consecutive), which
@@ -85,11 +90,11 @@ def pass_seed(seed, i: int):
 
 class Layout:
     """The lanes of a primal pass that shares: ``width x height`` pixels (the film's crop),
-    ``spp`` consecutive lanes a pixel, and the scene's Lambertian BSDFs (``table``:
-    :func:`lambertian_table`)."""
+    ``spp`` consecutive lanes a pixel, and the scene's BSDFs that share (``table``:
+    :func:`share_table`)."""
     __slots__ = ("width", "height", "spp", "table")
 
-    def __init__(self, width: int, height: int, spp: int, table: mi.Bool):
+    def __init__(self, width: int, height: int, spp: int, table: "ShareTable"):
         self.width, self.height, self.spp, self.table = int(width), int(height), int(spp), table
 
     @property
@@ -97,7 +102,7 @@ class Layout:
         return self.width * self.height * self.spp
 
     @classmethod
-    def of(cls, sensor: mi.Sensor, spp: int, table: mi.Bool) -> "Layout":
+    def of(cls, sensor: mi.Sensor, spp: int, table: "ShareTable") -> "Layout":
         size = sensor.film().crop_size()     # (films that sample their border are refused)
         return cls(size[0], size[1], spp, table)
 
@@ -125,30 +130,68 @@ def is_lambertian(bsdf: mi.BSDF) -> bool:
     return len(nested) > 0 and all(n.class_name() == _LAMBERTIAN for n in nested)
 
 
-def lambertian_table(shapes) -> mi.Bool | None:
-    """A table of the BSDFs of ``shapes`` (by their registry index) that
-    :func:`is_lambertian`, or ``None`` where no shape but lights has one: nothing worth
-    sharing (a shape without a BSDF of its own, as a light often is, has Mitsuba's default
-    ``diffuse``)."""
-    ids, surfaces = set(), False
+LAMBERTIAN, REEVALUATED = 1, 2     # codes of a BSDF in a ShareTable (0: not shared)
+
+
+class ShareTable:
+    """Per BSDF of a scene (by registry index, :attr:`codes`), how a second vertex on it shares:
+    :data:`LAMBERTIAN` (:func:`is_lambertian`: the light it reflects, the same towards every
+    neighbour), :data:`REEVALUATED` (no delta lobe: its BSDF evaluated again towards each
+    neighbour, :mod:`~.reconnection`) or 0 (delta lobes: not shared); :attr:`reevaluates`
+    whether any BSDF is :data:`REEVALUATED`; :attr:`lambertian_surfaces` whether a shape other
+    than a light has a :data:`LAMBERTIAN` one."""
+    __slots__ = ("codes", "reevaluates", "lambertian_surfaces", "_ids")
+
+    def __init__(self, codes: dict, lambertian_surfaces: bool):
+        table = [0] * (max(codes) + 1)
+        for i, c in codes.items():
+            table[i] = c
+        self.codes = mi.UInt32(table)
+        self.reevaluates = REEVALUATED in codes.values()
+        self.lambertian_surfaces = bool(lambertian_surfaces)
+        self._ids = dict(codes)
+
+    def lambertian_only(self) -> "ShareTable | None":
+        """This table without :data:`REEVALUATED` BSDFs (``None`` where no shape but lights
+        has a Lambertian one)."""
+        if not self.reevaluates:
+            return self
+        kept = {i: c for i, c in self._ids.items() if c == LAMBERTIAN}
+        return ShareTable(kept, True) if kept and self.lambertian_surfaces else None
+
+    def code(self, bsdf: mi.BSDFPtr, active: mi.Bool) -> mi.UInt32:
+        """The codes of the BSDFs ``bsdf`` (0 where inactive or absent)."""
+        index = dr.reinterpret_array(mi.UInt32, bsdf)
+        active = active & (bsdf != None) & (index < dr.width(self.codes))  # noqa: E711
+        return dr.gather(mi.UInt32, self.codes, index, active)
+
+
+def share_code(bsdf: mi.BSDF) -> int:
+    """How a second vertex on ``bsdf`` shares (:class:`ShareTable`).
+
+    >>> share_code(mi.load_dict({"type": "diffuse"})), share_code(mi.load_dict({"type": "roughplastic"}))
+    (1, 2)
+    >>> share_code(mi.load_dict({"type": "dielectric"}))
+    0
+    """
+    if is_lambertian(bsdf):
+        return LAMBERTIAN
+    return 0 if mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta) else REEVALUATED
+
+
+def share_table(shapes) -> ShareTable | None:
+    """The :class:`ShareTable` of the BSDFs of ``shapes``, or ``None`` where no shape but
+    lights has a BSDF that shares: nothing worth sharing (a shape without a BSDF of its own,
+    as a light often is, has Mitsuba's default ``diffuse``)."""
+    codes, surfaces, lambertian = {}, False, False
     for shape in shapes:
         bsdf = shape.bsdf()
-        if bsdf is not None and is_lambertian(bsdf):
-            ids.add(int(dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(bsdf))[0]))
+        code = share_code(bsdf) if bsdf is not None else 0
+        if code:
+            codes[int(dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(bsdf))[0])] = code
             surfaces |= not shape.is_emitter()
-    if not surfaces:
-        return None
-    table = [False] * (max(ids) + 1)
-    for i in ids:
-        table[i] = True
-    return mi.Bool(table)
-
-
-def lambertian(table: mi.Bool, bsdf: mi.BSDFPtr, active: mi.Bool) -> mi.Bool:
-    """Whether the BSDFs ``bsdf`` are in ``table`` (:func:`lambertian_table`)."""
-    index = dr.reinterpret_array(mi.UInt32, bsdf)
-    active = active & (bsdf != None) & (index < dr.width(table))  # noqa: E711
-    return dr.gather(mi.Bool, table, index, active)
+            lambertian |= code == LAMBERTIAN and not shape.is_emitter()
+    return ShareTable(codes, lambertian) if surfaces else None
 
 
 def takes_part(bsdf: mi.BSDFPtr, valid: mi.Bool) -> mi.Bool:
@@ -188,14 +231,15 @@ class SharedLight:
         self.β = mi.Spectrum(1.0) if β is None else β
         self.L = mi.Spectrum(0.0) if L is None else L
         self.x2 = SecondVertex() if x2 is None else x2
+        self._w = None                    # after the loop (weigh): each sample's weight
 
-    def visit(self, table: mi.Bool, depth: mi.UInt32, active: mi.Bool, si: mi.SurfaceInteraction3f,
+    def visit(self, table: ShareTable, depth: mi.UInt32, active: mi.Bool, si: mi.SurfaceInteraction3f,
               bsdf: mi.BSDFPtr, d: mi.Vector3f) -> None:
         """At each vertex ``si`` (reached along ``d``): the first says whether it takes part,
-        the second whether it is Lambertian (``table``: :func:`lambertian_table`) and where."""
+        the second whether it shares (``table``) and where it is."""
         self.shared = dr.select(active & (depth == 0), takes_part(bsdf, si.is_valid()), self.shared)
         at_x2 = active & (depth == 1)
-        self.shared &= ~at_x2 | lambertian(table, bsdf, at_x2 & si.is_valid())
+        self.shared &= ~at_x2 | (table.code(bsdf, at_x2 & si.is_valid()) != 0)
         self.x2.record(si, d, at_x2)
 
     def own_part(self, depth: mi.UInt32, Le: mi.Spectrum, Lr: mi.Spectrum, Le_raw, Lr_raw) -> mi.Spectrum:
@@ -208,48 +252,87 @@ class SharedLight:
         if Le_raw is not None:
             self.L += dr.select(rel & (depth >= 2), self.β * Le_raw, 0.0)
         if Lr_raw is not None:
-            self.L += dr.select(rel, self.β * Lr_raw, 0.0)
+            self.L += dr.select(rel & (depth >= self._first_kept), self.β * Lr_raw, 0.0)
         return dr.select(rel, dr.select(depth == 1, Le, 0.0), Le + Lr)
+
+    _first_kept = 1       # the depth from which light samples go to L (and weights to β)
 
     def bounce(self, depth: mi.UInt32, weight: mi.Spectrum) -> None:
         """A BSDF sample's weight, counted from the second vertex on."""
-        self.β = dr.select(depth >= 1, self.β * weight, self.β)
+        self.β = dr.select(depth >= self._first_kept, self.β * weight, self.β)
+
+    def prepare(self, scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
+                active: mi.Bool, flags: mi.RayFlags, guide) -> None:
+        """After the loop, what :meth:`weigh` and :meth:`contribution` read beyond the loop
+        state (nothing here). ``ray``, ``pi``, ``active``: the camera rays, their first intersections, the
+        lanes rendered; ``flags``: the loop's ray flags; ``guide``: the paths' guide or ``None``."""
+
+    def weigh(self, density) -> None:
+        """Each lane's sample's weight before the BSDF at the first vertex that sees it: the
+        balance heuristic over the tile's four densities for its second vertex,
+        ``Lr / sum p``. ``density(lanes)``: for lanes ``lanes``, the density of each slot's
+        pixel for their second vertices (area measure; 0 where it does not deliver it)."""
+        total = sum(density(dr.arange(mi.UInt32, dr.width(self.L))))
+        self._w = dr.select(total > 0, self.L / dr.maximum(total, 1e-30), 0.0)
+        dr.eval(self._w)
+
+    def contribution(self, member: mi.UInt32, slot: mi.UInt32, f: mi.Spectrum) -> mi.Spectrum:
+        """The sample of lane ``member`` (a tile member's) in the estimate of the lanes
+        at hand, whose pixels are in slot ``slot`` of the tile, whose BSDF value towards its
+        second vertex times the geometry term is ``f`` (after :meth:`weigh`)."""
+        return f * dr.gather(mi.Spectrum, self._w, member)
+
+
+def tile_member(layout: "Layout", lane: mi.UInt32, k) -> tuple:
+    """For lanes ``lane`` of a pass: ``(member, inside)``, the lane of the same sample in the
+    pixel in slot ``k`` (an int or a ``mi.UInt32``; ``x + 2 y`` in the tile) of the lane's
+    tile, or the lane itself where that pixel lies outside the film, and whether it is inside."""
+    pixel = lane // layout.spp
+    s = lane - pixel * layout.spp
+    py = pixel // layout.width
+    px = pixel - py * layout.width
+    qx, qy = px - px % TILE + k % TILE, py - py % TILE + k // TILE
+    inside = (qx < layout.width) & (qy < layout.height)
+    return dr.select(inside, (qy * layout.width + qx) * layout.spp + s, lane), inside
+
+
+def tile_members(layout: "Layout", lane: mi.UInt32) -> tuple:
+    """For lanes ``lane`` of a pass: ``(members, inside, slot)``: :func:`tile_member` for
+    each slot of the tile, and the lane's own slot."""
+    members, inside = zip(*(tile_member(layout, lane, k) for k in range(TILE * TILE)))
+    pixel = lane // layout.spp
+    py = pixel // layout.width
+    px = pixel - py * layout.width
+    return list(members), list(inside), px % TILE + TILE * (py % TILE)
 
 
 def tile_estimate(scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
-                  flags: mi.RayFlags, active: mi.Bool, shared: mi.Bool, x2: SecondVertex,
-                  Lr: mi.Spectrum) -> mi.Spectrum:
+                  flags: mi.RayFlags, active: mi.Bool, shared: mi.Bool, share: SharedLight,
+                  guide=None) -> mi.Spectrum:
     """The reflected light at each lane's first vertex from its tile's shared samples (the
     sum over ``k`` in the module docstring). ``ray``, ``pi``: the camera rays and their first
     intersections; ``shared``: whether a lane's own sample is shared (its first vertex takes
-    part, its second is Lambertian); ``x2``, ``Lr``: its second vertex and the light that
-    vertex reflects (estimated by the rest of its path, its emission left out)."""
+    part, its second shares); ``share``: the loop's :class:`SharedLight` (its second vertex,
+    and what its :meth:`~SharedLight.contribution` reads); ``guide``: where the paths were
+    guided (:mod:`~.guiding`), whose mixture densities count."""
     n = dr.width(shared)
     if n != layout.lanes:
         raise ValueError(f"pixel_reuse.tile_estimate: {n} lanes; expected {layout.lanes} "
                          f"({layout.width}x{layout.height} pixels x {layout.spp} spp)")
+    share.prepare(scene, layout, ray, pi, active, flags, guide)
     si = pi.compute_surface_interaction(ray, ray_flags=flags, active=active)
     bsdf = si.bsdf(ray)
     part = active & takes_part(bsdf, si.is_valid())
     ctx = mi.BSDFContext()
 
     lane = dr.arange(mi.UInt32, n)
-    pixel = lane // layout.spp
-    s = lane - pixel * layout.spp
-    py = pixel // layout.width
-    px = pixel - py * layout.width
-    tx, ty = px - px % TILE, py - py % TILE
-    members, inside = [], []
-    for k in range(TILE * TILE):
-        qx, qy = tx + k % TILE, ty + k // TILE
-        inside.append((qx < layout.width) & (qy < layout.height))
-        members.append(dr.select(inside[-1], (qy * layout.width + qx) * layout.spp + s, lane))
+    members, inside, slot = tile_members(layout, lane)
 
     # this lane's BSDF value and density towards each member's x2 (area measure at x2)
     f, p = [], []
     for k, m in enumerate(members):
         own = m == lane
-        q = dr.gather(SecondVertex, x2, m)
+        q = dr.gather(SecondVertex, share.x2, m)
         ok = part & inside[k] & dr.gather(mi.Bool, shared, m)
         v = q.p - si.p
         d2 = dr.squared_norm(v)
@@ -260,6 +343,8 @@ def tile_estimate(scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.Preli
         seen = (d2 > 0) & (dr.dot(q.n, d) < 0) & (dr.dot(q.sh_n, d) < 0)
         ok &= own | (seen & ~scene.ray_test(si.spawn_ray_to(q.p), ok & seen & ~own))
         value, pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
+        if guide is not None:
+            pdf = guiding.mix_pdf(guide, si.p, d, pdf, ok)
         g = cos2 / dr.maximum(d2, 1e-30)
         f.append(dr.select(ok, value * g, 0.0))
         # a density counts where this pixel's path would carry the sample on: where its BSDF
@@ -268,12 +353,19 @@ def tile_estimate(scene: mi.Scene, layout: "Layout", ray: mi.Ray3f, pi: mi.Preli
         p.append(dr.select(ok & (dr.max(value) > 0), pdf * g, 0.0))
     dr.eval(f, p)
 
-    # the balance heuristic's denominator for member k's sample: every member's density
+    # each sample's weight, once per sample: the balance heuristic over its tile's densities
+    # (p[k] at lane j: lane j's for the x2 of the member in slot k)
+    slots = TILE * TILE
+    p_at = dr.zeros(mi.Float, n * slots)
+    for k in range(slots):
+        dr.scatter(p_at, p[k], lane * slots + k)
+
+    def density(lanes):
+        mem, ins, own = tile_members(layout, lanes)
+        return [dr.select(ins[j], dr.gather(mi.Float, p_at, mj * slots + own), 0.0) for j, mj in enumerate(mem)]
+
+    share.weigh(density)
     out = mi.Spectrum(0.0)
     for k, m in enumerate(members):
-        total = mi.Float(0.0)
-        for j, mj in enumerate(members):
-            total += dr.select(inside[j], dr.gather(mi.Float, p[k], mj), 0.0)
-        lr = dr.gather(mi.Spectrum, Lr, m)
-        out += dr.select(total > 0, f[k] * lr / dr.maximum(total, 1e-30), 0.0)
+        out += share.contribution(m, slot, f[k])
     return out

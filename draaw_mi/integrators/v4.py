@@ -7,7 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..errors import ParameterError
-from . import emission_split, guide_cache, guiding, pixel_reuse
+from . import emission_split, guide_cache, guiding, pixel_reuse, reconnection
 from .common import mis_weight, with_shared_parameters, parse_bool, parse_float, propagate_adjoint, relative, sample_emitter, separate_adjoints
 from .sampling import PowerSelection, only_constant_environment, roulette
 from .scene_view import scene_view
@@ -103,15 +103,15 @@ class DraawV4Integrator(V4Passes):
      * - pixel_reuse
        - |string|
        - Path reuse in primal renders (:mod:`~draaw_mi.integrators.pixel_reuse`): the light
-         a path's first vertex receives after a bounce off a Lambertian surface (Mitsuba's
-         ``diffuse``) is shared among the four pixels of a 2x2 tile, each seeing the others'
-         second vertices through a shadow ray, combined by the balance heuristic (the
-         expectation stays ``path``'s). ``auto`` shares in renders of 2^20 samples or more
-         (any spp), images up to 2^20 pixels, with the independent sampler (V4's stratified one
-         in its place), of scenes with a Lambertian surface other than a light, not lit by
-         environments alone, where a pilot finds at least 15 % of the light arriving after the
-         first bounce (once per scene); ``on`` wherever sharing can run; ``off`` never. It
-         never runs in guided renders (and with ``guiding = "on"``), adaptive sampling's
+         a path's first vertex receives after a bounce off a surface without delta lobes is
+         shared among the four pixels of a 2x2 tile, each seeing the others' second vertices
+         through a shadow ray (their BSDF evaluated again towards it unless Lambertian),
+         combined by the balance heuristic (the expectation stays ``path``'s). ``auto``
+         shares in renders of 2^20 samples or more (any spp), images up to 2^20 pixels, with
+         the independent sampler (V4's stratified one in its place), of scenes with such a
+         surface other than a light, not lit by environments alone, where a pilot finds at
+         least 15 % of the light arriving after the first bounce (once per scene); ``on``
+         wherever sharing can run; ``off`` never. It never runs in adaptive sampling's
          passes, gradient passes, ``dr.freeze`` recordings, or with media, SDF objects or
          ``max_depth`` <= 2 (``draaw-mi info SCENE`` says whether and why).
          (Default: ``auto``)
@@ -147,9 +147,10 @@ class DraawV4Integrator(V4Passes):
       not stratified;
     - guided paths where light arrives indirectly (a learned grid of directional histograms
       in a one-sample MIS mixture with the BSDF);
-    - path reuse among the pixels of 2x2 tiles where light arrives after a bounce off
-      Lambertian surfaces (Bekaert et al. 2002; a room lit through a doorway: 0.35x the
-      variance for 1.3x the time);
+    - path reuse among the pixels of 2x2 tiles where light arrives after a bounce
+      (Bekaert et al. 2002, with the reconnection shift at glossy vertices; a room lit
+      through a doorway: 0.3x the variance for 1.5x the time; a floor lit by a glossy
+      panel, guided: 0.25x for 1.9x);
     - a kernel specialised to the scene: each feature of
       :func:`~draaw_mi.integrators.features.detect_features` (area / delta / environment
       emitters, delta BSDFs, textures and normal maps, AOVs) is a Python-level branch, so an
@@ -256,8 +257,8 @@ class DraawV4Integrator(V4Passes):
         self.guides = guide_cache.GuideCache(mode)
         self._guide = self._guide_records = None    # set around guided primal renders (guiding.py)
         self._reuse_layout = None      # pixel_reuse.Layout of a uniform primal pass that shares
-        self._reuse_table = None       # its Lambertian BSDFs (Held: not loop state) while a shared render runs
-        self._lambertian_memo = None   # (scene's selection_key, Lambertian table | None, why not | None)
+        self._reuse_table = None       # its BSDFs that share (Held: not loop state) while a shared render runs
+        self._share_memo = None        # (scene's selection_key, ShareTable | None, why not | None)
         self.pixel_reuse = str(props.get("pixel_reuse", "auto"))
         if self.pixel_reuse not in ("auto", "on", "off"):
             raise ParameterError(f"draaw_v4: pixel_reuse={self.pixel_reuse!r}; expected 'auto', 'on' or 'off'")
@@ -347,12 +348,14 @@ class DraawV4Integrator(V4Passes):
 
         # the light reflected at the first vertex, shared with the pixel's 2x2 tile
         # (pixel_reuse.py) in the passes that name their lanes' layout
-        layout = self._reuse_layout if primal and guide is None and rec is None and sdf is None else None
+        layout = self._reuse_layout if primal and rec is None and sdf is None else None
         reuse = layout is not None
-        share = pixel_reuse.SharedLight() if reuse else None
+        reconnect = reuse and layout.table.reevaluates    # a BSDF other than Lambertian shares
+        share = (reconnection.ReconnectedLight() if reconnect else pixel_reuse.SharedLight()) if reuse else None
         if dr.hint(reuse, mode="scalar"):
-            lambertian = layout.table
+            shares = layout.table
             ray0, pi0, active0 = mi.Ray3f(ray), pi, mi.Bool(active)
+            dr.eval(ray0, pi0, active0)    # (read again after the loop: traced once)
 
         # the light gathered by the first vertex (R + G + B), for adaptive sampling's pilot
         # where it decides on guiding (guiding.indirect_share's measure, at no extra pass)
@@ -375,11 +378,12 @@ class DraawV4Integrator(V4Passes):
                 valid |= active & (depth == 0) & si.is_valid()
             bsdf = si.bsdf(ray)
             if dr.hint(reuse, mode="scalar"):
-                share.visit(lambertian, depth, active, si, bsdf, ray.d)
+                share.visit(shares, depth, active, si, bsdf, ray.d)
 
             # ---------------------- Direct emission ----------------------
             Le = mi.Spectrum(0.0)
             Le_raw = Lr_raw = None                    # the same without β, for path reuse
+            Le_em = pl_em = wo_em = E_em = rpl_em = None     # (ditto, unweighted: reconnection)
             if dr.hint(hit_em, mode="scalar"):
                 em_active = mi.Bool(active)
                 if dr.hint(self.hide_emitters, mode="scalar"):
@@ -394,9 +398,11 @@ class DraawV4Integrator(V4Passes):
                 elif dr.hint(sel is not None, mode="scalar"):
                     em_pdf = sel.pdf_direction(prev_si, ds, em_active & ~prev_delta)
                     w_bsdf = mis_weight(prev_pdf, em_pdf)
+                    pl_em = em_pdf
                 else:
                     em_pdf = scene.pdf_emitter_direction(prev_si, ds, em_active & ~prev_delta)
                     w_bsdf = mis_weight(prev_pdf, em_pdf)
+                    pl_em = em_pdf
                 with dr.resume_grad(when=not primal):
                     Le_em = ds.emitter.eval(si, em_active)
                     Le = β * w_bsdf * Le_em
@@ -442,9 +448,14 @@ class DraawV4Integrator(V4Passes):
                             w_em = dr.select(ds.delta, 1.0, w_em)
                         Lr_dir = β * w_em * f_em * em_w
                         Lr_raw = w_em * f_em * em_w
+                        if dr.hint(reconnect, mode="scalar"):
+                            rpl_em = dr.select(ds.delta | (ds.pdf <= 0), 0.0, dr.rcp(ds.pdf))
                     else:
                         Lr_dir = β * f_em * em_w
                         Lr_raw = f_em * em_w
+                        rpl_em = mi.Float(0.0)             # (delta lights only: not hit)
+                    if dr.hint(reconnect, mode="scalar"):
+                        wo_em, E_em = wo, dr.select(active_em, em_w, 0.0)
                     if dr.hint(self._light_sums is not None and sel is not None, mode="scalar"):
                         # light pilot (light_pilot.py): second moment per emitter
                         idx, _, pmf = sel.sample_index(s_em.x, active_em)
@@ -458,6 +469,9 @@ class DraawV4Integrator(V4Passes):
             if dr.hint(guide is not None, mode="scalar"):
                 bs, bsdf_w = guiding.mix_sample(guide, bsdf, ctx, si, bs, bsdf_w, sampler, guidable)
 
+            if dr.hint(reconnect, mode="scalar"):
+                share.record(depth, ray, wo_em, E_em, rpl_em, bs.wo, Le_em,
+                             pl_em if pl_em is not None else mi.Float(0.0))
             if dr.hint(reuse, mode="scalar"):
                 L += share.own_part(depth, Le, Lr_dir, Le_raw, Lr_raw)
             else:
@@ -511,7 +525,7 @@ class DraawV4Integrator(V4Passes):
         if dr.hint(reuse, mode="scalar"):
             dr.eval(L, valid, depth, share)         # the loop's outputs, in one kernel
             L += pixel_reuse.tile_estimate(scene, layout, ray0, pi0, flags, active0,
-                                           share.shared & (depth >= 2), share.x2, share.L)
+                                           share.shared & (depth >= 2), share, guide)
         if dr.hint(primal and self.want_depth, mode="scalar"):
             self.last_depth = depth        # path lengths, for adaptive sampling's cost model
         if dr.hint(L_first is not None, mode="scalar"):

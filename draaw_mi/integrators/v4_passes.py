@@ -211,7 +211,7 @@ class V4Passes(LightTables):
         return img
 
     def reuse_table(self, scene, sensor, spp):
-        """The table of Lambertian BSDFs (:func:`~.pixel_reuse.lambertian_table`) for a
+        """The BSDFs that share (:func:`~.pixel_reuse.share_table`) for a
         uniform primal pass of ``spp`` samples per pixel (0: the sensor's) that shares the
         light reflected at its first vertices within 2x2 pixel tiles
         (:mod:`~draaw_mi.integrators.pixel_reuse`), else ``None`` (:meth:`reuse_decision`)."""
@@ -224,24 +224,32 @@ class V4Passes(LightTables):
         samples or more (:func:`~.pixel_reuse.large_enough`) of images up to
         :data:`~.pixel_reuse.AUTO_MAX_PIXELS` pixels with the independent sampler (V4's stratified one in its place; other samplers round each
         pass's count up: ``on`` then takes more samples than asked), unless only environments
-        light it (:func:`~.pixel_reuse.sky_only`); never in guided renders,
-        ``dr.freeze`` recordings, with media or SDF objects, ``max_depth`` 2 or less, or
-        without a Lambertian surface that is not a light."""
+        light it (:func:`~.pixel_reuse.sky_only`); ``auto`` shares second vertices on
+        Lambertian BSDFs only, except in guided renders (every BSDF without delta lobes:
+        :mod:`~.reconnection`). Never in ``dr.freeze`` recordings, with media or SDF objects,
+        ``max_depth`` 2 or less, or without a surface that is not a light whose BSDF has no
+        delta lobe."""
         if self.pixel_reuse == "off":
             return None, "pixel_reuse=off"
-        if self._guide is not None or self.guides.mode == "on":
-            return None, "a guided render"
         if dr.flag(dr.JitFlag.FreezingScope):
             return None, "a frozen render"
         if 0 <= self.max_depth <= 2:
             return None, f"max_depth={self.max_depth}: no light after a bounce"
-        table, unshared = self._lambertian_table(scene)
+        table, unshared = self._share_table(scene)
         if table is None:
-            return None, "no shape but lights has Mitsuba's diffuse BSDF (draaw materials are not shared)"
+            return None, "no shape but lights has a BSDF without delta lobes"
         if unshared is not None:
             return None, unshared
         if self.pixel_reuse == "on":
             return table, "pixel_reuse=on"
+        # re-evaluating other BSDFs (reconnection.py) costs 1.5-3x a sample's time: it paid on
+        # the glossy panel, guided (0.08x path's MSE), not in the open scenes' metals and glass
+        guided = self._guide is not None
+        if not guided:
+            table = table.lambertian_only()
+            if table is None:
+                return None, ("auto: no shape but lights has a Lambertian BSDF (Mitsuba's diffuse; "
+                              "others share in guided renders)")
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         if self._strata_part is not None:       # the rest of a pattern after adaptive sampling's
             n = self._strata_part[0]            # pilot: the render's count decides
@@ -259,21 +267,22 @@ class V4Passes(LightTables):
         share = self.guides.indirect_share(self, scene, self.selection_key(scene))
         if share < pixel_reuse.SHARE_MIN:
             return None, f"auto: {share:.0%} of the light arrives after a bounce (< {pixel_reuse.SHARE_MIN:.0%})"
-        return table, f"auto: {share:.0%} of the light arrives after a bounce"
+        return table, (f"auto: {share:.0%} of the light arrives after a bounce"
+                       + (", guided: every BSDF without delta lobes" if guided and table.reevaluates else ""))
 
-    def _lambertian_table(self, scene) -> tuple:
+    def _share_table(self, scene) -> tuple:
         """``(table, why not)`` of ``scene``, kept for its next renders:
-        :func:`~.pixel_reuse.lambertian_table`, and where the scene's features rule sharing
+        :func:`~.pixel_reuse.share_table`, and where the scene's features rule sharing
         out (media, SDF objects), why (else ``None``). (A feature walk costs 40 ms on the
         2,000-light scene: once per scene, not per render.)"""
         key = self.selection_key(scene)
-        memo = self._lambertian_memo
+        memo = self._share_memo
         if memo is None or memo[0] != key:
-            table = pixel_reuse.lambertian_table(scene_shapes(scene))
+            table = pixel_reuse.share_table(scene_shapes(scene))
             feats = self.features(scene) if table is not None else {}
             why = ("participating media" if feats.get("media") else
                    "SDF objects" if feats.get("sdf") else None)
-            memo = self._lambertian_memo = (key, table, why)
+            memo = self._share_memo = (key, table, why)
         return memo[1], memo[2]
 
     def _say_sensor_gates(self, sensor) -> None:
