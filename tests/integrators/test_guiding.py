@@ -201,7 +201,10 @@ def test_a_first_render_decided_by_the_pilot_keeps_paths_expectation(panel, monk
         key = integ.selection_key(panel)
         assert integ.guides.share(key) >= guiding.SHARE_MIN
         assert integ.guides.guide(integ, panel, key) is not None
-    ref = seed_stack(panel, integrator("path", max_depth=5), 256, range(100, 100 + K))
+    # (path at 4x the samples: its per-pixel means are skewed (a firefly lifts both the mean
+    # and its error), which against V4's guided, shared renders, with a fifth of its
+    # variance, put 5 % of pixels beyond 3 sigma at 256 spp; the image means agree to 1 %)
+    ref = seed_stack(panel, integrator("path", max_depth=5), 1024, range(100, 100 + K))
     assert np.isfinite(v4).all()
     check_same_expectation(ref, v4, max_frac3=0.03)
 

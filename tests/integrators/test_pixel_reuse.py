@@ -324,17 +324,24 @@ def test_auto_keeps_a_scenes_own_sampler_unshared():
     assert table is None and "ldsampler" in why, why
 
 
-def test_a_scenes_first_render_shares_after_its_pilot(monkeypatch):
+@pytest.mark.parametrize("name, guided", [("doorway", False), ("glossy_diffuse", True)])
+def test_a_scenes_first_render_shares_after_its_pilot(monkeypatch, name, guided):
     """A scene's first render (one ``draaw-mi render``): adaptive sampling's pilot decides on
-    guiding, then the rest of each pixel's pattern (60 of 64) renders uniformly, and shares:
-    the render is 64 spp, as large as ``auto`` asks."""
+    guiding, then the rest of each pixel's samples (60 of 64) render uniformly, guided or not,
+    and share: the render is 64 spp, as large as ``auto`` asks."""
     from draaw_mi.integrators import film_splat
     calls = []
     real = film_splat.splat_pass
-    monkeypatch.setattr(film_splat, "splat_pass", lambda *a, **k: calls.append(a[4]) or real(*a, **k))
-    scene = ss.load("doorway", 128)
-    img = render_np(scene, integrator("draaw_v4"), 64, 1)
-    assert np.isfinite(img).all() and sum(calls) == 60, calls
+
+    def spy(integ, *a, **k):
+        calls.append((a[3], integ._guide is not None))
+        return real(integ, *a, **k)
+
+    monkeypatch.setattr(film_splat, "splat_pass", spy)
+    scene = ss.load(name, 128)
+    img = render_np(scene, integrator("draaw_v4", max_depth=ss.max_depth(name)), 64, 1)
+    assert np.isfinite(img).all() and sum(c[0] for c in calls) == 60, calls
+    assert all(c[1] is guided for c in calls), calls
 
 
 def _room(extra=None, camera=None):
