@@ -41,6 +41,9 @@ from .pixel_reuse import TILE, SharedLight, tile_member
 
 SLOTS = TILE * TILE
 NONE = 0xFFFFFFFF       # a lane without a record (its x2 brought no light back)
+AUTO_MAX_PIXELS = 1 << 19   # ``auto`` re-evaluates in images up to this size: about 330 bytes a
+                            # lane (glossy panel at 64 spp, peak: 512^2 341 MiB, path's 160;
+                            # 1024^2, a pass of one sample of every pixel, 518 against 176)
 
 
 def _rcp(x: mi.Float) -> mi.Float:

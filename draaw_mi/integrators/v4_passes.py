@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import adaptive_sampling as ads
-from . import emission_split, film_splat, glints, guiding, pixel_reuse, stratify
+from . import emission_split, film_splat, glints, guiding, pixel_reuse, reconnection, stratify
 from .features import sampler_plugin, scene_shapes, sensor_gated_speedups
 from .light_tables import LightTables
 from .strata_sampler import strata_sampler
@@ -225,7 +225,8 @@ class V4Passes(LightTables):
         :data:`~.pixel_reuse.AUTO_MAX_PIXELS` pixels with the independent sampler (V4's stratified one in its place; other samplers round each
         pass's count up: ``on`` then takes more samples than asked), unless only environments
         light it (:func:`~.pixel_reuse.sky_only`); ``auto`` shares second vertices on
-        Lambertian BSDFs only, except in guided renders (every BSDF without delta lobes:
+        Lambertian BSDFs only, except in guided renders of images up to
+        :data:`~.reconnection.AUTO_MAX_PIXELS` pixels (every BSDF without delta lobes:
         :mod:`~.reconnection`). Never in ``dr.freeze`` recordings, with media or SDF objects,
         ``max_depth`` 2 or less, or without a surface that is not a light whose BSDF has no
         delta lobe."""
@@ -242,21 +243,24 @@ class V4Passes(LightTables):
             return None, unshared
         if self.pixel_reuse == "on":
             return table, "pixel_reuse=on"
-        # re-evaluating other BSDFs (reconnection.py) costs 1.5-3x a sample's time: it paid on
-        # the glossy panel, guided (0.08x path's MSE), not in the open scenes' metals and glass
-        guided = self._guide is not None
+        # re-evaluating other BSDFs (reconnection.py) costs 1.6-2.4x a sample's time: it paid
+        # on the glossy panel, guided (0.085x path's MSE), not on the open scenes' metals and
+        # glass unguided (speed_suite.md, session 77)
+        size = sensor.film().crop_size()
+        pixels = int(size[0]) * int(size[1])
+        guided = self._guide is not None and pixels <= reconnection.AUTO_MAX_PIXELS
         if not guided:
             table = table.lambertian_only()
             if table is None:
                 return None, ("auto: no shape but lights has a Lambertian BSDF (Mitsuba's diffuse; "
-                              "others share in guided renders)")
+                              "others share in guided renders up to "
+                              f"2^{reconnection.AUTO_MAX_PIXELS.bit_length() - 1} pixels)")
         n = int(spp) if spp else int(sensor.sampler().sample_count())
         if self._strata_part is not None:       # the rest of a pattern after adaptive sampling's
             n = self._strata_part[0]            # pilot: the render's count decides
-        size = sensor.film().crop_size()
-        if not pixel_reuse.large_enough(n * int(size[0]) * int(size[1])):
+        if not pixel_reuse.large_enough(n * pixels):
             return None, f"auto: renders of 2^{guiding.PILOTED_MIN_SAMPLES.bit_length() - 1} samples or more"
-        if int(size[0]) * int(size[1]) > pixel_reuse.AUTO_MAX_PIXELS:
+        if pixels > pixel_reuse.AUTO_MAX_PIXELS:
             return None, (f"auto: images up to 2^{pixel_reuse.AUTO_MAX_PIXELS.bit_length() - 1} pixels "
                           "(a pass keeps one sample of every pixel)")
         kind = sampler_plugin(sensor.sampler())

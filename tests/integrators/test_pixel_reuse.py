@@ -279,8 +279,8 @@ def test_auto_leaves_images_above_1024_squared_unshared():
 
 def test_auto_reconnects_glossy_second_vertices_in_guided_renders_only():
     """The glossy panel (its light after the first bounce: 100 %) renders guided, and its
-    draaw floor and panel share there; unguided, ``auto`` shares Lambertian BSDFs only (its
-    wall), and the metal spheres (no Lambertian surface) not at all."""
+    draaw floor and panel share there, in images up to 2^19 pixels; unguided, ``auto`` shares
+    Lambertian BSDFs only (its wall), and the metal spheres (no Lambertian surface) not at all."""
     scene = ss.load("glossy_diffuse", 128)
     sensor = scene.sensors()[0]
     v4 = integrator("draaw_v4", max_depth=6)
@@ -289,6 +289,15 @@ def test_auto_reconnects_glossy_second_vertices_in_guided_renders_only():
     assert v4._guide is not None
     table, why = v4.reuse_decision(scene, sensor, 64)
     assert table.reevaluates and "guided" in why, why
+    # above 2^19 pixels the re-evaluation's memory (about 330 bytes a lane) is not spent
+    d = ss.build("glossy_diffuse", 16)
+    d["sensor"]["film"].update(width=1024, height=513)
+    big = mi.load_dict(d)
+    v4 = integrator("draaw_v4", max_depth=6)
+    v4._guide = v4.guides.guide(v4, big, v4.selection_key(big))
+    assert v4._guide is not None
+    table, why = v4.reuse_decision(big, big.sensors()[0], 64)
+    assert table is not None and not table.reevaluates, why
     metals = ss.load("metals", 128)
     table, why = integrator("draaw_v4", max_depth=5, guiding="off").reuse_decision(metals, metals.sensors()[0], 64)
     assert table is None and "Lambertian" in why, why
