@@ -190,9 +190,10 @@ def test_the_pilot_records_only_a_whole_training():
 
 def test_a_first_render_decided_by_the_pilot_keeps_paths_expectation(panel, monkeypatch):
     """Each seed a fresh integrator, so each render is the scene's first: an unguided pilot of
-    spp/16, then (its share 1.0) a guided uniform main pass, mixed with the constant weights
-    1/16 and 15/16. Popping the pilot's first sum for the decision instead of its last
-    (``sums.pop(0)``: the red channel) puts 32 % of pixels beyond 3 sigma."""
+    spp/16 decides (its share 1.0) and teaches the guide, then a guided uniform render of the
+    other samples, which shares among 2x2 tiles, is the image (the pilot's unguided image left
+    out). Popping the pilot's first sum for the decision instead of its last (``sums.pop(0)``:
+    the red channel) puts 32 % of pixels beyond 3 sigma."""
     monkeypatch.setattr(guiding, "PILOTED_MIN_SAMPLES", 1)
     K = 12
     integs = [integrator("draaw_v4", max_depth=5) for _ in range(K)]
