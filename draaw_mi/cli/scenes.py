@@ -233,11 +233,9 @@ def cmd_info(args) -> int:
             samples = stratify.describe(v4, loaded.mi_scene, sensor, int(out["scene"]["settings"]["spp"]))
             lights = describe_selection(loaded.mi_scene, v4.light_selection)
             table, why = v4.reuse_decision(loaded.mi_scene, sensor, int(st["spp"]))
-            reuse = (("2x2 pixel tiles share the light after a bounce off any surface without delta lobes"
-                      if table.reevaluates else
-                      "2x2 pixel tiles share the light after a bounce off Lambertian surfaces, in guided "
-                      "renders off any without delta lobes") + f" ({why})"
-                     if table is not None else f"off ({why})")
+            reuse = ("2x2 pixel tiles share the light after a bounce off "
+                     + ("any surface without delta lobes" if table.reevaluates else "Lambertian surfaces")
+                     + f" ({why})" if table is not None else f"off ({why})")
         out["scene"]["v4_gated"] = gated
         out["scene"]["v4_reuse"] = reuse
         out["scene"]["v4_samples"] = samples

@@ -249,7 +249,10 @@ class V4Passes(LightTables):
         size = sensor.film().crop_size()
         pixels = int(size[0]) * int(size[1])
         guided = self._guide is not None and pixels <= reconnection.AUTO_MAX_PIXELS
+        others = ""
         if not guided:
+            others = ("; its other BSDFs in guided renders up to "
+                      f"2^{reconnection.AUTO_MAX_PIXELS.bit_length() - 1} pixels" if table.reevaluates else "")
             table = table.lambertian_only()
             if table is None:
                 return None, ("auto: no shape but lights has a Lambertian BSDF (Mitsuba's diffuse; "
@@ -272,7 +275,7 @@ class V4Passes(LightTables):
         if share < pixel_reuse.SHARE_MIN:
             return None, f"auto: {share:.0%} of the light arrives after a bounce (< {pixel_reuse.SHARE_MIN:.0%})"
         return table, (f"auto: {share:.0%} of the light arrives after a bounce"
-                       + (", guided: every BSDF without delta lobes" if guided and table.reevaluates else ""))
+                       + (", guided: every BSDF without delta lobes" if guided and table.reevaluates else others))
 
     def _share_table(self, scene) -> tuple:
         """``(table, why not)`` of ``scene``, kept for its next renders:
