@@ -252,10 +252,10 @@ class SharedLight:
         if Le_raw is not None:
             self.L += dr.select(rel & (depth >= 2), self.β * Le_raw, 0.0)
         if Lr_raw is not None:
-            self.L += dr.select(rel & (depth >= self._first_kept), self.β * Lr_raw, 0.0)
+            self.L += dr.select(rel, self.β * Lr_raw, 0.0)
         return dr.select(rel, dr.select(depth == 1, Le, 0.0), Le + Lr)
 
-    _first_kept = 1       # the depth from which light samples go to L (and weights to β)
+    _first_kept = 1       # the depth from which BSDF weights count in β
 
     def bounce(self, depth: mi.UInt32, weight: mi.Spectrum) -> None:
         """A BSDF sample's weight, counted from the second vertex on."""
